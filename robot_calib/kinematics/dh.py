@@ -1,0 +1,125 @@
+"""Denavit-Hartenberg chain with the Hayati-Mirmirani beta, batched over poses.
+
+Convention (CONTRACT.md, "Joint and model conventions"; seed paper eq. 1-5):
+link j maps frame j-1 to frame j by ``Rz(theta_j) Tz(d_j) Tx(a_j) Rx(alpha_j) Ry(beta_j)``
+with ``theta_j = theta_j(table) + q_j``. The axis of joint j is z of frame j-1.
+beta_j is used (and d_j dropped) only where axes j and j+1 are nominally parallel.
+
+An optional per-joint error transform ``housing_error[j]`` (eccentricity, seed eq. 10) is
+applied in the fixed housing frame j-1 before the joint's rotation:
+``frame_j = frame_{j-1} E_j Rz(theta_j) ...``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from robot_calib.kinematics.frames import Array, rot_x, rot_y, rot_z
+
+
+@dataclass(frozen=True)
+class DHTable:
+    """DH/Hayati values per pose and joint; every field broadcasts to (n_poses, n_joints).
+
+    theta : full joint angle theta_j(table) + q_j [rad]
+    d, a : [m]; alpha, beta : [rad]
+    """
+
+    theta: Array
+    d: Array
+    a: Array
+    alpha: Array
+    beta: Array
+
+    def broadcast(self) -> DHTable:
+        """All fields as arrays of one common shape (n_poses, n_joints)."""
+        arrays = np.broadcast_arrays(self.theta, self.d, self.a, self.alpha, self.beta)
+        return DHTable(*(np.asarray(x, dtype=float) for x in arrays))
+
+
+def link_transforms(dh: DHTable) -> Array:
+    """Link transforms ``Rz(theta) Tz(d) Tx(a) Rx(alpha) Ry(beta)``, shape (n, J, 4, 4)."""
+    t = dh.broadcast()
+    n, j = t.theta.shape
+    flat = {k: getattr(t, k).reshape(-1) for k in ("theta", "d", "a", "alpha", "beta")}
+    rz = rot_z(flat["theta"])
+    out = np.zeros((n * j, 4, 4))
+    out[:, :3, :3] = rz @ rot_x(flat["alpha"]) @ rot_y(flat["beta"])
+    out[:, :3, 3] = rz[:, :, 0] * flat["a"][:, None]
+    out[:, 2, 3] += flat["d"]
+    out[:, 3, 3] = 1.0
+    return out.reshape(n, j, 4, 4)
+
+
+def chain(dh: DHTable, housing_error: Array | None = None) -> Array:
+    """Frames of the chain in the robot base frame.
+
+    housing_error : optional, shape (n, J, 4, 4) — error transform of each joint in its
+        housing frame j-1, applied before the joint rotation.
+    Returns frame2base, shape (n, J + 1, 4, 4): index 0 is the base (identity), index j is
+    frame j (the flange for j = J).
+    """
+    links = link_transforms(dh)
+    if housing_error is not None:
+        links = housing_error @ links
+    n, j = links.shape[:2]
+    frames = np.empty((n, j + 1, 4, 4))
+    frames[:, 0] = np.eye(4)
+    for k in range(j):
+        frames[:, k + 1] = frames[:, k] @ links[:, k]
+    return frames
+
+
+@dataclass(frozen=True)
+class ChainDerivatives:
+    """Derivatives of a point fixed in the last frame, in the base frame [m per unit].
+
+    Each field has shape (n, 3, J): column j is d p / d (parameter of link j+1).
+    """
+
+    theta: Array
+    d: Array
+    a: Array
+    alpha: Array
+    beta: Array
+
+
+def point_derivatives(
+    dh: DHTable, frames: Array, p_in_base: Array, housing_error: Array | None = None
+) -> ChainDerivatives:
+    """Analytic derivatives of the point `p_in_base` (n, 3) [m] w.r.t. every link parameter.
+
+    frames : frame2base from `chain`, shape (n, J + 1, 4, 4), for the same `dh` and
+        `housing_error` (n, J, 4, 4) or None.
+    Each parameter is a small screw motion of the chain beyond it (rotation about or
+    translation along an axis whose line is known from `frames`).
+    """
+    t = dh.broadcast()
+    prev = frames[:, :-1]  # frame j-1 of link j, (n, J, 4, 4)
+    if housing_error is not None:
+        prev = prev @ housing_error  # the joint turns about the displaced axis
+    x_prev, y_prev, z_prev = prev[..., :3, 0], prev[..., :3, 1], prev[..., :3, 2]
+    o_prev = prev[..., :3, 3]
+    o_link = frames[:, 1:, :3, 3]  # origin of frame j = where the a/alpha/beta axes pass
+    y_link = frames[:, 1:, :3, 1]  # Ry(beta) turns about frame j's own y axis
+    ct, st = np.cos(t.theta)[..., None], np.sin(t.theta)[..., None]
+    x_mid = ct * x_prev + st * y_prev  # x after Rz(theta): the a- and alpha-axis, (n, J, 3)
+
+    lever_prev = p_in_base[:, None, :] - o_prev
+    lever_link = p_in_base[:, None, :] - o_link
+    d_theta = np.cross(z_prev, lever_prev)
+    d_alpha = np.cross(x_mid, lever_link)
+    d_beta = np.cross(y_link, lever_link)
+
+    def cols(v: Array) -> Array:
+        return np.moveaxis(v, 1, -1)  # (n, J, 3) -> (n, 3, J)
+
+    return ChainDerivatives(
+        theta=cols(d_theta),
+        d=cols(z_prev),
+        a=cols(x_mid),
+        alpha=cols(d_alpha),
+        beta=cols(d_beta),
+    )

@@ -1,0 +1,70 @@
+"""Elementary rigid transforms, batched over a leading axis.
+
+Every function returns homogeneous matrices of shape (n, 4, 4) (or rotations (n, 3, 3))
+for angle/length arrays of shape (n,). Angles in rad, lengths in m.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[np.float64]
+
+
+def rot_x(angle: ArrayLike) -> Array:
+    """Rotations about x, shape (n, 3, 3), for `angle` of shape (n,) [rad]."""
+    c, s = np.cos(angle), np.sin(angle)
+    one, zero = np.ones_like(c), np.zeros_like(c)
+    return np.stack(
+        [np.stack([one, zero, zero], -1), np.stack([zero, c, -s], -1), np.stack([zero, s, c], -1)],
+        -2,
+    )
+
+
+def rot_y(angle: ArrayLike) -> Array:
+    """Rotations about y, shape (n, 3, 3), for `angle` of shape (n,) [rad]."""
+    c, s = np.cos(angle), np.sin(angle)
+    one, zero = np.ones_like(c), np.zeros_like(c)
+    return np.stack(
+        [np.stack([c, zero, s], -1), np.stack([zero, one, zero], -1), np.stack([-s, zero, c], -1)],
+        -2,
+    )
+
+
+def rot_z(angle: ArrayLike) -> Array:
+    """Rotations about z, shape (n, 3, 3), for `angle` of shape (n,) [rad]."""
+    c, s = np.cos(angle), np.sin(angle)
+    one, zero = np.ones_like(c), np.zeros_like(c)
+    return np.stack(
+        [np.stack([c, -s, zero], -1), np.stack([s, c, zero], -1), np.stack([zero, zero, one], -1)],
+        -2,
+    )
+
+
+def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> Array:
+    """Rotation Rz(yaw) Ry(pitch) Rx(roll), shape (3, 3) (fixed-axis XYZ, as ROS's RPY)."""
+    return rot_z(np.array([yaw]))[0] @ rot_y(np.array([pitch]))[0] @ rot_x(np.array([roll]))[0]
+
+
+def matrix_to_rpy(rotation: Array) -> tuple[float, float, float]:
+    """Inverse of `rpy_to_matrix` for a (3, 3) rotation; pitch in [-pi/2, pi/2]."""
+    pitch = float(np.arcsin(np.clip(-rotation[2, 0], -1.0, 1.0)))
+    roll = float(np.arctan2(rotation[2, 1], rotation[2, 2]))
+    yaw = float(np.arctan2(rotation[1, 0], rotation[0, 0]))
+    return roll, pitch, yaw
+
+
+def homogeneous(rotation: Array, translation: Array) -> Array:
+    """Stack rotations (..., 3, 3) and translations (..., 3) into (..., 4, 4) transforms."""
+    shape = np.broadcast_shapes(rotation.shape[:-2], translation.shape[:-1])
+    out = np.zeros(shape + (4, 4))
+    out[..., :3, :3] = rotation
+    out[..., :3, 3] = translation
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def transform_points(a2b: Array, p_in_a: Array) -> Array:
+    """Apply transforms a2b (..., 4, 4) to points p_in_a (..., 3); returns p_in_b (..., 3)."""
+    return np.einsum("...ij,...j->...i", a2b[..., :3, :3], p_in_a) + a2b[..., :3, 3]

@@ -1,0 +1,75 @@
+"""Measurement poses: joint readings with the approach direction and time of each pose.
+
+The direction rule is the contract's (CONTRACT.md section 1, "Measurements"): the
+direction from which joint j approached a pose is the sign of its change since the
+previous pose; unchanged (within `joint_change_tolerance`) keeps the previous direction;
+at the first pose every direction is +1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from robot_calib.errors import InputError
+from robot_calib.kinematics.frames import Array
+
+JOINT_CHANGE_TOLERANCE = 1e-4  # rad, contract default
+
+
+def approach_directions(q: Array, tolerance: float = JOINT_CHANGE_TOLERANCE) -> Array:
+    """Approach direction of every joint at every pose.
+
+    q : shape (n_poses, n_joints), readings in visiting order [rad].
+    Returns shape (n_poses, n_joints), values +1.0 / -1.0.
+    """
+    q = np.asarray(q, dtype=float)
+    n, j = q.shape
+    direction = np.ones((n, j))
+    if n < 2:
+        return direction
+    step = np.diff(q, axis=0)
+    sign = np.where(np.abs(step) > tolerance, np.sign(step), 0.0)
+    # Carry the last non-zero sign forward (per joint), starting from +1.
+    for k in range(1, n):
+        direction[k] = np.where(sign[k - 1] != 0.0, sign[k - 1], direction[k - 1])
+    return direction
+
+
+@dataclass(frozen=True)
+class Poses:
+    """A batch of measurement poses.
+
+    q : shape (n, J), joint readings [rad]
+    direction : shape (n, J), approach direction +1/-1 of every joint
+    time : shape (n,), seconds since the first measurement of the recording [s]
+    """
+
+    q: Array
+    direction: Array
+    time: Array
+
+    def __len__(self) -> int:
+        return int(self.q.shape[0])
+
+    @classmethod
+    def from_readings(
+        cls, q: Array, direction: Array | None = None, time: Array | None = None
+    ) -> Poses:
+        """Poses from readings; missing directions follow the row order, missing time is 0."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        if q.ndim != 2 or not np.all(np.isfinite(q)):
+            raise InputError(f"joint readings must be a finite (n, J) array, got shape {q.shape}")
+        n = q.shape[0]
+        d = approach_directions(q) if direction is None else np.asarray(direction, dtype=float)
+        t = np.zeros(n) if time is None else np.asarray(time, dtype=float)
+        if d.shape != q.shape or not np.all(np.abs(d) == 1.0):
+            raise InputError(f"directions must be +1/-1 of shape {q.shape}, got {d.shape}")
+        if t.shape != (n,) or not np.all(np.isfinite(t)):
+            raise InputError(f"time must be finite of shape ({n},), got {t.shape}")
+        return cls(q, d, t)
+
+    def subset(self, index: Array) -> Poses:
+        """The poses selected by an index or boolean mask (directions kept as recorded)."""
+        return Poses(self.q[index], self.direction[index], self.time[index])

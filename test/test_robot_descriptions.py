@@ -1,0 +1,91 @@
+"""Robot descriptions as data: built-ins, the user YAML format and its errors."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robot_calib.errors import RobotDescriptionError
+from robot_calib.kinematics.description import available_robots, load_robot
+
+
+def test_builtins() -> None:
+    assert {"kr5_sixx_r650", "ur5", "ur10"} <= set(available_robots())
+    kr5 = load_robot("kr5_sixx_r650")
+    assert kr5.joint_names == tuple(f"joint_a{j}" for j in range(1, 7))
+    np.testing.assert_allclose(np.degrees(kr5.limits[1]), [-162, -5])
+    assert np.all(kr5.link_mass > 0)
+    assert load_robot("ur5").a[1] == pytest.approx(-0.425)
+
+
+def test_user_yaml_in_degrees(tmp_path: Path) -> None:
+    path = tmp_path / "two_link.yaml"
+    path.write_text(
+        "name: two_link\nangle_unit: deg\njoints:\n"
+        "  - {theta: 0, d: 0.1, a: 0.5, alpha: 0}\n"
+        "  - {theta: 90, d: 0, a: 0.4, alpha: 0, limits: [-90, 90]}\n"
+    )
+    robot = load_robot(path)
+    assert robot.name == "two_link" and robot.n_joints == 2
+    assert robot.theta[1] == pytest.approx(np.pi / 2)
+    assert robot.hayati.tolist() == [True, False]  # alpha1 = 0: axes 1 and 2 parallel
+    np.testing.assert_allclose(robot.limits[1], [-np.pi / 2, np.pi / 2])
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("joints: [1", "not valid YAML"),
+        ("- 1\n- 2\n", "expected a mapping"),
+        (
+            "joints:\n  - {theta: 0, d: 0, a: 1}\n  - {theta: 0, d: 0, a: 1, alpha: 0}\n",
+            "joint 1: missing 'alpha'",
+        ),
+        (
+            "joints:\n  - {theta: x, d: 0, a: 1, alpha: 0}\n"
+            "  - {theta: 0, d: 0, a: 1, alpha: 0}\n",
+            "joint 1 theta: expected a number",
+        ),
+        ("angle_unit: grad\njoints: []\n", "angle_unit"),
+    ],
+)
+def test_malformed_yaml(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(RobotDescriptionError, match=message) as info:
+        load_robot(path)
+    assert "bad.yaml" in str(info.value)
+
+
+def test_unknown_robot() -> None:
+    with pytest.raises(RobotDescriptionError, match="unknown robot 'kr6'"):
+        load_robot("kr6")
+
+
+@pytest.mark.parametrize("robot", ["kr6_nonexistent", "{tmp}/broken.yaml"])
+def test_cli_bad_robot_exits_2_with_one_line(tmp_path: Path, robot: str) -> None:
+    (tmp_path / "broken.yaml").write_text("joints: [1")
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "robot_calib",
+            "run",
+            "-o",
+            str(tmp_path / "out"),
+            "--robot",
+            robot.format(tmp=tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "error" in lines[0]
+    assert robot.format(tmp=tmp_path).split("/")[-1] in lines[0]
+    assert not (tmp_path / "out").exists()
