@@ -1,4 +1,4 @@
-"""The single forward model: robot + tracker/target frames (+ effects) -> target points.
+"""The single forward model: robot + effects + tracker/target frames -> target points.
 
 Simulation, identification and diagnosis all call `KinematicModel`. Points are
 predicted in the laser-tracker frame:
@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from robot_calib.effects.base import Effect
+from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, chain, point_derivatives
 from robot_calib.kinematics.frames import Array, rot_x, rot_y, rot_z
@@ -68,16 +70,51 @@ def geometric_parameters(
     return ParameterVector(params)
 
 
+def housing_transforms(housing: Array) -> Array:
+    """Error transforms T(dx, dy, dz) Rx(ex) Ry(ey) (seed eq. 10), shape (n, J, 4, 4),
+    from error motions `housing` (n, J, 5) [m, m, m, rad, rad]."""
+    n, j, _ = housing.shape
+    flat = housing.reshape(-1, 5)
+    out = np.zeros((n * j, 4, 4))
+    out[:, :3, :3] = rot_x(flat[:, 3]) @ rot_y(flat[:, 4])
+    out[:, :3, 3] = flat[:, :3]
+    out[:, 3, 3] = 1.0
+    return out.reshape(n, j, 4, 4)
+
+
 @dataclass(frozen=True)
 class KinematicModel:
-    """Forward model and analytic Jacobian for one robot description."""
+    """Forward model and analytic Jacobian: a robot description plus effects."""
 
     robot: RobotDescription
+    effects: tuple[Effect, ...] = ()
 
-    def dh_table(self, params: ParameterVector, q: Array) -> DHTable:
-        """DH/Hayati values of every pose, (n, J) each, from parameters and readings q (n, J)."""
+    def __post_init__(self) -> None:
+        for effect in self.effects:
+            bad = [j for j in effect.joints if not 1 <= j <= self.robot.n_joints]
+            if bad:
+                raise InputError(
+                    f"effect {effect.name}: joints {bad} outside 1..{self.robot.n_joints}"
+                )
+
+    def parameters(
+        self,
+        base2tracker: tuple[float, float, float, float, float, float] = (0.0,) * 6,
+        target_in_flange: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> ParameterVector:
+        """Nominal geometric parameters followed by every effect's (nominal 0)."""
+        params = geometric_parameters(self.robot, base2tracker, target_in_flange)
+        for effect in self.effects:
+            params = params.concat(ParameterVector(effect.parameters(self.robot)))
+        return params
+
+    def with_effects(self, *effects: Effect) -> KinematicModel:
+        """The same robot with `effects` added."""
+        return KinematicModel(self.robot, self.effects + tuple(effects))
+
+    def _nominal_rows(self, params: ParameterVector) -> dict[str, Array]:
         n = self.robot.n_joints
-        row = {
+        return {
             field: np.array(
                 [
                     params.get(f"{field}{j}", getattr(self.robot, field)[j - 1])
@@ -86,13 +123,11 @@ class KinematicModel:
             )
             for field in DH_UNITS
         }
-        return DHTable(
-            theta=row["theta"][None, :] + q,
-            d=row["d"][None, :],
-            a=row["a"][None, :],
-            alpha=row["alpha"][None, :],
-            beta=row["beta"][None, :],
-        )
+
+    def dh_table(self, params: ParameterVector, q: Array) -> DHTable:
+        """Geometric DH/Hayati values (no effects), (n, J) each, for readings q (n, J)."""
+        row = self._nominal_rows(params)
+        return DHTable(row["theta"] + q, row["d"], row["a"], row["alpha"], row["beta"])
 
     @staticmethod
     def base2tracker(params: ParameterVector) -> Array:
@@ -104,8 +139,8 @@ class KinematicModel:
         return out
 
     def flange2base(self, params: ParameterVector, poses: Poses) -> Array:
-        """Flange (DH frame J) poses in the robot base frame, shape (n, 4, 4)."""
-        return chain(self.dh_table(params, poses.q))[:, -1]
+        """Flange (DH frame J) poses in the robot base frame, with effects, shape (n, 4, 4)."""
+        return self._chain(params, poses)[1][:, -1]
 
     def target_points(self, params: ParameterVector, poses: Poses) -> Array:
         """Predicted target centres in the tracker frame, shape (n, 3) [m]."""
@@ -117,11 +152,36 @@ class KinematicModel:
         assert jac is not None
         return points, jac
 
+    def _chain(self, params: ParameterVector, poses: Poses):  # noqa: ANN202 - internal
+        """Effective DH table, frames (n, J+1, 4, 4), housing transforms, contributions."""
+        n, n_joints = poses.q.shape
+        row = self._nominal_rows(params)
+        contributions = [e.contribution(self.robot, params, poses) for e in self.effects]
+        offset = np.zeros((n, n_joints))
+        strain = np.zeros(n)
+        housing = None
+        for c in contributions:
+            if c.joint_offset is not None:
+                offset += c.joint_offset
+            if c.length_strain is not None:
+                strain += c.length_strain
+            if c.housing is not None:
+                housing = c.housing if housing is None else housing + c.housing
+        scale = (1.0 + strain)[:, None]
+        dh = DHTable(
+            row["theta"] + poses.q + offset,
+            row["d"] * scale,
+            row["a"] * scale,
+            row["alpha"],
+            row["beta"],
+        )
+        errors = None if housing is None else housing_transforms(housing)
+        return dh, chain(dh, errors), errors, housing, contributions, row, scale
+
     def _evaluate(
         self, params: ParameterVector, poses: Poses, with_jacobian: bool
     ) -> tuple[Array, Array | None]:
-        dh = self.dh_table(params, poses.q)
-        frames = chain(dh)
+        dh, frames, errors, housing, contributions, row, scale = self._chain(params, poses)
         target = np.array([params[k] for k in TARGET])
         flange = frames[:, -1]
         p_in_base = flange[:, :3, :3] @ target + flange[:, :3, 3]
@@ -133,12 +193,15 @@ class KinematicModel:
 
         n = len(poses)
         jac = np.zeros((n, 3, len(params)))
-        deriv = point_derivatives(dh, frames, p_in_base)
+        deriv = point_derivatives(dh, frames, p_in_base, errors)
         for j in range(1, self.robot.n_joints + 1):
             for field in DH_UNITS:
                 name = f"{field}{j}"
                 if name in params:
-                    jac[:, :, params.index(name)] = getattr(deriv, field)[:, :, j - 1] @ rot.T
+                    col = getattr(deriv, field)[:, :, j - 1]
+                    if field in ("a", "d"):
+                        col = col * scale  # the effective length is (1 + strain) * value
+                    jac[:, :, params.index(name)] = col @ rot.T
         for axis, name in enumerate(BASE_TRANSLATION):
             jac[:, axis, params.index(name)] = 1.0
         # Rotation R = Rz(yaw) Ry(pitch) Rx(roll): each angle turns about an axis of the
@@ -156,4 +219,37 @@ class KinematicModel:
         flange_in_tracker = rot @ flange[:, :3, :3]  # (n, 3, 3)
         for axis, name in enumerate(TARGET):
             jac[:, :, params.index(name)] = flange_in_tracker[:, :, axis]
+
+        d_housing = None
+        if housing is not None:
+            d_housing = _housing_derivatives(frames, housing, p_in_base)
+        for effect, c in zip(self.effects, contributions):
+            cols = [params.index(name) for name in effect.parameter_names(self.robot)]
+            d_eff = np.zeros((n, 3, len(cols)))
+            if c.joint_offset_jac is not None:
+                d_eff += np.einsum("naj,njp->nap", deriv.theta, c.joint_offset_jac)
+            if c.length_strain_jac is not None:
+                d_strain = deriv.a @ row["a"] + deriv.d @ row["d"]  # (n, 3)
+                d_eff += d_strain[:, :, None] * c.length_strain_jac[:, None, :]
+            if c.housing_jac is not None:
+                assert d_housing is not None
+                d_eff += np.einsum("najk,njkp->nap", d_housing, c.housing_jac)
+            jac[:, :, cols] = np.einsum("ab,nbp->nap", rot, d_eff)
         return points, jac
+
+
+def _housing_derivatives(frames: Array, housing: Array, p_in_base: Array) -> Array:
+    """d p_in_base / d (dx, dy, dz, ex, ey) of every joint, shape (n, 3, J, 5), exact for
+    E = T(dx, dy, dz) Rx(ex) Ry(ey) applied in housing frame j-1 (`frames[:, j-1]`)."""
+    prev = frames[:, :-1]  # (n, J, 4, 4)
+    rot_prev = prev[..., :3, :3]
+    shifted = prev[..., :3, 3] + np.einsum("njab,njb->nja", rot_prev, housing[..., :3])
+    lever = p_in_base[:, None, :] - shifted  # from the displaced tilt centre
+    x_axis = rot_prev[..., :, 0]
+    tilt_x = housing[..., 3:4]  # ey turns about y after Rx(ex): R_prev (0, cos ex, sin ex)
+    y_axis = np.cos(tilt_x) * rot_prev[..., :, 1] + np.sin(tilt_x) * rot_prev[..., :, 2]
+    out = np.empty(housing.shape[:2] + (3, 5))  # (n, J, 3, 5)
+    out[..., :3] = rot_prev
+    out[..., 3] = np.cross(x_axis, lever)
+    out[..., 4] = np.cross(y_axis, lever)
+    return np.moveaxis(out, 1, 2)  # (n, 3, J, 5)

@@ -18,22 +18,26 @@ from robot_calib.kinematics.frames import Array
 JOINT_CHANGE_TOLERANCE = 1e-4  # rad, contract default
 
 
+def next_direction(
+    previous_direction: Array, previous_q: Array, q: Array,
+    tolerance: float = JOINT_CHANGE_TOLERANCE,
+) -> Array:
+    """Directions (..., J) at readings q given those of the previous pose: the sign of the
+    change, or the previous direction where the joint held still (within `tolerance`)."""
+    step = q - previous_q
+    return np.where(np.abs(step) > tolerance, np.sign(step), previous_direction)
+
+
 def approach_directions(q: Array, tolerance: float = JOINT_CHANGE_TOLERANCE) -> Array:
     """Approach direction of every joint at every pose.
 
     q : shape (n_poses, n_joints), readings in visiting order [rad].
-    Returns shape (n_poses, n_joints), values +1.0 / -1.0.
+    Returns shape (n_poses, n_joints), values +1.0 / -1.0 (+1 at the first pose).
     """
     q = np.asarray(q, dtype=float)
-    n, j = q.shape
-    direction = np.ones((n, j))
-    if n < 2:
-        return direction
-    step = np.diff(q, axis=0)
-    sign = np.where(np.abs(step) > tolerance, np.sign(step), 0.0)
-    # Carry the last non-zero sign forward (per joint), starting from +1.
-    for k in range(1, n):
-        direction[k] = np.where(sign[k - 1] != 0.0, sign[k - 1], direction[k - 1])
+    direction = np.ones(q.shape)
+    for k in range(1, q.shape[0]):
+        direction[k] = next_direction(direction[k - 1], q[k - 1], q[k], tolerance)
     return direction
 
 

@@ -1,0 +1,20 @@
+"""backlash: a joint-angle offset whose sign follows the approach direction.
+
+theta_j += 0.5 * play_j * direction_j, so poses reached forth and back differ by the play.
+Parameter `backlashJ` [rad] = the total play of joint J.
+"""
+
+from __future__ import annotations
+
+from robot_calib.effects.base import JointOffsetEffect
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.frames import Array
+from robot_calib.poses import Poses
+
+
+class Backlash(JointOffsetEffect):
+    name = "backlash"
+    unit = "rad"
+
+    def signal(self, robot: RobotDescription, poses: Poses) -> Array:
+        return 0.5 * poses.direction

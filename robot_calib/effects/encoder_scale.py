@@ -1,0 +1,20 @@
+"""encoder_scale: a joint-angle scale (gear-ratio) error.
+
+The real angle is (1 + s_j) times the reading: theta_j += s_j * q_j.
+Parameter `encoder_scaleJ` [1] = s_j.
+"""
+
+from __future__ import annotations
+
+from robot_calib.effects.base import JointOffsetEffect
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.frames import Array
+from robot_calib.poses import Poses
+
+
+class EncoderScale(JointOffsetEffect):
+    name = "encoder_scale"
+    unit = "1"
+
+    def signal(self, robot: RobotDescription, poses: Poses) -> Array:
+        return poses.q

@@ -1,0 +1,1 @@
+"""The simulated world (true robot + effects + noise), measurement plans and the tracker."""

@@ -1,0 +1,80 @@
+"""What the simulated laser tracker measures: the physical target of the world's true
+model at the physical joint angles (reading + repeatability noise, effects acting on the
+direction history and time), plus tracker and target noise, latency and dropouts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robot_calib.kinematics.frames import Array
+from robot_calib.poses import Poses, next_direction
+from robot_calib.sim.world import NoiseModel, World
+
+
+def tracker_noise(noise: NoiseModel, p_in_tracker: Array, rng: np.random.Generator) -> Array:
+    """Noise vectors (n, 3) [m] for points p_in_tracker (n, 3) (tracker at the origin)."""
+    n = p_in_tracker.shape[0]
+    target = rng.normal(0.0, noise.target_sigma_m, (n, 3))
+    if not noise.anisotropic:
+        return target + rng.normal(0.0, noise.tracker_sigma_m, (n, 3))
+    distance = np.linalg.norm(p_in_tracker, axis=1, keepdims=True)
+    radial = p_in_tracker / distance
+    # Two unit vectors across the line of sight.
+    helper = np.where(np.abs(radial[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    across1 = np.cross(radial, helper)
+    across1 /= np.linalg.norm(across1, axis=1, keepdims=True)
+    across2 = np.cross(radial, across1)
+    sigma_t = noise.tracker_transverse_sigma_rad * distance
+    return (
+        target
+        + radial * rng.normal(0.0, noise.tracker_radial_sigma_m, (n, 1))
+        + across1 * rng.normal(0.0, 1.0, (n, 1)) * sigma_t
+        + across2 * rng.normal(0.0, 1.0, (n, 1)) * sigma_t
+    )
+
+
+def physical_points(world: World, poses: Poses, rng: np.random.Generator,
+                    noisy: bool = True) -> Array:
+    """Measured target centres in the tracker frame, shape (n, 3) [m], for `poses`
+    (readings, approach directions, time). noisy=False gives the exact true points."""
+    if not noisy:
+        return world.model.target_points(world.truth, poses)
+    jitter = rng.normal(0.0, world.noise.joint_sigma_rad, poses.q.shape)
+    physical = Poses(poses.q + jitter, poses.direction, poses.time)
+    points = world.model.target_points(world.truth, physical)
+    return points + tracker_noise(world.noise, points, rng)
+
+
+@dataclass
+class StreamingTracker:
+    """The tracker as a stream: one reading at a time, keeping the direction history and
+    the start time that effects need (the state a real robot carries)."""
+
+    world: World
+    rng: np.random.Generator
+    _last_q: Array | None = None
+    _direction: Array | None = None
+    _t0: float | None = None
+    count: int = field(default=0)
+
+    def measure(self, q: Array, stamp_s: float) -> tuple[Array, float] | None:
+        """Point (3,) [m] and its measurement stamp [s] for reading q (J,) at `stamp_s`;
+        None when the point is dropped (line of sight lost)."""
+        q = np.asarray(q, dtype=float)
+        if self._last_q is None:
+            self._direction = np.ones_like(q)
+            self._t0 = stamp_s
+        else:
+            self._direction = next_direction(self._direction, self._last_q, q)
+        self._last_q = q
+        assert self._direction is not None and self._t0 is not None
+        options = self.world.tracker
+        latency = self.rng.uniform(0.0, options.latency_max_s)
+        if self.rng.random() < options.dropout_probability:
+            return None
+        poses = Poses(q[None, :], self._direction[None, :], np.array([stamp_s - self._t0]))
+        self.count += 1
+        return physical_points(self.world, poses, self.rng)[0], stamp_s - latency

@@ -1,0 +1,156 @@
+"""Measurement plans: which joint readings the robot visits, in which order, how fast.
+
+- `paper-test1` .. `paper-test6`: the seed's Table 2. Each joint in turn sweeps from Start
+  to End in `points` steps and back (forth and back = the "measured points" row:
+  120/580/290/290/290/290), the other joints at the home pose.
+- `random`: general poses uniform within the joint limits.
+- `iso9283`: the ISO 9283 cube positions P1..P5 (centre and four points on the diagonal
+  plane, 10 % of the diagonal in from the corners), visited in cycles.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from robot_calib.errors import InputError
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.model import KinematicModel
+from robot_calib.poses import Poses
+from robot_calib.sim.world import Timing
+
+# Seed Table 2: per test, per joint (start, end) [deg] and points; and % of max speed.
+PAPER_TESTS: dict[int, tuple[list[tuple[float, float, int]], float]] = {
+    1: ([(167, -167, 10), (-5, -162, 10), (145, -114, 10), (177, -177, 10), (90, -90, 10),
+         (178, -178, 10)], 0.03),
+    2: ([(167, -167, 60), (-5, -162, 30), (145, -114, 50), (177, -177, 60), (90, -90, 30),
+         (178, -178, 60)], 0.03),
+    3: ([(167, -167, 30), (-5, -162, 15), (145, -114, 25), (177, -177, 30), (90, -90, 15),
+         (178, -178, 30)], 0.03),
+    4: ([(80, -80, 30), (-40, -120, 15), (80, -50, 25), (90, -90, 30), (45, -45, 15),
+         (90, -90, 30)], 0.01),
+    5: ([(80, -80, 30), (-40, -120, 15), (80, -50, 25), (90, -90, 30), (45, -45, 15),
+         (90, -90, 30)], 0.03),
+    6: ([(80, -80, 30), (-40, -120, 15), (80, -50, 25), (90, -90, 30), (45, -45, 15),
+         (90, -90, 30)], 0.10),
+}  # fmt: skip
+
+# Pose of the joints that do not sweep [deg]: wrist bent so that every joint's circle has
+# a radius of several cm at the target.
+HOME_DEG = (0.0, -90.0, 90.0, 0.0, 45.0, 0.0)
+PLAN_NAMES = (*(f"paper-test{k}" for k in PAPER_TESTS), "random", "iso9283")
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Joint readings to visit in order.
+
+    q : shape (n, J) [rad]; sweep : shape (n,), the 1-based joint a circle sweep turns
+    (0 = general pose); speed_fraction : fraction of each joint's max speed [1].
+    """
+
+    name: str
+    q: Array
+    sweep: Array
+    speed_fraction: float
+
+    def __len__(self) -> int:
+        return int(self.q.shape[0])
+
+
+def paper_test_plan(test: int, home_deg: tuple[float, ...] = HOME_DEG) -> Plan:
+    """The seed's Table 2 test `test` (1-6) for a 6-joint robot."""
+    if test not in PAPER_TESTS:
+        raise InputError(f"paper-test{test}: the seed's Table 2 has tests 1-6")
+    sweeps, speed = PAPER_TESTS[test]
+    rows, labels = [], []
+    for j, (start, end, points) in enumerate(sweeps, start=1):
+        forth = np.linspace(start, end, points)
+        for angle in np.concatenate([forth, forth[::-1]]):
+            q = np.array(home_deg, dtype=float)
+            q[j - 1] = angle
+            rows.append(q)
+            labels.append(j)
+    return Plan(f"paper-test{test}", np.radians(rows), np.array(labels), speed)
+
+
+def random_plan(robot: RobotDescription, n: int, rng: np.random.Generator,
+                margin: float = 0.05, speed_fraction: float = 0.1) -> Plan:
+    """`n` general poses uniform in the joint limits shrunk by `margin` of each range."""
+    lo, hi = robot.limits.T
+    span = hi - lo
+    q = rng.uniform(lo + margin * span, hi - margin * span, (n, robot.n_joints))
+    return Plan("random", q, np.zeros(n, dtype=int), speed_fraction)
+
+
+def inverse_kinematics(model: KinematicModel, params: ParameterVector, goal2base: Array,
+                       q_seed: Array, iterations: int = 50) -> Array:
+    """Readings (J,) [rad] that put the flange at `goal2base` (4, 4), by damped Gauss-Newton
+    on position and orientation error from `q_seed`; raises InputError if it fails."""
+    q = np.array(q_seed, dtype=float)
+    for _ in range(iterations):
+        error = _pose_error(model, params, q, goal2base)
+        if np.linalg.norm(error) < 1e-12:
+            return q
+        jac = np.empty((6, q.size))
+        for k in range(q.size):
+            step = np.zeros(q.size)
+            step[k] = 1e-7
+            jac[:, k] = (_pose_error(model, params, q + step, goal2base) - error) / 1e-7
+        q -= np.linalg.solve(jac.T @ jac + 1e-9 * np.eye(q.size), jac.T @ error)
+    if np.linalg.norm(_pose_error(model, params, q, goal2base)) > 1e-9:
+        raise InputError("inverse kinematics did not converge (goal out of reach?)")
+    return q
+
+
+def _pose_error(model: KinematicModel, params: ParameterVector, q: Array, goal: Array) -> Array:
+    flange = model.flange2base(params, Poses.from_readings(q[None, :]))[0]
+    rot = goal[:3, :3].T @ flange[:3, :3]
+    return np.concatenate([flange[:3, 3] - goal[:3, 3],
+                           0.5 * np.array([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0],
+                                           rot[1, 0] - rot[0, 1]])])
+
+
+def iso9283_plan(model: KinematicModel, params: ParameterVector, cycles: int = 10,
+                 side_m: float = 0.2, home_deg: tuple[float, ...] = HOME_DEG) -> Plan:
+    """ISO 9283 cube test: P1 (centre) then P2..P5 on the cube's diagonal plane, `cycles`
+    times P1 -> P2 -> P3 -> P4 -> P5, flange orientation of the home pose throughout.
+    The cube (edge `side_m`) is centred on the home pose's flange."""
+    home_q = np.radians(home_deg)
+    home = model.flange2base(params, Poses.from_readings(home_q[None, :]))[0]
+    half = side_m / 2
+    # Diagonal plane through cube corners C1 (-,-,-), C2 (+,+,-), C7 (+,+,+), C8 (-,-,+):
+    # points 10 % of the diagonal in from each corner (0.8 of the half-diagonal offsets).
+    corners = np.array([[1, 1, -1], [1, 1, 1], [-1, -1, 1], [-1, -1, -1]]) * half * 0.8
+    offsets = np.vstack([np.zeros(3), corners])
+    qs = []
+    for offset in offsets:
+        goal = home.copy()
+        goal[:3, 3] += offset
+        qs.append(inverse_kinematics(model, params, goal, home_q))
+    q = np.tile(np.array(qs), (cycles, 1))
+    return Plan("iso9283", q, np.zeros(len(q), dtype=int), 0.1)
+
+
+def make_plan(name: str, model: KinematicModel, params: ParameterVector,
+              rng: np.random.Generator, n_random: int = 200) -> Plan:
+    """A plan by name (PLAN_NAMES); `params` are the controller's (nominal) parameters."""
+    if name.startswith("paper-test") and name[10:].isdigit():
+        return paper_test_plan(int(name[10:]))
+    if name == "random":
+        return random_plan(model.robot, n_random, rng)
+    if name == "iso9283":
+        return iso9283_plan(model, params)
+    raise InputError(f"unknown plan {name!r} (known: {', '.join(PLAN_NAMES)})")
+
+
+def plan_times(plan: Plan, timing: Timing) -> Array:
+    """Measurement time of every pose since the first [s], shape (n,): joint-interpolated
+    moves at the plan's speed fraction, plus acceleration, settling and measurement."""
+    speed = np.asarray(timing.max_joint_speed_rad_s)[: plan.q.shape[1]] * plan.speed_fraction
+    move = np.max(np.abs(np.diff(plan.q, axis=0)) / speed, axis=1)
+    step = move + timing.accel_overhead_s + timing.settle_s + timing.measure_s
+    return np.concatenate([[0.0], np.cumsum(step)])
