@@ -61,8 +61,8 @@ class StreamingTracker:
     count: int = field(default=0)
 
     def measure(self, q: Array, stamp_s: float) -> tuple[Array, float] | None:
-        """Point (3,) [m] and its measurement stamp [s] for reading q (J,) at `stamp_s`;
-        None when the point is dropped (line of sight lost)."""
+        """Point (3,) [m] for reading q (J,) stamped `stamp_s`, and the latency [s] by which
+        the tracker's measurement precedes that stamp; None when the point is dropped."""
         q = np.asarray(q, dtype=float)
         if self._last_q is None:
             self._direction = np.ones_like(q)
@@ -77,4 +77,4 @@ class StreamingTracker:
             return None
         poses = Poses(q[None, :], self._direction[None, :], np.array([stamp_s - self._t0]))
         self.count += 1
-        return physical_points(self.world, poses, self.rng)[0], stamp_s - latency
+        return physical_points(self.world, poses, self.rng)[0], latency

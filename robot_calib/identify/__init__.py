@@ -1,0 +1,1 @@
+"""Identification: circle point analysis, geometric and effect fits, identifiability."""

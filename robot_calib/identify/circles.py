@@ -1,0 +1,81 @@
+"""Least-squares plane and circle of a circle sweep (seed section 5, steps 1-5).
+
+1. best-fitting plane (SVD of the centred points); 2. project the points onto it;
+3. best-fitting circle in the plane (algebraic fit, refined by Gauss-Newton on the
+geometric distance); 4. the centre is a point of the joint axis; 5. the plane normal is
+its direction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from robot_calib.errors import InputError
+from robot_calib.kinematics.frames import Array
+
+
+@dataclass(frozen=True)
+class Circle:
+    """A fitted circle in the frame of the input points.
+
+    centre : (3,) [m]; normal : (3,) unit, oriented by the right-hand rule of the sweep's
+    visiting order (the joint turning positively about it); radius [m];
+    plane_residuals : (n,) signed distances to the plane [m];
+    radial_residuals : (n,) in-plane distance to the centre minus radius [m].
+    """
+
+    centre: Array
+    normal: Array
+    radius: float
+    plane_residuals: Array
+    radial_residuals: Array
+
+    @property
+    def rms(self) -> float:
+        """Root mean square of the full 3-D point-to-circle residual [m]."""
+        return float(np.sqrt(np.mean(self.plane_residuals**2 + self.radial_residuals**2)))
+
+    def angles(self, points: Array, reference: Array | None = None) -> Array:
+        """Angle of each point (n, 3) about the normal [rad], from `reference` (a point)."""
+        u = (points[0] if reference is None else reference) - self.centre
+        u = u - self.normal * (u @ self.normal)
+        u /= np.linalg.norm(u)
+        v = np.cross(self.normal, u)
+        rel = points - self.centre
+        return np.arctan2(rel @ v, rel @ u)
+
+
+def fit_circle(points: Array, where: str = "sweep") -> Circle:
+    """Circle through points (n, 3) [m], n >= 3, visited in order of increasing angle."""
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 2 or points.shape[0] < 3 or points.shape[1] != 3:
+        raise InputError(f"{where}: a circle needs >= 3 points, got shape {points.shape}")
+    mean = points.mean(axis=0)
+    _, singular, vt = np.linalg.svd(points - mean)
+    if singular[1] < 1e-9 * max(singular[0], 1e-300):
+        raise InputError(f"{where}: points are collinear, no circle")
+    u, v, normal = vt
+    local = np.stack([(points - mean) @ u, (points - mean) @ v], axis=1)
+    # Algebraic (Kasa) fit: x^2 + y^2 = 2 a x + 2 b y + c.
+    design = np.column_stack([2 * local, np.ones(len(local))])
+    (a, b, c), *_ = np.linalg.lstsq(design, (local**2).sum(axis=1), rcond=None)
+    centre2, radius = np.array([a, b]), float(np.sqrt(c + a * a + b * b))
+    for _ in range(20):  # Gauss-Newton on the geometric distance
+        rel = local - centre2
+        dist = np.linalg.norm(rel, axis=1)
+        res = dist - radius
+        jac = np.column_stack([-rel / dist[:, None], -np.ones(len(dist))])
+        step, *_ = np.linalg.lstsq(jac, -res, rcond=None)
+        centre2, radius = centre2 + step[:2], radius + float(step[2])
+        if np.max(np.abs(step)) < 1e-13:
+            break
+    centre = mean + centre2[0] * u + centre2[1] * v
+    # Orient the normal so the points advance positively about it.
+    rel = points - centre
+    turning = np.cross(rel[:-1], rel[1:]).sum(axis=0)
+    if turning @ normal < 0:
+        normal = -normal
+    radial = np.linalg.norm(local - centre2, axis=1) - radius
+    return Circle(centre, normal, radius, (points - mean) @ normal, radial)

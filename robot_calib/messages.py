@@ -1,0 +1,46 @@
+"""Conversions between the contract's messages and arrays (CONTRACT.md section 1).
+
+Duck-typed on field names, so they serve rclpy messages and messages decoded from a bag
+(mcap_ros2) alike; no ROS import here.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from robot_calib.errors import InputError
+from robot_calib.kinematics.frames import Array
+
+JOINT_STATES_TOPIC = "/joint_states"
+POINT_TOPIC = "/laser_tracker/point"
+TRACKER_FRAME = "laser_tracker"
+JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
+POINT_TYPE = "geometry_msgs/msg/PointStamped"
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    """builtin_interfaces/Time -> integer nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_sec_nanosec(ns: int) -> tuple[int, int]:
+    """Integer nanoseconds -> (sec, nanosec) of builtin_interfaces/Time."""
+    return ns // 1_000_000_000, ns % 1_000_000_000
+
+
+def joint_positions(msg: Any, joint_names: tuple[str, ...], where: str = JOINT_STATES_TOPIC
+                    ) -> Array:
+    """Readings (J,) [rad] of `joint_names` from a JointState (matched by name, any order)."""
+    names = list(msg.name)
+    missing = [n for n in joint_names if n not in names]
+    if missing:
+        raise InputError(f"{where}: JointState lacks joints {missing} (has {names})")
+    if len(msg.position) != len(names):
+        raise InputError(f"{where}: JointState has {len(names)} names but "
+                         f"{len(msg.position)} positions")
+    q = np.array([msg.position[names.index(n)] for n in joint_names], dtype=float)
+    if not np.all(np.isfinite(q)):
+        raise InputError(f"{where}: JointState positions not finite: {q.tolist()}")
+    return q
