@@ -6,17 +6,16 @@ Every bad input ends in one line on stderr naming the file/value and exit status
 from __future__ import annotations
 
 import argparse
-import json
 import sys
+import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from robot_calib.errors import RobotCalibError
+from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.kinematics.description import RobotDescription, load_robot
-from robot_calib.model import KinematicModel, geometric_parameters
-from robot_calib.poses import Poses
 
 DEFAULT_ROBOT = "kr5_sixx_r650"
 
@@ -39,28 +38,107 @@ def _robot_table(robot: RobotDescription) -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    """The main job on built-in defaults (grows into simulate -> ... -> report)."""
+    """The main job on built-in defaults: simulate -> record (-> calibrate -> diagnose ->
+    report as those steps land). Every run writes a new folder under --output."""
     robot = load_robot(args.robot)
-    out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
-    model = KinematicModel(robot)
-    params = geometric_parameters(robot)
+    out = Path(args.output) / time.strftime("run-%Y%m%d-%H%M%S")
+    out.mkdir(parents=True, exist_ok=False)
     print(_robot_table(robot))
-    q = np.array([np.zeros(robot.n_joints), robot.limits.mean(axis=1)])
-    flange = model.flange2base(params, Poses.from_readings(q))
-    for name, qq, f in zip(("zero reading", "mid-range"), q, flange):
-        print(
-            f"flange at {name} q={np.degrees(qq).round(1).tolist()} deg: "
-            f"{(f[:3, 3] * 1e3).round(3).tolist()} mm in base"
+    bag = out / "calibration.mcap"
+    print(f"[1/2] simulate + record: {args.plan} in the default world -> {bag}")
+    cmd_simulate(
+        argparse.Namespace(
+            output=str(bag),
+            world=None,
+            seed=args.seed,
+            effects=args.effects,
+            plan=args.plan,
+            n_random=200,
+            robot=args.robot,
         )
-    summary = {
-        "robot": robot.name,
-        "parameters": params.to_dict(),
-        "free_parameters": list(params.free_names),
-    }
-    path = out / "nominal_model.json"
-    path.write_text(json.dumps(summary, indent=1))
-    print(f"{len(params)} parameters ({len(params.free_names)} free) written to {path}")
+    )
+    print(f"[2/2] read back: {bag}")
+    from robot_calib.bag import BagReader
+
+    with BagReader(bag) as reader:
+        for topic, count in reader.counts.items():
+            print(f"  {topic}: {count} messages")
+    print(f"done: {out}")
+    return 0
+
+
+def parse_effect(spec: str) -> tuple[str, list[int], float | None]:
+    """'backlash:4', 'eccentricity:1,2', 'thermal_drift', 'compliance:2=2e-5' (SI value)."""
+    value = None
+    if "=" in spec:
+        spec, raw = spec.split("=", 1)
+        try:
+            value = float(raw)
+        except ValueError:
+            raise InputError(f"--effects {spec}={raw}: value must be a number (SI)") from None
+    name, _, joints = spec.partition(":")
+    try:
+        return name, [int(j) for j in joints.split(",") if j], value
+    except ValueError:
+        raise InputError(f"--effects {spec}: joints must be numbers, e.g. backlash:4") from None
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Simulate a plan in a world and record the bag (+ the world's truth beside it)."""
+    from robot_calib.effects import make_effect
+    from robot_calib.sim.world import (
+        build_world,
+        default_effect_values,
+        load_world,
+        save_world,
+        with_effect,
+    )
+
+    output = Path(args.output)
+    if output.exists():
+        raise InputError(f"{output}: exists, will not overwrite a recording")
+    if not output.parent.is_dir():
+        raise InputError(f"{output.parent}: no such folder")
+    if args.world is None and args.robot != DEFAULT_ROBOT:
+        # Another robot without a world file: its nominal geometry in the default set-up.
+        world = build_world({"robot": args.robot, "geometry": "nominal"}, f"--robot {args.robot}")
+    else:
+        world = load_world(args.world)
+    if args.seed is not None:
+        world = replace(world, seed=args.seed)
+    for spec in args.effects or []:
+        name, joints, value = parse_effect(spec)
+        effect = make_effect(name, joints)
+        values = default_effect_values(effect, world.model.robot.name)
+        if value is not None:
+            values = {k: value for k in values}
+        world = with_effect(world, effect, values)
+    world_file = output.with_suffix(".world.yaml")
+    save_world(world, world_file)
+    from robot_calib.nodes.simulate import simulate_bag
+
+    started = time.monotonic()
+    last = [0.0]
+
+    def progress(done: int, total: int) -> None:
+        if time.monotonic() - last[0] > 1.0 or done == total:
+            last[0] = time.monotonic()
+            print(f"  {args.plan}: {done}/{total} poses", file=sys.stderr)
+
+    counts = simulate_bag(
+        output,
+        args.plan,
+        world_file,
+        -1 if args.seed is None else args.seed,
+        args.n_random,
+        progress,
+    )
+    effects = ", ".join(e.label for e in world.effects) or "none"
+    print(
+        f"{output}: {', '.join(f'{t}={n}' for t, n in counts.items())} messages "
+        f"({args.plan}, effects: {effects}) in {time.monotonic() - started:.1f} s; "
+        f"truth in {world_file}"
+    )
     return 0
 
 
@@ -80,8 +158,34 @@ def build_parser() -> argparse.ArgumentParser:
         p.set_defaults(func=func)
         return p
 
+    sim = add("simulate", cmd_simulate, "simulate a measurement plan and record an MCAP bag")
+    sim.add_argument(
+        "--plan",
+        default="paper-test3",
+        help="paper-test1..6 (seed Table 2), random, iso9283 (default paper-test3)",
+    )
+    sim.add_argument("--world", help="world YAML file (default: the built-in default world)")
+    sim.add_argument(
+        "--effects",
+        nargs="*",
+        metavar="EFFECT",
+        help="effects to switch on, e.g. backlash:4 eccentricity:1,2 "
+        "thermal_drift compliance:2=2e-5 (default magnitudes unless =VALUE)",
+    )
+    sim.add_argument("--seed", type=int, help="random seed of noise and plan")
+    sim.add_argument("--n-random", type=int, default=200, help="poses of the random plan")
+    sim.add_argument("-o", "--output", required=True, help="bag to write (BAG.mcap)")
+
     run = add("run", cmd_run, "the main job on built-in defaults")
     run.add_argument("-o", "--output", default="out", help="output folder (default out/)")
+    run.add_argument("--plan", default="paper-test2", help="calibration plan (paper-test2)")
+    run.add_argument(
+        "--effects",
+        nargs="*",
+        default=["backlash:4"],
+        help="effects of the simulated robot (default backlash:4)",
+    )
+    run.add_argument("--seed", type=int, default=0, help="random seed")
     return parser
 
 

@@ -20,3 +20,7 @@ class ParameterError(RobotCalibError):
 
 class InputError(RobotCalibError):
     """Bad array shapes or values at a public boundary (CSV, bag, arguments)."""
+
+
+class BagError(RobotCalibError):
+    """Unreadable, truncated or existing bag file (MCAP), or a bad topic/type in one."""

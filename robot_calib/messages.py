@@ -30,16 +30,18 @@ def ns_to_sec_nanosec(ns: int) -> tuple[int, int]:
     return ns // 1_000_000_000, ns % 1_000_000_000
 
 
-def joint_positions(msg: Any, joint_names: tuple[str, ...], where: str = JOINT_STATES_TOPIC
-                    ) -> Array:
+def joint_positions(
+    msg: Any, joint_names: tuple[str, ...], where: str = JOINT_STATES_TOPIC
+) -> Array:
     """Readings (J,) [rad] of `joint_names` from a JointState (matched by name, any order)."""
     names = list(msg.name)
     missing = [n for n in joint_names if n not in names]
     if missing:
         raise InputError(f"{where}: JointState lacks joints {missing} (has {names})")
     if len(msg.position) != len(names):
-        raise InputError(f"{where}: JointState has {len(names)} names but "
-                         f"{len(msg.position)} positions")
+        raise InputError(
+            f"{where}: JointState has {len(names)} names but {len(msg.position)} positions"
+        )
     q = np.array([msg.position[names.index(n)] for n in joint_names], dtype=float)
     if not np.all(np.isfinite(q)):
         raise InputError(f"{where}: JointState positions not finite: {q.tolist()}")

@@ -19,7 +19,9 @@ JOINT_CHANGE_TOLERANCE = 1e-4  # rad, contract default
 
 
 def next_direction(
-    previous_direction: Array, previous_q: Array, q: Array,
+    previous_direction: Array,
+    previous_q: Array,
+    q: Array,
     tolerance: float = JOINT_CHANGE_TOLERANCE,
 ) -> Array:
     """Directions (..., J) at readings q given those of the previous pose: the sign of the

@@ -63,8 +63,10 @@ def test_jacobian_with_every_effect_matches_finite_differences() -> None:
     nominal = model.parameters((2.5, 0.1, 0.2, 0.1, 0.2, 0.3), (0.06, 0.0, 0.05))
     small = ("compliance", "thermal")  # their units make 1e-2 absurdly large
     params = nominal.with_values(
-        {n: v + rng.normal(0, 1e-6 if n.startswith(small) else 1e-2)
-         for n, v in zip(nominal.names, nominal.values)}
+        {
+            n: v + rng.normal(0, 1e-6 if n.startswith(small) else 1e-2)
+            for n, v in zip(nominal.names, nominal.values)
+        }
     )
     lo, hi = model.robot.limits.T
     poses = Poses.from_readings(rng.uniform(lo, hi, (9, 6)), time=rng.uniform(0, 1000, 9))

@@ -83,7 +83,9 @@ def test_backlash_separates_forth_and_back(world: World) -> None:
     rng = np.random.default_rng(0)
     gap = np.linalg.norm(
         physical_points(w, poses.subset(forth), rng, noisy=False)
-        - physical_points(w, poses.subset(back), rng, noisy=False), axis=1)
+        - physical_points(w, poses.subset(back), rng, noisy=False),
+        axis=1,
+    )
     radius = fit_circle(physical_points(world, poses.subset(forth), rng, noisy=False)).radius
     # Interior poses are approached from opposite sides. At the ends both visits come from
     # the same side: the sweep's start is reached from the home pose moving forth, and the
@@ -93,7 +95,8 @@ def test_backlash_separates_forth_and_back(world: World) -> None:
     assert 0.15e-3 < play * radius < 0.35e-3  # ~0.25 mm at the target, as the seed reports
     # Without backlash, forth and back coincide.
     gap0 = physical_points(world, poses.subset(forth), rng, noisy=False) - physical_points(
-        world, poses.subset(back), rng, noisy=False)
+        world, poses.subset(back), rng, noisy=False
+    )
     assert np.abs(gap0).max() < 1e-12
 
 
@@ -142,7 +145,8 @@ def test_thermal_drift_grows_with_time(world: World) -> None:
     rng = np.random.default_rng(0)
     shift = np.linalg.norm(
         physical_points(w, poses, rng, noisy=False) - physical_points(world, poses, rng, False),
-        axis=1)
+        axis=1,
+    )
     assert shift[0] < 1e-12
     late = poses.time > poses.time[-1] * 0.8
     assert 0.05e-3 < shift[late].mean() < 1e-3
@@ -162,8 +166,12 @@ def test_eccentricity_bends_the_circle(world: World) -> None:
 
 def test_anisotropic_noise_is_radial(world: World) -> None:
     rng = np.random.default_rng(0)
-    noise = NoiseModel(anisotropic=True, tracker_radial_sigma_m=1e-6,
-                       tracker_transverse_sigma_rad=1e-5, target_sigma_m=0.0)
+    noise = NoiseModel(
+        anisotropic=True,
+        tracker_radial_sigma_m=1e-6,
+        tracker_transverse_sigma_rad=1e-5,
+        target_sigma_m=0.0,
+    )
     points = np.tile([[2.5, 0.0, 0.0]], (20000, 1))
     e = tracker_noise(noise, points, rng)
     assert np.std(e[:, 0]) == pytest.approx(1e-6, rel=0.05)
@@ -173,8 +181,9 @@ def test_anisotropic_noise_is_radial(world: World) -> None:
 def test_streaming_tracker_matches_batch(world: World) -> None:
     poses, _ = sweep_poses(world, test=1)
     tracker = StreamingTracker(world, np.random.default_rng(0))
-    noiseless = World(world.model, world.truth, NoiseModel(0, False, 0, 0, 0, 0),
-                      world.tracker, world.timing)
+    noiseless = World(
+        world.model, world.truth, NoiseModel(0, False, 0, 0, 0, 0), world.tracker, world.timing
+    )
     tracker = StreamingTracker(noiseless, np.random.default_rng(0))
     streamed = [tracker.measure(q, 100.0 + t) for q, t in zip(poses.q, poses.time)]
     points = np.array([p for p, _ in streamed])
@@ -201,8 +210,9 @@ def test_iso9283_and_random_plans(world: World) -> None:
     centre = flange[0, :3, 3]
     offsets = flange[1:5, :3, 3] - centre
     np.testing.assert_allclose(np.abs(offsets), 0.08, atol=1e-9)  # 0.8 x half of 0.2 m
-    np.testing.assert_allclose(flange[:, :3, :3], flange[:1, :3, :3].repeat(len(plan), 0),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        flange[:, :3, :3], flange[:1, :3, :3].repeat(len(plan), 0), atol=1e-9
+    )
     random = make_plan("random", world.model, nominal, rng, n_random=50)
     lo, hi = world.model.robot.limits.T
     assert len(random) == 50 and np.all((random.q > lo) & (random.q < hi))

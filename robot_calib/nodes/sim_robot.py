@@ -8,6 +8,8 @@ it also drives /clock (rosgraph_msgs/Clock), so nodes with use_sim_time run on p
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from rclpy.clock import Clock as RosClock
 from rclpy.clock import ClockType
@@ -18,13 +20,14 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from robot_calib.messages import JOINT_STATES_TOPIC, ns_to_sec_nanosec
-from robot_calib.nodes.node_params import declare
+from robot_calib.nodes._common import declare, run_node
 from robot_calib.sim.plans import PLAN_NAMES, Plan, make_plan, plan_times
 from robot_calib.sim.world import load_world
 
 SYSTEM_CLOCK = RosClock(clock_type=ClockType.SYSTEM_TIME)
-QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
-                 depth=1000)
+QOS = QoSProfile(
+    reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1000
+)
 
 
 class SimRobotNode(Node):
@@ -32,18 +35,35 @@ class SimRobotNode(Node):
 
     def __init__(self, **kwargs: object) -> None:
         super().__init__("sim_robot", **kwargs)  # type: ignore[arg-type]
-        self.plan_name = declare(self, "plan", "paper-test3",
-                                 f"measurement plan: {', '.join(PLAN_NAMES)}")
+        self.plan_name = declare(
+            self, "plan", "paper-test3", f"measurement plan: {', '.join(PLAN_NAMES)}"
+        )
         world_file = declare(self, "world", "", "world YAML file ('' = built-in default)")
-        self.rate = declare(self, "rate", 1.0,
-                            "time factor vs the plan's realistic timing (1 = real time, "
-                            "10 = ten times faster, <= 0 = as fast as possible)")
+        self.rate = declare(
+            self,
+            "rate",
+            1.0,
+            "time factor vs the plan's realistic timing (1 = real time, "
+            "10 = ten times faster, <= 0 = as fast as possible)",
+        )
         seed = declare(self, "seed", -1, "random seed (-1 = the world's seed)")
         n_random = declare(self, "n_random", 200, "number of poses of the 'random' plan")
-        self.wait_for = declare(self, "wait_for_subscribers", 1,
-                                "start once this many /joint_states readers are matched")
-        publish_clock = declare(self, "publish_clock", False,
-                                "also publish /clock = measurement time (simulated time)")
+        self.wait_for = declare(
+            self,
+            "wait_for_subscribers",
+            1,
+            "start once this many /joint_states readers are matched",
+        )
+        publish_clock = declare(
+            self, "publish_clock", False, "also publish /clock = measurement time (simulated time)"
+        )
+        autostart = declare(
+            self,
+            "autostart",
+            True,
+            "publish on a wall-clock timer (false: a driver calls "
+            "publish_pose(), as robot-calib simulate does)",
+        )
         self.world = load_world(world_file or None)
         rng = np.random.default_rng(self.world.seed if seed < 0 else seed)
         nominal = self.world.model.parameters()
@@ -56,6 +76,9 @@ class SimRobotNode(Node):
         self.next_pose = 0
         self.start_ns: int | None = None
         self._start_wall_ns = 0
+        self._done_wall_ns: int | None = None
+        if autostart:
+            self._timer = self.create_timer(0.005, self._tick)
         self.get_logger().info(
             f"plan {self.plan_name}: {len(self.plan)} poses over {self.times_s[-1] / 60:.1f} min "
             f"of robot time; waiting for {self.wait_for} subscriber(s) on {JOINT_STATES_TOPIC}"
@@ -95,11 +118,16 @@ class SimRobotNode(Node):
         self.next_pose += 1
         return stamp
 
-    def start_timer(self) -> None:
-        """Standalone mode: publish on a wall-clock timer at the plan's timing / rate."""
-        self._timer = self.create_timer(0.005, self._tick)
+    @property
+    def finished(self) -> bool:
+        """Done, and 0.5 s have passed for reliable readers to take the last poses."""
+        return (
+            self._done_wall_ns is not None
+            and SYSTEM_CLOCK.now().nanoseconds - self._done_wall_ns > 500_000_000
+        )
 
     def _tick(self) -> None:
+        """Standalone mode: publish on a wall-clock timer at the plan's timing / rate."""
         if self.done:
             return
         if self.start_ns is None:
@@ -116,13 +144,12 @@ class SimRobotNode(Node):
             if self.rate <= 0:
                 break  # one pose per tick: readers keep up with a depth-1000 queue
         if self.done:
+            self._done_wall_ns = SYSTEM_CLOCK.now().nanoseconds
             self.get_logger().info(f"plan {self.plan_name} done: {len(self.plan)} poses")
 
 
 def main(args: list[str] | None = None) -> None:
-    from robot_calib.nodes.node_params import run_standalone
-
-    run_standalone(SimRobotNode, args, until_done=True)
+    sys.exit(run_node(SimRobotNode, args, done=lambda node: node.finished))
 
 
 if __name__ == "__main__":

@@ -9,6 +9,8 @@ stamp by a random latency; points may drop out (line of sight), as the world say
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
@@ -23,7 +25,7 @@ from robot_calib.messages import (
     ns_to_sec_nanosec,
     stamp_to_ns,
 )
-from robot_calib.nodes.node_params import declare
+from robot_calib.nodes._common import declare, run_node
 from robot_calib.nodes.sim_robot import QOS
 from robot_calib.sim.measure import StreamingTracker
 from robot_calib.sim.world import load_world
@@ -71,9 +73,7 @@ class SimTrackerNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    from robot_calib.nodes.node_params import run_standalone
-
-    run_standalone(SimTrackerNode, args)
+    sys.exit(run_node(SimTrackerNode, args))
 
 
 if __name__ == "__main__":

@@ -36,8 +36,9 @@ def tracker_noise(noise: NoiseModel, p_in_tracker: Array, rng: np.random.Generat
     )
 
 
-def physical_points(world: World, poses: Poses, rng: np.random.Generator,
-                    noisy: bool = True) -> Array:
+def physical_points(
+    world: World, poses: Poses, rng: np.random.Generator, noisy: bool = True
+) -> Array:
     """Measured target centres in the tracker frame, shape (n, 3) [m], for `poses`
     (readings, approach directions, time). noisy=False gives the exact true points."""
     if not noisy:

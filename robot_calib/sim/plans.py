@@ -77,8 +77,13 @@ def paper_test_plan(test: int, home_deg: tuple[float, ...] = HOME_DEG) -> Plan:
     return Plan(f"paper-test{test}", np.radians(rows), np.array(labels), speed)
 
 
-def random_plan(robot: RobotDescription, n: int, rng: np.random.Generator,
-                margin: float = 0.05, speed_fraction: float = 0.1) -> Plan:
+def random_plan(
+    robot: RobotDescription,
+    n: int,
+    rng: np.random.Generator,
+    margin: float = 0.05,
+    speed_fraction: float = 0.1,
+) -> Plan:
     """`n` general poses uniform in the joint limits shrunk by `margin` of each range."""
     lo, hi = robot.limits.T
     span = hi - lo
@@ -86,8 +91,13 @@ def random_plan(robot: RobotDescription, n: int, rng: np.random.Generator,
     return Plan("random", q, np.zeros(n, dtype=int), speed_fraction)
 
 
-def inverse_kinematics(model: KinematicModel, params: ParameterVector, goal2base: Array,
-                       q_seed: Array, iterations: int = 50) -> Array:
+def inverse_kinematics(
+    model: KinematicModel,
+    params: ParameterVector,
+    goal2base: Array,
+    q_seed: Array,
+    iterations: int = 50,
+) -> Array:
     """Readings (J,) [rad] that put the flange at `goal2base` (4, 4), by damped Gauss-Newton
     on position and orientation error from `q_seed`; raises InputError if it fails."""
     q = np.array(q_seed, dtype=float)
@@ -109,13 +119,21 @@ def inverse_kinematics(model: KinematicModel, params: ParameterVector, goal2base
 def _pose_error(model: KinematicModel, params: ParameterVector, q: Array, goal: Array) -> Array:
     flange = model.flange2base(params, Poses.from_readings(q[None, :]))[0]
     rot = goal[:3, :3].T @ flange[:3, :3]
-    return np.concatenate([flange[:3, 3] - goal[:3, 3],
-                           0.5 * np.array([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0],
-                                           rot[1, 0] - rot[0, 1]])])
+    return np.concatenate(
+        [
+            flange[:3, 3] - goal[:3, 3],
+            0.5 * np.array([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]]),
+        ]
+    )
 
 
-def iso9283_plan(model: KinematicModel, params: ParameterVector, cycles: int = 10,
-                 side_m: float = 0.2, home_deg: tuple[float, ...] = HOME_DEG) -> Plan:
+def iso9283_plan(
+    model: KinematicModel,
+    params: ParameterVector,
+    cycles: int = 10,
+    side_m: float = 0.2,
+    home_deg: tuple[float, ...] = HOME_DEG,
+) -> Plan:
     """ISO 9283 cube test: P1 (centre) then P2..P5 on the cube's diagonal plane, `cycles`
     times P1 -> P2 -> P3 -> P4 -> P5, flange orientation of the home pose throughout.
     The cube (edge `side_m`) is centred on the home pose's flange."""
@@ -135,8 +153,13 @@ def iso9283_plan(model: KinematicModel, params: ParameterVector, cycles: int = 1
     return Plan("iso9283", q, np.zeros(len(q), dtype=int), 0.1)
 
 
-def make_plan(name: str, model: KinematicModel, params: ParameterVector,
-              rng: np.random.Generator, n_random: int = 200) -> Plan:
+def make_plan(
+    name: str,
+    model: KinematicModel,
+    params: ParameterVector,
+    rng: np.random.Generator,
+    n_random: int = 200,
+) -> Plan:
     """A plan by name (PLAN_NAMES); `params` are the controller's (nominal) parameters."""
     if name.startswith("paper-test") and name[10:].isdigit():
         return paper_test_plan(int(name[10:]))

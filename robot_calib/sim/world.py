@@ -8,7 +8,7 @@ about 2.5 m from the base, an active target on a bracket off the flange axis.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +17,7 @@ import yaml
 
 from robot_calib.effects import Effect, make_effect
 from robot_calib.errors import InputError, RobotCalibError
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.description import available_robots, load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
 
@@ -180,14 +180,20 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
             if robot.name != "kr5_sixx_r650":
                 raise InputError(f"{source}: geometry {geometry} is for the kr5_sixx_r650")
             truth = truth.with_values(
-                {k: v * (DEG if k.startswith(("theta", "alpha", "beta")) else 1e-3)
-                 for k, v in SEED_TABLE3_AVG_2_6.items()}
+                {
+                    k: v * (DEG if k.startswith(("theta", "alpha", "beta")) else 1e-3)
+                    for k, v in SEED_TABLE3_AVG_2_6.items()
+                }
             )
         elif geometry != "nominal":
             raise InputError(f"{source}: geometry must be seed_table3_avg_2_6 or nominal")
         deviations = _mapping(data, "deviations", source)
         truth = truth.with_values({k: truth[k] + float(v) for k, v in deviations.items()})
         truth = truth.with_values(effect_values)
+        # `truth`: absolute values of any parameters, applied last (written by world_to_dict).
+        truth = truth.with_values(
+            {k: float(v) for k, v in _mapping(data, "truth", source).items()}
+        )
         noise = NoiseModel(**_mapping(data, "noise", source))
         tracker = TrackerOptions(**_mapping(data, "tracker", source))
         timing_data = _mapping(data, "timing", source)
@@ -200,6 +206,36 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
     except (TypeError, KeyError, ValueError) as exc:
         raise InputError(f"{source}: malformed world ({type(exc).__name__}: {exc})") from None
     return World(model, truth, noise, tracker, timing, int(data.get("seed", 0)), source)
+
+
+def world_to_dict(world: World) -> dict[str, Any]:
+    """A world-file mapping that rebuilds `world` exactly (every true value under `truth`)."""
+    effects = []
+    for effect in world.effects:
+        spec: dict[str, Any] = {"name": effect.name, "joints": list(effect.joints)}
+        spec.update(
+            {f.name: getattr(effect, f.name) for f in fields(effect) if f.name != "joints"}
+        )
+        effects.append(spec)
+    timing = asdict(world.timing)
+    timing["max_joint_speed_deg_s"] = np.degrees(timing.pop("max_joint_speed_rad_s")).tolist()
+    robot = world.model.robot
+    return {
+        "robot": robot.name if robot.name in available_robots() else robot.source,
+        "seed": world.seed,
+        "geometry": "nominal",
+        "effects": effects,
+        "truth": {n: float(v) for n, v in zip(world.truth.names, world.truth.values)},
+        "noise": asdict(world.noise),
+        "tracker": asdict(world.tracker),
+        "timing": timing,
+    }
+
+
+def save_world(world: World, path: Path) -> None:
+    """Write `world` as a world YAML file (the ground truth of a simulated recording)."""
+    header = f"# robot_calib world (complete truth), from {world.source}\n"
+    path.write_text(header + yaml.safe_dump(world_to_dict(world), sort_keys=False))
 
 
 def load_world(path: str | Path | None = None) -> World:
@@ -219,5 +255,4 @@ def with_effect(world: World, effect: Effect, values: dict[str, float] | None = 
     model = world.model.with_effects(effect)
     truth = model.parameters().with_values(dict(zip(world.truth.names, world.truth.values)))
     truth = truth.with_values(values or default_effect_values(effect, world.model.robot.name))
-    return World(model, truth, world.noise, world.tracker, world.timing, world.seed, world.source)
-
+    return replace(world, model=model, truth=truth)

@@ -1,0 +1,156 @@
+"""Shared plumbing of the recorder and replay nodes: described parameters, type import,
+QoS conversion, and the standalone `main` loop with SIGINT/SIGTERM handling."""
+
+from __future__ import annotations
+
+import importlib
+import signal
+import sys
+from collections.abc import Callable, Sequence
+from types import FrameType
+from typing import Any, TypeVar
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
+from rclpy.signals import SignalHandlerOptions
+
+from robot_calib.bag.ros2_formats import QosProfile, duration_from_ns
+from robot_calib.errors import InputError, RobotCalibError
+
+N = TypeVar("N", bound=Node)
+
+_TYPES = {
+    str: ParameterType.PARAMETER_STRING,
+    int: ParameterType.PARAMETER_INTEGER,
+    float: ParameterType.PARAMETER_DOUBLE,
+    bool: ParameterType.PARAMETER_BOOL,
+    list: ParameterType.PARAMETER_STRING_ARRAY,  # the only array parameters here
+}
+
+
+def declare(node: Node, name: str, default: Any, description: str) -> Any:
+    """Declare a typed, read-only ROS parameter with a description (units in the text) and
+    return its value. A float parameter also takes an integer (`-p rate:=1`)."""
+    if isinstance(default, float):
+        descriptor = ParameterDescriptor(
+            description=description, read_only=True, dynamic_typing=True
+        )
+    else:
+        descriptor = ParameterDescriptor(
+            type=_TYPES[type(default)], description=description, read_only=True
+        )
+    try:
+        if isinstance(default, list) and not default:  # an empty list has no inferable type
+            node.declare_parameter(name, Parameter.Type.STRING_ARRAY, descriptor)
+        else:
+            node.declare_parameter(name, default, descriptor)
+        value = node.get_parameter(name).value
+    except ParameterUninitializedException:  # the empty-list default, not overridden
+        return []
+    except ParameterException as exc:  # e.g. `-p qos_depth:=many`
+        raise InputError(f"{node.get_name()}: parameter {name!r}: {exc}") from None
+    if isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise InputError(
+                f"{node.get_name()}: parameter {name!r} must be a number, not {value!r}"
+            )
+        return float(value)
+    return list(value) if isinstance(default, list) else value
+
+
+def overrides(
+    values: dict[str, Any], parameter_overrides: Sequence[Parameter] | None
+) -> list[Parameter]:
+    """Keyword arguments that are not None, as parameter overrides (after any given ones)."""
+    given = list(parameter_overrides or [])
+    return given + [
+        Parameter(name, value=value) for name, value in values.items() if value is not None
+    ]
+
+
+def message_class(type_name: str) -> type:
+    """The Python class of 'pkg/msg/Type' (the package must be installed); InputError."""
+    parts = type_name.split("/")
+    if len(parts) != 3:
+        raise InputError(f"bad message type name {type_name!r} (want pkg/msg/Type)")
+    package, namespace, name = parts
+    try:
+        cls = getattr(importlib.import_module(f"{package}.{namespace}"), name)
+    except (ImportError, AttributeError) as exc:
+        raise InputError(f"message type {type_name} is not installed: {exc}") from None
+    return cls  # type: ignore[no-any-return]
+
+
+def qos_to_record(qos: QoSProfile) -> QosProfile:
+    """An rclpy QoS profile as rosbag2 records it (rmw policy names, (sec, nsec))."""
+    return QosProfile(
+        history=qos.history.name.lower(),
+        depth=int(qos.depth),
+        reliability=qos.reliability.name.lower(),
+        durability=qos.durability.name.lower(),
+        deadline=duration_from_ns(qos.deadline.nanoseconds),
+        lifespan=duration_from_ns(qos.lifespan.nanoseconds),
+        liveliness=qos.liveliness.name.lower(),
+        liveliness_lease_duration=duration_from_ns(qos.liveliness_lease_duration.nanoseconds),
+        avoid_ros_namespace_conventions=bool(qos.avoid_ros_namespace_conventions),
+    )
+
+
+def run_node(
+    factory: Callable[[], N],
+    args: Sequence[str] | None = None,
+    *,
+    done: Callable[[N], bool] | None = None,
+    on_stop: Callable[[N], Any] | None = None,
+    name: str | None = None,
+) -> int:
+    """Run one node alone until SIGINT, SIGTERM, external shutdown or `done(node)`.
+
+    SIGINT and SIGTERM only set a flag (Python handlers; rclpy's own handlers are not
+    installed), so a callback is never interrupted half-way; the loop then stops, calls
+    `on_stop(node)` (e.g. finalise a file), destroys the node and shuts rclpy down.
+    Returns the exit status: 0, or 2 for bad input (one line on stderr: "NAME: error: …").
+    """
+    received: list[int] = []
+
+    def stop(signum: int, frame: FrameType | None) -> None:
+        received.append(signum)
+
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    rclpy.init(
+        args=list(args) if args is not None else None,
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
+    node: N | None = None
+    status = 0
+    name = name or getattr(factory, "__name__", "node")
+    try:
+        node = factory()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not received and rclpy.ok() and not (done is not None and done(node)):
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except RobotCalibError as exc:
+        print(f"{name}: error: {exc}", file=sys.stderr, flush=True)
+        status = exc.exit_status
+    finally:
+        try:
+            if node is not None:
+                if on_stop is not None:
+                    on_stop(node)
+                node.destroy_node()
+        except RobotCalibError as exc:
+            print(f"{name}: error: {exc}", file=sys.stderr, flush=True)
+            status = exc.exit_status
+        finally:
+            rclpy.try_shutdown()
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+    return status
