@@ -11,6 +11,8 @@ import os
 import tempfile
 from pathlib import Path
 
+import pytest
+
 # Fast DDS accepts domains 0-101 and 215-232; 0 is everybody's default, so skip it.
 _DOMAINS = [*range(1, 102), *range(215, 233)]
 _LOCK_DIR = Path(tempfile.gettempdir()) / "robot_calib_ros_domains"
@@ -36,3 +38,15 @@ def pytest_configure(config) -> None:  # noqa: ANN001 - pytest hook signature
     os.environ["ROS_DOMAIN_ID"] = str(_claim_domain())
     log_dir = Path(tempfile.mkdtemp(prefix="robot_calib_roslog_"))
     os.environ["ROS_LOG_DIR"] = str(log_dir)
+
+
+@pytest.fixture
+def context():  # noqa: ANN201 - rclpy is imported lazily, after the domain is claimed
+    """A private rclpy context, shut down after the test."""
+    import rclpy
+    from rclpy.context import Context
+
+    ctx = Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)

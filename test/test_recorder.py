@@ -13,7 +13,6 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-import rclpy
 from geometry_msgs.msg import PointStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -32,15 +31,6 @@ from robot_calib.nodes.recorder import RecorderNode
 JS, PS = "/joint_states", "/laser_tracker/point"
 REPO = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 20.0
-
-
-@pytest.fixture
-def context() -> Iterator[Context]:
-    """A private rclpy context, shut down after the test."""
-    ctx = Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
 
 
 def joint_state(i: int) -> JointState:

@@ -7,11 +7,10 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-import rclpy
 from geometry_msgs.msg import PointStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -29,15 +28,6 @@ JS, PS = "/joint_states", "/laser_tracker/point"
 PS_TYPE = "geometry_msgs/msg/PointStamped"
 REPO = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 20.0
-
-
-@pytest.fixture
-def context() -> Iterator[Context]:
-    """A private rclpy context, shut down after the test."""
-    ctx = Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
 
 
 def spin_until(executor: SingleThreadedExecutor, condition: Callable[[], bool]) -> None:
