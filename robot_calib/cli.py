@@ -142,6 +142,48 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _log(message: str) -> None:
+    print(message, file=sys.stderr)
+
+
+def _output_path(raw: str, what: str) -> Path:
+    path = Path(raw)
+    if not path.parent.is_dir():
+        raise InputError(f"{path.parent}: no such folder for {what}")
+    return path
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """Identify a model from bags; write PARAMS.json; print a summary in mm/deg."""
+    from robot_calib.bag.recording import read_recording
+    from robot_calib.identify.calibrate import calibrate, parse_model
+    from robot_calib.identify.params_file import calibration_to_dict, summary, write_json_atomic
+
+    robot = load_robot(args.robot)
+    parse_model(args.model, robot, args.ecc_order)  # bad --model fails before any reading
+    output = _output_path(args.output, "PARAMS.json")
+    recording = read_recording(args.bags, robot, args.pair_tolerance, log=_log)
+    started = time.perf_counter()
+    cal = calibrate(recording, robot, args.model, args.ecc_order, log=_log)
+    print(summary(cal, recording))
+    write_json_atomic(calibration_to_dict(cal, recording), output)
+    print(f"{output}: {cal.name} in {time.perf_counter() - started:.2f} s")
+    return 0
+
+
+def cmd_predict(args: argparse.Namespace) -> int:
+    """Target positions (tracker frame, m) for the joint angles of JOINTS.csv."""
+    from robot_calib.identify.params_file import load_params
+    from robot_calib.predict import read_joints_csv, write_points_csv
+
+    model, params, _ = load_params(args.params)
+    poses = read_joints_csv(args.joints, model.robot.n_joints)
+    output = _output_path(args.output, "POINTS.csv")
+    write_points_csv(model.target_points(params, poses), output)
+    print(f"{output}: {len(poses)} points (m, laser_tracker frame)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="robot-calib", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -175,6 +217,25 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--seed", type=int, help="random seed of noise and plan")
     sim.add_argument("--n-random", type=int, default=200, help="poses of the random plan")
     sim.add_argument("-o", "--output", required=True, help="bag to write (BAG.mcap)")
+
+    cal = add("calibrate", cmd_calibrate, "identify a model from bags -> PARAMS.json")
+    cal.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
+    cal.add_argument(
+        "--model",
+        default="geometric",
+        help="nominal | cpa | geometric | geometric+eccentricity | geometric+EFFECT[:joints]"
+        " (default geometric)",
+    )
+    cal.add_argument("--ecc-order", type=int, default=1, help="eccentricity Fourier order (1)")
+    cal.add_argument(
+        "--pair-tolerance", type=float, default=0.05, help="point/joint-state pairing [s]"
+    )
+    cal.add_argument("-o", "--output", required=True, help="PARAMS.json to write")
+
+    pred = add("predict", cmd_predict, "target positions for joint angles (JOINTS.csv)")
+    pred.add_argument("params", metavar="PARAMS.json")
+    pred.add_argument("--joints", required=True, help="JOINTS.csv: q1..q6 [rad] (+t, dir1..6)")
+    pred.add_argument("-o", "--output", required=True, help="POINTS.csv to write (x,y,z m)")
 
     run = add("run", cmd_run, "the main job on built-in defaults")
     run.add_argument("-o", "--output", default="out", help="output folder (default out/)")

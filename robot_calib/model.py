@@ -21,7 +21,7 @@ from robot_calib.effects.base import Effect
 from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, chain, point_derivatives
-from robot_calib.kinematics.frames import Array, rot_x, rot_y, rot_z
+from robot_calib.kinematics.frames import Array, matrix_to_rpy, rot_x, rot_y, rot_z
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
 
@@ -68,6 +68,23 @@ def geometric_parameters(
     for name, value in zip(TARGET, target_in_flange):
         params.append(Parameter(name, "m", float(value), group="frames"))
     return ParameterVector(params)
+
+
+def absorb_base_offsets(robot: RobotDescription, params: ParameterVector) -> ParameterVector:
+    """The same geometry with theta1 and d1 at their nominal values, their deviations moved
+    into base2tracker (a turn about and shift along axis 1 commute with joint 1). Use it to
+    compare a simulated world's truth with identified parameters, which keep them nominal."""
+    d_theta = params["theta1"] - robot.theta[0]
+    d_d = params["d1"] - robot.d[0]
+    shift = np.eye(4)
+    shift[:3, :3] = rot_z([d_theta])[0]
+    shift[2, 3] = d_d
+    frame = KinematicModel.base2tracker(params) @ shift
+    roll, pitch, yaw = matrix_to_rpy(frame[:3, :3])
+    updates = dict(zip(BASE_TRANSLATION, frame[:3, 3]))
+    updates.update(zip(BASE_ROTATION, (roll, pitch, yaw)))
+    updates.update({"theta1": float(robot.theta[0]), "d1": float(robot.d[0])})
+    return params.with_values(updates)
 
 
 def housing_transforms(housing: Array) -> Array:

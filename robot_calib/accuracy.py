@@ -1,0 +1,68 @@
+"""Accuracy figures (CONTRACT.md section 5): the seed paper's pairwise-distance criterion,
+which needs no common frame, and the absolute point error where the tracker pose is known.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from robot_calib.kinematics.frames import Array
+
+_PAIR_BLOCK = 2048  # rows per block: memory O(block * N), time O(N^2)
+
+
+@dataclass(frozen=True)
+class Accuracy:
+    """Seed criterion over all N(N-1)/2 pairs and absolute distances, in mm for humans."""
+
+    n_points: int
+    pairwise_mean_mm: float
+    pairwise_max_mm: float
+    absolute_mean_mm: float
+    absolute_rms_mm: float
+    absolute_max_mm: float
+
+    def to_dict(self) -> dict[str, float | int]:
+        return asdict(self)
+
+    def line(self) -> str:
+        return (
+            f"seed criterion mean {self.pairwise_mean_mm:.4f} / max {self.pairwise_max_mm:.4f} mm"
+            f", absolute mean {self.absolute_mean_mm:.4f} / max {self.absolute_max_mm:.4f} mm"
+            f" ({self.n_points} points)"
+        )
+
+
+def pairwise_errors(measured: Array, predicted: Array) -> tuple[float, float]:
+    """Mean and max [m] over all pairs i<j of | |m_i - m_j| - |p_i - p_j| |, for measured and
+    predicted points (N, 3) each in its own frame (seed section 5)."""
+    n = len(measured)
+    if n < 2:
+        return 0.0, 0.0
+    total, worst, count = 0.0, 0.0, 0
+    for start in range(0, n - 1, _PAIR_BLOCK):
+        rows = slice(start, min(start + _PAIR_BLOCK, n - 1))
+        dm = np.linalg.norm(measured[rows, None, :] - measured[None, :, :], axis=-1)
+        dp = np.linalg.norm(predicted[rows, None, :] - predicted[None, :, :], axis=-1)
+        diff = np.abs(dm - dp)
+        upper = np.arange(rows.start, rows.stop)[:, None] < np.arange(n)[None, :]
+        total += float(diff[upper].sum())
+        worst = max(worst, float(diff[upper].max()))
+        count += int(upper.sum())
+    return total / count, worst
+
+
+def accuracy(measured: Array, predicted: Array) -> Accuracy:
+    """Both criteria for measured and predicted points (N, 3) [m] in the tracker frame."""
+    mean, worst = pairwise_errors(measured, predicted)
+    absolute = np.linalg.norm(predicted - measured, axis=1)
+    return Accuracy(
+        len(measured),
+        mean * 1e3,
+        worst * 1e3,
+        float(absolute.mean() * 1e3),
+        float(np.sqrt(np.mean(absolute**2)) * 1e3),
+        float(absolute.max() * 1e3),
+    )

@@ -1,0 +1,153 @@
+"""The models of the ladder (CONTRACT.md sections 2-3) identified from a recording.
+
+- `nominal`: the nominal DH table; only the tracker pose and the target offset are fitted.
+- `cpa`: circle point analysis (seed section 5), parameters straight from the axis lines.
+- `geometric`: all geometric parameters by Levenberg-Marquardt on absolute residuals,
+  starting from CPA (or from `nominal` when the recording has no full set of sweeps).
+- `geometric+EFFECT[:J,J..][+...]`: effects of the vocabulary fitted jointly with the
+  geometry, starting from `geometric`; e.g. `geometric+eccentricity` (all joints, order
+  `ecc_order`), `geometric+backlash:4`, `geometric+compliance:2,3+thermal_drift`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robot_calib.accuracy import Accuracy, accuracy
+from robot_calib.bag.recording import Recording
+from robot_calib.effects import VOCABULARY, Effect, make_effect
+from robot_calib.errors import InputError
+from robot_calib.identify.cpa import CPAResult, circle_point_analysis
+from robot_calib.identify.fit import FitResult, fit_model
+from robot_calib.identify.identifiability import Identifiability
+from robot_calib.identify.registration import fit_frames
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.model import KinematicModel
+
+BASE_MODELS = ("nominal", "cpa", "geometric")
+Log = Callable[[str], None]
+
+
+def parse_model(
+    spec: str, robot: RobotDescription, ecc_order: int = 1
+) -> tuple[str, list[Effect]]:
+    """('nominal'|'cpa'|'geometric', effects) of a model name such as
+    'geometric+eccentricity' or 'geometric+backlash:4+thermal_drift'."""
+    base, *extras = spec.split("+")
+    if base not in BASE_MODELS or (extras and base != "geometric"):
+        raise InputError(
+            f"--model {spec}: expected nominal, cpa, geometric or geometric+EFFECT[:joints] "
+            f"(effects: {', '.join(VOCABULARY)})"
+        )
+    effects: list[Effect] = []
+    for extra in extras:
+        name, _, joint_text = extra.partition(":")
+        if name not in VOCABULARY or name == "geometric":
+            raise InputError(f"--model {spec}: unknown effect {name!r} ({', '.join(VOCABULARY)})")
+        try:
+            joints = [int(j) for j in joint_text.split(",") if j]
+        except ValueError:
+            raise InputError(f"--model {spec}: joints must be numbers, e.g. backlash:4") from None
+        if not joints and name != "thermal_drift":
+            joints = list(range(1, robot.n_joints + 1))
+        options = {"order": ecc_order} if name == "eccentricity" else {}
+        effects.append(make_effect(name, joints, **options))
+    return base, effects
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """An identified model: its name, forward model, parameters with 1-sigma std (P,) in
+    SI units (0 where fixed), in-sample accuracy and the evidence behind it."""
+
+    name: str
+    model: KinematicModel
+    parameters: ParameterVector
+    std: Array
+    accuracy: Accuracy
+    residuals: Array  # (n, 3) predicted - measured [m]
+    identifiability: Identifiability | None = None
+    solver: dict[str, object] = field(default_factory=dict)
+    cpa: CPAResult | None = None
+
+    def predict(self, poses) -> Array:  # noqa: ANN001 - Poses
+        """Target points (n, 3) [m] in the tracker frame."""
+        return self.model.target_points(self.parameters, poses)
+
+
+def _from_fit(name: str, model: KinematicModel, fit: FitResult, points: Array,
+              cpa: CPAResult | None = None) -> Calibration:  # fmt: skip
+    return Calibration(
+        name,
+        model,
+        fit.parameters,
+        fit.std,
+        accuracy(points, points + fit.residuals),
+        fit.residuals,
+        fit.identifiability,
+        fit.solver,
+        cpa,
+    )
+
+
+def calibrate(
+    recording: Recording,
+    robot: RobotDescription,
+    model_spec: str = "geometric",
+    ecc_order: int = 1,
+    log: Log | None = None,
+    start: Calibration | None = None,
+) -> Calibration:
+    """Identify `model_spec` from `recording`. `start`: a calibration to start from (its
+    parameters seed the geometry), else the ladder below the model is climbed first."""
+    say = log or (lambda _msg: None)
+    base, effects = parse_model(model_spec, robot, ecc_order)
+    poses, points = recording.poses, recording.points
+    geometric = KinematicModel(robot)
+    has_sweeps = all(recording.sweeps_of(j) for j in range(1, robot.n_joints + 1))
+    if base == "nominal":
+        say("nominal: fitting the tracker pose and target offset only")
+        return _from_fit("nominal", geometric, fit_frames(geometric, geometric.parameters(),
+                                                           poses, points), points)  # fmt: skip
+    cpa = None
+    if base == "cpa" or (start is None and has_sweeps):
+        cpa = circle_point_analysis(recording, robot)
+        for w in cpa.warnings:
+            say(w)
+    if base == "cpa":
+        assert cpa is not None
+        predicted = geometric.target_points(cpa.parameters, poses)
+        return Calibration(
+            "cpa",
+            geometric,
+            cpa.parameters,
+            np.zeros(len(cpa.parameters)),
+            accuracy(points, predicted),
+            predicted - points,
+            solver={"method": "circle point analysis (seed section 5)"},
+            cpa=cpa,
+        )
+    if start is not None:
+        initial = start.parameters
+    elif cpa is not None:
+        initial = cpa.parameters
+    else:
+        say("geometric: no sweep of every joint, starting from the nominal model")
+        initial = fit_frames(geometric, geometric.parameters(), poses, points).parameters
+    model = KinematicModel(robot, tuple(effects))
+    initial_values = dict(zip(initial.names, initial.values))
+    params = model.parameters().with_values(
+        {k: v for k, v in initial_values.items() if k in model.parameters()}
+    )
+    if effects and start is None:
+        geo = calibrate(recording, robot, "geometric", log=log)
+        params = params.with_values(dict(zip(geo.parameters.names, geo.parameters.values)))
+    say(f"{model_spec}: Levenberg-Marquardt on {len(points)} points, {int(params.free.sum())} "
+        "free parameters before the identifiability check")  # fmt: skip
+    fit = fit_model(model, params, poses, points, progress=say)
+    return _from_fit(model_spec, model, fit, points, cpa)

@@ -1,0 +1,118 @@
+"""Which parameters the data can identify, from the column-scaled Jacobian.
+
+Columns are scaled to unit norm (so metres and radians compare). Taken in priority order
+(geometric first, then effects), a parameter whose column is, but for a tiny fraction, a
+combination of the columns already accepted moves no measured point in a way of its own:
+it is fixed, with the parameters it duplicates as the reason. The condition number and the
+observability index of what stays free come from the SVD.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.parameters import ParameterVector
+
+#: A unit column whose part outside the accepted columns is below this is unidentifiable:
+#: 1e-6 is far below what tracker noise can resolve over a robot's reach.
+RELATIVE_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """condition_number and observability_index (Borm-Menq O1 = geometric mean of the
+    singular values / sqrt(rows)) of the column-scaled Jacobian of the free parameters;
+    fixed: (name, reason) of each parameter fixed by this analysis."""
+
+    condition_number: float
+    observability_index: float
+    n_free: int
+    fixed: tuple[tuple[str, str], ...]
+
+
+def scaled_svd(jac: Array) -> tuple[Array, Array, Array]:
+    """Column norms (p,), singular values (p,) and right singular vectors (p, p) of the
+    Jacobian (m, p) with unit-norm columns (zero columns stay zero)."""
+    norms = np.linalg.norm(jac, axis=0)
+    scaled = jac / np.where(norms > 0, norms, 1.0)
+    _, s, vt = np.linalg.svd(scaled, full_matrices=False)
+    return norms, s, vt
+
+
+def fix_unidentifiable(
+    params: ParameterVector, jac_full: Array, tolerance: float = RELATIVE_TOLERANCE
+) -> tuple[ParameterVector, Identifiability]:
+    """Fix free parameters the data cannot identify. jac_full : (m, P), d residuals / d every
+    parameter of `params` (full vector order). Returns the vector with those fixed (reason
+    recorded) and the analysis of what stays free.
+
+    Greedy Gram-Schmidt in priority order (geometric parameters first, then each effect's
+    in its own order): a parameter whose unit-scaled column is, to within `tolerance`, a
+    combination of the columns already accepted adds nothing the data can see, and is fixed
+    at its current value with the accepted parameters it duplicates as the reason.
+    """
+    free = np.flatnonzero(params.free)
+    order = sorted(free, key=lambda i: params.parameters[i].group != "geometric")
+    m = jac_full.shape[0]
+    basis = np.zeros((m, len(order)))  # orthonormal columns of the accepted parameters
+    r_factor = np.zeros((len(order), len(order)))  # accepted (scaled) = basis @ r_factor
+    accepted: list[int] = []
+    fixed: list[tuple[str, str]] = []
+    for i in order:
+        column = jac_full[:, i]
+        norm = np.linalg.norm(column)
+        name = params.names[i]
+        if norm == 0.0:
+            fixed.append((name, "not identifiable: moves no measured point"))
+            continue
+        column = column / norm
+        k = len(accepted)
+        coeff = basis[:, :k].T @ column
+        rest = column - basis[:, :k] @ coeff
+        extra = basis[:, :k].T @ rest  # second pass: Gram-Schmidt stays orthogonal
+        coeff += extra
+        rest -= basis[:, :k] @ extra
+        left = np.linalg.norm(rest)
+        if left > tolerance:
+            basis[:, k] = rest / left
+            r_factor[:k, k] = coeff
+            r_factor[k, k] = left
+            accepted.append(i)
+            continue
+        weights = np.linalg.solve(r_factor[:k, :k], coeff) if k else np.zeros(0)
+        top = np.argsort(-np.abs(weights))[:4]
+        partners = [params.names[accepted[t]] for t in top if abs(weights[t]) > 1e-3]
+        fixed.append(
+            (
+                name,
+                "not identifiable from these poses: moves the points like "
+                f"{' + '.join(partners) or 'nothing'} (unexplained part {left:.1e})",
+            )
+        )
+    for name, reason in fixed:
+        params = params.fixed([name], reason)
+    return params, describe(jac_full[:, params.free], tuple(fixed))
+
+
+def describe(jac_free: Array, fixed: tuple[tuple[str, str], ...] = ()) -> Identifiability:
+    """Condition number and observability index of a Jacobian (m, p) of free parameters."""
+    if jac_free.shape[1] == 0:
+        return Identifiability(1.0, 0.0, 0, fixed)
+    _, s, _ = scaled_svd(jac_free)
+    observability = float(np.exp(np.mean(np.log(np.maximum(s, 1e-300)))) / np.sqrt(len(jac_free)))
+    return Identifiability(float(s[0] / max(s[-1], 1e-300)), observability, len(s), fixed)
+
+
+def standard_deviations(jac_free: Array, residuals: Array, n_params: int) -> Array:
+    """1-sigma standard deviations (p,) of free parameters from the Jacobian (m, p) and the
+    residual vector (m,) at the solution: sigma^2 (J^T J)^-1 with sigma^2 = SSR / (m - p)."""
+    m = len(residuals)
+    dof = max(m - n_params, 1)
+    sigma2 = float(residuals @ residuals) / dof
+    _, s, vt = np.linalg.svd(jac_free, full_matrices=False)
+    keep = s > s[0] * 1e-12
+    cov_diag = ((vt[keep].T / s[keep]) ** 2).sum(axis=1)
+    return np.sqrt(sigma2 * cov_diag)

@@ -1,0 +1,175 @@
+"""PARAMS.json: an identified model as a file (msgs_doc/parameters.md), and its human summary.
+
+Values are SI (m, rad); the summary printed for people is in mm and deg, labelled.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robot_calib.bag.recording import Recording
+from robot_calib.effects import make_effect
+from robot_calib.errors import InputError, ParameterError, RobotCalibError
+from robot_calib.identify.calibrate import Calibration
+from robot_calib.kinematics.description import available_robots, load_robot
+from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.model import KinematicModel
+
+FORMAT = "robot_calib.params/1"
+
+
+def human_value(name: str, unit: str, value: float) -> tuple[float, str]:
+    """A value in the units people read: m -> mm, rad -> deg (others unchanged)."""
+    if unit == "m":
+        return value * 1e3, "mm"
+    if unit == "rad":
+        return float(np.degrees(value)), "deg"
+    return value, unit
+
+
+def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any]:
+    """The JSON document of a calibration (see msgs_doc/parameters.md)."""
+    robot = cal.model.robot
+    records = cal.parameters.to_dict()
+    for record, std in zip(records, cal.std):
+        record["std"] = float(std)
+    doc: dict[str, Any] = {
+        "format": FORMAT,
+        "model": cal.name,
+        "robot": robot.name if robot.name in available_robots() else robot.source,
+        "effects": [
+            {"name": e.name, "joints": list(e.joints), **_options(e)} for e in cal.model.effects
+        ],
+        "parameters": records,
+        "fixed": [
+            {"name": p.name, "reason": p.fixed_reason}
+            for p in cal.parameters.parameters
+            if not p.free
+        ],
+        "residuals": cal.accuracy.to_dict(),
+        "solver": cal.solver,
+        "recordings": list(recording.sources),
+        "measurements": {
+            "paired": len(recording),
+            "unpaired": recording.n_unpaired,
+            "sweeps": len(recording.sweeps),
+            "general_poses": int(recording.general.sum()),
+        },
+        "warnings": list(recording.warnings),
+    }
+    if cal.identifiability is not None:
+        ident = cal.identifiability
+        doc["identifiability"] = {
+            "condition_number": ident.condition_number,
+            "observability_index": ident.observability_index,
+            "free_parameters": ident.n_free,
+            "fixed_by_data": len(ident.fixed),
+        }
+    if cal.cpa is not None:
+        doc["cpa"] = {
+            "q_ref": cal.cpa.q_ref.tolist(),
+            "sweeps": [
+                {
+                    "joint": s.joint,
+                    "points": s.n_points,
+                    "span_deg": float(np.degrees(s.span_rad)),
+                    "radius_m": s.circle.radius,
+                    "rms_m": s.circle.rms,
+                    "plane_rms_m": float(np.sqrt(np.mean(s.circle.plane_residuals**2))),
+                    "radial_rms_m": float(np.sqrt(np.mean(s.circle.radial_residuals**2))),
+                }
+                for s in cal.cpa.sweeps
+            ],
+            "axes": [
+                {"point_m": a.point.tolist(), "direction": a.direction.tolist()}
+                for a in cal.cpa.axes
+            ],
+        }
+    return doc
+
+
+def _options(effect: object) -> dict[str, Any]:
+    order = getattr(effect, "order", None)
+    return {} if order is None else {"order": order}
+
+
+def write_json_atomic(doc: dict[str, Any], path: Path) -> None:
+    """Write JSON via a temporary file and rename: never a half-written file."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(doc, indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict[str, Any]]:
+    """The forward model and parameters of a PARAMS.json (and the whole document)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such parameter file")
+    try:
+        doc = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise InputError(f"{path}: not a robot_calib parameter file (format {FORMAT})")
+    try:
+        robot = load_robot(doc["robot"])
+        effects = tuple(
+            make_effect(
+                e["name"], e.get("joints", []), **({"order": e["order"]} if "order" in e else {})
+            )  # fmt: skip
+            for e in doc.get("effects", [])
+        )
+        model = KinematicModel(robot, effects)
+        params = ParameterVector.from_dict(doc["parameters"])
+        expected = model.parameters().names
+        if params.names != expected:
+            missing = sorted(set(expected) - set(params.names))
+            raise ParameterError(f"parameters do not match the model (missing {missing[:5]})")
+    except (KeyError, TypeError) as exc:
+        raise InputError(f"{path}: malformed parameter file ({exc})") from None
+    except RobotCalibError as exc:
+        raise InputError(f"{path}: {exc}") from None
+    return model, params, doc
+
+
+def summary(cal: Calibration, recording: Recording) -> str:
+    """Human summary: measurements, parameters (mm/deg) with 1-sigma, fixed, residuals."""
+    lines = [recording.summary(), f"model: {cal.name}"]
+    if cal.identifiability is not None:
+        ident = cal.identifiability
+        lines.append(
+            f"identifiability: {ident.n_free} free parameters, condition number "
+            f"{ident.condition_number:.1f}, observability index {ident.observability_index:.2e}"
+            f", {len(ident.fixed)} fixed by the data"
+        )
+    lines.append(f"{'parameter':<22}{'value':>14}{'nominal':>14}{'deviation':>12}{'1-sigma':>11}")
+    for p, value, std in zip(cal.parameters.parameters, cal.parameters.values, cal.std):
+        if p.group not in ("geometric", "frames") and not p.free:
+            continue  # effect terms the data fixed at 0: listed once below
+        v, unit = human_value(p.name, p.unit, value)
+        n, _ = human_value(p.name, p.unit, p.nominal)
+        s, _ = human_value(p.name, p.unit, std)
+        sigma = f"{s:11.5f}" if p.free else "      fixed"
+        lines.append(f"{p.name + ' [' + unit + ']':<22}{v:14.5f}{n:14.5f}{v - n:12.5f}{sigma}")
+    fixed = [p for p in cal.parameters.parameters if not p.free]
+    if fixed:
+        reasons: dict[str, list[str]] = {}
+        for p in fixed:
+            reason = p.fixed_reason
+            key = reason if len(reason) < 90 else reason.split(":")[0]
+            reasons.setdefault(key, []).append(p.name)
+        for reason, names in reasons.items():
+            shown = ", ".join(names[:8]) + (f" (+{len(names) - 8} more)" if len(names) > 8 else "")
+            lines.append(f"fixed ({reason}): {shown}")
+    lines.append(f"residuals (in-sample): {cal.accuracy.line()}")
+    if cal.solver.get("time_s") is not None:
+        lines.append(
+            f"solver: {cal.solver.get('message')} ({cal.solver.get('evaluations')} evaluations, "
+            f"{float(cal.solver['time_s']):.3f} s)"  # type: ignore[arg-type]
+        )
+    return "\n".join(lines)

@@ -1,0 +1,72 @@
+"""`robot-calib predict`: target positions for given joint angles (CONTRACT.md section 2).
+
+JOINTS.csv: header q1..qJ [rad], optional leading column t [s] and optional dir1..dirJ (+1/-1);
+without dir columns the directions follow the row order, without t the time is 0.
+POINTS.csv: header x,y,z [m], one row per input row, in the laser_tracker frame.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from pathlib import Path
+
+import numpy as np
+
+from robot_calib.errors import InputError
+from robot_calib.kinematics.frames import Array
+from robot_calib.poses import Poses
+
+
+def read_joints_csv(path: str | Path, n_joints: int) -> Poses:
+    """Poses of a JOINTS.csv; a bad header or row raises InputError naming file and line."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such joints file")
+    with path.open(newline="") as handle:
+        rows = list(csv.reader(handle))
+    if not rows:
+        raise InputError(f"{path}: empty file (expected header q1..q{n_joints})")
+    header = [h.strip() for h in rows[0]]
+    q_cols = [f"q{j}" for j in range(1, n_joints + 1)]
+    missing = [c for c in q_cols if c not in header]
+    if missing:
+        raise InputError(f"{path}: header lacks {missing} (got {header})")
+    dir_cols = [f"dir{j}" for j in range(1, n_joints + 1)]
+    has_dir = all(c in header for c in dir_cols)
+    if not has_dir and any(c in header for c in dir_cols):
+        raise InputError(f"{path}: give all of {dir_cols} or none")
+    values = []
+    for line, row in enumerate(rows[1:], start=2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != len(header):
+            raise InputError(f"{path}:{line}: {len(row)} fields, header has {len(header)}")
+        try:
+            values.append([float(c) for c in row])
+        except ValueError:
+            raise InputError(f"{path}:{line}: not a number in {row}") from None
+    if not values:
+        raise InputError(f"{path}: no poses")
+    table = np.array(values)
+    if not np.all(np.isfinite(table)):
+        bad = int(np.flatnonzero(~np.isfinite(table).all(axis=1))[0]) + 2
+        raise InputError(f"{path}:{bad}: value not finite")
+    col = {name: k for k, name in enumerate(header)}
+    q = table[:, [col[c] for c in q_cols]]
+    direction = table[:, [col[c] for c in dir_cols]] if has_dir else None
+    time = table[:, col["t"]] if "t" in col else None
+    if direction is not None and not np.all(np.abs(direction) == 1.0):
+        raise InputError(f"{path}: dir columns must be +1 or -1")
+    return Poses.from_readings(q, direction, time)
+
+
+def write_points_csv(points: Array, path: str | Path) -> None:
+    """POINTS.csv with header x,y,z [m], written atomically (temporary file + rename)."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with tmp.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["x", "y", "z"])
+        writer.writerows([[repr(float(v)) for v in p] for p in points])
+    os.replace(tmp, path)
