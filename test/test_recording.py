@@ -1,0 +1,163 @@
+"""Reading a recording: pairing points with joint states, directions, sweeps, and the one-line
+errors for bad input (real MCAP files written with our writer and rclpy serialisation)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PointStamped
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import JointState
+
+from robot_calib.bag import BagWriter
+from robot_calib.bag.recording import find_sweeps, read_recording, recording_from_arrays
+from robot_calib.errors import RobotCalibError
+from robot_calib.kinematics.description import load_robot
+from robot_calib.sim.plans import paper_test_plan, random_plan
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "bags" / "paper_test3.mcap"
+JS, PS = "/joint_states", "/laser_tracker/point"
+JS_TYPE, PS_TYPE = "sensor_msgs/msg/JointState", "geometry_msgs/msg/PointStamped"
+T0 = 1_700_000_000_000_000_000
+ROBOT = load_robot("kr5_sixx_r650")
+
+
+def _stamp(msg, ns: int) -> None:  # noqa: ANN001 - any stamped message
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(ns), 1_000_000_000)
+
+
+def write_measurements(
+    path: Path,
+    q: np.ndarray,
+    points: np.ndarray,
+    *,
+    point_offsets_s: np.ndarray | None = None,
+    names: list[str] | None = None,
+    js_type: str = JS_TYPE,
+    topics: tuple[str, ...] = (JS, PS),
+) -> None:
+    """A bag with one JointState and one PointStamped per pose, 1 s apart; point i stamped
+    point_offsets_s[i] after its joint state."""
+    names = names or [f"joint_a{j}" for j in range(1, 7)]
+    offsets = np.zeros(len(q)) if point_offsets_s is None else point_offsets_s
+    with BagWriter(path, ros_distro="jazzy") as writer:
+        for topic in topics:
+            writer.add_topic(topic, js_type if topic == JS else PS_TYPE)
+        for i, (qi, pi) in enumerate(zip(q, points)):
+            t = T0 + i * 1_000_000_000
+            js = JointState(name=names, position=[float(v) for v in qi])
+            _stamp(js, t)
+            pt = PointStamped()
+            pt.header.frame_id = "laser_tracker"
+            pt.point.x, pt.point.y, pt.point.z = (float(v) for v in pi)
+            _stamp(pt, t + offsets[i] * 1e9)
+            if JS in topics:
+                writer.write(JS, serialize_message(pt if js_type == PS_TYPE else js), t)
+            if PS in topics:
+                writer.write(PS, serialize_message(pt), t + 1000)
+
+
+def test_sweeps_of_the_paper_plan() -> None:
+    plan = paper_test_plan(2)
+    sweeps = find_sweeps(plan.q)
+    assert [s.joint for s in sweeps] == [1, 2, 3, 4, 5, 6]
+    assert [s.n_poses for s in sweeps] == [120, 60, 100, 120, 60, 120]
+    for s in sweeps:  # each sweep is exactly the plan's poses labelled with that joint
+        assert np.array_equal(s.index, np.flatnonzero(plan.sweep == s.joint))
+
+
+def test_general_poses_make_no_sweeps_and_a_shared_pose_starts_the_next_sweep() -> None:
+    assert find_sweeps(random_plan(ROBOT, 50, np.random.default_rng(0)).q) == []
+    q = np.zeros((7, 6))
+    q[1:4, 0] = [0.1, 0.2, 0.3]  # joint 1 turns over poses 0-3
+    q[4:, 0] = 0.3
+    q[4:, 1] = [0.1, 0.2, 0.3]  # then joint 2 from pose 3 on
+    sweeps = find_sweeps(q)
+    assert [(s.joint, s.index.tolist()) for s in sweeps] == [(1, [0, 1, 2, 3]), (2, [3, 4, 5, 6])]
+
+
+def test_sample_bag_pairs_every_point() -> None:
+    rec = read_recording([SAMPLE], ROBOT)
+    assert len(rec) == 290 and rec.n_unpaired == 0
+    assert [s.joint for s in rec.sweeps] == [1, 2, 3, 4, 5, 6]
+    assert rec.general.sum() == 0
+    assert rec.poses.time[0] == 0.0 and np.all(np.diff(rec.poses.time) > 0)
+    # Forth then back: joint 1 approaches its first half from +, the second half from -.
+    d = rec.poses.direction[rec.sweeps[0].index, 0]
+    assert np.all(d[1:30] == -1.0) and np.all(d[31:] == 1.0)
+
+
+def test_unpaired_points_are_counted_and_reported(tmp_path: Path) -> None:
+    plan = paper_test_plan(3)
+    offsets = np.zeros(len(plan.q))
+    offsets[[5, 50, 100]] = 0.3  # 0.3 s from any joint state: beyond the 0.05 s tolerance
+    path = tmp_path / "late.mcap"
+    write_measurements(path, plan.q, np.ones((len(plan.q), 3)), point_offsets_s=offsets)
+    log: list[str] = []
+    rec = read_recording([path], ROBOT, log=log.append)
+    assert rec.n_unpaired == 3 and len(rec) == len(plan.q) - 3
+    assert any("3 of 290 points have no joint state" in w for w in log)
+    # With a wider tolerance they pair again.
+    assert read_recording([path], ROBOT, pair_tolerance=0.5).n_unpaired == 0
+
+
+@pytest.mark.parametrize(
+    ("case", "message"),
+    [
+        ("text", "not an MCAP file"),
+        ("missing_topic", "no topic /laser_tracker/point"),
+        ("wrong_type", "has type geometry_msgs/msg/PointStamped, not sensor_msgs/msg/JointState"),
+        ("nan", "is not finite"),
+        ("millimetres", "look like millimetres"),
+        ("names", "lacks joints"),
+        ("truncated", "truncated MCAP file"),
+    ],
+)
+def test_bad_bags_give_one_line_errors(tmp_path: Path, case: str, message: str) -> None:
+    path = tmp_path / f"{case}.mcap"
+    q = paper_test_plan(3).q[:20]
+    points = np.tile([2.0, 1.0, 0.1], (20, 1))
+    if case == "text":
+        path.write_text("x,y,z\n1,2,3\n")
+    elif case == "missing_topic":
+        write_measurements(path, q, points, topics=(JS,))
+    elif case == "wrong_type":
+        write_measurements(path, q, points, js_type=PS_TYPE)
+    elif case == "nan":
+        points[7, 1] = np.nan
+        write_measurements(path, q, points)
+    elif case == "millimetres":
+        write_measurements(path, q, points * 1e3)
+    elif case == "names":
+        write_measurements(path, q, points, names=[f"j{j}" for j in range(6)])
+    elif case == "truncated":
+        write_measurements(path, q, points)
+        path.write_bytes(path.read_bytes()[:-200])
+    with pytest.raises(RobotCalibError) as err:
+        read_recording([path], ROBOT)
+    assert message in str(err.value) and str(path) in str(err.value)
+    assert "\n" not in str(err.value)
+    # The command line says the same in one line with exit status 2 and writes nothing.
+    out = tmp_path / f"{case}.json"
+    proc = subprocess.run(
+        [sys.executable, "-m", "robot_calib", "calibrate", str(path), "-o", str(out)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_small_sweeps_are_used_as_general_poses_with_a_warning() -> None:
+    q = np.zeros((5, 6))
+    q[:, 3] = np.radians([0, 1, 2, 3, 4])  # 4 deg: too small to fit a circle
+    rec = recording_from_arrays(q, np.random.default_rng(0).normal(size=(5, 3)))
+    assert rec.sweeps == () and rec.general.all()
+    assert "too small to fit a circle" in rec.warnings[0]
