@@ -20,7 +20,6 @@ from robot_calib.bag.recording import recording_from_arrays
 from robot_calib.effects import make_effect
 from robot_calib.identify.calibrate import calibrate, parse_model
 from robot_calib.identify.cpa import circle_point_analysis
-from robot_calib.identify.fit import fit_model
 from robot_calib.identify.identifiability import fix_unidentifiable
 from robot_calib.identify.params_file import load_params
 from robot_calib.kinematics.frames import rpy_to_matrix
@@ -199,7 +198,8 @@ def test_calibrate_and_predict_commands(tmp_path: Path) -> None:
     rows = [f"{t},{','.join(repr(float(v)) for v in q)}" for t, q in zip(h_poses.time, h_poses.q)]
     joints.write_text(header + "\n" + "\n".join(rows) + "\n")
     points = tmp_path / "points.csv"
-    proc = subprocess.run([*run, "predict", str(params), "--joints", str(joints), "-o", str(points)],
+    predict = [*run, "predict", str(params), "--joints"]
+    proc = subprocess.run([*predict, str(joints), "-o", str(points)],
                           capture_output=True, text=True, check=False)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     predicted = np.loadtxt(points, delimiter=",", skiprows=1)
@@ -211,7 +211,7 @@ def test_calibrate_and_predict_commands(tmp_path: Path) -> None:
 
     bad = tmp_path / "bad.csv"
     bad.write_text("q1,q2,q3\n1,2,3\n")
-    proc = subprocess.run([*run, "predict", str(params), "--joints", str(bad), "-o", str(points)],
+    proc = subprocess.run([*predict, str(bad), "-o", str(points)],
                           capture_output=True, text=True, check=False)  # fmt: skip
     assert proc.returncode == 2 and "bad.csv: header lacks ['q4', 'q5', 'q6']" in proc.stderr
     proc = subprocess.run([*run, "calibrate", str(bag), "--model", "geometric+wobble", "-o", "x"],
