@@ -37,32 +37,54 @@ def _robot_table(robot: RobotDescription) -> str:
     return "\n".join(lines)
 
 
+RUN_MODELS = ("nominal", "cpa", "geometric")
+
+
 def cmd_run(args: argparse.Namespace) -> int:
-    """The main job on built-in defaults: simulate -> record (-> calibrate -> diagnose ->
-    report as those steps land). Every run writes a new folder under --output."""
+    """The main job on built-in defaults: simulate + record a calibration bag and a hold-out
+    bag, calibrate the models of the ladder, score them on the hold-out poses. Every run
+    writes a new folder under --output."""
+    from robot_calib.accuracy import accuracy
+    from robot_calib.bag.recording import read_recording
+    from robot_calib.identify.calibrate import calibrate
+    from robot_calib.identify.params_file import calibration_to_dict, summary, write_json_atomic
+
     robot = load_robot(args.robot)
     out = Path(args.output) / time.strftime("run-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=False)
     print(_robot_table(robot))
-    bag = out / "calibration.mcap"
-    print(f"[1/2] simulate + record: {args.plan} in the default world -> {bag}")
+    bag, holdout = out / "calibration.mcap", out / "holdout.mcap"
+    steps = 4
+    print(f"[1/{steps}] simulate + record: {args.plan} in the default world -> {bag}")
+    base = dict(world=None, effects=args.effects, n_random=args.holdout, robot=args.robot)
+    cmd_simulate(argparse.Namespace(output=str(bag), seed=args.seed, plan=args.plan, **base))
+    print(f"[2/{steps}] simulate + record: {args.holdout} random hold-out poses -> {holdout}")
+    base["world"] = str(bag.with_suffix(".world.yaml"))
+    base["effects"] = []
     cmd_simulate(
-        argparse.Namespace(
-            output=str(bag),
-            world=None,
-            seed=args.seed,
-            effects=args.effects,
-            plan=args.plan,
-            n_random=200,
-            robot=args.robot,
-        )
+        argparse.Namespace(output=str(holdout), seed=args.seed + 1, plan="random", **base)
     )
-    print(f"[2/2] read back: {bag}")
-    from robot_calib.bag import BagReader
-
-    with BagReader(bag) as reader:
-        for topic, count in reader.counts.items():
-            print(f"  {topic}: {count} messages")
+    recording = read_recording([bag], robot, log=_log)
+    held = read_recording([holdout], robot, log=_log)
+    print(f"[3/{steps}] calibrate: {', '.join(RUN_MODELS)}")
+    rows = []
+    for name in RUN_MODELS:
+        cal = calibrate(recording, robot, name, log=_log)
+        write_json_atomic(calibration_to_dict(cal, recording), out / f"params_{name}.json")
+        if name == "geometric":
+            print(summary(cal, recording))
+        rows.append((name, cal.accuracy, accuracy(held.points, cal.predict(held.poses))))
+    print(
+        f"[4/{steps}] accuracy (seed criterion: pairwise distance errors; absolute: tracker frame)"
+    )
+    print(f"{'model':<12}{'in-sample mean/max [mm]':>26}{'hold-out mean/max [mm]':>26}"
+          f"{'hold-out abs mean [mm]':>25}")  # fmt: skip
+    for name, fit, test in rows:
+        print(
+            f"{name:<12}{fit.pairwise_mean_mm:>15.4f} / {fit.pairwise_max_mm:<8.4f}"
+            f"{test.pairwise_mean_mm:>15.4f} / {test.pairwise_max_mm:<8.4f}"
+            f"{test.absolute_mean_mm:>17.4f}"
+        )
     print(f"done: {out}")
     return 0
 
@@ -247,6 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="effects of the simulated robot (default backlash:4)",
     )
     run.add_argument("--seed", type=int, default=0, help="random seed")
+    run.add_argument("--holdout", type=int, default=200, help="random hold-out poses (200)")
     return parser
 
 
