@@ -193,6 +193,39 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots."""
+    from robot_calib.bag.recording import read_recording
+    from robot_calib.diagnose.diagnosis import diagnose
+    from robot_calib.diagnose.report import write_report
+    from robot_calib.identify.params_file import write_json_atomic
+
+    robot = load_robot(args.robot)
+    output = _output_path(args.output, "DIAGNOSIS.json")
+    recording = read_recording(args.bags, robot, args.pair_tolerance, log=_log)
+    holdout = None
+    if args.holdout:
+        holdout = read_recording(args.holdout, robot, args.pair_tolerance, log=_log)
+    started = time.perf_counter()
+    doc, ladder = diagnose(recording, robot, holdout, log=_log)
+    write_json_atomic(doc, output)
+    report = output.with_suffix(".md")
+    write_report(doc, ladder, recording, report)
+    dom = doc["dominant_effect"]
+    print(f"{'model':<40}{'held-out mean/max [mm]':>24}{'abs rms [mm]':>14}")
+    for rung in doc["ladder"]:
+        mean, worst = rung["holdout_mean_mm"], rung["holdout_max_mm"]
+        print(f"{rung['model']:<40}{mean:>11.4f} / {worst:<9.4f}"
+              f"{rung['holdout_abs_rms_mm']:>14.4f}")  # fmt: skip
+    print(f"noise floor (abs rms): {doc['noise']['floor_abs_rms_mm']:.4f} mm "
+          f"({doc['noise']['source']})")  # fmt: skip
+    print("dominant effect: " + ("null (geometric reaches the noise level)" if dom is None
+                                 else f"{dom['effect']} joints {dom['joints']}"))  # fmt: skip
+    print(f"unexplained: {doc['unexplained']['note']}")
+    print(f"{output}, {report} in {time.perf_counter() - started:.1f} s")
+    return 0
+
+
 def cmd_predict(args: argparse.Namespace) -> int:
     """Target positions (tracker frame, m) for the joint angles of JOINTS.csv."""
     from robot_calib.identify.params_file import load_params
@@ -253,6 +286,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--pair-tolerance", type=float, default=0.05, help="point/joint-state pairing [s]"
     )
     cal.add_argument("-o", "--output", required=True, help="PARAMS.json to write")
+
+    diag = add("diagnose", cmd_diagnose, "sim-to-real gap diagnosis -> DIAGNOSIS.json + report")
+    diag.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
+    diag.add_argument("--holdout", nargs="*", metavar="BAG", help="hold-out bag(s): scored only")
+    diag.add_argument(
+        "--pair-tolerance", type=float, default=0.05, help="point/joint-state pairing [s]"
+    )
+    diag.add_argument("-o", "--output", required=True, help="DIAGNOSIS.json to write")
 
     pred = add("predict", cmd_predict, "target positions for joint angles (JOINTS.csv)")
     pred.add_argument("params", metavar="PARAMS.json")

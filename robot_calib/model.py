@@ -159,6 +159,14 @@ class KinematicModel:
         """Flange (DH frame J) poses in the robot base frame, with effects, shape (n, 4, 4)."""
         return self._chain(params, poses)[1][:, -1]
 
+    def joint_axes(self, params: ParameterVector, poses: Poses) -> tuple[Array, Array]:
+        """Axis lines of every joint at `poses` in the tracker frame: origins (n, J, 3) [m]
+        and unit directions (n, J, 3) (z of frame j-1; housing errors included)."""
+        frames = self._chain(params, poses)[1][:, :-1]
+        b2t = self.base2tracker(params)
+        origins = frames[..., :3, 3] @ b2t[:3, :3].T + b2t[:3, 3]
+        return origins, frames[..., :3, 2] @ b2t[:3, :3].T
+
     def target_points(self, params: ParameterVector, poses: Poses) -> Array:
         """Predicted target centres in the tracker frame, shape (n, 3) [m]."""
         return self._evaluate(params, poses, with_jacobian=False)[0]

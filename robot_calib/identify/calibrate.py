@@ -4,9 +4,10 @@
 - `cpa`: circle point analysis (seed section 5), parameters straight from the axis lines.
 - `geometric`: all geometric parameters by Levenberg-Marquardt on absolute residuals,
   starting from CPA (or from `nominal` when the recording has no full set of sweeps).
-- `geometric+EFFECT[:J,J..][+...]`: effects of the vocabulary fitted jointly with the
-  geometry, starting from `geometric`; e.g. `geometric+eccentricity` (all joints, order
-  `ecc_order`), `geometric+backlash:4`, `geometric+compliance:2,3+thermal_drift`.
+- `geometric+EFFECT[:J,J..][:order=K][+...]`: effects of the vocabulary fitted jointly with
+  the geometry, starting from `geometric`; e.g. `geometric+eccentricity` (all joints, order
+  `ecc_order`), `geometric+eccentricity:6:order=3`, `geometric+backlash:4`,
+  `geometric+compliance:2,3+thermal_drift`.
 """
 
 from __future__ import annotations
@@ -46,16 +47,23 @@ def parse_model(
         )
     effects: list[Effect] = []
     for extra in extras:
-        name, _, joint_text = extra.partition(":")
+        name, *fields = extra.split(":")
         if name not in VOCABULARY or name == "geometric":
             raise InputError(f"--model {spec}: unknown effect {name!r} ({', '.join(VOCABULARY)})")
+        options: dict[str, int] = {"order": ecc_order} if name == "eccentricity" else {}
+        joints: list[int] = []
         try:
-            joints = [int(j) for j in joint_text.split(",") if j]
+            for f in fields:
+                if f.startswith("order="):
+                    options["order"] = int(f.split("=", 1)[1])
+                else:
+                    joints += [int(j) for j in f.split(",") if j]
         except ValueError:
-            raise InputError(f"--model {spec}: joints must be numbers, e.g. backlash:4") from None
+            raise InputError(
+                f"--model {spec}: expected EFFECT:J,J[:order=K], e.g. backlash:4"
+            ) from None
         if not joints and name != "thermal_drift":
             joints = list(range(1, robot.n_joints + 1))
-        options = {"order": ecc_order} if name == "eccentricity" else {}
         effects.append(make_effect(name, joints, **options))
     return base, effects
 
@@ -151,3 +159,17 @@ def calibrate(
         "free parameters before the identifiability check")  # fmt: skip
     fit = fit_model(model, params, poses, points, progress=say)
     return _from_fit(model_spec, model, fit, points, cpa)
+
+
+def effect_spec(effect: Effect) -> str:
+    """The `--model` term of one effect, e.g. 'backlash:4', 'eccentricity:6:order=3'."""
+    spec = effect.name
+    if effect.joints:
+        spec += ":" + ",".join(str(j) for j in effect.joints)
+    order = getattr(effect, "order", None)
+    return spec + (f":order={order}" if order is not None else "")
+
+
+def model_name(effects: tuple[Effect, ...] | list[Effect]) -> str:
+    """The `--model` name of the geometric model plus `effects`."""
+    return "+".join(["geometric", *(effect_spec(e) for e in effects)])

@@ -1,0 +1,209 @@
+"""The diagnosis ladder: from `geometric`, add the effect that most reduces the error on data
+not used to fit it, until nothing beats the noise level (CONTRACT.md section 4).
+
+Screening is linearised and cheap: the current model is extended by every candidate at
+zero (which changes no prediction), one Jacobian gives all candidate columns, and each
+candidate is scored by k-fold cross-validation over whole poses (and on the hold-out bags
+when given) with one Gauss-Newton step from the current solution. The winner is then
+fitted in full (Levenberg-Marquardt) and its rung scored with real refits per fold.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robot_calib.accuracy import Accuracy, accuracy
+from robot_calib.bag.recording import Recording
+from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
+from robot_calib.effects import Effect, make_effect
+from robot_calib.effects.compliance import gravity_torques
+from robot_calib.identify.calibrate import Calibration, calibrate, model_name
+from robot_calib.identify.fit import fit_model
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.frames import Array
+from robot_calib.model import KinematicModel
+
+N_FOLDS = 5
+MAX_RUNGS = 4
+MIN_GAIN = 0.05  # a candidate must cut the held-out rms by 5 % ...
+AT_FLOOR = 1.2  # ... and the ladder stops once held-out rms <= 1.2 x the noise floor
+ECC_ORDERS = (1, 2, 3)
+TRY_TOP = 3  # candidates refitted per round when the best one's refit disappoints
+Log = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class Rung:
+    """One model of the ladder and its scores on held-out data (CV folds or hold-out bags)."""
+
+    model: str
+    effects: tuple[Effect, ...]
+    calibration: Calibration
+    heldout: Accuracy
+    heldout_residuals: Array  # (m, 3) predicted - measured [m] of the scored points
+    screening_rms_m: float  # linearised score that chose it (nan for geometric)
+
+
+@dataclass(frozen=True)
+class Ladder:
+    """The rungs in the order added, the noise level, the candidates of every round."""
+
+    rungs: list[Rung]
+    noise: NoiseLevel
+    scored_on: str
+    candidates: list[list[tuple[str, float]]] = field(default_factory=list)
+
+
+def candidates(robot: RobotDescription, recording: Recording,
+               present: tuple[Effect, ...]) -> list[Effect]:  # fmt: skip
+    """Every effect x joint (x eccentricity order) of the vocabulary not yet in the model
+    and able to move a measured point (e.g. no compliance where gravity has no torque)."""
+    taken = {(e.name, e.joints, getattr(e, "order", 0)) for e in present}
+    tau = gravity_torques(robot, recording.poses.q)
+    out: list[Effect] = []
+    for j in range(1, robot.n_joints + 1):
+        out.append(make_effect("backlash", [j]))
+        out.append(make_effect("encoder_scale", [j]))
+        if np.ptp(tau[:, j - 1]) > 1e-3:
+            out.append(make_effect("compliance", [j]))
+        have = max((getattr(e, "order", 0) for e in present
+                    if e.name == "eccentricity" and e.joints == (j,)), default=0)  # fmt: skip
+        out += [make_effect("eccentricity", [j], order=k) for k in ECC_ORDERS if k > have]
+    if np.ptp(recording.poses.time) > 0:
+        out.append(make_effect("thermal_drift"))
+    return [e for e in out if (e.name, e.joints, getattr(e, "order", 0)) not in taken]
+
+
+def folds(n: int, k: int = N_FOLDS, seed: int = 0) -> Array:
+    """Fold number (n,) of every pose: a fixed random split into k folds of whole poses."""
+    return np.random.default_rng(seed).permutation(n) % k
+
+
+def _replace(present: tuple[Effect, ...], new: Effect) -> tuple[Effect, ...]:
+    """`present` plus `new`; a higher eccentricity order of a joint replaces the lower."""
+    kept = tuple(
+        e for e in present if not (e.name == new.name == "eccentricity" and e.joints == new.joints)
+    )
+    return kept + (new,)
+
+
+def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
+            holdout: Recording | None) -> list[tuple[Effect, float]]:  # fmt: skip
+    """Linearised held-out rms [m] of the current model and of each candidate added."""
+    widest: dict[tuple[str, tuple[int, ...]], Effect] = {}
+    for e in cal.model.effects + tuple(pool):  # one effect per (name, joints), highest order
+        key = (e.name, e.joints)
+        if key not in widest or getattr(e, "order", 0) > getattr(widest[key], "order", 0):
+            widest[key] = e
+    superset = KinematicModel(cal.model.robot, tuple(widest.values()))
+    params = superset.parameters().with_values(
+        dict(zip(cal.parameters.names, cal.parameters.values))
+    )
+    predicted, jac = superset.jacobian(params, recording.poses)
+    n = len(recording)
+    residual = predicted - recording.points
+    base_cols = [params.index(name) for name in cal.parameters.free_names]
+    h_res = h_jac = None
+    if holdout is not None:
+        h_pred, h_jac = superset.jacobian(params, holdout.poses)
+        h_res = h_pred - holdout.points
+    fold = folds(n)
+    scores = []
+    for effect in [None, *pool]:
+        cols = list(base_cols)
+        if effect is not None:
+            cols += [params.index(name) for name in effect.parameter_names(cal.model.robot)
+                     if params.index(name) not in base_cols]  # fmt: skip
+        h_cols = None if h_jac is None else h_jac[:, :, cols]
+        scores.append((effect, _linear_score(residual, jac[:, :, cols], fold, h_res, h_cols)))
+    return scores
+
+
+def _linear_score(residual: Array, jac: Array, fold: Array, h_res: Array | None,
+                  h_jac: Array | None) -> float:  # fmt: skip
+    """rms |r + J dx| [m] on held-out points, dx the least-squares step on the others."""
+    norms = np.linalg.norm(jac.reshape(-1, jac.shape[-1]), axis=0)
+    keep = norms > 0
+    jac = jac[:, :, keep] / norms[keep]
+
+    def step(rows: Array) -> Array:
+        a = jac[rows].reshape(-1, jac.shape[-1])
+        return np.linalg.lstsq(a, -residual[rows].reshape(-1), rcond=1e-9)[0]
+
+    if h_res is not None and h_jac is not None:
+        h_jac = h_jac[:, :, keep] / norms[keep]
+        dx = step(np.ones(len(residual), dtype=bool))
+        out = h_res + h_jac @ dx
+    else:
+        out = np.empty_like(residual)
+        for f in np.unique(fold):
+            test = fold == f
+            out[test] = residual[test] + jac[test] @ step(~test)
+    return float(np.sqrt(np.mean(np.sum(out**2, axis=1))))
+
+
+def score_rung(cal: Calibration, recording: Recording,
+               holdout: Recording | None) -> tuple[Accuracy, Array]:  # fmt: skip
+    """Held-out accuracy of a calibrated model: on the hold-out bags when given, else
+    k-fold over whole poses (each fold refitted from the full solution)."""
+    if holdout is not None:
+        predicted = cal.predict(holdout.poses)
+        return accuracy(holdout.points, predicted), predicted - holdout.points
+    fold = folds(len(recording))
+    predicted = np.empty_like(recording.points)
+    for f in range(N_FOLDS):
+        train = fold != f
+        fit = fit_model(cal.model, cal.parameters, recording.poses.subset(train),
+                        recording.points[train], check_identifiability=False)  # fmt: skip
+        test = recording.poses.subset(~train)
+        predicted[~train] = cal.model.target_points(fit.parameters, test)
+    return accuracy(recording.points, predicted), predicted - recording.points
+
+
+def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording | None = None,
+               log: Log | None = None) -> Ladder:  # fmt: skip
+    """Climb the ladder on `recording`, scoring on `holdout` (or k-fold CV)."""
+    say = log or (lambda _m: None)
+    geo = calibrate(recording, robot, "geometric", log=log)
+    noise = estimate_noise(recording, geo.residuals, int(geo.parameters.free.sum()))
+    scored_on = "hold-out bags" if holdout is not None else f"{N_FOLDS}-fold CV over poses"
+    say(f"noise: {noise.sigma_m * 1e3:.4f} mm per axis ({noise.source}, {noise.n}); "
+        f"scoring on {scored_on}")  # fmt: skip
+    acc, res = score_rung(geo, recording, holdout)
+    rungs = [Rung("geometric", (), geo, acc, res, float("nan"))]
+    rounds: list[list[tuple[str, float]]] = []
+    say(f"  geometric: held-out rms {acc.absolute_rms_mm:.4f} mm "
+        f"(floor {noise.floor_rms_m * 1e3:.4f})")  # fmt: skip
+    while len(rungs) <= MAX_RUNGS:
+        current = rungs[-1]
+        if current.heldout.absolute_rms_mm <= AT_FLOOR * noise.floor_rms_m * 1e3:
+            break
+        pool = candidates(robot, recording, current.effects)
+        if not pool:
+            break
+        scores = _screen(current.calibration, pool, recording, holdout)
+        base = scores[0][1]
+        ranked = sorted(scores[1:], key=lambda s: s[1])
+        rounds.append([(model_name(_replace(current.effects, e)), s) for e, s in ranked[:8]])
+        accepted = None
+        for effect, lin_score in ranked[:TRY_TOP]:  # the refit must confirm the screening
+            if lin_score > (1.0 - MIN_GAIN) * base:
+                break
+            effects = _replace(current.effects, effect)
+            name = model_name(effects)
+            cal = calibrate(recording, robot, name, log=None, start=current.calibration)
+            acc, res = score_rung(cal, recording, holdout)
+            say(
+                f"  try {name}: linearised {lin_score * 1e3:.4f} mm, refitted held-out rms "
+                f"{acc.absolute_rms_mm:.4f} mm (current {current.heldout.absolute_rms_mm:.4f})"
+            )
+            if acc.absolute_rms_mm <= (1.0 - MIN_GAIN) * current.heldout.absolute_rms_mm:
+                accepted = Rung(name, effects, cal, acc, res, lin_score)
+                break
+        if accepted is None:
+            break
+        rungs.append(accepted)
+    return Ladder(rungs, noise, scored_on, rounds)

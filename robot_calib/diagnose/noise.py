@@ -1,0 +1,76 @@
+"""The measurement noise level, estimated from the data, not assumed.
+
+1. Repeat poses: consecutive measurements at the same readings and approach directions
+   (e.g. the turn-around of a forth-and-back sweep) differ only by noise:
+   sigma^2 = mean |p_a - p_b|^2 / 6 per axis.
+2. Else circle sweeps: each circle fit leaves 2 of the 3 noise components (plane, radial):
+   sigma^2 = sum(residual^2) / (2 n - 6 per sweep) (an upper bound if effects bend circles).
+3. Else the in-sample residual of a fitted model with its degrees of freedom.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from robot_calib.bag.recording import Recording
+from robot_calib.identify.circles import fit_circle
+from robot_calib.kinematics.frames import Array
+from robot_calib.poses import JOINT_CHANGE_TOLERANCE
+
+MIN_REPEATS = 3
+
+
+@dataclass(frozen=True)
+class NoiseLevel:
+    """sigma_m: per-axis 1-sigma noise of a measured point [m]; source: how it was found;
+    n: the number of repeat pairs / points behind it."""
+
+    sigma_m: float
+    source: str
+    n: int
+
+    @property
+    def floor_rms_m(self) -> float:
+        """Expected rms of |predicted - measured| for the true model [m] (3-D)."""
+        return float(np.sqrt(3.0) * self.sigma_m)
+
+    @property
+    def floor_mean_m(self) -> float:
+        """Expected mean of |predicted - measured| for the true model [m]."""
+        return float(np.sqrt(8.0 / np.pi) * self.sigma_m)
+
+
+def repeat_pairs(recording: Recording) -> Array:
+    """Index pairs (k, 2) of consecutive measurements with equal readings and directions."""
+    q, d = recording.poses.q, recording.poses.direction
+    same = np.all(np.abs(np.diff(q, axis=0)) <= JOINT_CHANGE_TOLERANCE, axis=1)
+    same &= np.all(d[1:] == d[:-1], axis=1)
+    same &= recording.bag_index[1:] == recording.bag_index[:-1]
+    first = np.flatnonzero(same)
+    return np.stack([first, first + 1], axis=1)
+
+
+def estimate_noise(recording: Recording, fallback_residuals: Array | None = None,
+                   fallback_dof: int = 0) -> NoiseLevel:  # fmt: skip
+    """The noise level of `recording` (see the module docstring for the order of methods);
+    fallback_residuals (n, 3) [m] of a fitted model with `fallback_dof` free parameters."""
+    pairs = repeat_pairs(recording)
+    if len(pairs) >= MIN_REPEATS:
+        diff = recording.points[pairs[:, 0]] - recording.points[pairs[:, 1]]
+        return NoiseLevel(float(np.sqrt(np.mean(diff**2) / 2.0)), "repeat poses", len(pairs))
+    if recording.sweeps:
+        total, dof = 0.0, 0
+        for s in recording.sweeps:
+            circle = fit_circle(recording.points[s.index])
+            total += float(np.sum(circle.plane_residuals**2 + circle.radial_residuals**2))
+            dof += 2 * s.n_poses - 6
+        if dof > 0:
+            return NoiseLevel(float(np.sqrt(total / dof)), "circle fits", dof)
+    if fallback_residuals is not None:
+        dof = max(fallback_residuals.size - fallback_dof, 1)
+        return NoiseLevel(
+            float(np.sqrt(np.sum(fallback_residuals**2) / dof)), "model residual", dof
+        )
+    return NoiseLevel(float("nan"), "unknown", 0)

@@ -1,0 +1,129 @@
+"""The human report of a diagnosis: Markdown with PNG plots (the ladder, residual against each
+joint angle split by approach direction, residual against time), readable without the JSON."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robot_calib.bag.recording import Recording
+from robot_calib.diagnose.ladder import Ladder
+from robot_calib.diagnose.signatures import arc_angle_errors
+
+
+def _plots(ladder: Ladder, recording: Recording, stem: Path) -> list[tuple[str, str]]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = []
+    names = [r.model for r in ladder.rungs]
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    ax.bar(range(len(names)), [r.heldout.absolute_rms_mm for r in ladder.rungs], color="#4878a8")
+    ax.axhline(ladder.noise.floor_rms_m * 1e3, color="k", ls="--", label="noise floor")
+    ax.set_xticks(range(len(names)), names, rotation=15, ha="right", fontsize=8)
+    ax.set_ylabel("held-out rms error [mm]")
+    ax.set_title(f"the ladder (scored on {ladder.scored_on})")
+    ax.legend()
+    fig.tight_layout()
+    path = stem.with_name(stem.name + "_ladder.png")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    out.append(("The ladder: held-out error of each model", path.name))
+
+    geo = ladder.rungs[0].calibration
+    arcs = arc_angle_errors(geo.model, geo.parameters, recording, geo.residuals)
+    if arcs:
+        fig, axes = plt.subplots(2, 3, figsize=(10, 5.5), sharey=False)
+        for ax, (j, (idx, err)) in zip(axes.ravel(), arcs.items()):
+            q = np.degrees(recording.poses.q[idx, j - 1])
+            forth = recording.poses.direction[idx, j - 1] > 0
+            ax.plot(q[forth], err[forth] * 1e6, ".", ms=3, label="approached +")
+            ax.plot(q[~forth], err[~forth] * 1e6, ".", ms=3, label="approached -")
+            ax.set_title(f"joint {j}", fontsize=9)
+            ax.set_xlabel("reading [deg]", fontsize=8)
+            ax.set_ylabel("arc error [urad]", fontsize=8)
+        axes.ravel()[0].legend(fontsize=7)
+        fig.suptitle("geometric model: residual along each sweep's arc vs the joint angle")
+        fig.tight_layout()
+        path = stem.with_name(stem.name + "_angle.png")
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        out.append(("Residual against each joint angle, by approach direction", path.name))
+
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    for rung in (ladder.rungs[0], ladder.rungs[-1])[: len(ladder.rungs)]:
+        norm = np.linalg.norm(rung.calibration.residuals, axis=1) * 1e3
+        ax.plot(recording.poses.time, norm, ".", ms=3, label=rung.model)
+    ax.set_xlabel("time since the first measurement [s]")
+    ax.set_ylabel("|residual| [mm]")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = stem.with_name(stem.name + "_time.png")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    out.append(("Residual against time (in-sample)", path.name))
+    return out
+
+
+def write_report(doc: dict[str, Any], ladder: Ladder, recording: Recording, path: Path) -> None:
+    """Markdown report `path` (+ PNGs beside it named after it)."""
+    plots = _plots(ladder, recording, path.with_suffix(""))
+    dom = doc["dominant_effect"]
+    verdict = (
+        "geometric already reaches the noise level: no dominant unmodelled effect"
+        if dom is None
+        else f"dominant effect: **{dom['effect']}** on joint(s) {dom['joints'] or '-'}"
+    )
+    noise = doc["noise"]
+    lines = [
+        "# Sim-to-real gap diagnosis",
+        "",
+        f"Recordings: {', '.join(doc['recordings'])}; scored on {doc['scored_on']}"
+        + (f" ({', '.join(doc['holdout'])})" if doc["holdout"] else "")
+        + ".",
+        "",
+        f"**Verdict** — {verdict}.",
+        "",
+        f"Noise level from the data ({noise['source']}, n = {noise['n']}): "
+        f"{noise['sigma_mm'] * 1e3:.1f} um per axis; a perfect model would leave "
+        f"{noise['floor_abs_rms_mm']:.4f} mm rms on held-out points.",
+        "",
+        "| model | held-out seed criterion mean / max [mm] "
+        "| held-out absolute mean / rms [mm] | x noise floor |",
+        "|---|---|---|---|",
+    ]
+    for rung in doc["ladder"]:
+        lines.append(
+            f"| {rung['model']} | {rung['holdout_mean_mm']:.4f} / {rung['holdout_max_mm']:.4f} "
+            f"| {rung['holdout_abs_mean_mm']:.4f} / {rung['holdout_abs_rms_mm']:.4f} "
+            f"| {rung['holdout_abs_rms_mm'] / noise['floor_abs_rms_mm']:.2f} |"
+        )
+    lines += ["", f"What remains: {doc['unexplained']['note']}.", "", "## Where the residual lies",
+              "", "Geometric model, per joint from its sweeps (angle-equivalent error along the "
+              "arc):", "",
+              "| joint | rms [urad] | harmonics 1-4 [urad] | forth-back split [urad] "
+              "| slope vs angle [urad/rad] | corr. with gravity torque |",
+              "|---|---|---|---|---|---|"]  # fmt: skip
+    for j in doc["where"]["joints"]:
+        lines.append(
+            f"| {j['joint']} | {j['arc_rms_urad']:.1f} | "
+            f"{', '.join(f'{a:.1f}' for a in j['harmonics_urad'])} | "
+            f"{j['direction_split_urad']:.1f} | {j['slope_vs_angle_urad_per_rad']:.1f} | "
+            f"{j['gravity_torque_correlation']:.2f} |"
+        )
+    t = doc["where"]["time"]
+    lines += [
+        "",
+        f"Against time: rms by quartile {', '.join(f'{v:.4f}' for v in t['rms_by_quartile_mm'])}"
+        f" mm, trend {t['slope_mm_per_h']:.3f} mm/h. By reach (near to far): "
+        + ", ".join(f"{v:.4f}" for v in doc["where"]["workspace"]["rms_by_reach_tertile_mm"])
+        + " mm.",
+        "",
+    ]
+    for title, name in plots:
+        lines += [f"### {title}", "", f"![{title}]({name})", ""]
+    path.write_text("\n".join(lines))
