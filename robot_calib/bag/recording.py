@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -145,6 +146,24 @@ def _check_topic(reader: BagReader, topic: str, type_name: str) -> None:
         raise BagError(f"{reader.path}: topic {topic} has no messages")
 
 
+def velocity_signs(msg: Any, joint_names: tuple[str, ...]) -> Array:
+    """Signs (J,) of a JointState's velocities of `joint_names` (matched by name); zeros
+    (unknown) where the message has no velocity per joint."""
+    if len(msg.velocity) != len(msg.name):
+        return np.zeros(len(joint_names))
+    names = list(msg.name)
+    return np.sign([float(msg.velocity[names.index(n)]) for n in joint_names])
+
+
+def _check_metres(points: Array, where: str, error: type[Exception]) -> None:
+    """Raise `error` when points (n, 3) look like millimetres rather than metres."""
+    if len(points) and np.median(np.linalg.norm(points, axis=1)) > MAX_PLAUSIBLE_RANGE_M:
+        raise error(
+            f"{where}: {POINT_TOPIC} points are {np.median(np.abs(points)):.0f} units from the "
+            "tracker: they look like millimetres; the contract wants metres"
+        )
+
+
 def _read_bag(
     path: Path, robot: RobotDescription
 ) -> tuple[Array, Array, Array, Array, Array, list[str]]:
@@ -160,13 +179,9 @@ def _read_bag(
             msg = m.decode()
             if m.topic == JOINT_STATES_TOPIC:
                 q = joint_positions(msg, robot.joint_names, f"{path}: {JOINT_STATES_TOPIC}")
-                v = np.zeros(len(q))
-                if len(msg.velocity) == len(msg.name):
-                    names = list(msg.name)
-                    v = np.sign([msg.velocity[names.index(n)] for n in robot.joint_names])
                 js_t.append(stamp_to_ns(msg.header.stamp))
                 js_q.append(q)
-                js_v.append(v)
+                js_v.append(velocity_signs(msg, robot.joint_names))
             else:
                 p = np.array([msg.point.x, msg.point.y, msg.point.z])
                 if not np.all(np.isfinite(p)):
@@ -177,11 +192,7 @@ def _read_bag(
                 pt_t.append(stamp_to_ns(msg.header.stamp))
                 pts.append(p)
     points = np.array(pts)
-    if np.median(np.linalg.norm(points, axis=1)) > MAX_PLAUSIBLE_RANGE_M:
-        raise BagError(
-            f"{path}: {POINT_TOPIC} points are {np.median(np.abs(points)):.0f} units from the "
-            "tracker: they look like millimetres; the contract wants metres"
-        )
+    _check_metres(points, str(path), BagError)
     if frames != {TRACKER_FRAME}:
         warnings.append(
             f"warning: {path}: {POINT_TOPIC} frame_id {sorted(frames)} is not "
@@ -214,6 +225,37 @@ def pair_nearest(reference_ns: Array, query_ns: Array, tolerance_ns: int) -> Arr
     return np.where(np.abs(reference_ns[pick] - query_ns) <= tolerance_ns, pick, -1)
 
 
+def _pair(
+    js_t: Array,
+    js_q: Array,
+    js_v: Array,
+    pt_t: Array,
+    pts: Array,
+    pair_tolerance: float,
+    where: str,
+    warnings: list[str],
+) -> tuple[Array, Array, Array, Array, int]:
+    """The contract's pairing of one source whose joint states (stamps (m,) [ns], readings
+    (m, J) [rad], velocity signs (m, J), 0 = unknown) and points (stamps (n,) [ns], (n, 3) [m])
+    are each in stamp order: readings, approach directions, time since the first paired point
+    [s] and points of the paired measurements, and the number of points dropped (warned)."""
+    if len(js_t) == 0:
+        pick = np.full(len(pt_t), -1)
+    else:
+        pick = pair_nearest(js_t, pt_t, int(round(pair_tolerance * 1e9)))
+    ok = pick >= 0
+    if not ok.all():
+        warnings.append(
+            f"warning: {where}: {int((~ok).sum())} of {len(ok)} points have no joint "
+            f"state within {pair_tolerance} s: dropped"
+        )
+    q = js_q[pick[ok]]
+    velocity = js_v[pick[ok]]
+    direction = np.where(velocity != 0, velocity, approach_directions(q))
+    time = (pt_t[ok] - pt_t[ok][0]) * 1e-9 if ok.any() else np.zeros(0)
+    return q, direction, time, pts[ok], int((~ok).sum())
+
+
 def read_recording(
     paths: Sequence[str | Path],
     robot: RobotDescription,
@@ -235,24 +277,16 @@ def read_recording(
             raise BagError(f"{path}: no such bag file")
         js_t, js_q, js_v, pt_t, pts, bag_warnings = _read_bag(path, robot)
         warnings += bag_warnings
-        pick = pair_nearest(js_t, pt_t, int(round(pair_tolerance * 1e9)))
-        ok = pick >= 0
-        if not ok.all():
-            warnings.append(
-                f"warning: {path}: {int((~ok).sum())} of {len(ok)} points have no joint "
-                f"state within {pair_tolerance} s: dropped"
-            )
-        unpaired += int((~ok).sum())
-        if ok.sum() < require_points:
+        q, direction, time, points, dropped = _pair(
+            js_t, js_q, js_v, pt_t, pts, pair_tolerance, str(path), warnings
+        )
+        unpaired += dropped
+        if len(q) < require_points:
             raise BagError(f"{path}: no tracker point pairs with a joint state")
-        q = js_q[pick[ok]]
-        direction = approach_directions(q)
-        velocity = js_v[pick[ok]]
-        direction = np.where(velocity != 0, velocity, direction)
         q_all.append(q)
         d_all.append(direction)
-        t_all.append((pt_t[ok] - pt_t[ok][0]) * 1e-9)
-        p_all.append(pts[ok])
+        t_all.append(time)
+        p_all.append(points)
         idx_all.append(np.full(len(q), b))
         sweeps += [Sweep(s.joint, s.index + offset) for s in usable_sweeps(q, str(path), warnings)]
         offset += len(q)
@@ -285,5 +319,59 @@ def recording_from_arrays(
         tuple(sweeps),
         np.zeros(len(poses), dtype=int),
         0,
+        tuple(warnings),
+    )
+
+
+def recording_from_stream(
+    js_ns: Array,
+    q: Array,
+    velocity_sign: Array,
+    point_ns: Array,
+    points: Array,
+    pair_tolerance: float = PAIR_TOLERANCE_S,
+    source: str = "live",
+) -> Recording:
+    """A recording of one source from messages received live, paired as a bag is.
+
+    js_ns (m,) joint-state stamps [ns], q (m, J) readings [rad], velocity_sign (m, J) (+1/-1,
+    0 = no velocity); point_ns (n,) point stamps [ns], points (n, 3) tracker frame [m]; each
+    in any order (sorted here by stamp). Raises InputError when no point pairs.
+    """
+    js_ns, point_ns = np.asarray(js_ns, dtype=np.int64), np.asarray(point_ns, dtype=np.int64)
+    q, velocity_sign = np.asarray(q, dtype=float), np.asarray(velocity_sign, dtype=float)
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    if len(point_ns) != len(points) or len(js_ns) != len(q) or q.shape != velocity_sign.shape:
+        raise InputError(
+            f"{source}: stamps and values differ in length (joint states {len(js_ns)} vs "
+            f"{q.shape}, points {len(point_ns)} vs {points.shape})"
+        )
+    _check_metres(points, source, InputError)
+    js_order = np.argsort(js_ns, kind="stable")
+    pt_order = np.argsort(point_ns, kind="stable")
+    warnings: list[str] = []
+    q, direction, time, points, unpaired = _pair(
+        js_ns[js_order],
+        q[js_order],
+        velocity_sign[js_order],
+        point_ns[pt_order],
+        points[pt_order],
+        pair_tolerance,
+        source,
+        warnings,
+    )
+    if len(q) == 0:
+        raise InputError(
+            f"{source}: none of {len(point_ns)} tracker points has a joint state within "
+            f"{pair_tolerance} s ({len(js_ns)} joint states received)"
+        )
+    sweeps = usable_sweeps(q, source, warnings)
+    return Recording(
+        (source,),
+        Poses(q, direction, time),
+        points,
+        tuple(sweeps),
+        np.zeros(len(q), dtype=int),
+        unpaired,
         tuple(warnings),
     )

@@ -3,8 +3,10 @@
 1. Repeat poses: consecutive measurements at the same readings and approach directions
    (e.g. the turn-around of a forth-and-back sweep) differ only by noise:
    sigma^2 = mean |p_a - p_b|^2 / 6 per axis.
-2. Else circle sweeps: each circle fit leaves 2 of the 3 noise components (plane, radial):
+2. Circle sweeps: each circle fit leaves 2 of the 3 noise components (plane, radial):
    sigma^2 = sum(residual^2) / (2 n - 6 per sweep) (an upper bound if effects bend circles).
+   Where both exist and agree (circles within 1.5 x), they are pooled by degrees of freedom
+   (a handful of repeat pairs alone scatters by +-20 %); else the repeat poses win.
 3. Else the in-sample residual of a fitted model with its degrees of freedom.
 """
 
@@ -20,6 +22,7 @@ from robot_calib.kinematics.frames import Array
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE
 
 MIN_REPEATS = 3
+AGREE = 1.5  # circle-fit noise within this factor of the repeat-pose noise: pool them
 
 
 @dataclass(frozen=True)
@@ -42,6 +45,15 @@ class NoiseLevel:
         return float(np.sqrt(8.0 / np.pi) * self.sigma_m)
 
 
+def _circle_noise(recording: Recording) -> NoiseLevel | None:
+    total, dof = 0.0, 0
+    for s in recording.sweeps:
+        circle = fit_circle(recording.points[s.index])
+        total += float(np.sum(circle.plane_residuals**2 + circle.radial_residuals**2))
+        dof += 2 * s.n_poses - 6
+    return NoiseLevel(float(np.sqrt(total / dof)), "circle fits", dof) if dof > 0 else None
+
+
 def repeat_pairs(recording: Recording) -> Array:
     """Index pairs (k, 2) of consecutive measurements with equal readings and directions."""
     q, d = recording.poses.q, recording.poses.direction
@@ -57,17 +69,19 @@ def estimate_noise(recording: Recording, fallback_residuals: Array | None = None
     """The noise level of `recording` (see the module docstring for the order of methods);
     fallback_residuals (n, 3) [m] of a fitted model with `fallback_dof` free parameters."""
     pairs = repeat_pairs(recording)
+    repeat = None
     if len(pairs) >= MIN_REPEATS:
         diff = recording.points[pairs[:, 0]] - recording.points[pairs[:, 1]]
-        return NoiseLevel(float(np.sqrt(np.mean(diff**2) / 2.0)), "repeat poses", len(pairs))
-    if recording.sweeps:
-        total, dof = 0.0, 0
-        for s in recording.sweeps:
-            circle = fit_circle(recording.points[s.index])
-            total += float(np.sum(circle.plane_residuals**2 + circle.radial_residuals**2))
-            dof += 2 * s.n_poses - 6
-        if dof > 0:
-            return NoiseLevel(float(np.sqrt(total / dof)), "circle fits", dof)
+        repeat = NoiseLevel(float(np.sqrt(np.mean(diff**2) / 2.0)), "repeat poses", 3 * len(pairs))
+    circles = _circle_noise(recording)
+    if repeat is not None and circles is not None:
+        if circles.sigma_m <= AGREE * repeat.sigma_m:  # circles not bent by effects: pool
+            dof = repeat.n + circles.n
+            var = (repeat.n * repeat.sigma_m**2 + circles.n * circles.sigma_m**2) / dof
+            return NoiseLevel(float(np.sqrt(var)), "repeat poses + circle fits", dof)
+        return repeat
+    if repeat is not None or circles is not None:
+        return repeat or circles  # type: ignore[return-value]
     if fallback_residuals is not None:
         dof = max(fallback_residuals.size - fallback_dof, 1)
         return NoiseLevel(

@@ -1,0 +1,439 @@
+"""calibrator: identify a model from bags or from live topics and publish it, latched.
+
+Bag mode (parameter `bags` set): once at start, read and pair the bags (CONTRACT.md
+section 1), calibrate, publish. Live mode (`bags` empty): buffer /joint_states and
+/laser_tracker/point; on a std_msgs/Empty on `~/solve` (std_srvs is not a dependency of
+the package, so no Trigger service), or after `solve_after_idle_s` without a new point
+("the plan has ended"), pair everything received so far exactly as a bag is paired and
+calibrate. Results go out on latched (transient local) topics: `~/parameters` (the
+PARAMS.json document), `~/summary`, `~/residuals` and `~/markers` (RViz / Foxglove).
+Topics, layouts and parameters: msgs_doc/calibrator.md.
+
+Bad input (RobotCalibError) is logged as one error line. A live node keeps running;
+standalone in bag mode the node then exits with status 2.
+
+Standalone: `ros2 run robot_calib calibrator --ros-args -p bags:="['run.mcap']"`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import Point, PointStamped
+from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import ColorRGBA, Empty, Float64MultiArray, MultiArrayDimension, String
+from visualization_msgs.msg import Marker, MarkerArray
+
+from robot_calib.bag.recording import (
+    PAIR_TOLERANCE_S,
+    Recording,
+    read_recording,
+    recording_from_stream,
+    velocity_signs,
+)
+from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.identify.calibrate import Calibration, calibrate, parse_model
+from robot_calib.identify.params_file import calibration_to_dict, summary, write_json_atomic
+from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.frames import Array
+from robot_calib.messages import (
+    JOINT_STATES_TOPIC,
+    POINT_TOPIC,
+    TRACKER_FRAME,
+    joint_positions,
+    stamp_to_ns,
+)
+from robot_calib.nodes._common import declare, overrides, run_node
+
+LATCHED = QoSProfile(  # late joiners (RViz, a test, `ros2 topic echo`) get the last result
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+DEFAULT_QOS_DEPTH = 10000
+AXIS_LENGTH_M = 0.3  # drawn length of an identified joint axis, centred on its circles
+CIRCLE_SEGMENTS = 72
+RESIDUAL_FIELDS = "x,y,z,residual"  # the columns of ~/residuals (msgs_doc/calibrator.md)
+STEADY = ClockType.STEADY_TIME  # timers run on wall time also when /clock stands still
+
+
+class CalibratorNode(Node):
+    """Calibrates from `bags`, or from live topics when `bags` is empty.
+
+    In-process: `CalibratorNode(bags=[...], context=...)`; keyword values become parameter
+    overrides (as do `parameter_overrides=[Parameter(...)]`; keywords win). `solve()` pairs
+    and calibrates what live mode received so far. `calibration` is the last result,
+    `error` the last bad-input error (logged), `failed` tells that bag mode failed.
+    Raises RobotCalibError on bad parameters (unknown robot or model, missing output folder).
+    """
+
+    def __init__(
+        self,
+        bags: Sequence[str | os.PathLike[str]] | None = None,
+        *,
+        model: str | None = None,
+        robot: str | None = None,
+        output: str | os.PathLike[str] | None = None,
+        solve_after_idle_s: float | None = None,
+        node_name: str = "calibrator",
+        parameter_overrides: Sequence[Parameter] | None = None,
+        **node_kwargs: Any,
+    ) -> None:
+        values = {
+            "bags": None if bags is None else [os.fspath(b) for b in bags],
+            "model": model,
+            "robot": robot,
+            "output": None if output is None else os.fspath(output),
+            "solve_after_idle_s": solve_after_idle_s,
+        }
+        super().__init__(
+            node_name, parameter_overrides=overrides(values, parameter_overrides), **node_kwargs
+        )
+        try:
+            self._declare_parameters()
+        except RobotCalibError:
+            super().destroy_node()
+            raise
+        self.calibration: Calibration | None = None
+        self.recording: Recording | None = None
+        self.error: RobotCalibError | None = None
+        self.solves = 0
+        self._result_publishers = {
+            "parameters": self.create_publisher(String, "~/parameters", LATCHED),
+            "summary": self.create_publisher(String, "~/summary", LATCHED),
+            "residuals": self.create_publisher(Float64MultiArray, "~/residuals", LATCHED),
+            "markers": self.create_publisher(MarkerArray, "~/markers", LATCHED),
+        }
+        steady = Clock(clock_type=STEADY)
+        if self.bags:
+            self._once = self.create_timer(0.0, self._solve_bags, clock=steady)
+            self.get_logger().info(f"calibrating {self.model_spec} from {', '.join(self.bags)}")
+            return
+        self._js_ns: list[int] = []
+        self._js_q: list[Array] = []
+        self._js_v: list[Array] = []
+        self._pt_ns: list[int] = []
+        self._pt_xyz: list[Array] = []
+        self.rejected = 0
+        self._last_point_s: float | None = None
+        self._unsolved = False
+        live_qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST,
+            depth=self.qos_depth,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.VOLATILE,
+        )
+        for msg_type, topic, callback in (
+            (JointState, JOINT_STATES_TOPIC, self._on_joint_state),
+            (PointStamped, POINT_TOPIC, self._on_point),
+        ):
+            self.create_subscription(
+                msg_type,
+                topic,
+                callback,
+                live_qos,
+                event_callbacks=SubscriptionEventCallbacks(
+                    incompatible_qos=lambda event, topic=topic: self.get_logger().warning(
+                        f"{topic}: a publisher's QoS is incompatible with RELIABLE "
+                        f"(policy {event.last_policy_kind}); its messages are not received"
+                    )
+                ),
+            )
+        self.create_subscription(Empty, "~/solve", lambda _msg: self.solve(), 10)
+        if self.solve_after_idle_s > 0:
+            period = min(self.solve_after_idle_s / 4, 0.5)
+            self._idle_timer = self.create_timer(period, self._check_idle, clock=steady)
+        idle = (
+            f", or {self.solve_after_idle_s} s after the last point"
+            if self.solve_after_idle_s > 0
+            else ""
+        )
+        self.get_logger().info(
+            f"collecting {JOINT_STATES_TOPIC} and {POINT_TOPIC}; solving {self.model_spec} "
+            f"on {self.resolve_topic_name('~/solve')}{idle}"
+        )
+
+    def _declare_parameters(self) -> None:
+        self.bags: list[str] = declare(
+            self, "bags", [], "calibration bags (.mcap) to solve at start; empty: live topics"
+        )
+        self.model_spec: str = declare(
+            self, "model", "geometric", "model to identify, e.g. geometric, geometric+eccentricity"
+        )
+        self.ecc_order: int = declare(
+            self, "ecc_order", 1, "Fourier order of the eccentricity effect [1]"
+        )
+        robot_name: str = declare(
+            self, "robot", "kr5_sixx_r650", "built-in robot name or robot YAML file"
+        )
+        self.pair_tolerance: float = declare(
+            self,
+            "pair_tolerance",
+            PAIR_TOLERANCE_S,
+            "a point pairs with the joint state nearest in header.stamp within this [s]",
+        )
+        self.output: str = declare(
+            self, "output", "", "also write each result to this PARAMS.json path ('' = no file)"
+        )
+        self.solve_after_idle_s: float = declare(
+            self,
+            "solve_after_idle_s",
+            0.0,
+            "live mode: solve when no new point arrived for this long after the last one "
+            "[s, wall time]; 0 = only on ~/solve",
+        )
+        self.residual_scale: float = declare(
+            self,
+            "residual_scale",
+            100.0,
+            "residual lines in ~/markers are drawn this many times their length [1]",
+        )
+        self.qos_depth: int = declare(
+            self,
+            "qos_depth",
+            DEFAULT_QOS_DEPTH,
+            "live mode: history depth of the two subscriptions [messages]",
+        )
+        self.robot = load_robot(robot_name)
+        parse_model(self.model_spec, self.robot, self.ecc_order)  # a bad model fails now
+        name = self.get_name()
+        if self.ecc_order < 1:
+            raise InputError(f"{name}: parameter 'ecc_order' must be >= 1")
+        if self.pair_tolerance <= 0:
+            raise InputError(f"{name}: parameter 'pair_tolerance' must be > 0 [s]")
+        if self.solve_after_idle_s < 0:
+            raise InputError(f"{name}: parameter 'solve_after_idle_s' must be >= 0 [s]")
+        if self.residual_scale <= 0:
+            raise InputError(f"{name}: parameter 'residual_scale' must be > 0")
+        if self.qos_depth < 1:
+            raise InputError(f"{name}: parameter 'qos_depth' must be >= 1")
+        if self.output and not Path(self.output).parent.is_dir():
+            raise InputError(f"{self.output}: no such folder for the parameter file")
+
+    # --- public ---------------------------------------------------------------------------
+
+    @property
+    def failed(self) -> bool:
+        """Bag mode could not calibrate (standalone: exit status 2)."""
+        return bool(self.bags) and self.error is not None
+
+    @property
+    def received(self) -> dict[str, int]:
+        """Live mode: messages buffered per topic (joint states refused are not counted)."""
+        if self.bags:
+            return {}
+        return {JOINT_STATES_TOPIC: len(self._js_ns), POINT_TOPIC: len(self._pt_ns)}
+
+    def solve(self) -> Calibration | None:
+        """Live mode: pair everything received so far, calibrate and publish. Bad input is
+        logged (one line) and kept in `error`; returns None then."""
+        if self.bags:
+            self.get_logger().warning("~/solve ignored: the node calibrates from its bags")
+            return None
+        self._unsolved = False
+        names = self.robot.joint_names
+        try:
+            recording = recording_from_stream(
+                np.array(self._js_ns, dtype=np.int64),
+                np.array(self._js_q).reshape(-1, len(names)),
+                np.array(self._js_v).reshape(-1, len(names)),
+                np.array(self._pt_ns, dtype=np.int64),
+                np.array(self._pt_xyz).reshape(-1, 3),
+                self.pair_tolerance,
+                source=f"live {JOINT_STATES_TOPIC} + {POINT_TOPIC}",
+            )
+            for warning in recording.warnings:
+                self._log(warning)
+            return self._calibrate(recording)
+        except RobotCalibError as exc:
+            self._fail(exc)
+            return None
+
+    # --- internals ------------------------------------------------------------------------
+
+    def _solve_bags(self) -> None:
+        self._once.cancel()
+        try:
+            recording = read_recording(self.bags, self.robot, self.pair_tolerance, log=self._log)
+            self._calibrate(recording)
+        except RobotCalibError as exc:
+            self._fail(exc)
+
+    def _calibrate(self, recording: Recording) -> Calibration:
+        """Calibrate `recording`, write `output` if set, publish every result topic."""
+        self.get_logger().info(recording.summary())
+        cal = calibrate(recording, self.robot, self.model_spec, self.ecc_order, log=self._log)
+        doc = calibration_to_dict(cal, recording)
+        if self.output:
+            try:
+                write_json_atomic(doc, Path(self.output))
+            except OSError as exc:
+                raise InputError(f"{self.output}: cannot write ({exc.strerror})") from None
+        self._result_publishers["parameters"].publish(String(data=json.dumps(doc)))
+        self._result_publishers["summary"].publish(String(data=summary(cal, recording)))
+        self._result_publishers["residuals"].publish(
+            residuals_message(recording.points, cal.residuals)
+        )
+        self._result_publishers["markers"].publish(
+            calibration_markers(cal, recording.points, self.residual_scale)
+        )
+        self.calibration, self.recording, self.error = cal, recording, None
+        self.solves += 1
+        written = f", written to {self.output}" if self.output else ""
+        self.get_logger().info(f"{cal.name}: {cal.accuracy.line()}; published{written}")
+        return cal
+
+    def _fail(self, exc: RobotCalibError) -> None:
+        self.error = exc
+        self.get_logger().error(str(exc))
+
+    def _log(self, message: str) -> None:
+        """The core's progress lines as info, its 'warning: ...' lines as warnings."""
+        if message.startswith("warning: "):
+            self.get_logger().warning(message.removeprefix("warning: "))
+        else:
+            self.get_logger().info(message.strip())
+
+    def _on_joint_state(self, msg: JointState) -> None:
+        names = self.robot.joint_names
+        try:
+            q = joint_positions(msg, names)
+        except InputError as exc:
+            self.rejected += 1
+            self.get_logger().warning(
+                f"{exc} ({self.rejected} refused so far)", throttle_duration_sec=10.0
+            )
+            return
+        self._js_ns.append(stamp_to_ns(msg.header.stamp))
+        self._js_q.append(q)
+        self._js_v.append(velocity_signs(msg, names))
+
+    def _on_point(self, msg: PointStamped) -> None:
+        xyz = np.array([msg.point.x, msg.point.y, msg.point.z])
+        if not np.all(np.isfinite(xyz)):
+            self.get_logger().warning(f"{POINT_TOPIC}: point not finite {xyz}: ignored")
+            return
+        if msg.header.frame_id != TRACKER_FRAME:
+            self.get_logger().warning(
+                f"{POINT_TOPIC}: frame_id {msg.header.frame_id!r} is not '{TRACKER_FRAME}' "
+                "(used as the tracker frame anyway)",
+                once=True,
+            )
+        self._pt_ns.append(stamp_to_ns(msg.header.stamp))
+        self._pt_xyz.append(xyz)
+        self._last_point_s = time.monotonic()
+        self._unsolved = True
+
+    def _check_idle(self) -> None:
+        """Solve once the points have stopped for solve_after_idle_s (the plan ended)."""
+        if (
+            self._unsolved
+            and self._last_point_s is not None
+            and time.monotonic() - self._last_point_s >= self.solve_after_idle_s
+        ):
+            self.get_logger().info(
+                f"no new point for {self.solve_after_idle_s} s: solving {len(self._pt_ns)} points"
+            )
+            self.solve()
+
+
+# --- messages of a result (no ROS graph needed) ---------------------------------------------
+
+
+def residuals_message(measured: Array, residuals: Array) -> Float64MultiArray:
+    """~/residuals: rows [x, y, z, |r|] of the measured points (n, 3) [m, tracker frame] and
+    the norms of the residuals (n, 3) predicted - measured [m], row-major, dims [n, 4]."""
+    table = np.column_stack([measured, np.linalg.norm(residuals, axis=1)])
+    msg = Float64MultiArray()
+    msg.layout.dim = [
+        MultiArrayDimension(label="measurement", size=table.shape[0], stride=table.size),
+        MultiArrayDimension(label=RESIDUAL_FIELDS, size=4, stride=4),
+    ]
+    msg.layout.data_offset = 0
+    msg.data = table.ravel().tolist()
+    return msg
+
+
+def _points(xyz: Array) -> list[Point]:
+    return [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in xyz]
+
+
+def _marker(ns: str, marker_id: int, kind: int, rgba: tuple[float, ...]) -> Marker:
+    marker = Marker(ns=ns, id=marker_id, type=kind, action=Marker.ADD)
+    marker.header.frame_id = TRACKER_FRAME  # stamp 0: RViz uses the latest transform
+    marker.pose.orientation.w = 1.0
+    marker.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+    return marker
+
+
+def circle_polyline(centre: Array, normal: Array, radius: float, n: int) -> Array:
+    """Closed polyline (n + 1, 3) of the circle of `centre` (3,) [m], unit `normal` (3,),
+    `radius` [m]: first point repeated last."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(normal, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    angle = np.linspace(0.0, 2 * np.pi, n + 1)
+    return centre + radius * (np.cos(angle)[:, None] * u + np.sin(angle)[:, None] * v)
+
+
+def calibration_markers(cal: Calibration, measured: Array, residual_scale: float) -> MarkerArray:
+    """~/markers in the tracker frame: a DELETEALL (clears an earlier result), then namespace
+    "axes" (one ARROW per identified joint axis, id = joint), "circles" (one LINE_STRIP per
+    fitted sweep circle), "measured" (SPHERE_LIST of the points) and "residuals" (LINE_LIST
+    from each measured point towards its prediction, `residual_scale` times the residual)."""
+    markers = [Marker(action=Marker.DELETEALL)]
+    markers[0].header.frame_id = TRACKER_FRAME
+    if cal.cpa is not None:
+        for j, axis in enumerate(cal.cpa.axes, start=1):
+            arrow = _marker("axes", j, Marker.ARROW, (0.1, 0.4, 1.0, 1.0))
+            half = 0.5 * AXIS_LENGTH_M * axis.direction
+            arrow.points = _points([axis.point - half, axis.point + half])
+            arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.004, 0.010, 0.020  # shaft, head [m]
+            markers.append(arrow)
+        for k, sweep in enumerate(cal.cpa.sweeps):
+            strip = _marker("circles", k, Marker.LINE_STRIP, (0.2, 0.8, 0.2, 1.0))
+            c = sweep.circle
+            strip.points = _points(circle_polyline(c.centre, c.normal, c.radius, CIRCLE_SEGMENTS))
+            strip.scale.x = 0.001  # line width [m]
+            markers.append(strip)
+    dots = _marker("measured", 0, Marker.SPHERE_LIST, (1.0, 1.0, 1.0, 1.0))
+    dots.points = _points(measured)
+    dots.scale.x = dots.scale.y = dots.scale.z = 0.003  # sphere diameter [m]
+    lines = _marker("residuals", 0, Marker.LINE_LIST, (1.0, 0.2, 0.1, 1.0))
+    ends = measured + residual_scale * cal.residuals
+    lines.points = _points(np.stack([measured, ends], axis=1).reshape(-1, 3))
+    lines.scale.x = 0.0005  # line width [m]
+    markers += [dots, lines]
+    return MarkerArray(markers=markers)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """`ros2 run robot_calib calibrator [--ros-args -p bags:="['A.mcap']" ...]`."""
+    started: list[CalibratorNode] = []
+
+    def start() -> CalibratorNode:
+        started.append(CalibratorNode())
+        return started[-1]
+
+    status = run_node(start, args, done=lambda node: node.failed, name="calibrator")
+    if status == 0 and started and started[0].failed:
+        assert started[0].error is not None
+        return started[0].error.exit_status
+    return status
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,49 @@
+"""Blind harness at scale: N random cases per withheld-effect class, hit rate per class.
+
+    .venv/bin/python scripts/blind_harness.py [--cases 20] [--classes backlash ...]
+
+A hit: the diagnosis names the withheld effect and its joints (null for `none`; for the
+out-of-vocabulary `joint_ripple`: `unknown` or any effect on the right joint) and its chosen
+rung brings the held-out error to within 1.5 x the noise floor (not required for the ripple).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+from robot_calib.diagnose.blind import CLASSES, run_case
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--cases", type=int, default=20, help="cases per class (20)")
+    parser.add_argument("--classes", nargs="*", default=list(CLASSES), choices=CLASSES)
+    parser.add_argument("--json", help="write every case's verdict to this file")
+    args = parser.parse_args()
+    results = []
+    for effect in args.classes:
+        hits = named = 0
+        started = time.perf_counter()
+        for seed in range(args.cases):
+            r = run_case(effect, 1000 + seed)
+            results.append(r)
+            hits += r["hit"]
+            named += r["named"]
+            mark = "hit " if r["hit"] else "MISS"
+            ratio = r["ratio_to_floor"]
+            print(f"  {effect:<14} seed {1000 + seed}: {mark} truth {r['joints']} answer "
+                  f"{r['answer']} held-out {ratio:.2f} x floor", file=sys.stderr)  # fmt: skip
+        per_case = (time.perf_counter() - started) / args.cases
+        print(f"{effect:<14} hit rate {hits}/{args.cases}  (named {named}/{args.cases})  "
+              f"{per_case:.1f} s per case", flush=True)  # fmt: skip
+    if args.json:
+        with open(args.json, "w") as handle:
+            json.dump(results, handle, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
