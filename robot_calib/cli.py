@@ -54,7 +54,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=False)
     print(_robot_table(robot))
     bag, holdout = out / "calibration.mcap", out / "holdout.mcap"
-    steps = 4
+    steps = 5
     print(f"[1/{steps}] simulate + record: {args.plan} in the default world -> {bag}")
     base = dict(world=None, effects=args.effects, n_random=args.holdout, robot=args.robot)
     cmd_simulate(argparse.Namespace(output=str(bag), seed=args.seed, plan=args.plan, **base))
@@ -85,7 +85,17 @@ def cmd_run(args: argparse.Namespace) -> int:
             f"{test.pairwise_mean_mm:>15.4f} / {test.pairwise_max_mm:<8.4f}"
             f"{test.absolute_mean_mm:>17.4f}"
         )
-    print(f"done: {out}")
+    print(f"[5/{steps}] diagnose the sim-to-real gap (hold-out: {holdout.name})")
+    cmd_diagnose(
+        argparse.Namespace(
+            bags=[str(bag)],
+            holdout=[str(holdout)],
+            pair_tolerance=0.05,
+            output=str(out / "diagnosis.json"),
+            robot=args.robot,
+        )
+    )
+    print(f"done: {out} (report: {out / 'diagnosis.md'})")
     return 0
 
 
