@@ -104,7 +104,10 @@ def test_nodes_run_alone_as_processes(tmp_path: Path) -> None:
         text=True,
     )
     tracker = subprocess.Popen(
-        [str(BIN / "sim_tracker")], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        [str(BIN / "sim_tracker"), "--ros-args", "-p", "wait_for_subscribers:=1"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
     )
     try:
         robot = subprocess.run(

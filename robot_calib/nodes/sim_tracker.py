@@ -41,13 +41,30 @@ class SimTrackerNode(Node):
         self.world = load_world(world_file or None)
         rng = np.random.default_rng(self.world.seed + 1 if seed < 0 else seed)
         self.tracker = StreamingTracker(self.world, rng)
-        self.publisher = self.create_publisher(PointStamped, POINT_TOPIC, QOS)
-        self.subscription = self.create_subscription(
-            JointState, JOINT_STATES_TOPIC, self.on_joint_state, QOS
+        self.wait_for = declare(
+            self,
+            "wait_for_subscribers",
+            0,
+            "subscribe to /joint_states only once this many readers of the points are matched"
+            " (so a robot that waits for its own readers starts only when no point is lost)",
         )
+        self.publisher = self.create_publisher(PointStamped, POINT_TOPIC, QOS)
+        self.subscription = None
         self.received = 0
         self.published = 0
         self.dropped = 0
+        self._wait_timer = self.create_timer(0.01, self._subscribe_when_ready)
+        self._subscribe_when_ready()
+
+    def _subscribe_when_ready(self) -> None:
+        if self.subscription is not None:
+            return
+        if self.publisher.get_subscription_count() < self.wait_for:
+            return
+        self.destroy_timer(self._wait_timer)
+        self.subscription = self.create_subscription(
+            JointState, JOINT_STATES_TOPIC, self.on_joint_state, QOS
+        )
 
     def on_joint_state(self, msg: JointState) -> None:
         self.received += 1
