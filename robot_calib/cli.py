@@ -196,7 +196,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     output = _output_path(args.output, "PARAMS.json")
     recording = read_recording(args.bags, robot, args.pair_tolerance, log=_log)
     started = time.perf_counter()
-    cal = calibrate(recording, robot, args.model, args.ecc_order, log=_log)
+    cal = calibrate(
+        recording, robot, args.model, args.ecc_order, log=_log, objective=args.objective
+    )
     print(summary(cal, recording))
     write_json_atomic(calibration_to_dict(cal, recording), output)
     print(f"{output}: {cal.name} in {time.perf_counter() - started:.2f} s")
@@ -292,6 +294,13 @@ def build_parser() -> argparse.ArgumentParser:
         " (default geometric)",
     )
     cal.add_argument("--ecc-order", type=int, default=1, help="eccentricity Fourier order (1)")
+    cal.add_argument(
+        "--objective",
+        default="absolute",
+        choices=("absolute", "seed"),
+        help="absolute tracker-frame residuals (O(N), default) or the seed's pairwise "
+        "distances anchored on the CPA centres of circles 1, 3, 5 (O(N^2))",
+    )
     cal.add_argument(
         "--pair-tolerance", type=float, default=0.05, help="point/joint-state pairing [s]"
     )

@@ -217,3 +217,20 @@ def test_calibrate_and_predict_commands(tmp_path: Path) -> None:
     proc = subprocess.run([*run, "calibrate", str(bag), "--model", "geometric+wobble", "-o", "x"],
                           capture_output=True, text=True, check=False)  # fmt: skip
     assert proc.returncode == 2 and "unknown effect 'wobble'" in proc.stderr
+
+
+def test_seed_objective_finds_the_same_geometry() -> None:
+    """The seed's pairwise-distance objective (anchored on circle centres 1, 3, 5) and the
+    absolute one identify the same robot on effect-free data."""
+    plan = paper_test_plan(3)
+    poses, points = measure(WORLD, plan.q, 11)
+    rec = recording_from_arrays(plan.q, points)
+    absolute = calibrate(rec, ROBOT, "geometric")
+    seed = calibrate(rec, ROBOT, "geometric", objective="seed")
+    assert seed.solver["objective"] == "seed pairwise distances"
+    truth = absorb_base_offsets(ROBOT, WORLD.truth)
+    for name in GEOMETRIC_NAMES:
+        if absolute.parameters.free[absolute.parameters.index(name)]:
+            sigma = absolute.std[absolute.parameters.index(name)]
+            assert abs(seed.parameters[name] - truth[name]) < 5 * sigma, name
+    assert seed.accuracy.pairwise_mean_mm < 1.1 * absolute.accuracy.pairwise_mean_mm

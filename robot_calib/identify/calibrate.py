@@ -24,6 +24,7 @@ from robot_calib.errors import InputError
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
 from robot_calib.identify.fit import FitResult, fit_model
 from robot_calib.identify.identifiability import Identifiability
+from robot_calib.identify.objectives import AbsoluteObjective, Objective, SeedObjective
 from robot_calib.identify.registration import fit_frames
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
@@ -31,6 +32,8 @@ from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
 
 BASE_MODELS = ("nominal", "cpa", "geometric")
+OBJECTIVES = ("absolute", "seed")
+SEED_ANCHORS = (1, 3, 5)  # the seed fixes the cloud on the centres of circles 1, 3 and 5
 Log = Callable[[str], None]
 
 
@@ -110,9 +113,14 @@ def calibrate(
     ecc_order: int = 1,
     log: Log | None = None,
     start: Calibration | None = None,
+    objective: str = "absolute",
 ) -> Calibration:
     """Identify `model_spec` from `recording`. `start`: a calibration to start from (its
-    parameters seed the geometry), else the ladder below the model is climbed first."""
+    parameters seed the geometry), else the ladder below the model is climbed first.
+    objective: 'absolute' residuals, or 'seed' (pairwise distances anchored on the CPA
+    centres of circles 1, 3, 5, the seed's eq. 18) for the LM models."""
+    if objective not in OBJECTIVES:
+        raise InputError(f"--objective {objective}: expected one of {', '.join(OBJECTIVES)}")
     say = log or (lambda _msg: None)
     base, effects = parse_model(model_spec, robot, ecc_order)
     poses, points = recording.poses, recording.points
@@ -123,7 +131,7 @@ def calibrate(
         return _from_fit("nominal", geometric, fit_frames(geometric, geometric.parameters(),
                                                            poses, points), points)  # fmt: skip
     cpa = None
-    if base == "cpa" or (start is None and has_sweeps):
+    if base == "cpa" or (start is None and has_sweeps) or objective == "seed":
         cpa = circle_point_analysis(recording, robot)
         for w in cpa.warnings:
             say(w)
@@ -157,8 +165,17 @@ def calibrate(
         params = params.with_values(dict(zip(geo.parameters.names, geo.parameters.values)))
     say(f"{model_spec}: Levenberg-Marquardt on {len(points)} points, {int(params.free.sum())} "
         "free parameters before the identifiability check")  # fmt: skip
-    fit = fit_model(model, params, poses, points, progress=say)
+    fit = fit_model(model, params, poses, points, progress=say,
+                    objective=_objective(objective, cpa))  # fmt: skip
     return _from_fit(model_spec, model, fit, points, cpa)
+
+
+def _objective(name: str, cpa: CPAResult | None) -> Objective:
+    if name == "absolute":
+        return AbsoluteObjective()
+    assert cpa is not None
+    anchors = [next(s.circle.centre for s in cpa.sweeps if s.joint == j) for j in SEED_ANCHORS]
+    return SeedObjective(np.array(anchors))
 
 
 def effect_spec(effect: Effect) -> str:

@@ -21,6 +21,7 @@ from robot_calib.identify.identifiability import (
     fix_unidentifiable,
     standard_deviations,
 )
+from robot_calib.identify.objectives import AbsoluteObjective, Objective
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
@@ -32,7 +33,8 @@ Progress = Callable[[str], None]
 @dataclass(frozen=True)
 class FitResult:
     """parameters: fitted vector (fixed flags and reasons included); std : (P,) 1-sigma of
-    each parameter in its unit (0 for fixed); residuals : (n, 3) predicted - measured [m];
+    each parameter in its unit (0 for fixed), from the objective's residuals;
+    residuals : (n, 3) predicted - measured points [m] (whatever the objective);
     identifiability of the free set; solver : status, message, evaluations, cost, time."""
 
     parameters: ParameterVector
@@ -47,19 +49,27 @@ class _Problem:
     both at the same point)."""
 
     def __init__(
-        self, model: KinematicModel, start: ParameterVector, poses: Poses, points: Array
+        self,
+        model: KinematicModel,
+        start: ParameterVector,
+        poses: Poses,
+        points: Array,
+        objective: Objective,
     ) -> None:
         self.model, self.start, self.poses, self.points = model, start, poses, points
+        self.objective = objective
         self._x: Array | None = None
         self._cache: tuple[Array, Array] = (np.empty(0), np.empty((0, 0)))
+        self.predicted = np.empty((0, 3))
         self.evaluations = 0
 
     def evaluate(self, x: Array) -> tuple[Array, Array]:
+        """Objective residuals (m,) and their Jacobian (m, n_free) at free values x."""
         if self._x is None or not np.array_equal(x, self._x):
             params = self.start.unpack(x)
             predicted, jac = self.model.jacobian(params, self.poses)
-            residual = (predicted - self.points).reshape(-1)
-            self._cache = (residual, jac[:, :, params.free].reshape(len(residual), -1))
+            self._cache = self.objective.residuals(predicted, jac[:, :, params.free], self.points)
+            self.predicted = predicted
             self._x = x.copy()
             self.evaluations += 1
         return self._cache
@@ -72,16 +82,19 @@ def fit_model(
     points: Array,
     progress: Progress | None = None,
     check_identifiability: bool = True,
+    objective: Objective | None = None,
 ) -> FitResult:
     """Fit the free parameters of `start` so the model's targets at `poses` match `points`
-    (n, 3) [m]. Unidentifiable parameters are fixed first (at their start values)."""
+    (n, 3) [m] in the sense of `objective` (default: absolute residuals). Unidentifiable
+    parameters are fixed first (at their start values)."""
     started = time.perf_counter()
+    objective = objective or AbsoluteObjective()
     params, fixed = start, ()
     if check_identifiability:
-        _, jac = model.jacobian(start, poses)
-        params, ident = fix_unidentifiable(params, jac.reshape(-1, len(params)))
+        predicted, jac = model.jacobian(start, poses)
+        params, ident = fix_unidentifiable(params, objective.residuals(predicted, jac, points)[1])
         fixed = ident.fixed
-    problem = _Problem(model, params, poses, points)
+    problem = _Problem(model, params, poses, points, objective)
     last_report = [time.monotonic()]
 
     def fun(x: Array) -> Array:
@@ -115,10 +128,11 @@ def fit_model(
     return FitResult(
         fitted,
         std,
-        residual.reshape(-1, 3),
+        problem.predicted - points,
         describe(jac_free, fixed),
         {
             "method": "levenberg-marquardt (scipy least_squares, MINPACK lmder)",
+            "objective": objective.name,
             "status": status,
             "message": message,
             "evaluations": problem.evaluations,
