@@ -19,6 +19,7 @@ from geometry_msgs.msg import PointStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Empty, Float64MultiArray, String
@@ -287,3 +288,45 @@ def test_live_pairing_gives_the_bags_recording() -> None:
     assert rec.poses.direction[1, :2].tolist() == [1.0, -1.0]
     with pytest.raises(InputError, match="millimetres"):
         recording_from_stream([0], q[:1], v[:1], [0], [[1500.0, 200.0, 300.0]])
+
+
+def test_bag_mode_runs_the_diagnosis_and_latches_its_summary(
+    context: Context, tmp_path: Path
+) -> None:
+    """A world with joint-4 backlash: the node's diagnosis names it, on the hold-out bag."""
+    run = [sys.executable, "-m", "robot_calib", "simulate"]
+    bag, holdout = tmp_path / "cal.mcap", tmp_path / "hold.mcap"
+    for cmd in (
+        [*run, "--plan", "paper-test3", "--effects", "backlash:4", "--seed", "2", "-o", str(bag)],
+        [*run, "--plan", "random", "--n-random", "100", "--world",
+         str(bag.with_suffix(".world.yaml")), "--seed", "3", "-o", str(holdout)],
+    ):  # fmt: skip
+        subprocess.run(cmd, check=True, capture_output=True)
+    calibrator = CalibratorNode(
+        bags=[bag],
+        context=context,
+        parameter_overrides=[
+            Parameter("diagnose", value=True),
+            Parameter("holdout_bags", value=[str(holdout)]),
+        ],
+    )
+    listener = Node("diag_listener", context=context)
+    got: dict[str, str] = {}
+    for name in ("diagnosis", "diagnosis_summary"):
+        listener.create_subscription(
+            String, f"/calibrator/{name}", lambda m, n=name: got.__setitem__(n, m.data), LATCHED
+        )
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(calibrator)
+    executor.add_node(listener)
+    try:
+        spin_until(executor, lambda: len(got) == 2 or calibrator.error is not None)
+    finally:
+        executor.shutdown()
+        calibrator.destroy_node()
+        listener.destroy_node()
+    assert calibrator.error is None
+    doc = json.loads(got["diagnosis"])
+    assert doc["dominant_effect"] == {"effect": "backlash", "joints": [4]}
+    assert doc["scored_on"] == "hold-out bags"
+    assert "dominant effect: backlash on joints [4]" in got["diagnosis_summary"]

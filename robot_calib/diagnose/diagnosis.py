@@ -105,3 +105,22 @@ def diagnose(
         "holdout": [] if holdout is None else list(holdout.sources),
     }
     return doc, ladder
+
+
+def diagnosis_summary(doc: dict[str, Any]) -> str:
+    """A few human lines: the verdict, the ladder (held-out, seed criterion), what remains."""
+    dom = doc["dominant_effect"]
+    verdict = (
+        "null (geometric reaches the noise level)"
+        if dom is None
+        else f"{dom['effect']} on joints {dom['joints']}"
+    )
+    rungs = "; ".join(
+        f"{r['model']} {r['holdout_mean_mm']:.4f}/{r['holdout_max_mm']:.4f} mm"
+        for r in doc["ladder"]
+    )
+    return (
+        f"dominant effect: {verdict}. Ladder (held-out seed criterion mean/max, "
+        f"{doc['scored_on']}): {rungs}. Noise floor {doc['noise']['floor_abs_rms_mm']:.4f} mm "
+        f"rms. {doc['unexplained']['note']}."
+    )

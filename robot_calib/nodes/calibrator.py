@@ -42,6 +42,7 @@ from robot_calib.bag.recording import (
     recording_from_stream,
     velocity_signs,
 )
+from robot_calib.diagnose.diagnosis import diagnose, diagnosis_summary
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify.calibrate import Calibration, calibrate, parse_model
 from robot_calib.identify.params_file import calibration_to_dict, summary, write_json_atomic
@@ -116,6 +117,13 @@ class CalibratorNode(Node):
             "residuals": self.create_publisher(Float64MultiArray, "~/residuals", LATCHED),
             "markers": self.create_publisher(MarkerArray, "~/markers", LATCHED),
         }
+        if self.diagnose:
+            self._result_publishers["diagnosis"] = self.create_publisher(
+                String, "~/diagnosis", LATCHED
+            )
+            self._result_publishers["diagnosis_summary"] = self.create_publisher(
+                String, "~/diagnosis_summary", LATCHED
+            )
         steady = Clock(clock_type=STEADY)
         if self.bags:
             self._once = self.create_timer(0.0, self._solve_bags, clock=steady)
@@ -199,6 +207,15 @@ class CalibratorNode(Node):
             "residual_scale",
             100.0,
             "residual lines in ~/markers are drawn this many times their length [1]",
+        )
+        self.diagnose: bool = declare(
+            self,
+            "diagnose",
+            False,
+            "also run the sim-to-real gap diagnosis and publish ~/diagnosis (+ _summary)",
+        )
+        self.holdout_bags: list[str] = declare(
+            self, "holdout_bags", [], "hold-out bags for the diagnosis (empty: k-fold CV)"
         )
         self.qos_depth: int = declare(
             self,
@@ -289,11 +306,26 @@ class CalibratorNode(Node):
         self._result_publishers["markers"].publish(
             calibration_markers(cal, recording.points, self.residual_scale)
         )
+        if self.diagnose:
+            self._diagnose(recording)
         self.calibration, self.recording, self.error = cal, recording, None
         self.solves += 1
         written = f", written to {self.output}" if self.output else ""
         self.get_logger().info(f"{cal.name}: {cal.accuracy.line()}; published{written}")
         return cal
+
+    def _diagnose(self, recording: Recording) -> None:
+        """Run the diagnosis on `recording` (scored on `holdout_bags` or k-fold) and publish
+        the DIAGNOSIS.json document and its one-paragraph summary."""
+        holdout = None
+        if self.holdout_bags:
+            holdout = read_recording(self.holdout_bags, self.robot, self.pair_tolerance,
+                                     log=self._log)  # fmt: skip
+        doc, _ = diagnose(recording, self.robot, holdout, log=None)
+        self.diagnosis = doc
+        self._result_publishers["diagnosis"].publish(String(data=json.dumps(doc)))
+        self._result_publishers["diagnosis_summary"].publish(String(data=diagnosis_summary(doc)))
+        self.get_logger().info(diagnosis_summary(doc))
 
     def _fail(self, exc: RobotCalibError) -> None:
         self.error = exc
