@@ -38,7 +38,7 @@ def _plots(ladder: Ladder, recording: Recording, stem: Path) -> list[tuple[str, 
     arcs = arc_angle_errors(geo.model, geo.parameters, recording, geo.residuals)
     if arcs:
         fig, axes = plt.subplots(2, 3, figsize=(10, 5.5), sharey=False)
-        for ax, (j, (idx, err)) in zip(axes.ravel(), arcs.items()):
+        for ax, (j, (idx, err, _)) in zip(axes.ravel(), arcs.items()):
             q = np.degrees(recording.poses.q[idx, j - 1])
             forth = recording.poses.direction[idx, j - 1] > 0
             ax.plot(q[forth], err[forth] * 1e6, ".", ms=3, label="approached +")

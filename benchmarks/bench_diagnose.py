@@ -1,0 +1,63 @@
+"""Benchmark (not a test): full diagnosis of a Test 2 recording + 200 hold-out poses.
+
+    .venv/bin/python benchmarks/bench_diagnose.py [--repeat 3] [--effects backlash:4 ...]
+
+Target (issue 5): <= 10 s on 2 cores. Prints the median wall time per effect world, with
+the stages (read bags, ladder) timed separately, and the verdict for a sanity check.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+from robot_calib.bag.recording import read_recording
+from robot_calib.cli import main as cli
+from robot_calib.diagnose.diagnosis import diagnose
+from robot_calib.kinematics.description import load_robot
+
+TARGET_S = 10.0
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument(
+        "--effects", nargs="*", default=["none", "backlash:4", "eccentricity:5", "thermal_drift"]
+    )
+    args = parser.parse_args()
+    robot = load_robot("kr5_sixx_r650")
+    print(f"{'world':<16}{'read [s]':>10}{'diagnose [s]':>14}{'total [s]':>11}  verdict")
+    worst = 0.0
+    with tempfile.TemporaryDirectory() as tmp:
+        for spec in args.effects:
+            folder = Path(tmp) / spec.replace(":", "_")
+            folder.mkdir()
+            bag, hold = folder / "cal.mcap", folder / "hold.mcap"
+            effects = [] if spec == "none" else ["--effects", spec]
+            cli(["simulate", "--plan", "paper-test2", *effects, "--seed", "1", "-o", str(bag)])
+            cli(["simulate", "--plan", "random", "--world", str(bag.with_suffix(".world.yaml")),
+                 "--seed", "2", "-o", str(hold)])  # fmt: skip
+            reads, runs = [], []
+            for _ in range(args.repeat):
+                started = time.perf_counter()
+                rec = read_recording([bag], robot)
+                held = read_recording([hold], robot)
+                reads.append(time.perf_counter() - started)
+                started = time.perf_counter()
+                doc, _ = diagnose(rec, robot, held)
+                runs.append(time.perf_counter() - started)
+            total = statistics.median(reads) + statistics.median(runs)
+            worst = max(worst, total)
+            print(f"{spec:<16}{statistics.median(reads):>10.2f}{statistics.median(runs):>14.2f}"
+                  f"{total:>11.2f}  {doc['dominant_effect']}", flush=True)  # fmt: skip
+    print(f"worst total {worst:.2f} s vs target {TARGET_S:.0f} s: "
+          f"{'PASS' if worst <= TARGET_S else 'MISS'}")  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
