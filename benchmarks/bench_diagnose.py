@@ -1,3 +1,4 @@
+# ruff: noqa: E402 - the BLAS thread setting must precede the numpy import
 """Benchmark (not a test): full diagnosis of a Test 2 recording + 200 hold-out poses.
 
     .venv/bin/python benchmarks/bench_diagnose.py [--repeat 3] [--effects backlash:4 ...]
@@ -7,6 +8,10 @@ the stages (read bags, ladder) timed separately, and the verdict for a sanity ch
 """
 
 from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see robot_calib/__init__.py
 
 import argparse
 import statistics

@@ -67,6 +67,7 @@ TARGET_ECCENTRICITY_S = 0.5
 TARGET_SLOPE = 1.1  # log(time) vs log(n): "linear" within 10 %
 PERTURBATION = 1e-4  # start of the large-n fits: truth + N(0, 1e-4) [m or rad]
 MIB = 2.0**20
+MEASURE_CHUNK = 5_000  # poses simulated at once
 # ROS 2 domains: the same lock files as test/conftest.py, so the simulate run never shares
 # a DDS domain with a test or another benchmark running on this machine.
 ROS_DOMAINS = [*range(1, 102), *range(215, 233)]
@@ -138,8 +139,16 @@ def section(title: str) -> None:
 
 
 def measured(world: World, q: np.ndarray, seed: int) -> tuple[Poses, np.ndarray]:
+    """Poses of readings q (n, J) and their simulated measured points (n, 3) [m], made in
+    chunks: the simulator's eccentricity costs ~22 kB per pose at once, which would set the
+    process's peak RSS far above that of the fits measured here."""
     poses = Poses.from_readings(q)
-    return poses, physical_points(world, poses, np.random.default_rng(seed))
+    rng = np.random.default_rng(seed)
+    chunks = [
+        physical_points(world, poses.subset(slice(k, k + MEASURE_CHUNK)), rng)
+        for k in range(0, len(poses), MEASURE_CHUNK)
+    ]
+    return poses, np.concatenate(chunks)
 
 
 def perturbed_start(world: World, model: KinematicModel, seed: int) -> ParameterVector:

@@ -238,6 +238,62 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_import(args: argparse.Namespace) -> int:
+    """Measurement CSV(s) -> a contract bag (rows in order, bad rows reported by line)."""
+    from robot_calib.bag.csv_import import (
+        PRESETS,
+        CsvFormat,
+        read_measurement_csv,
+        with_overrides,
+        write_measurement_bag,
+    )
+
+    robot = load_robot(args.robot)
+    output = _output_path(args.output, "the bag")
+    if output.exists():
+        raise InputError(f"{output}: exists, will not overwrite a recording")
+    if args.preset:
+        if args.preset not in PRESETS:
+            raise InputError(f"--preset {args.preset}: known presets: {', '.join(PRESETS)}")
+        fmt = PRESETS[args.preset]
+    else:
+        if not args.joints or not args.point:
+            raise InputError("give --preset, or --joints and --point (column names or indices)")
+        fmt = CsvFormat(joints=tuple(args.joints.split(",")), point=tuple(args.point.split(",")))
+    split = lambda text: None if text is None else tuple(text.split(","))  # noqa: E731
+    fmt = with_overrides(
+        fmt,
+        joints=split(args.joints),
+        point=split(args.point),
+        dif=split(args.dif),
+        dif_sign=args.dif_sign,
+        time=args.time,
+        separator=args.sep,
+        decimal_comma=True if args.decimal_comma else None,
+        angle_unit=args.angle_unit,
+        length_unit=args.length_unit,
+        header=False if args.no_header else None,
+    )
+    if len(fmt.point) != 3 or (fmt.dif is not None and len(fmt.dif) != 3):
+        raise InputError("--point and --dif take three columns: x,y,z")
+    tables = []
+    for csv_path in args.csv:
+        table = read_measurement_csv(csv_path, fmt)
+        for line, why in table.bad_rows:
+            _log(f"warning: {csv_path}:{line}: {why}: row skipped")
+        print(f"{csv_path}: {len(table.q)} rows imported, {len(table.bad_rows)} bad rows skipped")
+        tables.append(table)
+    q = np.concatenate([t.q for t in tables])
+    points = np.concatenate([t.points for t in tables])
+    times = None
+    if all(t.time is not None for t in tables):
+        times = np.concatenate([t.time - t.time[0] + k * 1e6 for k, t in enumerate(tables)])
+    counts = write_measurement_bag(output, q, points, robot.joint_names, times)
+    print(f"{output}: {', '.join(f'{k}={v}' for k, v in counts.items())} messages "
+          f"({robot.name}, {fmt.angle_unit}/{fmt.length_unit} -> rad/m)")  # fmt: skip
+    return 0
+
+
 def cmd_predict(args: argparse.Namespace) -> int:
     """Target positions (tracker frame, m) for the joint angles of JOINTS.csv."""
     from robot_calib.identify.params_file import load_params
@@ -313,6 +369,21 @@ def build_parser() -> argparse.ArgumentParser:
         "--pair-tolerance", type=float, default=0.05, help="point/joint-state pairing [s]"
     )
     diag.add_argument("-o", "--output", required=True, help="DIAGNOSIS.json to write")
+
+    imp = add("import", cmd_import, "measurement CSV(s) -> a bag of the contract")
+    imp.add_argument("csv", nargs="+", metavar="CSV", help="CSV file(s), rows in visiting order")
+    imp.add_argument("--preset", help="a known export format: ur5_jacobi2025")
+    imp.add_argument("--joints", help="joint columns, names or 0-based indices: q1,q2,...")
+    imp.add_argument("--point", help="measured point columns x,y,z")
+    imp.add_argument("--dif", help="difference columns dx,dy,dz: point = point + sign * dif")
+    imp.add_argument("--dif-sign", type=float, choices=(-1.0, 1.0), help="sign of --dif (+1/-1)")
+    imp.add_argument("--time", help="time column [s] (default: poses 1 s apart)")
+    imp.add_argument("--sep", help="field separator (default ',')")
+    imp.add_argument("--decimal-comma", action="store_true", help="numbers written 1,5")
+    imp.add_argument("--angle-unit", choices=("deg", "rad"), help="joint angle unit")
+    imp.add_argument("--length-unit", choices=("mm", "m"), help="point unit")
+    imp.add_argument("--no-header", action="store_true", help="the CSV has no header row")
+    imp.add_argument("-o", "--output", required=True, help="bag to write (BAG.mcap)")
 
     pred = add("predict", cmd_predict, "target positions for joint angles (JOINTS.csv)")
     pred.add_argument("params", metavar="PARAMS.json")

@@ -1,3 +1,4 @@
+# ruff: noqa: E402 - the BLAS thread setting must precede the numpy import
 """Blind harness at scale: N random cases per withheld-effect class, hit rate per class.
 
     .venv/bin/python scripts/blind_harness.py [--cases 20] [--classes backlash ...]
@@ -8,6 +9,10 @@ rung brings the held-out error to within 1.5 x the noise floor (not required for
 """
 
 from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see robot_calib/__init__.py
 
 import argparse
 import json

@@ -1,3 +1,4 @@
+# ruff: noqa: E402 - the BLAS thread setting must precede the numpy import
 """Reproduce the seed paper's experiment (sections 5-7) in simulation: Tables 3 and 4.
 
 Two simulated KR5 sixx R650 worlds, both with the true geometry of the seed's Table 3
@@ -24,6 +25,10 @@ markers below, so hand-written text around them survives a rerun).
 """
 
 from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see robot_calib/__init__.py
 
 import argparse
 import sys

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+import robot_calib  # noqa: F401 - first, so its one-BLAS-thread default precedes numpy
+
 # Fast DDS accepts domains 0-101 and 215-232; 0 is everybody's default, so skip it.
 _DOMAINS = [*range(1, 102), *range(215, 233)]
 _LOCK_DIR = Path(tempfile.gettempdir()) / "robot_calib_ros_domains"

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from typing import Any
 
 from robot_calib.bag.recording import Recording
-from robot_calib.diagnose.ladder import AT_FLOOR, Ladder, run_ladder
+from robot_calib.diagnose.ladder import AT_FLOOR, N_FOLDS, Ladder, run_ladder
 from robot_calib.diagnose.signatures import where_it_lies
 from robot_calib.kinematics.description import RobotDescription
 
@@ -32,8 +32,8 @@ def dominant_effect(ladder: Ladder, where: dict[str, Any]) -> dict[str, Any] | N
     if gains:
         name = max(gains, key=gains.__getitem__)
         return {"effect": name, "joints": sorted(joints[name])}
-    if rungs[0].heldout.absolute_rms_mm <= NULL_FACTOR * floor_mm:
-        return None
+    if rungs[0].heldout.absolute_rms_mm <= NULL_FACTOR * floor_mm or not ladder.noise.independent:
+        return None  # at the noise level, or (noise unknown) no candidate helps
     strongest = where.get("strongest_signature")
     return {"effect": "unknown", "joints": [strongest["joint"]] if strongest else []}
 
@@ -55,7 +55,18 @@ def diagnose(
     dominant = dominant_effect(ladder, where)
     floor_mm = ladder.noise.floor_rms_m * 1e3
     ratio = best.heldout.absolute_rms_mm / floor_mm
-    if ratio <= AT_FLOOR:
+    if not ladder.noise.independent:
+        note = (
+            "noise level not known independently of the model (no repeat poses or circle "
+            f"sweeps): the floor is the geometric model's own residual; held-out rms {ratio:.2f}"
+            " x that"
+            + (
+                f"; strongest structure: {after['strongest_signature']['text']}"
+                if after["strongest_signature"]
+                else ""
+            )  # fmt: skip
+        )
+    elif ratio <= AT_FLOOR:
         note = f"at the noise level: held-out rms {ratio:.2f} x the noise floor"
     else:
         sig = after["strongest_signature"]
@@ -96,6 +107,8 @@ def diagnose(
             "floor_abs_mean_mm": ladder.noise.floor_mean_m * 1e3,
         },
         "scored_on": ladder.scored_on,
+        "selected_on": f"{N_FOLDS}-fold CV over poses"
+        + (" + hold-out bags (equal weight)" if holdout is not None else ""),
         "where": where,
         "candidates": [
             [{"model": m, "linearised_holdout_rms_mm": s * 1e3} for m, s in rnd]

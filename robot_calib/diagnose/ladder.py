@@ -44,7 +44,7 @@ class Rung:
     calibration: Calibration
     heldout: Accuracy
     heldout_residuals: Array  # (m, 3) predicted - measured [m] of the scored points
-    screening_rms_m: float  # linearised score that chose it (nan for geometric)
+    score_m: float  # selection score: combined k-fold + hold-out rms [m] after refits
 
 
 @dataclass(frozen=True)
@@ -122,9 +122,17 @@ def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
     return scores
 
 
+def combined_rms(cv_residuals: Array, holdout_residuals: Array | None) -> float:
+    """The selection score [m]: rms point error of the k-fold predictions and (when given)
+    of the hold-out bags, each source weighted equally whatever its size."""
+    parts = [cv_residuals] if holdout_residuals is None else [cv_residuals, holdout_residuals]
+    return float(np.sqrt(np.mean([np.mean(np.sum(r**2, axis=1)) for r in parts])))
+
+
 def _linear_score(residual: Array, jac: Array, fold: Array, h_res: Array | None,
                   h_jac: Array | None) -> float:  # fmt: skip
-    """rms |r + J dx| [m] on held-out points, dx the least-squares step on the others."""
+    """`combined_rms` of |r + J dx| [m]: k-fold (dx the least-squares step on the other
+    folds) and on the hold-out points (dx from all calibration points)."""
     norms = np.linalg.norm(jac.reshape(-1, jac.shape[-1]), axis=0)
     keep = norms > 0
     jac = jac[:, :, keep] / norms[keep]
@@ -133,25 +141,31 @@ def _linear_score(residual: Array, jac: Array, fold: Array, h_res: Array | None,
         a = jac[rows].reshape(-1, jac.shape[-1])
         return np.linalg.lstsq(a, -residual[rows].reshape(-1), rcond=1e-9)[0]
 
+    h_out = None
     if h_res is not None and h_jac is not None:
         h_jac = h_jac[:, :, keep] / norms[keep]
-        dx = step(np.ones(len(residual), dtype=bool))
-        out = h_res + h_jac @ dx
-    else:
-        out = np.empty_like(residual)
-        for f in np.unique(fold):
-            test = fold == f
-            out[test] = residual[test] + jac[test] @ step(~test)
-    return float(np.sqrt(np.mean(np.sum(out**2, axis=1))))
+        h_out = h_res + h_jac @ step(np.ones(len(residual), dtype=bool))
+    out = np.empty_like(residual)
+    for f in np.unique(fold):
+        test = fold == f
+        out[test] = residual[test] + jac[test] @ step(~test)
+    return combined_rms(out, h_out)
 
 
 def score_rung(cal: Calibration, recording: Recording,
-               holdout: Recording | None) -> tuple[Accuracy, Array]:  # fmt: skip
-    """Held-out accuracy of a calibrated model: on the hold-out bags when given, else
-    k-fold over whole poses (each fold refitted from the full solution)."""
-    if holdout is not None:
-        predicted = cal.predict(holdout.poses)
-        return accuracy(holdout.points, predicted), predicted - holdout.points
+               holdout: Recording | None) -> tuple[Accuracy, Array, float]:  # fmt: skip
+    """Held-out accuracy of a calibrated model (on the hold-out bags when given, else k-fold
+    over whole poses, each fold refitted from the full solution), its residuals (m, 3) [m],
+    and the selection score `combined_rms` [m]."""
+    cv_acc, cv_res = _kfold(cal, recording)
+    if holdout is None:
+        return cv_acc, cv_res, combined_rms(cv_res, None)
+    predicted = cal.predict(holdout.poses)
+    h_res = predicted - holdout.points
+    return accuracy(holdout.points, predicted), h_res, combined_rms(cv_res, h_res)
+
+
+def _kfold(cal: Calibration, recording: Recording) -> tuple[Accuracy, Array]:
     fold = folds(len(recording))
     predicted = np.empty_like(recording.points)
     for f in range(N_FOLDS):
@@ -172,14 +186,15 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
     scored_on = "hold-out bags" if holdout is not None else f"{N_FOLDS}-fold CV over poses"
     say(f"noise: {noise.sigma_m * 1e3:.4f} mm per axis ({noise.source}, {noise.n}); "
         f"scoring on {scored_on}")  # fmt: skip
-    acc, res = score_rung(geo, recording, holdout)
-    rungs = [Rung("geometric", (), geo, acc, res, float("nan"))]
+    acc, res, score = score_rung(geo, recording, holdout)
+    rungs = [Rung("geometric", (), geo, acc, res, score)]
     rounds: list[list[tuple[str, float]]] = []
     say(f"  geometric: held-out rms {acc.absolute_rms_mm:.4f} mm "
         f"(floor {noise.floor_rms_m * 1e3:.4f})")  # fmt: skip
     while len(rungs) <= MAX_RUNGS:
         current = rungs[-1]
-        if current.heldout.absolute_rms_mm <= AT_FLOOR * noise.floor_rms_m * 1e3:
+        at_floor = current.heldout.absolute_rms_mm <= AT_FLOOR * noise.floor_rms_m * 1e3
+        if at_floor and noise.independent:
             break
         pool = candidates(robot, recording, current.effects)
         if not pool:
@@ -195,13 +210,11 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
             effects = _replace(current.effects, effect)
             name = model_name(effects)
             cal = calibrate(recording, robot, name, log=None, start=current.calibration)
-            acc, res = score_rung(cal, recording, holdout)
-            say(
-                f"  try {name}: linearised {lin_score * 1e3:.4f} mm, refitted held-out rms "
-                f"{acc.absolute_rms_mm:.4f} mm (current {current.heldout.absolute_rms_mm:.4f})"
-            )
-            if acc.absolute_rms_mm <= (1.0 - MIN_GAIN) * current.heldout.absolute_rms_mm:
-                accepted = Rung(name, effects, cal, acc, res, lin_score)
+            acc, res, score = score_rung(cal, recording, holdout)
+            say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, refitted "
+                f"{score * 1e3:.4f} mm (current {current.score_m * 1e3:.4f})")  # fmt: skip
+            if score <= (1.0 - MIN_GAIN) * current.score_m:
+                accepted = Rung(name, effects, cal, acc, res, score)
                 break
         if accepted is None:
             break

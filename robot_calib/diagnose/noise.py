@@ -35,6 +35,12 @@ class NoiseLevel:
     n: int
 
     @property
+    def independent(self) -> bool:
+        """True when estimated without any model (repeat poses, circle fits): only then can
+        a model's error be compared with it (a model's own residual is no floor)."""
+        return self.source != "model residual"
+
+    @property
     def floor_rms_m(self) -> float:
         """Expected rms of |predicted - measured| for the true model [m] (3-D)."""
         return float(np.sqrt(3.0) * self.sigma_m)

@@ -18,6 +18,7 @@ from scipy.optimize import least_squares
 from robot_calib.identify.identifiability import (
     Identifiability,
     describe,
+    fix_poorly_determined,
     fix_unidentifiable,
     standard_deviations,
 )
@@ -92,8 +93,10 @@ def fit_model(
     params, fixed = start, ()
     if check_identifiability:
         predicted, jac = model.jacobian(start, poses)
-        params, ident = fix_unidentifiable(params, objective.residuals(predicted, jac, points)[1])
-        fixed = ident.fixed
+        residual0, jac_full = objective.residuals(predicted, jac, points)
+        params, ident = fix_unidentifiable(params, jac_full)
+        params, weak = fix_poorly_determined(params, jac_full, residual0)
+        fixed = ident.fixed + tuple(weak)
     problem = _Problem(model, params, poses, points, objective)
     last_report = [time.monotonic()]
 

@@ -116,3 +116,50 @@ def standard_deviations(jac_free: Array, residuals: Array, n_params: int) -> Arr
     keep = s > s[0] * 1e-12
     cov_diag = ((vt[keep].T / s[keep]) ** 2).sum(axis=1)
     return np.sqrt(sigma2 * cov_diag)
+
+
+#: A free parameter whose 1-sigma from the data would exceed this (by unit) is not
+#: identified in any useful sense: 1 mm for a length, 0.01 rad (0.6 deg) for an angle.
+STD_BOUNDS = {"m": 1e-3, "rad": 1e-2, "1": 1e-2, "rad/(N m)": 1e-3, "1/s": 1e-4}
+
+
+def covariance(jac_free: Array, residuals: Array) -> Array:
+    """Covariance (p, p) of the free parameters: sigma^2 (J^T J)^-1, sigma^2 = SSR/(m - p)."""
+    m, p = jac_free.shape
+    sigma2 = float(residuals @ residuals) / max(m - p, 1)
+    _, s, vt = np.linalg.svd(jac_free, full_matrices=False)
+    keep = s > s[0] * 1e-12
+    scaled = vt[keep].T / s[keep]
+    return sigma2 * scaled @ scaled.T
+
+
+def fix_poorly_determined(
+    params: ParameterVector, jac_full: Array, residuals: Array
+) -> tuple[ParameterVector, list[tuple[str, str]]]:
+    """Fix, one at a time, the free parameter whose predicted 1-sigma most exceeds its
+    STD_BOUNDS, until none does. jac_full (m, P) and residuals (m,) at the start point; the
+    noise level comes from one linearised (Gauss-Newton) step from there."""
+    fixed: list[tuple[str, str]] = []
+    while True:
+        free = np.flatnonzero(params.free)
+        if not len(free):
+            return params, fixed
+        jac = jac_full[:, free]
+        step = np.linalg.lstsq(jac, -residuals, rcond=1e-12)[0]
+        cov = covariance(jac, residuals + jac @ step)
+        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        bounds = np.array([STD_BOUNDS.get(params.parameters[i].unit, np.inf) for i in free])
+        ratio = std / bounds
+        worst = int(np.argmax(ratio))
+        if ratio[worst] <= 1.0:
+            return params, fixed
+        corr = cov[worst] / np.maximum(std * std[worst], 1e-300)
+        partners = [params.names[free[k]] for k in np.argsort(-np.abs(corr))
+                    if k != worst and abs(corr[k]) > 0.9][:3]  # fmt: skip
+        unit = params.parameters[free[worst]].unit
+        reason = (
+            f"not identifiable from these poses: its 1-sigma would be {std[worst]:.2g} {unit}"
+            + (f", correlated with {', '.join(partners)}" if partners else "")
+        )
+        params = params.fixed([params.names[free[worst]]], reason)
+        fixed.append((params.names[free[worst]], reason))
