@@ -105,13 +105,18 @@ def write_report(doc: dict[str, Any], ladder: Ladder, recording: Recording, path
     lines += ["", f"What remains: {doc['unexplained']['note']}.", "", "## Where the residual lies",
               "", "Geometric model, per joint from its sweeps (angle-equivalent error along the "
               "arc):", "",
-              "| joint | rms [urad] | harmonics 1-4 [urad] | forth-back split [urad] "
+              "| joint | rms [urad] | harmonics 1-4 [urad] (x their noise sigma) "
+              "| forth-back split [urad] "
               "| slope vs angle [urad/rad] | corr. with gravity torque |",
               "|---|---|---|---|---|---|"]  # fmt: skip
     for j in doc["where"]["joints"]:
         lines.append(
             f"| {j['joint']} | {j['arc_rms_urad']:.1f} | "
-            f"{', '.join(f'{a:.1f}' for a in j['harmonics_urad'])} | "
+            + ", ".join(
+                f"{a:.1f} ({s:.0f}x)"
+                for a, s in zip(j["harmonics_urad"], j["harmonics_significance"])
+            )
+            + " | "
             f"{j['direction_split_urad']:.1f} | {j['slope_vs_angle_urad_per_rad']:.1f} | "
             f"{j['gravity_torque_correlation']:.2f} |"
         )
