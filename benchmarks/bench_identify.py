@@ -19,13 +19,15 @@ Prints figures (no assertions):
 All data come from one world: the default world (seed Table 3 geometry) with the seed's
 eccentricity (Tables 5-6) on all six joints, measurement noise on. Fits at large n start
 from the true geometry perturbed by 1e-4 (m or rad) with the eccentricity at zero, and call
-`fit_model` directly so that only the fit is timed. Timings depend on machine load: the load
-average is printed; `--blas-threads 1` pins BLAS to one thread (see the final notes).
+`fit_model` directly so that only the fit is timed. Timings depend on machine load (the load
+average is printed) and on BLAS threads: importing robot_calib sets one unless
+OPENBLAS_NUM_THREADS is set; `--blas-threads N` runs with N (the threads in use are printed).
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
 import fcntl
 import os
 import platform
@@ -41,6 +43,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+# isort: split
+# First, before NumPy loads: importing robot_calib sets the BLAS thread count (one thread
+# unless OPENBLAS_NUM_THREADS is already set), as the console scripts get it.
+import robot_calib  # noqa: F401
+
+# isort: split
 import numpy as np
 import scipy
 
@@ -58,7 +66,6 @@ from robot_calib.sim.measure import physical_points
 from robot_calib.sim.plans import paper_test_plan, random_plan
 from robot_calib.sim.world import World, load_world, with_effect
 
-ROOT = Path(__file__).resolve().parents[1]
 SIZES = (1_000, 3_000, 10_000, 30_000, 100_000)
 PAIRWISE_SIZES = (1_000, 3_000, 10_000)
 BLAS_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
@@ -84,6 +91,9 @@ class Timing:
     @property
     def median(self) -> float:
         return statistics.median(self.times)
+
+    def short(self) -> str:
+        return f"{self.median:.4f} s (min {min(self.times):.4f})"
 
     def line(self) -> str:
         t = self.times
@@ -122,6 +132,30 @@ def load_line() -> str:
     one, five, _ = os.getloadavg()
     busy = "  <- CPU contention: timings inflated" if one > (os.cpu_count() or 1) else ""
     return f"load average {one:.2f} (1 min), {five:.2f} (5 min) on {os.cpu_count()} CPUs{busy}"
+
+
+def blas_threads() -> str:
+    """Threads of each OpenBLAS loaded in this process (NumPy's, SciPy's), read back from
+    the libraries; '?' where the library has none of the known symbols."""
+    try:
+        maps = Path("/proc/self/maps").read_text()
+    except OSError:
+        return "unknown (no /proc/self/maps)"
+    paths = sorted(
+        {ln.split()[-1] for ln in maps.splitlines() if "openblas" in ln and "/" in ln.split()[-1]}
+    )
+    names = (
+        "scipy_openblas_get_num_threads64_",
+        "scipy_openblas_get_num_threads",
+        "openblas_get_num_threads64_",
+        "openblas_get_num_threads",
+    )
+    out = []
+    for path in paths:
+        lib = ctypes.CDLL(path)
+        getter = next((getattr(lib, n) for n in names if hasattr(lib, n)), None)
+        out.append(f"{Path(path).name.split('-')[0]} {getter() if getter else '?'}")
+    return ", ".join(out) or "no OpenBLAS loaded"
 
 
 def loglog_slope(n: list[int], t: list[float]) -> float:
@@ -182,7 +216,7 @@ def claim_ros_domain() -> tuple[int, Any]:
     raise RuntimeError(f"no free ROS_DOMAIN_ID: all of {len(ROS_DOMAINS)} are locked")
 
 
-def bench_bag(robot: RobotDescription, runs: int, tmp: Path) -> dict[str, float]:
+def bench_bag(robot: RobotDescription, runs: int, tmp: Path) -> dict[str, Timing]:
     section("read_recording of a Test 2 bag (robot-calib simulate --plan paper-test2)")
     bag = tmp / "test2.mcap"
     cli = Path(sys.executable).with_name("robot-calib")
@@ -205,24 +239,24 @@ def bench_bag(robot: RobotDescription, runs: int, tmp: Path) -> dict[str, float]
     rec: Recording = timing.result
     print(f"  read_recording: {timing.line()}")
     print(f"    {rec.summary()}")
-    return {"read_recording": timing.median}
+    return {"read_recording": timing}
 
 
-def bench_test2(world: World, runs: int, seed: int) -> dict[str, float]:
+def bench_test2(world: World, runs: int, seed: int) -> dict[str, Timing]:
     robot = world.model.robot
     plan = paper_test_plan(2)
     _, points = measured(world, plan.q, seed)
     rec = recording_from_arrays(plan.q, points, source="paper-test2")
-    out: dict[str, float] = {}
+    out: dict[str, Timing] = {}
 
     section(f"Test 2 recording: {rec.summary()}")
     cpa = repeat(lambda: circle_point_analysis(rec, robot), runs)
-    out["cpa"] = cpa.median
+    out["cpa"] = cpa
     print(f"  CPA alone (circle_point_analysis): {cpa.line()}")
 
     geo = repeat(lambda: calibrate(rec, robot, "geometric"), runs)
     cal = geo.result
-    out["geometric"] = geo.median
+    out["geometric"] = geo
     print(f"  calibrate geometric (CPA + LM + accuracy): {geo.line()}")
     print(
         f"    LM: {cal.solver['evaluations']} evaluations, fit_model {cal.solver['time_s']:.4f} s "
@@ -249,7 +283,7 @@ def bench_test2(world: World, runs: int, seed: int) -> dict[str, float]:
             runs,
         )
         res = ecc.result
-        out[f"ecc {label}"] = ecc.median
+        out[f"ecc {label}"] = ecc
         n_ecc = sum(1 for n in res.parameters.names if n.startswith("ecc"))
         print(f"  {len(recording)} points; calibrate(start=geometric): {ecc.line()}")
         print(
@@ -369,7 +403,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--blas-threads",
         type=int,
         default=None,
-        help="set OPENBLAS/OMP/MKL_NUM_THREADS and restart (default: as is)",
+        help="set OPENBLAS/OMP/MKL_NUM_THREADS to N and restart (default: as importing "
+        "robot_calib leaves them: 1 unless already set)",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of the simulated data")
     parser.add_argument(
@@ -391,8 +426,12 @@ def main(argv: list[str] | None = None) -> int:
     print("bench_identify: " + " ".join(sys.argv[1:]) if sys.argv[1:] else "bench_identify")
     print(
         f"  python {platform.python_version()}, numpy {np.__version__}, scipy "
-        f"{scipy.__version__}, {platform.machine()}, {os.cpu_count()} CPUs; BLAS threads: "
+        f"{scipy.__version__}, {platform.machine()}, {os.cpu_count()} CPUs"
+    )
+    print(
+        f"  BLAS threads in use: {blas_threads()} ("
         + ", ".join(f"{v}={os.environ.get(v, 'unset')}" for v in BLAS_ENV)
+        + ")"
     )
     print(f"  {load_line()}")
 
@@ -460,16 +499,16 @@ def main(argv: list[str] | None = None) -> int:
     target(
         "geometric, Test 2 (580 pts), calibrate",
         f"<= {TARGET_GEOMETRIC_S} s",
-        f"{results['geometric']:.4f} s",
-        results["geometric"] <= TARGET_GEOMETRIC_S,
+        results["geometric"].short(),
+        results["geometric"].median <= TARGET_GEOMETRIC_S,
     )
     for label in ("Test 2", "Test 2 + 100 general poses"):
         value = results[f"ecc {label}"]
         target(
             f"geometric+ecc from geometric, {label}",
             f"<= {TARGET_ECCENTRICITY_S} s",
-            f"{value:.4f} s",
-            value <= TARGET_ECCENTRICITY_S,
+            value.short(),
+            value.median <= TARGET_ECCENTRICITY_S,
         )
     if len(geo_n) >= 2:
         target(
@@ -500,8 +539,8 @@ def main(argv: list[str] | None = None) -> int:
             None,
         )
     if "read_recording" in results:
-        target("read_recording, Test 2 bag", "(info)", f"{results['read_recording']:.4f} s", None)
-    target("CPA alone, Test 2", "(info)", f"{results['cpa']:.4f} s", None)
+        target("read_recording, Test 2 bag", "(info)", results["read_recording"].short(), None)
+    target("CPA alone, Test 2", "(info)", results["cpa"].short(), None)
     widths = [
         max(len(r[i]) for r in [("measurement", "target", "measured", "result"), *rows])
         for i in range(4)
@@ -513,9 +552,9 @@ def main(argv: list[str] | None = None) -> int:
         f"maxrss {maxrss_mib():.0f} MiB"
     )
     print(
-        "  Times are medians of wall-clock runs; with other processes on the CPUs a "
-        "multi-threaded BLAS can\n  slow the SVD/QR steps many-fold: compare "
-        "--blas-threads 1."
+        "  Times are medians of wall-clock runs (min in brackets). Other processes on the "
+        "CPUs inflate them,\n  a multi-threaded BLAS (--blas-threads 2) many-fold: its "
+        "SVD/QR threads wait on each other."
     )
     return 0
 

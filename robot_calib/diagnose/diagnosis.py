@@ -8,6 +8,7 @@ from typing import Any
 
 from robot_calib.bag.recording import Recording
 from robot_calib.diagnose.ladder import AT_FLOOR, N_FOLDS, Ladder, run_ladder
+from robot_calib.diagnose.noise import NoiseLevel, refine_with_model
 from robot_calib.diagnose.signatures import where_it_lies
 from robot_calib.kinematics.description import RobotDescription
 
@@ -16,12 +17,14 @@ FORMAT = "robot_calib.diagnosis/1"
 NULL_FACTOR = 1.5
 
 
-def dominant_effect(ladder: Ladder, where: dict[str, Any]) -> dict[str, Any] | None:
+def dominant_effect(
+    ladder: Ladder, where: dict[str, Any], noise: NoiseLevel
+) -> dict[str, Any] | None:
     """The effect that removed most of what `geometric` left (with its joints); None when
     geometric is already at the noise level; 'unknown' with the joints of the strongest
     residual signature when structure remains that no candidate explains."""
     rungs = ladder.rungs
-    floor_mm = ladder.noise.floor_rms_m * 1e3
+    floor_mm = noise.floor_rms_m * 1e3
     gains: dict[str, float] = {}
     joints: dict[str, set[int]] = {}
     for before, rung in zip(rungs, rungs[1:]):
@@ -32,7 +35,7 @@ def dominant_effect(ladder: Ladder, where: dict[str, Any]) -> dict[str, Any] | N
     if gains:
         name = max(gains, key=gains.__getitem__)
         return {"effect": name, "joints": sorted(joints[name])}
-    if rungs[0].heldout.absolute_rms_mm <= NULL_FACTOR * floor_mm or not ladder.noise.independent:
+    if rungs[0].heldout.absolute_rms_mm <= NULL_FACTOR * floor_mm or not noise.independent:
         return None  # at the noise level, or (noise unknown) no candidate helps
     strongest = where.get("strongest_signature")
     return {"effect": "unknown", "joints": [strongest["joint"]] if strongest else []}
@@ -52,10 +55,12 @@ def diagnose(
                           ladder.noise.sigma_m)  # fmt: skip
     after = where_it_lies(best.calibration.model, best.calibration.parameters, recording,
                           best.calibration.residuals, ladder.noise.sigma_m)  # fmt: skip
-    dominant = dominant_effect(ladder, where)
-    floor_mm = ladder.noise.floor_rms_m * 1e3
+    noise = refine_with_model(ladder.noise, best.calibration.residuals,
+                              int(best.calibration.parameters.free.sum()))  # fmt: skip
+    dominant = dominant_effect(ladder, where, noise)
+    floor_mm = noise.floor_rms_m * 1e3
     ratio = best.heldout.absolute_rms_mm / floor_mm
-    if not ladder.noise.independent:
+    if not noise.independent:
         note = (
             "noise level not known independently of the model (no repeat poses or circle "
             f"sweeps): the floor is the geometric model's own residual; held-out rms {ratio:.2f}"
@@ -100,11 +105,13 @@ def diagnose(
             "where": after,
         },
         "noise": {
-            "sigma_mm": ladder.noise.sigma_m * 1e3,
-            "source": ladder.noise.source,
-            "n": ladder.noise.n,
+            "sigma_mm": noise.sigma_m * 1e3,
+            "source": noise.source,
+            "n": noise.n,
             "floor_abs_rms_mm": floor_mm,
-            "floor_abs_mean_mm": ladder.noise.floor_mean_m * 1e3,
+            "floor_abs_mean_mm": noise.floor_mean_m * 1e3,
+            "ladder_sigma_mm": ladder.noise.sigma_m * 1e3,
+            "ladder_source": ladder.noise.source,
         },
         "scored_on": ladder.scored_on,
         "selected_on": f"{N_FOLDS}-fold CV over poses"

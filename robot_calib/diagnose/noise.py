@@ -7,7 +7,10 @@
    sigma^2 = sum(residual^2) / (2 n - 6 per sweep) (an upper bound if effects bend circles).
    Where both exist and agree (circles within 1.5 x), they are pooled by degrees of freedom
    (a handful of repeat pairs alone scatters by +-20 %); else the repeat poses win.
-3. Else the in-sample residual of a fitted model with its degrees of freedom.
+3. Else the in-sample residual of a fitted model with its degrees of freedom (then the
+   floor is not independent of the model, and the diagnosis says so).
+The final verdict pools the independent estimate with the best model's in-sample residual
+where they agree (`refine_with_model`).
 """
 
 from __future__ import annotations
@@ -94,3 +97,19 @@ def estimate_noise(recording: Recording, fallback_residuals: Array | None = None
             float(np.sqrt(np.sum(fallback_residuals**2) / dof)), "model residual", dof
         )
     return NoiseLevel(float("nan"), "unknown", 0)
+
+
+def refine_with_model(noise: NoiseLevel, residuals: Array, n_free: int) -> NoiseLevel:
+    """Pool an independent estimate with a fitted model's in-sample residual (n, 3) [m]
+    when the two agree (within AGREE): the model then leaves only noise, and its thousands of
+    degrees of freedom steady an estimate from a handful of repeat poses. Unchanged when
+    they disagree (the model misses structure) or when `noise` is not independent."""
+    dof = residuals.size - n_free
+    if not noise.independent or dof <= 0:
+        return noise
+    sigma = float(np.sqrt(np.sum(residuals**2) / dof))
+    if sigma > AGREE * noise.sigma_m:
+        return noise
+    total = noise.n + dof
+    var = (noise.n * noise.sigma_m**2 + dof * sigma**2) / total
+    return NoiseLevel(float(np.sqrt(var)), f"{noise.source} + final model residual", total)

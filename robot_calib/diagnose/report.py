@@ -13,7 +13,9 @@ from robot_calib.diagnose.ladder import Ladder
 from robot_calib.diagnose.signatures import arc_angle_errors
 
 
-def _plots(ladder: Ladder, recording: Recording, stem: Path) -> list[tuple[str, str]]:
+def _plots(
+    ladder: Ladder, recording: Recording, stem: Path, floor_mm: float
+) -> list[tuple[str, str]]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -23,7 +25,7 @@ def _plots(ladder: Ladder, recording: Recording, stem: Path) -> list[tuple[str, 
     names = [r.model for r in ladder.rungs]
     fig, ax = plt.subplots(figsize=(7, 3.2))
     ax.bar(range(len(names)), [r.heldout.absolute_rms_mm for r in ladder.rungs], color="#4878a8")
-    ax.axhline(ladder.noise.floor_rms_m * 1e3, color="k", ls="--", label="noise floor")
+    ax.axhline(floor_mm, color="k", ls="--", label="noise floor")
     ax.set_xticks(range(len(names)), names, rotation=15, ha="right", fontsize=8)
     ax.set_ylabel("held-out rms error [mm]")
     ax.set_title(f"the ladder (scored on {ladder.scored_on})")
@@ -71,7 +73,7 @@ def _plots(ladder: Ladder, recording: Recording, stem: Path) -> list[tuple[str, 
 
 def write_report(doc: dict[str, Any], ladder: Ladder, recording: Recording, path: Path) -> None:
     """Markdown report `path` (+ PNGs beside it named after it)."""
-    plots = _plots(ladder, recording, path.with_suffix(""))
+    plots = _plots(ladder, recording, path.with_suffix(""), doc["noise"]["floor_abs_rms_mm"])
     dom = doc["dominant_effect"]
     verdict = (
         "geometric already reaches the noise level: no dominant unmodelled effect"
