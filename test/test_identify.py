@@ -234,3 +234,17 @@ def test_seed_objective_finds_the_same_geometry() -> None:
             sigma = absolute.std[absolute.parameters.index(name)]
             assert abs(seed.parameters[name] - truth[name]) < 5 * sigma, name
     assert seed.accuracy.pairwise_mean_mm < 1.1 * absolute.accuracy.pairwise_mean_mm
+
+
+def test_pairwise_criterion_samples_pairs_for_large_sets() -> None:
+    """Above MAX_EXACT_POINTS the criterion comes from a random sample of pairs: a uniform
+    1e-3 scale error gives a pair error of 1e-3 x the pair distance, whose mean is known."""
+    from robot_calib.accuracy import MAX_EXACT_POINTS
+
+    rng = np.random.default_rng(1)
+    measured = rng.uniform(-1.0, 1.0, size=(MAX_EXACT_POINTS + 1000, 3))
+    mean, worst = pairwise_errors(measured, measured * 1.001)
+    i, j = rng.integers(0, len(measured), (2, 200_000))
+    expected = 1e-3 * np.linalg.norm(measured[i] - measured[j], axis=1).mean()
+    assert mean == pytest.approx(expected, rel=0.01)
+    assert worst <= 1e-3 * 2 * np.sqrt(3) * 1.0001

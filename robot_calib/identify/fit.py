@@ -45,6 +45,23 @@ class FitResult:
     solver: dict[str, object]
 
 
+BLOCK_POSES = 5000  # Jacobian evaluated in blocks: its temporaries stay in cache (linear time)
+
+
+def blocked_jacobian(
+    model: KinematicModel, params: ParameterVector, poses: Poses
+) -> tuple[Array, Array]:
+    """`model.jacobian` over `poses` in blocks of BLOCK_POSES: points (n, 3), jac (n, 3, P)."""
+    n = len(poses)
+    if n <= BLOCK_POSES:
+        return model.jacobian(params, poses)
+    points, jac = np.empty((n, 3)), np.empty((n, 3, len(params)))
+    for start in range(0, n, BLOCK_POSES):
+        rows = slice(start, min(start + BLOCK_POSES, n))
+        points[rows], jac[rows] = model.jacobian(params, poses.subset(rows))
+    return points, jac
+
+
 class _Problem:
     """Residuals and Jacobian of the free parameters, evaluated once per x (LM asks for
     both at the same point)."""
@@ -68,7 +85,7 @@ class _Problem:
         """Objective residuals (m,) and their Jacobian (m, n_free) at free values x."""
         if self._x is None or not np.array_equal(x, self._x):
             params = self.start.unpack(x)
-            predicted, jac = self.model.jacobian(params, self.poses)
+            predicted, jac = blocked_jacobian(self.model, params, self.poses)
             self._cache = self.objective.residuals(predicted, jac[:, :, params.free], self.points)
             self.predicted = predicted
             self._x = x.copy()
@@ -92,7 +109,7 @@ def fit_model(
     objective = objective or AbsoluteObjective()
     params, fixed = start, ()
     if check_identifiability:
-        predicted, jac = model.jacobian(start, poses)
+        predicted, jac = blocked_jacobian(model, start, poses)
         residual0, jac_full = objective.residuals(predicted, jac, points)
         params, ident = fix_unidentifiable(params, jac_full)
         params, weak = fix_poorly_determined(params, jac_full, residual0)

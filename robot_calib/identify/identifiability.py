@@ -101,7 +101,8 @@ def describe(jac_free: Array, fixed: tuple[tuple[str, str], ...] = ()) -> Identi
     """Condition number and observability index of a Jacobian (m, p) of free parameters."""
     if jac_free.shape[1] == 0:
         return Identifiability(1.0, 0.0, 0, fixed)
-    _, s, _ = scaled_svd(jac_free)
+    norms = np.linalg.norm(jac_free, axis=0)
+    s = np.linalg.svd(jac_free / np.where(norms > 0, norms, 1.0), compute_uv=False)
     observability = float(np.exp(np.mean(np.log(np.maximum(s, 1e-300)))) / np.sqrt(len(jac_free)))
     return Identifiability(float(s[0] / max(s[-1], 1e-300)), observability, len(s), fixed)
 
