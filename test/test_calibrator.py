@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from diagnostic_msgs.srv import SelfTest
 from geometry_msgs.msg import PointStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -155,7 +156,7 @@ def test_bag_mode_results_are_latched_for_late_subscribers(context: Context) -> 
     assert len(shown["measured"][0].points) == 290
 
 
-@pytest.mark.parametrize("trigger", ["solve_topic", "idle"])
+@pytest.mark.parametrize("trigger", ["solve_topic", "service", "idle"])
 def test_live_mode_identifies_the_world_truth(context: Context, trigger: str) -> None:
     """The seed's Test 3 from a simulated world (exact points) through real publishers;
     one extra point far from any joint state is dropped and counted."""
@@ -173,8 +174,9 @@ def test_live_mode_identifies_the_world_truth(context: Context, trigger: str) ->
     js_pub = source.create_publisher(JointState, JOINT_STATES_TOPIC, deep)
     pt_pub = source.create_publisher(PointStamped, POINT_TOPIC, deep)
     solve_pub = source.create_publisher(Empty, "/calibrator/solve", 10)
+    client = source.create_client(SelfTest, "/calibrator/calibrate")
     executor = SingleThreadedExecutor(context=context)
-    for node in (calibrator, listener):
+    for node in (calibrator, listener, source):
         executor.add_node(node)
     try:
         spin_until(
@@ -198,9 +200,18 @@ def test_live_mode_identifies_the_world_truth(context: Context, trigger: str) ->
         pt_pub.publish(stray)
         expected = {JOINT_STATES_TOPIC: len(plan), POINT_TOPIC: len(plan) + 1}
         spin_until(executor, lambda: calibrator.received == expected)
-        if trigger == "solve_topic":
+        if trigger != "idle":
             assert calibrator.calibration is None  # nothing before the trigger
+        if trigger == "solve_topic":
             solve_pub.publish(Empty())
+        if trigger == "service":
+            spin_until(executor, client.service_is_ready)
+            future = client.call_async(SelfTest.Request())
+            spin_until(executor, future.done)
+            answer = future.result()
+            assert answer.passed == b"\x01" and answer.id == "geometric"
+            values = {kv.key: kv.value for kv in answer.status[0].values}
+            assert values["points"] == "290" and float(values["absolute_mean_mm"]) < 1e-3
         spin_until(executor, lambda: "parameters" in listener.last)
         if trigger == "idle":  # no new point since: no second solve
             deadline = time.monotonic() + 2 * idle_s

@@ -2,8 +2,9 @@
 
 Bag mode (parameter `bags` set): once at start, read and pair the bags (CONTRACT.md
 section 1), calibrate, publish. Live mode (`bags` empty): buffer /joint_states and
-/laser_tracker/point; on a std_msgs/Empty on `~/solve` (std_srvs is not a dependency of
-the package, so no Trigger service), or after `solve_after_idle_s` without a new point
+/laser_tracker/point; on a call of the service `~/calibrate` (diagnostic_msgs/srv/SelfTest:
+empty request, the outcome as a DiagnosticStatus; std_srvs is not a dependency), a
+std_msgs/Empty on `~/solve`, or after `solve_after_idle_s` without a new point
 ("the plan has ended"), pair everything received so far exactly as a bag is paired and
 calibrate. Results go out on latched (transient local) topics: `~/parameters` (the
 PARAMS.json document), `~/summary`, `~/residuals` and `~/markers` (RViz / Foxglove).
@@ -25,6 +26,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.srv import SelfTest
 from geometry_msgs.msg import Point, PointStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -160,6 +163,7 @@ class CalibratorNode(Node):
                 ),
             )
         self.create_subscription(Empty, "~/solve", lambda _msg: self.solve(), 10)
+        self.create_service(SelfTest, "~/calibrate", self._on_calibrate)
         if self.solve_after_idle_s > 0:
             period = min(self.solve_after_idle_s / 4, 0.5)
             self._idle_timer = self.create_timer(period, self._check_idle, clock=steady)
@@ -172,6 +176,34 @@ class CalibratorNode(Node):
             f"collecting {JOINT_STATES_TOPIC} and {POINT_TOPIC}; solving {self.model_spec} "
             f"on {self.resolve_topic_name('~/solve')}{idle}"
         )
+
+    def _on_calibrate(self, _request: SelfTest.Request, response: SelfTest.Response) -> Any:
+        """Service ~/calibrate (diagnostic_msgs/srv/SelfTest: empty request): solve now and
+        answer with the outcome as one DiagnosticStatus (message = accuracy or the error)."""
+        cal = self.calibration if self.bags else self.solve()  # bag mode: the bags' result
+        status = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="")
+        if cal is None:
+            status.level = DiagnosticStatus.ERROR
+            status.message = str(self.error) if self.error else "no calibration"
+        else:
+            status.level = DiagnosticStatus.OK
+            status.message = cal.accuracy.line()
+            acc = cal.accuracy
+            status.values = [
+                KeyValue(key=k, value=v)
+                for k, v in (
+                    ("model", cal.name),
+                    ("points", str(acc.n_points)),
+                    ("absolute_mean_mm", f"{acc.absolute_mean_mm:.6f}"),
+                    ("absolute_max_mm", f"{acc.absolute_max_mm:.6f}"),
+                    ("pairwise_mean_mm", f"{acc.pairwise_mean_mm:.6f}"),
+                    ("pairwise_max_mm", f"{acc.pairwise_max_mm:.6f}"),
+                )
+            ]
+        response.id = cal.name if cal is not None else ""
+        response.passed = bytes([cal is not None])
+        response.status = [status]
+        return response
 
     def _declare_parameters(self) -> None:
         self.bags: list[str] = declare(
