@@ -122,6 +122,28 @@ def write_report(doc: dict[str, Any], ladder: Ladder, recording: Recording, path
             f"{j['direction_split_urad']:.1f} | {j['slope_vs_angle_urad_per_rad']:.1f} | "
             f"{j['gravity_torque_correlation']:.2f} |"
         )
+    lines += [
+        "",
+        "From every pose, as joint-angle error terms fitted jointly with the geometry (what "
+        "the geometry can absorb does not count; in brackets: x their noise sigma):",
+        "",
+        "| joint | harmonics 1-4 [urad] | direction (backlash) [urad] "
+        "| scale [urad/rad] | gravity [urad/(N m)] |",
+        "|---|---|---|---|---|",
+    ]
+    for j in doc["where"]["joints_from_all_poses"]:
+        harmonics = ", ".join(
+            f"{a:.1f} ({s:.0f}x)" for a, s in zip(j["harmonics_urad"], j["harmonics_significance"])
+        )
+        lines.append(
+            f"| {j['joint']} | {harmonics} "
+            f"| {j['direction_urad']:.1f} ({j['direction_significance']:.0f}x) "
+            f"| {j['scale_urad_per_rad']:.1f} ({j['scale_significance']:.0f}x) "
+            f"| {j['gravity_urad_per_Nm']:.2f} ({j['gravity_significance']:.0f}x) |"
+        )
+    strongest = doc["where"]["strongest_signature"]
+    if strongest:
+        lines += ["", f"Strongest structure: {strongest['text']}."]
     t = doc["where"]["time"]
     lines += [
         "",

@@ -55,6 +55,87 @@ def harmonic_amplitudes(
     return np.hypot(coef[1::2], coef[2::2]), np.sqrt((var[1::2] + var[2::2]) / 2.0)
 
 
+def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recording,
+                residuals: Array, noise_sigma_m: float) -> list[dict[str, Any]]:  # fmt: skip
+    """From every pose (sweeps or not), per joint, what each signature explains of the
+    residual beyond what the model's own free parameters can absorb: a joint-angle error
+    shaped as harmonic k = 1..4 of the reading, as the approach direction (backlash), the
+    reading (scale) or the gravity torque (compliance). Each family is tested on its own
+    against the geometry (so families do not trade huge opposite coefficients): its value,
+    and its significance sqrt(chi^2 explained) in units of the noise."""
+    poses, n_joints = recording.poses, model.robot.n_joints
+    origins, axes = model.joint_axes(params, poses)
+    predicted = recording.points + residuals
+    motion = np.cross(axes, predicted[:, None, :] - origins)  # (n, J, 3) [m/rad]
+    _, jac = model.jacobian(params, poses)
+    nuisance = jac[:, :, params.free].reshape(-1, int(params.free.sum())) / noise_sigma_m
+    basis = np.linalg.qr(nuisance)[0] if nuisance.shape[1] else np.zeros((nuisance.shape[0], 0))
+    r = residuals.reshape(-1) / noise_sigma_m
+    r = r - basis @ (basis.T @ r)
+    tau = gravity_torques(model.robot, poses.q)
+
+    def explain(signals: list[Array], j: int) -> tuple[Array, float]:
+        """Coefficients [rad per unit signal] and sqrt(chi^2 explained) of one family."""
+        cols = np.stack([(motion[:, j, :] * s[:, None]).reshape(-1) for s in signals], 1)
+        cols = cols / noise_sigma_m
+        cols = cols - basis @ (basis.T @ cols)
+        coef, *_ = np.linalg.lstsq(cols, r, rcond=1e-10)
+        return coef, float(np.linalg.norm(cols @ coef))
+
+    out = []
+    for j in range(n_joints):
+        qj = poses.q[:, j]
+        entry: dict[str, Any] = {"joint": j + 1}
+        amps, sig = [], []
+        for k in range(1, HARMONICS + 1):
+            coef, z = explain([np.cos(k * qj), np.sin(k * qj)], j)
+            amps.append(float(np.hypot(*coef) * 1e6))
+            sig.append(z)
+        entry["harmonics_urad"], entry["harmonics_significance"] = amps, sig
+        for name, key, signal in (("direction", "direction_urad", poses.direction[:, j]),
+                                  ("scale", "scale_urad_per_rad", qj),
+                                  ("gravity", "gravity_urad_per_Nm", tau[:, j])):  # fmt: skip
+            if np.ptp(signal) > 1e-9:
+                coef, z = explain([signal], j)
+                entry[key], entry[f"{name}_significance"] = float(coef[0] * 1e6), z
+            else:
+                entry[key], entry[f"{name}_significance"] = 0.0, 0.0
+        out.append(entry)
+    return out
+
+
+FAMILIES = (  # (key of the value, key of the significance, words, unit)
+    ("direction_urad", "direction_significance", "approach direction (backlash-like)", "urad"),
+    ("scale_urad_per_rad", "scale_significance", "reading (scale-like)", "urad/rad"),
+    ("gravity_urad_per_Nm", "gravity_significance", "gravity torque (compliance-like)",
+     "urad/(N m)"),
+)  # fmt: skip
+ORDINAL = {1: "1st", 2: "2nd", 3: "3rd"}
+
+
+def strongest_signature(terms: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The most significant family of `joint_terms` over all joints, with a sentence."""
+    best = None  # (significance, joint, harmonic or None, value, text)
+    for entry in terms:
+        j = entry["joint"]
+        pairs = zip(entry["harmonics_urad"], entry["harmonics_significance"])
+        for k, (amp, sig) in enumerate(pairs, start=1):
+            text = (f"{ORDINAL.get(k, f'{k}th')} harmonic of joint {j} ({amp:.1f} urad of "
+                    f"joint-angle error, {sig:.0f} x its noise)")  # fmt: skip
+            if best is None or sig > best[0]:
+                best = (sig, j, k, amp, text)
+        for key, sig_key, words, unit in FAMILIES:
+            sig = entry[sig_key]
+            if best is None or sig > best[0]:
+                text = (f"joint {j} error following its {words}: {entry[key]:.1f} {unit}, "
+                        f"{sig:.0f} x its noise")  # fmt: skip
+                best = (sig, j, None, entry[key], text)
+    if best is None:
+        return None
+    sig, j, k, value, text = best
+    return {"joint": j, "harmonic": k, "value": value, "significance": sig, "text": text}
+
+
 def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Recording,
                   residuals: Array, noise_sigma_m: float) -> dict[str, Any]:  # fmt: skip
     """The 'where' section of DIAGNOSIS.json (units in the key names)."""
@@ -89,26 +170,11 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
     quartiles = np.array_split(np.argsort(time, kind="stable"), 4)
     reach = np.linalg.norm((recording.points - recording.points.mean(axis=0))[:, :2], axis=1)
     tertiles = np.array_split(np.argsort(reach, kind="stable"), 3)
-    strongest = None  # (joint, harmonic, amplitude, significance): the most significant
-    for entry in joints:
-        pairs = zip(entry["harmonics_urad"], entry["harmonics_significance"])
-        for k, (amp, sig) in enumerate(pairs, start=1):
-            if strongest is None or sig > strongest[3]:
-                strongest = (entry["joint"], k, amp, sig)
-    ordinal = {1: "1st", 2: "2nd", 3: "3rd"}
+    all_poses = joint_terms(model, params, recording, residuals, noise_sigma_m)
     return {
         "joints": joints,
-        "strongest_signature": None
-        if strongest is None
-        else {
-            "joint": strongest[0],
-            "harmonic": strongest[1],
-            "amplitude_urad": strongest[2],
-            "significance": strongest[3],
-            "text": f"{ordinal.get(strongest[1], f'{strongest[1]}th')} harmonic of joint "
-            f"{strongest[0]} ({strongest[2]:.1f} urad along the arc, {strongest[3]:.0f} x its "
-            "noise)",
-        },
+        "joints_from_all_poses": all_poses,
+        "strongest_signature": strongest_signature(all_poses),
         "time": {
             "rms_by_quartile_mm": [float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in quartiles],
             "slope_mm_per_h": float(np.polyfit(time, norm, 1)[0] * 3.6e6)
