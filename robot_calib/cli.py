@@ -308,7 +308,12 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="robot-calib", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="robot-calib",
+        description="Calibrate 6-axis robots from laser-tracker measurements and diagnose "
+        "why the real robot still differs from the model. Start with `robot-calib run`; "
+        "units on disk are SI (m, rad), reports add mm/deg. Bad input: one line, exit 2.",
+    )
     sub = parser.add_subparsers(dest="command", required=True)
 
     def add(
