@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -127,6 +128,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     )
 
     output = Path(args.output)
+    from robot_calib.sim.plans import PLAN_NAMES
+
+    if args.plan not in PLAN_NAMES:
+        raise InputError(f"--plan {args.plan}: unknown plan (known: {', '.join(PLAN_NAMES)})")
     if output.exists():
         raise InputError(f"{output}: exists, will not overwrite a recording")
     if not output.parent.is_dir():
@@ -157,14 +162,19 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             last[0] = time.monotonic()
             print(f"  {args.plan}: {done}/{total} poses", file=sys.stderr)
 
-    counts = simulate_bag(
-        output,
-        args.plan,
-        world_file,
-        -1 if args.seed is None else args.seed,
-        args.n_random,
-        progress,
-    )
+    try:
+        counts = simulate_bag(
+            output,
+            args.plan,
+            world_file,
+            -1 if args.seed is None else args.seed,
+            args.n_random,
+            progress,
+        )
+    except BaseException:  # nothing written half-way: a partial simulation is no recording
+        world_file.unlink(missing_ok=True)
+        output.unlink(missing_ok=True)
+        raise
     effects = ", ".join(e.label for e in world.effects) or "none"
     print(
         f"{output}: {', '.join(f'{t}={n}' for t, n in counts.items())} messages "
@@ -248,7 +258,11 @@ def cmd_import(args: argparse.Namespace) -> int:
         write_measurement_bag,
     )
 
-    robot = load_robot(args.robot)
+    preset = PRESETS.get(args.preset or "")
+    robot_name = args.robot
+    if preset is not None and preset.robot and args.robot == DEFAULT_ROBOT:
+        robot_name = preset.robot  # the preset's robot unless --robot says otherwise
+    robot = load_robot(robot_name)
     output = _output_path(args.output, "the bag")
     if output.exists():
         raise InputError(f"{output}: exists, will not overwrite a recording")
@@ -300,6 +314,10 @@ def cmd_predict(args: argparse.Namespace) -> int:
     from robot_calib.predict import read_joints_csv, write_points_csv
 
     model, params, _ = load_params(args.params)
+    if args.robot != DEFAULT_ROBOT and load_robot(args.robot).name != model.robot.name:
+        raise InputError(
+            f"{args.params}: identified for robot {model.robot.name}, not --robot {args.robot}"
+        )
     poses = read_joints_csv(args.joints, model.robot.n_joints)
     output = _output_path(args.output, "POINTS.csv")
     write_points_csv(model.target_points(params, poses), output)
@@ -307,8 +325,15 @@ def cmd_predict(args: argparse.Namespace) -> int:
     return 0
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """Usage errors as one line and exit status 2 (the contract's rule for bad input)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _OneLineParser(
         prog="robot-calib",
         description="Calibrate 6-axis robots from laser-tracker measurements and diagnose "
         "why the real robot still differs from the model. Start with `robot-calib run`; "

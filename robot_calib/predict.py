@@ -23,7 +23,7 @@ def read_joints_csv(path: str | Path, n_joints: int) -> Poses:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such joints file")
-    with path.open(newline="") as handle:
+    with path.open(newline="", encoding="utf-8-sig") as handle:  # -sig: Excel's BOM
         rows = list(csv.reader(handle))
     if not rows:
         raise InputError(f"{path}: empty file (expected header q1..q{n_joints})")

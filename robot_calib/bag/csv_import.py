@@ -54,6 +54,7 @@ class CsvFormat:
     angle_unit: str = "rad"
     length_unit: str = "m"
     header: bool = True
+    robot: str | None = None  # the robot the format belongs to (default for --robot)
 
 
 # ur5_jacobi2025 (datasets/ur5_jacobi2025/README.md): `x_t..z_t` the commanded target [mm],
@@ -69,6 +70,7 @@ PRESETS = {
         dif_sign=-1.0,
         angle_unit="deg",
         length_unit="mm",
+        robot="ur5",
     )
 }
 
@@ -114,7 +116,7 @@ def read_measurement_csv(path: str | Path, fmt: CsvFormat) -> ImportedTable:
         list(fmt.joints) + list(fmt.point) + list(fmt.dif or ()) + ([fmt.time] if fmt.time else [])
     )
     cols = [_column(r, header, path) for r in refs]
-    values, bad = [], []
+    values, bad, lines = [], [], []
     for line, row in enumerate(body, start=first_line):
         if not row or all(not c.strip() for c in row):
             continue
@@ -134,6 +136,7 @@ def read_measurement_csv(path: str | Path, fmt: CsvFormat) -> ImportedTable:
             bad.append((line, "value not finite"))
             continue
         values.append(numbers)
+        lines.append(line)
     if not values:
         raise InputError(f"{path}: no usable rows ({len(bad)} bad)")
     table = np.array(values)
@@ -144,6 +147,12 @@ def read_measurement_csv(path: str | Path, fmt: CsvFormat) -> ImportedTable:
         points = points + fmt.dif_sign * table[:, n_j + 3 : n_j + 6]
     points = points * LENGTH_UNITS[fmt.length_unit]
     time = table[:, -1] if fmt.time else None
+    if time is not None and np.any(np.diff(time) <= 0):
+        k = int(np.flatnonzero(np.diff(time) <= 0)[0]) + 1
+        raise InputError(
+            f"{path}:{lines[k]}: time {time[k]:g} s does not increase (previous row: "
+            f"{time[k - 1]:g} s); rows must be in measurement order"
+        )
     return ImportedTable(q, points, time, tuple(bad))
 
 

@@ -28,6 +28,9 @@ def make_effect(name: str, joints: tuple[int, ...] | list[int] = (), **options: 
     if name not in EFFECTS:
         raise InputError(f"unknown effect {name!r} (known: {', '.join(EFFECTS)})")
     joints = tuple(int(j) for j in joints)
+    order = options.get("order", 1)
+    if not isinstance(order, int) or order < 1:
+        raise InputError(f"effect {name!r}: order must be an integer >= 1, got {order!r}")
     if name == "thermal_drift" and joints:
         raise InputError("thermal_drift belongs to no joint: give joints: []")
     try:

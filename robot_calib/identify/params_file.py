@@ -16,7 +16,7 @@ from robot_calib.bag.recording import Recording
 from robot_calib.effects import make_effect
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
 from robot_calib.identify.calibrate import Calibration
-from robot_calib.kinematics.description import available_robots, load_robot
+from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
 
@@ -41,7 +41,7 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
     doc: dict[str, Any] = {
         "format": FORMAT,
         "model": cal.name,
-        "robot": robot.name if robot.name in available_robots() else robot.source,
+        "robot": robot.reference(),
         "effects": [
             {"name": e.name, "joints": list(e.joints), **_options(e)} for e in cal.model.effects
         ],
@@ -161,7 +161,8 @@ def summary(cal: Calibration, recording: Recording) -> str:
         reasons: dict[str, list[str]] = {}
         for p in fixed:
             reason = p.fixed_reason
-            key = reason if len(reason) < 90 else reason.split(":")[0]
+            many = "moves the points like" in reason  # one per term: group them
+            key = reason.split(":")[0] if many else reason
             reasons.setdefault(key, []).append(p.name)
         for reason, names in reasons.items():
             shown = ", ".join(names[:8]) + (f" (+{len(names) - 8} more)" if len(names) > 8 else "")

@@ -7,7 +7,7 @@ See `robots/kr5_sixx_r650.yaml` for a commented example.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -44,10 +44,19 @@ class RobotDescription:
     link_mass: Array
     link_com: Array
     source: str = ""
+    path: str = ""  # absolute path of the YAML file it was loaded from ('' if built in code)
 
     @property
     def n_joints(self) -> int:
         return len(self.joint_names)
+
+    def reference(self) -> str:
+        """What `load_robot` needs to load it again: the built-in name, else the absolute
+        path of its YAML file (what PARAMS.json and world files store)."""
+        builtin = (ROBOTS_DIR / f"{self.name}.yaml").resolve()
+        if not self.path or Path(self.path) == builtin:
+            return self.name
+        return self.path
 
 
 def available_robots() -> list[str]:
@@ -72,7 +81,7 @@ def load_robot(name_or_path: str | Path) -> RobotDescription:
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise RobotDescriptionError(f"{path}: not valid YAML ({first})") from None
-    return parse_robot(data, str(path))
+    return replace(parse_robot(data, str(path)), path=str(path.resolve()))
 
 
 def _number(value: Any, where: str) -> float:

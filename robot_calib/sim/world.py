@@ -17,7 +17,7 @@ import yaml
 
 from robot_calib.effects import Effect, make_effect
 from robot_calib.errors import InputError, RobotCalibError
-from robot_calib.kinematics.description import available_robots, load_robot
+from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
 
@@ -221,7 +221,7 @@ def world_to_dict(world: World) -> dict[str, Any]:
     timing["max_joint_speed_deg_s"] = np.degrees(timing.pop("max_joint_speed_rad_s")).tolist()
     robot = world.model.robot
     return {
-        "robot": robot.name if robot.name in available_robots() else robot.source,
+        "robot": robot.reference(),
         "seed": world.seed,
         "geometry": "nominal",
         "effects": effects,
