@@ -203,8 +203,8 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
         base = scores[0][1]
         ranked = sorted(scores[1:], key=lambda s: s[1])
         rounds.append([(model_name(_replace(current.effects, e)), s) for e, s in ranked[:8]])
-        accepted = None
-        for effect, lin_score in ranked[:TRY_TOP]:  # the refit must confirm the screening
+        accepted: Rung | None = None
+        for effect, lin_score in ranked[:TRY_TOP]:  # refits confirm the screening; best wins
             if lin_score > (1.0 - MIN_GAIN) * base:
                 break
             effects = _replace(current.effects, effect)
@@ -213,9 +213,11 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
             acc, res, score = score_rung(cal, recording, holdout)
             say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, refitted "
                 f"{score * 1e3:.4f} mm (current {current.score_m * 1e3:.4f})")  # fmt: skip
-            if score <= (1.0 - MIN_GAIN) * current.score_m:
+            good = score <= (1.0 - MIN_GAIN) * current.score_m
+            if good and (accepted is None or score < accepted.score_m):
                 accepted = Rung(name, effects, cal, acc, res, score)
-                break
+            if good and score <= AT_FLOOR * noise.floor_rms_m and noise.independent:
+                break  # at the noise floor already: nothing left to win
         if accepted is None:
             break
         rungs.append(accepted)
