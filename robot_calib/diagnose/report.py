@@ -24,7 +24,10 @@ def _plots(
     out = []
     names = [r.model for r in ladder.rungs]
     fig, ax = plt.subplots(figsize=(7, 3.2))
-    ax.bar(range(len(names)), [r.heldout.absolute_rms_mm for r in ladder.rungs], color="#4878a8")
+    bars = ax.bar(
+        range(len(names)), [r.heldout.absolute_rms_mm for r in ladder.rungs], color="#4878a8"
+    )
+    ax.bar_label(bars, fmt="%.4f mm", fontsize=8)
     ax.axhline(floor_mm, color="k", ls="--", label="noise floor")
     ax.set_xticks(range(len(names)), names, rotation=15, ha="right", fontsize=8)
     ax.set_ylabel("held-out rms error [mm]")
