@@ -119,6 +119,7 @@ def parse_effect(spec: str) -> tuple[str, list[int], float | None]:
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Simulate a plan in a world and record the bag (+ the world's truth beside it)."""
     from robot_calib.effects import make_effect
+    from robot_calib.sim.plans import PLAN_NAMES
     from robot_calib.sim.world import (
         build_world,
         default_effect_values,
@@ -127,15 +128,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         with_effect,
     )
 
-    output = Path(args.output)
-    from robot_calib.sim.plans import PLAN_NAMES
-
     if args.plan not in PLAN_NAMES:
         raise InputError(f"--plan {args.plan}: unknown plan (known: {', '.join(PLAN_NAMES)})")
-    if output.exists():
-        raise InputError(f"{output}: exists, will not overwrite a recording")
-    if not output.parent.is_dir():
-        raise InputError(f"{output.parent}: no such folder")
+    output = _new_bag_path(args.output)
     if args.world is None and args.robot != DEFAULT_ROBOT:
         # Another robot without a world file: its nominal geometry in the default set-up.
         world = build_world({"robot": args.robot, "geometry": "nominal"}, f"--robot {args.robot}")
@@ -193,6 +188,14 @@ def _output_path(raw: str, what: str) -> Path:
     if not path.parent.is_dir():
         raise InputError(f"{path.parent}: no such folder for {what}")
     return path
+
+
+def _new_bag_path(raw: str) -> Path:
+    """The path of a bag to create: its folder must exist, the file must not."""
+    path = Path(raw)
+    if path.exists():
+        raise InputError(f"{path}: exists, will not overwrite a recording")
+    return _output_path(raw, "the bag")
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -263,9 +266,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     if preset is not None and preset.robot and args.robot == DEFAULT_ROBOT:
         robot_name = preset.robot  # the preset's robot unless --robot says otherwise
     robot = load_robot(robot_name)
-    output = _output_path(args.output, "the bag")
-    if output.exists():
-        raise InputError(f"{output}: exists, will not overwrite a recording")
+    output = _new_bag_path(args.output)
     if args.preset:
         if args.preset not in PRESETS:
             raise InputError(f"--preset {args.preset}: known presets: {', '.join(PRESETS)}")

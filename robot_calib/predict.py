@@ -8,11 +8,12 @@ POINTS.csv: header x,y,z [m], one row per input row, in the laser_tracker frame.
 from __future__ import annotations
 
 import csv
-import os
+import io
 from pathlib import Path
 
 import numpy as np
 
+from robot_calib.atomic import write_text_atomic
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
 from robot_calib.poses import Poses
@@ -63,10 +64,8 @@ def read_joints_csv(path: str | Path, n_joints: int) -> Poses:
 
 def write_points_csv(points: Array, path: str | Path) -> None:
     """POINTS.csv with header x,y,z [m], written atomically (temporary file + rename)."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with tmp.open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(["x", "y", "z"])
-        writer.writerows([[repr(float(v)) for v in p] for p in points])
-    os.replace(tmp, path)
+    text = io.StringIO(newline="")
+    writer = csv.writer(text)
+    writer.writerow(["x", "y", "z"])
+    writer.writerows([[repr(float(v)) for v in p] for p in points])
+    write_text_atomic(path, text.getvalue())

@@ -53,8 +53,10 @@ def diagnose(
     geo = ladder.rungs[0].calibration
     where = where_it_lies(geo.model, geo.parameters, recording, geo.residuals,
                           ladder.noise.sigma_m)  # fmt: skip
-    after = where_it_lies(best.calibration.model, best.calibration.parameters, recording,
-                          best.calibration.residuals, ladder.noise.sigma_m)  # fmt: skip
+    after = where if len(ladder.rungs) == 1 else where_it_lies(
+        best.calibration.model, best.calibration.parameters, recording,
+        best.calibration.residuals, ladder.noise.sigma_m,
+    )  # fmt: skip
     noise = refine_with_model(ladder.noise, best.calibration.residuals,
                               int(best.calibration.parameters.free.sum()))  # fmt: skip
     dominant = dominant_effect(ladder, where, noise)

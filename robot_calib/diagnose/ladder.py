@@ -21,7 +21,7 @@ from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, make_effect
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.identify.calibrate import Calibration, calibrate, model_name
-from robot_calib.identify.fit import fit_model
+from robot_calib.identify.fit import blocked_jacobian, fit_model
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.model import KinematicModel
@@ -102,13 +102,13 @@ def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
     params = superset.parameters().with_values(
         dict(zip(cal.parameters.names, cal.parameters.values))
     )
-    predicted, jac = superset.jacobian(params, recording.poses)
+    predicted, jac = blocked_jacobian(superset, params, recording.poses)
     n = len(recording)
     residual = predicted - recording.points
     base_cols = [params.index(name) for name in cal.parameters.free_names]
     h_res = h_jac = None
     if holdout is not None:
-        h_pred, h_jac = superset.jacobian(params, holdout.poses)
+        h_pred, h_jac = blocked_jacobian(superset, params, holdout.poses)
         h_res = h_pred - holdout.points
     fold = folds(n)
     scores = []

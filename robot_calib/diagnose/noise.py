@@ -85,18 +85,26 @@ def estimate_noise(recording: Recording, fallback_residuals: Array | None = None
     circles = _circle_noise(recording)
     if repeat is not None and circles is not None:
         if circles.sigma_m <= AGREE * repeat.sigma_m:  # circles not bent by effects: pool
-            dof = repeat.n + circles.n
-            var = (repeat.n * repeat.sigma_m**2 + circles.n * circles.sigma_m**2) / dof
-            return NoiseLevel(float(np.sqrt(var)), "repeat poses + circle fits", dof)
+            return _pooled(repeat, circles, "repeat poses + circle fits")
         return repeat
     if repeat is not None or circles is not None:
         return repeat or circles  # type: ignore[return-value]
     if fallback_residuals is not None:
-        dof = max(fallback_residuals.size - fallback_dof, 1)
-        return NoiseLevel(
-            float(np.sqrt(np.sum(fallback_residuals**2) / dof)), "model residual", dof
-        )
+        return _model_noise(fallback_residuals, fallback_dof)
     return NoiseLevel(float("nan"), "unknown", 0)
+
+
+def _model_noise(residuals: Array, n_free: int) -> NoiseLevel:
+    """Per-axis noise from a fitted model's in-sample residuals (n, 3) [m] and its dof."""
+    dof = max(residuals.size - n_free, 1)
+    return NoiseLevel(float(np.sqrt(np.sum(residuals**2) / dof)), "model residual", dof)
+
+
+def _pooled(a: NoiseLevel, b: NoiseLevel, source: str) -> NoiseLevel:
+    """Two estimates of one noise pooled by their degrees of freedom."""
+    dof = a.n + b.n
+    var = (a.n * a.sigma_m**2 + b.n * b.sigma_m**2) / dof
+    return NoiseLevel(float(np.sqrt(var)), source, dof)
 
 
 def refine_with_model(noise: NoiseLevel, residuals: Array, n_free: int) -> NoiseLevel:
@@ -104,12 +112,9 @@ def refine_with_model(noise: NoiseLevel, residuals: Array, n_free: int) -> Noise
     when the two agree (within AGREE): the model then leaves only noise, and its thousands of
     degrees of freedom steady an estimate from a handful of repeat poses. Unchanged when
     they disagree (the model misses structure) or when `noise` is not independent."""
-    dof = residuals.size - n_free
-    if not noise.independent or dof <= 0:
+    if not noise.independent or residuals.size - n_free <= 0:
         return noise
-    sigma = float(np.sqrt(np.sum(residuals**2) / dof))
-    if sigma > AGREE * noise.sigma_m:
+    model = _model_noise(residuals, n_free)
+    if model.sigma_m > AGREE * noise.sigma_m:
         return noise
-    total = noise.n + dof
-    var = (noise.n * noise.sigma_m**2 + dof * sigma**2) / total
-    return NoiseLevel(float(np.sqrt(var)), f"{noise.source} + final model residual", total)
+    return _pooled(noise, model, f"{noise.source} + final model residual")

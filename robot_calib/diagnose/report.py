@@ -74,6 +74,12 @@ def _plots(
     return out
 
 
+def _harmonics(entry: dict[str, Any]) -> str:
+    """'a1 (s1x), a2 (s2x), ...': harmonic amplitudes [urad] with their significance."""
+    pairs = zip(entry["harmonics_urad"], entry["harmonics_significance"])
+    return ", ".join(f"{a:.1f} ({s:.0f}x)" for a, s in pairs)
+
+
 def write_report(doc: dict[str, Any], ladder: Ladder, recording: Recording, path: Path) -> None:
     """Markdown report `path` (+ PNGs beside it named after it)."""
     plots = _plots(ladder, recording, path.with_suffix(""), doc["noise"]["floor_abs_rms_mm"])
@@ -116,30 +122,22 @@ def write_report(doc: dict[str, Any], ladder: Ladder, recording: Recording, path
               "|---|---|---|---|---|---|"]  # fmt: skip
     for j in doc["where"]["joints"]:
         lines.append(
-            f"| {j['joint']} | {j['arc_rms_urad']:.1f} | "
-            + ", ".join(
-                f"{a:.1f} ({s:.0f}x)"
-                for a, s in zip(j["harmonics_urad"], j["harmonics_significance"])
-            )
-            + " | "
+            f"| {j['joint']} | {j['arc_rms_urad']:.1f} | {_harmonics(j)} | "
             f"{j['direction_split_urad']:.1f} | {j['slope_vs_angle_urad_per_rad']:.1f} | "
             f"{j['gravity_torque_correlation']:.2f} |"
         )
     lines += [
         "",
-        "From every pose, as joint-angle error terms fitted jointly with the geometry (what "
-        "the geometry can absorb does not count; in brackets: x their noise sigma):",
+        "From every pose, as joint-angle error terms, each tested alone against what the "
+        "geometry can absorb (which does not count; in brackets: x their noise sigma):",
         "",
         "| joint | harmonics 1-4 [urad] | direction (backlash) [urad] "
         "| scale [urad/rad] | gravity [urad/(N m)] |",
         "|---|---|---|---|---|",
     ]
     for j in doc["where"]["joints_from_all_poses"]:
-        harmonics = ", ".join(
-            f"{a:.1f} ({s:.0f}x)" for a, s in zip(j["harmonics_urad"], j["harmonics_significance"])
-        )
         lines.append(
-            f"| {j['joint']} | {harmonics} "
+            f"| {j['joint']} | {_harmonics(j)} "
             f"| {j['direction_urad']:.1f} ({j['direction_significance']:.0f}x) "
             f"| {j['scale_urad_per_rad']:.1f} ({j['scale_significance']:.0f}x) "
             f"| {j['gravity_urad_per_Nm']:.2f} ({j['gravity_significance']:.0f}x) |"

@@ -16,6 +16,8 @@ import numpy as np
 
 from robot_calib.bag.recording import Recording
 from robot_calib.effects.compliance import gravity_torques
+from robot_calib.effects.eccentricity import fourier_basis
+from robot_calib.identify.fit import blocked_jacobian
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
@@ -44,11 +46,8 @@ def harmonic_amplitudes(
     """Amplitudes (order,) of harmonics 1..order of values(q) (least squares with a mean)
     and their 1-sigma from noise `sigma` on each value: over a partial turn the harmonics
     are nearly collinear and their amplitudes are uncertain, which the sigma shows."""
-    cols = [np.ones_like(q)]
-    for k in range(1, order + 1):
-        cols += [np.cos(k * q), np.sin(k * q)]
     weights = np.broadcast_to(1.0 / np.asarray(sigma, dtype=float), q.shape)
-    design = np.stack(cols, axis=1) * weights[:, None]
+    design = fourier_basis(q, order) * weights[:, None]
     coef, *_ = np.linalg.lstsq(design, values * weights, rcond=None)
     cov = np.linalg.pinv(design.T @ design)
     var = np.diag(cov)
@@ -67,7 +66,7 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
     origins, axes = model.joint_axes(params, poses)
     predicted = recording.points + residuals
     motion = np.cross(axes, predicted[:, None, :] - origins)  # (n, J, 3) [m/rad]
-    _, jac = model.jacobian(params, poses)
+    _, jac = blocked_jacobian(model, params, poses)
     nuisance = jac[:, :, params.free].reshape(-1, int(params.free.sum())) / noise_sigma_m
     basis = np.linalg.qr(nuisance)[0] if nuisance.shape[1] else np.zeros((nuisance.shape[0], 0))
     r = residuals.reshape(-1) / noise_sigma_m

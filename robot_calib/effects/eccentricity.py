@@ -23,6 +23,14 @@ from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
 
 
+def fourier_basis(q: np.ndarray, order: int) -> np.ndarray:
+    """Columns 1, cos q, sin q, ..., cos(K q), sin(K q) of angles q (n,) [rad]: (n, 1 + 2K)."""
+    cols = [np.ones_like(q)]
+    for k in range(1, order + 1):
+        cols += [np.cos(k * q), np.sin(k * q)]
+    return np.stack(cols, axis=-1)
+
+
 def term_names(order: int) -> list[str]:
     """Fourier terms of one error motion: D, c1, s1, ..., cK, sK."""
     return ["D"] + [f"{kind}{k}" for k in range(1, order + 1) for kind in ("c", "s")]
@@ -49,10 +57,7 @@ class Eccentricity(Effect):
 
     def basis(self, q: np.ndarray) -> np.ndarray:
         """Fourier basis of readings q (n,) [rad]: shape (n, 1 + 2K) = 1, cos q, sin q, ..."""
-        cols = [np.ones_like(q)]
-        for k in range(1, self.order + 1):
-            cols += [np.cos(k * q), np.sin(k * q)]
-        return np.stack(cols, axis=-1)
+        return fourier_basis(q, self.order)
 
     def contribution(
         self, robot: RobotDescription, params: ParameterVector, poses: Poses

@@ -155,19 +155,23 @@ def calibrate(
     else:
         say("geometric: no sweep of every joint, starting from the nominal model")
         initial = fit_frames(geometric, geometric.parameters(), poses, points).parameters
+    if effects and start is None:  # the geometry first; the effects start from it
+        say(f"geometric: Levenberg-Marquardt on {len(points)} points, before the effects")
+        geo = fit_model(geometric, _seeded(geometric, initial), poses, points, progress=say)
+        initial = geo.parameters
     model = KinematicModel(robot, tuple(effects))
-    initial_values = dict(zip(initial.names, initial.values))
-    params = model.parameters().with_values(
-        {k: v for k, v in initial_values.items() if k in model.parameters()}
-    )
-    if effects and start is None:
-        geo = calibrate(recording, robot, "geometric", log=log)
-        params = params.with_values(dict(zip(geo.parameters.names, geo.parameters.values)))
+    params = _seeded(model, initial)
     say(f"{model_spec}: Levenberg-Marquardt on {len(points)} points, {int(params.free.sum())} "
         "free parameters before the identifiability check")  # fmt: skip
     fit = fit_model(model, params, poses, points, progress=say,
                     objective=_objective(objective, cpa))  # fmt: skip
     return _from_fit(model_spec, model, fit, points, cpa)
+
+
+def _seeded(model: KinematicModel, values: ParameterVector) -> ParameterVector:
+    """`model`'s parameters (fresh free flags) with the values that `values` also has."""
+    fresh = model.parameters()
+    return fresh.with_values({k: v for k, v in zip(values.names, values.values) if k in fresh})
 
 
 def _objective(name: str, cpa: CPAResult | None) -> Objective:

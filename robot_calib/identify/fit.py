@@ -17,10 +17,10 @@ from scipy.optimize import least_squares
 
 from robot_calib.identify.identifiability import (
     Identifiability,
+    covariance,
     describe,
     fix_poorly_determined,
     fix_unidentifiable,
-    standard_deviations,
 )
 from robot_calib.identify.objectives import AbsoluteObjective, Objective
 from robot_calib.kinematics.frames import Array
@@ -144,7 +144,7 @@ def fit_model(
     fitted = params.unpack(x)
     std = np.zeros(len(fitted))
     if len(x):
-        std[fitted.free] = standard_deviations(jac_free, residual, len(x))
+        std[fitted.free] = np.sqrt(np.diag(covariance(jac_free, residual)))
     return FitResult(
         fitted,
         std,

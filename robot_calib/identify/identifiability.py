@@ -33,15 +33,6 @@ class Identifiability:
     fixed: tuple[tuple[str, str], ...]
 
 
-def scaled_svd(jac: Array) -> tuple[Array, Array, Array]:
-    """Column norms (p,), singular values (p,) and right singular vectors (p, p) of the
-    Jacobian (m, p) with unit-norm columns (zero columns stay zero)."""
-    norms = np.linalg.norm(jac, axis=0)
-    scaled = jac / np.where(norms > 0, norms, 1.0)
-    _, s, vt = np.linalg.svd(scaled, full_matrices=False)
-    return norms, s, vt
-
-
 def fix_unidentifiable(
     params: ParameterVector, jac_full: Array, tolerance: float = RELATIVE_TOLERANCE
 ) -> tuple[ParameterVector, Identifiability]:
@@ -105,18 +96,6 @@ def describe(jac_free: Array, fixed: tuple[tuple[str, str], ...] = ()) -> Identi
     s = np.linalg.svd(jac_free / np.where(norms > 0, norms, 1.0), compute_uv=False)
     observability = float(np.exp(np.mean(np.log(np.maximum(s, 1e-300)))) / np.sqrt(len(jac_free)))
     return Identifiability(float(s[0] / max(s[-1], 1e-300)), observability, len(s), fixed)
-
-
-def standard_deviations(jac_free: Array, residuals: Array, n_params: int) -> Array:
-    """1-sigma standard deviations (p,) of free parameters from the Jacobian (m, p) and the
-    residual vector (m,) at the solution: sigma^2 (J^T J)^-1 with sigma^2 = SSR / (m - p)."""
-    m = len(residuals)
-    dof = max(m - n_params, 1)
-    sigma2 = float(residuals @ residuals) / dof
-    _, s, vt = np.linalg.svd(jac_free, full_matrices=False)
-    keep = s > s[0] * 1e-12
-    cov_diag = ((vt[keep].T / s[keep]) ** 2).sum(axis=1)
-    return np.sqrt(sigma2 * cov_diag)
 
 
 #: A free parameter whose 1-sigma from the data would exceed this (by unit) is not

@@ -6,12 +6,12 @@ Values are SI (m, rad); the summary printed for people is in mm and deg, labelle
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from robot_calib.atomic import write_text_atomic
 from robot_calib.bag.recording import Recording
 from robot_calib.effects import make_effect
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
@@ -100,9 +100,7 @@ def _options(effect: object) -> dict[str, Any]:
 
 def write_json_atomic(doc: dict[str, Any], path: Path) -> None:
     """Write JSON via a temporary file and rename: never a half-written file."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(doc, indent=2) + "\n")
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(doc, indent=2) + "\n")
 
 
 def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict[str, Any]]:
