@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from robot_calib.bag.recording import read_recording
+from robot_calib.bag.read import read_recording
 from robot_calib.cli import main as cli
 from robot_calib.diagnose.diagnosis import diagnose
 from robot_calib.kinematics.description import load_robot

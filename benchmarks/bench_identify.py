@@ -53,13 +53,14 @@ import numpy as np
 import scipy
 
 from robot_calib.accuracy import accuracy
-from robot_calib.bag.recording import Recording, read_recording, recording_from_arrays
+from robot_calib.bag.read import read_recording
 from robot_calib.effects import make_effect
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.cpa import circle_point_analysis
 from robot_calib.identify.fit import fit_model
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.model import KinematicModel, absorb_base_offsets
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points

@@ -46,7 +46,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     bag, calibrate the models of the ladder, score them on the hold-out poses. Every run
     writes a new folder under --output."""
     from robot_calib.accuracy import accuracy
-    from robot_calib.bag.recording import read_recording
+    from robot_calib.bag.read import read_recording
     from robot_calib.identify.calibrate import calibrate
     from robot_calib.identify.params_file import calibration_to_dict, summary, write_json_atomic
 
@@ -200,7 +200,7 @@ def _new_bag_path(raw: str) -> Path:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """Identify a model from bags; write PARAMS.json; print a summary in mm/deg."""
-    from robot_calib.bag.recording import read_recording
+    from robot_calib.bag.read import read_recording
     from robot_calib.identify.calibrate import calibrate, parse_model
     from robot_calib.identify.params_file import calibration_to_dict, summary, write_json_atomic
 
@@ -220,7 +220,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
     """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots."""
-    from robot_calib.bag.recording import read_recording
+    from robot_calib.bag.read import read_recording
     from robot_calib.diagnose.diagnosis import diagnose
     from robot_calib.diagnose.report import write_report
     from robot_calib.identify.params_file import write_json_atomic

@@ -46,3 +46,12 @@ def joint_positions(
     if not np.all(np.isfinite(q)):
         raise InputError(f"{where}: JointState positions not finite: {q.tolist()}")
     return q
+
+
+def velocity_signs(msg: Any, joint_names: tuple[str, ...]) -> Array:
+    """Signs (J,) of a JointState's velocities of `joint_names` (matched by name); zeros
+    (unknown) where the message has no velocity per joint."""
+    if len(msg.velocity) != len(msg.name):
+        return np.zeros(len(joint_names))
+    names = list(msg.name)
+    return np.sign([float(msg.velocity[names.index(n)]) for n in joint_names])

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robot_calib.effects.base import Effect
+from robot_calib.effects.base import Contribution, Effect
 from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, chain, point_derivatives
@@ -85,6 +85,26 @@ def absorb_base_offsets(robot: RobotDescription, params: ParameterVector) -> Par
     updates.update(zip(BASE_ROTATION, (roll, pitch, yaw)))
     updates.update({"theta1": float(robot.theta[0]), "d1": float(robot.d[0])})
     return params.with_values(updates)
+
+
+@dataclass(frozen=True)
+class Chain:
+    """The kinematic chain of a model at n poses, effects applied.
+
+    dh : effective DH/Hayati values, (n, J) each; frames : (n, J + 1, 4, 4) frame j in the
+    robot base (0 = base, J = flange); errors : (n, J, 4, 4) housing error transforms or None;
+    housing : (n, J, 5) housing error motions [m, m, m, rad, rad] or None;
+    contributions : one per effect, in the model's order; rows : the geometric DH/Hayati rows
+    (J,) each, before effects; scale : (n, 1) length scale 1 + strain [1].
+    """
+
+    dh: DHTable
+    frames: Array
+    errors: Array | None
+    housing: Array | None
+    contributions: list[Contribution]
+    rows: dict[str, Array]
+    scale: Array
 
 
 def housing_transforms(housing: Array) -> Array:
@@ -157,12 +177,12 @@ class KinematicModel:
 
     def flange2base(self, params: ParameterVector, poses: Poses) -> Array:
         """Flange (DH frame J) poses in the robot base frame, with effects, shape (n, 4, 4)."""
-        return self._chain(params, poses)[1][:, -1]
+        return self._chain(params, poses).frames[:, -1]
 
     def joint_axes(self, params: ParameterVector, poses: Poses) -> tuple[Array, Array]:
         """Axis lines of every joint at `poses` in the tracker frame: origins (n, J, 3) [m]
         and unit directions (n, J, 3) (z of frame j-1; housing errors included)."""
-        frames = self._chain(params, poses)[1][:, :-1]
+        frames = self._chain(params, poses).frames[:, :-1]
         b2t = self.base2tracker(params)
         origins = frames[..., :3, 3] @ b2t[:3, :3].T + b2t[:3, 3]
         return origins, frames[..., :3, 2] @ b2t[:3, :3].T
@@ -177,8 +197,8 @@ class KinematicModel:
         assert jac is not None
         return points, jac
 
-    def _chain(self, params: ParameterVector, poses: Poses):  # noqa: ANN202 - internal
-        """Effective DH table, frames (n, J+1, 4, 4), housing transforms, contributions."""
+    def _chain(self, params: ParameterVector, poses: Poses) -> Chain:
+        """The chain at `poses` with every effect's contribution applied."""
         n, n_joints = poses.q.shape
         row = self._nominal_rows(params)
         contributions = [e.contribution(self.robot, params, poses) for e in self.effects]
@@ -201,12 +221,15 @@ class KinematicModel:
             row["beta"],
         )
         errors = None if housing is None else housing_transforms(housing)
-        return dh, chain(dh, errors), errors, housing, contributions, row, scale
+        return Chain(dh, chain(dh, errors), errors, housing, contributions, row, scale)
 
     def _evaluate(
         self, params: ParameterVector, poses: Poses, with_jacobian: bool
     ) -> tuple[Array, Array | None]:
-        dh, frames, errors, housing, contributions, row, scale = self._chain(params, poses)
+        ch = self._chain(params, poses)
+        dh, frames, errors, housing, row, scale = (
+            ch.dh, ch.frames, ch.errors, ch.housing, ch.rows, ch.scale
+        )
         target = np.array([params[k] for k in TARGET])
         flange = frames[:, -1]
         p_in_base = flange[:, :3, :3] @ target + flange[:, :3, 3]
@@ -248,7 +271,7 @@ class KinematicModel:
         d_housing = None
         if housing is not None:
             d_housing = _housing_derivatives(frames, housing, p_in_base)
-        for effect, c in zip(self.effects, contributions):
+        for effect, c in zip(self.effects, ch.contributions):
             cols = [params.index(name) for name in effect.parameter_names(self.robot)]
             d_eff = np.zeros((n, 3, len(cols)))
             if c.joint_offset_jac is not None:

@@ -19,7 +19,7 @@ import json
 import sys
 import time
 
-from robot_calib.diagnose.blind import CLASSES, run_case
+from robot_calib.sim.blind import CLASSES, run_case
 
 
 def main() -> int:

@@ -20,8 +20,8 @@ import argparse
 import numpy as np
 
 from robot_calib.accuracy import accuracy
-from robot_calib.bag.recording import recording_from_arrays
 from robot_calib.identify.calibrate import calibrate
+from robot_calib.measurements import recording_from_arrays
 from robot_calib.model import absorb_base_offsets
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points

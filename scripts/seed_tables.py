@@ -40,11 +40,11 @@ from pathlib import Path
 import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
-from robot_calib.bag.recording import recording_from_arrays
 from robot_calib.effects import make_effect
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.measurements import recording_from_arrays
 from robot_calib.model import absorb_base_offsets
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points

@@ -29,7 +29,7 @@ from robot_calib.bag.csv_import import (
     with_overrides,
     write_measurement_bag,
 )
-from robot_calib.bag.recording import read_recording
+from robot_calib.bag.read import read_recording
 from robot_calib.diagnose.diagnosis import diagnose
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.kinematics.description import load_robot

@@ -27,15 +27,17 @@ from std_msgs.msg import Empty, Float64MultiArray, String
 from visualization_msgs.msg import Marker, MarkerArray
 
 from robot_calib.bag import BagReader
-from robot_calib.bag.recording import read_recording, recording_from_stream, velocity_signs
+from robot_calib.bag.read import read_recording
 from robot_calib.errors import InputError
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.measurements import recording_from_stream
 from robot_calib.messages import (
     JOINT_STATES_TOPIC,
     POINT_TOPIC,
     joint_positions,
     ns_to_sec_nanosec,
     stamp_to_ns,
+    velocity_signs,
 )
 from robot_calib.model import KinematicModel, absorb_base_offsets
 from robot_calib.nodes.calibrator import LATCHED, CalibratorNode

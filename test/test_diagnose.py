@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from robot_calib.diagnose.blind import judge, make_case, run_case
 from robot_calib.diagnose.diagnosis import diagnose
+from robot_calib.sim.blind import judge, make_case, run_case
 from robot_calib.sim.world import load_world
 
 ROBOT = load_world().model.robot

@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 
 from robot_calib.accuracy import accuracy, pairwise_errors
-from robot_calib.bag.recording import recording_from_arrays
 from robot_calib.effects import make_effect
 from robot_calib.identify.calibrate import calibrate, parse_model
 from robot_calib.identify.cpa import circle_point_analysis
 from robot_calib.identify.identifiability import fix_unidentifiable
 from robot_calib.identify.params_file import load_params
 from robot_calib.kinematics.frames import rpy_to_matrix
+from robot_calib.measurements import recording_from_arrays
 from robot_calib.model import KinematicModel, absorb_base_offsets
 from robot_calib.poses import Poses
 from robot_calib.predict import read_joints_csv

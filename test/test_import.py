@@ -14,7 +14,7 @@ from rosbags.highlevel import AnyReader
 
 from robot_calib.accuracy import accuracy
 from robot_calib.bag.csv_import import PRESETS, CsvFormat, read_measurement_csv
-from robot_calib.bag.recording import read_recording
+from robot_calib.bag.read import read_recording
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.kinematics.description import load_robot
 

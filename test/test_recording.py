@@ -14,9 +14,10 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
 from robot_calib.bag import BagWriter
-from robot_calib.bag.recording import find_sweeps, read_recording, recording_from_arrays
+from robot_calib.bag.read import read_recording
 from robot_calib.errors import RobotCalibError
 from robot_calib.kinematics.description import load_robot
+from robot_calib.measurements import find_sweeps, recording_from_arrays
 from robot_calib.sim.plans import paper_test_plan, random_plan
 
 ROOT = Path(__file__).resolve().parents[1]

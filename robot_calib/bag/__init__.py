@@ -1,19 +1,33 @@
-"""Bags: MCAP files as `ros2 bag record -s mcap` (Jazzy) writes them; ROS-free.
+"""Bags: MCAP files as `ros2 bag record -s mcap` (Jazzy) writes them; ROS-free file I/O.
 
 `BagWriter` writes raw CDR messages with their receive times; `BagReader` reads them back
-(also from a bag whose recorder was killed). `ros2_formats` holds the rosbag2 formats.
+(also from a bag whose recorder was killed); `read.read_recording` turns bags into the
+measurement model's `Recording`. Nothing is imported until used (PEP 562), so importing
+`robot_calib.bag` costs nothing and the core never pulls in `mcap` by accident.
 """
 
-from robot_calib.bag.mcap_reader import BagMessage, BagReader, TopicInfo
-from robot_calib.bag.mcap_writer import BagWriter
-from robot_calib.bag.ros2_formats import QosProfile, message_definition, type_description_hash
+from __future__ import annotations
 
-__all__ = [
-    "BagMessage",
-    "BagReader",
-    "BagWriter",
-    "QosProfile",
-    "TopicInfo",
-    "message_definition",
-    "type_description_hash",
-]
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "BagMessage": "robot_calib.bag.mcap_reader",
+    "BagReader": "robot_calib.bag.mcap_reader",
+    "TopicInfo": "robot_calib.bag.mcap_reader",
+    "BagWriter": "robot_calib.bag.mcap_writer",
+    "QosProfile": "robot_calib.bag.ros2_formats",
+    "message_definition": "robot_calib.bag.ros2_formats",
+    "type_description_hash": "robot_calib.bag.ros2_formats",
+    "read_recording": "robot_calib.bag.read",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'robot_calib.bag' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)
+
+
+__all__ = sorted(_EXPORTS)

@@ -6,11 +6,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from robot_calib.bag.recording import Recording
 from robot_calib.diagnose.ladder import AT_FLOOR, N_FOLDS, Ladder, run_ladder
 from robot_calib.diagnose.noise import NoiseLevel, refine_with_model
 from robot_calib.diagnose.signatures import where_it_lies
 from robot_calib.kinematics.description import RobotDescription
+from robot_calib.measurements import Recording
 
 FORMAT = "robot_calib.diagnosis/1"
 #: geometric within this factor of the noise floor on held-out data: nothing to diagnose

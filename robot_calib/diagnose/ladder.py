@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
-from robot_calib.bag.recording import Recording
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, make_effect
 from robot_calib.effects.compliance import gravity_torques
@@ -24,6 +23,7 @@ from robot_calib.identify.calibrate import Calibration, calibrate, model_name
 from robot_calib.identify.fit import blocked_jacobian, fit_model
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
+from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
 
 N_FOLDS = 5

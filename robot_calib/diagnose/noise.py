@@ -19,9 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robot_calib.bag.recording import Recording
 from robot_calib.identify.circles import fit_circle
 from robot_calib.kinematics.frames import Array
+from robot_calib.measurements import Recording
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE
 
 MIN_REPEATS = 3

@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.bag.recording import Recording
 from robot_calib.diagnose.ladder import Ladder
 from robot_calib.diagnose.signatures import arc_angle_errors
+from robot_calib.measurements import Recording
 
 
 def _plots(

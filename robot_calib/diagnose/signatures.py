@@ -14,12 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.bag.recording import Recording
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.effects.eccentricity import fourier_basis
 from robot_calib.identify.fit import blocked_jacobian
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
 
 HARMONICS = 4

@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
-from robot_calib.bag.recording import Recording
 from robot_calib.effects import VOCABULARY, Effect, make_effect
 from robot_calib.errors import InputError
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
@@ -29,6 +28,7 @@ from robot_calib.identify.registration import fit_frames
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
 
 BASE_MODELS = ("nominal", "cpa", "geometric")

@@ -24,13 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robot_calib.bag.recording import Recording
 from robot_calib.errors import InputError
 from robot_calib.identify.circles import Circle, fit_circle
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, link_transforms
 from robot_calib.kinematics.frames import Array, matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.measurements import Recording
 from robot_calib.model import geometric_parameters
 
 REF_CONSISTENCY_RAD = 1e-3  # sweeps whose held joints differ by more break the CPA premise

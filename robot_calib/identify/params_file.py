@@ -12,12 +12,12 @@ from typing import Any
 import numpy as np
 
 from robot_calib.atomic import write_text_atomic
-from robot_calib.bag.recording import Recording
 from robot_calib.effects import make_effect
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
 from robot_calib.identify.calibrate import Calibration
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
 
 FORMAT = "robot_calib.params/1"

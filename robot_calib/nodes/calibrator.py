@@ -38,25 +38,21 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Empty, Float64MultiArray, MultiArrayDimension, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from robot_calib.bag.recording import (
-    PAIR_TOLERANCE_S,
-    Recording,
-    read_recording,
-    recording_from_stream,
-    velocity_signs,
-)
+from robot_calib.bag.read import read_recording
 from robot_calib.diagnose.diagnosis import diagnose, diagnosis_summary
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify.calibrate import Calibration, calibrate, parse_model
 from robot_calib.identify.params_file import calibration_to_dict, summary, write_json_atomic
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.frames import Array
+from robot_calib.measurements import PAIR_TOLERANCE_S, Recording, recording_from_stream
 from robot_calib.messages import (
     JOINT_STATES_TOPIC,
     POINT_TOPIC,
     TRACKER_FRAME,
     joint_positions,
     stamp_to_ns,
+    velocity_signs,
 )
 from robot_calib.nodes._common import declare, overrides, run_node
 

@@ -11,9 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.bag.recording import Recording, recording_from_arrays
 from robot_calib.diagnose.diagnosis import diagnose
 from robot_calib.effects import make_effect
+from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points
 from robot_calib.sim.plans import Plan, paper_test_plan, plan_times, random_plan

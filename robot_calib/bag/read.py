@@ -1,0 +1,110 @@
+"""Bags -> a `Recording`: read the contract's two topics of each bag and hand their stamps
+and values to the measurement model (`robot_calib.measurements`), which pairs them.
+
+Bad input raises `BagError` naming the file and the problem (one line, exit status 2).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from robot_calib.bag.mcap_reader import BagReader
+from robot_calib.errors import BagError, InputError
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.measurements.recording import (
+    PAIR_TOLERANCE_S,
+    Recording,
+    recording_from_stream,
+)
+from robot_calib.messages import (
+    JOINT_STATE_TYPE,
+    JOINT_STATES_TOPIC,
+    POINT_TOPIC,
+    POINT_TYPE,
+    TRACKER_FRAME,
+    joint_positions,
+    stamp_to_ns,
+    velocity_signs,
+)
+
+
+def _check_topic(reader: BagReader, topic: str, type_name: str) -> None:
+    info = reader.topics.get(topic)
+    if info is None:
+        raise BagError(f"{reader.path}: no topic {topic} (has {', '.join(reader.topics)})")
+    if info.type_name != type_name:
+        raise BagError(f"{reader.path}: topic {topic} has type {info.type_name}, not {type_name}")
+    if info.message_count == 0:
+        raise BagError(f"{reader.path}: topic {topic} has no messages")
+
+
+def read_bag(
+    path: Path, robot: RobotDescription, pair_tolerance: float = PAIR_TOLERANCE_S
+) -> Recording:
+    """The paired measurements of one bag (its own time origin and direction history)."""
+    if not path.is_file():
+        raise BagError(f"{path}: no such bag file")
+    warnings: list[str] = []
+    js_t, js_q, js_v, pt_t, pts = [], [], [], [], []
+    frames: set[str] = set()
+    with BagReader(path) as reader:
+        _check_topic(reader, JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
+        _check_topic(reader, POINT_TOPIC, POINT_TYPE)
+        for m in reader.messages([JOINT_STATES_TOPIC, POINT_TOPIC]):
+            msg = m.decode()
+            if m.topic == JOINT_STATES_TOPIC:
+                js_q.append(
+                    joint_positions(msg, robot.joint_names, f"{path}: {JOINT_STATES_TOPIC}")
+                )
+                js_t.append(stamp_to_ns(msg.header.stamp))
+                js_v.append(velocity_signs(msg, robot.joint_names))
+            else:
+                p = np.array([msg.point.x, msg.point.y, msg.point.z])
+                if not np.all(np.isfinite(p)):
+                    raise BagError(
+                        f"{path}: {POINT_TOPIC} message {len(pts) + 1} is not finite: {p}"
+                    )
+                frames.add(msg.header.frame_id)
+                pt_t.append(stamp_to_ns(msg.header.stamp))
+                pts.append(p)
+    if frames != {TRACKER_FRAME}:
+        warnings.append(
+            f"warning: {path}: {POINT_TOPIC} frame_id {sorted(frames)} is not "
+            f"'{TRACKER_FRAME}' (used as the tracker frame anyway)"
+        )
+    n_joints = robot.n_joints
+    rec = recording_from_stream(
+        np.array(js_t, dtype=np.int64),
+        np.array(js_q).reshape(-1, n_joints),
+        np.array(js_v).reshape(-1, n_joints),
+        np.array(pt_t, dtype=np.int64),
+        np.array(pts).reshape(-1, 3),
+        pair_tolerance,
+        source=str(path),
+        error=BagError,
+    )
+    return Recording(
+        rec.sources, rec.poses, rec.points, rec.sweeps, rec.bag_index, rec.n_unpaired,
+        tuple(warnings) + rec.warnings,
+    )  # fmt: skip
+
+
+def read_recording(
+    paths: Sequence[str | Path],
+    robot: RobotDescription,
+    pair_tolerance: float = PAIR_TOLERANCE_S,
+    log: Callable[[str], None] | None = None,
+) -> Recording:
+    """Read and pair the measurements of one or more bags (each bag its own time origin and
+    direction history). Raises BagError on unusable input; warnings go to `log` and into the
+    result."""
+    if not paths:
+        raise InputError("no bag given")
+    recording = Recording.concatenate([read_bag(Path(p), robot, pair_tolerance) for p in paths])
+    for w in recording.warnings:
+        if log:
+            log(w)
+    return recording

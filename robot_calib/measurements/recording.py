@@ -1,0 +1,199 @@
+"""A recording as the identifier sees it: paired measurements (CONTRACT.md section 1).
+
+Each tracker point is paired with the joint state nearest in stamp (within
+`PAIR_TOLERANCE_S`); approach directions and time since the first measurement follow;
+circle sweeps are found. Unpaired points are counted and reported, never dropped silently.
+This is the measurement model only: where the stamps and values come from (a bag, live
+topics, arrays in memory) is the caller's business (`robot_calib.bag.read`, the nodes).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robot_calib.errors import InputError
+from robot_calib.kinematics.frames import Array
+from robot_calib.measurements.sweeps import Sweep, usable_sweeps
+from robot_calib.poses import Poses, approach_directions
+
+PAIR_TOLERANCE_S = 0.05  # contract default: the one place this number is written
+MAX_PLAUSIBLE_RANGE_M = 50.0  # a laser tracker's range; larger coordinates look like mm
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Paired measurements of one or more sources, in visiting order.
+
+    poses : readings q (n, J) [rad], approach directions, time since the first measurement
+      of each source [s]; points : (n, 3) measured target centres, tracker frame [m];
+    sweeps : circle sweeps found; bag_index : (n,) which source each pose came from;
+    n_unpaired : points without a joint state in tolerance (dropped, reported);
+    warnings : labelled problems that did not stop the reading.
+    """
+
+    sources: tuple[str, ...]
+    poses: Poses
+    points: Array
+    sweeps: tuple[Sweep, ...]
+    bag_index: Array
+    n_unpaired: int = 0
+    warnings: tuple[str, ...] = field(default=())
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+    @property
+    def general(self) -> Array:
+        """Boolean mask (n,): poses that belong to no sweep."""
+        mask = np.ones(len(self), dtype=bool)
+        for s in self.sweeps:
+            mask[s.index] = False
+        return mask
+
+    def sweeps_of(self, joint: int) -> list[Sweep]:
+        return [s for s in self.sweeps if s.joint == joint]
+
+    def summary(self) -> str:
+        """One human line: sources, poses, sweeps per joint, unpaired."""
+        per_joint = ", ".join(
+            f"J{j}:{sum(s.n_poses for s in self.sweeps_of(j))}"
+            for j in sorted({s.joint for s in self.sweeps})
+        )
+        return (
+            f"{', '.join(self.sources)}: {len(self)} measurements "
+            f"({len(self.sweeps)} sweeps [{per_joint or 'none'}], "
+            f"{int(self.general.sum())} general poses), {self.n_unpaired} unpaired"
+        )
+
+    @classmethod
+    def concatenate(cls, parts: Sequence[Recording]) -> Recording:
+        """One recording of several sources in the given order (each keeps its own time
+        origin and direction history; sweeps never cross a source boundary)."""
+        if not parts:
+            raise InputError("no recording given")
+        sweeps: list[Sweep] = []
+        offset = 0
+        for part in parts:
+            sweeps += [s.shifted(offset) for s in part.sweeps]
+            offset += len(part)
+        return cls(
+            tuple(s for p in parts for s in p.sources),
+            Poses(
+                np.concatenate([p.poses.q for p in parts]),
+                np.concatenate([p.poses.direction for p in parts]),
+                np.concatenate([p.poses.time for p in parts]),
+            ),
+            np.concatenate([p.points for p in parts]),
+            tuple(sweeps),
+            np.concatenate([np.full(len(p), b) for b, p in enumerate(parts)]),
+            sum(p.n_unpaired for p in parts),
+            tuple(w for p in parts for w in p.warnings),
+        )
+
+
+def check_metres(points: Array, where: str, error: type[Exception] = InputError) -> None:
+    """Raise `error` when points (n, 3) look like millimetres rather than metres."""
+    if len(points) and np.median(np.linalg.norm(points, axis=1)) > MAX_PLAUSIBLE_RANGE_M:
+        raise error(
+            f"{where}: tracker points are {np.median(np.abs(points)):.0f} units from the "
+            "tracker: they look like millimetres; the contract wants metres"
+        )
+
+
+def pair_nearest(reference_ns: Array, query_ns: Array, tolerance_ns: int) -> Array:
+    """Index into sorted `reference_ns` of the stamp nearest each of `query_ns`, -1 where
+    none lies within `tolerance_ns`; shape of `query_ns`."""
+    right = np.clip(np.searchsorted(reference_ns, query_ns), 1, len(reference_ns) - 1)
+    left = right - 1
+    if len(reference_ns) == 1:
+        left = right = np.zeros_like(query_ns)
+    pick = np.where(
+        np.abs(reference_ns[left] - query_ns) <= np.abs(reference_ns[right] - query_ns),
+        left,
+        right,
+    )
+    return np.where(np.abs(reference_ns[pick] - query_ns) <= tolerance_ns, pick, -1)
+
+
+def recording_from_arrays(
+    q: Array, points: Array, time: Array | None = None, source: str = "arrays"
+) -> Recording:
+    """A recording of measurements already paired in memory (one source, visiting order):
+    q (n, J) [rad], points (n, 3) [m], time (n,) [s]."""
+    poses = Poses.from_readings(q, time=time)
+    warnings: list[str] = []
+    sweeps = usable_sweeps(poses.q, source, warnings)
+    return Recording(
+        (source,),
+        poses,
+        np.asarray(points, dtype=float),
+        tuple(sweeps),
+        np.zeros(len(poses), dtype=int),
+        0,
+        tuple(warnings),
+    )
+
+
+def recording_from_stream(
+    js_ns: Array,
+    q: Array,
+    velocity_sign: Array,
+    point_ns: Array,
+    points: Array,
+    pair_tolerance: float = PAIR_TOLERANCE_S,
+    source: str = "live",
+    error: type[Exception] = InputError,
+) -> Recording:
+    """A recording of one source from its stamped messages (a bag's or live), paired by
+    the contract's rule.
+
+    js_ns (m,) joint-state stamps [ns], q (m, J) readings [rad], velocity_sign (m, J) (+1/-1,
+    0 = no velocity); point_ns (n,) point stamps [ns], points (n, 3) tracker frame [m]; each
+    in any order (sorted here by stamp, stable). Raises `error` (naming `source`) when the
+    points look like millimetres or none pairs.
+    """
+    js_ns, point_ns = np.asarray(js_ns, dtype=np.int64), np.asarray(point_ns, dtype=np.int64)
+    q, velocity_sign = np.asarray(q, dtype=float), np.asarray(velocity_sign, dtype=float)
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    if len(point_ns) != len(points) or len(js_ns) != len(q) or q.shape != velocity_sign.shape:
+        raise InputError(
+            f"{source}: stamps and values differ in length (joint states {len(js_ns)} vs "
+            f"{q.shape}, points {len(point_ns)} vs {points.shape})"
+        )
+    check_metres(points, source, error)
+    js_order = np.argsort(js_ns, kind="stable")
+    pt_order = np.argsort(point_ns, kind="stable")
+    js_ns, q, velocity_sign = js_ns[js_order], q[js_order], velocity_sign[js_order]
+    point_ns, points = point_ns[pt_order], points[pt_order]
+    warnings: list[str] = []
+    if len(js_ns) == 0:
+        pick = np.full(len(point_ns), -1)
+    else:
+        pick = pair_nearest(js_ns, point_ns, int(round(pair_tolerance * 1e9)))
+    ok = pick >= 0
+    if not ok.all():
+        warnings.append(
+            f"warning: {source}: {int((~ok).sum())} of {len(ok)} points have no joint "
+            f"state within {pair_tolerance} s: dropped"
+        )
+    if not ok.any():
+        raise error(
+            f"{source}: none of {len(point_ns)} tracker points has a joint state within "
+            f"{pair_tolerance} s ({len(js_ns)} joint states)"
+        )
+    q, velocity = q[pick[ok]], velocity_sign[pick[ok]]
+    direction = np.where(velocity != 0, velocity, approach_directions(q))
+    time = (point_ns[ok] - point_ns[ok][0]) * 1e-9
+    sweeps = usable_sweeps(q, source, warnings)
+    return Recording(
+        (source,),
+        Poses(q, direction, time),
+        points[ok],
+        tuple(sweeps),
+        np.zeros(len(q), dtype=int),
+        int((~ok).sum()),
+        tuple(warnings),
+    )
