@@ -22,6 +22,9 @@ from pathlib import Path
 from robot_calib.bag.read import read_recording
 from robot_calib.cli import main as cli
 from robot_calib.diagnose.diagnosis import diagnose
+from robot_calib.effects.backlash import Backlash
+from robot_calib.effects.eccentricity import Eccentricity
+from robot_calib.effects.thermal_drift import ThermalDrift
 from robot_calib.kinematics.description import load_robot
 
 TARGET_S = 10.0
@@ -31,8 +34,12 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument(
-        "--effects", nargs="*", default=["none", "backlash:4", "eccentricity:5", "thermal_drift"]
-    )
+        "--effects",
+        nargs="*",
+        default=["none", Backlash(joints=(4,)).spec, Eccentricity(joints=(5,)).spec,
+                 ThermalDrift().spec],
+        help="worlds: 'none' or an effect of `simulate --effects`",
+    )  # fmt: skip
     args = parser.parse_args()
     robot = load_robot("kr5_sixx_r650")
     print(f"{'world':<16}{'read [s]':>10}{'diagnose [s]':>14}{'total [s]':>11}  verdict")

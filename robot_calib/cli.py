@@ -11,12 +11,15 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.kinematics.description import RobotDescription, load_robot
+
+if TYPE_CHECKING:
+    from robot_calib.effects import Effect
 
 DEFAULT_ROBOT = "kr5_sixx_r650"
 
@@ -57,7 +60,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     bag, holdout = out / "calibration.mcap", out / "holdout.mcap"
     steps = 5
     print(f"[1/{steps}] simulate + record: {args.plan} in the default world -> {bag}")
-    base = dict(world=None, effects=args.effects, n_random=args.holdout, robot=args.robot)
+    from robot_calib.effects import MAIN_JOB_EFFECTS
+
+    effects = MAIN_JOB_EFFECTS if args.effects is None else args.effects
+    base = dict(world=None, effects=effects, n_random=args.holdout, robot=args.robot)
     cmd_simulate(argparse.Namespace(output=str(bag), seed=args.seed, plan=args.plan, **base))
     print(f"[2/{steps}] simulate + record: {args.holdout} random hold-out poses -> {holdout}")
     base["world"] = str(bag.with_suffix(".world.yaml"))
@@ -100,33 +106,28 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def parse_effect(spec: str) -> tuple[str, list[int], float | None]:
-    """'backlash:4', 'eccentricity:1,2', 'thermal_drift', 'compliance:2=2e-5' (SI value)."""
+def parse_sim_effect(text: str, n_joints: int) -> tuple[Effect, float | None]:
+    """An effect of `simulate --effects`: its text form (`parse_effect`, e.g. 'backlash:4',
+    'eccentricity:1,2', 'thermal_drift') with an optional '=VALUE' [SI] for all its terms,
+    e.g. 'compliance:2=2e-5'."""
+    from robot_calib.effects import effect_class, option_types, parse_effect
+
     value = None
-    if "=" in spec:
-        spec, raw = spec.split("=", 1)
+    options = option_types(effect_class(text.split(":")[0].split("=")[0]))
+    spec, sep, raw = text.rpartition("=")
+    if sep and spec.split(":")[-1] not in options:  # '=VALUE', not an option's 'key=value'
         try:
             value = float(raw)
         except ValueError:
-            raise InputError(f"--effects {spec}={raw}: value must be a number (SI)") from None
-    name, _, joints = spec.partition(":")
-    try:
-        return name, [int(j) for j in joints.split(",") if j], value
-    except ValueError:
-        raise InputError(f"--effects {spec}: joints must be numbers, e.g. backlash:4") from None
+            raise InputError(f"--effects {text}: value must be a number (SI)") from None
+        text = spec
+    return parse_effect(text, n_joints), value
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     """Simulate a plan in a world and record the bag (+ the world's truth beside it)."""
-    from robot_calib.effects import make_effect
     from robot_calib.sim.plans import PLAN_NAMES
-    from robot_calib.sim.world import (
-        build_world,
-        default_effect_values,
-        load_world,
-        save_world,
-        with_effect,
-    )
+    from robot_calib.sim.world import build_world, load_world, save_world, with_effect
 
     if args.plan not in PLAN_NAMES:
         raise InputError(f"--plan {args.plan}: unknown plan (known: {', '.join(PLAN_NAMES)})")
@@ -139,9 +140,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if args.seed is not None:
         world = replace(world, seed=args.seed)
     for spec in args.effects or []:
-        name, joints, value = parse_effect(spec)
-        effect = make_effect(name, joints)
-        values = default_effect_values(effect, world.model.robot.name)
+        effect, value = parse_sim_effect(spec, world.model.robot.n_joints)
+        values = effect.default_values(world.model.robot)
         if value is not None:
             values = {k: value for k in values}
         world = with_effect(world, effect, values)
@@ -427,8 +427,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--effects",
         nargs="*",
-        default=["backlash:4"],
-        help="effects of the simulated robot (default backlash:4)",
+        help="effects of the simulated robot, as for simulate (default: joint-4 backlash)",
     )
     run.add_argument("--seed", type=int, default=0, help="random seed")
     run.add_argument("--holdout", type=int, default=200, help="random hold-out poses (200)")

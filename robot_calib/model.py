@@ -228,7 +228,12 @@ class KinematicModel:
     ) -> tuple[Array, Array | None]:
         ch = self._chain(params, poses)
         dh, frames, errors, housing, row, scale = (
-            ch.dh, ch.frames, ch.errors, ch.housing, ch.rows, ch.scale
+            ch.dh,
+            ch.frames,
+            ch.errors,
+            ch.housing,
+            ch.rows,
+            ch.scale,
         )
         target = np.array([params[k] for k in TARGET])
         flange = frames[:, -1]

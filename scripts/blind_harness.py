@@ -19,13 +19,13 @@ import json
 import sys
 import time
 
-from robot_calib.sim.blind import CLASSES, run_case
+from robot_calib.sim.blind import classes, run_case
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--cases", type=int, default=20, help="cases per class (20)")
-    parser.add_argument("--classes", nargs="*", default=list(CLASSES), choices=CLASSES)
+    parser.add_argument("--classes", nargs="*", default=list(classes()), choices=classes())
     parser.add_argument("--json", help="write every case's verdict to this file")
     args = parser.parse_args()
     results = []

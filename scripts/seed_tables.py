@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
-from robot_calib.effects import make_effect
+from robot_calib.effects import seed_effects
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
@@ -125,9 +125,9 @@ class WorldResult:
 def seed_like(world: World) -> World:
     """`world` plus the seed's unmodelled effects: eccentricity (Tables 5-6, order 1) on
     every joint and the default 2 mrad backlash on joint 4."""
-    joints = list(range(1, world.model.robot.n_joints + 1))
-    world = with_effect(world, make_effect("eccentricity", joints, order=1))
-    return with_effect(world, make_effect("backlash", [4]))
+    for effect in seed_effects(world.model.robot.n_joints):
+        world = with_effect(world, effect)
+    return world
 
 
 def measure(world: World, plan: Plan, rng: np.random.Generator) -> Measurement:

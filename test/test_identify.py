@@ -54,7 +54,7 @@ def test_cpa_on_exact_points_gives_the_true_geometry() -> None:
         assert cpa.parameters[name] == pytest.approx(truth[name], abs=1e-9), name
     assert all(s.circle.rms < 1e-9 for s in cpa.sweeps)
     # The axis lines are the world's joint axes at the reference pose.
-    frames = KinematicModel(ROBOT)._chain(WORLD.truth, Poses.from_readings(cpa.q_ref[None]))[1]
+    frames = KinematicModel(ROBOT)._chain(WORLD.truth, Poses.from_readings(cpa.q_ref[None])).frames
     b2t = KinematicModel.base2tracker(WORLD.truth)
     for j, axis in enumerate(cpa.axes):
         z = b2t[:3, :3] @ frames[0, j, :3, 2]

@@ -17,8 +17,7 @@ import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
-from robot_calib.effects import Effect, make_effect
-from robot_calib.effects.compliance import gravity_torques
+from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.identify.calibrate import Calibration, calibrate, model_name
 from robot_calib.identify.fit import blocked_jacobian, fit_model
 from robot_calib.kinematics.description import RobotDescription
@@ -30,7 +29,6 @@ N_FOLDS = 5
 MAX_RUNGS = 4
 MIN_GAIN = 0.05  # a candidate must cut the held-out rms by 5 % ...
 AT_FLOOR = 1.2  # ... and the ladder stops once held-out rms <= 1.2 x the noise floor
-ECC_ORDERS = (1, 2, 3)
 TRY_TOP = 3  # candidates refitted per round when the best one's refit disappoints
 Log = Callable[[str], None]
 
@@ -59,22 +57,13 @@ class Ladder:
 
 def candidates(robot: RobotDescription, recording: Recording,
                present: tuple[Effect, ...]) -> list[Effect]:  # fmt: skip
-    """Every effect x joint (x eccentricity order) of the vocabulary not yet in the model
-    and able to move a measured point (e.g. no compliance where gravity has no torque)."""
-    taken = {(e.name, e.joints, getattr(e, "order", 0)) for e in present}
-    tau = gravity_torques(robot, recording.poses.q)
-    out: list[Effect] = []
-    for j in range(1, robot.n_joints + 1):
-        out.append(make_effect("backlash", [j]))
-        out.append(make_effect("encoder_scale", [j]))
-        if np.ptp(tau[:, j - 1]) > 1e-3:
-            out.append(make_effect("compliance", [j]))
-        have = max((getattr(e, "order", 0) for e in present
-                    if e.name == "eccentricity" and e.joints == (j,)), default=0)  # fmt: skip
-        out += [make_effect("eccentricity", [j], order=k) for k in ECC_ORDERS if k > have]
-    if np.ptp(recording.poses.time) > 0:
-        out.append(make_effect("thermal_drift"))
-    return [e for e in out if (e.name, e.joints, getattr(e, "order", 0)) not in taken]
+    """Every effect x joint (x option, e.g. eccentricity order) of the vocabulary able to
+    move a measured point (`Effect.ladder_candidates`) that adds parameters to the model
+    (not already present, nor covered by a present effect, e.g. a lower order)."""
+    return [
+        e for e in ladder_candidates(robot, recording.poses)
+        if not any(p.covers(e, robot) for p in present)
+    ]  # fmt: skip
 
 
 def folds(n: int, k: int = N_FOLDS, seed: int = 0) -> Array:
@@ -82,23 +71,25 @@ def folds(n: int, k: int = N_FOLDS, seed: int = 0) -> Array:
     return np.random.default_rng(seed).permutation(n) % k
 
 
-def _replace(present: tuple[Effect, ...], new: Effect) -> tuple[Effect, ...]:
-    """`present` plus `new`; a higher eccentricity order of a joint replaces the lower."""
-    kept = tuple(
-        e for e in present if not (e.name == new.name == "eccentricity" and e.joints == new.joints)
-    )
-    return kept + (new,)
+def _replace(present: tuple[Effect, ...], new: Effect,
+             robot: RobotDescription) -> tuple[Effect, ...]:  # fmt: skip
+    """`present` plus `new`, which replaces what it covers (e.g. a lower order)."""
+    return tuple(e for e in present if not new.covers(e, robot)) + (new,)
 
 
 def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
             holdout: Recording | None) -> list[tuple[Effect, float]]:  # fmt: skip
     """Linearised held-out rms [m] of the current model and of each candidate added."""
-    widest: dict[tuple[str, tuple[int, ...]], Effect] = {}
-    for e in cal.model.effects + tuple(pool):  # one effect per (name, joints), highest order
-        key = (e.name, e.joints)
-        if key not in widest or getattr(e, "order", 0) > getattr(widest[key], "order", 0):
-            widest[key] = e
-    superset = KinematicModel(cal.model.robot, tuple(widest.values()))
+    robot = cal.model.robot
+    every = cal.model.effects + tuple(pool)
+    widest: list[Effect] = []  # every effect that no other covers (e.g. the highest order)
+    for e in every:
+        covered = [k for k, w in enumerate(widest) if e.covers(w, robot)]
+        if covered:
+            widest[covered[0]] = e  # in place: the parameter order stays that of `every`
+        elif not any(w.covers(e, robot) for w in widest):
+            widest.append(e)
+    superset = KinematicModel(robot, tuple(widest))
     params = superset.parameters().with_values(
         dict(zip(cal.parameters.names, cal.parameters.values))
     )
@@ -202,12 +193,14 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
         scores = _screen(current.calibration, pool, recording, holdout)
         base = scores[0][1]
         ranked = sorted(scores[1:], key=lambda s: s[1])
-        rounds.append([(model_name(_replace(current.effects, e)), s) for e, s in ranked[:8]])
+        rounds.append(
+            [(model_name(_replace(current.effects, e, robot)), s) for e, s in ranked[:8]]
+        )
         accepted: Rung | None = None
         for effect, lin_score in ranked[:TRY_TOP]:  # refits confirm the screening; best wins
             if lin_score > (1.0 - MIN_GAIN) * base:
                 break
-            effects = _replace(current.effects, effect)
+            effects = _replace(current.effects, effect, robot)
             name = model_name(effects)
             cal = calibrate(recording, robot, name, log=None, start=current.calibration)
             acc, res, score = score_rung(cal, recording, holdout)

@@ -1,11 +1,18 @@
-"""Effects: additions to the kinematic model, one module per contract name.
+"""Effects: additions to the kinematic model, one module per contract name, and their registry.
 
-`make_effect(name, joints, **options)` builds one from its contract name.
+Everything outside this package reaches effects through the registry, never by name:
+`make_effect(name, joints, **options)` builds one, `parse_effect('backlash:4')` reads the
+text form and `effect_from_dict` the file form; `vocabulary()` lists the contract's effects
+in registry order (the order the ladder and the blind harness use). A new effect is one new
+module whose class is passed to `register_effect`.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import fields
+from typing import Any, get_type_hints
 
 from robot_calib.effects.backlash import Backlash
 from robot_calib.effects.base import Contribution, Effect
@@ -15,28 +22,141 @@ from robot_calib.effects.encoder_scale import EncoderScale
 from robot_calib.effects.ripple import JointRipple
 from robot_calib.effects.thermal_drift import ThermalDrift
 from robot_calib.errors import InputError
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.poses import Poses
 
-EFFECTS: dict[str, type[Effect]] = {
-    cls.name: cls
-    for cls in (Eccentricity, Backlash, Compliance, EncoderScale, ThermalDrift, JointRipple)
-}
-VOCABULARY = tuple(name for name, cls in EFFECTS.items() if cls.in_vocabulary)
+#: name -> class, in the order the ladder enumerates candidates and the harness its classes
+EFFECTS: dict[str, type[Effect]] = {}
+
+
+def register_effect(cls: type[Effect]) -> type[Effect]:
+    """Add an effect class to the registry under `cls.name` (usable as a decorator)."""
+    if cls.name in EFFECTS and EFFECTS[cls.name] is not cls:
+        raise ValueError(f"effect name {cls.name!r} already registered")
+    EFFECTS[cls.name] = cls
+    return cls
+
+
+@contextmanager
+def registered(cls: type[Effect]) -> Iterator[type[Effect]]:
+    """The registry with `cls` added for the duration of a `with` block (tests, plug-ins
+    tried out): everything that loops over the registry sees it, then it is gone."""
+    register_effect(cls)
+    try:
+        yield cls
+    finally:
+        EFFECTS.pop(cls.name, None)
+
+
+for _cls in (Backlash, EncoderScale, Compliance, ThermalDrift, Eccentricity, JointRipple):
+    register_effect(_cls)
+
+
+def vocabulary() -> tuple[str, ...]:
+    """Names of the contract's effects (section 3) the identifier and the ladder may use."""
+    return tuple(name for name, cls in EFFECTS.items() if cls.in_vocabulary)
+
+
+def effect_class(name: str) -> type[Effect]:
+    """The registered class called `name`; InputError listing the known names otherwise."""
+    if name not in EFFECTS:
+        raise InputError(f"unknown effect {name!r} (known: {', '.join(EFFECTS)})")
+    return EFFECTS[name]
+
+
+def option_types(cls: type[Effect]) -> dict[str, type]:
+    """The options of an effect class (dataclass fields besides `joints`) and their types."""
+    hints = get_type_hints(cls)
+    return {f.name: hints[f.name] for f in fields(cls) if f.name != "joints"}
 
 
 def make_effect(name: str, joints: tuple[int, ...] | list[int] = (), **options: Any) -> Effect:
     """The effect called `name` (contract vocabulary or simulator-only) on `joints` (1-based)."""
-    if name not in EFFECTS:
-        raise InputError(f"unknown effect {name!r} (known: {', '.join(EFFECTS)})")
-    joints = tuple(int(j) for j in joints)
-    order = options.get("order", 1)
-    if not isinstance(order, int) or order < 1:
-        raise InputError(f"effect {name!r}: order must be an integer >= 1, got {order!r}")
-    if name == "thermal_drift" and joints:
-        raise InputError("thermal_drift belongs to no joint: give joints: []")
+    cls = effect_class(name)
+    unknown = sorted(set(options) - set(option_types(cls)))
+    if unknown:
+        raise InputError(
+            f"effect {name!r}: unknown option(s) {unknown} (has: {list(option_types(cls))})"
+        )
     try:
-        return EFFECTS[name](joints=joints, **options)  # type: ignore[call-arg]
-    except TypeError as exc:
-        raise InputError(f"effect {name!r}: bad options {options} ({exc})") from None
+        return cls(joints=tuple(int(j) for j in joints), **options)  # type: ignore[call-arg]
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"effect {name!r}: bad joints/options {options} ({exc})") from None
 
 
-__all__ = ["EFFECTS", "VOCABULARY", "Contribution", "Effect", "make_effect"]
+def parse_effect(text: str, n_joints: int, **defaults: Any) -> Effect:
+    """An effect from its text form `name[:J,J,..][:option=value]` (`Effect.spec`), e.g.
+    'backlash:4', 'eccentricity:6:order=3', 'thermal_drift'. Without joints a per-joint
+    effect is on every joint 1..n_joints; `defaults` give options not in the text (only
+    those the effect has, e.g. order=2 applies to eccentricity, not to backlash)."""
+    name, *parts = text.split(":")
+    cls = effect_class(name)
+    types = option_types(cls)
+    options = {k: v for k, v in defaults.items() if k in types}
+    joints: list[int] = []
+    try:
+        for part in parts:
+            if "=" in part:
+                key, raw = part.split("=", 1)
+                if key not in types:
+                    raise InputError(
+                        f"{text}: effect {name!r} has no option {key!r} (has: {list(types)})"
+                    )
+                options[key] = types[key](raw)
+            else:
+                joints += [int(j) for j in part.split(",") if j]
+    except ValueError:
+        raise InputError(
+            f"{text}: expected EFFECT[:J,J][:option=value], e.g. backlash:4"
+        ) from None
+    if not joints and cls.per_joint:
+        joints = list(range(1, n_joints + 1))
+    return make_effect(name, joints, **options)
+
+
+def effect_from_dict(record: Mapping[str, Any]) -> Effect:
+    """An effect from its PARAMS.json / world-file record (`Effect.to_dict`)."""
+    record = dict(record)
+    if "name" not in record:
+        raise InputError(f"effect record without a name: {record}")
+    name, joints = record.pop("name"), record.pop("joints", [])
+    return make_effect(name, joints or (), **record)
+
+
+def seed_effects(n_joints: int) -> tuple[Effect, ...]:
+    """The seed paper's unmodelled effects of the real KR5: runout (Tables 5-6, order 1) on
+    every joint and joint-4 backlash (the seed reports about 250 um of play)."""
+    return (Eccentricity(joints=tuple(range(1, n_joints + 1)), order=1), Backlash(joints=(4,)))
+
+
+#: The effects of the main job's simulated robot (`robot-calib run`): joint-4 backlash.
+MAIN_JOB_EFFECTS = (Backlash(joints=(4,)).spec,)
+
+
+def ladder_candidates(robot: RobotDescription, poses: Poses) -> list[Effect]:
+    """Every candidate of every vocabulary effect for these poses, joint by joint (in
+    registry order within a joint), effects of no joint last."""
+    out: list[Effect] = []
+    for name in vocabulary():
+        out += EFFECTS[name].ladder_candidates(robot, poses)
+    order = {name: k for k, name in enumerate(EFFECTS)}
+    return sorted(
+        out, key=lambda e: (min(e.joints) if e.joints else robot.n_joints + 1, order[e.name])
+    )
+
+
+__all__ = [
+    "EFFECTS",
+    "Contribution",
+    "Effect",
+    "effect_class",
+    "effect_from_dict",
+    "MAIN_JOB_EFFECTS",
+    "ladder_candidates",
+    "make_effect",
+    "parse_effect",
+    "register_effect",
+    "registered",
+    "seed_effects",
+    "vocabulary",
+]

@@ -8,6 +8,13 @@ with respect to the effect's own parameters (so the identifier gets analytic Jac
 - housing (n, J, 5): the error motions dx, dy, dz [m], ex, ey [rad] of each joint in its
   fixed housing frame, applied before the joint's rotation (eccentricity, seed eq. 10).
 
+Everything specific to an effect lives on its class, so that adding an effect is one new
+module registered in `robot_calib.effects`: its parameter names, its options (dataclass
+fields besides `joints`, e.g. a Fourier `order`), its text form `name[:J,J][:option=value]`
+(`spec`, parsed by `robot_calib.effects.parse_effect`), its PARAMS.json / world-file form
+(`to_dict`), the simulator's default and random magnitudes (`default_values`, `draw`) and
+the candidates the diagnosis ladder tries (`ladder_candidates`).
+
 The simulator, the identifier and the diagnosis use the same objects: the simulator
 evaluates them at the world's true parameter values, the identifier fits them.
 """
@@ -15,11 +22,12 @@ evaluates them at the world's true parameter values, the identifier fits them.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
-from typing import ClassVar
+from dataclasses import dataclass, field, fields
+from typing import Any, ClassVar
 
 import numpy as np
 
+from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
@@ -46,16 +54,32 @@ class Contribution:
     housing_jac: Array | None = None
 
 
+def signed_uniform(rng: np.random.Generator, low: float, high: float) -> float:
+    """A random value of random sign whose magnitude is uniform in [low, high)."""
+    return float(rng.choice([-1.0, 1.0]) * rng.uniform(low, high))
+
+
 @dataclass(frozen=True)
 class Effect(ABC):
-    """Base of every effect. `joints` are 1-based joint numbers (empty: no joint)."""
+    """Base of every effect. `joints` are 1-based joint numbers (empty: no joint).
+
+    Subclasses are frozen dataclasses: equal effects (same class, joints and options) are
+    the same model term, so sets and `in` work on them.
+    """
 
     name: ClassVar[str]
     #: True for the contract's vocabulary (section 3); False for simulator-only effects
     #: that stand for "something the model does not know" in blind tests.
     in_vocabulary: ClassVar[bool] = True
+    #: False for effects that belong to no joint (their `joints` must be empty).
+    per_joint: ClassVar[bool] = True
     joints: tuple[int, ...] = field(default=())
 
+    def __post_init__(self) -> None:
+        if not self.per_joint and self.joints:
+            raise InputError(f"{self.name} belongs to no joint: give joints: []")
+
+    # -- the model ------------------------------------------------------------------------
     @abstractmethod
     def parameters(self, robot: RobotDescription) -> list[Parameter]:
         """The effect's parameters (nominal 0 = effect absent), named uniquely."""
@@ -66,12 +90,6 @@ class Effect(ABC):
     ) -> Contribution:
         """Channels and their derivatives at `poses` for the values in `params`."""
 
-    @property
-    def label(self) -> str:
-        """Human/JSON label, e.g. 'backlash[4]'."""
-        joints = ",".join(str(j) for j in self.joints)
-        return f"{self.name}[{joints}]" if joints else self.name
-
     def parameter_names(self, robot: RobotDescription) -> list[str]:
         return [p.name for p in self.parameters(robot)]
 
@@ -79,12 +97,77 @@ class Effect(ABC):
         """Current values of this effect's parameters, shape (P_e,)."""
         return np.array([params[n] for n in self.parameter_names(robot)])
 
+    # -- names and files ------------------------------------------------------------------
+    def options(self) -> dict[str, Any]:
+        """The effect's options (its dataclass fields besides `joints`), e.g. {'order': 2}."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "joints"}
+
+    @property
+    def label(self) -> str:
+        """Human/JSON label, e.g. 'backlash[4]'."""
+        joints = ",".join(str(j) for j in self.joints)
+        return f"{self.name}[{joints}]" if joints else self.name
+
+    @property
+    def spec(self) -> str:
+        """The `--model` term, e.g. 'backlash:4', 'eccentricity:6:order=3', 'thermal_drift'
+        (parsed back by `robot_calib.effects.parse_effect`)."""
+        parts = [self.name]
+        if self.joints:
+            parts.append(",".join(str(j) for j in self.joints))
+        parts += [f"{k}={v}" for k, v in self.options().items()]
+        return ":".join(parts)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The PARAMS.json / world-file record: name, joints and options
+        (read back by `robot_calib.effects.effect_from_dict`)."""
+        return {"name": self.name, "joints": list(self.joints), **self.options()}
+
+    def covers(self, other: Effect, robot: RobotDescription) -> bool:
+        """True when this effect's parameters include all of `other`'s (e.g. eccentricity
+        of order 3 covers order 1 of the same joint): `other` adds nothing next to it."""
+        mine = set(self.parameter_names(robot))
+        return type(other) is type(self) and set(other.parameter_names(robot)) <= mine
+
+    # -- simulator ------------------------------------------------------------------------
+    @abstractmethod
+    def default_values(self, robot: RobotDescription) -> dict[str, float]:
+        """Realistic true values [SI] of the parameters for a simulated world."""
+
+    @classmethod
+    @abstractmethod
+    def draw(
+        cls, robot: RobotDescription, rng: np.random.Generator, joint: int
+    ) -> tuple[Effect, dict[str, float]]:
+        """A random instance and realistic random true values [SI] for a blind test case;
+        `joint` is a joint the caller drew at random (an effect may choose another)."""
+
+    # -- diagnosis ------------------------------------------------------------------------
+    @classmethod
+    def ladder_candidates(cls, robot: RobotDescription, poses: Poses) -> list[Effect]:
+        """The instances the diagnosis ladder tries on these poses: by default one per
+        joint (or one for an effect of no joint)."""
+        if not cls.per_joint:
+            return [cls()]
+        return [cls(joints=(j,)) for j in range(1, robot.n_joints + 1)]
+
+
+def check_order(effect: Effect, order: int) -> None:
+    """Raise InputError unless `order` is an integer >= 1 (Fourier orders)."""
+    if isinstance(order, bool) or not isinstance(order, int) or order < 1:
+        raise InputError(f"effect {effect.name!r}: order must be an integer >= 1, got {order!r}")
+
 
 class JointOffsetEffect(Effect):
     """An effect that adds `theta_j += coefficient_j * signal_j(poses)`, linear in its
-    one parameter per joint (backlash, encoder_scale, compliance)."""
+    one parameter per joint (backlash, encoder_scale, compliance), named `<name>J`."""
 
     unit: ClassVar[str]
+    #: simulator default of the coefficient [unit]
+    default_magnitude: ClassVar[float]
+    #: range of a random coefficient for blind tests [unit], and whether its sign is random
+    draw_range: ClassVar[tuple[float, float]]
+    draw_signed: ClassVar[bool] = False
 
     def parameters(self, robot: RobotDescription) -> list[Parameter]:
         return [Parameter(f"{self.name}{j}", self.unit, 0.0, group=self.name) for j in self.joints]
@@ -102,3 +185,15 @@ class JointOffsetEffect(Effect):
         for k, j in enumerate(self.joints):
             jac[:, j - 1, k] = signal[:, j - 1]
         return Contribution(joint_offset=jac @ self.values(robot, params), joint_offset_jac=jac)
+
+    def default_values(self, robot: RobotDescription) -> dict[str, float]:
+        return {name: self.default_magnitude for name in self.parameter_names(robot)}
+
+    @classmethod
+    def draw(
+        cls, robot: RobotDescription, rng: np.random.Generator, joint: int
+    ) -> tuple[Effect, dict[str, float]]:
+        effect = cls(joints=(joint,))
+        low, high = cls.draw_range
+        value = signed_uniform(rng, low, high) if cls.draw_signed else rng.uniform(low, high)
+        return effect, {effect.parameter_names(robot)[0]: float(value)}

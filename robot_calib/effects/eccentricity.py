@@ -17,10 +17,46 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robot_calib.effects.base import HOUSING_ERRORS, Contribution, Effect
+from robot_calib.effects.base import (
+    HOUSING_ERRORS,
+    Contribution,
+    Effect,
+    check_order,
+    signed_uniform,
+)
+from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
+
+DEG = np.pi / 180.0
+#: Fourier orders the diagnosis ladder tries per joint
+LADDER_ORDERS = (1, 2, 3)
+#: blind tests: radial (dx, dy) [m] and tilt (ex, ey) [rad] order-1 amplitudes
+DRAW_RADIAL_M = (0.05e-3, 0.2e-3)
+DRAW_TILT_RAD = (0.1e-3, 0.5e-3)
+#: the robot whose runout the seed paper measured (Tables 5-6): the simulator's default
+SEED_ROBOT = "kr5_sixx_r650"
+
+# Seed Tables 5-6: eccentricity offsets D and amplitudes A per joint, order dx, dy, dz [mm],
+# ex, ey (read as deg: the tables label them "mm", which cannot be a tilt). Phases (Table 7)
+# are all below 3e-4 rad, so the series is D + A cos(q).
+SEED_TABLE5_D = [
+    [-0.00894432, -0.00044766, -0.09097568, -2.8886e-05, 9.9299e-05],
+    [0.00225915, -0.05434195, -0.00171799, -0.00027847, 0.00043006],
+    [0.16801637, 0.00185002, -0.03888246, -0.00021782, -0.0004381],
+    [0.00982289, 0.03792663, 0.00545861, 9.5836e-05, -0.00014458],
+    [-0.00465192, 0.00250222, 0.31343338, 0.00324521, -0.00115391],
+    [-0.03546433, -0.02386418, -0.13111638, 0.00084781, 0.00031983],
+]
+SEED_TABLE6_A = [
+    [-0.09438893, -0.010266, -0.1214897, -0.0056238, 0.0062345],
+    [-0.01861644, -0.11436569, -0.00977474, 0.02706514, -0.02377566],
+    [0.14699369, -0.02192545, -0.00973498, 0.00430838, 0.02144104],
+    [0.24364125, -0.00971577, -0.02075261, -0.01180938, 0.00267801],
+    [-0.1641385, -0.02075231, 0.0408056, -0.00131996, -0.14413296],
+    [0.00374365, 0.04081512, 0.02455266, 0.01901011, 0.04791811],
+]
 
 
 def fourier_basis(q: np.ndarray, order: int) -> np.ndarray:
@@ -41,6 +77,15 @@ class Eccentricity(Effect):
     name = "eccentricity"
     order: int = 1
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_order(self, self.order)
+
+    @staticmethod
+    def term(joint: int, error: str, term: str) -> str:
+        """Parameter name of one Fourier term, e.g. term(2, 'dx', 'c1') = 'ecc2_dx_c1'."""
+        return f"ecc{joint}_{error}_{term}"
+
     @property
     def label(self) -> str:
         return f"eccentricity(order {self.order})[{','.join(map(str, self.joints))}]"
@@ -48,7 +93,7 @@ class Eccentricity(Effect):
     def parameters(self, robot: RobotDescription) -> list[Parameter]:
         return [
             Parameter(
-                f"ecc{j}_{err}_{term}", "m" if err[0] == "d" else "rad", 0.0, group=self.name
+                self.term(j, err, term), "m" if err[0] == "d" else "rad", 0.0, group=self.name
             )
             for j in self.joints
             for err in HOUSING_ERRORS
@@ -72,3 +117,35 @@ class Eccentricity(Effect):
                 start = k * per_joint + e * n_terms
                 jac[:, j - 1, e, start : start + n_terms] = basis
         return Contribution(housing=jac @ self.values(robot, params), housing_jac=jac)
+
+    def default_values(self, robot: RobotDescription) -> dict[str, float]:
+        """The seed's measured runout (Tables 5-6, order 1) of the KR5's joints."""
+        if robot.name != SEED_ROBOT:
+            raise InputError(
+                f"eccentricity values must be given for robots other than the {SEED_ROBOT}"
+            )
+        values = {}
+        for j in self.joints:
+            for e, err in enumerate(HOUSING_ERRORS):
+                scale = 1e-3 if err[0] == "d" else DEG
+                values[self.term(j, err, "D")] = SEED_TABLE5_D[j - 1][e] * scale
+                values[self.term(j, err, "c1")] = SEED_TABLE6_A[j - 1][e] * scale
+        return values
+
+    @classmethod
+    def draw(
+        cls, robot: RobotDescription, rng: np.random.Generator, joint: int
+    ) -> tuple[Effect, dict[str, float]]:
+        """Order 1 on one joint: radial and tilt runout, random phase and sign."""
+        values = {cls.term(joint, e, t): signed_uniform(rng, *DRAW_RADIAL_M)
+                  for e in ("dx", "dy") for t in ("c1", "s1")}  # fmt: skip
+        values.update({cls.term(joint, e, t): signed_uniform(rng, *DRAW_TILT_RAD)
+                       for e in ("ex", "ey") for t in ("c1", "s1")})  # fmt: skip
+        return cls(joints=(joint,), order=1), values
+
+    @classmethod
+    def ladder_candidates(cls, robot: RobotDescription, poses: Poses) -> list[Effect]:
+        """Every joint at every order of LADDER_ORDERS."""
+        return [
+            cls(joints=(j,), order=k) for j in range(1, robot.n_joints + 1) for k in LADDER_ORDERS
+        ]

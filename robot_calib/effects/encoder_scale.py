@@ -15,6 +15,9 @@ from robot_calib.poses import Poses
 class EncoderScale(JointOffsetEffect):
     name = "encoder_scale"
     unit = "1"
+    default_magnitude = 3e-4  # tenths of a mm over the workspace
+    draw_range = (2e-4, 8e-4)
+    draw_signed = True
 
     def signal(self, robot: RobotDescription, poses: Poses) -> Array:
         return poses.q

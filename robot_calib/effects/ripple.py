@@ -11,10 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robot_calib.effects.base import Contribution, Effect
+from robot_calib.effects.base import Contribution, Effect, check_order, signed_uniform
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
+
+DEFAULT_AMPLITUDE = 3e-4  # rad
+DRAW_RANGE = (2e-4, 5e-4)  # rad, blind tests
 
 
 @dataclass(frozen=True)
@@ -23,11 +26,19 @@ class JointRipple(Effect):
     in_vocabulary = False
     order: int = 3
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_order(self, self.order)
+
+    def _names(self, j: int) -> tuple[str, str]:
+        """(cos, sin) parameter names of joint j."""
+        return f"ripple_cos{j}", f"ripple_sin{j}"
+
     def parameters(self, robot: RobotDescription) -> list[Parameter]:
         return [
-            Parameter(f"ripple_{kind}{j}", "rad", 0.0, group=self.name)
+            Parameter(name, "rad", 0.0, group=self.name)
             for j in self.joints
-            for kind in ("cos", "sin")
+            for name in self._names(j)
         ]
 
     def contribution(
@@ -41,3 +52,14 @@ class JointRipple(Effect):
             jac[:, j - 1, 2 * k] = np.sin(angle)
             jac[:, j - 1, 2 * k + 1] = np.cos(angle)
         return Contribution(joint_offset=jac @ self.values(robot, params), joint_offset_jac=jac)
+
+    def default_values(self, robot: RobotDescription) -> dict[str, float]:
+        return {self._names(j)[0]: DEFAULT_AMPLITUDE for j in self.joints}
+
+    @classmethod
+    def draw(
+        cls, robot: RobotDescription, rng: np.random.Generator, joint: int
+    ) -> tuple[Effect, dict[str, float]]:
+        effect = cls(joints=(joint,))
+        cos_name, sin_name = effect._names(joint)
+        return effect, {sin_name: signed_uniform(rng, *DRAW_RANGE), cos_name: 0.0}

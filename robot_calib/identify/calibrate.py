@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
-from robot_calib.effects import VOCABULARY, Effect, make_effect
+from robot_calib.effects import Effect, parse_effect, vocabulary
 from robot_calib.errors import InputError
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
 from robot_calib.identify.fit import FitResult, fit_model
@@ -41,33 +41,24 @@ def parse_model(
     spec: str, robot: RobotDescription, ecc_order: int = 1
 ) -> tuple[str, list[Effect]]:
     """('nominal'|'cpa'|'geometric', effects) of a model name such as
-    'geometric+eccentricity' or 'geometric+backlash:4+thermal_drift'."""
+    'geometric+eccentricity' or 'geometric+backlash:4+thermal_drift'; `ecc_order` is the
+    default Fourier `order` of effects that have one."""
     base, *extras = spec.split("+")
+    known = ", ".join(vocabulary())
     if base not in BASE_MODELS or (extras and base != "geometric"):
         raise InputError(
             f"--model {spec}: expected nominal, cpa, geometric or geometric+EFFECT[:joints] "
-            f"(effects: {', '.join(VOCABULARY)})"
+            f"(effects: {known})"
         )
     effects: list[Effect] = []
     for extra in extras:
-        name, *fields = extra.split(":")
-        if name not in VOCABULARY or name == "geometric":
-            raise InputError(f"--model {spec}: unknown effect {name!r} ({', '.join(VOCABULARY)})")
-        options: dict[str, int] = {"order": ecc_order} if name == "eccentricity" else {}
-        joints: list[int] = []
+        name = extra.split(":")[0]
+        if name not in vocabulary():
+            raise InputError(f"--model {spec}: unknown effect {name!r} ({known})")
         try:
-            for f in fields:
-                if f.startswith("order="):
-                    options["order"] = int(f.split("=", 1)[1])
-                else:
-                    joints += [int(j) for j in f.split(",") if j]
-        except ValueError:
-            raise InputError(
-                f"--model {spec}: expected EFFECT:J,J[:order=K], e.g. backlash:4"
-            ) from None
-        if not joints and name != "thermal_drift":
-            joints = list(range(1, robot.n_joints + 1))
-        effects.append(make_effect(name, joints, **options))
+            effects.append(parse_effect(extra, robot.n_joints, order=ecc_order))
+        except InputError as exc:
+            raise InputError(f"--model {spec}: {exc}") from None
     return base, effects
 
 
@@ -182,15 +173,6 @@ def _objective(name: str, cpa: CPAResult | None) -> Objective:
     return SeedObjective(np.array(anchors))
 
 
-def effect_spec(effect: Effect) -> str:
-    """The `--model` term of one effect, e.g. 'backlash:4', 'eccentricity:6:order=3'."""
-    spec = effect.name
-    if effect.joints:
-        spec += ":" + ",".join(str(j) for j in effect.joints)
-    order = getattr(effect, "order", None)
-    return spec + (f":order={order}" if order is not None else "")
-
-
 def model_name(effects: tuple[Effect, ...] | list[Effect]) -> str:
     """The `--model` name of the geometric model plus `effects`."""
-    return "+".join(["geometric", *(effect_spec(e) for e in effects)])
+    return "+".join(["geometric", *(e.spec for e in effects)])

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from robot_calib.atomic import write_text_atomic
-from robot_calib.effects import make_effect
+from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
 from robot_calib.identify.calibrate import Calibration
 from robot_calib.kinematics.description import load_robot
@@ -42,9 +42,7 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
         "format": FORMAT,
         "model": cal.name,
         "robot": robot.reference(),
-        "effects": [
-            {"name": e.name, "joints": list(e.joints), **_options(e)} for e in cal.model.effects
-        ],
+        "effects": [e.to_dict() for e in cal.model.effects],
         "parameters": records,
         "fixed": [
             {"name": p.name, "reason": p.fixed_reason}
@@ -93,11 +91,6 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
     return doc
 
 
-def _options(effect: object) -> dict[str, Any]:
-    order = getattr(effect, "order", None)
-    return {} if order is None else {"order": order}
-
-
 def write_json_atomic(doc: dict[str, Any], path: Path) -> None:
     """Write JSON via a temporary file and rename: never a half-written file."""
     write_text_atomic(path, json.dumps(doc, indent=2) + "\n")
@@ -116,12 +109,7 @@ def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict
         raise InputError(f"{path}: not a robot_calib parameter file (format {FORMAT})")
     try:
         robot = load_robot(doc["robot"])
-        effects = tuple(
-            make_effect(
-                e["name"], e.get("joints", []), **({"order": e["order"]} if "order" in e else {})
-            )  # fmt: skip
-            for e in doc.get("effects", [])
-        )
+        effects = tuple(effect_from_dict(e) for e in doc.get("effects", []))
         model = KinematicModel(robot, effects)
         params = ParameterVector.from_dict(doc["parameters"])
         expected = model.parameters().names

@@ -12,20 +12,21 @@ from typing import Any
 import numpy as np
 
 from robot_calib.diagnose.diagnosis import diagnose
-from robot_calib.effects import make_effect
+from robot_calib.effects import EFFECTS, Effect, effect_class
+from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points
 from robot_calib.sim.plans import Plan, paper_test_plan, plan_times, random_plan
 from robot_calib.sim.world import World, load_world, with_effect
 
-CLASSES = ("none", "backlash", "encoder_scale", "compliance", "thermal_drift", "eccentricity",
-           "joint_ripple")  # fmt: skip
-# Joints of the KR5 where gravity has a torque worth a deflection: up to 41 N m (joint 2) and
-# 13 N m (joint 3) over Test 2 and random poses, but only 0.34 N m on joints 4 and 5 without
-# payload, where any realistic compliance moves the target by less than the noise.
-GRAVITY_JOINTS = (2, 3)
+NONE = "none"  # the class of cases with no withheld effect (geometric only)
 FLOOR_FACTOR = 1.5
+
+
+def classes() -> tuple[str, ...]:
+    """The case classes: none, then every registered effect (vocabulary or not)."""
+    return (NONE, *EFFECTS)
 
 
 @dataclass(frozen=True)
@@ -39,33 +40,15 @@ class Case:
     holdout: Recording
 
 
-def _signed(rng: np.random.Generator, low: float, high: float) -> float:
-    return float(rng.choice([-1.0, 1.0]) * rng.uniform(low, high))
-
-
 def random_effect(
-    effect: str, rng: np.random.Generator
-) -> tuple[tuple[int, ...], dict[str, float]]:
-    """Joints and realistic random true values (SI) for one effect class."""
-    j = int(rng.integers(1, 7))
-    if effect == "backlash":
-        return (j,), {f"backlash{j}": rng.uniform(1e-3, 4e-3)}
-    if effect == "encoder_scale":
-        return (j,), {f"encoder_scale{j}": _signed(rng, 2e-4, 8e-4)}
-    if effect == "compliance":
-        j = int(rng.choice(GRAVITY_JOINTS))
-        return (j,), {f"compliance{j}": rng.uniform(1e-5, 4e-5)}
-    if effect == "thermal_drift":
-        return (), {"thermal_drift_rate": rng.uniform(2e-7, 6e-7)}
-    if effect == "eccentricity":
-        values = {f"ecc{j}_{e}_{t}": _signed(rng, 0.05e-3, 0.2e-3)
-                  for e in ("dx", "dy") for t in ("c1", "s1")}  # fmt: skip
-        values.update({f"ecc{j}_{e}_{t}": _signed(rng, 0.1e-3, 0.5e-3)
-                       for e in ("ex", "ey") for t in ("c1", "s1")})  # fmt: skip
-        return (j,), values
-    if effect == "joint_ripple":
-        return (j,), {f"ripple_sin{j}": _signed(rng, 2e-4, 5e-4), f"ripple_cos{j}": 0.0}
-    return (), {}
+    effect: str, robot: RobotDescription, rng: np.random.Generator
+) -> tuple[Effect | None, dict[str, float]]:
+    """A random instance of the class `effect` (random joint) and realistic random true
+    values (SI), `Effect.draw`; (None, {}) for the class `none`."""
+    joint = int(rng.integers(1, robot.n_joints + 1))  # drawn for every class: same streams
+    if effect == NONE:
+        return None, {}
+    return effect_class(effect).draw(robot, rng, joint)
 
 
 def _record(world: World, plan: Plan, rng: np.random.Generator) -> Recording:
@@ -79,10 +62,11 @@ def make_case(effect: str, seed: int, n_holdout: int = 200) -> Case:
     calibration (Test 2 sweeps) and hold-out (random general poses) recordings."""
     rng = np.random.default_rng(seed)
     world = load_world()
-    joints, values = random_effect(effect, rng)
-    if effect != "none":
-        world = with_effect(world, make_effect(effect, joints), values)
+    withheld, values = random_effect(effect, world.model.robot, rng)
+    if withheld is not None:
+        world = with_effect(world, withheld, values)
     holdout_plan = random_plan(world.model.robot, n_holdout, rng)
+    joints = () if withheld is None else withheld.joints
     return Case(effect, joints, values, _record(world, paper_test_plan(2), rng),
                 _record(world, holdout_plan, rng))  # fmt: skip
 
@@ -91,9 +75,10 @@ def judge(case: Case, doc: dict[str, Any]) -> dict[str, Any]:
     """Did the diagnosis name the withheld effect and its joints, and reach the floor?"""
     dom = doc["dominant_effect"]
     ratio = doc["unexplained"]["ratio_to_noise_floor"]
-    if case.effect == "none":
+    outside = case.effect != NONE and not effect_class(case.effect).in_vocabulary
+    if case.effect == NONE:
         named = dom is None
-    elif case.effect == "joint_ripple":  # outside the vocabulary
+    elif outside:  # no model can name it: the right joints are the answer
         named = dom is not None and list(case.joints) == dom["joints"]
     else:
         named = (
@@ -109,7 +94,7 @@ def judge(case: Case, doc: dict[str, Any]) -> dict[str, Any]:
         "named": bool(named),
         "ratio_to_floor": ratio,
         "at_floor": bool(at_floor),
-        "hit": bool(named and (at_floor or case.effect == "joint_ripple")),
+        "hit": bool(named and (at_floor or outside)),
     }
 
 

@@ -8,6 +8,8 @@ about 2.5 m from the base, an active target on a bracket off the flange axis.
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -15,7 +17,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from robot_calib.effects import Effect, make_effect
+from robot_calib.effects import Effect, effect_class, effect_from_dict, option_types
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
@@ -32,37 +34,6 @@ SEED_TABLE3_AVG_2_6 = {
     "alpha1": 90.0171, "alpha2": 0.0077, "alpha3": 89.9702, "alpha4": 90.0290, "alpha5": 90.0182,
     "beta2": 0.0541,
 }  # fmt: skip
-
-# Seed Tables 5-6: eccentricity offsets D and amplitudes A per joint, order dx, dy, dz [mm],
-# ex, ey (read as deg: the tables label them "mm", which cannot be a tilt). Phases (Table 7)
-# are all below 3e-4 rad, so the series is D + A cos(q).
-SEED_TABLE5_D = [
-    [-0.00894432, -0.00044766, -0.09097568, -2.8886e-05, 9.9299e-05],
-    [0.00225915, -0.05434195, -0.00171799, -0.00027847, 0.00043006],
-    [0.16801637, 0.00185002, -0.03888246, -0.00021782, -0.0004381],
-    [0.00982289, 0.03792663, 0.00545861, 9.5836e-05, -0.00014458],
-    [-0.00465192, 0.00250222, 0.31343338, 0.00324521, -0.00115391],
-    [-0.03546433, -0.02386418, -0.13111638, 0.00084781, 0.00031983],
-]
-SEED_TABLE6_A = [
-    [-0.09438893, -0.010266, -0.1214897, -0.0056238, 0.0062345],
-    [-0.01861644, -0.11436569, -0.00977474, 0.02706514, -0.02377566],
-    [0.14699369, -0.02192545, -0.00973498, 0.00430838, 0.02144104],
-    [0.24364125, -0.00971577, -0.02075261, -0.01180938, 0.00267801],
-    [-0.1641385, -0.02075231, 0.0408056, -0.00131996, -0.14413296],
-    [0.00374365, 0.04081512, 0.02455266, 0.01901011, 0.04791811],
-]
-
-# Realistic default magnitude of each effect's parameters (SI units of the parameter):
-# a joint-4 play of 2 mrad moves the target ~0.25 mm between approach directions (the seed
-# reports 250 um); the others give tenths of a mm over the workspace.
-DEFAULT_MAGNITUDE = {
-    "backlash": 2.0e-3,  # rad, total play
-    "encoder_scale": 3e-4,  # 1
-    "compliance": 2.0e-5,  # rad/(N m)
-    "thermal_drift_rate": 3e-7,  # 1/s: 0.03 % strain per 1000 s of warm-up
-    "joint_ripple": 3e-4,  # rad
-}
 
 
 @dataclass(frozen=True)
@@ -123,28 +94,34 @@ class World:
         return self.model.effects
 
 
-def eccentricity_from_seed(joints: tuple[int, ...]) -> dict[str, float]:
-    """Order-1 eccentricity values of the seed's Tables 5-6 for `joints` [SI]."""
-    values = {}
-    for j in joints:
-        for e, err in enumerate(("dx", "dy", "dz", "ex", "ey")):
-            scale = 1e-3 if err[0] == "d" else DEG
-            values[f"ecc{j}_{err}_D"] = SEED_TABLE5_D[j - 1][e] * scale
-            values[f"ecc{j}_{err}_c1"] = SEED_TABLE6_A[j - 1][e] * scale
-    return values
+TOP_KEYS = (
+    "robot", "seed", "geometry", "deviations", "base2tracker", "target_in_flange_m",
+    "effects", "truth", "noise", "tracker", "timing",
+)  # fmt: skip
+FRAME_KEYS = ("xyz_m", "rpy_deg")
+EFFECT_KEYS = ("name", "joints", "values")  # plus the effect's own options (e.g. order)
 
 
-def default_effect_values(effect: Effect, robot_name: str) -> dict[str, float]:
-    """Realistic default values for an effect's parameters (see DEFAULT_MAGNITUDE)."""
-    if effect.name == "eccentricity":
-        if robot_name == "kr5_sixx_r650" and getattr(effect, "order", 1) >= 1:
-            return eccentricity_from_seed(effect.joints)
-        raise InputError("eccentricity values must be given for robots other than the KR5")
-    if effect.name == "thermal_drift":
-        return {"thermal_drift_rate": DEFAULT_MAGNITUDE["thermal_drift_rate"]}
-    if effect.name == "joint_ripple":
-        return {f"ripple_cos{j}": DEFAULT_MAGNITUDE["joint_ripple"] for j in effect.joints}
-    return {f"{effect.name}{j}": DEFAULT_MAGNITUDE[effect.name] for j in effect.joints}
+def check_keys(data: dict[str, Any], known: Sequence[str], where: str) -> None:
+    """InputError naming the first key of `data` not in `known` (with the nearest known
+    key as a hint): a misspelt key must not be silently ignored."""
+    for key in data:
+        if key not in known:
+            near = difflib.get_close_matches(str(key), known, n=1)
+            hint = f" (did you mean {near[0]!r}?)" if near else f" (known: {', '.join(known)})"
+            raise InputError(f"{where}: unknown key {key!r}{hint}")
+
+
+def _effect(spec: Any, source: str) -> tuple[Effect, dict[str, float] | None]:
+    """An effect of a world file's `effects` list and its true values (None: defaults)."""
+    if not isinstance(spec, dict) or "name" not in spec:
+        raise InputError(f"{source}: effects: each entry is a mapping with a name, got {spec!r}")
+    options = tuple(option_types(effect_class(spec["name"])))
+    check_keys(spec, EFFECT_KEYS + options, f"{source}: effect {spec['name']}")
+    values = spec.get("values")
+    if values is not None and not isinstance(values, dict):
+        raise InputError(f"{source}: effect {spec['name']}: values must be a mapping")
+    return effect_from_dict({k: v for k, v in spec.items() if k != "values"}), values
 
 
 def _mapping(data: dict[str, Any], key: str, source: str) -> dict[str, Any]:
@@ -154,23 +131,32 @@ def _mapping(data: dict[str, Any], key: str, source: str) -> dict[str, Any]:
     return value
 
 
+def _section(data: dict[str, Any], key: str, cls: type, source: str) -> dict[str, Any]:
+    """The mapping `key` of a world file, checked against the fields of dataclass `cls`
+    (timing also takes `max_joint_speed_deg_s`)."""
+    value = dict(_mapping(data, key, source))
+    known = tuple(f.name for f in fields(cls))
+    check_keys(value, known + (("max_joint_speed_deg_s",) if cls is Timing else ()),
+               f"{source}: {key}")  # fmt: skip
+    return value
+
+
 def build_world(data: dict[str, Any], source: str = "built-in default") -> World:
     """A world from a parsed world-file mapping; errors name `source`."""
     if not isinstance(data, dict):
         raise InputError(f"{source}: a world file is a mapping (see worlds/default.yaml)")
+    check_keys(data, TOP_KEYS, source)
     try:
         robot = load_robot(data.get("robot", "kr5_sixx_r650"))
         effects = []
         effect_values: dict[str, float] = {}
         for spec in data.get("effects", []) or []:
-            spec = dict(spec)
-            name, joints = spec.pop("name"), spec.pop("joints", [])
-            values = spec.pop("values", None)
-            effect = make_effect(name, joints, **spec)
+            effect, values = _effect(spec, source)
             effects.append(effect)
-            effect_values.update(values or default_effect_values(effect, robot.name))
+            effect_values.update(values or effect.default_values(robot))
         model = KinematicModel(robot, tuple(effects))
         frame = _mapping(data, "base2tracker", source)
+        check_keys(frame, FRAME_KEYS, f"{source}: base2tracker")
         xyz = frame.get("xyz_m", [2.2, 1.0, -0.3])
         rpy = np.radians(frame.get("rpy_deg", [0.0, 0.0, 200.0]))
         target = data.get("target_in_flange_m", [0.06, 0.0, 0.05])
@@ -194,9 +180,9 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         truth = truth.with_values(
             {k: float(v) for k, v in _mapping(data, "truth", source).items()}
         )
-        noise = NoiseModel(**_mapping(data, "noise", source))
-        tracker = TrackerOptions(**_mapping(data, "tracker", source))
-        timing_data = _mapping(data, "timing", source)
+        noise = NoiseModel(**_section(data, "noise", NoiseModel, source))
+        tracker = TrackerOptions(**_section(data, "tracker", TrackerOptions, source))
+        timing_data = _section(data, "timing", Timing, source)
         if "max_joint_speed_deg_s" in timing_data:
             speeds = np.radians(timing_data.pop("max_joint_speed_deg_s"))
             timing_data["max_joint_speed_rad_s"] = tuple(speeds)
@@ -210,13 +196,7 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
 
 def world_to_dict(world: World) -> dict[str, Any]:
     """A world-file mapping that rebuilds `world` exactly (every true value under `truth`)."""
-    effects = []
-    for effect in world.effects:
-        spec: dict[str, Any] = {"name": effect.name, "joints": list(effect.joints)}
-        spec.update(
-            {f.name: getattr(effect, f.name) for f in fields(effect) if f.name != "joints"}
-        )
-        effects.append(spec)
+    effects = [effect.to_dict() for effect in world.effects]
     timing = asdict(world.timing)
     timing["max_joint_speed_deg_s"] = np.degrees(timing.pop("max_joint_speed_rad_s")).tolist()
     robot = world.model.robot
@@ -254,5 +234,5 @@ def with_effect(world: World, effect: Effect, values: dict[str, float] | None = 
     """The world with one more effect switched on (default magnitudes unless given)."""
     model = world.model.with_effects(effect)
     truth = model.parameters().with_values(dict(zip(world.truth.names, world.truth.values)))
-    truth = truth.with_values(values or default_effect_values(effect, world.model.robot.name))
+    truth = truth.with_values(values or effect.default_values(world.model.robot))
     return replace(world, model=model, truth=truth)
