@@ -60,12 +60,12 @@ def main() -> int:
                 held = read_recording([hold], robot)
                 reads.append(time.perf_counter() - started)
                 started = time.perf_counter()
-                doc, _ = diagnose(rec, robot, held)
+                diagnosis, _ = diagnose(rec, robot, held)
                 runs.append(time.perf_counter() - started)
             total = statistics.median(reads) + statistics.median(runs)
             worst = max(worst, total)
             print(f"{spec:<16}{statistics.median(reads):>10.2f}{statistics.median(runs):>14.2f}"
-                  f"{total:>11.2f}  {doc['dominant_effect']}", flush=True)  # fmt: skip
+                  f"{total:>11.2f}  {diagnosis.verdict}", flush=True)  # fmt: skip
     print(f"worst total {worst:.2f} s vs target {TARGET_S:.0f} s: "
           f"{'PASS' if worst <= TARGET_S else 'MISS'}")  # fmt: skip
     return 0

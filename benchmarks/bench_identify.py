@@ -260,7 +260,7 @@ def bench_test2(world: World, runs: int, seed: int) -> dict[str, Timing]:
     out["geometric"] = geo
     print(f"  calibrate geometric (CPA + LM + accuracy): {geo.line()}")
     print(
-        f"    LM: {cal.solver['evaluations']} evaluations, fit_model {cal.solver['time_s']:.4f} s "
+        f"    LM: {cal.solver.evaluations} evaluations, fit_model {cal.solver.time_s:.4f} s "
         f"(last run), {int(cal.parameters.free.sum())} free, "
         f"rms {cal.accuracy.absolute_rms_mm:.4f} mm"
     )
@@ -288,8 +288,8 @@ def bench_test2(world: World, runs: int, seed: int) -> dict[str, Timing]:
         n_ecc = sum(1 for n in res.parameters.names if n.startswith("ecc"))
         print(f"  {len(recording)} points; calibrate(start=geometric): {ecc.line()}")
         print(
-            f"    LM: {res.solver['evaluations']} evaluations (status {res.solver['status']}),"
-            f" fit_model {res.solver['time_s']:.4f} s (last run), "
+            f"    LM: {res.solver.evaluations} evaluations (status {res.solver.status}),"
+            f" fit_model {res.solver.time_s:.4f} s (last run), "
             f"{int(res.parameters.free.sum())} free of {len(res.parameters)} "
             f"({n_ecc} eccentricity terms, the rest fixed as unidentifiable), "
             f"rms {res.accuracy.absolute_rms_mm:.4f} mm "
@@ -331,7 +331,7 @@ def bench_scaling(
         timing = repeat(lambda p=poses, x=points: fit_model(model, start, p, x), runs, budget_s)
         fit = timing.result
         peak = traced_peak_mib(lambda p=poses, x=points: fit_model(model, start, p, x))
-        evals = int(fit.solver["evaluations"])
+        evals = int(fit.solver.evaluations)
         rms = float(np.sqrt(np.mean(np.sum(fit.residuals**2, axis=1)))) * 1e6
         t = timing.median
         print(
@@ -340,8 +340,8 @@ def bench_scaling(
             f"{peak:>9.0f} {peak * MIB / n / 1e3:>8.1f} {maxrss_mib():>10.0f}  {rms:>6.2f}",
             flush=True,
         )
-        if fit.solver["status"] <= 0:
-            print(f"    ! LM stopped without converging: {fit.solver['message']}")
+        if (fit.solver.status or 0) <= 0:
+            print(f"    ! LM stopped without converging: {fit.solver.message}")
         done_n.append(n)
         times.append(t)
         peaks.append(peak)

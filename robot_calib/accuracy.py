@@ -4,11 +4,12 @@ which needs no common frame, and the absolute point error where the tracker pose
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from robot_calib.kinematics.frames import Array
+from robot_calib.records import Record
 
 _PAIR_BLOCK = 2048  # rows per block: memory O(block * N), time O(N^2)
 MAX_EXACT_POINTS = 5000  # above this the pairwise figures come from a random sample of pairs
@@ -16,7 +17,7 @@ SAMPLED_PAIRS = 5_000_000
 
 
 @dataclass(frozen=True)
-class Accuracy:
+class Accuracy(Record):
     """Seed criterion over all N(N-1)/2 pairs and absolute distances, in mm for humans."""
 
     n_points: int
@@ -25,9 +26,6 @@ class Accuracy:
     absolute_mean_mm: float
     absolute_rms_mm: float
     absolute_max_mm: float
-
-    def to_dict(self) -> dict[str, float | int]:
-        return asdict(self)
 
     def line(self) -> str:
         return (

@@ -51,7 +51,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from robot_calib.accuracy import accuracy
     from robot_calib.bag.read import read_recording
     from robot_calib.identify.calibrate import calibrate
-    from robot_calib.identify.params_file import calibration_to_dict, summary, write_json_atomic
+    from robot_calib.identify.params_file import summary, write_json_atomic
 
     robot = load_robot(args.robot)
     out = Path(args.output) / time.strftime("run-%Y%m%d-%H%M%S")
@@ -77,7 +77,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     rows = []
     for name in RUN_MODELS:
         cal = calibrate(recording, robot, name, log=_log)
-        write_json_atomic(calibration_to_dict(cal, recording), out / f"params_{name}.json")
+        write_json_atomic(cal.to_dict(recording), out / f"params_{name}.json")
         if name == "geometric":
             print(summary(cal, recording))
         rows.append((name, cal.accuracy, accuracy(held.points, cal.predict(held.poses))))
@@ -202,7 +202,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     """Identify a model from bags; write PARAMS.json; print a summary in mm/deg."""
     from robot_calib.bag.read import read_recording
     from robot_calib.identify.calibrate import calibrate, parse_model
-    from robot_calib.identify.params_file import calibration_to_dict, summary, write_json_atomic
+    from robot_calib.identify.params_file import summary, write_json_atomic
 
     robot = load_robot(args.robot)
     parse_model(args.model, robot, args.ecc_order)  # bad --model fails before any reading
@@ -213,7 +213,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         recording, robot, args.model, args.ecc_order, log=_log, objective=args.objective
     )
     print(summary(cal, recording))
-    write_json_atomic(calibration_to_dict(cal, recording), output)
+    write_json_atomic(cal.to_dict(recording), output)
     print(f"{output}: {cal.name} in {time.perf_counter() - started:.2f} s")
     return 0
 
@@ -232,21 +232,20 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     if args.holdout:
         holdout = read_recording(args.holdout, robot, args.pair_tolerance, log=_log)
     started = time.perf_counter()
-    doc, ladder = diagnose(recording, robot, holdout, log=_log)
-    write_json_atomic(doc, output)
+    diagnosis, ladder = diagnose(recording, robot, holdout, log=_log)
+    write_json_atomic(diagnosis.to_dict(), output)
     report = output.with_suffix(".md")
-    write_report(doc, ladder, recording, report)
-    dom = doc["dominant_effect"]
+    write_report(diagnosis, ladder, recording, report)
+    dom = diagnosis.dominant_effect
     print(f"{'model':<40}{'held-out mean/max [mm]':>24}{'abs rms [mm]':>14}")
-    for rung in doc["ladder"]:
-        mean, worst = rung["holdout_mean_mm"], rung["holdout_max_mm"]
-        print(f"{rung['model']:<40}{mean:>11.4f} / {worst:<9.4f}"
-              f"{rung['holdout_abs_rms_mm']:>14.4f}")  # fmt: skip
-    print(f"noise floor (abs rms): {doc['noise']['floor_abs_rms_mm']:.4f} mm "
-          f"({doc['noise']['source']})")  # fmt: skip
+    for rung in diagnosis.ladder:
+        print(f"{rung.model:<40}{rung.holdout_mean_mm:>11.4f} / {rung.holdout_max_mm:<9.4f}"
+              f"{rung.holdout_abs_rms_mm:>14.4f}")  # fmt: skip
+    print(f"noise floor (abs rms): {diagnosis.noise.floor_abs_rms_mm:.4f} mm "
+          f"({diagnosis.noise.source})")  # fmt: skip
     print("dominant effect: " + ("null (geometric reaches the noise level)" if dom is None
-                                 else f"{dom['effect']} joints {dom['joints']}"))  # fmt: skip
-    print(f"unexplained: {doc['unexplained']['note']}")
+                                 else f"{dom.effect} joints {dom.joints}"))  # fmt: skip
+    print(f"unexplained: {diagnosis.unexplained.note}")
     print(f"{output}, {report} in {time.perf_counter() - started:.1f} s")
     return 0
 

@@ -62,7 +62,7 @@ def main() -> int:
         cal = calibrate(grid, robot, model)
         fits[model] = (cal, time.perf_counter() - started)
     started = time.perf_counter()
-    doc, ladder = diagnose(grid, robot, test)
+    diagnosis, ladder = diagnose(grid, robot, test)
     diag_time = time.perf_counter() - started
     picked = ladder.rungs[-1]
     models = [("nominal (tracker pose + tool fitted)", *fits["nominal"]),
@@ -79,12 +79,12 @@ def main() -> int:
     print("|---|---|---|---|---|---|")
     for row in rows:
         print("| " + " | ".join(row) + " |")
-    dom = doc["dominant_effect"]
+    dom = None if diagnosis.dominant_effect is None else diagnosis.dominant_effect.to_dict()
     print(
         f"\ndominant effect: {dom}; diagnosis {diag_time:.1f} s; "
         f"free parameters (geometric): {int(fits['geometric'][0].parameters.free.sum())}"
     )
-    print(f"note: {doc['unexplained']['note']}")
+    print(f"note: {diagnosis.unexplained.note}")
     return 0
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from robot_calib.diagnose.diagnosis import diagnose
+from robot_calib.diagnose.diagnosis import Diagnosis, DominantEffect, diagnose
 from robot_calib.sim.blind import judge, make_case, run_case
 from robot_calib.sim.world import load_world
 
@@ -34,18 +34,25 @@ def test_effect_outside_the_vocabulary_points_at_its_joint() -> None:
 
 def test_diagnosis_document_report_and_ladder() -> None:
     case = make_case("backlash", 4)
-    doc, ladder = diagnose(case.calibration, ROBOT, case.holdout)
-    assert doc["dominant_effect"] == {"effect": "backlash", "joints": list(case.joints)}
-    assert [r["model"] for r in doc["ladder"]][0] == "geometric"
-    first, last = doc["ladder"][0], doc["ladder"][-1]
-    assert last["holdout_mean_mm"] < 0.3 * first["holdout_mean_mm"]
+    diagnosis, ladder = diagnose(case.calibration, ROBOT, case.holdout)
+    assert diagnosis.dominant_effect == DominantEffect("backlash", list(case.joints))
+    assert [r.model for r in diagnosis.ladder][0] == "geometric"
+    first, last = diagnosis.ladder[0], diagnosis.ladder[-1]
+    assert last.holdout_mean_mm < 0.3 * first.holdout_mean_mm
     # The noise level comes from the data: the world's ~5 um per axis.
-    assert 3.5e-3 < doc["noise"]["sigma_mm"] < 7e-3
+    assert 3.5e-3 < diagnosis.noise.sigma_mm < 7e-3
     # Where it lies: the forth/back split of the withheld joint is the play (rad -> urad).
-    joint = next(j for j in doc["where"]["joints"] if j["joint"] == case.joints[0])
+    joint = next(j for j in diagnosis.where.joints if j.joint == case.joints[0])
     play = case.values[f"backlash{case.joints[0]}"]
-    assert abs(joint["direction_split_urad"]) == pytest.approx(play * 1e6, rel=0.3)
-    assert judge(case, doc)["hit"]
+    assert abs(joint.direction_split_urad) == pytest.approx(play * 1e6, rel=0.3)
+    assert judge(case, diagnosis)["hit"]
+    # The document: contract keys, and a JSON round trip to the same typed object.
+    doc = json.loads(json.dumps(diagnosis.to_dict()))
+    assert doc["format"] == "robot_calib.diagnosis/1"
+    assert doc["dominant_effect"] == {"effect": "backlash", "joints": list(case.joints)}
+    assert {"model", "holdout_mean_mm", "holdout_max_mm"} <= set(doc["ladder"][0])
+    assert {"holdout_mean_mm", "note"} <= set(doc["unexplained"])
+    assert Diagnosis.from_dict(doc) == diagnosis
 
 
 def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:

@@ -24,7 +24,7 @@ from robot_calib.effects import (
     vocabulary,
 )
 from robot_calib.identify.calibrate import calibrate, parse_model
-from robot_calib.identify.params_file import calibration_to_dict, load_params, write_json_atomic
+from robot_calib.identify.params_file import load_calibration, load_params, write_json_atomic
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import recording_from_arrays
 from robot_calib.model import KinematicModel
@@ -108,12 +108,16 @@ def check_params_round_trip(cls: type[Effect], tmp_path: Path) -> None:
     if cls.in_vocabulary:
         cal = calibrate(recording, ROBOT, spec, log=None, start=cal)
     path = tmp_path / f"{cls.name}.json"
-    write_json_atomic(calibration_to_dict(cal, recording), path)
+    write_json_atomic(cal.to_dict(recording), path)
     model, params, _ = load_params(path)
     assert model.effects == cal.model.effects
     np.testing.assert_array_equal(params.values, cal.parameters.values)
     test = random_poses(rng, 10)
     np.testing.assert_allclose(model.target_points(params, test), cal.predict(test), atol=1e-12)
+    loaded = load_calibration(path)  # the typed object: the same model, 1-sigma and report
+    assert loaded.model.effects == cal.model.effects and loaded.name == cal.name
+    np.testing.assert_array_equal(loaded.std, cal.std)
+    assert loaded.accuracy == cal.accuracy and loaded.solver == cal.solver
 
 
 def check_simulator_defaults(cls: type[Effect]) -> None:

@@ -227,7 +227,7 @@ def test_seed_objective_finds_the_same_geometry() -> None:
     rec = recording_from_arrays(plan.q, points)
     absolute = calibrate(rec, ROBOT, "geometric")
     seed = calibrate(rec, ROBOT, "geometric", objective="seed")
-    assert seed.solver["objective"] == "seed pairwise distances"
+    assert seed.solver.objective == "seed pairwise distances"
     truth = absorb_base_offsets(ROBOT, WORLD.truth)
     for name in GEOMETRIC_NAMES:
         if absolute.parameters.free[absolute.parameters.index(name)]:

@@ -4,22 +4,136 @@ DIAGNOSIS.json document of CONTRACT.md section 4 (extended: msgs_doc/diagnosis.m
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
-from robot_calib.diagnose.ladder import AT_FLOOR, N_FOLDS, Ladder, run_ladder
+from robot_calib.diagnose.ladder import AT_FLOOR, N_FOLDS, Ladder, Rung, run_ladder
 from robot_calib.diagnose.noise import NoiseLevel, refine_with_model
-from robot_calib.diagnose.signatures import where_it_lies
+from robot_calib.diagnose.signatures import WhereItLies, where_it_lies
+from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import Recording
+from robot_calib.records import Record
 
 FORMAT = "robot_calib.diagnosis/1"
 #: geometric within this factor of the noise floor on held-out data: nothing to diagnose
 NULL_FACTOR = 1.5
+UNKNOWN = "unknown"  # the verdict for structure no effect of the vocabulary explains
+
+
+@dataclass(frozen=True)
+class DominantEffect(Record):
+    """The effect (a vocabulary name, or 'unknown') and the joints where it lies."""
+
+    effect: str
+    joints: list[int]
+
+
+@dataclass(frozen=True)
+class RungScore(Record):
+    """One rung of the ladder: held-out figures (seed criterion and absolute) and in-sample."""
+
+    model: str
+    holdout_mean_mm: float
+    holdout_max_mm: float
+    holdout_abs_mean_mm: float
+    holdout_abs_max_mm: float
+    holdout_abs_rms_mm: float
+    insample_mean_mm: float
+    insample_abs_rms_mm: float
+    free_parameters: int
+
+    @classmethod
+    def of(cls, rung: Rung) -> RungScore:
+        held, fit = rung.heldout, rung.calibration.accuracy
+        return cls(
+            rung.model, held.pairwise_mean_mm, held.pairwise_max_mm, held.absolute_mean_mm,
+            held.absolute_max_mm, held.absolute_rms_mm, fit.pairwise_mean_mm,
+            fit.absolute_rms_mm, int(rung.calibration.parameters.free.sum()),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Unexplained(Record):
+    """What remains after the best rung, and where it lies."""
+
+    holdout_mean_mm: float
+    holdout_abs_rms_mm: float
+    noise_floor_abs_rms_mm: float
+    ratio_to_noise_floor: float
+    note: str
+    where: WhereItLies
+
+
+@dataclass(frozen=True)
+class NoiseReport(Record):
+    """The noise floor of the verdict (msgs_doc/diagnosis.md, `noise`)."""
+
+    sigma_mm: float
+    source: str
+    n: int
+    floor_abs_rms_mm: float
+    floor_abs_mean_mm: float
+    ladder_sigma_mm: float
+    ladder_source: str
+
+
+@dataclass(frozen=True)
+class CandidateScore(Record):
+    model: str
+    linearised_holdout_rms_mm: float
+
+
+@dataclass(frozen=True)
+class Diagnosis(Record):
+    """DIAGNOSIS.json (CONTRACT.md section 4, extended: msgs_doc/diagnosis.md)."""
+
+    dominant_effect: DominantEffect | None
+    ladder: list[RungScore]
+    unexplained: Unexplained
+    noise: NoiseReport
+    scored_on: str
+    selected_on: str
+    where: WhereItLies
+    candidates: list[list[CandidateScore]]
+    recordings: list[str]
+    holdout: list[str]
+    format: str = FORMAT
+
+    def to_dict(self) -> dict[str, Any]:
+        doc = super().to_dict()
+        return {"format": doc.pop("format"), **doc}  # the format first, as always written
+
+    @classmethod
+    def from_dict(cls, data: Any) -> Diagnosis:  # noqa: ANN401 - JSON
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise InputError(f"not a robot_calib diagnosis (format {FORMAT})")
+        return super().from_dict(data)
+
+    @property
+    def verdict(self) -> str:
+        """One phrase: the dominant effect and its joints, or null."""
+        dom = self.dominant_effect
+        if dom is None:
+            return "null (geometric reaches the noise level)"
+        return f"{dom.effect} on joints {dom.joints}"
+
+    def summary(self) -> str:
+        """A few human lines: the verdict, the ladder (held-out, seed criterion), what
+        remains."""
+        rungs = "; ".join(
+            f"{r.model} {r.holdout_mean_mm:.4f}/{r.holdout_max_mm:.4f} mm" for r in self.ladder
+        )
+        return (
+            f"dominant effect: {self.verdict}. Ladder (held-out seed criterion mean/max, "
+            f"{self.scored_on}): {rungs}. Noise floor {self.noise.floor_abs_rms_mm:.4f} mm "
+            f"rms. {self.unexplained.note}."
+        )
 
 
 def dominant_effect(
-    ladder: Ladder, where: dict[str, Any], noise: NoiseLevel
-) -> dict[str, Any] | None:
+    ladder: Ladder, where: WhereItLies, noise: NoiseLevel
+) -> DominantEffect | None:
     """The effect that removed most of what `geometric` left (with its joints); None when
     geometric is already at the noise level; 'unknown' with the joints of the strongest
     residual signature when structure remains that no candidate explains."""
@@ -34,11 +148,11 @@ def dominant_effect(
         joints.setdefault(added.name, set()).update(added.joints)
     if gains:
         name = max(gains, key=gains.__getitem__)
-        return {"effect": name, "joints": sorted(joints[name])}
+        return DominantEffect(name, sorted(joints[name]))
     if rungs[0].heldout.absolute_rms_mm <= NULL_FACTOR * floor_mm or not noise.independent:
         return None  # at the noise level, or (noise unknown) no candidate helps
-    strongest = where.get("strongest_signature")
-    return {"effect": "unknown", "joints": [strongest["joint"]] if strongest else []}
+    strongest = where.strongest_signature
+    return DominantEffect(UNKNOWN, [strongest.joint] if strongest else [])
 
 
 def diagnose(
@@ -46,8 +160,8 @@ def diagnose(
     robot: RobotDescription,
     holdout: Recording | None = None,
     log: Callable[[str], None] | None = None,
-) -> tuple[dict[str, Any], Ladder]:
-    """The diagnosis document and the ladder behind it."""
+) -> tuple[Diagnosis, Ladder]:
+    """The diagnosis and the ladder behind it."""
     ladder = run_ladder(recording, robot, holdout, log)
     best = ladder.rungs[-1]
     geo = ladder.rungs[0].calibration
@@ -59,90 +173,49 @@ def diagnose(
     )  # fmt: skip
     noise = refine_with_model(ladder.noise, best.calibration.residuals,
                               int(best.calibration.parameters.free.sum()))  # fmt: skip
-    dominant = dominant_effect(ladder, where, noise)
     floor_mm = noise.floor_rms_m * 1e3
     ratio = best.heldout.absolute_rms_mm / floor_mm
+    sig = after.strongest_signature
+    structure = f"; strongest structure: {sig.text}" if sig else ""
     if not noise.independent:
         note = (
             "noise level not known independently of the model (no repeat poses or circle "
             f"sweeps): the floor is the geometric model's own residual; held-out rms {ratio:.2f}"
-            " x that"
-            + (
-                f"; strongest structure: {after['strongest_signature']['text']}"
-                if after["strongest_signature"]
-                else ""
-            )  # fmt: skip
+            " x that" + structure
         )
     elif ratio <= AT_FLOOR:
         note = f"at the noise level: held-out rms {ratio:.2f} x the noise floor"
     else:
-        sig = after["strongest_signature"]
         note = (
             f"held-out rms {ratio:.2f} x the noise floor remains; no effect of the vocabulary "
-            "reduces it further" + (f"; strongest structure: {sig['text']}" if sig else "")
+            "reduces it further" + structure
         )
-    doc: dict[str, Any] = {
-        "format": FORMAT,
-        "dominant_effect": dominant,
-        "ladder": [
-            {
-                "model": r.model,
-                "holdout_mean_mm": r.heldout.pairwise_mean_mm,
-                "holdout_max_mm": r.heldout.pairwise_max_mm,
-                "holdout_abs_mean_mm": r.heldout.absolute_mean_mm,
-                "holdout_abs_max_mm": r.heldout.absolute_max_mm,
-                "holdout_abs_rms_mm": r.heldout.absolute_rms_mm,
-                "insample_mean_mm": r.calibration.accuracy.pairwise_mean_mm,
-                "insample_abs_rms_mm": r.calibration.accuracy.absolute_rms_mm,
-                "free_parameters": int(r.calibration.parameters.free.sum()),
-            }
-            for r in ladder.rungs
-        ],
-        "unexplained": {
-            "holdout_mean_mm": best.heldout.pairwise_mean_mm,
-            "holdout_abs_rms_mm": best.heldout.absolute_rms_mm,
-            "noise_floor_abs_rms_mm": floor_mm,
-            "ratio_to_noise_floor": ratio,
-            "note": note,
-            "where": after,
-        },
-        "noise": {
-            "sigma_mm": noise.sigma_m * 1e3,
-            "source": noise.source,
-            "n": noise.n,
-            "floor_abs_rms_mm": floor_mm,
-            "floor_abs_mean_mm": noise.floor_mean_m * 1e3,
-            "ladder_sigma_mm": ladder.noise.sigma_m * 1e3,
-            "ladder_source": ladder.noise.source,
-        },
-        "scored_on": ladder.scored_on,
-        "selected_on": f"{N_FOLDS}-fold CV over poses"
+    diagnosis = Diagnosis(
+        dominant_effect=dominant_effect(ladder, where, noise),
+        ladder=[RungScore.of(r) for r in ladder.rungs],
+        unexplained=Unexplained(
+            best.heldout.pairwise_mean_mm,
+            best.heldout.absolute_rms_mm,
+            floor_mm,
+            ratio,
+            note,
+            after,
+        ),  # fmt: skip
+        noise=NoiseReport(
+            noise.sigma_m * 1e3,
+            noise.source,
+            noise.n,
+            floor_mm,
+            noise.floor_mean_m * 1e3,
+            ladder.noise.sigma_m * 1e3,
+            ladder.noise.source,
+        ),  # fmt: skip
+        scored_on=ladder.scored_on,
+        selected_on=f"{N_FOLDS}-fold CV over poses"
         + (" + hold-out bags (equal weight)" if holdout is not None else ""),
-        "where": where,
-        "candidates": [
-            [{"model": m, "linearised_holdout_rms_mm": s * 1e3} for m, s in rnd]
-            for rnd in ladder.candidates
-        ],
-        "recordings": list(recording.sources),
-        "holdout": [] if holdout is None else list(holdout.sources),
-    }
-    return doc, ladder
-
-
-def diagnosis_summary(doc: dict[str, Any]) -> str:
-    """A few human lines: the verdict, the ladder (held-out, seed criterion), what remains."""
-    dom = doc["dominant_effect"]
-    verdict = (
-        "null (geometric reaches the noise level)"
-        if dom is None
-        else f"{dom['effect']} on joints {dom['joints']}"
+        where=where,
+        candidates=[[CandidateScore(m, s * 1e3) for m, s in rnd] for rnd in ladder.candidates],
+        recordings=list(recording.sources),
+        holdout=[] if holdout is None else list(holdout.sources),
     )
-    rungs = "; ".join(
-        f"{r['model']} {r['holdout_mean_mm']:.4f}/{r['holdout_max_mm']:.4f} mm"
-        for r in doc["ladder"]
-    )
-    return (
-        f"dominant effect: {verdict}. Ladder (held-out seed criterion mean/max, "
-        f"{doc['scored_on']}): {rungs}. Noise floor {doc['noise']['floor_abs_rms_mm']:.4f} mm "
-        f"rms. {doc['unexplained']['note']}."
-    )
+    return diagnosis, ladder

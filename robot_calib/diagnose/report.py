@@ -4,12 +4,12 @@ joint angle split by approach direction, residual against time), readable withou
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from robot_calib.diagnose.diagnosis import Diagnosis
 from robot_calib.diagnose.ladder import Ladder
-from robot_calib.diagnose.signatures import arc_angle_errors
+from robot_calib.diagnose.signatures import ArcSignature, JointTerms, arc_angle_errors
 from robot_calib.measurements import Recording
 
 
@@ -74,57 +74,59 @@ def _plots(
     return out
 
 
-def _harmonics(entry: dict[str, Any]) -> str:
+def _harmonics(entry: ArcSignature | JointTerms) -> str:
     """'a1 (s1x), a2 (s2x), ...': harmonic amplitudes [urad] with their significance."""
-    pairs = zip(entry["harmonics_urad"], entry["harmonics_significance"])
+    pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
     return ", ".join(f"{a:.1f} ({s:.0f}x)" for a, s in pairs)
 
 
-def write_report(doc: dict[str, Any], ladder: Ladder, recording: Recording, path: Path) -> None:
+def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
+                 path: Path) -> None:  # fmt: skip
     """Markdown report `path` (+ PNGs beside it named after it)."""
-    plots = _plots(ladder, recording, path.with_suffix(""), doc["noise"]["floor_abs_rms_mm"])
-    dom = doc["dominant_effect"]
+    noise, where = diagnosis.noise, diagnosis.where
+    plots = _plots(ladder, recording, path.with_suffix(""), noise.floor_abs_rms_mm)
+    dom = diagnosis.dominant_effect
     verdict = (
         "geometric already reaches the noise level: no dominant unmodelled effect"
         if dom is None
-        else f"dominant effect: **{dom['effect']}** on joint(s) {dom['joints'] or '-'}"
+        else f"dominant effect: **{dom.effect}** on joint(s) {dom.joints or '-'}"
     )
-    noise = doc["noise"]
     lines = [
         "# Sim-to-real gap diagnosis",
         "",
-        f"Recordings: {', '.join(doc['recordings'])}; scored on {doc['scored_on']}"
-        + (f" ({', '.join(doc['holdout'])})" if doc["holdout"] else "")
+        f"Recordings: {', '.join(diagnosis.recordings)}; scored on {diagnosis.scored_on}"
+        + (f" ({', '.join(diagnosis.holdout)})" if diagnosis.holdout else "")
         + ".",
         "",
         f"**Verdict** — {verdict}.",
         "",
-        f"Noise level from the data ({noise['source']}, n = {noise['n']}): "
-        f"{noise['sigma_mm'] * 1e3:.1f} um per axis; a perfect model would leave "
-        f"{noise['floor_abs_rms_mm']:.4f} mm rms on held-out points.",
+        f"Noise level from the data ({noise.source}, n = {noise.n}): "
+        f"{noise.sigma_mm * 1e3:.1f} um per axis; a perfect model would leave "
+        f"{noise.floor_abs_rms_mm:.4f} mm rms on held-out points.",
         "",
         "| model | held-out seed criterion mean / max [mm] "
         "| held-out absolute mean / rms [mm] | x noise floor |",
         "|---|---|---|---|",
     ]
-    for rung in doc["ladder"]:
+    for rung in diagnosis.ladder:
         lines.append(
-            f"| {rung['model']} | {rung['holdout_mean_mm']:.4f} / {rung['holdout_max_mm']:.4f} "
-            f"| {rung['holdout_abs_mean_mm']:.4f} / {rung['holdout_abs_rms_mm']:.4f} "
-            f"| {rung['holdout_abs_rms_mm'] / noise['floor_abs_rms_mm']:.2f} |"
+            f"| {rung.model} | {rung.holdout_mean_mm:.4f} / {rung.holdout_max_mm:.4f} "
+            f"| {rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f} "
+            f"| {rung.holdout_abs_rms_mm / noise.floor_abs_rms_mm:.2f} |"
         )
-    lines += ["", f"What remains: {doc['unexplained']['note']}.", "", "## Where the residual lies",
+    lines += ["", f"What remains: {diagnosis.unexplained.note}.", "",
+              "## Where the residual lies",
               "", "Geometric model, per joint from its sweeps (angle-equivalent error along the "
               "arc):", "",
               "| joint | rms [urad] | harmonics 1-4 [urad] (x their noise sigma) "
               "| forth-back split [urad] "
               "| slope vs angle [urad/rad] | corr. with gravity torque |",
               "|---|---|---|---|---|---|"]  # fmt: skip
-    for j in doc["where"]["joints"]:
+    for j in where.joints:
         lines.append(
-            f"| {j['joint']} | {j['arc_rms_urad']:.1f} | {_harmonics(j)} | "
-            f"{j['direction_split_urad']:.1f} | {j['slope_vs_angle_urad_per_rad']:.1f} | "
-            f"{j['gravity_torque_correlation']:.2f} |"
+            f"| {j.joint} | {j.arc_rms_urad:.1f} | {_harmonics(j)} | "
+            f"{j.direction_split_urad:.1f} | {j.slope_vs_angle_urad_per_rad:.1f} | "
+            f"{j.gravity_torque_correlation:.2f} |"
         )
     lines += [
         "",
@@ -135,22 +137,21 @@ def write_report(doc: dict[str, Any], ladder: Ladder, recording: Recording, path
         "| scale [urad/rad] | gravity [urad/(N m)] |",
         "|---|---|---|---|---|",
     ]
-    for j in doc["where"]["joints_from_all_poses"]:
+    for t in where.joints_from_all_poses:
         lines.append(
-            f"| {j['joint']} | {_harmonics(j)} "
-            f"| {j['direction_urad']:.1f} ({j['direction_significance']:.0f}x) "
-            f"| {j['scale_urad_per_rad']:.1f} ({j['scale_significance']:.0f}x) "
-            f"| {j['gravity_urad_per_Nm']:.2f} ({j['gravity_significance']:.0f}x) |"
+            f"| {t.joint} | {_harmonics(t)} "
+            f"| {t.direction_urad:.1f} ({t.direction_significance:.0f}x) "
+            f"| {t.scale_urad_per_rad:.1f} ({t.scale_significance:.0f}x) "
+            f"| {t.gravity_urad_per_Nm:.2f} ({t.gravity_significance:.0f}x) |"
         )
-    strongest = doc["where"]["strongest_signature"]
-    if strongest:
-        lines += ["", f"Strongest structure: {strongest['text']}."]
-    t = doc["where"]["time"]
+    if where.strongest_signature:
+        lines += ["", f"Strongest structure: {where.strongest_signature.text}."]
+    quartiles = ", ".join(f"{v:.4f}" for v in where.time.rms_by_quartile_mm)
     lines += [
         "",
-        f"Against time: rms by quartile {', '.join(f'{v:.4f}' for v in t['rms_by_quartile_mm'])}"
-        f" mm, trend {t['slope_mm_per_h']:.3f} mm/h. By reach (near to far): "
-        + ", ".join(f"{v:.4f}" for v in doc["where"]["workspace"]["rms_by_reach_tertile_mm"])
+        f"Against time: rms by quartile {quartiles}"
+        f" mm, trend {where.time.slope_mm_per_h:.3f} mm/h. By reach (near to far): "
+        + ", ".join(f"{v:.4f}" for v in where.workspace.rms_by_reach_tertile_mm)
         + " mm.",
         "",
     ]

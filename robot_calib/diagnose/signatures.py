@@ -10,7 +10,7 @@ signatures of the joint effects.
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -21,8 +21,73 @@ from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
+from robot_calib.records import Record
 
 HARMONICS = 4
+
+
+@dataclass(frozen=True)
+class ArcSignature(Record):
+    """A joint's error along the arc of its own sweeps, as a joint-angle error [urad]."""
+
+    joint: int
+    arc_rms_urad: float
+    harmonics_urad: list[float]  # harmonics 1..HARMONICS of the reading
+    harmonics_significance: list[float]  # amplitude / its 1-sigma
+    direction_split_urad: float  # forth minus back (backlash-like)
+    slope_vs_angle_urad_per_rad: float  # (scale-like)
+    gravity_torque_correlation: float  # (compliance-like), -1..1
+
+
+@dataclass(frozen=True)
+class JointTerms(Record):
+    """What each signature family explains of a joint, from every pose, beyond the
+    geometry: its value and its significance (sqrt of chi^2 explained, in noise units)."""
+
+    joint: int
+    harmonics_urad: list[float]
+    harmonics_significance: list[float]
+    direction_urad: float
+    direction_significance: float
+    scale_urad_per_rad: float
+    scale_significance: float
+    gravity_urad_per_Nm: float
+    gravity_significance: float
+
+
+@dataclass(frozen=True)
+class Signature(Record):
+    """The most significant signature: its joint, harmonic (None for the other families),
+    value (urad, urad/rad or urad/(N m)), significance and a sentence."""
+
+    joint: int
+    harmonic: int | None
+    value: float
+    significance: float
+    text: str
+
+
+@dataclass(frozen=True)
+class TimeTrend(Record):
+    rms_by_quartile_mm: list[float]
+    slope_mm_per_h: float
+
+
+@dataclass(frozen=True)
+class Workspace(Record):
+    rms_by_reach_tertile_mm: list[float]  # near to far from the centre of the points
+
+
+@dataclass(frozen=True)
+class WhereItLies(Record):
+    """The 'where' section of DIAGNOSIS.json (msgs_doc/diagnosis.md)."""
+
+    joints: list[ArcSignature]
+    joints_from_all_poses: list[JointTerms]
+    strongest_signature: Signature | None
+    time: TimeTrend
+    workspace: Workspace
+    noise_sigma_mm: float
 
 
 def arc_angle_errors(model: KinematicModel, params: ParameterVector, recording: Recording,
@@ -55,7 +120,7 @@ def harmonic_amplitudes(
 
 
 def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recording,
-                residuals: Array, noise_sigma_m: float) -> list[dict[str, Any]]:  # fmt: skip
+                residuals: Array, noise_sigma_m: float) -> list[JointTerms]:  # fmt: skip
     """From every pose (sweeps or not), per joint, what each signature explains of the
     residual beyond what the model's own free parameters can absorb: a joint-angle error
     shaped as harmonic k = 1..4 of the reading, as the approach direction (backlash), the
@@ -81,29 +146,35 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
         coef, *_ = np.linalg.lstsq(cols, r, rcond=1e-10)
         return coef, float(np.linalg.norm(cols @ coef))
 
+    def family(signal: Array, j: int) -> tuple[float, float]:
+        """Value [urad per unit signal] and significance of a one-signal family."""
+        if np.ptp(signal) <= 1e-9:
+            return 0.0, 0.0
+        coef, z = explain([signal], j)
+        return float(coef[0] * 1e6), z
+
     out = []
     for j in range(n_joints):
         qj = poses.q[:, j]
-        entry: dict[str, Any] = {"joint": j + 1}
         amps, sig = [], []
         for k in range(1, HARMONICS + 1):
             coef, z = explain([np.cos(k * qj), np.sin(k * qj)], j)
             amps.append(float(np.hypot(*coef) * 1e6))
             sig.append(z)
-        entry["harmonics_urad"], entry["harmonics_significance"] = amps, sig
-        for name, key, signal in (("direction", "direction_urad", poses.direction[:, j]),
-                                  ("scale", "scale_urad_per_rad", qj),
-                                  ("gravity", "gravity_urad_per_Nm", tau[:, j])):  # fmt: skip
-            if np.ptp(signal) > 1e-9:
-                coef, z = explain([signal], j)
-                entry[key], entry[f"{name}_significance"] = float(coef[0] * 1e6), z
-            else:
-                entry[key], entry[f"{name}_significance"] = 0.0, 0.0
-        out.append(entry)
+        out.append(
+            JointTerms(
+                j + 1,
+                amps,
+                sig,
+                *family(poses.direction[:, j], j),
+                *family(qj, j),
+                *family(tau[:, j], j),
+            )  # fmt: skip
+        )
     return out
 
 
-FAMILIES = (  # (key of the value, key of the significance, words, unit)
+FAMILIES = (  # (field of the value, field of the significance, words, unit)
     ("direction_urad", "direction_significance", "approach direction (backlash-like)", "urad"),
     ("scale_urad_per_rad", "scale_significance", "reading (scale-like)", "urad/rad"),
     ("gravity_urad_per_Nm", "gravity_significance", "gravity torque (compliance-like)",
@@ -112,32 +183,32 @@ FAMILIES = (  # (key of the value, key of the significance, words, unit)
 ORDINAL = {1: "1st", 2: "2nd", 3: "3rd"}
 
 
-def strongest_signature(terms: list[dict[str, Any]]) -> dict[str, Any] | None:
+def strongest_signature(terms: list[JointTerms]) -> Signature | None:
     """The most significant family of `joint_terms` over all joints, with a sentence."""
-    best = None  # (significance, joint, harmonic or None, value, text)
+    best: tuple[float, int, int | None, float, str] | None = None
     for entry in terms:
-        j = entry["joint"]
-        pairs = zip(entry["harmonics_urad"], entry["harmonics_significance"])
+        j = entry.joint
+        pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
         for k, (amp, sig) in enumerate(pairs, start=1):
             text = (f"{ORDINAL.get(k, f'{k}th')} harmonic of joint {j} ({amp:.1f} urad of "
                     f"joint-angle error, {sig:.0f} x its noise)")  # fmt: skip
             if best is None or sig > best[0]:
                 best = (sig, j, k, amp, text)
         for key, sig_key, words, unit in FAMILIES:
-            sig = entry[sig_key]
+            sig, value = getattr(entry, sig_key), getattr(entry, key)
             if best is None or sig > best[0]:
-                text = (f"joint {j} error following its {words}: {entry[key]:.1f} {unit}, "
+                text = (f"joint {j} error following its {words}: {value:.1f} {unit}, "
                         f"{sig:.0f} x its noise")  # fmt: skip
-                best = (sig, j, None, entry[key], text)
+                best = (sig, j, None, value, text)
     if best is None:
         return None
     sig, j, k, value, text = best
-    return {"joint": j, "harmonic": k, "value": value, "significance": sig, "text": text}
+    return Signature(j, k, value, sig, text)
 
 
 def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Recording,
-                  residuals: Array, noise_sigma_m: float) -> dict[str, Any]:  # fmt: skip
-    """The 'where' section of DIAGNOSIS.json (units in the key names)."""
+                  residuals: Array, noise_sigma_m: float) -> WhereItLies:  # fmt: skip
+    """Where the residual lies (units in the field names)."""
     q, direction = recording.poses.q, recording.poses.direction
     joints = []
     tau = gravity_torques(model.robot, q)
@@ -154,15 +225,15 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
         corr = float(np.corrcoef(t, err)[0, 1]) if np.ptp(t) > 1e-3 else 0.0
         amps, amp_sigma = harmonic_amplitudes(qj, err, noise_sigma_m / lever)
         joints.append(
-            {
-                "joint": j,
-                "arc_rms_urad": float(np.sqrt(np.mean(err**2)) * 1e6),
-                "harmonics_urad": [float(a * 1e6) for a in amps],
-                "harmonics_significance": [float(a / s) for a, s in zip(amps, amp_sigma)],
-                "direction_split_urad": split * 1e6,
-                "slope_vs_angle_urad_per_rad": slope * 1e6,
-                "gravity_torque_correlation": corr,
-            }
+            ArcSignature(
+                j,
+                float(np.sqrt(np.mean(err**2)) * 1e6),
+                [float(a * 1e6) for a in amps],
+                [float(a / s) for a, s in zip(amps, amp_sigma)],
+                split * 1e6,
+                slope * 1e6,
+                corr,
+            )
         )
     norm = np.linalg.norm(residuals, axis=1)
     time = recording.poses.time
@@ -170,20 +241,14 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
     reach = np.linalg.norm((recording.points - recording.points.mean(axis=0))[:, :2], axis=1)
     tertiles = np.array_split(np.argsort(reach, kind="stable"), 3)
     all_poses = joint_terms(model, params, recording, residuals, noise_sigma_m)
-    return {
-        "joints": joints,
-        "joints_from_all_poses": all_poses,
-        "strongest_signature": strongest_signature(all_poses),
-        "time": {
-            "rms_by_quartile_mm": [float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in quartiles],
-            "slope_mm_per_h": float(np.polyfit(time, norm, 1)[0] * 3.6e6)
-            if np.ptp(time) > 0
-            else 0.0,
-        },
-        "workspace": {
-            "rms_by_reach_tertile_mm": [
-                float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in tertiles
-            ],
-        },
-        "noise_sigma_mm": noise_sigma_m * 1e3,
-    }
+    return WhereItLies(
+        joints,
+        all_poses,
+        strongest_signature(all_poses),
+        TimeTrend(
+            [float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in quartiles],
+            float(np.polyfit(time, norm, 1)[0] * 3.6e6) if np.ptp(time) > 0 else 0.0,
+        ),
+        Workspace([float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in tertiles]),
+        noise_sigma_m * 1e3,
+    )

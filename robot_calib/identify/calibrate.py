@@ -12,16 +12,17 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
 from robot_calib.effects import Effect, parse_effect, vocabulary
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
-from robot_calib.identify.fit import FitResult, fit_model
+from robot_calib.identify.fit import FitResult, SolverReport, fit_model
 from robot_calib.identify.identifiability import Identifiability
 from robot_calib.identify.objectives import AbsoluteObjective, Objective, SeedObjective
 from robot_calib.identify.registration import fit_frames
@@ -30,6 +31,7 @@ from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
+from robot_calib.poses import Poses
 
 BASE_MODELS = ("nominal", "cpa", "geometric")
 OBJECTIVES = ("absolute", "seed")
@@ -72,14 +74,38 @@ class Calibration:
     parameters: ParameterVector
     std: Array
     accuracy: Accuracy
-    residuals: Array  # (n, 3) predicted - measured [m]
+    residuals: Array  # (n, 3) predicted - measured [m]; (0, 3) when read from a file
     identifiability: Identifiability | None = None
-    solver: dict[str, object] = field(default_factory=dict)
+    solver: SolverReport = field(default_factory=lambda: SolverReport("none"))
     cpa: CPAResult | None = None
 
-    def predict(self, poses) -> Array:  # noqa: ANN001 - Poses
+    def predict(self, poses: Poses) -> Array:
         """Target points (n, 3) [m] in the tracker frame."""
         return self.model.target_points(self.parameters, poses)
+
+    def to_dict(self, recording: Recording) -> dict[str, Any]:
+        """The PARAMS.json document (msgs_doc/parameters.md) of this calibration from
+        `recording` (its sources, counts and warnings go into the document)."""
+        from robot_calib.identify.params_file import calibration_to_dict
+
+        return calibration_to_dict(self, recording)
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any], where: str = "PARAMS.json") -> Calibration:
+        """The calibration of a PARAMS.json document: model, parameters, 1-sigma, in-sample
+        accuracy and solver report (the per-point residuals, identifiability evidence and
+        CPA circles are not in the file: residuals is empty, the others None)."""
+        from robot_calib.identify.params_file import params_from_dict
+
+        model, params = params_from_dict(doc, where)
+        try:
+            std = np.array([float(r.get("std", 0.0)) for r in doc["parameters"]])
+            acc = Accuracy.from_dict(doc["residuals"])
+            solver = SolverReport.from_dict(doc.get("solver") or {"method": "unknown"})
+        except (KeyError, TypeError, ValueError, RobotCalibError) as exc:
+            raise InputError(f"{where}: malformed parameter file ({exc})") from None
+        return cls(str(doc.get("model", "")), model, params, std, acc, np.empty((0, 3)),
+                   solver=solver)  # fmt: skip
 
 
 def _from_fit(name: str, model: KinematicModel, fit: FitResult, points: Array,
@@ -136,7 +162,7 @@ def calibrate(
             np.zeros(len(cpa.parameters)),
             accuracy(points, predicted),
             predicted - points,
-            solver={"method": "circle point analysis (seed section 5)"},
+            solver=SolverReport("circle point analysis (seed section 5)"),
             cpa=cpa,
         )
     if start is not None:

@@ -27,8 +27,42 @@ from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses
+from robot_calib.records import Record
 
 Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class SolverReport(Record):
+    """How the parameters were found: the PARAMS.json `solver` section.
+
+    method : the algorithm; objective : what it minimised (None for closed forms such as
+    CPA); the rest is scipy `least_squares`'s result (None where no solver ran):
+    status : its termination code (> 0 converged, 0 max evaluations, -1 bad input);
+    message : its reason in words; success : status > 0; nfev, njev : function and
+    Jacobian evaluations it made; optimality : first-order optimality (gradient
+    infinity-norm at the solution); cost_m2 : half the sum of squared residuals [m^2];
+    evaluations : model evaluations of ours (residuals and Jacobian together);
+    time_s : wall time of the fit [s].
+    """
+
+    method: str
+    objective: str | None = None
+    status: int | None = None
+    message: str | None = None
+    success: bool | None = None
+    nfev: int | None = None
+    njev: int | None = None
+    optimality: float | None = None
+    cost_m2: float | None = None
+    evaluations: int | None = None
+    time_s: float | None = None
+
+    def line(self) -> str:
+        """One human line, e.g. 'solver: `ftol` ... (12 evaluations, 0.081 s)'."""
+        if self.time_s is None:
+            return f"solver: {self.method}"
+        return f"solver: {self.message} ({self.evaluations} evaluations, {self.time_s:.3f} s)"
 
 
 @dataclass(frozen=True)
@@ -36,13 +70,13 @@ class FitResult:
     """parameters: fitted vector (fixed flags and reasons included); std : (P,) 1-sigma of
     each parameter in its unit (0 for fixed), from the objective's residuals;
     residuals : (n, 3) predicted - measured points [m] (whatever the objective);
-    identifiability of the free set; solver : status, message, evaluations, cost, time."""
+    identifiability of the free set; solver : scipy's whole result and our timing."""
 
     parameters: ParameterVector
     std: Array
     residuals: Array
     identifiability: Identifiability
-    solver: dict[str, object]
+    solver: SolverReport
 
 
 BLOCK_POSES = 5000  # Jacobian evaluated in blocks: its temporaries stay in cache (linear time)
@@ -126,7 +160,7 @@ def fit_model(
         return residual
 
     x = params.pack()
-    status, message = 0, "no free parameters"
+    status, message, nfev, njev, optimality = 0, "no free parameters", 0, 0, 0.0
     if len(x):
         solution = least_squares(
             fun,
@@ -140,6 +174,8 @@ def fit_model(
             max_nfev=100 * (len(x) + 1),
         )
         x, status, message = solution.x, int(solution.status), str(solution.message)
+        nfev, njev = int(solution.nfev), int(solution.njev or 0)
+        optimality = float(solution.optimality)
     residual, jac_free = problem.evaluate(x)
     fitted = params.unpack(x)
     std = np.zeros(len(fitted))
@@ -150,13 +186,17 @@ def fit_model(
         std,
         problem.predicted - points,
         describe(jac_free, fixed),
-        {
-            "method": "levenberg-marquardt (scipy least_squares, MINPACK lmder)",
-            "objective": objective.name,
-            "status": status,
-            "message": message,
-            "evaluations": problem.evaluations,
-            "cost_m2": float(0.5 * residual @ residual),
-            "time_s": time.perf_counter() - started,
-        },
+        SolverReport(
+            method="levenberg-marquardt (scipy least_squares, MINPACK lmder)",
+            objective=objective.name,
+            status=status,
+            message=message,
+            success=status > 0,
+            nfev=nfev,
+            njev=njev,
+            optimality=optimality,
+            cost_m2=float(0.5 * residual @ residual),
+            evaluations=problem.evaluations,
+            time_s=time.perf_counter() - started,
+        ),
     )

@@ -6,19 +6,22 @@ Values are SI (m, rad); the summary printed for people is in mm and deg, labelle
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
-from robot_calib.identify.calibrate import Calibration
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
-from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
+
+if TYPE_CHECKING:  # light at run time: reading a parameter file needs no scipy
+    from robot_calib.identify.calibrate import Calibration
+    from robot_calib.measurements import Recording
 
 FORMAT = "robot_calib.params/1"
 
@@ -50,7 +53,7 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
             if not p.free
         ],
         "residuals": cal.accuracy.to_dict(),
-        "solver": cal.solver,
+        "solver": cal.solver.to_dict(),
         "recordings": list(recording.sources),
         "measurements": {
             "paired": len(recording),
@@ -96,9 +99,7 @@ def write_json_atomic(doc: dict[str, Any], path: Path) -> None:
     write_text_atomic(path, json.dumps(doc, indent=2) + "\n")
 
 
-def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict[str, Any]]:
-    """The forward model and parameters of a PARAMS.json (and the whole document)."""
-    path = Path(path)
+def _read_document(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise InputError(f"{path}: no such parameter file")
     try:
@@ -107,6 +108,13 @@ def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict
         raise InputError(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise InputError(f"{path}: not a robot_calib parameter file (format {FORMAT})")
+    return doc
+
+
+def params_from_dict(
+    doc: Mapping[str, Any], where: str = "PARAMS.json"
+) -> tuple[KinematicModel, ParameterVector]:
+    """The forward model and parameters of a PARAMS.json document; errors name `where`."""
     try:
         robot = load_robot(doc["robot"])
         effects = tuple(effect_from_dict(e) for e in doc.get("effects", []))
@@ -117,10 +125,28 @@ def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict
             missing = sorted(set(expected) - set(params.names))
             raise ParameterError(f"parameters do not match the model (missing {missing[:5]})")
     except (KeyError, TypeError) as exc:
-        raise InputError(f"{path}: malformed parameter file ({exc})") from None
+        raise InputError(f"{where}: malformed parameter file ({exc})") from None
     except RobotCalibError as exc:
-        raise InputError(f"{path}: {exc}") from None
+        raise InputError(f"{where}: {exc}") from None
+    return model, params
+
+
+def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict[str, Any]]:
+    """The forward model and parameters of a PARAMS.json (and the whole document).
+
+    Light on purpose (no scipy): `predict` reads parameter files through it."""
+    path = Path(path)
+    doc = _read_document(path)
+    model, params = params_from_dict(doc, str(path))
     return model, params, doc
+
+
+def load_calibration(path: str | Path) -> Calibration:
+    """The `Calibration` of a PARAMS.json file (see `Calibration.from_dict`)."""
+    from robot_calib.identify import calibrate  # scipy: only when a Calibration is wanted
+
+    path = Path(path)
+    return calibrate.Calibration.from_dict(_read_document(path), str(path))
 
 
 def summary(cal: Calibration, recording: Recording) -> str:
@@ -154,9 +180,6 @@ def summary(cal: Calibration, recording: Recording) -> str:
             shown = ", ".join(names[:8]) + (f" (+{len(names) - 8} more)" if len(names) > 8 else "")
             lines.append(f"fixed ({reason}): {shown}")
     lines.append(f"residuals (in-sample): {cal.accuracy.line()}")
-    if cal.solver.get("time_s") is not None:
-        lines.append(
-            f"solver: {cal.solver.get('message')} ({cal.solver.get('evaluations')} evaluations, "
-            f"{float(cal.solver['time_s']):.3f} s)"  # type: ignore[arg-type]
-        )
+    if cal.solver.time_s is not None:
+        lines.append(cal.solver.line())
     return "\n".join(lines)

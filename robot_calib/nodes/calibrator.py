@@ -39,10 +39,10 @@ from std_msgs.msg import ColorRGBA, Empty, Float64MultiArray, MultiArrayDimensio
 from visualization_msgs.msg import Marker, MarkerArray
 
 from robot_calib.bag.read import read_recording
-from robot_calib.diagnose.diagnosis import diagnose, diagnosis_summary
+from robot_calib.diagnose.diagnosis import diagnose
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify.calibrate import Calibration, calibrate, parse_model
-from robot_calib.identify.params_file import calibration_to_dict, summary, write_json_atomic
+from robot_calib.identify.params_file import summary, write_json_atomic
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements import PAIR_TOLERANCE_S, Recording, recording_from_stream
@@ -320,7 +320,7 @@ class CalibratorNode(Node):
         """Calibrate `recording`, write `output` if set, publish every result topic."""
         self.get_logger().info(recording.summary())
         cal = calibrate(recording, self.robot, self.model_spec, self.ecc_order, log=self._log)
-        doc = calibration_to_dict(cal, recording)
+        doc = cal.to_dict(recording)
         if self.output:
             try:
                 write_json_atomic(doc, Path(self.output))
@@ -349,11 +349,11 @@ class CalibratorNode(Node):
         if self.holdout_bags:
             holdout = read_recording(self.holdout_bags, self.robot, self.pair_tolerance,
                                      log=self._log)  # fmt: skip
-        doc, _ = diagnose(recording, self.robot, holdout, log=None)
-        self.diagnosis = doc
-        self._result_publishers["diagnosis"].publish(String(data=json.dumps(doc)))
-        self._result_publishers["diagnosis_summary"].publish(String(data=diagnosis_summary(doc)))
-        self.get_logger().info(diagnosis_summary(doc))
+        diagnosis, _ = diagnose(recording, self.robot, holdout, log=None)
+        self.diagnosis = diagnosis
+        self._result_publishers["diagnosis"].publish(String(data=json.dumps(diagnosis.to_dict())))
+        self._result_publishers["diagnosis_summary"].publish(String(data=diagnosis.summary()))
+        self.get_logger().info(diagnosis.summary())
 
     def _fail(self, exc: RobotCalibError) -> None:
         self.error = exc

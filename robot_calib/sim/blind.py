@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.diagnose.diagnosis import diagnose
+from robot_calib.diagnose.diagnosis import Diagnosis, diagnose
 from robot_calib.effects import EFFECTS, Effect, effect_class
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import Recording, recording_from_arrays
@@ -71,26 +71,22 @@ def make_case(effect: str, seed: int, n_holdout: int = 200) -> Case:
                 _record(world, holdout_plan, rng))  # fmt: skip
 
 
-def judge(case: Case, doc: dict[str, Any]) -> dict[str, Any]:
+def judge(case: Case, diagnosis: Diagnosis) -> dict[str, Any]:
     """Did the diagnosis name the withheld effect and its joints, and reach the floor?"""
-    dom = doc["dominant_effect"]
-    ratio = doc["unexplained"]["ratio_to_noise_floor"]
+    dom = diagnosis.dominant_effect
+    ratio = diagnosis.unexplained.ratio_to_noise_floor
     outside = case.effect != NONE and not effect_class(case.effect).in_vocabulary
     if case.effect == NONE:
         named = dom is None
     elif outside:  # no model can name it: the right joints are the answer
-        named = dom is not None and list(case.joints) == dom["joints"]
+        named = dom is not None and list(case.joints) == dom.joints
     else:
-        named = (
-            dom is not None
-            and dom["effect"] == case.effect
-            and (dom["joints"] == list(case.joints))
-        )
+        named = dom is not None and dom.effect == case.effect and (dom.joints == list(case.joints))
     at_floor = ratio <= FLOOR_FACTOR
     return {
         "effect": case.effect,
         "joints": list(case.joints),
-        "answer": dom,
+        "answer": None if dom is None else dom.to_dict(),
         "named": bool(named),
         "ratio_to_floor": ratio,
         "at_floor": bool(at_floor),
@@ -101,5 +97,5 @@ def judge(case: Case, doc: dict[str, Any]) -> dict[str, Any]:
 def run_case(effect: str, seed: int) -> dict[str, Any]:
     """Make, diagnose and judge one blind case."""
     case = make_case(effect, seed)
-    doc, _ = diagnose(case.calibration, load_world().model.robot, case.holdout)
-    return judge(case, doc)
+    diagnosis, _ = diagnose(case.calibration, load_world().model.robot, case.holdout)
+    return judge(case, diagnosis)
