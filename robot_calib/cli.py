@@ -9,7 +9,6 @@ import argparse
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -17,11 +16,19 @@ import numpy as np
 
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.kinematics.description import RobotDescription, load_robot
+from robot_calib.measurements import PAIR_TOLERANCE_S
+from robot_calib.pipeline import (
+    DEFAULT_PLAN,
+    DEFAULT_ROBOT,
+    N_RANDOM_POSES,
+    RUN_HOLDOUT_POSES,
+    RUN_PLAN,
+    new_file_path,
+    output_path,
+)
 
 if TYPE_CHECKING:
-    from robot_calib.effects import Effect
-
-DEFAULT_ROBOT = "kr5_sixx_r650"
+    from robot_calib.diagnose.diagnosis import Diagnosis
 
 
 def _robot_table(robot: RobotDescription) -> str:
@@ -41,201 +48,8 @@ def _robot_table(robot: RobotDescription) -> str:
     return "\n".join(lines)
 
 
-RUN_MODELS = ("nominal", "cpa", "geometric")
-
-
-def cmd_run(args: argparse.Namespace) -> int:
-    """The main job on built-in defaults: simulate + record a calibration bag and a hold-out
-    bag, calibrate the models of the ladder, score them on the hold-out poses. Every run
-    writes a new folder under --output."""
-    from robot_calib.accuracy import accuracy
-    from robot_calib.bag.read import read_recording
-    from robot_calib.identify.calibrate import calibrate
-    from robot_calib.identify.params_file import summary, write_json_atomic
-
-    robot = load_robot(args.robot)
-    out = Path(args.output) / time.strftime("run-%Y%m%d-%H%M%S")
-    out.mkdir(parents=True, exist_ok=False)
-    print(_robot_table(robot))
-    bag, holdout = out / "calibration.mcap", out / "holdout.mcap"
-    steps = 5
-    print(f"[1/{steps}] simulate + record: {args.plan} in the default world -> {bag}")
-    from robot_calib.effects import MAIN_JOB_EFFECTS
-
-    effects = MAIN_JOB_EFFECTS if args.effects is None else args.effects
-    base = dict(world=None, effects=effects, n_random=args.holdout, robot=args.robot)
-    cmd_simulate(argparse.Namespace(output=str(bag), seed=args.seed, plan=args.plan, **base))
-    print(f"[2/{steps}] simulate + record: {args.holdout} random hold-out poses -> {holdout}")
-    base["world"] = str(bag.with_suffix(".world.yaml"))
-    base["effects"] = []
-    cmd_simulate(
-        argparse.Namespace(output=str(holdout), seed=args.seed + 1, plan="random", **base)
-    )
-    recording = read_recording([bag], robot, log=_log)
-    held = read_recording([holdout], robot, log=_log)
-    print(f"[3/{steps}] calibrate: {', '.join(RUN_MODELS)}")
-    rows = []
-    for name in RUN_MODELS:
-        cal = calibrate(recording, robot, name, log=_log)
-        write_json_atomic(cal.to_dict(recording), out / f"params_{name}.json")
-        if name == "geometric":
-            print(summary(cal, recording))
-        rows.append((name, cal.accuracy, accuracy(held.points, cal.predict(held.poses))))
-    print(
-        f"[4/{steps}] accuracy (seed criterion: pairwise distance errors; absolute: tracker frame)"
-    )
-    print(f"{'model':<12}{'in-sample mean/max [mm]':>26}{'hold-out mean/max [mm]':>26}"
-          f"{'hold-out abs mean [mm]':>25}")  # fmt: skip
-    for name, fit, test in rows:
-        print(
-            f"{name:<12}{fit.pairwise_mean_mm:>15.4f} / {fit.pairwise_max_mm:<8.4f}"
-            f"{test.pairwise_mean_mm:>15.4f} / {test.pairwise_max_mm:<8.4f}"
-            f"{test.absolute_mean_mm:>17.4f}"
-        )
-    print(f"[5/{steps}] diagnose the sim-to-real gap (hold-out: {holdout.name})")
-    cmd_diagnose(
-        argparse.Namespace(
-            bags=[str(bag)],
-            holdout=[str(holdout)],
-            pair_tolerance=0.05,
-            output=str(out / "diagnosis.json"),
-            robot=args.robot,
-        )
-    )
-    print(f"done: {out} (report: {out / 'diagnosis.md'})")
-    return 0
-
-
-def parse_sim_effect(text: str, n_joints: int) -> tuple[Effect, float | None]:
-    """An effect of `simulate --effects`: its text form (`parse_effect`, e.g. 'backlash:4',
-    'eccentricity:1,2', 'thermal_drift') with an optional '=VALUE' [SI] for all its terms,
-    e.g. 'compliance:2=2e-5'."""
-    from robot_calib.effects import effect_class, option_types, parse_effect
-
-    value = None
-    options = option_types(effect_class(text.split(":")[0].split("=")[0]))
-    spec, sep, raw = text.rpartition("=")
-    if sep and spec.split(":")[-1] not in options:  # '=VALUE', not an option's 'key=value'
-        try:
-            value = float(raw)
-        except ValueError:
-            raise InputError(f"--effects {text}: value must be a number (SI)") from None
-        text = spec
-    return parse_effect(text, n_joints), value
-
-
-def cmd_simulate(args: argparse.Namespace) -> int:
-    """Simulate a plan in a world and record the bag (+ the world's truth beside it)."""
-    from robot_calib.sim.plans import PLAN_NAMES
-    from robot_calib.sim.world import build_world, load_world, save_world, with_effect
-
-    if args.plan not in PLAN_NAMES:
-        raise InputError(f"--plan {args.plan}: unknown plan (known: {', '.join(PLAN_NAMES)})")
-    output = _new_bag_path(args.output)
-    if args.world is None and args.robot != DEFAULT_ROBOT:
-        # Another robot without a world file: its nominal geometry in the default set-up.
-        world = build_world({"robot": args.robot, "geometry": "nominal"}, f"--robot {args.robot}")
-    else:
-        world = load_world(args.world)
-    if args.seed is not None:
-        world = replace(world, seed=args.seed)
-    for spec in args.effects or []:
-        effect, value = parse_sim_effect(spec, world.model.robot.n_joints)
-        values = effect.default_values(world.model.robot)
-        if value is not None:
-            values = {k: value for k in values}
-        world = with_effect(world, effect, values)
-    world_file = output.with_suffix(".world.yaml")
-    save_world(world, world_file)
-    from robot_calib.nodes.simulate import simulate_bag
-
-    started = time.monotonic()
-    last = [0.0]
-
-    def progress(done: int, total: int) -> None:
-        if time.monotonic() - last[0] > 1.0 or done == total:
-            last[0] = time.monotonic()
-            print(f"  {args.plan}: {done}/{total} poses", file=sys.stderr)
-
-    try:
-        counts = simulate_bag(
-            output,
-            args.plan,
-            world_file,
-            -1 if args.seed is None else args.seed,
-            args.n_random,
-            progress,
-        )
-    except BaseException:  # nothing written half-way: a partial simulation is no recording
-        world_file.unlink(missing_ok=True)
-        output.unlink(missing_ok=True)
-        raise
-    effects = ", ".join(e.label for e in world.effects) or "none"
-    print(
-        f"{output}: {', '.join(f'{t}={n}' for t, n in counts.items())} messages "
-        f"({args.plan}, effects: {effects}) in {time.monotonic() - started:.1f} s; "
-        f"truth in {world_file}"
-    )
-    return 0
-
-
-def _log(message: str) -> None:
-    print(message, file=sys.stderr)
-
-
-def _output_path(raw: str, what: str) -> Path:
-    path = Path(raw)
-    if not path.parent.is_dir():
-        raise InputError(f"{path.parent}: no such folder for {what}")
-    return path
-
-
-def _new_bag_path(raw: str) -> Path:
-    """The path of a bag to create: its folder must exist, the file must not."""
-    path = Path(raw)
-    if path.exists():
-        raise InputError(f"{path}: exists, will not overwrite a recording")
-    return _output_path(raw, "the bag")
-
-
-def cmd_calibrate(args: argparse.Namespace) -> int:
-    """Identify a model from bags; write PARAMS.json; print a summary in mm/deg."""
-    from robot_calib.bag.read import read_recording
-    from robot_calib.identify.calibrate import calibrate, parse_model
-    from robot_calib.identify.params_file import summary, write_json_atomic
-
-    robot = load_robot(args.robot)
-    parse_model(args.model, robot, args.ecc_order)  # bad --model fails before any reading
-    output = _output_path(args.output, "PARAMS.json")
-    recording = read_recording(args.bags, robot, args.pair_tolerance, log=_log)
-    started = time.perf_counter()
-    cal = calibrate(
-        recording, robot, args.model, args.ecc_order, log=_log, objective=args.objective
-    )
-    print(summary(cal, recording))
-    write_json_atomic(cal.to_dict(recording), output)
-    print(f"{output}: {cal.name} in {time.perf_counter() - started:.2f} s")
-    return 0
-
-
-def cmd_diagnose(args: argparse.Namespace) -> int:
-    """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots."""
-    from robot_calib.bag.read import read_recording
-    from robot_calib.diagnose.diagnosis import diagnose
-    from robot_calib.diagnose.report import write_report
-    from robot_calib.identify.params_file import write_json_atomic
-
-    robot = load_robot(args.robot)
-    output = _output_path(args.output, "DIAGNOSIS.json")
-    recording = read_recording(args.bags, robot, args.pair_tolerance, log=_log)
-    holdout = None
-    if args.holdout:
-        holdout = read_recording(args.holdout, robot, args.pair_tolerance, log=_log)
-    started = time.perf_counter()
-    diagnosis, ladder = diagnose(recording, robot, holdout, log=_log)
-    write_json_atomic(diagnosis.to_dict(), output)
-    report = output.with_suffix(".md")
-    write_report(diagnosis, ladder, recording, report)
+def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: float) -> None:
+    """The diagnosis for people: the ladder (mm), the floor, the verdict, what remains."""
     dom = diagnosis.dominant_effect
     print(f"{'model':<40}{'held-out mean/max [mm]':>24}{'abs rms [mm]':>14}")
     for rung in diagnosis.ladder:
@@ -246,7 +60,101 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     print("dominant effect: " + ("null (geometric reaches the noise level)" if dom is None
                                  else f"{dom.effect} joints {dom.joints}"))  # fmt: skip
     print(f"unexplained: {diagnosis.unexplained.note}")
-    print(f"{output}, {report} in {time.perf_counter() - started:.1f} s")
+    print(f"{output}, {report} in {seconds:.1f} s")
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """The main job on built-in defaults: simulate + record a calibration bag and a hold-out
+    bag, calibrate the models of the ladder, score them on the hold-out poses, diagnose.
+    Every run writes a new folder under --output."""
+    from robot_calib import pipeline
+    from robot_calib.identify.params_file import summary
+
+    print(_robot_table(load_robot(args.robot)))
+    started = time.perf_counter()
+    result = pipeline.run(
+        args.output, args.robot, args.plan, args.effects, args.seed, args.holdout,
+        say=print, log=_log, progress=_progress(args.plan),
+    )  # fmt: skip
+    geometric = result.models["geometric"].calibration
+    print(summary(geometric, result.recording))
+    print("accuracy (seed criterion: pairwise distance errors; absolute: tracker frame)")
+    print(f"{'model':<12}{'in-sample mean/max [mm]':>26}{'hold-out mean/max [mm]':>26}"
+          f"{'hold-out abs mean [mm]':>25}")  # fmt: skip
+    for name, score in result.models.items():
+        fit, test = score.calibration.accuracy, score.holdout
+        print(
+            f"{name:<12}{fit.pairwise_mean_mm:>15.4f} / {fit.pairwise_max_mm:<8.4f}"
+            f"{test.pairwise_mean_mm:>15.4f} / {test.pairwise_max_mm:<8.4f}"
+            f"{test.absolute_mean_mm:>17.4f}"
+        )
+    seconds = time.perf_counter() - started
+    _print_diagnosis(result.diagnosis, result.folder / "diagnosis.json", result.report, seconds)
+    print(f"done: {result.folder} (report: {result.report})")
+    return 0
+
+
+def _progress(plan: str) -> Callable[[int, int], None]:
+    """A progress printer for simulations: 'plan: k/N poses' at most once a second."""
+    last = [0.0]
+
+    def progress(done: int, total: int) -> None:
+        if time.monotonic() - last[0] > 1.0 or done == total:
+            last[0] = time.monotonic()
+            print(f"  {plan}: {done}/{total} poses", file=sys.stderr)
+
+    return progress
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    """Simulate a plan in a world and record the bag (+ the world's truth beside it)."""
+    from robot_calib import pipeline
+
+    world = pipeline.simulation_world(args.world, args.robot, args.effects or (), args.seed)
+    sim = pipeline.simulate(
+        args.output, args.plan, world, args.seed, args.n_random, _progress(args.plan)
+    )
+    print(
+        f"{sim.bag}: {', '.join(f'{t}={n}' for t, n in sim.counts.items())} messages "
+        f"({args.plan}, effects: {', '.join(sim.effects) or 'none'}) in {sim.seconds:.1f} s; "
+        f"truth in {sim.world_file}"
+    )
+    return 0
+
+
+def _log(message: str) -> None:
+    print(message, file=sys.stderr)
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """Identify a model from bags; write PARAMS.json; print a summary in mm/deg."""
+    from robot_calib import pipeline
+    from robot_calib.identify.params_file import summary, write_json_atomic
+
+    robot = load_robot(args.robot)
+    output = pipeline.output_path(args.output, "PARAMS.json")
+    started = time.perf_counter()
+    cal, recording = pipeline.calibrate_bags(
+        args.bags, robot, args.model, args.ecc_order, args.objective, args.pair_tolerance, _log
+    )
+    print(summary(cal, recording))
+    write_json_atomic(cal.to_dict(recording), output)
+    print(f"{output}: {cal.name} in {time.perf_counter() - started:.2f} s")
+    return 0
+
+
+def cmd_diagnose(args: argparse.Namespace) -> int:
+    """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots."""
+    from robot_calib import pipeline
+
+    robot = load_robot(args.robot)
+    output = pipeline.output_path(args.output, "DIAGNOSIS.json")
+    started = time.perf_counter()
+    diagnosis, ladder, recording = pipeline.diagnose_bags(
+        args.bags, robot, args.holdout or (), args.pair_tolerance, _log
+    )
+    report = pipeline.write_diagnosis(diagnosis, ladder, recording, output)
+    _print_diagnosis(diagnosis, output, report, time.perf_counter() - started)
     return 0
 
 
@@ -265,7 +173,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     if preset is not None and preset.robot and args.robot == DEFAULT_ROBOT:
         robot_name = preset.robot  # the preset's robot unless --robot says otherwise
     robot = load_robot(robot_name)
-    output = _new_bag_path(args.output)
+    output = new_file_path(args.output, "the bag")
     if args.preset:
         if args.preset not in PRESETS:
             raise InputError(f"--preset {args.preset}: known presets: {', '.join(PRESETS)}")
@@ -319,7 +227,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
             f"{args.params}: identified for robot {model.robot.name}, not --robot {args.robot}"
         )
     poses = read_joints_csv(args.joints, model.robot.n_joints)
-    output = _output_path(args.output, "POINTS.csv")
+    output = output_path(args.output, "POINTS.csv")
     write_points_csv(model.target_points(params, poses), output)
     print(f"{output}: {len(poses)} points (m, laser_tracker frame)")
     return 0
@@ -356,8 +264,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim = add("simulate", cmd_simulate, "simulate a measurement plan and record an MCAP bag")
     sim.add_argument(
         "--plan",
-        default="paper-test3",
-        help="paper-test1..6 (seed Table 2), random, iso9283 (default paper-test3)",
+        default=DEFAULT_PLAN,
+        help=f"paper-test1..6 (seed Table 2), random, iso9283 (default {DEFAULT_PLAN})",
     )
     sim.add_argument("--world", help="world YAML file (default: the built-in default world)")
     sim.add_argument(
@@ -368,7 +276,9 @@ def build_parser() -> argparse.ArgumentParser:
         "thermal_drift compliance:2=2e-5 (default magnitudes unless =VALUE)",
     )
     sim.add_argument("--seed", type=int, help="random seed of noise and plan")
-    sim.add_argument("--n-random", type=int, default=200, help="poses of the random plan")
+    sim.add_argument(
+        "--n-random", type=int, default=N_RANDOM_POSES, help="poses of the random plan"
+    )
     sim.add_argument("-o", "--output", required=True, help="bag to write (BAG.mcap)")
 
     cal = add("calibrate", cmd_calibrate, "identify a model from bags -> PARAMS.json")
@@ -388,7 +298,10 @@ def build_parser() -> argparse.ArgumentParser:
         "distances anchored on the CPA centres of circles 1, 3, 5 (O(N^2))",
     )
     cal.add_argument(
-        "--pair-tolerance", type=float, default=0.05, help="point/joint-state pairing [s]"
+        "--pair-tolerance",
+        type=float,
+        default=PAIR_TOLERANCE_S,
+        help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
     )
     cal.add_argument("-o", "--output", required=True, help="PARAMS.json to write")
 
@@ -396,7 +309,10 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
     diag.add_argument("--holdout", nargs="*", metavar="BAG", help="hold-out bag(s): scored only")
     diag.add_argument(
-        "--pair-tolerance", type=float, default=0.05, help="point/joint-state pairing [s]"
+        "--pair-tolerance",
+        type=float,
+        default=PAIR_TOLERANCE_S,
+        help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
     )
     diag.add_argument("-o", "--output", required=True, help="DIAGNOSIS.json to write")
 
@@ -422,14 +338,19 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = add("run", cmd_run, "the main job on built-in defaults")
     run.add_argument("-o", "--output", default="out", help="output folder (default out/)")
-    run.add_argument("--plan", default="paper-test2", help="calibration plan (paper-test2)")
+    run.add_argument("--plan", default=RUN_PLAN, help=f"calibration plan ({RUN_PLAN})")
     run.add_argument(
         "--effects",
         nargs="*",
         help="effects of the simulated robot, as for simulate (default: joint-4 backlash)",
     )
     run.add_argument("--seed", type=int, default=0, help="random seed")
-    run.add_argument("--holdout", type=int, default=200, help="random hold-out poses (200)")
+    run.add_argument(
+        "--holdout",
+        type=int,
+        default=RUN_HOLDOUT_POSES,
+        help=f"random hold-out poses ({RUN_HOLDOUT_POSES})",
+    )
     return parser
 
 

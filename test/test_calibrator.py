@@ -343,3 +343,35 @@ def test_bag_mode_runs_the_diagnosis_and_latches_its_summary(
     assert doc["dominant_effect"] == {"effect": "backlash", "joints": [4]}
     assert doc["scored_on"] == "hold-out bags"
     assert "dominant effect: backlash on joints [4]" in got["diagnosis_summary"]
+
+
+def test_node_answers_while_it_solves(context: Context, tmp_path: Path) -> None:
+    """The solve runs in its own callback group: under a MultiThreadedExecutor the node's
+    parameter service answers while a calibration + diagnosis is still running."""
+    from rcl_interfaces.srv import GetParameters
+    from rclpy.executors import MultiThreadedExecutor
+
+    calibrator = CalibratorNode(
+        bags=[SAMPLE], context=context, parameter_overrides=[Parameter("diagnose", value=True)]
+    )
+    client_node = Node("asker", context=context)
+    client = client_node.create_client(GetParameters, "/calibrator/get_parameters")
+    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    executor.add_node(calibrator)
+    executor.add_node(client_node)
+    answered_while_busy: list[bool] = []
+    try:
+        assert client.wait_for_service(timeout_sec=TIMEOUT_S)
+        spin_until(executor, lambda: calibrator.busy or calibrator.solves > 0)
+        assert calibrator.busy, "the solve ended before the node could be asked"
+        future = client.call_async(GetParameters.Request(names=["model", "robot"]))
+        future.add_done_callback(lambda _f: answered_while_busy.append(calibrator.busy))
+        spin_until(executor, future.done)
+        spin_until(executor, lambda: calibrator.solves > 0 or calibrator.error is not None)
+    finally:
+        executor.shutdown()
+        calibrator.destroy_node()
+        client_node.destroy_node()
+    assert [v.string_value for v in future.result().values] == ["geometric", "kr5_sixx_r650"]
+    assert answered_while_busy == [True]
+    assert calibrator.error is None and calibrator.diagnosis is not None

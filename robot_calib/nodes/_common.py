@@ -13,7 +13,12 @@ from typing import Any, TypeVar
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.exceptions import ParameterException, ParameterUninitializedException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import (
+    Executor,
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    SingleThreadedExecutor,
+)
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
@@ -108,6 +113,7 @@ def run_node(
     done: Callable[[N], bool] | None = None,
     on_stop: Callable[[N], Any] | None = None,
     name: str | None = None,
+    multithreaded: bool = False,
 ) -> int:
     """Run one node alone until SIGINT, SIGTERM, external shutdown or `done(node)`.
 
@@ -115,6 +121,8 @@ def run_node(
     installed), so a callback is never interrupted half-way; the loop then stops, calls
     `on_stop(node)` (e.g. finalise a file), destroys the node and shuts rclpy down.
     Returns the exit status: 0, or 2 for bad input (one line on stderr: "NAME: error: …").
+    multithreaded: spin a MultiThreadedExecutor, for a node whose long callbacks sit in
+    their own callback group (the calibrator); otherwise one thread keeps callbacks ordered.
     """
     received: list[int] = []
 
@@ -131,7 +139,7 @@ def run_node(
     name = name or getattr(factory, "__name__", "node")
     try:
         node = factory()
-        executor = SingleThreadedExecutor()
+        executor: Executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
         executor.add_node(node)
         while not received and rclpy.ok() and not (done is not None and done(node)):
             executor.spin_once(timeout_sec=0.1)

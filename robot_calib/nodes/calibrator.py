@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,6 +30,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from diagnostic_msgs.srv import SelfTest
 from geometry_msgs.msg import Point, PointStamped
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
@@ -38,8 +40,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Empty, Float64MultiArray, MultiArrayDimension, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from robot_calib.bag.read import read_recording
-from robot_calib.diagnose.diagnosis import diagnose
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify.calibrate import Calibration, calibrate, parse_model
 from robot_calib.identify.params_file import summary, write_json_atomic
@@ -55,6 +55,7 @@ from robot_calib.messages import (
     velocity_signs,
 )
 from robot_calib.nodes._common import declare, overrides, run_node
+from robot_calib.pipeline import DEFAULT_ROBOT, diagnose_recordings, read_bags
 
 LATCHED = QoSProfile(  # late joiners (RViz, a test, `ros2 topic echo`) get the last result
     history=HistoryPolicy.KEEP_LAST,
@@ -124,8 +125,17 @@ class CalibratorNode(Node):
                 String, "~/diagnosis_summary", LATCHED
             )
         steady = Clock(clock_type=STEADY)
+        # Solving takes seconds: its callbacks share one mutually exclusive group (one solve
+        # at a time), apart from the default group of the subscriptions and the parameter
+        # services, so under a MultiThreadedExecutor the node keeps answering while it
+        # solves (ros2/examples callback_group.py).
+        self._solver_group = MutuallyExclusiveCallbackGroup()
+        self._lock = threading.Lock()  # the live buffers, shared with the solving thread
+        self.busy = False  # a solve is running
         if self.bags:
-            self._once = self.create_timer(0.0, self._solve_bags, clock=steady)
+            self._once = self.create_timer(
+                0.0, self._solve_bags, clock=steady, callback_group=self._solver_group
+            )
             self.get_logger().info(f"calibrating {self.model_spec} from {', '.join(self.bags)}")
             return
         self._js_ns: list[int] = []
@@ -158,11 +168,16 @@ class CalibratorNode(Node):
                     )
                 ),
             )
-        self.create_subscription(Empty, "~/solve", lambda _msg: self.solve(), 10)
-        self.create_service(SelfTest, "~/calibrate", self._on_calibrate)
+        group = self._solver_group
+        self.create_subscription(
+            Empty, "~/solve", lambda _msg: self.solve(), 10, callback_group=group
+        )
+        self.create_service(SelfTest, "~/calibrate", self._on_calibrate, callback_group=group)
         if self.solve_after_idle_s > 0:
             period = min(self.solve_after_idle_s / 4, 0.5)
-            self._idle_timer = self.create_timer(period, self._check_idle, clock=steady)
+            self._idle_timer = self.create_timer(
+                period, self._check_idle, clock=steady, callback_group=group
+            )
         idle = (
             f", or {self.solve_after_idle_s} s after the last point"
             if self.solve_after_idle_s > 0
@@ -212,7 +227,7 @@ class CalibratorNode(Node):
             self, "ecc_order", 1, "Fourier order of the eccentricity effect [1]"
         )
         robot_name: str = declare(
-            self, "robot", "kr5_sixx_r650", "built-in robot name or robot YAML file"
+            self, "robot", DEFAULT_ROBOT, "built-in robot name or robot YAML file"
         )
         self.pair_tolerance: float = declare(
             self,
@@ -287,18 +302,19 @@ class CalibratorNode(Node):
         if self.bags:
             self.get_logger().warning("~/solve ignored: the node calibrates from its bags")
             return None
-        self._unsolved = False
         names = self.robot.joint_names
+        with self._lock:  # a consistent snapshot while the subscriptions keep appending
+            self._unsolved = False
+            js_ns = np.array(self._js_ns, dtype=np.int64)
+            js_q = np.array(self._js_q).reshape(-1, len(names))
+            js_v = np.array(self._js_v).reshape(-1, len(names))
+            pt_ns = np.array(self._pt_ns, dtype=np.int64)
+            pt_xyz = np.array(self._pt_xyz).reshape(-1, 3)
         try:
             recording = recording_from_stream(
-                np.array(self._js_ns, dtype=np.int64),
-                np.array(self._js_q).reshape(-1, len(names)),
-                np.array(self._js_v).reshape(-1, len(names)),
-                np.array(self._pt_ns, dtype=np.int64),
-                np.array(self._pt_xyz).reshape(-1, 3),
-                self.pair_tolerance,
+                js_ns, js_q, js_v, pt_ns, pt_xyz, self.pair_tolerance,
                 source=f"live {JOINT_STATES_TOPIC} + {POINT_TOPIC}",
-            )
+            )  # fmt: skip
             for warning in recording.warnings:
                 self._log(warning)
             return self._calibrate(recording)
@@ -311,13 +327,20 @@ class CalibratorNode(Node):
     def _solve_bags(self) -> None:
         self._once.cancel()
         try:
-            recording = read_recording(self.bags, self.robot, self.pair_tolerance, log=self._log)
+            recording = read_bags(self.bags, self.robot, self.pair_tolerance, self._log)
             self._calibrate(recording)
         except RobotCalibError as exc:
             self._fail(exc)
 
     def _calibrate(self, recording: Recording) -> Calibration:
         """Calibrate `recording`, write `output` if set, publish every result topic."""
+        self.busy = True
+        try:
+            return self._calibrate_and_publish(recording)
+        finally:
+            self.busy = False
+
+    def _calibrate_and_publish(self, recording: Recording) -> Calibration:
         self.get_logger().info(recording.summary())
         cal = calibrate(recording, self.robot, self.model_spec, self.ecc_order, log=self._log)
         doc = cal.to_dict(recording)
@@ -347,9 +370,8 @@ class CalibratorNode(Node):
         the DIAGNOSIS.json document and its one-paragraph summary."""
         holdout = None
         if self.holdout_bags:
-            holdout = read_recording(self.holdout_bags, self.robot, self.pair_tolerance,
-                                     log=self._log)  # fmt: skip
-        diagnosis, _ = diagnose(recording, self.robot, holdout, log=None)
+            holdout = read_bags(self.holdout_bags, self.robot, self.pair_tolerance, self._log)
+        diagnosis, _ = diagnose_recordings(recording, self.robot, holdout)
         self.diagnosis = diagnosis
         self._result_publishers["diagnosis"].publish(String(data=json.dumps(diagnosis.to_dict())))
         self._result_publishers["diagnosis_summary"].publish(String(data=diagnosis.summary()))
@@ -376,9 +398,10 @@ class CalibratorNode(Node):
                 f"{exc} ({self.rejected} refused so far)", throttle_duration_sec=10.0
             )
             return
-        self._js_ns.append(stamp_to_ns(msg.header.stamp))
-        self._js_q.append(q)
-        self._js_v.append(velocity_signs(msg, names))
+        with self._lock:
+            self._js_ns.append(stamp_to_ns(msg.header.stamp))
+            self._js_q.append(q)
+            self._js_v.append(velocity_signs(msg, names))
 
     def _on_point(self, msg: PointStamped) -> None:
         xyz = np.array([msg.point.x, msg.point.y, msg.point.z])
@@ -391,10 +414,11 @@ class CalibratorNode(Node):
                 "(used as the tracker frame anyway)",
                 once=True,
             )
-        self._pt_ns.append(stamp_to_ns(msg.header.stamp))
-        self._pt_xyz.append(xyz)
-        self._last_point_s = time.monotonic()
-        self._unsolved = True
+        with self._lock:
+            self._pt_ns.append(stamp_to_ns(msg.header.stamp))
+            self._pt_xyz.append(xyz)
+            self._last_point_s = time.monotonic()
+            self._unsolved = True
 
     def _check_idle(self) -> None:
         """Solve once the points have stopped for solve_after_idle_s (the plan ended)."""
@@ -488,7 +512,9 @@ def main(args: Sequence[str] | None = None) -> int:
         started.append(CalibratorNode())
         return started[-1]
 
-    status = run_node(start, args, done=lambda node: node.failed, name="calibrator")
+    status = run_node(
+        start, args, done=lambda node: node.failed, name="calibrator", multithreaded=True
+    )
     if status == 0 and started and started[0].failed:
         assert started[0].error is not None
         return started[0].error.exit_status

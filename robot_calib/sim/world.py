@@ -17,7 +17,13 @@ from typing import Any
 import numpy as np
 import yaml
 
-from robot_calib.effects import Effect, effect_class, effect_from_dict, option_types
+from robot_calib.effects import (
+    Effect,
+    effect_class,
+    effect_from_dict,
+    option_types,
+    parse_effect,
+)
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
@@ -236,3 +242,19 @@ def with_effect(world: World, effect: Effect, values: dict[str, float] | None = 
     truth = model.parameters().with_values(dict(zip(world.truth.names, world.truth.values)))
     truth = truth.with_values(values or effect.default_values(world.model.robot))
     return replace(world, model=model, truth=truth)
+
+
+def parse_sim_effect(text: str, n_joints: int) -> tuple[Effect, float | None]:
+    """An effect of `simulate --effects`: its text form (`parse_effect`, e.g. 'backlash:4',
+    'eccentricity:1,2', 'thermal_drift') with an optional '=VALUE' [SI] for all its terms,
+    e.g. 'compliance:2=2e-5'."""
+    value = None
+    options = option_types(effect_class(text.split(":")[0].split("=")[0]))
+    spec, sep, raw = text.rpartition("=")
+    if sep and spec.split(":")[-1] not in options:  # '=VALUE', not an option's 'key=value'
+        try:
+            value = float(raw)
+        except ValueError:
+            raise InputError(f"--effects {text}: value must be a number (SI)") from None
+        text = spec
+    return parse_effect(text, n_joints), value
