@@ -2,15 +2,25 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from robot_calib.errors import RobotDescriptionError
-from robot_calib.kinematics.description import available_robots, load_robot
+from robot_calib.kinematics.description import (
+    JOINT_KEYS,
+    ROBOT_KEYS,
+    ROBOTS_DIR,
+    available_robots,
+    load_robot,
+)
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def test_builtins() -> None:
@@ -89,3 +99,91 @@ def test_cli_bad_robot_exits_2_with_one_line(tmp_path: Path, robot: str) -> None
     assert len(lines) == 1 and "error" in lines[0]
     assert robot.format(tmp=tmp_path).split("/")[-1] in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+TWO_JOINTS = "  - {theta: 0, d: 0.1, a: 0.5, alpha: 0}\n  - {theta: 0, d: 0, a: 0.4, alpha: 0%s}\n"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            "name: two_link\nefects: [compliance]\njoints:\n" + TWO_JOINTS % "",
+            r"robot\.yaml: unknown key 'efects' \(known: name, source, angle_unit, joints\)$",
+        ),
+        (
+            "nmae: two_link\njoints:\n" + TWO_JOINTS % "",
+            "unknown key 'nmae' (did you mean 'name'?)",
+        ),
+        ("joint:\n" + TWO_JOINTS % "", "unknown key 'joint' (did you mean 'joints'?)"),
+    ],
+)
+def test_unknown_top_level_key(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "robot.yaml"
+    path.write_text(text)
+    with pytest.raises(RobotDescriptionError) as info:
+        load_robot(path)
+    error = str(info.value)
+    assert "\n" not in error and error.startswith(str(path))
+    if message.endswith("$"):
+        assert re.search(message, error), error
+    else:
+        assert error.endswith(message), error
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (", mas: 3", "joint 2: unknown key 'mas' (did you mean 'mass'?)"),
+        (", alpah: 0", "joint 2: unknown key 'alpah' (did you mean 'alpha'?)"),
+        (", limit: [-1, 1]", "joint 2: unknown key 'limit' (did you mean 'limits'?)"),
+        (", stiffness: 1.0e5", "joint 2: unknown key 'stiffness' (known: name, theta, d, a,"),
+    ],
+)
+def test_unknown_joint_key(tmp_path: Path, extra: str, message: str) -> None:
+    path = tmp_path / "robot.yaml"
+    path.write_text("name: two_link\njoints:\n" + TWO_JOINTS % extra)
+    with pytest.raises(RobotDescriptionError) as info:
+        load_robot(path)
+    error = str(info.value)
+    assert "\n" not in error and error.startswith(f"{path}: ")
+    assert message in error, error
+
+
+def test_every_key_of_the_builtins_is_known() -> None:
+    for name in available_robots():
+        data = yaml.safe_load((ROBOTS_DIR / f"{name}.yaml").read_text())
+        assert set(data) <= set(ROBOT_KEYS), name
+        for joint in data["joints"]:
+            assert set(joint) <= set(JOINT_KEYS), name
+        load_robot(name)
+
+
+def test_cli_unknown_robot_key_exits_2_with_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "BAD.yaml"
+    bad.write_text("name: two_link\njoints:\n" + TWO_JOINTS % ", mas: 3")
+    out = tmp_path / "x.json"
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "robot_calib",
+            "calibrate",
+            str(REPO / "bags/paper_test3.mcap"),
+            "--robot",
+            str(bad),
+            "-o",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+        cwd=tmp_path,
+    )
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert "BAD.yaml" in lines[0] and "joint 2: unknown key 'mas'" in lines[0]
+    assert "did you mean 'mass'?" in lines[0]
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == [bad]

@@ -2,11 +2,14 @@
 
 Built-ins live in `robots/*.yaml`; a user passes a YAML file of the same format. Lengths
 are in m; angles in rad unless the file says ``angle_unit: deg`` (converted on load).
-See `robots/kr5_sixx_r650.yaml` for a commented example.
+See `robots/kr5_sixx_r650.yaml` for a commented example. Keys outside `ROBOT_KEYS` (top
+level) and `JOINT_KEYS` (each joint) are rejected, so a misspelt key is not silently ignored.
 """
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -19,6 +22,8 @@ from robot_calib.kinematics.frames import Array
 
 ROBOTS_DIR = Path(__file__).resolve().parent / "robots"
 DH_FIELDS = ("theta", "d", "a", "alpha")
+ROBOT_KEYS = ("name", "source", "angle_unit", "joints")  # top level of a robot YAML file
+JOINT_KEYS = ("name", *DH_FIELDS, "beta", "hayati", "limits", "mass", "com")  # each joint
 
 
 @dataclass(frozen=True)
@@ -92,10 +97,22 @@ def _number(value: Any, where: str) -> float:
     return float(value)
 
 
+def _reject_unknown_keys(entry: Mapping[Any, Any], known: tuple[str, ...], where: str) -> None:
+    """RobotDescriptionError naming the first key of `entry` not in `known` (and the closest
+    known key, if one is close)."""
+    for key in entry:
+        if key in known:
+            continue
+        close = difflib.get_close_matches(str(key), known, n=1)
+        hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(known)}"
+        raise RobotDescriptionError(f"{where}: unknown key {str(key)!r} ({hint})")
+
+
 def parse_robot(data: Any, source: str) -> RobotDescription:
     """Validate a loaded YAML mapping and build the description; errors name `source`."""
     if not isinstance(data, dict):
         raise RobotDescriptionError(f"{source}: expected a mapping with 'name' and 'joints'")
+    _reject_unknown_keys(data, ROBOT_KEYS, source)
     joints = data.get("joints")
     if not isinstance(joints, list) or len(joints) < 2:
         raise RobotDescriptionError(f"{source}: 'joints' must be a list of >= 2 joint entries")
@@ -110,6 +127,7 @@ def parse_robot(data: Any, source: str) -> RobotDescription:
         where = f"{source}: joint {j}"
         if not isinstance(entry, dict):
             raise RobotDescriptionError(f"{where}: expected a mapping")
+        _reject_unknown_keys(entry, JOINT_KEYS, where)
         for key in DH_FIELDS:
             if key not in entry:
                 raise RobotDescriptionError(f"{where}: missing '{key}'")
