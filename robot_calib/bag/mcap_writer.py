@@ -187,10 +187,7 @@ class BagWriter:
             )
             self._schema_ids[type_name] = schema_id
         if type_hash is None:
-            try:
-                type_hash = type_description_hash(type_name)
-            except ValueError:
-                type_hash = ""
+            type_hash = type_description_hash(type_name)
         offered = tuple(offered_qos)
         channel_id = self._writer.register_channel(
             topic=topic,
@@ -212,7 +209,7 @@ class BagWriter:
     def write(
         self,
         topic: str,
-        data: bytes,
+        data: bytes | bytearray | memoryview,
         log_time_ns: int,
         publish_time_ns: int | None = None,
         sequence: int = 0,

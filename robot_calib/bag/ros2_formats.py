@@ -22,7 +22,10 @@ import sys
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 PROFILE = "ros2"
 MESSAGE_ENCODING = "cdr"
@@ -312,26 +315,41 @@ def message_definition(type_name: str, prefixes: Sequence[Path] | None = None) -
             raise DefinitionNotFoundError(f"{msg_error} (searched {searched})") from None
 
 
-def type_description_hash(type_name: str, prefixes: Sequence[Path] | None = None) -> str:
-    """'RIHS01_<hex>' of a type from its installed type description (.json), '' if none.
+def typestore(*type_names: str) -> Typestore:
+    """A rosbags typestore with these types ('pkg/msg/Type') and their dependencies, parsed
+    from the definitions `message_definition` gives (what a bag's schema holds): CDR and
+    RIHS01 hashes are those of the installed interfaces, not of rosbags' bundled copy of
+    the distro. Raises DefinitionNotFoundError, or ValueError for a text it cannot parse."""
+    from rosbags.typesys import (
+        Stores,
+        TypesysError,
+        get_types_from_idl,
+        get_types_from_msg,
+        get_typestore,
+    )
 
-    rosidl (Iron and later) installs share/<pkg>/msg/<Type>.json with the hashes that
-    rclpy reports as `TopicEndpointInfo.topic_type_hash`.
-    """
-    prefixes = interface_prefixes() if prefixes is None else list(prefixes)
-    package, namespace, name = _split_type(type_name)
-    path = _interface_file(type_name, ".json", prefixes)
-    if path is None:
-        return ""
+    store = get_typestore(Stores.EMPTY)
+    for type_name in type_names:
+        encoding, text = message_definition(type_name)
+        try:
+            if encoding == SCHEMA_ENCODING_MSG:
+                store.register(get_types_from_msg(text, type_name))
+            else:  # sections "IDL: pkg/msg/Type\n<idl>", each after a delimiter line
+                for section in text.split(_DELIMITER)[1:]:
+                    store.register(get_types_from_idl(section.split("\n", 1)[1]))
+        except TypesysError as exc:
+            raise ValueError(f"cannot parse the definition of {type_name}: {exc}") from None
+    return store
+
+
+def type_description_hash(type_name: str) -> str:
+    """'RIHS01_<hex>' of a type (rosbags' `hash_rihs01` of `typestore(type_name)`), '' if
+    its definition is not installed. Equals the hash rclpy reports as
+    `TopicEndpointInfo.topic_type_hash` (rosidl's share/<pkg>/msg/<Type>.json)."""
     try:
-        hashes = json.loads(path.read_text(encoding="utf-8"))["type_hashes"]
-    except (OSError, ValueError, KeyError, TypeError):
+        return typestore(type_name).hash_rihs01(type_name)
+    except (DefinitionNotFoundError, ValueError, OSError):
         return ""
-    full_name = f"{package}/{namespace}/{name}"
-    for entry in hashes:
-        if isinstance(entry, dict) and entry.get("type_name") == full_name:
-            return str(entry.get("hash_string", ""))
-    return ""
 
 
 # --- the rosbag2 BagMetadata ---------------------------------------------------------------
