@@ -10,7 +10,8 @@ ROS-free (stdlib only). Each format below follows the rosbag2 source that writes
   (YAML::Dump of a sequence, metadata version 9: policy names as rmw strings, durations as
   {sec, nsec}); `topic_type_hash`: the RIHS01 type description hash.
 - metadata record `rosbag2` with key `serialized_metadata`: YAML::Dump of the BagMetadata
-  (rosbag2_storage yaml.hpp, version 9), written when the bag opens and again when it closes.
+  (rosbag2_storage yaml.hpp, version 9), written when the bag opens and again when it closes
+  (`BagWriter` builds it).
 """
 
 from __future__ import annotations
@@ -33,8 +34,6 @@ SCHEMA_ENCODING_MSG = "ros2msg"
 SCHEMA_ENCODING_IDL = "ros2idl"
 METADATA_NAME = "rosbag2"
 METADATA_KEY = "serialized_metadata"
-METADATA_VERSION = 9
-STORAGE_IDENTIFIER = "mcap"
 
 Duration = tuple[int, int]
 """An rmw_time_t: (sec, nsec)."""
@@ -350,68 +349,3 @@ def type_description_hash(type_name: str) -> str:
         return typestore(type_name).hash_rihs01(type_name)
     except (DefinitionNotFoundError, ValueError, OSError):
         return ""
-
-
-# --- the rosbag2 BagMetadata ---------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class TopicMetadata:
-    """One topic as rosbag2's BagMetadata lists it."""
-
-    name: str
-    type: str
-    offered_qos_profiles: tuple[QosProfile, ...] = ()
-    type_description_hash: str = ""
-    message_count: int = 0
-    serialization_format: str = MESSAGE_ENCODING
-
-
-def bag_metadata(
-    *,
-    file_name: str,
-    topics: Sequence[TopicMetadata],
-    starting_time_ns: int | None,
-    duration_ns: int,
-    ros_distro: str,
-) -> dict[str, Any]:
-    """BagMetadata (version 9) as rosbag2's YAML encoder orders it.
-
-    starting_time_ns: first log time [ns], None before any message (rosbag2 then writes
-    the largest int64, its `nanoseconds::max()`). file_name: the .mcap file's base name.
-    """
-    start = 2**63 - 1 if starting_time_ns is None else int(starting_time_ns)
-    count = sum(t.message_count for t in topics)
-    return {
-        "version": METADATA_VERSION,
-        "storage_identifier": STORAGE_IDENTIFIER,
-        "duration": {"nanoseconds": int(duration_ns)},
-        "starting_time": {"nanoseconds_since_epoch": start},
-        "message_count": count,
-        "topics_with_message_count": [
-            {
-                "topic_metadata": {
-                    "name": t.name,
-                    "type": t.type,
-                    "serialization_format": t.serialization_format,
-                    "offered_qos_profiles": [p.to_dict() for p in t.offered_qos_profiles],
-                    "type_description_hash": t.type_description_hash,
-                },
-                "message_count": t.message_count,
-            }
-            for t in topics
-        ],
-        "compression_format": "",
-        "compression_mode": "",
-        "relative_file_paths": [file_name],
-        "files": [
-            {
-                "path": file_name,
-                "starting_time": {"nanoseconds_since_epoch": start},
-                "duration": {"nanoseconds": int(duration_ns)},
-                "message_count": count,
-            }
-        ],
-        "custom_data": None,
-        "ros_distro": ros_distro,
-    }
