@@ -21,7 +21,7 @@ import os
 import re
 import sys
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -54,6 +54,13 @@ LIVELINESS = (
     "best_available",
 )
 
+_POLICIES = {
+    "history": HISTORY,
+    "reliability": RELIABILITY,
+    "durability": DURABILITY,
+    "liveliness": LIVELINESS,
+}
+_DURATIONS = ("deadline", "lifespan", "liveliness_lease_duration")
 _DELIMITER = "=" * 80 + "\n"
 _PRIMITIVES = frozenset(
     ("bool", "byte", "char", "float32", "float64", "string")
@@ -86,37 +93,20 @@ class QosProfile:
     avoid_ros_namespace_conventions: bool = False
 
     def to_dict(self) -> dict[str, Any]:
-        """The YAML mapping, keys in rosbag2's order."""
-        return {
-            "history": self.history,
-            "depth": self.depth,
-            "reliability": self.reliability,
-            "durability": self.durability,
-            "deadline": {"sec": self.deadline[0], "nsec": self.deadline[1]},
-            "lifespan": {"sec": self.lifespan[0], "nsec": self.lifespan[1]},
-            "liveliness": self.liveliness,
-            "liveliness_lease_duration": {
-                "sec": self.liveliness_lease_duration[0],
-                "nsec": self.liveliness_lease_duration[1],
-            },
-            "avoid_ros_namespace_conventions": self.avoid_ros_namespace_conventions,
-        }
+        """The YAML mapping, keys in rosbag2's order (the fields' order)."""
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        return values | {key: dict(zip(("sec", "nsec"), values[key])) for key in _DURATIONS}
 
     @classmethod
     def from_dict(cls, item: dict[str, Any]) -> QosProfile:
         """Parse one profile (metadata v9 names or v<=8 integers); ValueError if malformed."""
         try:
-            return cls(
-                history=_policy(item["history"], HISTORY),
-                depth=int(item["depth"]),
-                reliability=_policy(item["reliability"], RELIABILITY),
-                durability=_policy(item["durability"], DURABILITY),
-                deadline=_duration(item["deadline"]),
-                lifespan=_duration(item["lifespan"]),
-                liveliness=_policy(item["liveliness"], LIVELINESS),
-                liveliness_lease_duration=_duration(item["liveliness_lease_duration"]),
-                avoid_ros_namespace_conventions=bool(item["avoid_ros_namespace_conventions"]),
-            )
+            values = {f.name: item[f.name] for f in fields(cls)}
+            values |= {key: _policy(values[key], names) for key, names in _POLICIES.items()}
+            values |= {key: _duration(values[key]) for key in _DURATIONS}
+            values["depth"] = int(values["depth"])
+            key = "avoid_ros_namespace_conventions"
+            return cls(**values | {key: bool(values[key])})
         except (KeyError, TypeError, IndexError) as exc:
             raise ValueError(f"malformed QoS profile {item!r}: {exc!r}") from None
 
