@@ -154,6 +154,8 @@ def qos_profiles_from_yaml(text: str) -> tuple[QosProfile, ...]:
 
 
 # --- YAML as yaml-cpp's YAML::Dump writes it (block style, indented sequences) ------------
+# Not rosbags' emitter (ruamel.yaml): it sorts keys, writes '' and null, does not indent
+# sequences under a key and puts an empty list on the key's line; the bytes would change.
 
 _PLAIN = re.compile(r"[A-Za-z_/][A-Za-z0-9_./\-]*\Z")
 _YAML_WORDS = frozenset(("true", "false", "yes", "no", "on", "off", "y", "n", "null", "~"))
@@ -205,6 +207,8 @@ def dump_yaml(value: Any) -> str:
 
 
 # --- message definitions and type hashes from the installed interface files ----------------
+# The definition text is not rosbags' generate_msgdef: that one is rebuilt from the parsed
+# fields (no comments or blank lines, another dependency order), rosbag2 stores the files.
 
 
 def interface_prefixes() -> list[Path]:
