@@ -14,12 +14,12 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from mcap_ros2._dynamic import serialize_dynamic
 
 from robot_calib.bag.mcap_writer import BagWriter
-from robot_calib.bag.ros2_formats import message_definition
+from robot_calib.bag.ros2_formats import typestore
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
 from robot_calib.messages import (
@@ -168,29 +168,27 @@ def write_measurement_bag(
                else np.round((time - time[0]) * 1e9).astype(np.int64))  # fmt: skip
     if np.any(np.diff(offsets) <= 0):
         raise InputError("time column must increase from row to row")
-    encode_js = _encoder(JOINT_STATE_TYPE)
-    encode_pt = _encoder(POINT_TYPE)
+    store = typestore(JOINT_STATE_TYPE, POINT_TYPE)
+    types = store.types
     with BagWriter(output) as writer:
         writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         writer.add_topic(POINT_TOPIC, POINT_TYPE)
         for qi, pi, offset in zip(q, points, offsets):
             stamp_ns = START_NS + int(offset)
-            sec, nanosec = ns_to_sec_nanosec(stamp_ns)
-            header = {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": ""}
-            js = {"header": header, "name": list(joint_names), "position": qi.tolist(),
-                  "velocity": [], "effort": []}  # fmt: skip
-            writer.write(JOINT_STATES_TOPIC, encode_js(js), stamp_ns)
-            pt = {"header": {**header, "frame_id": TRACKER_FRAME},
-                  "point": dict(zip("xyz", map(float, pi)))}  # fmt: skip
-            writer.write(POINT_TOPIC, encode_pt(pt), stamp_ns + 1)
+            stamp = types["builtin_interfaces/msg/Time"](*ns_to_sec_nanosec(stamp_ns))
+            js = types[JOINT_STATE_TYPE](
+                header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
+                name=list(joint_names), position=qi, velocity=np.empty(0), effort=np.empty(0),
+            )  # fmt: skip
+            writer.write(JOINT_STATES_TOPIC, store.serialize_cdr(js, JOINT_STATE_TYPE), stamp_ns)
+            pt = types[POINT_TYPE](
+                header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=TRACKER_FRAME),
+                point=types["geometry_msgs/msg/Point"](*map(float, pi)),
+            )
+            writer.write(POINT_TOPIC, store.serialize_cdr(pt, POINT_TYPE), stamp_ns + 1)
         return writer.counts
 
 
-def _encoder(type_name: str):  # noqa: ANN202 - mcap_ros2 encoder callable
-    _, text = message_definition(type_name)
-    return serialize_dynamic(type_name, text)[type_name]
-
-
-def with_overrides(fmt: CsvFormat, **changes: object) -> CsvFormat:
+def with_overrides(fmt: CsvFormat, **changes: Any) -> CsvFormat:
     """A copy of `fmt` with the given (non-None) fields replaced."""
     return replace(fmt, **{k: v for k, v in changes.items() if v is not None})

@@ -1,37 +1,27 @@
 """Read MCAP bags (profile `ros2`): messages as raw CDR with receive times, topics, QoS.
 
-A closed bag is read through its summary (topics, counts) and then record by record. A bag
-whose writer was killed has no summary or footer; `BagReader(path, allow_truncated=True)`
-reads it record by record up to the last complete record: every closed chunk, nothing of
-the chunk that was open. Bad input raises BagError with a one-line message naming the file.
+Records come from the `mcap` library: header and summary (topics, counts, metadata index)
+through its seeking reader, messages in file order through its stream reader. A bag whose
+writer was killed has no summary or footer; `BagReader(path, allow_truncated=True)` reads
+it up to the last complete record: every closed chunk, nothing of the chunk that was open.
+Bad input raises BagError with a one-line message naming the file.
 """
 
 from __future__ import annotations
 
 import functools
-import io
 import os
+import struct
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import IO, Any
 
-from mcap.data_stream import ReadDataStream
-from mcap.exceptions import McapError
-from mcap.opcode import Opcode
-from mcap.records import (
-    Channel,
-    Chunk,
-    Footer,
-    Header,
-    Message,
-    Metadata,
-    MetadataIndex,
-    Schema,
-    Statistics,
-)
-from mcap.stream_reader import breakup_chunk
+from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.reader import FOOTER_SIZE, make_reader
+from mcap.records import Channel, McapRecord, Message, Metadata, Schema
+from mcap.stream_reader import MAGIC_SIZE, StreamReader
 from mcap_ros2.decoder import DecoderFactory
 
 from robot_calib.bag.ros2_formats import (
@@ -44,8 +34,8 @@ from robot_calib.bag.ros2_formats import (
 from robot_calib.errors import BagError
 
 MAGIC = b"\x89MCAP0\r\n"
-_RECORD_HEAD = 9  # opcode (1) + length (8)
-_FOOTER_BODY = 20  # summary_start (8) + summary_offset_start (8) + summary_crc (4)
+_CORRUPT = (McapError, ValueError, KeyError, IndexError, EOFError, struct.error)
+"""What mcap raises on a malformed file."""
 
 
 @dataclass(frozen=True)
@@ -88,8 +78,22 @@ class BagMessage:
         return self._decoder(self.data)
 
 
-class _Truncated(Exception):
-    """The data ends inside a record."""
+class _ExactReads:
+    """A binary file whose short reads raise EndOfFile.
+
+    mcap's ReadDataStream only notices an empty read; a record cut by a crash would come
+    back short (a partial message, a chunk failing its CRC) instead of ending the file.
+    """
+
+    def __init__(self, file: IO[bytes]) -> None:
+        self._file = file
+        self.seek, self.tell, self.seekable = file.seek, file.tell, file.seekable
+
+    def read(self, size: int = -1) -> bytes:
+        data = self._file.read(size)
+        if size > 0 and len(data) < size:
+            raise EndOfFile()
+        return data
 
 
 class BagReader:
@@ -110,53 +114,56 @@ class BagReader:
         except BagError:
             self._file.close()
             raise
-        except (McapError, ValueError, KeyError, IndexError, EOFError) as exc:
+        except _CORRUPT as exc:
             self._file.close()
             raise BagError(f"{self.path}: corrupt MCAP file: {exc}") from None
 
     def _open(self, allow_truncated: bool) -> None:
-        self._size = os.fstat(self._file.fileno()).st_size
-        self._file.seek(0)
-        if self._file.read(len(MAGIC)) != MAGIC:
-            raise BagError(f"{self.path}: not an MCAP file (no MCAP magic at the start)")
-        records = self._records(len(MAGIC), self._size)
         try:
-            opcode, body = next(records)
-        except (StopIteration, _Truncated):
+            self._reader = make_reader(_ExactReads(self._file))  # type: ignore[arg-type]
+        except (InvalidMagic, EndOfFile):
+            raise BagError(f"{self.path}: not an MCAP file (no MCAP magic at the start)") from None
+        try:
+            header = self._reader.get_header()
+        except EndOfFile:
             raise BagError(f"{self.path}: truncated MCAP file (no complete header)") from None
-        if opcode != Opcode.HEADER:
-            raise BagError(f"{self.path}: MCAP file does not start with a header record")
-        header = Header.read(_stream(body))
+        except McapError:
+            raise BagError(f"{self.path}: MCAP file does not start with a header record") from None
         self.profile: str = header.profile
         self.library: str = header.library
         if self.profile != PROFILE:
             raise BagError(f"{self.path}: MCAP profile {self.profile!r} is not {PROFILE!r}")
-        self._data_start = len(MAGIC) + _RECORD_HEAD + len(body)
-        self._schemas: dict[int, Schema] = {}
-        self._channels: dict[int, Channel] = {}
-        self._counts: dict[int, int] = {}
-        self._metadata_indexes: list[MetadataIndex] = []
-        self._decoders = DecoderFactory()
-        footer = self._footer()
-        self.complete: bool = footer is not None
+        size = self._file.seek(0, os.SEEK_END)
+        self._file.seek(size - MAGIC_SIZE)
+        self.complete: bool = size >= FOOTER_SIZE + 2 * MAGIC_SIZE and self._file.read() == MAGIC
         """True if the file was closed properly (footer present)."""
-        self.has_summary: bool = footer is not None and footer.summary_start != 0
+        if not self.complete and not allow_truncated:
+            raise BagError(
+                f"{self.path}: truncated MCAP file (no footer: its writer did not close "
+                "it); open with allow_truncated=True to read its complete chunks"
+            )
+        summary = self._reader.get_summary() if self.complete else None
+        self.has_summary: bool = summary is not None
         """True if the file has a summary section (statistics and indexes)."""
-        if footer is None:
-            if not allow_truncated:
-                raise BagError(
-                    f"{self.path}: truncated MCAP file (no footer: its writer did not close "
-                    "it); open with allow_truncated=True to read its complete chunks"
-                )
-            self._data_end = self._size
-            self._scan_topics()
-        elif footer.summary_start == 0:
-            self._data_end = self._size - len(MAGIC) - _RECORD_HEAD - _FOOTER_BODY
-            self._scan_topics()
-        else:
-            self._data_end = footer.summary_start
-            self._read_summary(footer.summary_start)
-        self.topics: dict[str, TopicInfo] = self._topic_infos()
+        self._metadata_indexed = summary is not None and bool(summary.metadata_indexes)
+        self._decoders = DecoderFactory()
+        if summary is not None and summary.statistics is not None and summary.channels:
+            schemas, channels = summary.schemas, summary.channels
+            counts = dict(summary.statistics.channel_message_counts)
+        else:  # no summary, or one without statistics or channels: count by reading
+            schemas, channels, counts = {}, {}, {}
+            for record in self._records():
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+        self._schemas, self._channels = schemas, channels
+        self.topics: dict[str, TopicInfo] = {
+            channel.topic: self._topic_info(channel, counts.get(channel.id, 0))
+            for channel in channels.values()
+        }
         """Topic name -> TopicInfo, in channel order."""
 
     # --- public ---------------------------------------------------------------------------
@@ -175,16 +182,19 @@ class BagReader:
         """Messages in file order (the order the recorder received them), optionally of
         some topics only. Each call starts again at the beginning."""
         wanted = None if topics is None else set(topics)
-        try:
-            for record in self._data_records():
-                if not isinstance(record, Message):
-                    continue
-                channel = self._channels.get(record.channel_id)
+        schemas, channels = dict(self._schemas), dict(self._channels)  # a live bag grows
+        for record in self._records():
+            if isinstance(record, Schema):
+                schemas.setdefault(record.id, record)
+            elif isinstance(record, Channel):
+                channels.setdefault(record.id, record)
+            elif isinstance(record, Message):
+                channel = channels.get(record.channel_id)
                 if channel is None:
                     raise BagError(f"{self.path}: message on unknown channel {record.channel_id}")
                 if wanted is not None and channel.topic not in wanted:
                     continue
-                schema = self._schemas.get(channel.schema_id)
+                schema = schemas.get(channel.schema_id)
                 yield BagMessage(
                     topic=channel.topic,
                     type_name=schema.name if schema is not None else "",
@@ -192,33 +202,23 @@ class BagReader:
                     publish_time_ns=record.publish_time,
                     data=bytes(record.data),
                     sequence=record.sequence,
-                    _decoder=functools.partial(self._decode, channel.id),
+                    _decoder=functools.partial(self._decode, channel, schema),
                 )
-        except (McapError, ValueError, KeyError, IndexError, EOFError) as exc:
-            raise BagError(f"{self.path}: corrupt MCAP data: {exc}") from None
 
     def rosbag2_metadata(self) -> str | None:
         """The last `rosbag2` metadata record's `serialized_metadata` (YAML text), if any."""
-        found: str | None = None
         try:
-            if self.has_summary and self._metadata_indexes:
-                for index in self._metadata_indexes:
-                    if index.name != METADATA_NAME:
-                        continue
-                    self._file.seek(index.offset + _RECORD_HEAD)
-                    body = self._file.read(index.length - _RECORD_HEAD)
-                    found = Metadata.read(_stream(body)).metadata.get(METADATA_KEY, found)
-                return found
-            for opcode, body in self._records(self._data_start, self._data_end):
-                if opcode == Opcode.METADATA:
-                    metadata = Metadata.read(_stream(body))
-                    if metadata.name == METADATA_NAME:
-                        found = metadata.metadata.get(METADATA_KEY, found)
-        except _Truncated:
-            pass
-        except (McapError, ValueError, KeyError, EOFError) as exc:
+            records: Iterable[McapRecord] = (
+                self._reader.iter_metadata() if self._metadata_indexed else self._records()
+            )
+            found = [
+                r.metadata.get(METADATA_KEY)
+                for r in records
+                if isinstance(r, Metadata) and r.name == METADATA_NAME
+            ]
+        except _CORRUPT as exc:
             raise BagError(f"{self.path}: corrupt MCAP metadata: {exc}") from None
-        return found
+        return next((text for text in reversed(found) if text is not None), None)
 
     def close(self) -> None:
         self._file.close()
@@ -236,144 +236,54 @@ class BagReader:
 
     # --- internals ------------------------------------------------------------------------
 
-    def _records(self, start: int, end: int) -> Iterator[tuple[int, bytes]]:
-        """(opcode, body) of the top-level records in [start, end); _Truncated at a record
-        that does not fit. Seeks before every read, so several iterators may interleave."""
-        position = start
-        while position < end:
-            self._file.seek(position)
-            head = self._file.read(_RECORD_HEAD)
-            if len(head) < _RECORD_HEAD:
-                raise _Truncated
-            opcode = head[0]
-            length = int.from_bytes(head[1:], "little")
-            if position + _RECORD_HEAD + length > end:
-                raise _Truncated
-            body = self._file.read(length)
-            if len(body) < length:
-                raise _Truncated
-            position += _RECORD_HEAD + length
-            yield opcode, body
-
-    def _data_records(self) -> Iterator[Schema | Channel | Message | Metadata]:
-        """Schemas, channels, messages (chunks opened) and metadata of the data section, in
-        file order; a truncated file ends quietly after its last complete record."""
-        try:
-            for opcode, body in self._records(self._data_start, self._data_end):
-                if opcode == Opcode.CHUNK:
-                    chunk = Chunk.read(_stream(body))
-                    for record in breakup_chunk(chunk, validate_crc=True):
-                        if isinstance(record, Schema | Channel | Message):
-                            yield record
-                elif opcode == Opcode.MESSAGE:
-                    yield Message.read(_stream(body), len(body))
-                elif opcode == Opcode.SCHEMA:
-                    yield Schema.read(_stream(body))
-                elif opcode == Opcode.CHANNEL:
-                    yield Channel.read(_stream(body))
-                elif opcode == Opcode.METADATA:
-                    yield Metadata.read(_stream(body))
-                elif opcode in (Opcode.DATA_END, Opcode.FOOTER):
-                    return
-                elif opcode == 0 and not self.complete:
-                    return  # zero fill after a crash: no record starts with opcode 0
-        except _Truncated:
-            if self.complete:
-                raise BagError(f"{self.path}: record runs past the data section") from None
-
-    def _footer(self) -> Footer | None:
-        """The footer, or None if the file does not end with one (writer killed)."""
-        footer_start = self._size - len(MAGIC) - _RECORD_HEAD - _FOOTER_BODY
-        if footer_start < self._data_start:
-            return None
-        self._file.seek(footer_start)
-        tail = self._file.read(_RECORD_HEAD + _FOOTER_BODY + len(MAGIC))
-        if tail[-len(MAGIC) :] != MAGIC or tail[0] != Opcode.FOOTER:
-            return None
-        if int.from_bytes(tail[1:_RECORD_HEAD], "little") != _FOOTER_BODY:
-            return None
-        footer = Footer.read(_stream(tail[_RECORD_HEAD : _RECORD_HEAD + _FOOTER_BODY]))
-        if footer.summary_start and not (self._data_start <= footer.summary_start <= footer_start):
-            raise BagError(f"{self.path}: footer points outside the file")
-        return footer
-
-    def _read_summary(self, summary_start: int) -> None:
-        footer_start = self._size - len(MAGIC) - _RECORD_HEAD - _FOOTER_BODY
-        statistics: Statistics | None = None
-        try:
-            for opcode, body in self._records(summary_start, footer_start):
-                if opcode == Opcode.SCHEMA:
-                    schema = Schema.read(_stream(body))
-                    self._schemas[schema.id] = schema
-                elif opcode == Opcode.CHANNEL:
-                    channel = Channel.read(_stream(body))
-                    self._channels[channel.id] = channel
-                elif opcode == Opcode.STATISTICS:
-                    statistics = Statistics.read(_stream(body))
-                elif opcode == Opcode.METADATA_INDEX:
-                    self._metadata_indexes.append(MetadataIndex.read(_stream(body)))
-        except _Truncated:
-            raise BagError(f"{self.path}: summary section runs into the footer") from None
-        if statistics is None or not self._channels:
-            self._schemas.clear()
-            self._channels.clear()
-            self._scan_topics()  # a summary without statistics or channels: count by reading
-            return
-        self._counts = dict(statistics.channel_message_counts)
-
-    def _scan_topics(self) -> None:
-        """Schemas, channels and message counts by reading the data section."""
-        counts: dict[int, int] = {}
-        for record in self._data_records():
-            if isinstance(record, Schema):
-                self._schemas[record.id] = record
-            elif isinstance(record, Channel):
-                self._channels[record.id] = record
-            elif isinstance(record, Message):
-                counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
-        self._counts = counts
-
-    def _topic_infos(self) -> dict[str, TopicInfo]:
-        infos: dict[str, TopicInfo] = {}
-        for channel in self._channels.values():
-            schema = self._schemas.get(channel.schema_id)
+    def _records(self) -> Iterator[McapRecord]:
+        """Every record from the start (chunks opened, CRCs checked), through a file handle
+        of its own so that several iterations may interleave. In a truncated bag mcap's
+        stream reader raises EndOfFile at the cut: the records end quietly there."""
+        with open(self.path, "rb") as stream:
             try:
-                qos = qos_profiles_from_yaml(channel.metadata.get("offered_qos_profiles", ""))
-            except ValueError as exc:
-                raise BagError(
-                    f"{self.path}: topic {channel.topic}: bad offered_qos_profiles: {exc}"
-                ) from None
-            infos[channel.topic] = TopicInfo(
-                topic=channel.topic,
-                type_name=schema.name if schema is not None else "",
-                message_count=self._counts.get(channel.id, 0),
-                offered_qos=qos,
-                type_hash=channel.metadata.get("topic_type_hash", ""),
-                schema_encoding=schema.encoding if schema is not None else "",
-                message_encoding=channel.message_encoding,
-            )
-        return infos
+                reader = StreamReader(_ExactReads(stream), validate_crcs=True)  # type: ignore[arg-type]
+                yield from reader.records
+            except EndOfFile:
+                if self.complete:
+                    raise BagError(f"{self.path}: corrupt MCAP data: ends in a record") from None
+            except _CORRUPT as exc:
+                raise BagError(f"{self.path}: corrupt MCAP data: {exc}") from None
 
-    def _decode(self, channel_id: int, data: bytes) -> Any:
-        channel = self._channels[channel_id]
+    def _topic_info(self, channel: Channel, count: int) -> TopicInfo:
         schema = self._schemas.get(channel.schema_id)
         try:
+            qos = qos_profiles_from_yaml(channel.metadata.get("offered_qos_profiles", ""))
+        except ValueError as exc:
+            raise BagError(
+                f"{self.path}: topic {channel.topic}: bad offered_qos_profiles: {exc}"
+            ) from None
+        return TopicInfo(
+            topic=channel.topic,
+            type_name=schema.name if schema is not None else "",
+            message_count=count,
+            offered_qos=qos,
+            type_hash=channel.metadata.get("topic_type_hash", ""),
+            schema_encoding=schema.encoding if schema is not None else "",
+            message_encoding=channel.message_encoding,
+        )
+
+    def _decode(self, channel: Channel, schema: Schema | None, data: bytes) -> Any:
+        """Decode with mcap_ros2 (its factory keeps one decoder per schema)."""
+        try:
             decoder = self._decoders.decoder_for(channel.message_encoding, schema)
-            if decoder is None:
-                raise BagError(
-                    f"{self.path}: topic {channel.topic}: cannot decode encoding "
-                    f"{channel.message_encoding!r} with schema "
-                    f"{schema.encoding if schema else None!r}"
-                )
-            return decoder(data)
-        except BagError:
-            raise
         except Exception as exc:  # mcap_ros2 raises assorted errors on bad schemas/data
+            raise BagError(f"{self.path}: topic {channel.topic}: bad schema: {exc}") from None
+        if decoder is None:
+            raise BagError(
+                f"{self.path}: topic {channel.topic}: cannot decode encoding "
+                f"{channel.message_encoding!r} with schema "
+                f"{schema.encoding if schema else None!r}"
+            )
+        try:
+            return decoder(data)
+        except Exception as exc:
             raise BagError(
                 f"{self.path}: topic {channel.topic}: cannot decode "
                 f"{schema.name if schema else '?'}: {exc}"
             ) from None
-
-
-def _stream(body: bytes) -> ReadDataStream:
-    return ReadDataStream(io.BytesIO(body))

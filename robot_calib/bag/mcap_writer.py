@@ -7,14 +7,15 @@ messages in chunks with message indexes; a `rosbag2` metadata record written at 
 again at close; on close the summary (schemas, channels, statistics, chunk and metadata
 indexes, summary offsets) and the footer.
 
-Crash safety: the file is written unbuffered, so each chunk is in the operating system as
-soon as it closes (at `chunk_size` bytes, or when it is older than `max_chunk_age_s`, checked
-on every write and by `flush_stale`). A killed writer loses at most the open chunk; the rest
-stays readable with `BagReader(path, allow_truncated=True)`.
+Crash safety: the file is flushed to the operating system as soon as a chunk closes (at
+`chunk_size` bytes, or when it is older than `max_chunk_age_s`, checked on every write and
+by `flush_stale`); mcap's writer itself flushes only when asked. A killed writer loses at
+most the open chunk; the rest stays readable with `BagReader(path, allow_truncated=True)`.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from collections.abc import Iterable
@@ -32,8 +33,6 @@ from robot_calib.bag.ros2_formats import (
     PROFILE,
     DefinitionNotFoundError,
     QosProfile,
-    TopicMetadata,
-    bag_metadata,
     dump_yaml,
     message_definition,
     qos_profiles_to_yaml,
@@ -48,28 +47,6 @@ _COMPRESSION = {
     "zstd": CompressionType.ZSTD,
     "lz4": CompressionType.LZ4,
 }
-
-
-class _UnbufferedFile:
-    """Write-through file for mcap.Writer: every write goes straight to the OS."""
-
-    def __init__(self, fd: int) -> None:
-        self.fd = fd
-        self._position = 0
-
-    def write(self, data: bytes | bytearray | memoryview) -> int:
-        view = memoryview(data)
-        while view:
-            written = os.write(self.fd, view)
-            view = view[written:]
-        self._position += len(data)
-        return len(data)
-
-    def tell(self) -> int:
-        return self._position
-
-    def flush(self) -> None:
-        """Nothing is buffered here."""
 
 
 @dataclass
@@ -113,13 +90,12 @@ class BagWriter:
                 f"{self.path}: chunk_size ({chunk_size} B) and max_chunk_age_s "
                 f"({max_chunk_age_s} s) must be positive"
             )
-        try:
-            fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        try:  # mode "x": never overwrite
+            self._file = open(self.path, "xb", opener=_create)  # noqa: SIM115 - close()
         except FileExistsError:
             raise BagError(f"{self.path}: already exists; not overwriting it") from None
         except OSError as exc:
             raise BagError(f"{self.path}: cannot create: {exc.strerror}") from None
-        self._file = _UnbufferedFile(fd)
         self._fsync = fsync
         self._max_chunk_age_ns = int(max_chunk_age_s * 1e9)
         self._ros_distro = os.environ.get("ROS_DISTRO", "") if ros_distro is None else ros_distro
@@ -130,15 +106,14 @@ class BagWriter:
         self._last_log_ns: int | None = None
         self._closed = False
         self._writer = Writer(
-            self._file,  # type: ignore[arg-type]  # duck-typed stream: write/tell/flush
-            chunk_size=chunk_size,
-            compression=_COMPRESSION[compression],
+            self._file, chunk_size=chunk_size, compression=_COMPRESSION[compression]
         )
         try:
             self._writer.start(
                 profile=PROFILE, library=f"robot_calib {__version__} (mcap-python writer)"
             )
             self._write_metadata()  # rosbag2 writes its metadata when it opens the bag
+            self._sync()
         except OSError as exc:
             self._abort()
             raise BagError(f"{self.path}: write failed: {exc.strerror}") from None
@@ -187,10 +162,7 @@ class BagWriter:
             )
             self._schema_ids[type_name] = schema_id
         if type_hash is None:
-            try:
-                type_hash = type_description_hash(type_name)
-            except ValueError:
-                type_hash = ""
+            type_hash = type_description_hash(type_name)
         offered = tuple(offered_qos)
         channel_id = self._writer.register_channel(
             topic=topic,
@@ -212,7 +184,7 @@ class BagWriter:
     def write(
         self,
         topic: str,
-        data: bytes,
+        data: bytes | bytearray | memoryview,
         log_time_ns: int,
         publish_time_ns: int | None = None,
         sequence: int = 0,
@@ -320,30 +292,45 @@ class BagWriter:
             raise BagError(f"{self.path}: bag already closed")
 
     def _sync(self, force: bool = False) -> None:
+        """Hand what is written to the OS (and to the disk with fsync or `force`)."""
+        self._file.flush()
         if self._fsync or force:
-            os.fsync(self._file.fd)
+            os.fsync(self._file.fileno())
 
     def _abort(self) -> None:
         if not self._closed:
             self._closed = True
-            os.close(self._file.fd)
+            with contextlib.suppress(OSError):  # a failed flush was reported already
+                self._file.close()
 
     def _write_metadata(self) -> None:
+        """rosbag2's BagMetadata (version 9, keys in the order of its YAML encoder, yaml.hpp).
+
+        Before any message the start is the largest int64 (its `nanoseconds::max()`)."""
         first, last = self._first_log_ns, self._last_log_ns
-        metadata = bag_metadata(
-            file_name=self.path.name,
-            topics=[
-                TopicMetadata(
-                    name=topic,
-                    type=entry.type_name,
-                    offered_qos_profiles=entry.offered_qos,
-                    type_description_hash=entry.type_hash,
-                    message_count=entry.count,
-                )
-                for topic, entry in self._topics.items()
-            ],
-            starting_time_ns=first,
-            duration_ns=0 if first is None or last is None else last - first,
-            ros_distro=self._ros_distro,
-        )
+        start = {"nanoseconds_since_epoch": 2**63 - 1 if first is None else first}
+        duration = {"nanoseconds": 0 if first is None or last is None else last - first}
+        count = self.message_count
+        topics = [
+            {"topic_metadata": {"name": topic, "type": entry.type_name,
+                                "serialization_format": MESSAGE_ENCODING,
+                                "offered_qos_profiles": [p.to_dict() for p in entry.offered_qos],
+                                "type_description_hash": entry.type_hash},
+             "message_count": entry.count}
+            for topic, entry in self._topics.items()
+        ]  # fmt: skip
+        metadata = {
+            "version": 9, "storage_identifier": "mcap", "duration": duration,
+            "starting_time": start, "message_count": count, "topics_with_message_count": topics,
+            "compression_format": "", "compression_mode": "",
+            "relative_file_paths": [self.path.name],
+            "files": [{"path": self.path.name, "starting_time": start, "duration": duration,
+                       "message_count": count}],
+            "custom_data": None, "ros_distro": self._ros_distro,
+        }  # fmt: skip
         self._writer.add_metadata(METADATA_NAME, {METADATA_KEY: dump_yaml(metadata)})
+
+
+def _create(path: str, flags: int) -> int:
+    """open()'s opener: a new bag is rw-r--r-- (before the umask), as before."""
+    return os.open(path, flags, 0o644)

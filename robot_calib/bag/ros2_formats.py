@@ -10,7 +10,8 @@ ROS-free (stdlib only). Each format below follows the rosbag2 source that writes
   (YAML::Dump of a sequence, metadata version 9: policy names as rmw strings, durations as
   {sec, nsec}); `topic_type_hash`: the RIHS01 type description hash.
 - metadata record `rosbag2` with key `serialized_metadata`: YAML::Dump of the BagMetadata
-  (rosbag2_storage yaml.hpp, version 9), written when the bag opens and again when it closes.
+  (rosbag2_storage yaml.hpp, version 9), written when the bag opens and again when it closes
+  (`BagWriter` builds it).
 """
 
 from __future__ import annotations
@@ -20,9 +21,12 @@ import os
 import re
 import sys
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 PROFILE = "ros2"
 MESSAGE_ENCODING = "cdr"
@@ -30,8 +34,6 @@ SCHEMA_ENCODING_MSG = "ros2msg"
 SCHEMA_ENCODING_IDL = "ros2idl"
 METADATA_NAME = "rosbag2"
 METADATA_KEY = "serialized_metadata"
-METADATA_VERSION = 9
-STORAGE_IDENTIFIER = "mcap"
 
 Duration = tuple[int, int]
 """An rmw_time_t: (sec, nsec)."""
@@ -52,6 +54,13 @@ LIVELINESS = (
     "best_available",
 )
 
+_POLICIES = {
+    "history": HISTORY,
+    "reliability": RELIABILITY,
+    "durability": DURABILITY,
+    "liveliness": LIVELINESS,
+}
+_DURATIONS = ("deadline", "lifespan", "liveliness_lease_duration")
 _DELIMITER = "=" * 80 + "\n"
 _PRIMITIVES = frozenset(
     ("bool", "byte", "char", "float32", "float64", "string")
@@ -84,37 +93,20 @@ class QosProfile:
     avoid_ros_namespace_conventions: bool = False
 
     def to_dict(self) -> dict[str, Any]:
-        """The YAML mapping, keys in rosbag2's order."""
-        return {
-            "history": self.history,
-            "depth": self.depth,
-            "reliability": self.reliability,
-            "durability": self.durability,
-            "deadline": {"sec": self.deadline[0], "nsec": self.deadline[1]},
-            "lifespan": {"sec": self.lifespan[0], "nsec": self.lifespan[1]},
-            "liveliness": self.liveliness,
-            "liveliness_lease_duration": {
-                "sec": self.liveliness_lease_duration[0],
-                "nsec": self.liveliness_lease_duration[1],
-            },
-            "avoid_ros_namespace_conventions": self.avoid_ros_namespace_conventions,
-        }
+        """The YAML mapping, keys in rosbag2's order (the fields' order)."""
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        return values | {key: dict(zip(("sec", "nsec"), values[key])) for key in _DURATIONS}
 
     @classmethod
     def from_dict(cls, item: dict[str, Any]) -> QosProfile:
         """Parse one profile (metadata v9 names or v<=8 integers); ValueError if malformed."""
         try:
-            return cls(
-                history=_policy(item["history"], HISTORY),
-                depth=int(item["depth"]),
-                reliability=_policy(item["reliability"], RELIABILITY),
-                durability=_policy(item["durability"], DURABILITY),
-                deadline=_duration(item["deadline"]),
-                lifespan=_duration(item["lifespan"]),
-                liveliness=_policy(item["liveliness"], LIVELINESS),
-                liveliness_lease_duration=_duration(item["liveliness_lease_duration"]),
-                avoid_ros_namespace_conventions=bool(item["avoid_ros_namespace_conventions"]),
-            )
+            values = {f.name: item[f.name] for f in fields(cls)}
+            values |= {key: _policy(values[key], names) for key, names in _POLICIES.items()}
+            values |= {key: _duration(values[key]) for key in _DURATIONS}
+            values["depth"] = int(values["depth"])
+            key = "avoid_ros_namespace_conventions"
+            return cls(**values | {key: bool(values[key])})
         except (KeyError, TypeError, IndexError) as exc:
             raise ValueError(f"malformed QoS profile {item!r}: {exc!r}") from None
 
@@ -162,6 +154,8 @@ def qos_profiles_from_yaml(text: str) -> tuple[QosProfile, ...]:
 
 
 # --- YAML as yaml-cpp's YAML::Dump writes it (block style, indented sequences) ------------
+# Not rosbags' emitter (ruamel.yaml): it sorts keys, writes '' and null, does not indent
+# sequences under a key and puts an empty list on the key's line; the bytes would change.
 
 _PLAIN = re.compile(r"[A-Za-z_/][A-Za-z0-9_./\-]*\Z")
 _YAML_WORDS = frozenset(("true", "false", "yes", "no", "on", "off", "y", "n", "null", "~"))
@@ -213,6 +207,8 @@ def dump_yaml(value: Any) -> str:
 
 
 # --- message definitions and type hashes from the installed interface files ----------------
+# The definition text is not rosbags' generate_msgdef: that one is rebuilt from the parsed
+# fields (no comments or blank lines, another dependency order), rosbag2 stores the files.
 
 
 def interface_prefixes() -> list[Path]:
@@ -312,88 +308,38 @@ def message_definition(type_name: str, prefixes: Sequence[Path] | None = None) -
             raise DefinitionNotFoundError(f"{msg_error} (searched {searched})") from None
 
 
-def type_description_hash(type_name: str, prefixes: Sequence[Path] | None = None) -> str:
-    """'RIHS01_<hex>' of a type from its installed type description (.json), '' if none.
+def typestore(*type_names: str) -> Typestore:
+    """A rosbags typestore with these types ('pkg/msg/Type') and their dependencies, parsed
+    from the definitions `message_definition` gives (what a bag's schema holds): CDR and
+    RIHS01 hashes are those of the installed interfaces, not of rosbags' bundled copy of
+    the distro. Raises DefinitionNotFoundError, or ValueError for a text it cannot parse."""
+    from rosbags.typesys import (
+        Stores,
+        TypesysError,
+        get_types_from_idl,
+        get_types_from_msg,
+        get_typestore,
+    )
 
-    rosidl (Iron and later) installs share/<pkg>/msg/<Type>.json with the hashes that
-    rclpy reports as `TopicEndpointInfo.topic_type_hash`.
-    """
-    prefixes = interface_prefixes() if prefixes is None else list(prefixes)
-    package, namespace, name = _split_type(type_name)
-    path = _interface_file(type_name, ".json", prefixes)
-    if path is None:
-        return ""
+    store = get_typestore(Stores.EMPTY)
+    for type_name in type_names:
+        encoding, text = message_definition(type_name)
+        try:
+            if encoding == SCHEMA_ENCODING_MSG:
+                store.register(get_types_from_msg(text, type_name))
+            else:  # sections "IDL: pkg/msg/Type\n<idl>", each after a delimiter line
+                for section in text.split(_DELIMITER)[1:]:
+                    store.register(get_types_from_idl(section.split("\n", 1)[1]))
+        except TypesysError as exc:
+            raise ValueError(f"cannot parse the definition of {type_name}: {exc}") from None
+    return store
+
+
+def type_description_hash(type_name: str) -> str:
+    """'RIHS01_<hex>' of a type (rosbags' `hash_rihs01` of `typestore(type_name)`), '' if
+    its definition is not installed. Equals the hash rclpy reports as
+    `TopicEndpointInfo.topic_type_hash` (rosidl's share/<pkg>/msg/<Type>.json)."""
     try:
-        hashes = json.loads(path.read_text(encoding="utf-8"))["type_hashes"]
-    except (OSError, ValueError, KeyError, TypeError):
+        return typestore(type_name).hash_rihs01(type_name)
+    except (DefinitionNotFoundError, ValueError, OSError):
         return ""
-    full_name = f"{package}/{namespace}/{name}"
-    for entry in hashes:
-        if isinstance(entry, dict) and entry.get("type_name") == full_name:
-            return str(entry.get("hash_string", ""))
-    return ""
-
-
-# --- the rosbag2 BagMetadata ---------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class TopicMetadata:
-    """One topic as rosbag2's BagMetadata lists it."""
-
-    name: str
-    type: str
-    offered_qos_profiles: tuple[QosProfile, ...] = ()
-    type_description_hash: str = ""
-    message_count: int = 0
-    serialization_format: str = MESSAGE_ENCODING
-
-
-def bag_metadata(
-    *,
-    file_name: str,
-    topics: Sequence[TopicMetadata],
-    starting_time_ns: int | None,
-    duration_ns: int,
-    ros_distro: str,
-) -> dict[str, Any]:
-    """BagMetadata (version 9) as rosbag2's YAML encoder orders it.
-
-    starting_time_ns: first log time [ns], None before any message (rosbag2 then writes
-    the largest int64, its `nanoseconds::max()`). file_name: the .mcap file's base name.
-    """
-    start = 2**63 - 1 if starting_time_ns is None else int(starting_time_ns)
-    count = sum(t.message_count for t in topics)
-    return {
-        "version": METADATA_VERSION,
-        "storage_identifier": STORAGE_IDENTIFIER,
-        "duration": {"nanoseconds": int(duration_ns)},
-        "starting_time": {"nanoseconds_since_epoch": start},
-        "message_count": count,
-        "topics_with_message_count": [
-            {
-                "topic_metadata": {
-                    "name": t.name,
-                    "type": t.type,
-                    "serialization_format": t.serialization_format,
-                    "offered_qos_profiles": [p.to_dict() for p in t.offered_qos_profiles],
-                    "type_description_hash": t.type_description_hash,
-                },
-                "message_count": t.message_count,
-            }
-            for t in topics
-        ],
-        "compression_format": "",
-        "compression_mode": "",
-        "relative_file_paths": [file_name],
-        "files": [
-            {
-                "path": file_name,
-                "starting_time": {"nanoseconds_since_epoch": start},
-                "duration": {"nanoseconds": int(duration_ns)},
-                "message_count": count,
-            }
-        ],
-        "custom_data": None,
-        "ros_distro": ros_distro,
-    }
