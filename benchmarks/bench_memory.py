@@ -86,7 +86,7 @@ def child(n: int, repeat: int, seed: int) -> dict[str, float | int | bool]:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_identify import measured, perturbed_start  # same data and start
 
-    world = with_effect(load_world(), make_effect("eccentricity", range(1, 7), order=1))
+    world = with_effect(load_world(), make_effect("eccentricity", list(range(1, 7)), order=1))
     model = KinematicModel(world.model.robot)
     start = perturbed_start(world, model, seed)
     q = random_plan(world.model.robot, n, np.random.default_rng(seed + n)).q

@@ -15,8 +15,10 @@ copy of the whole (m, p) Jacobian is made, which is what bounds the memory of la
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
+import numpy.typing as npt
 
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
@@ -113,7 +115,9 @@ def fix_unidentifiable(
 QR_BLOCK_ROWS = 8192
 
 
-def r_factor(jac: Array, columns: Array | None = None, extra: Array | None = None) -> Array:
+def r_factor(
+    jac: Array, columns: npt.NDArray[np.intp] | None = None, extra: Array | None = None
+) -> Array:
     """R of the QR of a tall Jacobian, computed block by block.
 
     Parameters
@@ -150,7 +154,7 @@ def r_factor(jac: Array, columns: Array | None = None, extra: Array | None = Non
         return rows(0, m, np.zeros((0, q)))
     r = np.zeros((0, q))
     for start in range(0, m, QR_BLOCK_ROWS):
-        r = np.linalg.qr(rows(start, min(start + QR_BLOCK_ROWS, m), r), mode="r")
+        r = cast(Array, np.linalg.qr(rows(start, min(start + QR_BLOCK_ROWS, m), r), mode="r"))
     return r
 
 
