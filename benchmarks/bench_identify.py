@@ -173,15 +173,17 @@ def section(title: str) -> None:
 # --- data ------------------------------------------------------------------------------
 
 
-def measured(world: World, q: np.ndarray, seed: int) -> tuple[Poses, np.ndarray]:
+def measured(
+    world: World, q: np.ndarray, seed: int, chunk: int = MEASURE_CHUNK
+) -> tuple[Poses, np.ndarray]:
     """Poses of readings q (n, J) and their simulated measured points (n, 3) [m], made in
-    chunks: the simulator's eccentricity costs ~22 kB per pose at once, which would set the
-    process's peak RSS far above that of the fits measured here."""
+    chunks of `chunk` poses: the simulator's eccentricity costs ~22 kB per pose at once,
+    which would set the process's peak RSS far above that of the fits measured here."""
     poses = Poses.from_readings(q)
     rng = np.random.default_rng(seed)
     chunks = [
-        physical_points(world, poses.subset(slice(k, k + MEASURE_CHUNK)), rng)
-        for k in range(0, len(poses), MEASURE_CHUNK)
+        physical_points(world, poses.subset(slice(k, k + chunk)), rng)
+        for k in range(0, len(poses), chunk)
     ]
     return poses, np.concatenate(chunks)
 

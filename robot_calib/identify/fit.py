@@ -98,7 +98,15 @@ def blocked_jacobian(
 
 class _Problem:
     """Residuals and Jacobian of the free parameters, evaluated once per x (LM asks for
-    both at the same point)."""
+    both at the same point).
+
+    With the absolute objective (3 rows per pose) the Jacobian is written block by block
+    (BLOCK_POSES poses) into one C-ordered (3n, n_free) array, reused at every x: no
+    (n, 3, P) array and no copy of the free columns. scipy copies what it is given (its
+    VectorFunction returns J.astype(...), MINPACK copies into its own fjac), so the buffer
+    may be overwritten at the next x. C order: MINPACK would first copy a Fortran array
+    into C order. Other objectives (rows from pairs of poses) get the full (n, 3, P).
+    """
 
     def __init__(
         self,
@@ -114,17 +122,58 @@ class _Problem:
         self._cache: tuple[Array, Array] = (np.empty(0), np.empty((0, 0)))
         self.predicted = np.empty((0, 3))
         self.evaluations = 0
+        self._jac: Array | None = None  # (3n, n_free) buffer of the blocked path
+        if type(objective) is AbsoluteObjective:  # not a subclass with other residuals
+            self._jac = np.empty((3 * len(poses), int(start.free.sum())))
 
     def evaluate(self, x: Array) -> tuple[Array, Array]:
-        """Objective residuals (m,) and their Jacobian (m, n_free) at free values x."""
+        """Objective residuals (m,) [m] and their Jacobian (m, n_free) at free values x.
+        The Jacobian array is reused: valid until evaluate is called at another x."""
         if self._x is None or not np.array_equal(x, self._x):
             params = self.start.unpack(x)
-            predicted, jac = blocked_jacobian(self.model, params, self.poses)
-            self._cache = self.objective.residuals(predicted, jac[:, :, params.free], self.points)
+            if self._jac is None:
+                predicted, jac = blocked_jacobian(self.model, params, self.poses)
+                self._cache = self.objective.residuals(
+                    predicted, jac[:, :, params.free], self.points
+                )
+            else:
+                predicted = self._free_jacobian(params, self._jac)
+                self._cache = ((predicted - self.points).reshape(-1), self._jac)
             self.predicted = predicted
             self._x = x.copy()
             self.evaluations += 1
         return self._cache
+
+    def _free_jacobian(self, params: ParameterVector, out: Array) -> Array:
+        """Points (n, 3) [m]; d points / d free parameters written into `out` (3n, n_free),
+        rows 3i..3i+2 for pose i, BLOCK_POSES poses at a time."""
+        n = len(self.poses)
+        free = np.flatnonzero(params.free)
+        jac = out.reshape(n, 3, len(free))  # a view: out is C-contiguous
+        points = np.empty((n, 3))
+        for start in range(0, n, BLOCK_POSES):
+            rows = slice(start, min(start + BLOCK_POSES, n))
+            block = self.poses if n <= BLOCK_POSES else self.poses.subset(rows)
+            points[rows], block_jac = self.model.jacobian(params, block)
+            jac[rows] = block_jac[:, :, free]
+        return points
+
+
+def _identifiable(
+    model: KinematicModel,
+    start: ParameterVector,
+    poses: Poses,
+    points: Array,
+    objective: Objective,
+) -> tuple[ParameterVector, tuple[tuple[str, str], ...]]:
+    """`start` with the parameters the data cannot identify (or only poorly) fixed, and
+    (name, reason) of each. Its own function so that the full Jacobian at the start,
+    (n, 3, P), is freed before the solver allocates its own."""
+    predicted, jac = blocked_jacobian(model, start, poses)
+    residual0, jac_full = objective.residuals(predicted, jac, points)
+    params, ident = fix_unidentifiable(start, jac_full)
+    params, weak = fix_poorly_determined(params, jac_full, residual0)
+    return params, ident.fixed + tuple(weak)
 
 
 def fit_model(
@@ -141,13 +190,10 @@ def fit_model(
     parameters are fixed first (at their start values)."""
     started = time.perf_counter()
     objective = objective or AbsoluteObjective()
-    params, fixed = start, ()
+    params: ParameterVector = start
+    fixed: tuple[tuple[str, str], ...] = ()
     if check_identifiability:
-        predicted, jac = blocked_jacobian(model, start, poses)
-        residual0, jac_full = objective.residuals(predicted, jac, points)
-        params, ident = fix_unidentifiable(params, jac_full)
-        params, weak = fix_poorly_determined(params, jac_full, residual0)
-        fixed = ident.fixed + tuple(weak)
+        params, fixed = _identifiable(model, start, poses, points, objective)
     problem = _Problem(model, params, poses, points, objective)
     last_report = [time.monotonic()]
 
