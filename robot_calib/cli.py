@@ -208,8 +208,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     q = np.concatenate([t.q for t in tables])
     points = np.concatenate([t.points for t in tables])
     times = None
-    if all(t.time is not None for t in tables):
-        times = np.concatenate([t.time - t.time[0] + k * 1e6 for k, t in enumerate(tables)])
+    stamps = [t.time for t in tables if t.time is not None]
+    if len(stamps) == len(tables):
+        times = np.concatenate([s - s[0] + k * 1e6 for k, s in enumerate(stamps)])
     counts = write_measurement_bag(output, q, points, robot.joint_names, times)
     print(f"{output}: {', '.join(f'{k}={v}' for k, v in counts.items())} messages "
           f"({robot.name}, {fmt.angle_unit}/{fmt.length_unit} -> rad/m)")  # fmt: skip

@@ -61,7 +61,14 @@ def simulation_world(
 ) -> World:
     """The world of a world file (default: the built-in one; another robot without a file:
     its nominal geometry in the default set-up), with `effects` switched on (text form of
-    `simulate --effects`, e.g. 'backlash:4', 'compliance:2=2e-5') and `seed` if given."""
+    `simulate --effects`, e.g. 'backlash:4', 'compliance:2=2e-5') and `seed` if given.
+
+    Returns
+    -------
+    world : World
+        The simulated truth: model (the robot with the effects), truth (every true
+        parameter value, SI), noise, tracker options (latency, dropout), timing, seed.
+    """
     from robot_calib.sim.world import build_world, load_world, parse_sim_effect, with_effect
 
     if world is None and robot != DEFAULT_ROBOT:
@@ -89,7 +96,24 @@ def simulate(
 ) -> Simulation:
     """Run the simulated graph (sim_robot, sim_tracker, recorder, in-process) over `plan`
     in `world` (default: `simulation_world()`) and record the bag `output` (a new file in
-    an existing folder) and its world file beside it. Nothing is left on failure."""
+    an existing folder) and its world file beside it. Nothing is left on failure.
+
+    Returns
+    -------
+    simulation : Simulation
+        What was recorded, with the following fields:
+
+        bag : Path
+            The MCAP bag written (`output`).
+        world_file : Path
+            The world used (the complete truth), beside the bag: `<bag>.world.yaml`.
+        counts : dict of str to int
+            Messages recorded per topic.
+        effects : tuple of str
+            Labels of the effects switched on in `world`.
+        seconds : float
+            Wall time of the simulation [s].
+    """
     from robot_calib.nodes.simulate import simulate_bag
     from robot_calib.sim.plans import PLAN_NAMES
     from robot_calib.sim.world import save_world
@@ -114,7 +138,13 @@ def simulate(
 
 
 def output_path(raw: str | Path, what: str) -> Path:
-    """The path of a file to write: its folder must exist (InputError naming it)."""
+    """The path of a file to write: its folder must exist (InputError naming it).
+
+    Returns
+    -------
+    path : Path
+        `raw` as a Path.
+    """
     path = Path(raw)
     if not path.parent.is_dir():
         raise InputError(f"{path.parent}: no such folder for {what}")
@@ -123,7 +153,13 @@ def output_path(raw: str | Path, what: str) -> Path:
 
 def new_file_path(raw: str | Path, what: str) -> Path:
     """The path of a recording to create: its folder must exist, the file must not (a
-    recording is never overwritten)."""
+    recording is never overwritten; InputError otherwise).
+
+    Returns
+    -------
+    path : Path
+        `raw` as a Path.
+    """
     path = Path(raw)
     if path.exists():
         raise InputError(f"{path}: exists, will not overwrite a recording")
@@ -136,7 +172,14 @@ def read_bags(
     pair_tolerance: float = PAIR_TOLERANCE_S,
     log: Log | None = None,
 ) -> Recording:
-    """The paired measurements of `bags` (CONTRACT.md section 1)."""
+    """The paired measurements of `bags` (CONTRACT.md section 1).
+
+    Returns
+    -------
+    recording : Recording
+        As `robot_calib.bag.read.read_recording`: poses (n), points (n, 3) [m], sweeps,
+        the bag of each pose, unpaired points and warnings.
+    """
     from robot_calib.bag.read import read_recording
 
     return read_recording(bags, robot, pair_tolerance, log=log)
@@ -151,8 +194,16 @@ def calibrate_bags(
     pair_tolerance: float = PAIR_TOLERANCE_S,
     log: Log | None = None,
 ) -> tuple[Calibration, Recording]:
-    """Identify `model` from `bags`: the calibration and the recording it came from. A bad
-    model name fails before any bag is read."""
+    """Identify `model` from `bags`. A bad model name fails before any bag is read.
+
+    Returns
+    -------
+    calibration : Calibration
+        As `robot_calib.identify.calibrate.calibrate`: parameters (P) with their 1-sigma,
+        in-sample accuracy [mm], residuals (n, 3) [m], identifiability, solver report.
+    recording : Recording
+        The paired measurements of `bags` it was identified from (as `read_bags`).
+    """
     from robot_calib.identify.calibrate import calibrate, parse_model
 
     parse_model(model, robot, ecc_order)
@@ -166,7 +217,15 @@ def diagnose_recordings(
     holdout: Recording | None = None,
     log: Log | None = None,
 ) -> tuple[Diagnosis, Ladder]:
-    """The sim-to-real gap diagnosis of `recording`, scored on `holdout` (else k-fold)."""
+    """The sim-to-real gap diagnosis of `recording`, scored on `holdout` (else k-fold).
+
+    Returns
+    -------
+    diagnosis : Diagnosis
+        The DIAGNOSIS.json document (as `robot_calib.diagnose.diagnosis.diagnose`).
+    ladder : Ladder
+        The rungs behind it, each with its calibration and held-out scores.
+    """
     from robot_calib.diagnose.diagnosis import diagnose
 
     return diagnose(recording, robot, holdout, log=log)
@@ -179,8 +238,17 @@ def diagnose_bags(
     pair_tolerance: float = PAIR_TOLERANCE_S,
     log: Log | None = None,
 ) -> tuple[Diagnosis, Ladder, Recording]:
-    """The diagnosis of `bags` scored on the `holdout` bags (none: k-fold CV over poses),
-    the ladder behind it and the calibration recording."""
+    """The diagnosis of `bags` scored on the `holdout` bags (none: k-fold CV over poses).
+
+    Returns
+    -------
+    diagnosis : Diagnosis
+        The DIAGNOSIS.json document (as `robot_calib.diagnose.diagnosis.diagnose`).
+    ladder : Ladder
+        The rungs behind it, each with its calibration and held-out scores.
+    recording : Recording
+        The paired measurements of `bags` (as `read_bags`); the hold-out's are not kept.
+    """
     recording = read_bags(bags, robot, pair_tolerance, log)
     held = read_bags(holdout, robot, pair_tolerance, log) if holdout else None
     diagnosis, ladder = diagnose_recordings(recording, robot, held, log)
@@ -190,8 +258,13 @@ def diagnose_bags(
 def write_diagnosis(
     diagnosis: Diagnosis, ladder: Ladder, recording: Recording, output: str | Path
 ) -> Path:
-    """DIAGNOSIS.json at `output` and the Markdown report (+ plots) beside it; returns the
-    report's path."""
+    """Write DIAGNOSIS.json at `output` and the Markdown report (+ plots) beside it.
+
+    Returns
+    -------
+    report : Path
+        The report: `output` with the suffix '.md'.
+    """
     from robot_calib.diagnose.report import write_report
     from robot_calib.identify.params_file import write_json_atomic
 
@@ -238,7 +311,28 @@ def run(
     """The main job: simulate + record a calibration bag (`plan`, `effects`; default the
     main job's joint-4 backlash) and `n_holdout` random hold-out poses in the same world,
     calibrate RUN_MODELS, score each on the hold-out poses, diagnose. Writes a new folder
-    `run-<time>` under `output_dir`; `say` gets one line per step."""
+    `run-<time>` under `output_dir`; `say` gets one line per step.
+
+    Returns
+    -------
+    result : RunResult
+        The main job's outputs, with the following fields:
+
+        folder : Path
+            The new folder `output_dir/run-YYYYmmdd-HHMMSS`.
+        calibration_bag, holdout_bag : Simulation
+            The two simulated recordings (calibration.mcap, holdout.mcap) and their worlds.
+        recording : Recording
+            The paired measurements of the calibration bag.
+        models : dict of str to ModelScore
+            Per model of RUN_MODELS: its Calibration (also written as
+            `params_<model>.json`) and its Accuracy on the hold-out poses [mm].
+        diagnosis : Diagnosis
+            The diagnosis of the calibration bag scored on the hold-out bag (written as
+            diagnosis.json).
+        report : Path
+            The Markdown report beside it (diagnosis.md).
+    """
     from robot_calib.accuracy import accuracy
     from robot_calib.effects import MAIN_JOB_EFFECTS
     from robot_calib.identify.calibrate import calibrate

@@ -11,9 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from robot_calib.errors import InputError
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 
 JOINT_CHANGE_TOLERANCE = 1e-4  # rad, contract default
 
@@ -76,6 +77,6 @@ class Poses:
             raise InputError(f"time must be finite of shape ({n},), got {t.shape}")
         return cls(q, d, t)
 
-    def subset(self, index: Array) -> Poses:
+    def subset(self, index: slice | IntArray | NDArray[np.bool_]) -> Poses:
         """The poses selected by an index or boolean mask (directions kept as recorded)."""
         return Poses(self.q[index], self.direction[index], self.time[index])

@@ -14,6 +14,7 @@ import numpy as np
 from robot_calib.bag.mcap_reader import BagReader
 from robot_calib.errors import BagError, InputError
 from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.frames import Array
 from robot_calib.measurements.recording import (
     PAIR_TOLERANCE_S,
     Recording,
@@ -48,7 +49,11 @@ def read_bag(
     if not path.is_file():
         raise BagError(f"{path}: no such bag file")
     warnings: list[str] = []
-    js_t, js_q, js_v, pt_t, pts = [], [], [], [], []
+    js_t: list[int] = []  # stamps [ns]
+    pt_t: list[int] = []
+    js_q: list[Array] = []
+    js_v: list[Array] = []
+    pts: list[Array] = []
     frames: set[str] = set()
     with BagReader(path) as reader:
         _check_topic(reader, JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
@@ -100,7 +105,16 @@ def read_recording(
 ) -> Recording:
     """Read and pair the measurements of one or more bags (each bag its own time origin and
     direction history). Raises BagError on unusable input; warnings go to `log` and into the
-    result."""
+    result.
+
+    Returns
+    -------
+    recording : Recording
+        The bags' paired measurements concatenated in the order of `paths` (fields as in
+        `recording_from_stream`): sources the bag paths; bag_index (n,) the position of
+        each pose's bag in `paths`; n_unpaired and warnings summed over the bags (plus a
+        warning for a point frame_id other than the tracker frame).
+    """
     if not paths:
         raise InputError("no bag given")
     recording = Recording.concatenate([read_bag(Path(p), robot, pair_tolerance) for p in paths])

@@ -161,7 +161,37 @@ def diagnose(
     holdout: Recording | None = None,
     log: Callable[[str], None] | None = None,
 ) -> tuple[Diagnosis, Ladder]:
-    """The diagnosis and the ladder behind it."""
+    """The sim-to-real gap diagnosis of `recording`: the model ladder (geometric, then the
+    effects that lower the held-out error), scored on `holdout` (None: k-fold over poses).
+
+    Returns
+    -------
+    diagnosis : Diagnosis
+        The DIAGNOSIS.json document (msgs_doc/diagnosis.md), with the following fields:
+
+        dominant_effect : DominantEffect or None
+            The effect ('unknown' if none of the vocabulary) and its joints; None when
+            the geometric model reaches the noise level.
+        ladder : list of RungScore
+            Per rung, in the order added: held-out and in-sample errors [mm], free
+            parameters.
+        unexplained : Unexplained
+            Held-out error of the best rung [mm], the noise floor [mm], their ratio, a
+            note and where the rest lies.
+        noise : NoiseReport
+            The noise level [mm] and its source, and the floor it implies [mm].
+        scored_on, selected_on : str
+            What the rungs were scored and selected on (hold-out bags, k-fold CV).
+        where : WhereItLies
+            Per-joint signatures of the geometric model's residuals.
+        candidates : list of list of CandidateScore
+            Per round of the ladder, the candidates' linearised held-out rms [mm].
+        recordings, holdout : list of str
+            The sources of `recording` and of `holdout`.
+    ladder : Ladder
+        The rungs (each with its Calibration and held-out residuals (m, 3) [m]), the noise
+        level used [m] and the candidates of every round (model, score [m]).
+    """
     ladder = run_ladder(recording, robot, holdout, log)
     best = ladder.rungs[-1]
     geo = ladder.rungs[0].calibration

@@ -21,7 +21,7 @@ from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.identify.calibrate import Calibration, calibrate, model_name
 from robot_calib.identify.fit import blocked_jacobian, fit_model
 from robot_calib.kinematics.description import RobotDescription
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
 
@@ -66,7 +66,7 @@ def candidates(robot: RobotDescription, recording: Recording,
     ]  # fmt: skip
 
 
-def folds(n: int, k: int = N_FOLDS, seed: int = 0) -> Array:
+def folds(n: int, k: int = N_FOLDS, seed: int = 0) -> IntArray:
     """Fold number (n,) of every pose: a fixed random split into k folds of whole poses."""
     return np.random.default_rng(seed).permutation(n) % k
 
@@ -78,8 +78,8 @@ def _replace(present: tuple[Effect, ...], new: Effect,
 
 
 def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
-            holdout: Recording | None) -> list[tuple[Effect, float]]:  # fmt: skip
-    """Linearised held-out rms [m] of the current model and of each candidate added."""
+            holdout: Recording | None) -> tuple[float, list[tuple[Effect, float]]]:  # fmt: skip
+    """Linearised held-out rms [m] of the current model, and of each candidate added."""
     robot = cal.model.robot
     every = cal.model.effects + tuple(pool)
     widest: list[Effect] = []  # every effect that no other covers (e.g. the highest order)
@@ -102,15 +102,18 @@ def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
         h_pred, h_jac = blocked_jacobian(superset, params, holdout.poses)
         h_res = h_pred - holdout.points
     fold = folds(n)
-    scores = []
-    for effect in [None, *pool]:
-        cols = list(base_cols)
-        if effect is not None:
-            cols += [params.index(name) for name in effect.parameter_names(cal.model.robot)
-                     if params.index(name) not in base_cols]  # fmt: skip
+
+    def score(cols: list[int]) -> float:
         h_cols = None if h_jac is None else h_jac[:, :, cols]
-        scores.append((effect, _linear_score(residual, jac[:, :, cols], fold, h_res, h_cols)))
-    return scores
+        return _linear_score(residual, jac[:, :, cols], fold, h_res, h_cols)
+
+    base = score(base_cols)
+    scores = []
+    for effect in pool:
+        cols = base_cols + [params.index(name) for name in effect.parameter_names(robot)
+                            if params.index(name) not in base_cols]  # fmt: skip
+        scores.append((effect, score(cols)))
+    return base, scores
 
 
 def combined_rms(cv_residuals: Array, holdout_residuals: Array | None) -> float:
@@ -120,7 +123,7 @@ def combined_rms(cv_residuals: Array, holdout_residuals: Array | None) -> float:
     return float(np.sqrt(np.mean([np.mean(np.sum(r**2, axis=1)) for r in parts])))
 
 
-def _linear_score(residual: Array, jac: Array, fold: Array, h_res: Array | None,
+def _linear_score(residual: Array, jac: Array, fold: IntArray, h_res: Array | None,
                   h_jac: Array | None) -> float:  # fmt: skip
     """`combined_rms` of |r + J dx| [m]: k-fold (dx the least-squares step on the other
     folds) and on the hold-out points (dx from all calibration points)."""
@@ -190,9 +193,8 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
         pool = candidates(robot, recording, current.effects)
         if not pool:
             break
-        scores = _screen(current.calibration, pool, recording, holdout)
-        base = scores[0][1]
-        ranked = sorted(scores[1:], key=lambda s: s[1])
+        base, scores = _screen(current.calibration, pool, recording, holdout)
+        ranked = sorted(scores, key=lambda s: s[1])
         rounds.append(
             [(model_name(_replace(current.effects, e, robot)), s) for e, s in ranked[:8]]
         )

@@ -87,8 +87,10 @@ def estimate_noise(recording: Recording, fallback_residuals: Array | None = None
         if circles.sigma_m <= AGREE * repeat.sigma_m:  # circles not bent by effects: pool
             return _pooled(repeat, circles, "repeat poses + circle fits")
         return repeat
-    if repeat is not None or circles is not None:
-        return repeat or circles  # type: ignore[return-value]
+    if repeat is not None:
+        return repeat
+    if circles is not None:
+        return circles
     if fallback_residuals is not None:
         return _model_noise(fallback_residuals, fallback_dof)
     return NoiseLevel(float("nan"), "unknown", 0)

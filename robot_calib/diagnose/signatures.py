@@ -17,7 +17,7 @@ import numpy as np
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.effects.eccentricity import fourier_basis
 from robot_calib.identify.fit import blocked_jacobian
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
@@ -91,12 +91,12 @@ class WhereItLies(Record):
 
 
 def arc_angle_errors(model: KinematicModel, params: ParameterVector, recording: Recording,
-                     residuals: Array) -> dict[int, tuple[Array, Array, Array]]:  # fmt: skip
+                     residuals: Array) -> dict[int, tuple[IntArray, Array, Array]]:  # fmt: skip
     """Per joint j with sweeps: (pose index (k,), angle-equivalent error (k,) [rad] =
     residual along the arc of joint j / lever arm, lever arm (k,) [m]), from its sweeps."""
     origins, axes = model.joint_axes(params, recording.poses)
     points = recording.points + residuals  # predicted
-    out: dict[int, tuple[Array, Array]] = {}
+    out: dict[int, tuple[IntArray, Array, Array]] = {}
     for j in sorted({s.joint for s in recording.sweeps}):
         idx = np.concatenate([s.index for s in recording.sweeps_of(j)])
         tangent = np.cross(axes[idx, j - 1], points[idx] - origins[idx, j - 1])
@@ -113,9 +113,8 @@ def harmonic_amplitudes(
     are nearly collinear and their amplitudes are uncertain, which the sigma shows."""
     weights = np.broadcast_to(1.0 / np.asarray(sigma, dtype=float), q.shape)
     design = fourier_basis(q, order) * weights[:, None]
-    coef, *_ = np.linalg.lstsq(design, values * weights, rcond=None)
-    cov = np.linalg.pinv(design.T @ design)
-    var = np.diag(cov)
+    coef = np.linalg.lstsq(design, values * weights, rcond=None)[0].astype(np.float64, copy=False)
+    var = np.diag(np.linalg.pinv(design.T @ design))
     return np.hypot(coef[1::2], coef[2::2]), np.sqrt((var[1::2] + var[2::2]) / 2.0)
 
 
@@ -143,7 +142,7 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
         cols = np.stack([(motion[:, j, :] * s[:, None]).reshape(-1) for s in signals], 1)
         cols = cols / noise_sigma_m
         cols = cols - basis @ (basis.T @ cols)
-        coef, *_ = np.linalg.lstsq(cols, r, rcond=1e-10)
+        coef = np.linalg.lstsq(cols, r, rcond=1e-10)[0].astype(np.float64, copy=False)
         return coef, float(np.linalg.norm(cols @ coef))
 
     def family(signal: Array, j: int) -> tuple[float, float]:
@@ -202,8 +201,8 @@ def strongest_signature(terms: list[JointTerms]) -> Signature | None:
                 best = (sig, j, None, value, text)
     if best is None:
         return None
-    sig, j, k, value, text = best
-    return Signature(j, k, value, sig, text)
+    sig, j, harmonic, value, text = best
+    return Signature(j, harmonic, value, sig, text)
 
 
 def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Recording,

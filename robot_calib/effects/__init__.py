@@ -71,7 +71,14 @@ def option_types(cls: type[Effect]) -> dict[str, type]:
 
 
 def make_effect(name: str, joints: tuple[int, ...] | list[int] = (), **options: Any) -> Effect:
-    """The effect called `name` (contract vocabulary or simulator-only) on `joints` (1-based)."""
+    """The effect called `name` (contract vocabulary or simulator-only) on `joints` (1-based).
+
+    Returns
+    -------
+    effect : Effect
+        An instance of the registered class of `name` (a frozen dataclass) with `joints`
+        and `options`. Raises InputError for an unknown name or option, or bad values.
+    """
     cls = effect_class(name)
     unknown = sorted(set(options) - set(option_types(cls)))
     if unknown:
@@ -79,7 +86,7 @@ def make_effect(name: str, joints: tuple[int, ...] | list[int] = (), **options: 
             f"effect {name!r}: unknown option(s) {unknown} (has: {list(option_types(cls))})"
         )
     try:
-        return cls(joints=tuple(int(j) for j in joints), **options)  # type: ignore[call-arg]
+        return cls(joints=tuple(int(j) for j in joints), **options)
     except (TypeError, ValueError) as exc:
         raise InputError(f"effect {name!r}: bad joints/options {options} ({exc})") from None
 
@@ -88,7 +95,14 @@ def parse_effect(text: str, n_joints: int, **defaults: Any) -> Effect:
     """An effect from its text form `name[:J,J,..][:option=value]` (`Effect.spec`), e.g.
     'backlash:4', 'eccentricity:6:order=3', 'thermal_drift'. Without joints a per-joint
     effect is on every joint 1..n_joints; `defaults` give options not in the text (only
-    those the effect has, e.g. order=2 applies to eccentricity, not to backlash)."""
+    those the effect has, e.g. order=2 applies to eccentricity, not to backlash).
+
+    Returns
+    -------
+    effect : Effect
+        As `make_effect`; its `spec` gives the text form back. Raises InputError for text
+        that names no effect or has bad joints or options.
+    """
     name, *parts = text.split(":")
     cls = effect_class(name)
     types = option_types(cls)
@@ -115,7 +129,14 @@ def parse_effect(text: str, n_joints: int, **defaults: Any) -> Effect:
 
 
 def effect_from_dict(record: Mapping[str, Any]) -> Effect:
-    """An effect from its PARAMS.json / world-file record (`Effect.to_dict`)."""
+    """An effect from its PARAMS.json / world-file record (`Effect.to_dict`).
+
+    Returns
+    -------
+    effect : Effect
+        As `make_effect` of the record's name, joints and options. Raises InputError for a
+        record without a name, or as `make_effect`.
+    """
     record = dict(record)
     if "name" not in record:
         raise InputError(f"effect record without a name: {record}")

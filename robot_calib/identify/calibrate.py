@@ -42,9 +42,17 @@ Log = Callable[[str], None]
 def parse_model(
     spec: str, robot: RobotDescription, ecc_order: int = 1
 ) -> tuple[str, list[Effect]]:
-    """('nominal'|'cpa'|'geometric', effects) of a model name such as
-    'geometric+eccentricity' or 'geometric+backlash:4+thermal_drift'; `ecc_order` is the
-    default Fourier `order` of effects that have one."""
+    """Split a model name such as 'geometric+eccentricity' or
+    'geometric+backlash:4+thermal_drift'; `ecc_order` is the default Fourier `order` of
+    effects that have one. Raises InputError on an unknown base or effect.
+
+    Returns
+    -------
+    base : str
+        'nominal', 'cpa' or 'geometric'.
+    effects : list of Effect
+        The effects after the base, in the order written (empty unless base is 'geometric').
+    """
     base, *extras = spec.split("+")
     known = ", ".join(vocabulary())
     if base not in BASE_MODELS or (extras and base != "geometric"):
@@ -135,7 +143,35 @@ def calibrate(
     """Identify `model_spec` from `recording`. `start`: a calibration to start from (its
     parameters seed the geometry), else the ladder below the model is climbed first.
     objective: 'absolute' residuals, or 'seed' (pairwise distances anchored on the CPA
-    centres of circles 1, 3, 5, the seed's eq. 18) for the LM models."""
+    centres of circles 1, 3, 5, the seed's eq. 18) for the LM models.
+
+    Returns
+    -------
+    calibration : Calibration
+        The identified model, with the following fields:
+
+        name : str
+            `model_spec`.
+        model : KinematicModel
+            The forward model: the geometry plus the effects of `model_spec`.
+        parameters : ParameterVector
+            The P identified values in SI units [m, rad, ...], with their free flags and
+            the reason of each parameter fixed (e.g. unidentifiable).
+        std : ndarray, shape (P,)
+            1-sigma of each parameter in its unit; 0 where fixed (all 0 for 'cpa').
+        accuracy : Accuracy
+            In-sample accuracy on `recording` (seed pairwise criterion and absolute) [mm].
+        residuals : ndarray, shape (n, 3)
+            Predicted - measured points of `recording`, tracker frame [m].
+        identifiability : Identifiability or None
+            Condition number, observability index and the parameters fixed by the
+            analysis; None for 'cpa'.
+        solver : SolverReport
+            How the parameters were found (scipy `least_squares`'s status, message,
+            evaluations, optimality; the method only for closed forms).
+        cpa : CPAResult or None
+            The circle point analysis (axes, circle fits) when it ran, else None.
+    """
     if objective not in OBJECTIVES:
         raise InputError(f"--objective {objective}: expected one of {', '.join(OBJECTIVES)}")
     say = log or (lambda _msg: None)

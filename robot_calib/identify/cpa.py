@@ -183,9 +183,9 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
             fits.append(SweepFit(j, s.n_poses, float(np.ptp(readings)), circle))
             lines.append((s.n_poses, line))
         weights = np.array([w for w, _ in lines], dtype=float)
-        direction = sum(w * ln.direction for w, ln in lines)
+        direction = sum((w * ln.direction for w, ln in lines), np.zeros(3))
         direction = direction / np.linalg.norm(direction)
-        point = sum(w * ln.point for w, ln in lines) / weights.sum()
+        point = sum((w * ln.point for w, ln in lines), np.zeros(3)) / weights.sum()
         axes.append(AxisLine(point, direction))
 
     # Base frame: on axis 1, d1 and theta1 nominal.

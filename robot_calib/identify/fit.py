@@ -187,14 +187,38 @@ def fit_model(
 ) -> FitResult:
     """Fit the free parameters of `start` so the model's targets at `poses` match `points`
     (n, 3) [m] in the sense of `objective` (default: absolute residuals). Unidentifiable
-    parameters are fixed first (at their start values)."""
+    parameters are fixed first (at their start values).
+
+    Returns
+    -------
+    result : FitResult
+        The fit, with the following fields:
+
+        parameters : ParameterVector
+            `start` with the P fitted values in SI units, and the parameters fixed as
+            unidentifiable (free flag off, reason recorded).
+        std : ndarray, shape (P,)
+            1-sigma of each parameter in its unit, from the objective's residuals and
+            Jacobian; 0 for fixed parameters.
+        residuals : ndarray, shape (n, 3)
+            Predicted - measured points at the solution, tracker frame [m] (whatever the
+            objective).
+        identifiability : Identifiability
+            Condition number and observability index of the free parameters' Jacobian,
+            and the (name, reason) of each parameter fixed.
+        solver : SolverReport
+            scipy `least_squares`'s status, message, success, nfev, njev, optimality,
+            cost_m2 (half the sum of squared residuals) [m^2], plus our evaluation count
+            and wall time [s]. Without free parameters no solver runs: status 0, message
+            'no free parameters'.
+    """
     started = time.perf_counter()
-    objective = objective or AbsoluteObjective()
+    goal: Objective = objective or AbsoluteObjective()
     params: ParameterVector = start
     fixed: tuple[tuple[str, str], ...] = ()
     if check_identifiability:
-        params, fixed = _identifiable(model, start, poses, points, objective)
-    problem = _Problem(model, params, poses, points, objective)
+        params, fixed = _identifiable(model, start, poses, points, goal)
+    problem = _Problem(model, params, poses, points, goal)
     last_report = [time.monotonic()]
 
     def fun(x: Array) -> Array:
@@ -234,7 +258,7 @@ def fit_model(
         describe(jac_free, fixed),
         SolverReport(
             method="levenberg-marquardt (scipy least_squares, MINPACK lmder)",
-            objective=objective.name,
+            objective=goal.name,
             status=status,
             message=message,
             success=status > 0,

@@ -65,7 +65,7 @@ def fix_unidentifiable(
     products as J's, without an (m, p) basis.
     """
     free = np.flatnonzero(params.free)
-    order = sorted(free, key=lambda i: params.parameters[i].group != "geometric")
+    order = sorted(map(int, free), key=lambda i: params.parameters[i].group != "geometric")
     m = jac_full.shape[0]
     columns = r_factor(jac_full, free)  # column c of it: J[:, free[c]] in Q's coordinates
     position = {int(i): c for c, i in enumerate(free)}
@@ -74,7 +74,7 @@ def fix_unidentifiable(
     accepted: list[int] = []
     fixed: list[tuple[str, str]] = []
     for i in order:
-        column = columns[:, position[int(i)]]
+        column = columns[:, position[i]]
         norm = np.linalg.norm(column)
         name = params.names[i]
         if norm == 0.0:

@@ -19,7 +19,8 @@ from robot_calib.kinematics.frames import Array
 class Objective(Protocol):
     """residuals(predicted (n, 3), jac (n, 3, P), measured (n, 3)) -> (r (m,), J (m, P))."""
 
-    name: str
+    @property
+    def name(self) -> str: ...
 
     def residuals(self, predicted: Array, jac: Array, measured: Array) -> tuple[Array, Array]: ...
 

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 Array = NDArray[np.float64]
+IntArray = NDArray[np.integer]  # indices, nanosecond stamps
 
 
 def rot_x(angle: ArrayLike) -> Array:

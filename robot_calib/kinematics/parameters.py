@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -132,21 +133,21 @@ class ParameterVector:
         ]
 
     @classmethod
-    def from_dict(cls, records: Sequence[Mapping[str, object]]) -> ParameterVector:
+    def from_dict(cls, records: Sequence[Mapping[str, Any]]) -> ParameterVector:
         """Inverse of `to_dict`."""
         try:
             params = [
                 Parameter(
                     str(r["name"]),
                     str(r["unit"]),
-                    float(r["nominal"]),  # type: ignore[arg-type]
+                    float(r["nominal"]),
                     bool(r["free"]),
                     str(r.get("fixed_reason", "")),
                     str(r.get("group", "geometric")),
                 )
                 for r in records
             ]
-            values = [float(r["value"]) for r in records]  # type: ignore[arg-type]
+            values = [float(r["value"]) for r in records]
         except (KeyError, TypeError, ValueError) as exc:
             raise ParameterError(f"malformed parameter record: {exc}") from None
         return cls(params, values)

@@ -13,9 +13,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 
 from robot_calib.errors import InputError
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements.sweeps import Sweep, usable_sweeps
 from robot_calib.poses import Poses, approach_directions
 
@@ -38,7 +39,7 @@ class Recording:
     poses: Poses
     points: Array
     sweeps: tuple[Sweep, ...]
-    bag_index: Array
+    bag_index: IntArray
     n_unpaired: int = 0
     warnings: tuple[str, ...] = field(default=())
 
@@ -46,7 +47,7 @@ class Recording:
         return len(self.poses)
 
     @property
-    def general(self) -> Array:
+    def general(self) -> NDArray[np.bool_]:
         """Boolean mask (n,): poses that belong to no sweep."""
         mask = np.ones(len(self), dtype=bool)
         for s in self.sweeps:
@@ -103,7 +104,7 @@ def check_metres(points: Array, where: str, error: type[Exception] = InputError)
         )
 
 
-def pair_nearest(reference_ns: Array, query_ns: Array, tolerance_ns: int) -> Array:
+def pair_nearest(reference_ns: IntArray, query_ns: IntArray, tolerance_ns: int) -> IntArray:
     """Index into sorted `reference_ns` of the stamp nearest each of `query_ns`, -1 where
     none lies within `tolerance_ns`; shape of `query_ns`."""
     right = np.clip(np.searchsorted(reference_ns, query_ns), 1, len(reference_ns) - 1)
@@ -122,7 +123,16 @@ def recording_from_arrays(
     q: Array, points: Array, time: Array | None = None, source: str = "arrays"
 ) -> Recording:
     """A recording of measurements already paired in memory (one source, visiting order):
-    q (n, J) [rad], points (n, 3) [m], time (n,) [s]."""
+    q (n, J) [rad], points (n, 3) [m], time (n,) [s].
+
+    Returns
+    -------
+    recording : Recording
+        Fields as in `recording_from_stream`: sources (`source`,); poses the n readings
+        in the given order, approach directions from that order, time `time` [s] (else
+        0); points (n, 3) [m]; sweeps the usable circle sweeps; bag_index (n,) zeros;
+        n_unpaired 0; warnings for sweeps too short to use.
+    """
     poses = Poses.from_readings(q, time=time)
     warnings: list[str] = []
     sweeps = usable_sweeps(poses.q, source, warnings)
@@ -138,10 +148,10 @@ def recording_from_arrays(
 
 
 def recording_from_stream(
-    js_ns: Array,
+    js_ns: IntArray,
     q: Array,
     velocity_sign: Array,
-    point_ns: Array,
+    point_ns: IntArray,
     points: Array,
     pair_tolerance: float = PAIR_TOLERANCE_S,
     source: str = "live",
@@ -154,6 +164,28 @@ def recording_from_stream(
     0 = no velocity); point_ns (n,) point stamps [ns], points (n, 3) tracker frame [m]; each
     in any order (sorted here by stamp, stable). Raises `error` (naming `source`) when the
     points look like millimetres or none pairs.
+
+    Returns
+    -------
+    recording : Recording
+        The paired measurements, with the following fields:
+
+        sources : tuple of str
+            (`source`,).
+        poses : Poses
+            One pose per paired point, in stamp order: q (k, J) the nearest joint state's
+            readings [rad]; direction (k, J) its velocity signs, else the approach
+            direction from the readings' order; time (k,) since the first paired point [s].
+        points : ndarray, shape (k, 3)
+            The paired points, tracker frame [m].
+        sweeps : tuple of Sweep
+            The circle sweeps usable for CPA (pose indices, joint).
+        bag_index : ndarray, shape (k,)
+            Zeros (one source).
+        n_unpaired : int
+            Points with no joint state within `pair_tolerance` (dropped).
+        warnings : tuple of str
+            'warning: ...' lines: points dropped, sweeps too short to use.
     """
     js_ns, point_ns = np.asarray(js_ns, dtype=np.int64), np.asarray(point_ns, dtype=np.int64)
     q, velocity_sign = np.asarray(q, dtype=float), np.asarray(velocity_sign, dtype=float)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE
 
 MIN_SWEEP_POSES = 3
@@ -19,7 +19,7 @@ class Sweep:
     """A circle sweep: `index` (k,) into the recording's poses, all turning `joint` (1-based)."""
 
     joint: int
-    index: Array
+    index: IntArray
 
     @property
     def n_poses(self) -> int:

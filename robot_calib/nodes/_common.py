@@ -85,10 +85,10 @@ def message_class(type_name: str) -> type:
         raise InputError(f"bad message type name {type_name!r} (want pkg/msg/Type)")
     package, namespace, name = parts
     try:
-        cls = getattr(importlib.import_module(f"{package}.{namespace}"), name)
+        cls: type = getattr(importlib.import_module(f"{package}.{namespace}"), name)
     except (ImportError, AttributeError) as exc:
         raise InputError(f"message type {type_name} is not installed: {exc}") from None
-    return cls  # type: ignore[no-any-return]
+    return cls
 
 
 def qos_to_record(qos: QoSProfile) -> QosProfile:

@@ -23,6 +23,7 @@ import os
 import threading
 import time
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ from diagnostic_msgs.srv import SelfTest
 from geometry_msgs.msg import Point, PointStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.event_handler import QoSRequestedIncompatibleQoSInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -162,16 +163,11 @@ class CalibratorNode(Node):
                 callback,
                 live_qos,
                 event_callbacks=SubscriptionEventCallbacks(
-                    incompatible_qos=lambda event, topic=topic: self.get_logger().warning(
-                        f"{topic}: a publisher's QoS is incompatible with RELIABLE "
-                        f"(policy {event.last_policy_kind}); its messages are not received"
-                    )
+                    incompatible_qos=partial(self._on_incompatible_qos, topic)
                 ),
             )
         group = self._solver_group
-        self.create_subscription(
-            Empty, "~/solve", lambda _msg: self.solve(), 10, callback_group=group
-        )
+        self.create_subscription(Empty, "~/solve", self._on_solve, 10, callback_group=group)
         self.create_service(SelfTest, "~/calibrate", self._on_calibrate, callback_group=group)
         if self.solve_after_idle_s > 0:
             period = min(self.solve_after_idle_s / 4, 0.5)
@@ -388,6 +384,15 @@ class CalibratorNode(Node):
         else:
             self.get_logger().info(message.strip())
 
+    def _on_incompatible_qos(self, topic: str, event: QoSRequestedIncompatibleQoSInfo) -> None:
+        self.get_logger().warning(
+            f"{topic}: a publisher's QoS is incompatible with RELIABLE "
+            f"(policy {event.last_policy_kind}); its messages are not received"
+        )
+
+    def _on_solve(self, _msg: Empty) -> None:
+        self.solve()
+
     def _on_joint_state(self, msg: JointState) -> None:
         names = self.robot.joint_names
         try:
@@ -450,7 +455,7 @@ def residuals_message(measured: Array, residuals: Array) -> Float64MultiArray:
     return msg
 
 
-def _points(xyz: Array) -> list[Point]:
+def _points(xyz: Array | Sequence[Array]) -> list[Point]:
     return [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in xyz]
 
 

@@ -16,10 +16,11 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Sequence
+from functools import partial
 from typing import Any
 
 from rclpy.clock import Clock, ClockType
-from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.event_handler import QoSRequestedIncompatibleQoSInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (
@@ -184,16 +185,19 @@ class RecorderNode(Node):
         self._subscriptions_by_topic[topic] = self.create_subscription(
             msg_type,
             topic,
-            lambda data, info, topic=topic: self._on_message(topic, data, info),
+            partial(self._on_message, topic),  # two arguments: rclpy passes (data, MessageInfo)
             self._request_qos(topic),
             raw=True,
             event_callbacks=SubscriptionEventCallbacks(
-                incompatible_qos=lambda event, topic=topic: self.get_logger().warning(
-                    f"{topic}: a publisher's QoS is incompatible with the recorder's "
-                    f"request (policy {event.last_policy_kind}); its messages are not recorded"
-                ),
-                message_lost=lambda event, topic=topic: self._on_lost(topic, event),
+                incompatible_qos=partial(self._on_incompatible_qos, topic),
+                message_lost=partial(self._on_lost, topic),
             ),
+        )
+
+    def _on_incompatible_qos(self, topic: str, event: QoSRequestedIncompatibleQoSInfo) -> None:
+        self.get_logger().warning(
+            f"{topic}: a publisher's QoS is incompatible with the recorder's "
+            f"request (policy {event.last_policy_kind}); its messages are not recorded"
         )
 
     def _on_lost(self, topic: str, event: Any) -> None:

@@ -9,6 +9,7 @@ it also drives /clock (rosgraph_msgs/Clock), so nodes with use_sim_time run on p
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 import numpy as np
 from rclpy.clock import Clock as RosClock
@@ -33,8 +34,8 @@ QOS = QoSProfile(
 class SimRobotNode(Node):
     """Publishes the plan's readings; `publish_pose(k)` lets a driver step it in lockstep."""
 
-    def __init__(self, **kwargs: object) -> None:
-        super().__init__("sim_robot", **kwargs)  # type: ignore[arg-type]
+    def __init__(self, **kwargs: Any) -> None:  # rclpy.node.Node's keyword arguments
+        super().__init__("sim_robot", **kwargs)
         self.plan_name = declare(
             self, "plan", "paper-test3", f"measurement plan: {', '.join(PLAN_NAMES)}"
         )

@@ -10,10 +10,12 @@ stamp by a random latency; points may drop out (line of sight), as the world say
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 
 from robot_calib.errors import InputError
@@ -34,8 +36,8 @@ from robot_calib.sim.world import load_world
 class SimTrackerNode(Node):
     """One point per received JointState (unless dropped); counts in `received`/`published`."""
 
-    def __init__(self, **kwargs: object) -> None:
-        super().__init__("sim_tracker", **kwargs)  # type: ignore[arg-type]
+    def __init__(self, **kwargs: Any) -> None:  # rclpy.node.Node's keyword arguments
+        super().__init__("sim_tracker", **kwargs)
         world_file = declare(self, "world", "", "world YAML file ('' = built-in default)")
         seed = declare(self, "seed", -1, "random seed (-1 = the world's seed + 1)")
         self.world = load_world(world_file or None)
@@ -49,7 +51,7 @@ class SimTrackerNode(Node):
             " (so a robot that waits for its own readers starts only when no point is lost)",
         )
         self.publisher = self.create_publisher(PointStamped, POINT_TOPIC, QOS)
-        self.subscription = None
+        self.subscription: Subscription | None = None
         self.received = 0
         self.published = 0
         self.dropped = 0

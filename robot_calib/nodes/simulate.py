@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from robot_calib.errors import RobotCalibError
@@ -57,7 +59,7 @@ def simulate_bag(
         rclpy.init()
     sim_time = Parameter("use_sim_time", value=True)
     world_param = Parameter("world", value=str(world) if world else "")
-    nodes = []
+    nodes: list[Node] = []
     try:
         robot = SimRobotNode(
             parameter_overrides=[
@@ -90,26 +92,24 @@ def simulate_bag(
             lambda: robot.ready() and tracker.publisher.get_subscription_count() >= 1,
             "discovery",
         )
+
+        def clocks_at(stamp: int) -> bool:
+            return all(n.get_clock().now().nanoseconds == stamp for n in nodes)
+
+        def recorded(sent: int) -> bool:
+            return (
+                tracker.received == sent
+                and recorder.counts.get(JOINT_STATES_TOPIC, 0) == sent
+                and recorder.counts.get(POINT_TOPIC, 0) == tracker.published
+            )
+
         total = len(robot.plan)
         while not robot.done:
             k = robot.next_pose
             robot.publish_clock(k)
-            stamp = robot.stamp_ns(k)
-            _spin_until(
-                executor,
-                lambda stamp=stamp: all(n.get_clock().now().nanoseconds == stamp for n in nodes),
-                "/clock",
-            )
+            _spin_until(executor, partial(clocks_at, robot.stamp_ns(k)), "/clock")
             robot.publish_pose()
-            _spin_until(
-                executor,
-                lambda sent=k + 1: (
-                    tracker.received == sent
-                    and recorder.counts.get(JOINT_STATES_TOPIC, 0) == sent
-                    and recorder.counts.get(POINT_TOPIC, 0) == tracker.published
-                ),
-                f"pose {k}",
-            )
+            _spin_until(executor, partial(recorded, k + 1), f"pose {k}")
             if progress is not None:
                 progress(k + 1, total)
         recorder.close()

@@ -69,6 +69,7 @@ class StreamingTracker:
             self._direction = np.ones_like(q)
             self._t0 = stamp_s
         else:
+            assert self._direction is not None  # set with the first reading
             self._direction = next_direction(self._direction, self._last_q, q)
         self._last_q = q
         assert self._direction is not None and self._t0 is not None
