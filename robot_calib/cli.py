@@ -74,7 +74,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     result = pipeline.run(
         args.output, args.robot, args.plan, args.effects, args.seed, args.holdout,
-        say=print, log=_log, progress=_progress(args.plan),
+        say=print, log=_log, progress=_progress(),
     )  # fmt: skip
     geometric = result.models["geometric"].calibration
     print(summary(geometric, result.recording))
@@ -94,11 +94,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _progress(plan: str) -> Callable[[int, int], None]:
+def _progress() -> Callable[[str, int, int], None]:
     """A progress printer for simulations: 'plan: k/N poses' at most once a second."""
     last = [0.0]
 
-    def progress(done: int, total: int) -> None:
+    def progress(plan: str, done: int, total: int) -> None:
         if time.monotonic() - last[0] > 1.0 or done == total:
             last[0] = time.monotonic()
             print(f"  {plan}: {done}/{total} poses", file=sys.stderr)
@@ -111,9 +111,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from robot_calib import pipeline
 
     world = pipeline.simulation_world(args.world, args.robot, args.effects or (), args.seed)
-    sim = pipeline.simulate(
-        args.output, args.plan, world, args.seed, args.n_random, _progress(args.plan)
-    )
+    sim = pipeline.simulate(args.output, args.plan, world, args.seed, args.n_random, _progress())
     print(
         f"{sim.bag}: {', '.join(f'{t}={n}' for t, n in sim.counts.items())} messages "
         f"({args.plan}, effects: {', '.join(sim.effects) or 'none'}) in {sim.seconds:.1f} s; "
@@ -132,7 +130,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from robot_calib.identify.params_file import summary, write_json_atomic
 
     robot = load_robot(args.robot)
-    output = pipeline.output_path(args.output, "PARAMS.json")
+    output = pipeline.output_path(args.output, "PARAMS.json", args.bags)
     started = time.perf_counter()
     cal, recording = pipeline.calibrate_bags(
         args.bags, robot, args.model, args.ecc_order, args.objective, args.pair_tolerance, _log
@@ -148,7 +146,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from robot_calib import pipeline
 
     robot = load_robot(args.robot)
-    output = pipeline.output_path(args.output, "DIAGNOSIS.json")
+    output = pipeline.output_path(
+        args.output, "DIAGNOSIS.json", [*args.bags, *(args.holdout or ())]
+    )
     started = time.perf_counter()
     diagnosis, ladder, recording = pipeline.diagnose_bags(
         args.bags, robot, args.holdout or (), args.pair_tolerance, _log
@@ -228,7 +228,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
             f"{args.params}: identified for robot {model.robot.name}, not --robot {args.robot}"
         )
     poses = read_joints_csv(args.joints, model.robot.n_joints)
-    output = output_path(args.output, "POINTS.csv")
+    output = output_path(args.output, "POINTS.csv", [args.params, args.joints])
     write_points_csv(model.target_points(params, poses), output)
     print(f"{output}: {len(poses)} points (m, laser_tracker frame)")
     return 0
@@ -239,6 +239,24 @@ class _OneLineParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _at_least(low: int) -> Callable[[str], int]:
+    """An argparse type: an integer >= `low` (else a one-line usage error, exit 2)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"{value} < {low}")
+        return value
+
+    return parse
+
+
+_count, _positive = _at_least(0), _at_least(1)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -276,9 +294,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="effects to switch on, e.g. backlash:4 eccentricity:1,2 "
         "thermal_drift compliance:2=2e-5 (default magnitudes unless =VALUE)",
     )
-    sim.add_argument("--seed", type=int, help="random seed of noise and plan")
+    sim.add_argument("--seed", type=_count, help="random seed of noise and plan (>= 0)")
     sim.add_argument(
-        "--n-random", type=int, default=N_RANDOM_POSES, help="poses of the random plan"
+        "--n-random", type=_positive, default=N_RANDOM_POSES, help="poses of the random plan"
     )
     sim.add_argument("-o", "--output", required=True, help="bag to write (BAG.mcap)")
 
@@ -290,7 +308,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="nominal | cpa | geometric | geometric+eccentricity | geometric+EFFECT[:joints]"
         " (default geometric)",
     )
-    cal.add_argument("--ecc-order", type=int, default=1, help="eccentricity Fourier order (1)")
+    cal.add_argument(
+        "--ecc-order", type=_positive, default=1, help="eccentricity Fourier order (1)"
+    )
     cal.add_argument(
         "--objective",
         default="absolute",
@@ -345,10 +365,10 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="*",
         help="effects of the simulated robot, as for simulate (default: joint-4 backlash)",
     )
-    run.add_argument("--seed", type=int, default=0, help="random seed")
+    run.add_argument("--seed", type=_count, default=0, help="random seed (>= 0)")
     run.add_argument(
         "--holdout",
-        type=int,
+        type=_positive,
         default=RUN_HOLDOUT_POSES,
         help=f"random hold-out poses ({RUN_HOLDOUT_POSES})",
     )

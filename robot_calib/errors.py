@@ -3,6 +3,11 @@
 The CLI turns every `RobotCalibError` into a one-line message and exit status 2.
 """
 
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable, Sequence
+
 
 class RobotCalibError(Exception):
     """Base class: bad input a user can fix (exit status 2 at the CLI)."""
@@ -24,3 +29,21 @@ class InputError(RobotCalibError):
 
 class BagError(RobotCalibError):
     """Unreadable, truncated or existing bag file (MCAP), or a bad topic/type in one."""
+
+
+def check_keys(
+    keys: Iterable[object],
+    known: Sequence[str],
+    where: str,
+    error: type[RobotCalibError] = InputError,
+    what: str = "key",
+) -> None:
+    """Raise `error` naming the first of `keys` not in `known`, with the closest known one
+    as a hint ("did you mean 'mass'?") or the known ones: a misspelt key or option must not
+    be silently ignored."""
+    for key in keys:
+        if key in known:
+            continue
+        close = difflib.get_close_matches(str(key), known, n=1)
+        hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(known) or 'none'}"
+        raise error(f"{where}: unknown {what} {str(key)!r} ({hint})")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -27,7 +28,7 @@ if TYPE_CHECKING:
     from robot_calib.sim.world import World
 
 Log = Callable[[str], None]
-Progress = Callable[[int, int], None]
+Progress = Callable[[str, int, int], None]  # (plan, poses done, poses in all)
 
 DEFAULT_ROBOT = "kr5_sixx_r650"  # the seed's robot
 DEFAULT_PLAN = "paper-test3"  # `simulate` without --plan
@@ -121,14 +122,15 @@ def simulate(
     if plan not in PLAN_NAMES:
         raise InputError(f"--plan {plan}: unknown plan (known: {', '.join(PLAN_NAMES)})")
     bag = new_file_path(output, "the bag")
+    world_file = new_file_path(bag.with_suffix(".world.yaml"), "the world file")
     world = world if world is not None else simulation_world(seed=seed)
-    world_file = bag.with_suffix(".world.yaml")
     save_world(world, world_file)
     started = time.monotonic()
     try:
         counts = simulate_bag(
-            bag, plan, world_file, -1 if seed is None else seed, n_random, progress
-        )
+            bag, plan, world_file, -1 if seed is None else seed, n_random,
+            None if progress is None else partial(progress, plan),
+        )  # fmt: skip
     except BaseException:  # nothing written half-way: a partial simulation is no recording
         world_file.unlink(missing_ok=True)
         bag.unlink(missing_ok=True)
@@ -137,8 +139,10 @@ def simulate(
     return Simulation(bag, world_file, counts, labels, time.monotonic() - started)
 
 
-def output_path(raw: str | Path, what: str) -> Path:
-    """The path of a file to write: its folder must exist (InputError naming it).
+def output_path(raw: str | Path, what: str, inputs: Sequence[str | Path] = ()) -> Path:
+    """The path of a file to write: its folder must exist, it must not be a folder, and it
+    must not be one of the command's `inputs` (an input is never overwritten); InputError
+    naming the path otherwise.
 
     Returns
     -------
@@ -148,6 +152,10 @@ def output_path(raw: str | Path, what: str) -> Path:
     path = Path(raw)
     if not path.parent.is_dir():
         raise InputError(f"{path.parent}: no such folder for {what}")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder; give a file name for {what}")
+    if path.exists() and any(path.resolve() == Path(p).resolve() for p in inputs):
+        raise InputError(f"{path}: is an input of this command; will not overwrite it")
     return path
 
 
@@ -338,15 +346,22 @@ def run(
     from robot_calib.identify.calibrate import calibrate
     from robot_calib.identify.params_file import write_json_atomic
     from robot_calib.kinematics.description import load_robot
+    from robot_calib.sim.plans import PLAN_NAMES
 
-    description = load_robot(robot)
+    description = load_robot(robot)  # every input checked before anything is written
+    if plan not in PLAN_NAMES:
+        raise InputError(f"--plan {plan}: unknown plan (known: {', '.join(PLAN_NAMES)})")
+    if n_holdout < 1 or seed < 0:
+        raise InputError(f"--holdout {n_holdout}, --seed {seed}: need >= 1 poses, seed >= 0")
+    effects = MAIN_JOB_EFFECTS if effects is None else effects
+    world = simulation_world(None, robot, effects, seed)
+    if Path(output_dir).exists() and not Path(output_dir).is_dir():
+        raise InputError(f"{output_dir}: exists and is not a folder")
     folder = Path(output_dir) / time.strftime("run-%Y%m%d-%H%M%S")
     folder.mkdir(parents=True, exist_ok=False)
     bag, holdout = folder / "calibration.mcap", folder / "holdout.mcap"
     steps = 4
     say(f"[1/{steps}] simulate + record: {plan} in the default world -> {bag}")
-    effects = MAIN_JOB_EFFECTS if effects is None else effects
-    world = simulation_world(None, robot, effects, seed)
     first = simulate(bag, plan, world, seed, n_holdout, progress)
     say(f"[2/{steps}] simulate + record: {n_holdout} random hold-out poses -> {holdout}")
     truth = simulation_world(first.world_file, robot, (), seed + 1)

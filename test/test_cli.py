@@ -29,12 +29,25 @@ def one_line_error(proc: subprocess.CompletedProcess[str], text: str) -> None:
     ("args", "text"),
     [
         (["calibrate", "x.mcap", "--ecc-order", "-1", "--model", "geometric+eccentricity",
-          "-o", "p.json"], "order must be an integer >= 1"),
+          "-o", "p.json"], "argument --ecc-order: -1 < 1"),
         (["calibrate", "x.mcap", "--model", "geometric+eccentricity:1:order=0", "-o", "p.json"],
          "order must be an integer >= 1"),
         (["import", "x.csv", "--preset", "ur5_jacobi2025", "--angle-unit", "grad", "-o", "b"],
          "invalid choice: 'grad'"),
         (["simulate", "--plan", "nosuch", "-o", "t.mcap"], "--plan nosuch: unknown plan"),
+        (["simulate", "--effects", "eccentricity:1:ordr=2", "-o", "t.mcap"],
+         "unknown option 'ordr' (did you mean 'order'?)"),
+        (["simulate", "--effects", "backlash:9", "-o", "t.mcap"], "joints [9] outside 1..6"),
+        (["simulate", "--effects", "backlash:4,4", "-o", "t.mcap"], "must be distinct"),
+        (["simulate", "--effects", "thermal_drift:3", "-o", "t.mcap"], "belongs to no joint"),
+        (["simulate", "--effects", "compliance:2=nan", "-o", "t.mcap"], "must be finite"),
+        (["simulate", "--plan", "random", "--n-random", "-5", "-o", "t.mcap"], "-5 < 1"),
+        (["simulate", "--seed", "-1", "-o", "t.mcap"], "-1 < 0"),
+        (["calibrate", "x.mcap", "--model", "geometric+backlash:99", "-o", "p.json"],
+         "joints [99] outside 1..6"),
+        (["run", "-o", "out", "--effects", "foo:1"], "unknown effect 'foo'"),
+        (["run", "-o", "out", "--plan", "nosuch"], "--plan nosuch: unknown plan"),
+        (["run", "-o", "out", "--holdout", "0"], "0 < 1"),
     ],
 )  # fmt: skip
 def test_bad_arguments_are_one_line_and_write_nothing(
@@ -79,3 +92,44 @@ def test_a_robot_from_a_yaml_file_round_trips_through_params(tmp_path: Path) -> 
         ),
         "identified for robot my_kr5, not --robot ur5",
     )
+
+
+def test_no_command_overwrites_its_input(tmp_path: Path) -> None:
+    """`-o` naming an input (the bag, PARAMS.json, JOINTS.csv, a world file) is refused."""
+    bag = tmp_path / "in.mcap"
+    shutil.copy(ROOT / "bags" / "paper_test3.mcap", bag)
+    before = bag.read_bytes()
+    one_line_error(run("calibrate", str(bag), "-o", str(bag)), "is an input of this command")
+    one_line_error(run("diagnose", str(bag), "-o", str(bag)), "is an input of this command")
+    one_line_error(run("calibrate", str(bag), "-o", str(tmp_path)), "is a folder")
+    assert bag.read_bytes() == before
+    params, joints = tmp_path / "p.json", tmp_path / "j.csv"
+    assert run("calibrate", str(bag), "-o", str(params)).returncode == 0
+    joints.write_text("q1,q2,q3,q4,q5,q6\n0,0.1,0.2,0.3,0.4,0.5\n")
+    for target in (params, joints):
+        kept = target.read_bytes()
+        proc = run("predict", str(params), "--joints", str(joints), "-o", str(target))
+        one_line_error(proc, "is an input of this command")
+        assert target.read_bytes() == kept
+    world = tmp_path / "my.world.yaml"
+    world.write_text((ROOT / "robot_calib" / "sim" / "worlds" / "default.yaml").read_text())
+    kept = world.read_bytes()
+    proc = run("simulate", "--world", str(world), "-o", str(tmp_path / "my.mcap"))
+    one_line_error(proc, "my.world.yaml: exists")
+    assert world.read_bytes() == kept and not (tmp_path / "my.mcap").exists()
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("base2tracker: {xyz_m: [2.2, 1.0]}", "base2tracker.xyz_m: expected three finite"),
+        ("target_in_flange_m: 0.05", "target_in_flange_m: expected three numbers"),
+        ("efects: []", "unknown key 'efects' (did you mean 'effects'?)"),
+        ("effects: [{name: backlash, joints: [4], ordr: 2}]", "unknown key 'ordr'"),
+    ],
+)
+def test_bad_world_files_are_one_line_errors(tmp_path: Path, text: str, message: str) -> None:
+    world = tmp_path / "w.yaml"
+    world.write_text(text + "\n")
+    one_line_error(run("simulate", "--world", str(world), "-o", str(tmp_path / "x.mcap")), message)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["w.yaml"]

@@ -21,7 +21,7 @@ from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.effects.encoder_scale import EncoderScale
 from robot_calib.effects.ripple import JointRipple
 from robot_calib.effects.thermal_drift import ThermalDrift
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, check_keys
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.poses import Poses
 
@@ -80,11 +80,7 @@ def make_effect(name: str, joints: tuple[int, ...] | list[int] = (), **options: 
         and `options`. Raises InputError for an unknown name or option, or bad values.
     """
     cls = effect_class(name)
-    unknown = sorted(set(options) - set(option_types(cls)))
-    if unknown:
-        raise InputError(
-            f"effect {name!r}: unknown option(s) {unknown} (has: {list(option_types(cls))})"
-        )
+    check_keys(options, tuple(option_types(cls)), f"effect {name!r}", what="option")
     try:
         return cls(joints=tuple(int(j) for j in joints), **options)
     except (TypeError, ValueError) as exc:
@@ -112,10 +108,7 @@ def parse_effect(text: str, n_joints: int, **defaults: Any) -> Effect:
         for part in parts:
             if "=" in part:
                 key, raw = part.split("=", 1)
-                if key not in types:
-                    raise InputError(
-                        f"{text}: effect {name!r} has no option {key!r} (has: {list(types)})"
-                    )
+                check_keys([key], tuple(types), text, what="option")
                 options[key] = types[key](raw)
             else:
                 joints += [int(j) for j in part.split(",") if j]
@@ -125,6 +118,9 @@ def parse_effect(text: str, n_joints: int, **defaults: Any) -> Effect:
         ) from None
     if not joints and cls.per_joint:
         joints = list(range(1, n_joints + 1))
+    bad = [j for j in joints if not 1 <= j <= n_joints]
+    if bad:
+        raise InputError(f"{text}: joints {bad} outside 1..{n_joints}")
     return make_effect(name, joints, **options)
 
 
@@ -137,9 +133,9 @@ def effect_from_dict(record: Mapping[str, Any]) -> Effect:
         As `make_effect` of the record's name, joints and options. Raises InputError for a
         record without a name, or as `make_effect`.
     """
+    if not isinstance(record, Mapping) or "name" not in record:
+        raise InputError(f"an effect is a mapping with a name, got {record!r}")
     record = dict(record)
-    if "name" not in record:
-        raise InputError(f"effect record without a name: {record}")
     name, joints = record.pop("name"), record.pop("joints", [])
     return make_effect(name, joints or (), **record)
 

@@ -77,7 +77,9 @@ class Effect(ABC):
 
     def __post_init__(self) -> None:
         if not self.per_joint and self.joints:
-            raise InputError(f"{self.name} belongs to no joint: give joints: []")
+            raise InputError(f"{self.name} belongs to no joint: give it no joints")
+        if any(j < 1 for j in self.joints) or len(set(self.joints)) != len(self.joints):
+            raise InputError(f"{self.name}: joints {list(self.joints)} must be distinct, >= 1")
 
     # -- the model ------------------------------------------------------------------------
     @abstractmethod

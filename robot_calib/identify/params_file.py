@@ -117,7 +117,10 @@ def params_from_dict(
     """The forward model and parameters of a PARAMS.json document; errors name `where`."""
     try:
         robot = load_robot(doc["robot"])
-        effects = tuple(effect_from_dict(e) for e in doc.get("effects", []))
+        records = doc.get("effects", [])
+        if not isinstance(records, list):
+            raise InputError(f"{where}: 'effects' must be a list of effect records")
+        effects = tuple(effect_from_dict(e) for e in records)
         model = KinematicModel(robot, effects)
         params = ParameterVector.from_dict(doc["parameters"])
         expected = model.parameters().names

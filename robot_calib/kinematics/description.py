@@ -8,8 +8,6 @@ level) and `JOINT_KEYS` (each joint) are rejected, so a misspelt key is not sile
 
 from __future__ import annotations
 
-import difflib
-from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -17,7 +15,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from robot_calib.errors import RobotDescriptionError
+from robot_calib.errors import RobotDescriptionError, check_keys
 from robot_calib.kinematics.frames import Array
 
 ROBOTS_DIR = Path(__file__).resolve().parent / "robots"
@@ -97,22 +95,11 @@ def _number(value: Any, where: str) -> float:
     return float(value)
 
 
-def _reject_unknown_keys(entry: Mapping[Any, Any], known: tuple[str, ...], where: str) -> None:
-    """RobotDescriptionError naming the first key of `entry` not in `known` (and the closest
-    known key, if one is close)."""
-    for key in entry:
-        if key in known:
-            continue
-        close = difflib.get_close_matches(str(key), known, n=1)
-        hint = f"did you mean {close[0]!r}?" if close else f"known: {', '.join(known)}"
-        raise RobotDescriptionError(f"{where}: unknown key {str(key)!r} ({hint})")
-
-
 def parse_robot(data: Any, source: str) -> RobotDescription:
     """Validate a loaded YAML mapping and build the description; errors name `source`."""
     if not isinstance(data, dict):
         raise RobotDescriptionError(f"{source}: expected a mapping with 'name' and 'joints'")
-    _reject_unknown_keys(data, ROBOT_KEYS, source)
+    check_keys(data, ROBOT_KEYS, source, RobotDescriptionError)
     joints = data.get("joints")
     if not isinstance(joints, list) or len(joints) < 2:
         raise RobotDescriptionError(f"{source}: 'joints' must be a list of >= 2 joint entries")
@@ -127,7 +114,7 @@ def parse_robot(data: Any, source: str) -> RobotDescription:
         where = f"{source}: joint {j}"
         if not isinstance(entry, dict):
             raise RobotDescriptionError(f"{where}: expected a mapping")
-        _reject_unknown_keys(entry, JOINT_KEYS, where)
+        check_keys(entry, JOINT_KEYS, where, RobotDescriptionError)
         for key in DH_FIELDS:
             if key not in entry:
                 raise RobotDescriptionError(f"{where}: missing '{key}'")

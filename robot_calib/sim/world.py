@@ -8,8 +8,7 @@ about 2.5 m from the base, an active target on a bracket off the flange axis.
 
 from __future__ import annotations
 
-import difflib
-from collections.abc import Sequence
+import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -24,7 +23,7 @@ from robot_calib.effects import (
     option_types,
     parse_effect,
 )
-from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.errors import InputError, RobotCalibError, check_keys
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
@@ -108,16 +107,6 @@ FRAME_KEYS = ("xyz_m", "rpy_deg")
 EFFECT_KEYS = ("name", "joints", "values")  # plus the effect's own options (e.g. order)
 
 
-def check_keys(data: dict[str, Any], known: Sequence[str], where: str) -> None:
-    """InputError naming the first key of `data` not in `known` (with the nearest known
-    key as a hint): a misspelt key must not be silently ignored."""
-    for key in data:
-        if key not in known:
-            near = difflib.get_close_matches(str(key), known, n=1)
-            hint = f" (did you mean {near[0]!r}?)" if near else f" (known: {', '.join(known)})"
-            raise InputError(f"{where}: unknown key {key!r}{hint}")
-
-
 def _effect(spec: Any, source: str) -> tuple[Effect, dict[str, float] | None]:
     """An effect of a world file's `effects` list and its true values (None: defaults)."""
     if not isinstance(spec, dict) or "name" not in spec:
@@ -135,6 +124,17 @@ def _mapping(data: dict[str, Any], key: str, source: str) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise InputError(f"{source}: '{key}' must be a mapping")
     return value
+
+
+def _triple(value: Any, where: str) -> tuple[float, float, float]:  # noqa: ANN401 - YAML
+    """Three finite numbers (x, y, z or roll, pitch, yaw) of a world file, else InputError."""
+    try:
+        out = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        raise InputError(f"{where}: expected three numbers, got {value!r}") from None
+    if len(out) != 3 or not all(math.isfinite(v) for v in out):
+        raise InputError(f"{where}: expected three finite numbers, got {value!r}")
+    return out[0], out[1], out[2]
 
 
 def _section(data: dict[str, Any], key: str, cls: type, source: str) -> dict[str, Any]:
@@ -163,10 +163,15 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         model = KinematicModel(robot, tuple(effects))
         frame = _mapping(data, "base2tracker", source)
         check_keys(frame, FRAME_KEYS, f"{source}: base2tracker")
-        xyz = frame.get("xyz_m", [2.2, 1.0, -0.3])
-        rpy = np.radians(frame.get("rpy_deg", [0.0, 0.0, 200.0]))
-        target = data.get("target_in_flange_m", [0.06, 0.0, 0.05])
-        truth = model.parameters(tuple(xyz) + tuple(rpy), tuple(target))
+        xyz = _triple(frame.get("xyz_m", [2.2, 1.0, -0.3]), f"{source}: base2tracker.xyz_m")
+        roll, pitch, yaw = _triple(
+            frame.get("rpy_deg", [0.0, 0.0, 200.0]), f"{source}: base2tracker.rpy_deg"
+        )
+        target = _triple(
+            data.get("target_in_flange_m", [0.06, 0.0, 0.05]), f"{source}: target_in_flange_m"
+        )
+        rpy = (math.radians(roll), math.radians(pitch), math.radians(yaw))
+        truth = model.parameters((*xyz, *rpy), target)
         geometry = data.get("geometry", "seed_table3_avg_2_6")
         if geometry == "seed_table3_avg_2_6":
             if robot.name != "kr5_sixx_r650":
@@ -249,12 +254,16 @@ def parse_sim_effect(text: str, n_joints: int) -> tuple[Effect, float | None]:
     'eccentricity:1,2', 'thermal_drift') with an optional '=VALUE' [SI] for all its terms,
     e.g. 'compliance:2=2e-5'."""
     value = None
-    options = option_types(effect_class(text.split(":")[0].split("=")[0]))
     spec, sep, raw = text.rpartition("=")
-    if sep and spec.split(":")[-1] not in options:  # '=VALUE', not an option's 'key=value'
+    last = spec.split(":")[-1]
+    # '=VALUE' follows the name or the joints ('thermal_drift=3e-7', 'compliance:2=2e-5');
+    # after anything else it is an option's 'key=value' (parse_effect checks the key).
+    if sep and (":" not in spec or last.replace(",", "").isdigit() or last == ""):
         try:
             value = float(raw)
         except ValueError:
             raise InputError(f"--effects {text}: value must be a number (SI)") from None
+        if not math.isfinite(value):
+            raise InputError(f"--effects {text}: value must be finite")
         text = spec
     return parse_effect(text, n_joints), value
