@@ -54,7 +54,7 @@ import scipy
 
 from robot_calib.accuracy import accuracy
 from robot_calib.bag.read import read_recording
-from robot_calib.effects import seed_effects
+from robot_calib.effects import seed_runout
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.cpa import circle_point_analysis
 from robot_calib.identify.fit import fit_model
@@ -439,7 +439,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  {load_line()}")
 
     base = load_world()
-    world = with_effect(base, seed_effects(6)[0])  # the seed's runout, order 1, every joint
+    world = with_effect(base, seed_runout(base.model.robot.n_joints))
     robot = world.model.robot
     print(
         f"  world: {base.source} + seed eccentricity (order 1, joints 1-6), noise on, "

@@ -41,7 +41,7 @@ import robot_calib  # noqa: F401
 # isort: split
 import numpy as np
 
-from robot_calib.effects import seed_effects
+from robot_calib.effects import seed_runout
 from robot_calib.identify.fit import fit_model
 from robot_calib.model import KinematicModel
 from robot_calib.sim.plans import random_plan
@@ -86,7 +86,8 @@ def child(n: int, repeat: int, seed: int) -> dict[str, float | int | bool]:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_identify import measured, perturbed_start  # same data and start
 
-    world = with_effect(load_world(), seed_effects(6)[0])  # the seed's runout, every joint
+    base = load_world()
+    world = with_effect(base, seed_runout(base.model.robot.n_joints))
     model = KinematicModel(world.model.robot)
     start = perturbed_start(world, model, seed)
     q = random_plan(world.model.robot, n, np.random.default_rng(seed + n)).q

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, NoReturn
 import numpy as np
 
 from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.kinematics.description import RobotDescription, load_robot
 from robot_calib.measurements import PAIR_TOLERANCE_S
 from robot_calib.pipeline import (
@@ -304,12 +305,15 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
     cal.add_argument(
         "--model",
-        default="geometric",
+        default=DEFAULT_MODEL,
         help="nominal | cpa | geometric | geometric+eccentricity | geometric+EFFECT[:joints]"
         " (default geometric)",
     )
     cal.add_argument(
-        "--ecc-order", type=_positive, default=1, help="eccentricity Fourier order (1)"
+        "--ecc-order",
+        type=_positive,
+        default=DEFAULT_ECC_ORDER,
+        help=f"eccentricity Fourier order ({DEFAULT_ECC_ORDER})",
     )
     cal.add_argument(
         "--objective",

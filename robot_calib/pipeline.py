@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from robot_calib.errors import InputError
+from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import PAIR_TOLERANCE_S
 
@@ -193,11 +194,31 @@ def read_bags(
     return read_recording(bags, robot, pair_tolerance, log=log)
 
 
+def calibrate_recording(
+    recording: Recording,
+    robot: RobotDescription,
+    model: str = DEFAULT_MODEL,
+    ecc_order: int = DEFAULT_ECC_ORDER,
+    objective: str = "absolute",
+    log: Log | None = None,
+) -> Calibration:
+    """Identify `model` from paired measurements (a bag's, or live topics').
+
+    Returns
+    -------
+    calibration : Calibration
+        As `robot_calib.identify.calibrate.calibrate`.
+    """
+    from robot_calib.identify.calibrate import calibrate
+
+    return calibrate(recording, robot, model, ecc_order, log=log, objective=objective)
+
+
 def calibrate_bags(
     bags: Sequence[str | Path],
     robot: RobotDescription,
-    model: str = "geometric",
-    ecc_order: int = 1,
+    model: str = DEFAULT_MODEL,
+    ecc_order: int = DEFAULT_ECC_ORDER,
     objective: str = "absolute",
     pair_tolerance: float = PAIR_TOLERANCE_S,
     log: Log | None = None,
@@ -212,11 +233,12 @@ def calibrate_bags(
     recording : Recording
         The paired measurements of `bags` it was identified from (as `read_bags`).
     """
-    from robot_calib.identify.calibrate import calibrate, parse_model
+    from robot_calib.identify.calibrate import parse_model
 
     parse_model(model, robot, ecc_order)
     recording = read_bags(bags, robot, pair_tolerance, log)
-    return calibrate(recording, robot, model, ecc_order, log=log, objective=objective), recording
+    cal = calibrate_recording(recording, robot, model, ecc_order, objective, log)
+    return cal, recording
 
 
 def diagnose_recordings(
@@ -343,7 +365,6 @@ def run(
     """
     from robot_calib.accuracy import accuracy
     from robot_calib.effects import MAIN_JOB_EFFECTS
-    from robot_calib.identify.calibrate import calibrate
     from robot_calib.identify.params_file import write_json_atomic
     from robot_calib.kinematics.description import load_robot
     from robot_calib.sim.plans import PLAN_NAMES
@@ -371,7 +392,7 @@ def run(
     say(f"[3/{steps}] calibrate: {', '.join(RUN_MODELS)}")
     models = {}
     for name in RUN_MODELS:
-        cal = calibrate(recording, description, name, log=log)
+        cal = calibrate_recording(recording, description, name, log=log)
         write_json_atomic(cal.to_dict(recording), folder / f"params_{name}.json")
         models[name] = ModelScore(cal, accuracy(held.points, cal.predict(held.poses)))
     say(f"[4/{steps}] diagnose the sim-to-real gap (hold-out: {holdout.name})")

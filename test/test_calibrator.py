@@ -375,3 +375,34 @@ def test_node_answers_while_it_solves(context: Context, tmp_path: Path) -> None:
     assert [v.string_value for v in future.result().values] == ["geometric", "kr5_sixx_r650"]
     assert answered_while_busy == [True]
     assert calibrator.error is None and calibrator.diagnosis is not None
+
+
+def test_node_destroyed_mid_solve_publishes_nothing(
+    context: Context, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Ctrl-C during a solve destroys the node while the solving thread runs on: that
+    thread then ends without publishing on destroyed publishers (no exception, which rclpy
+    would report as 'never retrieved' when the task is collected)."""
+    import gc
+
+    from rclpy.executors import MultiThreadedExecutor
+
+    calibrator = CalibratorNode(
+        bags=[SAMPLE], context=context, parameter_overrides=[Parameter("diagnose", value=True)]
+    )
+    executor = MultiThreadedExecutor(num_threads=2, context=context)
+    executor.add_node(calibrator)
+    spin_until(executor, lambda: calibrator.busy or calibrator.solves > 0)
+    assert calibrator.busy, "the solve ended before the node could be destroyed"
+    executor.shutdown(timeout_sec=0)
+    calibrator.destroy_node()
+    deadline = time.monotonic() + TIMEOUT_S
+    while calibrator.busy:
+        assert time.monotonic() < deadline, "the solving thread did not end"
+        time.sleep(0.01)
+    time.sleep(0.1)  # the task records its outcome after the callback returns
+    del executor
+    gc.collect()
+    assert calibrator.solves == 0 and calibrator.calibration is None
+    err = capfd.readouterr().err
+    assert "never retrieved" not in err and "Destroyable" not in err, err

@@ -1,11 +1,13 @@
-"""A new effect is one new module: `CosineOffset` below exists only in the test suite, yet
-once registered the simulator, the world files, the model names, PARAMS.json, the
-diagnosis ladder and the blind harness all know it, and the checks every effect gets
+"""A new effect is one new module: a module file dropped into the effects package is
+discovered and registered; `CosineOffset` below exists only in the test suite, yet once
+registered the simulator, the world files, the model names, PARAMS.json, the diagnosis
+ladder and the blind harness all know it, and the checks every effect gets
 (test_effects.py) pass for it, without any edit outside this file.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -18,7 +20,8 @@ from test_effects import (
     check_text_and_file_forms,
 )
 
-from robot_calib.effects import EFFECTS, Effect, registered, vocabulary
+import robot_calib.effects
+from robot_calib.effects import EFFECTS, Effect, discover_effects, registered, vocabulary
 from robot_calib.effects.base import JointOffsetEffect
 from robot_calib.identify.calibrate import parse_model
 from robot_calib.kinematics.description import RobotDescription
@@ -72,3 +75,38 @@ def test_the_ladder_and_the_blind_harness_find_a_new_effect(plugin: type[Effect]
     verdict = run_case(plugin.name, 3)
     assert verdict["answer"] == {"effect": "cosine_offset", "joints": verdict["joints"]}
     assert verdict["hit"], verdict
+
+
+MODULE = """
+import numpy as np
+
+from robot_calib.effects.base import JointOffsetEffect, register_effect
+
+
+@register_effect
+class Wobble(JointOffsetEffect):
+    name = "wobble"
+    unit = "rad"
+    default_magnitude = 1e-4
+    draw_range = (1e-4, 2e-4)
+
+    def signal(self, robot, poses):
+        return np.sin(2.0 * poses.q)
+"""
+
+
+def test_a_module_file_in_the_effects_package_is_discovered(tmp_path: Path) -> None:
+    """Drop `wobble.py` into a folder of the package's path: discovery registers it, and
+    the model parser and the ladder know it, with no other file touched."""
+    (tmp_path / "wobble.py").write_text(MODULE)
+    robot_calib.effects.__path__.append(str(tmp_path))
+    try:
+        assert "wobble" in discover_effects()
+        _, effects = parse_model("geometric+wobble:3", build_world({}, "default").model.robot)
+        assert [e.spec for e in effects] == ["wobble:3"]
+        check_text_and_file_forms(EFFECTS["wobble"])
+    finally:
+        robot_calib.effects.__path__.remove(str(tmp_path))
+        EFFECTS.pop("wobble", None)
+        sys.modules.pop("robot_calib.effects.wobble", None)
+    assert "wobble" not in discover_effects()

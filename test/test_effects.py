@@ -118,6 +118,7 @@ def check_params_round_trip(cls: type[Effect], tmp_path: Path) -> None:
     assert loaded.model.effects == cal.model.effects and loaded.name == cal.name
     np.testing.assert_array_equal(loaded.std, cal.std)
     assert loaded.accuracy == cal.accuracy and loaded.solver == cal.solver
+    assert loaded.identifiability == cal.identifiability
 
 
 def check_simulator_defaults(cls: type[Effect]) -> None:

@@ -2,39 +2,39 @@
 
 Everything outside this package reaches effects through the registry, never by name:
 `make_effect(name, joints, **options)` builds one, `parse_effect('backlash:4')` reads the
-text form and `effect_from_dict` the file form; `vocabulary()` lists the contract's effects
-in registry order (the order the ladder and the blind harness use). A new effect is one new
-module whose class is passed to `register_effect`.
+text form and `effect_from_dict` the file form; `vocabulary()` lists the contract's effects.
+A new effect is one new module in this package whose class is decorated with
+`@register_effect`: every module here is imported (`discover_effects`) when the package is.
 """
 
 from __future__ import annotations
 
+import importlib
+import pkgutil
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import fields
 from typing import Any, get_type_hints
 
-from robot_calib.effects.backlash import Backlash
-from robot_calib.effects.base import Contribution, Effect
-from robot_calib.effects.compliance import Compliance
-from robot_calib.effects.eccentricity import Eccentricity
-from robot_calib.effects.encoder_scale import EncoderScale
-from robot_calib.effects.ripple import JointRipple
-from robot_calib.effects.thermal_drift import ThermalDrift
+from robot_calib.effects.base import EFFECTS, Contribution, Effect, register_effect
 from robot_calib.errors import InputError, check_keys
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.poses import Poses
 
-#: name -> class, in the order the ladder enumerates candidates and the harness its classes
-EFFECTS: dict[str, type[Effect]] = {}
+
+def discover_effects() -> tuple[str, ...]:
+    """Import every module of this package (every folder of its `__path__`), so that each
+    registers its effect; returns the registered names in registry order."""
+    for info in pkgutil.iter_modules(__path__):
+        if info.name != "base":
+            importlib.import_module(f"{__name__}.{info.name}")
+    return tuple(EFFECTS)
 
 
-def register_effect(cls: type[Effect]) -> type[Effect]:
-    """Add an effect class to the registry under `cls.name` (usable as a decorator)."""
-    if cls.name in EFFECTS and EFFECTS[cls.name] is not cls:
-        raise ValueError(f"effect name {cls.name!r} already registered")
-    EFFECTS[cls.name] = cls
-    return cls
+discover_effects()
+
+from robot_calib.effects.backlash import Backlash  # noqa: E402 - the seed's effects, below
+from robot_calib.effects.eccentricity import Eccentricity  # noqa: E402
 
 
 @contextmanager
@@ -46,10 +46,6 @@ def registered(cls: type[Effect]) -> Iterator[type[Effect]]:
         yield cls
     finally:
         EFFECTS.pop(cls.name, None)
-
-
-for _cls in (Backlash, EncoderScale, Compliance, ThermalDrift, Eccentricity, JointRipple):
-    register_effect(_cls)
 
 
 def vocabulary() -> tuple[str, ...]:
@@ -140,10 +136,16 @@ def effect_from_dict(record: Mapping[str, Any]) -> Effect:
     return make_effect(name, joints or (), **record)
 
 
+def seed_runout(n_joints: int) -> Effect:
+    """The seed paper's measured runout of the real KR5 (Tables 5-6): eccentricity of
+    order 1 on every joint (its simulator defaults are those tables)."""
+    return Eccentricity(joints=tuple(range(1, n_joints + 1)), order=1)
+
+
 def seed_effects(n_joints: int) -> tuple[Effect, ...]:
-    """The seed paper's unmodelled effects of the real KR5: runout (Tables 5-6, order 1) on
-    every joint and joint-4 backlash (the seed reports about 250 um of play)."""
-    return (Eccentricity(joints=tuple(range(1, n_joints + 1)), order=1), Backlash(joints=(4,)))
+    """The seed paper's unmodelled effects of the real KR5: runout on every joint
+    (`seed_runout`) and joint-4 backlash (the seed reports about 250 um of play)."""
+    return (seed_runout(n_joints), Backlash(joints=(4,)))
 
 
 #: The effects of the main job's simulated robot (`robot-calib run`): joint-4 backlash.
@@ -152,14 +154,11 @@ MAIN_JOB_EFFECTS = (Backlash(joints=(4,)).spec,)
 
 def ladder_candidates(robot: RobotDescription, poses: Poses) -> list[Effect]:
     """Every candidate of every vocabulary effect for these poses, joint by joint (in
-    registry order within a joint), effects of no joint last."""
+    registry order, i.e. by module name, within a joint), effects of no joint last."""
     out: list[Effect] = []
     for name in vocabulary():
         out += EFFECTS[name].ladder_candidates(robot, poses)
-    order = {name: k for k, name in enumerate(EFFECTS)}
-    return sorted(
-        out, key=lambda e: (min(e.joints) if e.joints else robot.n_joints + 1, order[e.name])
-    )
+    return sorted(out, key=lambda e: min(e.joints) if e.joints else robot.n_joints + 1)
 
 
 __all__ = [
@@ -174,6 +173,8 @@ __all__ = [
     "parse_effect",
     "register_effect",
     "registered",
+    "discover_effects",
     "seed_effects",
+    "seed_runout",
     "vocabulary",
 ]

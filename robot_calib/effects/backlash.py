@@ -6,12 +6,13 @@ Parameter `backlashJ` [rad] = the total play of joint J.
 
 from __future__ import annotations
 
-from robot_calib.effects.base import JointOffsetEffect
+from robot_calib.effects.base import JointOffsetEffect, register_effect
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.poses import Poses
 
 
+@register_effect
 class Backlash(JointOffsetEffect):
     name = "backlash"
     unit = "rad"

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field, fields
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
@@ -34,6 +34,7 @@ from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
 
 HOUSING_ERRORS = ("dx", "dy", "dz", "ex", "ey")
+E = TypeVar("E", bound="Effect")
 
 
 @dataclass
@@ -52,6 +53,18 @@ class Contribution:
     length_strain_jac: Array | None = None
     housing: Array | None = None
     housing_jac: Array | None = None
+
+
+#: The registry: effect name -> class, in the order the modules were imported (by name).
+EFFECTS: dict[str, type[Effect]] = {}
+
+
+def register_effect(cls: type[E]) -> type[E]:
+    """Class decorator: add an effect class to the registry under `cls.name`."""
+    if cls.name in EFFECTS and EFFECTS[cls.name] is not cls:
+        raise ValueError(f"effect name {cls.name!r} already registered")
+    EFFECTS[cls.name] = cls
+    return cls
 
 
 def signed_uniform(rng: np.random.Generator, low: float, high: float) -> float:

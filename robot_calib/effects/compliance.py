@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robot_calib.effects.base import Effect, JointOffsetEffect
+from robot_calib.effects.base import Effect, JointOffsetEffect, register_effect
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, chain
 from robot_calib.kinematics.frames import Array
@@ -53,6 +53,7 @@ def gravity_joints(robot: RobotDescription) -> tuple[int, ...]:
     return tuple(int(j) + 1 for j in np.flatnonzero(peak > SIGNIFICANT_TORQUE_NM))
 
 
+@register_effect
 class Compliance(JointOffsetEffect):
     name = "compliance"
     unit = "rad/(N m)"

@@ -22,6 +22,7 @@ from robot_calib.effects.base import (
     Contribution,
     Effect,
     check_order,
+    register_effect,
     signed_uniform,
 )
 from robot_calib.errors import InputError
@@ -72,6 +73,7 @@ def term_names(order: int) -> list[str]:
     return ["D"] + [f"{kind}{k}" for k in range(1, order + 1) for kind in ("c", "s")]
 
 
+@register_effect
 @dataclass(frozen=True)
 class Eccentricity(Effect):
     name = "eccentricity"

@@ -11,7 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robot_calib.effects.base import Contribution, Effect, check_order, signed_uniform
+from robot_calib.effects.base import (
+    Contribution,
+    Effect,
+    check_order,
+    register_effect,
+    signed_uniform,
+)
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
@@ -20,6 +26,7 @@ DEFAULT_AMPLITUDE = 3e-4  # rad
 DRAW_RANGE = (2e-4, 5e-4)  # rad, blind tests
 
 
+@register_effect
 @dataclass(frozen=True)
 class JointRipple(Effect):
     name = "joint_ripple"

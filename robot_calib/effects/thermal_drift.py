@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robot_calib.effects.base import Contribution, Effect
+from robot_calib.effects.base import Contribution, Effect, register_effect
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
@@ -19,6 +19,7 @@ DEFAULT_RATE = 3e-7  # 1/s: 0.03 % strain per 1000 s of warm-up
 DRAW_RANGE = (2e-7, 6e-7)  # 1/s, blind tests
 
 
+@register_effect
 class ThermalDrift(Effect):
     name = "thermal_drift"
     per_joint = False

@@ -20,7 +20,9 @@ import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
 from robot_calib.effects import Effect, parse_effect, vocabulary
+from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
 from robot_calib.identify.fit import FitResult, SolverReport, fit_model
 from robot_calib.identify.identifiability import Identifiability
@@ -40,7 +42,7 @@ Log = Callable[[str], None]
 
 
 def parse_model(
-    spec: str, robot: RobotDescription, ecc_order: int = 1
+    spec: str, robot: RobotDescription, ecc_order: int = DEFAULT_ECC_ORDER
 ) -> tuple[str, list[Effect]]:
     """Split a model name such as 'geometric+eccentricity' or
     'geometric+backlash:4+thermal_drift'; `ecc_order` is the default Fourier `order` of
@@ -66,7 +68,9 @@ def parse_model(
         if name not in vocabulary():
             raise InputError(f"--model {spec}: unknown effect {name!r} ({known})")
         try:
-            effects.append(parse_effect(extra, robot.n_joints, order=ecc_order))
+            # --ecc-order is eccentricity's default order, no other effect's
+            defaults = {"order": ecc_order} if name == Eccentricity.name else {}
+            effects.append(parse_effect(extra, robot.n_joints, **defaults))
         except InputError as exc:
             raise InputError(f"--model {spec}: {exc}") from None
     return base, effects
@@ -101,8 +105,9 @@ class Calibration:
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any], where: str = "PARAMS.json") -> Calibration:
         """The calibration of a PARAMS.json document: model, parameters, 1-sigma, in-sample
-        accuracy and solver report (the per-point residuals, identifiability evidence and
-        CPA circles are not in the file: residuals is empty, the others None)."""
+        accuracy, identifiability (its figures; the parameters it fixed are those fixed in
+        the file but free in the model) and solver report. The per-point residuals and the
+        CPA circles are not in the file: residuals is empty (0, 3), cpa None."""
         from robot_calib.identify.params_file import params_from_dict
 
         model, params = params_from_dict(doc, where)
@@ -110,10 +115,25 @@ class Calibration:
             std = np.array([float(r.get("std", 0.0)) for r in doc["parameters"]])
             acc = Accuracy.from_dict(doc["residuals"])
             solver = SolverReport.from_dict(doc.get("solver") or {"method": "unknown"})
+            ident = None
+            if "identifiability" in doc:
+                figures = doc["identifiability"]
+                structural = model.parameters()
+                by_data = tuple(
+                    (p.name, p.fixed_reason)
+                    for p in params.parameters
+                    if not p.free and structural.parameters[structural.index(p.name)].free
+                )
+                ident = Identifiability(
+                    float(figures["condition_number"]),
+                    float(figures["observability_index"]),
+                    int(figures["free_parameters"]),
+                    by_data,
+                )
         except (KeyError, TypeError, ValueError, RobotCalibError) as exc:
             raise InputError(f"{where}: malformed parameter file ({exc})") from None
         return cls(str(doc.get("model", "")), model, params, std, acc, np.empty((0, 3)),
-                   solver=solver)  # fmt: skip
+                   ident, solver)  # fmt: skip
 
 
 def _from_fit(name: str, model: KinematicModel, fit: FitResult, points: Array,
@@ -134,8 +154,8 @@ def _from_fit(name: str, model: KinematicModel, fit: FitResult, points: Array,
 def calibrate(
     recording: Recording,
     robot: RobotDescription,
-    model_spec: str = "geometric",
-    ecc_order: int = 1,
+    model_spec: str = DEFAULT_MODEL,
+    ecc_order: int = DEFAULT_ECC_ORDER,
     log: Log | None = None,
     start: Calibration | None = None,
     objective: str = "absolute",

@@ -135,11 +135,12 @@ def run_node(
         signal_handler_options=SignalHandlerOptions.NO,
     )
     node: N | None = None
+    executor: Executor | None = None
     status = 0
     name = name or getattr(factory, "__name__", "node")
     try:
         node = factory()
-        executor: Executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
+        executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
         executor.add_node(node)
         while not received and rclpy.ok() and not (done is not None and done(node)):
             executor.spin_once(timeout_sec=0.1)
@@ -149,6 +150,11 @@ def run_node(
         print(f"{name}: error: {exc}", file=sys.stderr, flush=True)
         status = exc.exit_status
     finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=0)  # no new callbacks; a running one may finish
+        if node is not None and getattr(node, "busy", False):
+            print(f"{name}: stopping; the running solve ends first (Ctrl-C again to abort)",
+                  file=sys.stderr, flush=True)  # fmt: skip
         try:
             if node is not None:
                 if on_stop is not None:

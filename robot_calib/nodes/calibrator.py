@@ -41,8 +41,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Empty, Float64MultiArray, MultiArrayDimension, String
 from visualization_msgs.msg import Marker, MarkerArray
 
+from robot_calib.diagnose.diagnosis import Diagnosis
 from robot_calib.errors import InputError, RobotCalibError
-from robot_calib.identify.calibrate import Calibration, calibrate, parse_model
+from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
+from robot_calib.identify.calibrate import Calibration, parse_model
 from robot_calib.identify.params_file import summary, write_json_atomic
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.frames import Array
@@ -56,7 +58,12 @@ from robot_calib.messages import (
     velocity_signs,
 )
 from robot_calib.nodes._common import declare, overrides, run_node
-from robot_calib.pipeline import DEFAULT_ROBOT, diagnose_recordings, read_bags
+from robot_calib.pipeline import (
+    DEFAULT_ROBOT,
+    calibrate_recording,
+    diagnose_recordings,
+    read_bags,
+)
 
 LATCHED = QoSProfile(  # late joiners (RViz, a test, `ros2 topic echo`) get the last result
     history=HistoryPolicy.KEEP_LAST,
@@ -109,6 +116,7 @@ class CalibratorNode(Node):
             super().destroy_node()
             raise
         self.calibration: Calibration | None = None
+        self.diagnosis: Diagnosis | None = None  # the last diagnosis (parameter `diagnose`)
         self.recording: Recording | None = None
         self.error: RobotCalibError | None = None
         self.solves = 0
@@ -133,6 +141,7 @@ class CalibratorNode(Node):
         self._solver_group = MutuallyExclusiveCallbackGroup()
         self._lock = threading.Lock()  # the live buffers, shared with the solving thread
         self.busy = False  # a solve is running
+        self.stopping = False  # destroy_node was called: a running solve publishes nothing
         if self.bags:
             self._once = self.create_timer(
                 0.0, self._solve_bags, clock=steady, callback_group=self._solver_group
@@ -217,10 +226,13 @@ class CalibratorNode(Node):
             self, "bags", [], "calibration bags (.mcap) to solve at start; empty: live topics"
         )
         self.model_spec: str = declare(
-            self, "model", "geometric", "model to identify, e.g. geometric, geometric+eccentricity"
+            self,
+            "model",
+            DEFAULT_MODEL,
+            "model to identify, e.g. geometric, geometric+eccentricity",
         )
         self.ecc_order: int = declare(
-            self, "ecc_order", 1, "Fourier order of the eccentricity effect [1]"
+            self, "ecc_order", DEFAULT_ECC_ORDER, "Fourier order of the eccentricity effect [1]"
         )
         robot_name: str = declare(
             self, "robot", DEFAULT_ROBOT, "built-in robot name or robot YAML file"
@@ -280,6 +292,12 @@ class CalibratorNode(Node):
 
     # --- public ---------------------------------------------------------------------------
 
+    def destroy_node(self) -> None:
+        """Destroy the node; a solve still running in another thread then publishes nothing
+        (its thread ends with the solve)."""
+        self.stopping = True
+        super().destroy_node()
+
     @property
     def failed(self) -> bool:
         """Bag mode could not calibrate (standalone: exit status 2)."""
@@ -290,7 +308,8 @@ class CalibratorNode(Node):
         """Live mode: messages buffered per topic (joint states refused are not counted)."""
         if self.bags:
             return {}
-        return {JOINT_STATES_TOPIC: len(self._js_ns), POINT_TOPIC: len(self._pt_ns)}
+        with self._lock:
+            return {JOINT_STATES_TOPIC: len(self._js_ns), POINT_TOPIC: len(self._pt_ns)}
 
     def solve(self) -> Calibration | None:
         """Live mode: pair everything received so far, calibrate and publish. Bad input is
@@ -338,8 +357,12 @@ class CalibratorNode(Node):
 
     def _calibrate_and_publish(self, recording: Recording) -> Calibration:
         self.get_logger().info(recording.summary())
-        cal = calibrate(recording, self.robot, self.model_spec, self.ecc_order, log=self._log)
+        cal = calibrate_recording(
+            recording, self.robot, self.model_spec, self.ecc_order, log=self._log
+        )
         doc = cal.to_dict(recording)
+        if self.stopping:  # destroyed while solving (Ctrl-C): nothing to publish to
+            return cal
         if self.output:
             try:
                 write_json_atomic(doc, Path(self.output))
@@ -368,6 +391,8 @@ class CalibratorNode(Node):
         if self.holdout_bags:
             holdout = read_bags(self.holdout_bags, self.robot, self.pair_tolerance, self._log)
         diagnosis, _ = diagnose_recordings(recording, self.robot, holdout)
+        if self.stopping:
+            return
         self.diagnosis = diagnosis
         self._result_publishers["diagnosis"].publish(String(data=json.dumps(diagnosis.to_dict())))
         self._result_publishers["diagnosis_summary"].publish(String(data=diagnosis.summary()))
@@ -427,13 +452,16 @@ class CalibratorNode(Node):
 
     def _check_idle(self) -> None:
         """Solve once the points have stopped for solve_after_idle_s (the plan ended)."""
-        if (
-            self._unsolved
-            and self._last_point_s is not None
-            and time.monotonic() - self._last_point_s >= self.solve_after_idle_s
-        ):
+        with self._lock:
+            due = (
+                self._unsolved
+                and self._last_point_s is not None
+                and time.monotonic() - self._last_point_s >= self.solve_after_idle_s
+            )
+            n_points = len(self._pt_ns)
+        if due:
             self.get_logger().info(
-                f"no new point for {self.solve_after_idle_s} s: solving {len(self._pt_ns)} points"
+                f"no new point for {self.solve_after_idle_s} s: solving {n_points} points"
             )
             self.solve()
 

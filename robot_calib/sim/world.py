@@ -198,8 +198,8 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
             speeds = np.radians(timing_data.pop("max_joint_speed_deg_s"))
             timing_data["max_joint_speed_rad_s"] = tuple(speeds)
         timing = Timing(**timing_data)
-    except RobotCalibError as exc:
-        raise InputError(f"{source}: {exc}") from None
+    except RobotCalibError as exc:  # name the file once
+        raise InputError(str(exc) if str(exc).startswith(source) else f"{source}: {exc}") from None
     except (TypeError, KeyError, ValueError) as exc:
         raise InputError(f"{source}: malformed world ({type(exc).__name__}: {exc})") from None
     return World(model, truth, noise, tracker, timing, int(data.get("seed", 0)), source)
