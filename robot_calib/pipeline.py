@@ -272,10 +272,8 @@ def diagnose_bags(
 
     Returns
     -------
-    diagnosis : Diagnosis
-        The DIAGNOSIS.json document (as `robot_calib.diagnose.diagnosis.diagnose`).
-    ladder : Ladder
-        The rungs behind it, each with its calibration and held-out scores.
+    diagnosis, ladder : Diagnosis, Ladder
+        As `diagnose_recordings`.
     recording : Recording
         The paired measurements of `bags` (as `read_bags`); the hold-out's are not kept.
     """
