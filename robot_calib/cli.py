@@ -50,7 +50,10 @@ def _robot_table(robot: RobotDescription) -> str:
 
 
 def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: float) -> None:
-    """The diagnosis for people: the ladder (mm), the floor, the verdict, what remains."""
+    """The diagnosis for people: the ladder (mm), the floor, the verdict, what remains,
+    the measurements left out as tracker blunders."""
+    from robot_calib.identify.params_file import outlier_lines
+
     dom = diagnosis.dominant_effect
     print(f"{'model':<40}{'held-out mean/max [mm]':>24}{'abs rms [mm]':>14}")
     for rung in diagnosis.ladder:
@@ -61,6 +64,8 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
     print("dominant effect: " + ("null (geometric reaches the noise level)" if dom is None
                                  else f"{dom.effect} joints {dom.joints}"))  # fmt: skip
     print(f"unexplained: {diagnosis.unexplained.note}")
+    for line in outlier_lines(diagnosis.outliers):
+        print(line)
     print(f"{output}, {report} in {seconds:.1f} s")
 
 

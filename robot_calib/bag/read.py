@@ -7,6 +7,7 @@ Bad input raises `BagError` naming the file and the problem (one line, exit stat
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -91,10 +92,7 @@ def read_bag(
         source=str(path),
         error=BagError,
     )
-    return Recording(
-        rec.sources, rec.poses, rec.points, rec.sweeps, rec.bag_index, rec.n_unpaired,
-        tuple(warnings) + rec.warnings,
-    )  # fmt: skip
+    return replace(rec, warnings=tuple(warnings) + rec.warnings)
 
 
 def read_recording(

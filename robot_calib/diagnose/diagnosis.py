@@ -4,13 +4,14 @@ DIAGNOSIS.json document of CONTRACT.md section 4 (extended: msgs_doc/diagnosis.m
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from robot_calib.diagnose.ladder import AT_FLOOR, N_FOLDS, Ladder, Rung, run_ladder
 from robot_calib.diagnose.noise import NoiseLevel, refine_with_model
 from robot_calib.diagnose.signatures import WhereItLies, where_it_lies
 from robot_calib.errors import InputError
+from robot_calib.identify.outliers import Outlier
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import Recording
 from robot_calib.records import Record
@@ -98,6 +99,7 @@ class Diagnosis(Record):
     candidates: list[list[CandidateScore]]
     recordings: list[str]
     holdout: list[str]
+    outliers: list[Outlier] = field(default_factory=list)  # tracker blunders, never fitted
     format: str = FORMAT
 
     def to_dict(self) -> dict[str, Any]:
@@ -124,10 +126,16 @@ class Diagnosis(Record):
         rungs = "; ".join(
             f"{r.model} {r.holdout_mean_mm:.4f}/{r.holdout_max_mm:.4f} mm" for r in self.ladder
         )
+        blunders = (
+            f" {len(self.outliers)} measurement(s) left out as tracker blunders: "
+            + "; ".join(o.line() for o in self.outliers) + "."
+            if self.outliers
+            else ""
+        )  # fmt: skip
         return (
             f"dominant effect: {self.verdict}. Ladder (held-out seed criterion mean/max, "
             f"{self.scored_on}): {rungs}. Noise floor {self.noise.floor_abs_rms_mm:.4f} mm "
-            f"rms. {self.unexplained.note}."
+            f"rms. {self.unexplained.note}.{blunders}"
         )
 
 
@@ -193,6 +201,8 @@ def diagnose(
         level used [m] and the candidates of every round (model, score [m]).
     """
     ladder = run_ladder(recording, robot, holdout, log)
+    sources, holdout_sources = list(recording.sources), holdout
+    recording = ladder.recording if ladder.recording is not None else recording  # no outliers
     best = ladder.rungs[-1]
     geo = ladder.rungs[0].calibration
     where = where_it_lies(geo.model, geo.parameters, recording, geo.residuals,
@@ -245,7 +255,8 @@ def diagnose(
         + (" + hold-out bags (equal weight)" if holdout is not None else ""),
         where=where,
         candidates=[[CandidateScore(m, s * 1e3) for m, s in rnd] for rnd in ladder.candidates],
-        recordings=list(recording.sources),
-        holdout=[] if holdout is None else list(holdout.sources),
+        recordings=sources,
+        holdout=[] if holdout_sources is None else list(holdout_sources.sources),
+        outliers=list(ladder.outliers),
     )
     return diagnosis, ladder

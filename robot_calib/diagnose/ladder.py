@@ -20,6 +20,13 @@ from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.identify.calibrate import Calibration, calibrate, model_name
 from robot_calib.identify.fit import blocked_jacobian, fit_model
+from robot_calib.identify.outliers import (
+    OUTLIER_K,
+    Outlier,
+    describe_outliers,
+    outlier_mask,
+    robust_sigma,
+)
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording
@@ -47,12 +54,16 @@ class Rung:
 
 @dataclass(frozen=True)
 class Ladder:
-    """The rungs in the order added, the noise level, the candidates of every round."""
+    """The rungs in the order added, the noise level, the candidates of every round, the
+    recordings it was climbed and scored on (without the outliers) and the outliers."""
 
     rungs: list[Rung]
     noise: NoiseLevel
     scored_on: str
     candidates: list[list[tuple[str, float]]] = field(default_factory=list)
+    recording: Recording | None = None
+    holdout: Recording | None = None
+    outliers: tuple[Outlier, ...] = ()
 
 
 def candidates(robot: RobotDescription, recording: Recording,
@@ -173,9 +184,26 @@ def _kfold(cal: Calibration, recording: Recording) -> tuple[Accuracy, Array]:
 
 def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording | None = None,
                log: Log | None = None) -> Ladder:  # fmt: skip
-    """Climb the ladder on `recording`, scoring on `holdout` (or k-fold CV)."""
+    """Climb the ladder on `recording`, scoring on `holdout` (or k-fold CV).
+
+    Tracker blunders never become robot effects: the measurements the geometric
+    calibration flags (`calibrate`'s outlier screening) and the hold-out points beyond
+    OUTLIER_K robust sigmas of the geometric model's hold-out residuals are left out of
+    every rung, its scores and the noise floor, and listed in `Ladder.outliers`."""
     say = log or (lambda _m: None)
     geo = calibrate(recording, robot, "geometric", log=log)
+    outliers = geo.outliers
+    if geo.inliers is not None:
+        recording = recording.subset(geo.inliers)
+    if holdout is not None:
+        h_res = geo.predict(holdout.poses) - holdout.points
+        sigma = robust_sigma(h_res)
+        flagged = outlier_mask(h_res, sigma)
+        if flagged.any():
+            outliers += describe_outliers(holdout, flagged, h_res, sigma)
+            holdout = holdout.subset(~flagged)
+            say(f"outliers: {int(flagged.sum())} hold-out points beyond {OUTLIER_K:g} robust "
+                f"sigmas ({sigma * 1e3:.4f} mm) of the geometric model: not scored")  # fmt: skip
     noise = estimate_noise(recording, geo.residuals, int(geo.parameters.free.sum()))
     scored_on = "hold-out bags" if holdout is not None else f"{N_FOLDS}-fold CV over poses"
     say(f"noise: {noise.sigma_m * 1e3:.4f} mm per axis ({noise.source}, {noise.n}); "
@@ -204,7 +232,8 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
                 break
             effects = _replace(current.effects, effect, robot)
             name = model_name(effects)
-            cal = calibrate(recording, robot, name, log=None, start=current.calibration)
+            cal = calibrate(recording, robot, name, log=None, start=current.calibration,
+                            screen_outliers=False)  # fmt: skip
             acc, res, score = score_rung(cal, recording, holdout)
             say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, refitted "
                 f"{score * 1e3:.4f} mm (current {current.score_m * 1e3:.4f})")  # fmt: skip
@@ -216,4 +245,4 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
         if accepted is None:
             break
         rungs.append(accepted)
-    return Ladder(rungs, noise, scored_on, rounds)
+    return Ladder(rungs, noise, scored_on, rounds, recording, holdout, outliers)

@@ -114,6 +114,14 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
             f"| {rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f} "
             f"| {rung.holdout_abs_rms_mm / noise.floor_abs_rms_mm:.2f} |"
         )
+    if diagnosis.outliers:
+        lines += [
+            "",
+            f"Left out as tracker blunders ({len(diagnosis.outliers)}, beyond 8 "
+            "robust sigmas; never explained as an effect of the robot):",
+            "",
+        ]
+        lines += [f"- {o.line()}" for o in diagnosis.outliers]  # fmt: skip
     lines += ["", f"What remains: {diagnosis.unexplained.note}.", "",
               "## Where the residual lies",
               "", "Geometric model, per joint from its sweeps (angle-equivalent error along the "

@@ -13,10 +13,11 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from robot_calib.accuracy import Accuracy, accuracy
 from robot_calib.effects import Effect, parse_effect, vocabulary
@@ -27,6 +28,14 @@ from robot_calib.identify.cpa import CPAResult, circle_point_analysis
 from robot_calib.identify.fit import FitResult, SolverReport, fit_model
 from robot_calib.identify.identifiability import Identifiability
 from robot_calib.identify.objectives import AbsoluteObjective, Objective, SeedObjective
+from robot_calib.identify.outliers import (
+    OUTLIER_K,
+    Outlier,
+    describe_outliers,
+    group_sigmas,
+    outlier_mask,
+    robust_sigma,
+)
 from robot_calib.identify.registration import fit_frames
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
@@ -38,6 +47,7 @@ from robot_calib.poses import Poses
 BASE_MODELS = ("nominal", "cpa", "geometric")
 OBJECTIVES = ("absolute", "seed")
 SEED_ANCHORS = (1, 3, 5)  # the seed fixes the cloud on the centres of circles 1, 3 and 5
+MAX_OUTLIER_ROUNDS = 4  # refits without the flagged points until the set is stable
 Log = Callable[[str], None]
 
 
@@ -90,6 +100,8 @@ class Calibration:
     identifiability: Identifiability | None = None
     solver: SolverReport = field(default_factory=lambda: SolverReport("none"))
     cpa: CPAResult | None = None
+    outliers: tuple[Outlier, ...] = ()  # measurements flagged as blunders, not fitted
+    inliers: NDArray[np.bool_] | None = None  # (n,) of the recording given; None: all
 
     def predict(self, poses: Poses) -> Array:
         """Target points (n, 3) [m] in the tracker frame."""
@@ -132,8 +144,12 @@ class Calibration:
                 )
         except (KeyError, TypeError, ValueError, RobotCalibError) as exc:
             raise InputError(f"{where}: malformed parameter file ({exc})") from None
+        try:
+            outliers = tuple(Outlier.from_dict(o) for o in doc.get("outliers", []))
+        except (TypeError, RobotCalibError) as exc:
+            raise InputError(f"{where}: malformed outliers ({exc})") from None
         return cls(str(doc.get("model", "")), model, params, std, acc, np.empty((0, 3)),
-                   ident, solver)  # fmt: skip
+                   ident, solver, outliers=outliers)  # fmt: skip
 
 
 def _from_fit(name: str, model: KinematicModel, fit: FitResult, points: Array,
@@ -159,11 +175,18 @@ def calibrate(
     log: Log | None = None,
     start: Calibration | None = None,
     objective: str = "absolute",
+    screen_outliers: bool = True,
 ) -> Calibration:
     """Identify `model_spec` from `recording`. `start`: a calibration to start from (its
     parameters seed the geometry), else the ladder below the model is climbed first.
     objective: 'absolute' residuals, or 'seed' (pairwise distances anchored on the CPA
     centres of circles 1, 3, 5, the seed's eq. 18) for the LM models.
+
+    Tracker blunders (`screen_outliers`): when a point lies beyond OUTLIER_K robust sigmas
+    of the fit, every point is judged against a robust (soft-L1) refit that blunders barely
+    pull, the flagged ones are left out and the model identified again from the rest,
+    until the flagged set no longer changes (re-admitting any point the cleaner model
+    explains). Clean data take the plain path: one fit, nothing flagged.
 
     Returns
     -------
@@ -191,7 +214,54 @@ def calibrate(
             evaluations, optimality; the method only for closed forms).
         cpa : CPAResult or None
             The circle point analysis (axes, circle fits) when it ran, else None.
+        outliers : tuple of Outlier
+            The measurements flagged as blunders (bag, message index, stamp, size,
+            direction, sigmas), excluded from the fit; empty on clean data.
+        inliers : ndarray of bool, shape (n,), or None
+            Which measurements of `recording` were fitted (None: all). `residuals` and
+            `accuracy` are those of the fitted measurements.
     """
+    cal = _calibrate_once(recording, robot, model_spec, ecc_order, log, start, objective)
+    if not screen_outliers:
+        return cal
+    everyone = np.ones(len(recording), dtype=bool)
+    sigmas = group_sigmas(recording, cal.residuals, everyone)
+    if not outlier_mask(cal.residuals, sigmas).any():
+        return cal
+    say = log or (lambda _msg: None)
+    # Judge every point against a fit that the blunders barely pull: soft-L1, scale 3 sigma.
+    robust = fit_model(cal.model, cal.parameters, recording.poses, recording.points,
+                       check_identifiability=False,
+                       robust_scale=3.0 * robust_sigma(cal.residuals))  # fmt: skip
+    sigmas = group_sigmas(recording, robust.residuals, everyone)
+    flagged = outlier_mask(robust.residuals, sigmas)
+    for round_ in range(1, MAX_OUTLIER_ROUNDS + 1):
+        say(f"outliers: {int(flagged.sum())} of {len(flagged)} measurements beyond "
+            f"{OUTLIER_K:g} robust sigmas of their sweep: fitted without them")  # fmt: skip
+        cal = _calibrate_once(recording.subset(~flagged), robot, model_spec, ecc_order, log,
+                              start, objective)  # fmt: skip
+        residual_all = cal.predict(recording.poses) - recording.points
+        sigmas = group_sigmas(recording, residual_all, ~flagged)
+        again = outlier_mask(residual_all, sigmas)
+        if np.array_equal(again, flagged) or not again.any() or round_ == MAX_OUTLIER_ROUNDS:
+            break  # `cal` is the fit without `flagged`
+        flagged = again  # re-admit what the cleaner model explains, flag what it does not
+    outliers = describe_outliers(recording, flagged, residual_all, sigmas)
+    for outlier in outliers:
+        say(f"outlier: {outlier.line()}")
+    return replace(cal, outliers=outliers, inliers=~flagged)
+
+
+def _calibrate_once(
+    recording: Recording,
+    robot: RobotDescription,
+    model_spec: str,
+    ecc_order: int,
+    log: Log | None,
+    start: Calibration | None,
+    objective: str,
+) -> Calibration:
+    """`calibrate` of every measurement of `recording` (no outlier screening)."""
     if objective not in OBJECTIVES:
         raise InputError(f"--objective {objective}: expected one of {', '.join(OBJECTIVES)}")
     say = log or (lambda _msg: None)

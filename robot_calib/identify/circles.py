@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
@@ -36,6 +37,14 @@ class Circle:
     def rms(self) -> float:
         """Root mean square of the full 3-D point-to-circle residual [m]."""
         return float(np.sqrt(np.mean(self.plane_residuals**2 + self.radial_residuals**2)))
+
+    def distances(self, points: Array) -> Array:
+        """(n, 2) signed distance of points (n, 3) [m] to the plane and, in the plane, to
+        the circle [m]."""
+        rel = np.asarray(points, dtype=float) - self.centre
+        height = rel @ self.normal
+        radial = np.linalg.norm(rel - height[:, None] * self.normal, axis=1) - self.radius
+        return np.column_stack([height, radial])
 
     def angles(self, points: Array, reference: Array | None = None) -> Array:
         """Angle of each point (n, 3) about the normal [rad], from `reference` (a point)."""
@@ -79,3 +88,47 @@ def fit_circle(points: Array, where: str = "sweep") -> Circle:
         normal = -normal
     radial = np.linalg.norm(local - centre2, axis=1) - radius
     return Circle(centre, normal, radius, (points - mean) @ normal, radial)
+
+
+def robust_circle(
+    points: Array, where: str = "sweep", k: float = 8.0, n_trials: int = 12
+) -> tuple[Circle, NDArray[np.bool_]]:
+    """`fit_circle` that leaves out blunders (a lost beam, a reseated target).
+
+    A point 1 m off drags a least-squares circle towards itself, so it is not judged
+    against that fit: the start is the circle, of the plain fit and of `n_trials` circles
+    through three points spread over the sweep, whose median distance to all the points is
+    least (least median of squares); the points within k robust sigmas of it are fitted,
+    and the set is updated against that fit until it is stable (a good point misjudged by
+    the start comes back). On clean data the plain fit wins and every point is kept: the
+    result is `fit_circle`'s.
+
+    Returns
+    -------
+    circle : Circle
+        The fit of the kept points (its residuals are theirs).
+    keep : ndarray of bool, shape (n,)
+        Which of `points` were kept.
+    """
+    points = np.asarray(points, dtype=float)
+    n = len(points)
+    plain = fit_circle(points, where)
+    candidates = [plain]
+    third = n // 3
+    for i in np.unique(np.linspace(0, max(third - 1, 0), min(n_trials, third)).astype(int)):
+        try:
+            candidates.append(fit_circle(points[[i, i + third, i + 2 * third]], where))
+        except InputError:
+            continue  # three collinear points: no circle
+    medians = [np.median(np.linalg.norm(c.distances(points), axis=1)) for c in candidates]
+    circle = candidates[int(np.argmin(medians))]
+    keep, fitted = np.ones(n, dtype=bool), circle is plain
+    for _ in range(5):
+        spread = circle.distances(points[keep]).reshape(-1)
+        sigma = max(1.4826 * float(np.median(np.abs(spread - np.median(spread)))), 1e-7)
+        again = np.linalg.norm(circle.distances(points), axis=1) <= k * sigma
+        if again.sum() < 3 or (fitted and np.array_equal(again, keep)):
+            break
+        keep, fitted = again, True
+        circle = plain if keep.all() else fit_circle(points[keep], where)
+    return circle, keep

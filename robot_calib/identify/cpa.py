@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robot_calib.errors import InputError
-from robot_calib.identify.circles import Circle, fit_circle
+from robot_calib.identify.circles import Circle, robust_circle
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, link_transforms
 from robot_calib.kinematics.frames import Array, matrix_to_rpy
@@ -83,7 +83,8 @@ def _angle_about(axis: Array, start: Array, end: Array) -> float:
 def axis_from_sweep(points: Array, readings: Array, joint: int) -> tuple[AxisLine, Circle]:
     """Axis line and circle of one sweep: points (k, 3) [m], the turning joint's readings
     (k,) [rad]; the direction follows the readings (right-hand rule)."""
-    circle = fit_circle(points, f"sweep of joint {joint}")
+    circle, keep = robust_circle(points, f"sweep of joint {joint}")  # blunders left out
+    points, readings = points[keep], readings[keep]
     rel = points - circle.centre
     step = np.sign(np.diff(readings))
     turning = (np.cross(rel[:-1], rel[1:]) * step[:, None]).sum(axis=0)

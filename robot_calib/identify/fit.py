@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from robot_calib.errors import InputError
 from robot_calib.identify.identifiability import (
     Identifiability,
     covariance,
@@ -77,6 +78,57 @@ class FitResult:
     residuals: Array
     identifiability: Identifiability
     solver: SolverReport
+
+
+@dataclass(frozen=True)
+class _Solved:
+    """What one solver run left: free values x and scipy's status, message, counts."""
+
+    x: Array
+    status: int
+    message: str
+    nfev: int
+    njev: int
+    optimality: float
+
+
+def _solve(
+    problem: _Problem, x0: Array, progress: Progress | None, robust_scale: float | None
+) -> _Solved:
+    """Minimise the problem's residuals from x0: Levenberg-Marquardt for least squares
+    (MINPACK: fast and exact for small dense problems), or trust-region reflective with a
+    soft-L1 loss of `robust_scale` [m] (LM supports no robust loss). x_scale='jac': the
+    parameters mix metres and radians, the Jacobian's columns give their natural scales."""
+    if not len(x0):
+        return _Solved(x0, 0, "no free parameters", 0, 0, 0.0)
+    last_report = [time.monotonic()]
+
+    def fun(x: Array) -> Array:
+        residual = problem.evaluate(x)[0]
+        if progress and time.monotonic() - last_report[0] > 1.0:
+            last_report[0] = time.monotonic()
+            rms = np.sqrt(np.mean(residual**2)) * 1e3
+            progress(f"  LM: {problem.evaluations} evaluations, rms {rms:.4f} mm")
+        return residual
+
+    def jac(x: Array) -> Array:
+        return problem.evaluate(x)[1]
+
+    if robust_scale is None:
+        solution = least_squares(fun, x0, jac=jac, method="lm", x_scale="jac", xtol=1e-12,
+                                 ftol=1e-12, gtol=1e-12, max_nfev=100 * (len(x0) + 1))  # fmt: skip
+    else:
+        solution = least_squares(fun, x0, jac=jac, method="trf", loss="soft_l1",
+                                 f_scale=robust_scale, x_scale="jac", xtol=1e-10, ftol=1e-10,
+                                 gtol=1e-10, max_nfev=50 * (len(x0) + 1))  # fmt: skip
+    return _Solved(
+        solution.x,
+        int(solution.status),
+        str(solution.message),
+        int(solution.nfev),
+        int(solution.njev or 0),
+        float(solution.optimality),
+    )
 
 
 BLOCK_POSES = 5000  # Jacobian evaluated in blocks: its temporaries stay in cache (linear time)
@@ -159,21 +211,32 @@ class _Problem:
         return points
 
 
-def _identifiable(
+def _structurally_identifiable(
     model: KinematicModel,
     start: ParameterVector,
     poses: Poses,
     points: Array,
     objective: Objective,
 ) -> tuple[ParameterVector, tuple[tuple[str, str], ...]]:
-    """`start` with the parameters the data cannot identify (or only poorly) fixed, and
-    (name, reason) of each. Its own function so that the full Jacobian at the start,
-    (n, 3, P), is freed before the solver allocates its own."""
+    """`start` with the parameters the data cannot identify at all (exact redundancy, a
+    property of the Jacobian's structure that no start changes) fixed, and (name, reason)
+    of each. Its own function so that the full Jacobian at the start, (n, 3, P), is freed
+    before the solver allocates its own."""
     predicted, jac = blocked_jacobian(model, start, poses)
-    residual0, jac_full = objective.residuals(predicted, jac, points)
+    _, jac_full = objective.residuals(predicted, jac, points)
     params, ident = fix_unidentifiable(start, jac_full)
-    params, weak = fix_poorly_determined(params, jac_full, residual0)
-    return params, ident.fixed + tuple(weak)
+    return params, ident.fixed
+
+
+def check_enough_data(n_residuals: int, n_points: int, n_free: int) -> None:
+    """InputError unless the residuals outnumber the free parameters: fewer would leave
+    the fit undetermined (and its 1-sigma meaningless). Names how many points are needed."""
+    if n_residuals <= n_free:
+        needed = n_free // 3 + 1
+        raise InputError(
+            f"{n_points} measurements ({n_residuals} residuals) cannot determine "
+            f"{n_free} free parameters: at least {needed} measurements are needed"
+        )
 
 
 def fit_model(
@@ -184,10 +247,18 @@ def fit_model(
     progress: Progress | None = None,
     check_identifiability: bool = True,
     objective: Objective | None = None,
+    robust_scale: float | None = None,
 ) -> FitResult:
     """Fit the free parameters of `start` so the model's targets at `poses` match `points`
-    (n, 3) [m] in the sense of `objective` (default: absolute residuals). Unidentifiable
-    parameters are fixed first (at their start values).
+    (n, 3) [m] in the sense of `objective` (default: absolute residuals). Parameters the
+    data cannot identify are fixed: exact redundancies before solving, poorly determined
+    ones (1-sigma beyond bounds) judged at the converged point, never at the start, then
+    fixed at their start values and the fit repeated. InputError when the residuals do
+    not outnumber the free parameters.
+
+    robust_scale : None for least squares (Levenberg-Marquardt); else a soft-L1 loss of
+        that scale [m] per residual component (trust-region reflective), which blunders
+        barely pull: used to screen outliers (`identify.outliers`), not for the result.
 
     Returns
     -------
@@ -214,38 +285,32 @@ def fit_model(
     """
     started = time.perf_counter()
     goal: Objective = objective or AbsoluteObjective()
+    n_rows = goal.n_rows(len(points))
+    check_enough_data(n_rows, len(points), int(start.free.sum()))
     params: ParameterVector = start
     fixed: tuple[tuple[str, str], ...] = ()
     if check_identifiability:
-        params, fixed = _identifiable(model, start, poses, points, goal)
+        params, fixed = _structurally_identifiable(model, start, poses, points, goal)
     problem = _Problem(model, params, poses, points, goal)
-    last_report = [time.monotonic()]
-
-    def fun(x: Array) -> Array:
-        residual = problem.evaluate(x)[0]
-        if progress and time.monotonic() - last_report[0] > 1.0:
-            last_report[0] = time.monotonic()
-            rms = np.sqrt(np.mean(residual**2)) * 1e3
-            progress(f"  LM: {problem.evaluations} evaluations, rms {rms:.4f} mm")
-        return residual
-
-    x = params.pack()
-    status, message, nfev, njev, optimality = 0, "no free parameters", 0, 0, 0.0
-    if len(x):
-        solution = least_squares(
-            fun,
-            x,
-            jac=lambda x: problem.evaluate(x)[1],
-            method="lm",
-            x_scale="jac",
-            xtol=1e-12,
-            ftol=1e-12,
-            gtol=1e-12,
-            max_nfev=100 * (len(x) + 1),
-        )
-        x, status, message = solution.x, int(solution.status), str(solution.message)
-        nfev, njev = int(solution.nfev), int(solution.njev or 0)
-        optimality = float(solution.optimality)
+    solved = _solve(problem, params.pack(), progress, robust_scale)
+    if check_identifiability and len(solved.x):
+        residual, jac_free = problem.evaluate(solved.x)
+        at_solution = params.unpack(solved.x)
+        _, weak = fix_poorly_determined(at_solution, jac_free, residual, columns_are_free=True)
+        if weak:  # held at their start values, the rest refitted from the solution
+            names = [name for name, _ in weak]
+            params = at_solution.with_values({n: start[n] for n in names})
+            for name, reason in weak:
+                params = params.fixed([name], reason)
+            fixed = fixed + tuple(weak)
+            first_evaluations = problem.evaluations
+            problem = _Problem(model, params, poses, points, goal)
+            solved = _solve(problem, params.pack(), progress, robust_scale)
+            problem.evaluations += first_evaluations
+    x = solved.x
+    status, message, nfev, njev, optimality = (
+        solved.status, solved.message, solved.nfev, solved.njev, solved.optimality
+    )  # fmt: skip
     residual, jac_free = problem.evaluate(x)
     fitted = params.unpack(x)
     std = np.zeros(len(fitted))
@@ -257,7 +322,11 @@ def fit_model(
         problem.predicted - points,
         describe(jac_free, fixed),
         SolverReport(
-            method="levenberg-marquardt (scipy least_squares, MINPACK lmder)",
+            method=(
+                "levenberg-marquardt (scipy least_squares, MINPACK lmder)"
+                if robust_scale is None
+                else f"trust-region reflective, soft-L1 loss of scale {robust_scale:.3g} m"
+            ),
             objective=goal.name,
             status=status,
             message=message,

@@ -212,7 +212,7 @@ def covariance(jac_free: Array, residuals: Array, rows: int | None = None) -> Ar
 
 
 def fix_poorly_determined(
-    params: ParameterVector, jac_full: Array, residuals: Array
+    params: ParameterVector, jac_full: Array, residuals: Array, columns_are_free: bool = False
 ) -> tuple[ParameterVector, list[tuple[str, str]]]:
     """Fix, one at a time, the free parameter whose predicted 1-sigma most exceeds its
     STD_BOUNDS, until none does.
@@ -220,9 +220,11 @@ def fix_poorly_determined(
     Parameters
     ----------
     params : the parameter vector (P parameters).
-    jac_full : (m, P) d residuals / d every parameter at the start point.
-    residuals : (m,) residuals at the start point [m]; the noise level comes from one
-        linearised (Gauss-Newton) step from there.
+    jac_full : (m, P) d residuals / d every parameter (or, with `columns_are_free`,
+        (m, n_free) d residuals / d the free parameters only, in vector order).
+    residuals : (m,) residuals there [m]; the noise level comes from one linearised
+        (Gauss-Newton) step from there (no step at a converged solution, where it belongs:
+        from a poor start the step falls short and the noise looks far too large).
 
     Returns
     -------
@@ -237,7 +239,8 @@ def fix_poorly_determined(
     start_free = np.flatnonzero(params.free)
     if not len(start_free):
         return params, fixed
-    reduced = r_factor(jac_full, start_free, residuals)  # [J_free | r] = Q reduced
+    columns = None if columns_are_free else start_free
+    reduced = r_factor(jac_full, columns, residuals)  # [J_free | r] = Q reduced
     jac_start, res = reduced[:, :-1], reduced[:, -1]
     while True:
         free = np.flatnonzero(params.free)

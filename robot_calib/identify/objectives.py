@@ -22,12 +22,19 @@ class Objective(Protocol):
     @property
     def name(self) -> str: ...
 
+    def n_rows(self, n_points: int) -> int:
+        """How many residuals `residuals` gives for n_points measured points."""
+        ...
+
     def residuals(self, predicted: Array, jac: Array, measured: Array) -> tuple[Array, Array]: ...
 
 
 @dataclass(frozen=True)
 class AbsoluteObjective:
     name: str = "absolute"
+
+    def n_rows(self, n_points: int) -> int:
+        return 3 * n_points
 
     def residuals(self, predicted: Array, jac: Array, measured: Array) -> tuple[Array, Array]:
         return (predicted - measured).reshape(-1), jac.reshape(-1, jac.shape[-1])
@@ -39,6 +46,9 @@ class SeedObjective:
 
     anchors: Array
     name: str = "seed pairwise distances"
+
+    def n_rows(self, n_points: int) -> int:
+        return n_points * (n_points - 1) // 2 + len(self.anchors) * n_points
 
     def residuals(self, predicted: Array, jac: Array, measured: Array) -> tuple[Array, Array]:
         n = len(predicted)

@@ -6,7 +6,7 @@ Values are SI (m, rad); the summary printed for people is in mm and deg, labelle
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -21,6 +21,7 @@ from robot_calib.model import KinematicModel
 
 if TYPE_CHECKING:  # light at run time: reading a parameter file needs no scipy
     from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.outliers import Outlier
     from robot_calib.measurements import Recording
 
 FORMAT = "robot_calib.params/1"
@@ -62,6 +63,7 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
             "general_poses": int(recording.general.sum()),
         },
         "warnings": list(recording.warnings),
+        "outliers": [o.to_dict() for o in cal.outliers],
     }
     if cal.identifiability is not None:
         ident = cal.identifiability
@@ -152,6 +154,15 @@ def load_calibration(path: str | Path) -> Calibration:
     return calibrate.Calibration.from_dict(_read_document(path), str(path))
 
 
+def outlier_lines(outliers: Sequence[Outlier]) -> list[str]:
+    """Human lines for the flagged measurements (none: no line)."""
+    if not outliers:
+        return []
+    return [
+        f"outliers: {len(outliers)} measurement(s) flagged as tracker blunders, not fitted:"
+    ] + [f"  {o.line()}" for o in outliers]
+
+
 def summary(cal: Calibration, recording: Recording) -> str:
     """Human summary: measurements, parameters (mm/deg) with 1-sigma, fixed, residuals."""
     lines = [recording.summary(), f"model: {cal.name}"]
@@ -183,6 +194,7 @@ def summary(cal: Calibration, recording: Recording) -> str:
             shown = ", ".join(names[:8]) + (f" (+{len(names) - 8} more)" if len(names) > 8 else "")
             lines.append(f"fixed ({reason}): {shown}")
     lines.append(f"residuals (in-sample): {cal.accuracy.line()}")
+    lines += outlier_lines(cal.outliers)
     if cal.solver.time_s is not None:
         lines.append(cal.solver.line())
     return "\n".join(lines)

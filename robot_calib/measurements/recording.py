@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array, IntArray
-from robot_calib.measurements.sweeps import Sweep, usable_sweeps
+from robot_calib.measurements.sweeps import MIN_SWEEP_POSES, Sweep, usable_sweeps
 from robot_calib.poses import Poses, approach_directions
 
 PAIR_TOLERANCE_S = 0.05  # contract default: the one place this number is written
@@ -32,7 +32,10 @@ class Recording:
       of each source [s]; points : (n, 3) measured target centres, tracker frame [m];
     sweeps : circle sweeps found; bag_index : (n,) which source each pose came from;
     n_unpaired : points without a joint state in tolerance (dropped, reported);
-    warnings : labelled problems that did not stop the reading.
+    warnings : labelled problems that did not stop the reading;
+    point_index : (n,) 0-based index of each point's message among its source's tracker
+      points, in the order read (None: 0, 1, ... per source);
+    stamp_ns : (n,) the points' header stamps [ns] (None: unknown, e.g. arrays in memory).
     """
 
     sources: tuple[str, ...]
@@ -42,9 +45,44 @@ class Recording:
     bag_index: IntArray
     n_unpaired: int = 0
     warnings: tuple[str, ...] = field(default=())
+    point_index: IntArray | None = None
+    stamp_ns: IntArray | None = None
 
     def __len__(self) -> int:
         return len(self.poses)
+
+    def message_indices(self) -> IntArray:
+        """(n,) index of each point's message in its source (see `point_index`)."""
+        if self.point_index is not None:
+            return self.point_index
+        out = np.zeros(len(self), dtype=np.int64)
+        for b in np.unique(self.bag_index):
+            rows = self.bag_index == b
+            out[rows] = np.arange(int(rows.sum()))
+        return out
+
+    def subset(self, keep: NDArray[np.bool_]) -> Recording:
+        """The recording without the measurements where `keep` (n,) is False (e.g.
+        outliers): sweeps keep their remaining poses (one left with fewer than
+        MIN_SWEEP_POSES becomes general poses); sources, warnings and counts unchanged."""
+        keep = np.asarray(keep, dtype=bool)
+        new_index = np.cumsum(keep) - 1
+        sweeps = []
+        for s in self.sweeps:
+            kept = s.index[keep[s.index]]
+            if len(kept) >= MIN_SWEEP_POSES:
+                sweeps.append(Sweep(s.joint, new_index[kept]))
+        return Recording(
+            self.sources,
+            self.poses.subset(keep),
+            self.points[keep],
+            tuple(sweeps),
+            self.bag_index[keep],
+            self.n_unpaired,
+            self.warnings,
+            self.message_indices()[keep],
+            None if self.stamp_ns is None else self.stamp_ns[keep],
+        )
 
     @property
     def general(self) -> NDArray[np.bool_]:
@@ -92,6 +130,10 @@ class Recording:
             np.concatenate([np.full(len(p), b) for b, p in enumerate(parts)]),
             sum(p.n_unpaired for p in parts),
             tuple(w for p in parts for w in p.warnings),
+            np.concatenate([p.message_indices() for p in parts]),
+            None
+            if any(p.stamp_ns is None for p in parts)
+            else np.concatenate([p.stamp_ns for p in parts if p.stamp_ns is not None]),
         )
 
 
@@ -228,4 +270,6 @@ def recording_from_stream(
         np.zeros(len(q), dtype=int),
         int((~ok).sum()),
         tuple(warnings),
+        pt_order[ok],
+        point_ns[ok],
     )

@@ -1,0 +1,119 @@
+"""Tracker blunders (a lost beam, a reseated target): measured points far from what the
+model predicts, relative to a robust scale of all the residuals.
+
+The scale is robust: 1.4826 x the median absolute deviation of every residual component
+(x, y and z of every point pooled), which a few blunders do not move. A point whose
+residual norm exceeds OUTLIER_K of those sigmas is flagged: for Gaussian noise the norm is
+sigma x chi(3 dof), so 8 sigmas is a 1e-13 event, never seen on clean data, while a 1 mm
+blunder is 100-200 sigmas for a tracker of a few um. Systematic structure of an
+unmodelled effect is smooth and spread over many poses, so it raises the scale rather than
+standing out: the diagnosis still sees it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robot_calib.kinematics.frames import Array
+from robot_calib.measurements import Recording
+from robot_calib.records import Record
+
+#: a point beyond this many robust sigmas (of one residual component) is a blunder
+OUTLIER_K = 8.0
+#: the robust sigma never goes below this [m]: no tracker resolves better, and exact
+#: (noise-free) data would otherwise flag round-off
+MIN_SIGMA_M = 1e-7
+MAD_TO_SIGMA = 1.4826  # sigma of a normal distribution per median absolute deviation
+
+
+def robust_sigma(residuals: Array) -> float:
+    """Robust sigma [m] of one residual component, from residuals (n, 3) [m]: 1.4826 x the
+    median absolute deviation of all 3n components pooled (at least MIN_SIGMA_M)."""
+    flat = np.asarray(residuals, dtype=float).reshape(-1)
+    if not len(flat):
+        return MIN_SIGMA_M
+    mad = float(np.median(np.abs(flat - np.median(flat))))
+    return max(MAD_TO_SIGMA * mad, MIN_SIGMA_M)
+
+
+def outlier_mask(
+    residuals: Array, sigma: float | Array, k: float = OUTLIER_K
+) -> NDArray[np.bool_]:
+    """(n,) True where a point's residual norm [m] exceeds k x `sigma` [m] (one scale, or
+    one per point (n,))."""
+    return np.asarray(np.linalg.norm(residuals, axis=1) > k * np.asarray(sigma))
+
+
+def group_sigmas(recording: Recording, residuals: Array, fitted: NDArray[np.bool_]) -> Array:
+    """(n,) robust sigma [m] for judging each measurement: that of its group (its circle
+    sweep; the general poses of its source), never below that of all fitted points.
+
+    An unmodelled effect of one joint leaves its residual mostly in that joint's own
+    sweeps, tens of sigmas of the other sweeps' noise: judged against its own sweep, such
+    structure is the bulk and not flagged, while a blunder still stands out among its
+    neighbours. residuals : (n, 3) of every measurement [m]; fitted : (n,) the points the
+    model was fitted on (only they set the scales)."""
+    floor = robust_sigma(residuals[fitted])
+    out = np.full(len(recording), floor)
+    groups = [s.index for s in recording.sweeps]
+    general = recording.general
+    groups += [np.flatnonzero(general & (recording.bag_index == b))
+               for b in np.unique(recording.bag_index)]  # fmt: skip
+    for index in groups:
+        members = index[fitted[index]]
+        if len(members):
+            out[index] = max(floor, robust_sigma(residuals[members]))
+    return out
+
+
+@dataclass(frozen=True)
+class Outlier(Record):
+    """A flagged measurement: its source (bag), the 0-based index of its tracker-point
+    message there, its header stamp [ns] (None when the source had none), how far it is
+    from the model's prediction [m] and in which direction (unit vector, tracker frame,
+    measured minus predicted), in robust sigmas of the residual."""
+
+    bag: str
+    index: int
+    stamp_ns: int | None
+    size_m: float
+    direction: list[float]
+    sigmas: float
+
+    def line(self) -> str:
+        """One human line, e.g. 'run.mcap point 17 (stamp ...): 5.002 mm off (+x ...)'."""
+        stamp = "" if self.stamp_ns is None else f", stamp {self.stamp_ns * 1e-9:.3f} s"
+        d = ", ".join(f"{c:+.2f}" for c in self.direction)
+        return (
+            f"{self.bag} point {self.index}{stamp}: {self.size_m * 1e3:.3f} mm off the model "
+            f"({self.sigmas:.0f} sigma; direction {d})"
+        )
+
+
+def describe_outliers(
+    recording: Recording, mask: NDArray[np.bool_], residuals: Array, sigma: float | Array
+) -> tuple[Outlier, ...]:
+    """The flagged measurements of `recording` (mask (n,)) with residuals (n, 3) predicted
+    minus measured [m] of the model they were judged against, robust `sigma` [m] (one, or
+    one per measurement)."""
+    sigmas = np.broadcast_to(np.asarray(sigma, dtype=float), (len(recording),))
+    out = []
+    indices = recording.message_indices()
+    for i in np.flatnonzero(mask):
+        offset = -np.asarray(residuals[i], dtype=float)  # measured - predicted
+        size = float(np.linalg.norm(offset))
+        direction = (offset / size if size > 0 else offset).tolist()
+        out.append(
+            Outlier(
+                recording.sources[int(recording.bag_index[i])],
+                int(indices[i]),
+                None if recording.stamp_ns is None else int(recording.stamp_ns[i]),
+                size,
+                [float(c) for c in direction],
+                size / float(sigmas[i]),
+            )
+        )
+    return tuple(out)
