@@ -88,8 +88,10 @@ def repair_bag(source: Path, output: Path) -> RepairReport:
                     f"{info.message_encoding!r}, not {MESSAGE_ENCODING!r}"
                 )
         tmp = output.with_name(f".{output.name}.{os.getpid()}.tmp")
+        # BagWriter never overwrites: an existing `tmp` is an error, and not ours to remove
+        writer = BagWriter(tmp, ros_distro=_ros_distro(reader), file_name=output.name)
         try:
-            with BagWriter(tmp, ros_distro=_ros_distro(reader), file_name=output.name) as writer:
+            with writer:
                 for info in reader.topics.values():
                     writer.add_topic(
                         info.topic,
