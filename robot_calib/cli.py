@@ -240,6 +240,14 @@ def cmd_predict(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_repair(args: argparse.Namespace) -> int:
+    """Copy every complete message of a crashed (or intact) bag into a new, indexed bag."""
+    from robot_calib.bag.repair import repair_bag
+
+    print(repair_bag(Path(args.bag), Path(args.output)).summary())
+    return 0
+
+
 class _OneLineParser(argparse.ArgumentParser):
     """Usage errors as one line and exit status 2 (the contract's rule for bad input)."""
 
@@ -365,6 +373,10 @@ def build_parser() -> argparse.ArgumentParser:
     pred.add_argument("params", metavar="PARAMS.json")
     pred.add_argument("--joints", required=True, help="JOINTS.csv: q1..q6 [rad] (+t, dir1..6)")
     pred.add_argument("-o", "--output", required=True, help="POINTS.csv to write (x,y,z m)")
+
+    rep = add("repair", cmd_repair, "recover the messages of a crashed recording -> a new bag")
+    rep.add_argument("bag", metavar="BAG", help="bag whose writer was killed (.mcap)")
+    rep.add_argument("-o", "--output", required=True, help="new bag to write (FIXED.mcap)")
 
     run = add("run", cmd_run, "the main job on built-in defaults")
     run.add_argument("-o", "--output", default="out", help="output folder (default out/)")

@@ -31,6 +31,10 @@ class BagError(RobotCalibError):
     """Unreadable, truncated or existing bag file (MCAP), or a bad topic/type in one."""
 
 
+class TruncatedBagError(BagError):
+    """A bag whose writer did not close it (killed): no footer, its closed chunks readable."""
+
+
 def check_keys(
     keys: Iterable[object],
     known: Sequence[str],

@@ -1,5 +1,5 @@
 """recorder node through real rclpy: in-process with an executor, and as a process stopped by
-SIGINT, SIGTERM and SIGKILL. Bags land in tmp_path and are read back by our reader, by
+SIGINT, SIGTERM, SIGHUP and SIGKILL. Bags land in tmp_path and are read back by our reader, by
 mcap_ros2 (via BagMessage.decode) and by rosbags. The ROS domain is the test process's own
 (conftest.py); the recorder process inherits it."""
 
@@ -268,7 +268,9 @@ def test_recorder_process_refuses_an_existing_file(tmp_path: Path) -> None:
     assert existing.read_bytes() == b"precious"
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize(
+    "signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=["SIGINT", "SIGTERM", "SIGHUP"]
+)
 def test_recorder_process_finalises_bag_on_signal(
     source: Node, tmp_path: Path, signum: int
 ) -> None:

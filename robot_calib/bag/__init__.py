@@ -2,7 +2,8 @@
 
 `BagWriter` writes raw CDR messages with their receive times; `BagReader` reads them back
 (also from a bag whose recorder was killed); `read.read_recording` turns bags into the
-measurement model's `Recording`. Nothing is imported until used (PEP 562), so importing
+measurement model's `Recording`; `repair.repair_bag` copies what a killed writer left
+into a new, complete bag. Nothing is imported until used (PEP 562), so importing
 `robot_calib.bag` costs nothing and the core never pulls in `mcap` by accident.
 """
 
@@ -20,6 +21,8 @@ _EXPORTS = {
     "message_definition": "robot_calib.bag.ros2_formats",
     "type_description_hash": "robot_calib.bag.ros2_formats",
     "read_recording": "robot_calib.bag.read",
+    "RepairReport": "robot_calib.bag.repair",
+    "repair_bag": "robot_calib.bag.repair",
 }
 
 

@@ -31,7 +31,7 @@ from robot_calib.bag.ros2_formats import (
     QosProfile,
     qos_profiles_from_yaml,
 )
-from robot_calib.errors import BagError
+from robot_calib.errors import BagError, TruncatedBagError
 
 MAGIC = b"\x89MCAP0\r\n"
 _CORRUPT = (McapError, ValueError, KeyError, IndexError, EOFError, struct.error)
@@ -44,6 +44,7 @@ class TopicInfo:
 
     offered_qos: the publishers' offered profiles recorded with it (may be empty).
     type_hash: 'RIHS01_…' or '' when the recorder did not know it.
+    definition: the schema's text (for `ros2msg`, the message definition), '' if none.
     """
 
     topic: str
@@ -53,6 +54,7 @@ class TopicInfo:
     type_hash: str
     schema_encoding: str
     message_encoding: str
+    definition: str = ""
 
 
 @dataclass(frozen=True)
@@ -138,7 +140,7 @@ class BagReader:
         self.complete: bool = size >= FOOTER_SIZE + 2 * MAGIC_SIZE and self._file.read() == MAGIC
         """True if the file was closed properly (footer present)."""
         if not self.complete and not allow_truncated:
-            raise BagError(
+            raise TruncatedBagError(
                 f"{self.path}: truncated MCAP file (no footer: its writer did not close "
                 "it); open with allow_truncated=True to read its complete chunks"
             )
@@ -160,6 +162,9 @@ class BagReader:
                 elif isinstance(record, Message):
                     counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
         self._schemas, self._channels = schemas, channels
+        self.complete_bytes: int = size if self.complete else self._complete_end
+        """Bytes from the start to the end of the last complete record (the file size for a
+        complete bag); what follows in a truncated bag is a record cut by the crash."""
         self.topics: dict[str, TopicInfo] = {
             channel.topic: self._topic_info(channel, counts.get(channel.id, 0))
             for channel in channels.values()
@@ -241,9 +246,12 @@ class BagReader:
         of its own so that several iterations may interleave. In a truncated bag mcap's
         stream reader raises EndOfFile at the cut: the records end quietly there."""
         with open(self.path, "rb") as stream:
+            self._complete_end = MAGIC_SIZE
             try:
                 reader = StreamReader(_ExactReads(stream), validate_crcs=True)  # type: ignore[arg-type]
-                yield from reader.records
+                for record in reader.records:  # a chunk's records come once it is read whole
+                    self._complete_end = stream.tell()
+                    yield record
             except EndOfFile:
                 if self.complete:
                     raise BagError(f"{self.path}: corrupt MCAP data: ends in a record") from None
@@ -266,6 +274,7 @@ class BagReader:
             type_hash=channel.metadata.get("topic_type_hash", ""),
             schema_encoding=schema.encoding if schema is not None else "",
             message_encoding=channel.message_encoding,
+            definition=schema.data.decode("utf-8", "replace") if schema is not None else "",
         )
 
     def _decode(self, channel: Channel, schema: Schema | None, data: bytes) -> Any:

@@ -66,6 +66,8 @@ class BagWriter:
     `flush_stale`. compression: 'none' (rosbag2's default), 'zstd' or 'lz4' per chunk.
     fsync: also fsync each closed chunk (power-loss safety; costs a disk sync per chunk).
     ros_distro: recorded in the rosbag2 metadata (default: $ROS_DISTRO, else '').
+    file_name: the file's name in the rosbag2 metadata (default: path's name; give the
+    final name when writing to a temporary file that is renamed at the end).
     Use as a context manager or call `close()`; only a closed file has its summary.
     """
 
@@ -78,8 +80,10 @@ class BagWriter:
         compression: str = "none",
         fsync: bool = False,
         ros_distro: str | None = None,
+        file_name: str | None = None,
     ) -> None:
         self.path = Path(path)
+        self._file_name = self.path.name if file_name is None else file_name
         if compression not in _COMPRESSION:
             raise BagError(
                 f"{self.path}: unknown compression {compression!r} "
@@ -323,8 +327,8 @@ class BagWriter:
             "version": 9, "storage_identifier": "mcap", "duration": duration,
             "starting_time": start, "message_count": count, "topics_with_message_count": topics,
             "compression_format": "", "compression_mode": "",
-            "relative_file_paths": [self.path.name],
-            "files": [{"path": self.path.name, "starting_time": start, "duration": duration,
+            "relative_file_paths": [self._file_name],
+            "files": [{"path": self._file_name, "starting_time": start, "duration": duration,
                        "message_count": count}],
             "custom_data": None, "ros_distro": self._ros_distro,
         }  # fmt: skip

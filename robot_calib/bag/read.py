@@ -6,6 +6,7 @@ Bad input raises `BagError` naming the file and the problem (one line, exit stat
 
 from __future__ import annotations
 
+import shlex
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -13,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from robot_calib.bag.mcap_reader import BagReader
-from robot_calib.errors import BagError, InputError
+from robot_calib.errors import BagError, InputError, TruncatedBagError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements.recording import (
@@ -56,7 +57,14 @@ def read_bag(
     js_v: list[Array] = []
     pts: list[Array] = []
     frames: set[str] = set()
-    with BagReader(path) as reader:
+    try:
+        reader = BagReader(path)
+    except TruncatedBagError:
+        raise BagError(
+            f"{path}: truncated MCAP file (no footer: its writer did not close it; run "
+            f"`robot-calib repair {shlex.quote(str(path))} -o FIXED.mcap`)"
+        ) from None
+    with reader:
         _check_topic(reader, JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         _check_topic(reader, POINT_TOPIC, POINT_TYPE)
         for m in reader.messages([JOINT_STATES_TOPIC, POINT_TOPIC]):

@@ -1,5 +1,5 @@
 """Shared plumbing of the recorder and replay nodes: described parameters, type import,
-QoS conversion, and the standalone `main` loop with SIGINT/SIGTERM handling."""
+QoS conversion, and the standalone `main` loop with SIGINT/SIGTERM/SIGHUP handling."""
 
 from __future__ import annotations
 
@@ -28,6 +28,8 @@ from robot_calib.bag.ros2_formats import QosProfile, duration_from_ns
 from robot_calib.errors import InputError, RobotCalibError
 
 N = TypeVar("N", bound=Node)
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+"""Signals that stop a standalone node cleanly (SIGHUP: the terminal or SSH session closed)."""
 
 _TYPES = {
     str: ParameterType.PARAMETER_STRING,
@@ -115,11 +117,12 @@ def run_node(
     name: str | None = None,
     multithreaded: bool = False,
 ) -> int:
-    """Run one node alone until SIGINT, SIGTERM, external shutdown or `done(node)`.
+    """Run one node alone until SIGINT, SIGTERM, SIGHUP, external shutdown or `done(node)`.
 
-    SIGINT and SIGTERM only set a flag (Python handlers; rclpy's own handlers are not
-    installed), so a callback is never interrupted half-way; the loop then stops, calls
-    `on_stop(node)` (e.g. finalise a file), destroys the node and shuts rclpy down.
+    SIGINT, SIGTERM and SIGHUP (its terminal closed) only set a flag (Python handlers;
+    rclpy's own handlers are not installed), so a callback is never interrupted half-way; the
+    loop then stops, calls `on_stop(node)` (e.g. finalise a file), destroys the node and
+    shuts rclpy down.
     Returns the exit status: 0, or 2 for bad input (one line on stderr: "NAME: error: …").
     multithreaded: spin a MultiThreadedExecutor, for a node whose long callbacks sit in
     their own callback group (the calibrator); otherwise one thread keeps callbacks ordered.
@@ -129,7 +132,7 @@ def run_node(
     def stop(signum: int, frame: FrameType | None) -> None:
         received.append(signum)
 
-    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous = {sig: signal.signal(sig, stop) for sig in _STOP_SIGNALS}
     rclpy.init(
         args=list(args) if args is not None else None,
         signal_handler_options=SignalHandlerOptions.NO,

@@ -7,8 +7,9 @@ contract's topics have known types; other topics are subscribed once the graph s
 type. A topic's channel is created at its first message, with the publishers' offered QoS
 and type hash as the graph reports them then. Topics and parameters: msgs_doc/recorder.md.
 
-Standalone: `ros2 run robot_calib recorder --ros-args -p output:=run.mcap`; SIGINT or
-SIGTERM closes the bag (summary written) and prints the message counts per topic.
+Standalone: `ros2 run robot_calib recorder --ros-args -p output:=run.mcap`; SIGINT, SIGTERM or
+SIGHUP closes the bag (summary written) and prints the message counts per topic (SIGKILL
+leaves the closed chunks: `robot-calib repair` makes a complete bag of them).
 """
 
 from __future__ import annotations
