@@ -25,7 +25,7 @@ from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
-from robot_calib.identify.fit import FitResult, SolverReport, fit_model
+from robot_calib.identify.fit import FitResult, SolverReport, check_enough_data, fit_model
 from robot_calib.identify.identifiability import Identifiability
 from robot_calib.identify.objectives import AbsoluteObjective, Objective, SeedObjective
 from robot_calib.identify.outliers import (
@@ -36,12 +36,13 @@ from robot_calib.identify.outliers import (
     outlier_mask,
     robust_sigma,
 )
+from robot_calib.identify.plausibility import calibration_warnings, recording_warnings
 from robot_calib.identify.registration import fit_frames
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
-from robot_calib.model import KinematicModel
+from robot_calib.model import TARGET, KinematicModel
 from robot_calib.poses import Poses
 
 BASE_MODELS = ("nominal", "cpa", "geometric")
@@ -101,6 +102,7 @@ class Calibration:
     solver: SolverReport = field(default_factory=lambda: SolverReport("none"))
     cpa: CPAResult | None = None
     outliers: tuple[Outlier, ...] = ()  # measurements flagged as blunders, not fitted
+    warnings: tuple[str, ...] = ()  # implausible results, labelled (`plausibility`)
     inliers: NDArray[np.bool_] | None = None  # (n,) of the recording given; None: all
 
     def predict(self, poses: Poses) -> Array:
@@ -220,10 +222,40 @@ def calibrate(
         inliers : ndarray of bool, shape (n,), or None
             Which measurements of `recording` were fitted (None: all). `residuals` and
             `accuracy` are those of the fitted measurements.
+        warnings : tuple of str
+            Labelled signs of a wrong result (`identify.plausibility`): parameters far
+            from nominal, a residual far above the noise, stuck joints, readings outside
+            the limits or in degrees; empty when none.
     """
-    cal = _calibrate_once(recording, robot, model_spec, ecc_order, log, start, objective)
-    if not screen_outliers:
-        return cal
+    base, effects = parse_model(model_spec, robot, ecc_order)
+    if base != "cpa":  # too few measurements: say so before any work
+        free = KinematicModel(robot, tuple(effects)).parameters().free
+        n_free = len(TARGET) + 6 if base == "nominal" else int(free.sum())
+        check_enough_data(3 * len(recording), len(recording), n_free)
+    fit = _calibrate_once(recording, robot, model_spec, ecc_order, log, start, objective)
+    cal = _screened(fit, recording, robot, model_spec, ecc_order, log, start, objective) \
+        if screen_outliers else fit  # fmt: skip
+    geometry_fitted = base not in ("nominal", "cpa")
+    warnings = tuple(
+        recording_warnings(recording, robot) + calibration_warnings(cal, geometry_fitted)
+    )
+    for warning in warnings:
+        (log or (lambda _msg: None))(warning)
+    return replace(cal, warnings=warnings)
+
+
+def _screened(
+    cal: Calibration,
+    recording: Recording,
+    robot: RobotDescription,
+    model_spec: str,
+    ecc_order: int,
+    log: Log | None,
+    start: Calibration | None,
+    objective: str,
+) -> Calibration:
+    """`cal` (a fit of every measurement), or, when some lie beyond OUTLIER_K robust
+    sigmas of their sweep, the fit without the blunders, with `outliers` and `inliers`."""
     everyone = np.ones(len(recording), dtype=bool)
     sigmas = group_sigmas(recording, cal.residuals, everyone)
     if not outlier_mask(cal.residuals, sigmas).any():

@@ -90,6 +90,27 @@ def fit_circle(points: Array, where: str = "sweep") -> Circle:
     return Circle(centre, normal, radius, (points - mean) @ normal, radial)
 
 
+def _robust_sigma(values: Array) -> float:
+    """1.4826 x the median absolute deviation of `values` (any shape) [m], >= 0.1 um."""
+    flat = np.asarray(values).reshape(-1)
+    return max(1.4826 * float(np.median(np.abs(flat - np.median(flat)))), 1e-7)
+
+
+def _circle_through(a: Array, b: Array, c: Array) -> Circle | None:
+    """The circle through three points (3,) [m] (None when they are collinear); its
+    residual arrays are empty (it is a candidate, not a fit)."""
+    ab, ac = b - a, c - a
+    normal = np.cross(ab, ac)
+    area2 = float(normal @ normal)
+    if area2 < 1e-24:
+        return None
+    centre = a + (np.cross(normal, ab) * (ac @ ac) + np.cross(ac, normal) * (ab @ ab)) / (
+        2 * area2
+    )
+    empty = np.zeros(0)
+    return Circle(centre, normal / np.sqrt(area2), float(np.linalg.norm(a - centre)), empty, empty)
+
+
 def robust_circle(
     points: Array, where: str = "sweep", k: float = 8.0, n_trials: int = 12
 ) -> tuple[Circle, NDArray[np.bool_]]:
@@ -116,16 +137,14 @@ def robust_circle(
     candidates = [plain]
     third = n // 3
     for i in np.unique(np.linspace(0, max(third - 1, 0), min(n_trials, third)).astype(int)):
-        try:
-            candidates.append(fit_circle(points[[i, i + third, i + 2 * third]], where))
-        except InputError:
-            continue  # three collinear points: no circle
+        through = _circle_through(points[i], points[i + third], points[i + 2 * third])
+        if through is not None:
+            candidates.append(through)
     medians = [np.median(np.linalg.norm(c.distances(points), axis=1)) for c in candidates]
     circle = candidates[int(np.argmin(medians))]
     keep, fitted = np.ones(n, dtype=bool), circle is plain
     for _ in range(5):
-        spread = circle.distances(points[keep]).reshape(-1)
-        sigma = max(1.4826 * float(np.median(np.abs(spread - np.median(spread)))), 1e-7)
+        sigma = _robust_sigma(circle.distances(points[keep]))
         again = np.linalg.norm(circle.distances(points), axis=1) <= k * sigma
         if again.sum() < 3 or (fitted and np.array_equal(again, keep)):
             break

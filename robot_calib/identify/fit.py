@@ -93,7 +93,11 @@ class _Solved:
 
 
 def _solve(
-    problem: _Problem, x0: Array, progress: Progress | None, robust_scale: float | None
+    problem: _Problem,
+    x0: Array,
+    progress: Progress | None,
+    robust_scale: float | None,
+    rough: bool = False,
 ) -> _Solved:
     """Minimise the problem's residuals from x0: Levenberg-Marquardt for least squares
     (MINPACK: fast and exact for small dense problems), or trust-region reflective with a
@@ -115,8 +119,9 @@ def _solve(
         return problem.evaluate(x)[1]
 
     if robust_scale is None:
-        solution = least_squares(fun, x0, jac=jac, method="lm", x_scale="jac", xtol=1e-12,
-                                 ftol=1e-12, gtol=1e-12, max_nfev=100 * (len(x0) + 1))  # fmt: skip
+        tol = ROUGH_TOLERANCE if rough else 1e-12
+        solution = least_squares(fun, x0, jac=jac, method="lm", x_scale="jac", xtol=tol,
+                                 ftol=tol, gtol=tol, max_nfev=100 * (len(x0) + 1))  # fmt: skip
     else:
         solution = least_squares(fun, x0, jac=jac, method="trf", loss="soft_l1",
                                  f_scale=robust_scale, x_scale="jac", xtol=1e-10, ftol=1e-10,
@@ -131,6 +136,7 @@ def _solve(
     )
 
 
+ROUGH_TOLERANCE = 1e-6  # relative cost/step change: enough to judge identifiability at
 BLOCK_POSES = 5000  # Jacobian evaluated in blocks: its temporaries stay in cache (linear time)
 
 
@@ -292,7 +298,10 @@ def fit_model(
     if check_identifiability:
         params, fixed = _structurally_identifiable(model, start, poses, points, goal)
     problem = _Problem(model, params, poses, points, goal)
-    solved = _solve(problem, params.pack(), progress, robust_scale)
+    # Where a parameter is poorly determined, LM crawls along its flat valley: a coarse
+    # solve (ROUGH_TOLERANCE) gets near enough to judge it, then the exact solve runs.
+    rough = check_identifiability and robust_scale is None
+    solved = _solve(problem, params.pack(), progress, robust_scale, rough=rough)
     if check_identifiability and len(solved.x):
         residual, jac_free = problem.evaluate(solved.x)
         at_solution = params.unpack(solved.x)
@@ -305,8 +314,9 @@ def fit_model(
             fixed = fixed + tuple(weak)
             first_evaluations = problem.evaluations
             problem = _Problem(model, params, poses, points, goal)
-            solved = _solve(problem, params.pack(), progress, robust_scale)
             problem.evaluations += first_evaluations
+        if weak or rough:
+            solved = _solve(problem, params.pack() if weak else solved.x, progress, robust_scale)
     x = solved.x
     status, message, nfev, njev, optimality = (
         solved.status, solved.message, solved.nfev, solved.njev, solved.optimality

@@ -62,7 +62,7 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
             "sweeps": len(recording.sweeps),
             "general_poses": int(recording.general.sum()),
         },
-        "warnings": list(recording.warnings),
+        "warnings": list(recording.warnings) + list(cal.warnings),
         "outliers": [o.to_dict() for o in cal.outliers],
     }
     if cal.identifiability is not None:
@@ -195,6 +195,7 @@ def summary(cal: Calibration, recording: Recording) -> str:
             lines.append(f"fixed ({reason}): {shown}")
     lines.append(f"residuals (in-sample): {cal.accuracy.line()}")
     lines += outlier_lines(cal.outliers)
+    lines += list(cal.warnings)
     if cal.solver.time_s is not None:
         lines.append(cal.solver.line())
     return "\n".join(lines)

@@ -1,6 +1,11 @@
-"""A first tracker pose for a model that has none: the rigid transform that best maps the
-model's predicted points (base frame) onto the measured ones (Kabsch / Horn), then the
-frames (tracker pose, target offset) refined by least squares with the geometry held.
+"""A first tracker pose and target offset for a model that has neither: found globally,
+then the frames refined by least squares with the geometry held.
+
+measured_i = R (flange_p_i + flange_R_i t) + b is bilinear in the unknowns: for a fixed
+rotation R it is linear in the target offset t and the translation b, and for a fixed t
+the best R, b is a rigid fit (Kabsch / Horn). Alternating the two from t = 0 reaches the
+global solution in a few steps whatever the start, also for targets far from the flange
+(0.3 m on large robots), where a rigid fit with t = 0 alone leaves 100 mm.
 """
 
 from __future__ import annotations
@@ -10,10 +15,11 @@ import numpy as np
 from robot_calib.identify.fit import FitResult, fit_model
 from robot_calib.kinematics.frames import Array, matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
-from robot_calib.model import BASE_ROTATION, BASE_TRANSLATION, KinematicModel
+from robot_calib.model import BASE_ROTATION, BASE_TRANSLATION, TARGET, KinematicModel
 from robot_calib.poses import Poses
 
 REASON_FRAMES_ONLY = "held: only the tracker pose and target offset are fitted in this model"
+ALTERNATIONS = 50  # rigid fit <-> linear target offset; converges in a handful
 
 
 def rigid_transform(source: Array, target: Array) -> tuple[Array, Array]:
@@ -28,15 +34,37 @@ def rigid_transform(source: Array, target: Array) -> tuple[Array, Array]:
 
 
 def initial_frames(
-    model: KinematicModel, params: ParameterVector, poses: Poses, points: Array
+    model: KinematicModel,
+    params: ParameterVector,
+    poses: Poses,
+    points: Array,
+    iterations: int = ALTERNATIONS,
 ) -> ParameterVector:
-    """`params` with base2tracker set by a rigid fit of the predicted onto the measured points."""
+    """`params` with base2tracker and the target offset found globally for the geometry in
+    `params`: alternately the rigid fit of the predicted onto the measured points (n, 3)
+    [m] and the linear least squares of target offset and translation for that rotation,
+    until the offset moves by less than 1 nm."""
     at_origin = params.with_values({k: 0.0 for k in BASE_TRANSLATION + BASE_ROTATION})
-    predicted = model.target_points(at_origin, poses)
-    rotation, translation = rigid_transform(predicted, points)
+    flange = model.flange2base(at_origin, poses)  # (n, 4, 4), robot base frame
+    flange_rot, flange_pos = flange[:, :3, :3], flange[:, :3, 3]
+    target = np.array([params[k] for k in TARGET])
+    n = len(points)
+    for _ in range(iterations):
+        rotation, translation = rigid_transform(flange_pos + flange_rot @ target, points)
+        design = np.zeros((n, 3, 6))  # d measured / d (t, b) for this rotation
+        design[:, :, :3] = rotation @ flange_rot
+        design[:, :, 3:] = np.eye(3)
+        rhs = points - flange_pos @ rotation.T
+        solution = np.linalg.lstsq(design.reshape(-1, 6), rhs.reshape(-1), rcond=None)[0]
+        moved = float(np.linalg.norm(solution[:3] - target))
+        target = solution[:3]
+        if moved < 1e-9:
+            break
+    rotation, translation = rigid_transform(flange_pos + flange_rot @ target, points)
     roll, pitch, yaw = matrix_to_rpy(rotation)
     updates = dict(zip(BASE_TRANSLATION, translation))
     updates.update(dict(zip(BASE_ROTATION, (roll, pitch, yaw))))
+    updates.update(dict(zip(TARGET, target)))
     return params.with_values(updates)
 
 

@@ -1,0 +1,113 @@
+"""Is a calibration plausible? Labelled warnings for results that converge yet are wrong:
+a wrong `--robot`, two joints' readings swapped, readings in degrees, a stuck encoder, a
+residual far above what the tracker can explain. A fit that is wrong must say so.
+
+Each check is a pure function of the recording, the robot and the calibration; the
+warnings go to stdout, PARAMS.json `warnings` and the calibrator node's summary.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.measurements import Recording
+from robot_calib.poses import JOINT_CHANGE_TOLERANCE
+
+if TYPE_CHECKING:
+    from robot_calib.identify.calibrate import Calibration
+
+#: a geometric parameter this far from nominal is no manufacturing tolerance
+FAR_LENGTH_M = 0.020
+FAR_ANGLE_RAD = np.radians(2.0)
+#: the in-sample residual per axis may exceed the noise by this factor before a warning
+#: (an unmodelled joint effect such as 2 mrad of backlash leaves about 10 x)
+RESIDUAL_FACTOR = 20.0
+#: tracker + target noise per axis [m] assumed when the data cannot tell (no circle fits)
+DEFAULT_NOISE_M = 10e-6
+#: readings beyond the joint limits by more than this [rad] are reported
+LIMIT_MARGIN_RAD = np.radians(2.0)
+HINT = "a wrong --robot, two joints' readings swapped, or readings in other units?"
+
+
+def recording_warnings(recording: Recording, robot: RobotDescription) -> list[str]:
+    """Stuck joints (never moving while others do), readings outside the joint limits, and
+    readings that look like degrees (beyond 2 pi)."""
+    out: list[str] = []
+    q = recording.poses.q
+    moving = np.ptp(q, axis=0) > JOINT_CHANGE_TOLERANCE
+    names = robot.joint_names
+    if moving.any():
+        for j in (int(k) for k in np.flatnonzero(~moving)):
+            out.append(
+                f"warning: joint {j + 1} ({names[j]}) never moves while others do "
+                f"(reading {q[0, j]:.6f} rad throughout): a stuck encoder? its parameters "
+                "cannot be identified"
+            )
+    for j in range(robot.n_joints):
+        peak = float(np.max(np.abs(q[:, j])))
+        if peak > 2 * np.pi + LIMIT_MARGIN_RAD:
+            out.append(
+                f"warning: joint {j + 1} ({names[j]}) readings reach {peak:.1f} rad "
+                f"({np.degrees(peak):.0f} deg): they look like degrees; the contract wants rad"
+            )
+            continue
+        lo, hi = robot.limits[j]
+        outside = int(
+            np.sum((q[:, j] < lo - LIMIT_MARGIN_RAD) | (q[:, j] > hi + LIMIT_MARGIN_RAD))
+        )
+        if outside:
+            out.append(
+                f"warning: joint {j + 1} ({names[j]}): {outside} of {len(q)} readings outside "
+                f"its limits [{np.degrees(lo):.0f}, {np.degrees(hi):.0f}] deg ({robot.name}): "
+                "another robot?"
+            )
+    return out
+
+
+def noise_per_axis(cal: Calibration) -> tuple[float, str]:
+    """What the tracker alone leaves per axis [m], and where that figure comes from: the
+    circle fits of the sweeps (pooled rms over 3 components) when CPA ran, else the
+    assumed DEFAULT_NOISE_M."""
+    if cal.cpa is not None and cal.cpa.sweeps:
+        total = sum(
+            float(np.sum(s.circle.plane_residuals**2 + s.circle.radial_residuals**2))
+            for s in cal.cpa.sweeps
+        )
+        count = sum(2 * len(s.circle.plane_residuals) for s in cal.cpa.sweeps)
+        return float(np.sqrt(total / count)), "circle fits"
+    return DEFAULT_NOISE_M, "assumed tracker noise"
+
+
+def calibration_warnings(cal: Calibration, geometry_fitted: bool = True) -> list[str]:
+    """Geometric parameters far from nominal, and (when the geometry was fitted: not for
+    the nominal model or CPA, whose residual is the gap calibration closes) an in-sample
+    residual far above the noise, each with what usually causes it."""
+    out: list[str] = []
+    far = []
+    for p, value in zip(cal.parameters.parameters, cal.parameters.values):
+        if p.group != "geometric" or not p.free:
+            continue
+        deviation = value - p.nominal
+        if p.unit == "m" and abs(deviation) > FAR_LENGTH_M:
+            far.append(f"{p.name} {deviation * 1e3:+.1f} mm")
+        elif p.unit == "rad" and abs(deviation) > FAR_ANGLE_RAD:
+            far.append(f"{p.name} {np.degrees(deviation):+.2f} deg")
+    if far:
+        out.append(
+            f"warning: parameters far from nominal ({cal.model.robot.name}): "
+            f"{', '.join(far)}: {HINT}"
+        )
+    if geometry_fitted and len(cal.residuals):
+        noise, source = noise_per_axis(cal)
+        per_axis = float(np.sqrt(np.mean(cal.residuals**2)))
+        if per_axis > RESIDUAL_FACTOR * noise:
+            out.append(
+                f"warning: in-sample residual {per_axis * 1e3:.4f} mm per axis is "
+                f"{per_axis / noise:.0f} x the noise ({noise * 1e3:.4f} mm, {source}): "
+                "the model misses something large: an unmodelled effect (see `robot-calib "
+                f"diagnose`), {HINT}"
+            )
+    return out
