@@ -17,6 +17,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 
 from robot_calib.errors import RobotCalibError
 from robot_calib.messages import JOINT_STATES_TOPIC, POINT_TOPIC
@@ -53,10 +54,12 @@ def simulate_bag(
 
     Returns the recorder's message counts per topic. Owns rclpy init/shutdown unless a
     context is already initialised (then it uses the default context and leaves it up).
+    An owned context installs no signal handlers: Ctrl-C (and SIGTERM where the caller maps
+    it so) raises KeyboardInterrupt here, the bag is closed and the caller discards it.
     """
     owns_context = not rclpy.ok()
     if owns_context:
-        rclpy.init()
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     sim_time = Parameter("use_sim_time", value=True)
     world_param = Parameter("world", value=str(world) if world else "")
     nodes: list[Node] = []
