@@ -435,22 +435,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _interrupt(_signum: int, _frame: object) -> NoReturn:
-    """SIGTERM as Ctrl-C: unwind (staged outputs are removed), 'interrupted', exit 130."""
+_SIGNALLED: list[int] = []  # signals received (SIGINT, SIGTERM) while a verb runs
+
+
+def _interrupt(signum: int, _frame: object) -> NoReturn:
+    """Ctrl-C and SIGTERM: unwind (staged outputs are removed), 'interrupted', exit 130."""
+    _SIGNALLED.append(signum)
     raise KeyboardInterrupt
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     signal.signal(signal.SIGTERM, _interrupt)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
+        signal.signal(signal.SIGINT, _interrupt)
     try:
         return int(args.func(args))
-    except RobotCalibError as exc:
-        print(f"robot-calib {args.command}: error: {exc}", file=sys.stderr)
-        return exc.exit_status
-    except KeyboardInterrupt:
-        print(f"robot-calib {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except BaseException as exc:
+        # A signal can surface as another exception when it lands in a C extension's call
+        # back into Python (e.g. an rclpy callback): it is still an interruption.
+        if isinstance(exc, KeyboardInterrupt) or _SIGNALLED:
+            print(f"robot-calib {args.command}: interrupted", file=sys.stderr)
+            return 130
+        if isinstance(exc, RobotCalibError):
+            print(f"robot-calib {args.command}: error: {exc}", file=sys.stderr)
+            return exc.exit_status
+        raise
 
 
 if __name__ == "__main__":
