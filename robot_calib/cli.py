@@ -6,6 +6,8 @@ Every bad input ends in one line on stderr naming the file/value and exit status
 from __future__ import annotations
 
 import argparse
+import math
+import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -24,7 +26,6 @@ from robot_calib.pipeline import (
     N_RANDOM_POSES,
     RUN_HOLDOUT_POSES,
     RUN_PLAN,
-    new_file_path,
     output_path,
 )
 
@@ -117,7 +118,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from robot_calib import pipeline
 
     world = pipeline.simulation_world(args.world, args.robot, args.effects or (), args.seed)
-    sim = pipeline.simulate(args.output, args.plan, world, args.seed, args.n_random, _progress())
+    sim = pipeline.simulate(
+        args.output, args.plan, world, args.seed, args.n_random, _progress(), args.force
+    )
     print(
         f"{sim.bag}: {', '.join(f'{t}={n}' for t, n in sim.counts.items())} messages "
         f"({args.plan}, effects: {', '.join(sim.effects) or 'none'}) in {sim.seconds:.1f} s; "
@@ -136,7 +139,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from robot_calib.identify.params_file import summary, write_json_atomic
 
     robot = load_robot(args.robot)
-    output = pipeline.output_path(args.output, "PARAMS.json", args.bags)
+    output = pipeline.output_path(args.output, "PARAMS.json", args.bags, args.force)
     started = time.perf_counter()
     cal, recording = pipeline.calibrate_bags(
         args.bags, robot, args.model, args.ecc_order, args.objective, args.pair_tolerance, _log
@@ -152,14 +155,14 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     from robot_calib import pipeline
 
     robot = load_robot(args.robot)
-    output = pipeline.output_path(
-        args.output, "DIAGNOSIS.json", [*args.bags, *(args.holdout or ())]
-    )
+    inputs = [*args.bags, *(args.holdout or ())]
+    output = pipeline.output_path(args.output, "DIAGNOSIS.json", inputs, args.force)
+    pipeline.output_path(pipeline.report_path(output), "the report", inputs, args.force)
     started = time.perf_counter()
     diagnosis, ladder, recording = pipeline.diagnose_bags(
         args.bags, robot, args.holdout or (), args.pair_tolerance, _log
     )
-    report = pipeline.write_diagnosis(diagnosis, ladder, recording, output)
+    report = pipeline.write_diagnosis(diagnosis, ladder, recording, output, args.force)
     _print_diagnosis(diagnosis, output, report, time.perf_counter() - started)
     return 0
 
@@ -179,7 +182,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     if preset is not None and preset.robot and args.robot == DEFAULT_ROBOT:
         robot_name = preset.robot  # the preset's robot unless --robot says otherwise
     robot = load_robot(robot_name)
-    output = new_file_path(args.output, "the bag")
+    output = output_path(args.output, "the bag", args.csv, args.force)
     if args.preset:
         if args.preset not in PRESETS:
             raise InputError(f"--preset {args.preset}: known presets: {', '.join(PRESETS)}")
@@ -206,7 +209,9 @@ def cmd_import(args: argparse.Namespace) -> int:
         raise InputError("--point and --dif take three columns: x,y,z")
     tables = []
     for csv_path in args.csv:
-        table = read_measurement_csv(csv_path, fmt)
+        table = read_measurement_csv(csv_path, fmt, robot.limits)
+        for warning in table.warnings:
+            _log(warning)
         for line, why in table.bad_rows:
             _log(f"warning: {csv_path}:{line}: {why}: row skipped")
         print(f"{csv_path}: {len(table.q)} rows imported, {len(table.bad_rows)} bad rows skipped")
@@ -217,7 +222,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     stamps = [t.time for t in tables if t.time is not None]
     if len(stamps) == len(tables):
         times = np.concatenate([s - s[0] + k * 1e6 for k, s in enumerate(stamps)])
-    counts = write_measurement_bag(output, q, points, robot.joint_names, times)
+    counts = write_measurement_bag(output, q, points, robot.joint_names, times, args.force)
     print(f"{output}: {', '.join(f'{k}={v}' for k, v in counts.items())} messages "
           f"({robot.name}, {fmt.angle_unit}/{fmt.length_unit} -> rad/m)")  # fmt: skip
     return 0
@@ -226,15 +231,16 @@ def cmd_import(args: argparse.Namespace) -> int:
 def cmd_predict(args: argparse.Namespace) -> int:
     """Target positions (tracker frame, m) for the joint angles of JOINTS.csv."""
     from robot_calib.identify.params_file import load_params
-    from robot_calib.predict import read_joints_csv, write_points_csv
+    from robot_calib.predict import check_params_document, read_joints_csv, write_points_csv
 
-    model, params, _ = load_params(args.params)
+    model, params, doc = load_params(args.params)
+    check_params_document(doc, model.parameters(), args.params)
     if args.robot != DEFAULT_ROBOT and load_robot(args.robot).name != model.robot.name:
         raise InputError(
             f"{args.params}: identified for robot {model.robot.name}, not --robot {args.robot}"
         )
     poses = read_joints_csv(args.joints, model.robot.n_joints)
-    output = output_path(args.output, "POINTS.csv", [args.params, args.joints])
+    output = output_path(args.output, "POINTS.csv", [args.params, args.joints], args.force)
     write_points_csv(model.target_points(params, poses), output)
     print(f"{output}: {len(poses)} points (m, laser_tracker frame)")
     return 0
@@ -273,28 +279,60 @@ def _at_least(low: int) -> Callable[[str], int]:
 _count, _positive = _at_least(0), _at_least(1)
 
 
+def _tolerance(text: str) -> float:
+    """An argparse type: a finite number >= 0 [s] (else a one-line usage error, exit 2)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"{text} s: need a finite number >= 0")
+    return value
+
+
+OVERWRITE_POLICY = (
+    "Files: an existing output is never overwritten unless --force (then it is replaced "
+    "whole: written under a temporary name and renamed); an input is never overwritten, "
+    "even with --force; a failed or interrupted command leaves nothing behind."
+)
+
+
+def _add_force(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace existing outputs (never an input of the command)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _OneLineParser(
         prog="robot-calib",
         description="Calibrate 6-axis robots from laser-tracker measurements and diagnose "
         "why the real robot still differs from the model. Start with `robot-calib run`; "
         "units on disk are SI (m, rad), reports add mm/deg. Bad input: one line, exit 2.",
+        epilog=OVERWRITE_POLICY,
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
     def add(
-        name: str, func: Callable[[argparse.Namespace], int], help_: str
+        name: str, func: Callable[[argparse.Namespace], int], help_: str, robot: str | None = None
     ) -> argparse.ArgumentParser:
-        p = sub.add_parser(name, help=help_, description=help_)
+        p = sub.add_parser(name, help=help_, description=help_, epilog=OVERWRITE_POLICY)
         p.add_argument(
             "--robot",
-            default=DEFAULT_ROBOT,
-            help=f"built-in robot name or robot YAML file (default {DEFAULT_ROBOT})",
+            default=DEFAULT_ROBOT if robot is None else None,
+            help=f"built-in robot name or robot YAML file (default {robot or DEFAULT_ROBOT})",
         )
         p.set_defaults(func=func)
         return p
 
-    sim = add("simulate", cmd_simulate, "simulate a measurement plan and record an MCAP bag")
+    sim = add(
+        "simulate",
+        cmd_simulate,
+        "simulate a measurement plan and record an MCAP bag",
+        robot=f"the world's; {DEFAULT_ROBOT} in the built-in world",
+    )
     sim.add_argument(
         "--plan",
         default=DEFAULT_PLAN,
@@ -312,7 +350,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--n-random", type=_positive, default=N_RANDOM_POSES, help="poses of the random plan"
     )
-    sim.add_argument("-o", "--output", required=True, help="bag to write (BAG.mcap)")
+    sim.add_argument(
+        "-o", "--output", required=True, help="bag to write (BAG.mcap; + BAG.world.yaml)"
+    )
+    _add_force(sim)
 
     cal = add("calibrate", cmd_calibrate, "identify a model from bags -> PARAMS.json")
     cal.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
@@ -337,22 +378,30 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cal.add_argument(
         "--pair-tolerance",
-        type=float,
+        type=_tolerance,
         default=PAIR_TOLERANCE_S,
         help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
     )
     cal.add_argument("-o", "--output", required=True, help="PARAMS.json to write")
+    _add_force(cal)
 
     diag = add("diagnose", cmd_diagnose, "sim-to-real gap diagnosis -> DIAGNOSIS.json + report")
     diag.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
     diag.add_argument("--holdout", nargs="*", metavar="BAG", help="hold-out bag(s): scored only")
     diag.add_argument(
         "--pair-tolerance",
-        type=float,
+        type=_tolerance,
         default=PAIR_TOLERANCE_S,
         help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
     )
-    diag.add_argument("-o", "--output", required=True, help="DIAGNOSIS.json to write")
+    diag.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="DIAGNOSIS.json to write; the report goes beside it as <name>.md (+ "
+        "<name>_*.png), so -o may not end in .md",
+    )
+    _add_force(diag)
 
     imp = add("import", cmd_import, "measurement CSV(s) -> a bag of the contract")
     imp.add_argument("csv", nargs="+", metavar="CSV", help="CSV file(s), rows in visiting order")
@@ -368,18 +417,25 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--length-unit", choices=("mm", "m"), help="point unit")
     imp.add_argument("--no-header", action="store_true", help="the CSV has no header row")
     imp.add_argument("-o", "--output", required=True, help="bag to write (BAG.mcap)")
+    _add_force(imp)
 
     pred = add("predict", cmd_predict, "target positions for joint angles (JOINTS.csv)")
     pred.add_argument("params", metavar="PARAMS.json")
     pred.add_argument("--joints", required=True, help="JOINTS.csv: q1..q6 [rad] (+t, dir1..6)")
     pred.add_argument("-o", "--output", required=True, help="POINTS.csv to write (x,y,z m)")
+    _add_force(pred)
 
     rep = add("repair", cmd_repair, "recover the messages of a crashed recording -> a new bag")
     rep.add_argument("bag", metavar="BAG", help="bag whose writer was killed (.mcap)")
     rep.add_argument("-o", "--output", required=True, help="new bag to write (FIXED.mcap)")
 
     run = add("run", cmd_run, "the main job on built-in defaults")
-    run.add_argument("-o", "--output", default="out", help="output folder (default out/)")
+    run.add_argument(
+        "-o",
+        "--output",
+        default="out",
+        help="output folder (default out/); every run writes a new run-<time> folder in it",
+    )
     run.add_argument("--plan", default=RUN_PLAN, help=f"calibration plan ({RUN_PLAN})")
     run.add_argument(
         "--effects",
@@ -396,16 +452,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_SIGNALLED: list[int] = []  # signals received (SIGINT, SIGTERM) while a verb runs
+
+
+def _interrupt(signum: int, _frame: object) -> NoReturn:
+    """Ctrl-C and SIGTERM: unwind (staged outputs are removed), 'interrupted', exit 130."""
+    _SIGNALLED.append(signum)
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    signal.signal(signal.SIGTERM, _interrupt)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
+        signal.signal(signal.SIGINT, _interrupt)
     try:
         return int(args.func(args))
-    except RobotCalibError as exc:
-        print(f"robot-calib {args.command}: error: {exc}", file=sys.stderr)
-        return exc.exit_status
-    except KeyboardInterrupt:
-        print(f"robot-calib {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except BaseException as exc:
+        # A signal can surface as another exception when it lands in a C extension's call
+        # back into Python (e.g. an rclpy callback): it is still an interruption.
+        if isinstance(exc, KeyboardInterrupt) or _SIGNALLED:
+            print(f"robot-calib {args.command}: interrupted", file=sys.stderr)
+            return 130
+        if isinstance(exc, RobotCalibError):
+            print(f"robot-calib {args.command}: error: {exc}", file=sys.stderr)
+            return exc.exit_status
+        raise
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ caller pays only for what it runs.
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -57,13 +58,15 @@ class Simulation:
 
 def simulation_world(
     world: str | Path | None = None,
-    robot: str = DEFAULT_ROBOT,
+    robot: str | None = DEFAULT_ROBOT,
     effects: Sequence[str] = (),
     seed: int | None = None,
 ) -> World:
     """The world of a world file (default: the built-in one; another robot without a file:
     its nominal geometry in the default set-up), with `effects` switched on (text form of
     `simulate --effects`, e.g. 'backlash:4', 'compliance:2=2e-5') and `seed` if given.
+    `robot` None: the world's robot; a world file whose robot differs from `robot` is an
+    InputError.
 
     Returns
     -------
@@ -71,12 +74,19 @@ def simulation_world(
         The simulated truth: model (the robot with the effects), truth (every true
         parameter value, SI), noise, tracker options (latency, dropout), timing, seed.
     """
+    from robot_calib.kinematics.description import load_robot
     from robot_calib.sim.world import build_world, load_world, parse_sim_effect, with_effect
 
-    if world is None and robot != DEFAULT_ROBOT:
+    if world is None and robot not in (None, DEFAULT_ROBOT):
         out = build_world({"robot": robot, "geometry": "nominal"}, f"--robot {robot}")
     else:
         out = load_world(world)
+        wanted = None if robot is None else load_robot(robot)
+        if wanted is not None and wanted.reference() != out.model.robot.reference():
+            raise InputError(
+                f"{out.source}: world robot {out.model.robot.reference()} differs from "
+                f"--robot {robot}; give one of them"
+            )
     if seed is not None:
         out = replace(out, seed=seed)
     for spec in effects:
@@ -95,10 +105,14 @@ def simulate(
     seed: int | None = None,
     n_random: int = N_RANDOM_POSES,
     progress: Progress | None = None,
+    force: bool = False,
 ) -> Simulation:
     """Run the simulated graph (sim_robot, sim_tracker, recorder, in-process) over `plan`
-    in `world` (default: `simulation_world()`) and record the bag `output` (a new file in
-    an existing folder) and its world file beside it. Nothing is left on failure.
+    in `world` (default: `simulation_world()`) and record the bag `output` (in an existing
+    folder; an existing bag or world file is replaced only with `force`, the world file
+    read never) and its world file beside it. Both are written in a staging folder and
+    moved in at the end: nothing is left on failure or Ctrl-C. A recording without a
+    single tracker point is an InputError.
 
     Returns
     -------
@@ -116,34 +130,42 @@ def simulate(
         seconds : float
             Wall time of the simulation [s].
     """
+    from robot_calib.atomic import staged_outputs
+    from robot_calib.messages import POINT_TOPIC
     from robot_calib.nodes.simulate import simulate_bag
     from robot_calib.sim.plans import PLAN_NAMES
     from robot_calib.sim.world import save_world
 
     if plan not in PLAN_NAMES:
         raise InputError(f"--plan {plan}: unknown plan (known: {', '.join(PLAN_NAMES)})")
-    bag = new_file_path(output, "the bag")
-    world_file = new_file_path(bag.with_suffix(".world.yaml"), "the world file")
     world = world if world is not None else simulation_world(seed=seed)
-    save_world(world, world_file)
+    bag = output_path(output, "the bag", [world.source], force)
+    world_file = output_path(
+        bag.with_suffix(".world.yaml"), "the world file", [world.source], force
+    )
     started = time.monotonic()
-    try:
+    with staged_outputs(bag.parent, force) as stage:
+        save_world(world, stage / world_file.name)
         counts = simulate_bag(
-            bag, plan, world_file, -1 if seed is None else seed, n_random,
-            None if progress is None else partial(progress, plan),
+            stage / bag.name, plan, stage / world_file.name, -1 if seed is None else seed,
+            n_random, None if progress is None else partial(progress, plan),
         )  # fmt: skip
-    except BaseException:  # nothing written half-way: a partial simulation is no recording
-        world_file.unlink(missing_ok=True)
-        bag.unlink(missing_ok=True)
-        raise
+        if not counts.get(POINT_TOPIC):
+            raise InputError(
+                f"{bag}: the simulation recorded no tracker point (dropout probability "
+                f"{world.tracker.dropout_probability}); nothing written"
+            )
     labels = tuple(e.label for e in world.effects)
     return Simulation(bag, world_file, counts, labels, time.monotonic() - started)
 
 
-def output_path(raw: str | Path, what: str, inputs: Sequence[str | Path] = ()) -> Path:
-    """The path of a file to write: its folder must exist, it must not be a folder, and it
-    must not be one of the command's `inputs` (an input is never overwritten); InputError
-    naming the path otherwise.
+def output_path(
+    raw: str | Path, what: str, inputs: Sequence[str | Path] = (), force: bool = False
+) -> Path:
+    """The path of a file to write (the overwrite policy of every verb): its folder must
+    exist and be writable, it must not be a folder, it must not be one of the command's
+    `inputs` (an input is never overwritten, even with `force`), and it must not exist
+    unless `force`; InputError naming the path otherwise.
 
     Returns
     -------
@@ -155,24 +177,15 @@ def output_path(raw: str | Path, what: str, inputs: Sequence[str | Path] = ()) -
         raise InputError(f"{path.parent}: no such folder for {what}")
     if path.is_dir():
         raise InputError(f"{path}: is a folder; give a file name for {what}")
-    if path.exists() and any(path.resolve() == Path(p).resolve() for p in inputs):
+    if path.exists() and any(
+        Path(p).exists() and path.resolve() == Path(p).resolve() for p in inputs
+    ):
         raise InputError(f"{path}: is an input of this command; will not overwrite it")
+    if not os.access(path.parent, os.W_OK | os.X_OK):
+        raise InputError(f"{path.parent}: folder not writable; cannot write {what} there")
+    if path.exists() and not force:
+        raise InputError(f"{path}: exists; will not overwrite it (use --force)")
     return path
-
-
-def new_file_path(raw: str | Path, what: str) -> Path:
-    """The path of a recording to create: its folder must exist, the file must not (a
-    recording is never overwritten; InputError otherwise).
-
-    Returns
-    -------
-    path : Path
-        `raw` as a Path.
-    """
-    path = Path(raw)
-    if path.exists():
-        raise InputError(f"{path}: exists, will not overwrite a recording")
-    return output_path(path, what)
 
 
 def read_bags(
@@ -191,7 +204,24 @@ def read_bags(
     """
     from robot_calib.bag.read import read_recording
 
+    check_distinct_bags(bags)
     return read_recording(bags, robot, pair_tolerance, log=log)
+
+
+def check_distinct_bags(bags: Sequence[str | Path], holdout: Sequence[str | Path] = ()) -> None:
+    """InputError naming the bag when one is given twice, or as calibration and hold-out
+    bag (a "held-out" score would be in-sample, and sigmas would shrink by sqrt 2)."""
+    seen: list[tuple[Path, str]] = []
+    for raw, role in [(b, "calibration") for b in bags] + [(b, "hold-out") for b in holdout]:
+        path = Path(raw)
+        for other, other_role in seen:
+            same = (
+                path.exists() and other.exists() and os.path.samefile(path, other)
+            ) or path.resolve() == other.resolve()
+            if same:
+                how = "twice" if role == other_role else "as calibration and as hold-out bag"
+                raise InputError(f"{path}: the same bag given {how} (as {other}); give it once")
+        seen.append((path, role))
 
 
 def calibrate_recording(
@@ -211,7 +241,46 @@ def calibrate_recording(
     """
     from robot_calib.identify.calibrate import calibrate
 
+    if objective == "seed":
+        check_seed_objective_memory(len(recording), robot, model, ecc_order)
     return calibrate(recording, robot, model, ecc_order, log=log, objective=objective)
+
+
+SEED_OBJECTIVE_MEMORY_LIMIT = 2 * 1024**3  # bytes of pairwise rows `--objective seed` may take
+
+
+def seed_objective_bytes(n_points: int, n_params: int) -> int:
+    """Memory [bytes] of the seed objective's pairwise rows for `n_points` and `n_params`
+    parameters: per pair of points, the two points' Jacobians, their difference (3 x P
+    each) and the distance row (P), float64; O(n_points^2)."""
+    pairs = n_points * (n_points - 1) // 2
+    return pairs * (3 * 3 * n_params + n_params) * 8
+
+
+def check_seed_objective_memory(
+    n_points: int, robot: RobotDescription, model: str, ecc_order: int = DEFAULT_ECC_ORDER
+) -> None:
+    """InputError when `--objective seed` on `n_points` would need more than
+    SEED_OBJECTIVE_MEMORY_LIMIT, naming the largest number of points that fits."""
+    from robot_calib.identify.calibrate import parse_model
+    from robot_calib.model import KinematicModel
+
+    _, effects = parse_model(model, robot, ecc_order)
+    n_params = len(KinematicModel(robot, tuple(effects)).parameters().names)
+    need = seed_objective_bytes(n_points, n_params)
+    if need <= SEED_OBJECTIVE_MEMORY_LIMIT:
+        return
+    allowed = n_points
+    while seed_objective_bytes(allowed, n_params) > SEED_OBJECTIVE_MEMORY_LIMIT:
+        allowed = int(allowed * 0.99)
+    while seed_objective_bytes(allowed + 1, n_params) <= SEED_OBJECTIVE_MEMORY_LIMIT:
+        allowed += 1
+    gib = 1024**3
+    raise InputError(
+        f"--objective seed on {n_points} points needs {need / gib:.1f} GiB for its pairwise "
+        f"rows (limit {SEED_OBJECTIVE_MEMORY_LIMIT / gib:.0f} GiB: at most {allowed} points "
+        f"with {n_params} parameters); use --objective absolute (O(N)) or fewer points"
+    )
 
 
 def calibrate_bags(
@@ -277,29 +346,55 @@ def diagnose_bags(
     recording : Recording
         The paired measurements of `bags` (as `read_bags`); the hold-out's are not kept.
     """
+    check_distinct_bags(bags, holdout)
     recording = read_bags(bags, robot, pair_tolerance, log)
     held = read_bags(holdout, robot, pair_tolerance, log) if holdout else None
     diagnosis, ladder = diagnose_recordings(recording, robot, held, log)
     return diagnosis, ladder, recording
 
 
-def write_diagnosis(
-    diagnosis: Diagnosis, ladder: Ladder, recording: Recording, output: str | Path
-) -> Path:
-    """Write DIAGNOSIS.json at `output` and the Markdown report (+ plots) beside it.
+def report_path(output: str | Path) -> Path:
+    """The Markdown report of DIAGNOSIS.json `output`: beside it, suffix '.md' (its plots
+    `<stem>_*.png`). `output` itself may not end in '.md', so the two never collide.
 
     Returns
     -------
     report : Path
-        The report: `output` with the suffix '.md'.
+        `output` with the suffix '.md'.
     """
+    output = Path(output)
+    if output.suffix.lower() == ".md":
+        raise InputError(
+            f"-o {output}: names DIAGNOSIS.json, and its Markdown report goes beside it as "
+            f"<name>.md; give e.g. -o {output.with_suffix('.json')}"
+        )
+    return output.with_suffix(".md")
+
+
+def write_diagnosis(
+    diagnosis: Diagnosis,
+    ladder: Ladder,
+    recording: Recording,
+    output: str | Path,
+    force: bool = False,
+) -> Path:
+    """Write DIAGNOSIS.json at `output` and the Markdown report (+ plots) beside it, all
+    together (staged, then moved in; an existing file is replaced only with `force`).
+
+    Returns
+    -------
+    report : Path
+        The report: `report_path(output)`.
+    """
+    from robot_calib.atomic import staged_outputs
     from robot_calib.diagnose.report import write_report
     from robot_calib.identify.params_file import write_json_atomic
 
     output = Path(output)
-    write_json_atomic(diagnosis.to_dict(), output)
-    report = output.with_suffix(".md")
-    write_report(diagnosis, ladder, recording, report)
+    report = report_path(output)
+    with staged_outputs(output.parent, force) as stage:
+        write_json_atomic(diagnosis.to_dict(), stage / output.name)
+        write_report(diagnosis, ladder, recording, stage / report.name)
     return report
 
 

@@ -9,14 +9,21 @@ from __future__ import annotations
 
 import csv
 import io
+import math
+import re
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from robot_calib.atomic import write_text_atomic
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.poses import Poses
+
+SI_UNITS = ("m", "rad", "1", "1/s", "rad/(N m)")  # the units parameters are stored in
 
 
 def read_joints_csv(path: str | Path, n_joints: int) -> Poses:
@@ -29,11 +36,19 @@ def read_joints_csv(path: str | Path, n_joints: int) -> Poses:
     if not rows:
         raise InputError(f"{path}: empty file (expected header q1..q{n_joints})")
     header = [h.strip() for h in rows[0]]
+    repeated = sorted({h for h in header if header.count(h) > 1})
+    if repeated:
+        raise InputError(f"{path}: columns {repeated} given more than once (header {header})")
     q_cols = [f"q{j}" for j in range(1, n_joints + 1)]
+    dir_cols = [f"dir{j}" for j in range(1, n_joints + 1)]
+    extra = [h for h in header if re.fullmatch(r"(q|dir)\d+", h) and h not in q_cols + dir_cols]
+    if extra:
+        raise InputError(
+            f"{path}: columns {extra} beyond the robot's {n_joints} joints (header {header})"
+        )
     missing = [c for c in q_cols if c not in header]
     if missing:
         raise InputError(f"{path}: header lacks {missing} (got {header})")
-    dir_cols = [f"dir{j}" for j in range(1, n_joints + 1)]
     has_dir = all(c in header for c in dir_cols)
     if not has_dir and any(c in header for c in dir_cols):
         raise InputError(f"{path}: give all of {dir_cols} or none")
@@ -69,3 +84,25 @@ def write_points_csv(points: Array, path: str | Path) -> None:
     writer.writerow(["x", "y", "z"])
     writer.writerows([[repr(float(v)) for v in p] for p in points])
     write_text_atomic(path, text.getvalue())
+
+
+def check_params_document(
+    doc: Mapping[str, Any], params: ParameterVector, where: str | Path
+) -> None:
+    """InputError (one line, naming `where` and the parameter) when a PARAMS.json record
+    has a value, nominal or 1-sigma that is not a finite number, or a unit other than the
+    SI unit the model declares for it (m, rad, 1, 1/s, rad/(N m)): such a file was edited
+    or written by another tool, and predicting from it would be silently wrong."""
+    units = {p.name: p.unit for p in params.parameters}
+    for record in doc.get("parameters", []):
+        name = record.get("name")
+        for key in ("value", "nominal", "std"):
+            value = record.get(key, 0.0)
+            if not isinstance(value, int | float) or not math.isfinite(value):
+                raise InputError(f"{where}: parameter {name} {key} {value!r} is not finite")
+        unit = record.get("unit")
+        if unit != units.get(name) or unit not in SI_UNITS:
+            raise InputError(
+                f"{where}: parameter {name} has unit {unit!r}, expected {units.get(name)!r}: "
+                f"parameter files are in SI ({', '.join(SI_UNITS)})"
+            )

@@ -115,7 +115,7 @@ def test_no_command_overwrites_its_input(tmp_path: Path) -> None:
     world.write_text((ROOT / "robot_calib" / "sim" / "worlds" / "default.yaml").read_text())
     kept = world.read_bytes()
     proc = run("simulate", "--world", str(world), "-o", str(tmp_path / "my.mcap"))
-    one_line_error(proc, "my.world.yaml: exists")
+    one_line_error(proc, "my.world.yaml: is an input of this command")
     assert world.read_bytes() == kept and not (tmp_path / "my.mcap").exists()
 
 

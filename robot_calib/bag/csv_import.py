@@ -17,7 +17,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
+from robot_calib.atomic import staged_outputs
 from robot_calib.bag.mcap_writer import BagWriter
 from robot_calib.bag.ros2_formats import typestore
 from robot_calib.errors import InputError
@@ -77,12 +79,18 @@ PRESETS = {
 
 @dataclass(frozen=True)
 class ImportedTable:
-    """q (n, J) [rad], points (n, 3) [m], time (n,) [s] or None; bad_rows: (line, why)."""
+    """q (n, J) [rad], points (n, 3) [m], time (n,) [s] or None; bad_rows: (line, why);
+    warnings: labelled 'warning: ...' lines about the whole file (e.g. units)."""
 
     q: Array
     points: Array
     time: Array | None
     bad_rows: tuple[tuple[int, str], ...]
+    warnings: tuple[str, ...] = ()
+
+
+MAX_TRACKER_RANGE_M = 50.0  # beyond a laser tracker's range: millimetres read as metres
+MIN_TRACKER_RANGE_M = 0.05  # nearer than the tracker head allows: metres read as mm
 
 
 def _column(ref: str, header: list[str] | None, path: Path) -> int:
@@ -95,8 +103,105 @@ def _column(ref: str, header: list[str] | None, path: Path) -> int:
     return header.index(ref)
 
 
-def read_measurement_csv(path: str | Path, fmt: CsvFormat) -> ImportedTable:
-    """Rows of a measurement CSV in SI units; unreadable rows are listed, not dropped."""
+def _check_decimal_mark(path: Path, fmt: CsvFormat, cells: list[tuple[int, str]]) -> None:
+    """InputError when --decimal-comma meets numbers written with a decimal point (it would
+    read '1.5' as 15), or numbers with a decimal comma come without it."""
+    commas = [(line, c) for line, c in cells if "," in c]
+    points = [(line, c) for line, c in cells if "." in c]
+    if fmt.decimal_comma and points and not commas:
+        line, cell = points[0]
+        raise InputError(
+            f"{path}:{line}: --decimal-comma, but the numbers have a decimal point "
+            f"({cell!r}); drop --decimal-comma"
+        )
+    if not fmt.decimal_comma and commas and fmt.separator != ",":
+        line, cell = commas[0]
+        raise InputError(
+            f"{path}:{line}: number {cell!r} has a decimal comma; add --decimal-comma"
+        )
+
+
+def _unit_checks(
+    path: Path, fmt: CsvFormat, table: Array, lines: list[int], limits: Array | None
+) -> tuple[NDArray[np.bool_], list[tuple[int, str]], list[str]]:
+    """Per-column unit sanity of the rows read (table in the file's units): a joint column
+    in rad beyond any joint reading (> 2 pi, or 1.5 x the joint's limit) looks like degrees,
+    a point in m beyond a tracker's range looks like millimetres, one in mm nearer than
+    MIN_TRACKER_RANGE_M looks like metres. When most rows look so, InputError naming the
+    column; when a few do, they are rows in mixed units: bad rows.
+
+    Returns
+    -------
+    keep : ndarray of bool, shape (n,)
+        Rows in consistent units.
+    bad : list of (line, why)
+        The rows in mixed units.
+    warnings : list of str
+        'warning: ...' lines (joint columns in deg that all look like radians).
+    """
+    n_j = len(fmt.joints)
+    bad_mask = np.zeros(len(table), dtype=bool)
+    why = [""] * len(table)
+    q = table[:, :n_j]
+    if fmt.angle_unit == "rad":
+        reach = np.full(n_j, 2 * np.pi)
+        if limits is not None and len(limits) == n_j:
+            reach = np.maximum(reach, 1.5 * np.abs(limits).max(axis=1))
+        beyond = np.abs(q) > reach
+        for j in range(n_j):
+            if beyond[:, j].mean() > 0.5:
+                raise InputError(
+                    f"{path}: joint column {fmt.joints[j]!r} reaches "
+                    f"{np.abs(q[:, j]).max():.1f}, beyond any joint reading in rad "
+                    f"(|q| <= {reach[j]:.1f}): the angles look like degrees; give "
+                    "--angle-unit deg"
+                )
+        for k in np.flatnonzero(beyond.any(axis=1)):
+            j = int(np.flatnonzero(beyond[k])[0])
+            bad_mask[k] = True
+            why[k] = (f"joint column {fmt.joints[j]!r} = {q[k, j]:g} looks like degrees "
+                      "(the other rows: rad)")  # fmt: skip
+    points = table[:, n_j : n_j + 3]
+    if fmt.dif:
+        points = points + fmt.dif_sign * table[:, n_j + 3 : n_j + 6]
+    dist_m = np.linalg.norm(points, axis=1) * LENGTH_UNITS[fmt.length_unit]
+    columns = "/".join(fmt.point)
+    if fmt.length_unit == "m":
+        far, other, hint = dist_m > MAX_TRACKER_RANGE_M, "millimetres", "--length-unit mm"
+    else:
+        far, other, hint = dist_m < MIN_TRACKER_RANGE_M, "metres", "--length-unit m"
+    if far.mean() > 0.5:
+        raise InputError(
+            f"{path}: point columns {columns} are {np.median(dist_m):.3g} m from the tracker "
+            f"read as {fmt.length_unit}: they look like {other}; give {hint}"
+        )
+    for k in np.flatnonzero(far & ~bad_mask):
+        bad_mask[k] = True
+        why[k] = (f"point {columns} {dist_m[k]:.3g} m from the tracker looks like {other} "
+                  f"(the other rows: {fmt.length_unit})")  # fmt: skip
+    warnings = []
+    if fmt.angle_unit == "deg" and len(q) > 1:
+        span = np.ptp(q, axis=0)
+        if np.all(np.abs(q) <= 2 * np.pi) and span.max() > 0.5:
+            warnings.append(
+                f"warning: {path}: every joint column stays within +-{2 * np.pi:.2f} while "
+                "read as degrees: they look like radians (--angle-unit rad?)"
+            )
+    bad = [(lines[k], why[k]) for k in np.flatnonzero(bad_mask)]
+    return ~bad_mask, bad, warnings
+
+
+def read_measurement_csv(
+    path: str | Path, fmt: CsvFormat, limits: Array | None = None
+) -> ImportedTable:
+    """Rows of a measurement CSV in SI units; unreadable rows are listed, not dropped.
+
+    A row whose field count differs from the header's (or, without a header, from most
+    rows') is a bad row, so a '1,5' cell in a comma CSV cannot shift the columns; a row in
+    other units than the rest is a bad row; a file whose numbers or units contradict `fmt`
+    (decimal mark, deg/rad, mm/m) raises InputError naming the column. `limits` (J, 2)
+    [rad]: the robot's joint limits, for the degrees check (default: |q| <= 2 pi).
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such CSV file")
@@ -109,22 +214,39 @@ def read_measurement_csv(path: str | Path, fmt: CsvFormat) -> ImportedTable:
             rows = list(csv.reader(handle, delimiter=fmt.separator))
     except (UnicodeDecodeError, csv.Error) as exc:
         raise InputError(f"{path}: not a readable CSV ({exc})") from None
-    header = [h.strip() for h in rows[0]] if fmt.header and rows else None
-    first_line = 2 if fmt.header else 1
-    body = rows[1:] if fmt.header else rows
+    numbered = [
+        (line, row) for line, row in enumerate(rows, start=1) if any(c.strip() for c in row)
+    ]
+    if not numbered:
+        raise InputError(f"{path}: the file is empty (no header, no rows)")
+    header = [h.strip() for h in numbered[0][1]] if fmt.header else None
+    body = numbered[1:] if fmt.header else numbered
+    if not body:
+        raise InputError(f"{path}: no rows after the header (the file holds only a header)")
+    if header is not None:
+        n_fields, of = len(header), "the header has"
+    else:
+        counts = np.bincount([len(row) for _, row in body])
+        n_fields, of = int(counts.argmax()), "most rows have"
     refs = (
         list(fmt.joints) + list(fmt.point) + list(fmt.dif or ()) + ([fmt.time] if fmt.time else [])
     )
     cols = [_column(r, header, path) for r in refs]
-    values, bad, lines = [], [], []
-    for line, row in enumerate(body, start=first_line):
-        if not row or all(not c.strip() for c in row):
+    if max(cols) >= n_fields:
+        raise InputError(f"{path}: no column {max(cols)} ({of} {n_fields} fields)")
+    cells: list[tuple[int, str]] = []
+    raw, bad, lines = [], [], []
+    for line, row in body:
+        if len(row) != n_fields:
+            bad.append((line, f"{len(row)} fields, {of} {n_fields}"))
             continue
-        try:
-            fields = [row[c].strip() for c in cols]
-        except IndexError:
-            bad.append((line, f"{len(row)} fields, need column {max(cols)}"))
-            continue
+        fields = [row[c].strip() for c in cols]
+        cells += [(line, f) for f in fields]
+        raw.append(fields)
+        lines.append(line)
+    _check_decimal_mark(path, fmt, cells)
+    values, kept_lines = [], []
+    for line, fields in zip(lines, raw):
         if fmt.decimal_comma:
             fields = [f.replace(".", "").replace(",", ".") for f in fields]
         try:
@@ -136,10 +258,13 @@ def read_measurement_csv(path: str | Path, fmt: CsvFormat) -> ImportedTable:
             bad.append((line, "value not finite"))
             continue
         values.append(numbers)
-        lines.append(line)
+        kept_lines.append(line)
     if not values:
         raise InputError(f"{path}: no usable rows ({len(bad)} bad)")
     table = np.array(values)
+    keep, mixed, warnings = _unit_checks(path, fmt, table, kept_lines, limits)
+    bad = sorted(bad + mixed)
+    table, lines = table[keep], [line for line, k in zip(kept_lines, keep) if k]
     n_j = len(fmt.joints)
     q = table[:, :n_j] * ANGLE_UNITS[fmt.angle_unit]
     points = table[:, n_j : n_j + 3]
@@ -153,15 +278,18 @@ def read_measurement_csv(path: str | Path, fmt: CsvFormat) -> ImportedTable:
             f"{path}:{lines[k]}: time {time[k]:g} s does not increase (previous row: "
             f"{time[k - 1]:g} s); rows must be in measurement order"
         )
-    return ImportedTable(q, points, time, tuple(bad))
+    return ImportedTable(q, points, time, tuple(bad), tuple(warnings))
 
 
 def write_measurement_bag(
     output: str | Path, q: Array, points: Array, joint_names: tuple[str, ...],
-    time: Array | None = None,
+    time: Array | None = None, force: bool = False,
 ) -> dict[str, int]:  # fmt: skip
     """A contract bag: one JointState and one PointStamped per pose, stamped in row order
-    (`time` [s] from the first pose, else 1 s apart). Returns messages per topic."""
+    (`time` [s] from the first pose, else 1 s apart). Written under a temporary name and
+    moved in when complete (an existing `output` is replaced only with `force`): a failure
+    or Ctrl-C leaves nothing. Returns messages per topic."""
+    output = Path(output)
     if len(joint_names) != q.shape[1]:
         raise InputError(f"{q.shape[1]} joint columns for a robot with {len(joint_names)} joints")
     offsets = (np.arange(len(q)) * STEP_NS if time is None
@@ -170,7 +298,7 @@ def write_measurement_bag(
         raise InputError("time column must increase from row to row")
     store = typestore(JOINT_STATE_TYPE, POINT_TYPE)
     types = store.types
-    with BagWriter(output) as writer:
+    with staged_outputs(output.parent, force) as stage, BagWriter(stage / output.name) as writer:
         writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         writer.add_topic(POINT_TOPIC, POINT_TYPE)
         for qi, pi, offset in zip(q, points, offsets):
@@ -186,6 +314,7 @@ def write_measurement_bag(
                 point=types["geometry_msgs/msg/Point"](*map(float, pi)),
             )
             writer.write(POINT_TOPIC, store.serialize_cdr(pt, POINT_TYPE), stamp_ns + 1)
+        writer.close()
         return writer.counts
 
 

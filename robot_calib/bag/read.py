@@ -44,6 +44,17 @@ def _check_topic(reader: BagReader, topic: str, type_name: str) -> None:
         raise BagError(f"{reader.path}: topic {topic} has no messages")
 
 
+def _check_no_extra_joints(names: tuple[str, ...], robot: RobotDescription, path: Path) -> None:
+    """BagError when a JointState names joints the robot does not have (a 5-joint robot on
+    a 6-joint bag would silently ignore a moving joint)."""
+    extra = [n for n in names if n not in robot.joint_names]
+    if extra:
+        raise BagError(
+            f"{path}: {JOINT_STATES_TOPIC} has joints {extra} that robot {robot.name} "
+            f"({robot.n_joints} joints: {list(robot.joint_names)}) does not have; wrong --robot?"
+        )
+
+
 def read_bag(
     path: Path, robot: RobotDescription, pair_tolerance: float = PAIR_TOLERANCE_S
 ) -> Recording:
@@ -57,6 +68,7 @@ def read_bag(
     js_v: list[Array] = []
     pts: list[Array] = []
     frames: set[str] = set()
+    names_seen: tuple[str, ...] = robot.joint_names
     try:
         reader = BagReader(path)
     except TruncatedBagError:
@@ -73,6 +85,9 @@ def read_bag(
                 js_q.append(
                     joint_positions(msg, robot.joint_names, f"{path}: {JOINT_STATES_TOPIC}")
                 )
+                if tuple(msg.name) != names_seen:  # checked once per set of names
+                    names_seen = tuple(msg.name)
+                    _check_no_extra_joints(names_seen, robot, path)
                 js_t.append(stamp_to_ns(msg.header.stamp))
                 js_v.append(velocity_signs(msg, robot.joint_names))
             else:

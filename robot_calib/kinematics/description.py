@@ -141,6 +141,11 @@ def parse_robot(data: Any, source: str) -> RobotDescription:
         parallel = j < len(joints) and abs(np.sin(table["alpha"][-1])) < 1e-9
         hayati.append(bool(entry.get("hayati", parallel)))
 
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise RobotDescriptionError(
+            f"{source}: joint names must be distinct; {repeated} given more than once"
+        )
     return RobotDescription(
         name=str(data.get("name", Path(source).stem)),
         joint_names=tuple(names),

@@ -161,6 +161,26 @@ def pair_nearest(reference_ns: IntArray, query_ns: IntArray, tolerance_ns: int) 
     return np.where(np.abs(reference_ns[pick] - query_ns) <= tolerance_ns, pick, -1)
 
 
+def _distinct_joint_states(
+    js_ns: IntArray, q: Array, order: IntArray, source: str, error: type[Exception]
+) -> NDArray[np.bool_]:
+    """Mask (m,) of the joint states to keep (sorted by stamp): of identical duplicates
+    (same stamp, same readings) the first; two with the same stamp and different readings
+    raise `error` naming both (their position in `source`, the stamp and the readings)."""
+    keep = np.ones(len(js_ns), dtype=bool)
+    for k in np.flatnonzero(np.diff(js_ns) == 0) + 1:
+        if np.array_equal(q[k], q[k - 1]):
+            keep[k] = False
+            continue
+        raise error(
+            f"{source}: joint states {int(order[k - 1]) + 1} and {int(order[k]) + 1} have "
+            f"the same stamp {int(js_ns[k])} ns but different readings "
+            f"{np.round(q[k - 1], 6).tolist()} vs {np.round(q[k], 6).tolist()} rad: "
+            "which one the robot was at is unknown"
+        )
+    return keep
+
+
 def recording_from_arrays(
     q: Array, points: Array, time: Array | None = None, source: str = "arrays"
 ) -> Recording:
@@ -237,12 +257,23 @@ def recording_from_stream(
             f"{source}: stamps and values differ in length (joint states {len(js_ns)} vs "
             f"{q.shape}, points {len(point_ns)} vs {points.shape})"
         )
+    if not (np.isfinite(pair_tolerance) and pair_tolerance >= 0):
+        raise InputError(f"pair tolerance {pair_tolerance} s: need a finite number >= 0")
     check_metres(points, source, error)
     js_order = np.argsort(js_ns, kind="stable")
     pt_order = np.argsort(point_ns, kind="stable")
     js_ns, q, velocity_sign = js_ns[js_order], q[js_order], velocity_sign[js_order]
     point_ns, points = point_ns[pt_order], points[pt_order]
+    keep = _distinct_joint_states(js_ns, q, js_order, source, error)
+    js_ns, q, velocity_sign = js_ns[keep], q[keep], velocity_sign[keep]
     warnings: list[str] = []
+    shared = np.flatnonzero(np.diff(point_ns) == 0)
+    if len(shared):
+        warnings.append(
+            f"warning: {source}: {len(shared)} tracker points share their stamp with the "
+            f"point before (first at stamp {point_ns[shared[0]]} ns): each is paired with "
+            "the same joint state"
+        )
     if len(js_ns) == 0:
         pick = np.full(len(point_ns), -1)
     else:

@@ -8,8 +8,11 @@ Nothing waits on the wall clock, so a 580-pose bag takes about a second.
 
 from __future__ import annotations
 
+import contextlib
+import signal
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from functools import partial
 from pathlib import Path
 
@@ -17,6 +20,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 
 from robot_calib.errors import RobotCalibError
 from robot_calib.messages import JOINT_STATES_TOPIC, POINT_TOPIC
@@ -32,13 +36,46 @@ class SimulationStalled(RobotCalibError):
 
 
 def _spin_until(
-    executor: SingleThreadedExecutor, condition: Callable[[], bool], what: str
+    executor: SingleThreadedExecutor,
+    condition: Callable[[], bool],
+    what: str,
+    received: Sequence[int] = (),
 ) -> None:
+    """Spin until `condition`; KeyboardInterrupt once a signal is in `received` (a safe
+    point: between callbacks, never inside one)."""
     deadline = time.monotonic() + STEP_TIMEOUT_S
     while not condition():
+        if received:
+            raise KeyboardInterrupt
         if time.monotonic() > deadline:
             raise SimulationStalled(f"simulation stalled waiting for {what}")
         executor.spin_once(timeout_sec=0.01)
+
+
+@contextlib.contextmanager
+def _deferred_signals() -> Iterator[list[int]]:
+    """While the graph runs, SIGINT and SIGTERM (where Python handles them: Ctrl-C, the
+    CLI's SIGTERM) only record the signal; the driver raises KeyboardInterrupt at its next
+    step, so an interruption never lands inside an rclpy callback. Handlers restored after.
+
+    Yields
+    ------
+    received : list of int
+        The signals received so far.
+    """
+    received: list[int] = []
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            handler = signal.getsignal(sig)
+            if callable(handler):  # not SIG_DFL / SIG_IGN: those stay as they are
+                previous[sig] = handler
+                signal.signal(sig, lambda signum, _frame: received.append(signum))
+    try:
+        yield received
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def simulate_bag(
@@ -53,10 +90,26 @@ def simulate_bag(
 
     Returns the recorder's message counts per topic. Owns rclpy init/shutdown unless a
     context is already initialised (then it uses the default context and leaves it up).
+    An owned context installs no signal handlers of rclpy's: Ctrl-C (and SIGTERM where
+    the caller maps it so) raises KeyboardInterrupt at the next step, the bag is closed
+    and the caller discards it.
     """
+    with _deferred_signals() as received:
+        return _simulate_bag(output, plan, world, seed, n_random, progress, received)
+
+
+def _simulate_bag(
+    output: Path,
+    plan: str,
+    world: str | Path | None,
+    seed: int,
+    n_random: int,
+    progress: Callable[[int, int], None] | None,
+    received: Sequence[int],
+) -> dict[str, int]:
     owns_context = not rclpy.ok()
     if owns_context:
-        rclpy.init()
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     sim_time = Parameter("use_sim_time", value=True)
     world_param = Parameter("world", value=str(world) if world else "")
     nodes: list[Node] = []
@@ -91,6 +144,7 @@ def simulate_bag(
             executor,
             lambda: robot.ready() and tracker.publisher.get_subscription_count() >= 1,
             "discovery",
+            received,
         )
 
         def clocks_at(stamp: int) -> bool:
@@ -107,9 +161,9 @@ def simulate_bag(
         while not robot.done:
             k = robot.next_pose
             robot.publish_clock(k)
-            _spin_until(executor, partial(clocks_at, robot.stamp_ns(k)), "/clock")
+            _spin_until(executor, partial(clocks_at, robot.stamp_ns(k)), "/clock", received)
             robot.publish_pose()
-            _spin_until(executor, partial(recorded, k + 1), f"pose {k}")
+            _spin_until(executor, partial(recorded, k + 1), f"pose {k}", received)
             if progress is not None:
                 progress(k + 1, total)
         recorder.close()

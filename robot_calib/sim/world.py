@@ -147,6 +147,44 @@ def _section(data: dict[str, Any], key: str, cls: type, source: str) -> dict[str
     return value
 
 
+def _checked_values(value: dict[str, Any], key: str, cls: type, source: str) -> dict[str, Any]:
+    """The numbers of section `key` (a NoiseModel, TrackerOptions or Timing mapping): each
+    float field a finite number >= 0, each bool field a bool; InputError naming the key."""
+    defaults = {f.name: f.default for f in fields(cls)}
+    out = dict(value)
+    for name, item in value.items():
+        if not isinstance(defaults.get(name), bool | float):
+            continue  # tuples (speeds) are checked by the caller
+        where = f"{source}: {key}.{name}"
+        if isinstance(defaults[name], bool):
+            if not isinstance(item, bool):
+                raise InputError(f"{where}: expected true or false, got {item!r}")
+            continue
+        if isinstance(item, bool) or not isinstance(item, int | float):
+            raise InputError(f"{where}: expected a number, got {item!r}")
+        if not math.isfinite(item) or item < 0:
+            raise InputError(f"{where}: expected a finite number >= 0, got {item!r}")
+        out[name] = float(item)
+    return out
+
+
+def _speeds(value: Any, n_joints: int, where: str) -> tuple[float, ...]:  # noqa: ANN401
+    """Max joint speeds of a world file: one positive finite number per joint."""
+    if not isinstance(value, list | tuple) or len(value) != n_joints:
+        raise InputError(f"{where}: expected one speed per joint ({n_joints}), got {value!r}")
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+        raise InputError(f"{where}: expected numbers, got {value!r}")
+    if not all(math.isfinite(v) and v > 0 for v in value):
+        raise InputError(f"{where}: every speed must be finite and > 0, got {value!r}")
+    return tuple(float(v) for v in value)
+
+
+def _seed(value: Any, source: str) -> int:  # noqa: ANN401 - YAML
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise InputError(f"{source}: seed: expected an integer >= 0, got {value!r}")
+    return value
+
+
 def build_world(data: dict[str, Any], source: str = "built-in default") -> World:
     """A world from a parsed world-file mapping; errors name `source`."""
     if not isinstance(data, dict):
@@ -191,18 +229,46 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         truth = truth.with_values(
             {k: float(v) for k, v in _mapping(data, "truth", source).items()}
         )
-        noise = NoiseModel(**_section(data, "noise", NoiseModel, source))
-        tracker = TrackerOptions(**_section(data, "tracker", TrackerOptions, source))
-        timing_data = _section(data, "timing", Timing, source)
+        noise = NoiseModel(
+            **_checked_values(
+                _section(data, "noise", NoiseModel, source), "noise", NoiseModel, source
+            )
+        )
+        tracker = TrackerOptions(
+            **_checked_values(
+                _section(data, "tracker", TrackerOptions, source),
+                "tracker",
+                TrackerOptions,
+                source,
+            )
+        )
+        if not tracker.dropout_probability < 1.0:
+            raise InputError(
+                f"{source}: tracker.dropout_probability {tracker.dropout_probability}: must be "
+                "in [0, 1) (1 would record no point)"
+            )
+        timing_data = _checked_values(
+            _section(data, "timing", Timing, source), "timing", Timing, source
+        )
+        n = robot.n_joints
         if "max_joint_speed_deg_s" in timing_data:
-            speeds = np.radians(timing_data.pop("max_joint_speed_deg_s"))
-            timing_data["max_joint_speed_rad_s"] = tuple(speeds)
+            speeds = _speeds(
+                timing_data.pop("max_joint_speed_deg_s"),
+                n,
+                f"{source}: timing.max_joint_speed_deg_s",
+            )
+            timing_data["max_joint_speed_rad_s"] = tuple(np.radians(speeds))
+        elif "max_joint_speed_rad_s" in timing_data:
+            timing_data["max_joint_speed_rad_s"] = _speeds(
+                timing_data["max_joint_speed_rad_s"], n, f"{source}: timing.max_joint_speed_rad_s"
+            )
         timing = Timing(**timing_data)
+        seed = _seed(data.get("seed", 0), source)
     except RobotCalibError as exc:  # name the file once
         raise InputError(str(exc) if str(exc).startswith(source) else f"{source}: {exc}") from None
     except (TypeError, KeyError, ValueError) as exc:
         raise InputError(f"{source}: malformed world ({type(exc).__name__}: {exc})") from None
-    return World(model, truth, noise, tracker, timing, int(data.get("seed", 0)), source)
+    return World(model, truth, noise, tracker, timing, seed, source)
 
 
 def world_to_dict(world: World) -> dict[str, Any]:
