@@ -256,8 +256,7 @@ def _screened(
 ) -> Calibration:
     """`cal` (a fit of every measurement), or, when some lie beyond OUTLIER_K robust
     sigmas of their sweep, the fit without the blunders, with `outliers` and `inliers`."""
-    everyone = np.ones(len(recording), dtype=bool)
-    sigmas = group_sigmas(recording, cal.residuals, everyone)
+    sigmas = group_sigmas(recording, cal.residuals)
     if not outlier_mask(cal.residuals, sigmas).any():
         return cal
     say = log or (lambda _msg: None)
@@ -265,7 +264,7 @@ def _screened(
     robust = fit_model(cal.model, cal.parameters, recording.poses, recording.points,
                        check_identifiability=False,
                        robust_scale=3.0 * robust_sigma(cal.residuals))  # fmt: skip
-    sigmas = group_sigmas(recording, robust.residuals, everyone)
+    sigmas = group_sigmas(recording, robust.residuals)
     flagged = outlier_mask(robust.residuals, sigmas)
     for round_ in range(1, MAX_OUTLIER_ROUNDS + 1):
         say(f"outliers: {int(flagged.sum())} of {len(flagged)} measurements beyond "
@@ -273,7 +272,7 @@ def _screened(
         cal = _calibrate_once(recording.subset(~flagged), robot, model_spec, ecc_order, log,
                               start, objective)  # fmt: skip
         residual_all = cal.predict(recording.poses) - recording.points
-        sigmas = group_sigmas(recording, residual_all, ~flagged)
+        sigmas = group_sigmas(recording, residual_all)
         again = outlier_mask(residual_all, sigmas)
         if np.array_equal(again, flagged) or not again.any() or round_ == MAX_OUTLIER_ROUNDS:
             break  # `cal` is the fit without `flagged`

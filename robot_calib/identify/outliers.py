@@ -1,13 +1,16 @@
 """Tracker blunders (a lost beam, a reseated target): measured points far from what the
 model predicts, relative to a robust scale of all the residuals.
 
-The scale is robust: 1.4826 x the median absolute deviation of every residual component
-(x, y and z of every point pooled), which a few blunders do not move. A point whose
-residual norm exceeds OUTLIER_K of those sigmas is flagged: for Gaussian noise the norm is
-sigma x chi(3 dof), so 8 sigmas is a 1e-13 event, never seen on clean data, while a 1 mm
-blunder is 100-200 sigmas for a tracker of a few um. Systematic structure of an
-unmodelled effect is smooth and spread over many poses, so it raises the scale rather than
-standing out: the diagnosis still sees it.
+The scale is robust: the median of the points' residual norms, divided by the median of
+chi(3 dof) = 1.5382 (for isotropic Gaussian noise of sigma per axis the norm is sigma x
+chi(3)), which blunders (fewer than half the points) do not move. Norms, not components:
+the residual of an unmodelled joint effect lies mostly along one direction (a turn about a
+vertical axis moves nothing in z), and pooled components would put a third of the values
+near zero and the scale far too low. A point whose norm exceeds OUTLIER_K of those sigmas
+is flagged: for Gaussian noise that is a 1e-13 event, never seen on clean data, while a
+1 mm blunder is 100-200 sigmas for a tracker of a few um. The systematic structure of an
+unmodelled effect is smooth and spread over many poses (judged per sweep: `group_sigmas`),
+so it raises the scale rather than standing out: the diagnosis still sees it.
 """
 
 from __future__ import annotations
@@ -26,17 +29,16 @@ OUTLIER_K = 8.0
 #: the robust sigma never goes below this [m]: no tracker resolves better, and exact
 #: (noise-free) data would otherwise flag round-off
 MIN_SIGMA_M = 1e-7
-MAD_TO_SIGMA = 1.4826  # sigma of a normal distribution per median absolute deviation
+MEDIAN_CHI3 = 1.5382  # median of chi with 3 degrees of freedom (the norm of 3 unit normals)
 
 
 def robust_sigma(residuals: Array) -> float:
-    """Robust sigma [m] of one residual component, from residuals (n, 3) [m]: 1.4826 x the
-    median absolute deviation of all 3n components pooled (at least MIN_SIGMA_M)."""
-    flat = np.asarray(residuals, dtype=float).reshape(-1)
-    if not len(flat):
+    """Robust sigma [m] per axis from residuals (n, 3) [m]: the median residual norm over
+    MEDIAN_CHI3 (at least MIN_SIGMA_M)."""
+    norms = np.linalg.norm(np.asarray(residuals, dtype=float).reshape(-1, 3), axis=1)
+    if not len(norms):
         return MIN_SIGMA_M
-    mad = float(np.median(np.abs(flat - np.median(flat))))
-    return max(MAD_TO_SIGMA * mad, MIN_SIGMA_M)
+    return max(float(np.median(norms)) / MEDIAN_CHI3, MIN_SIGMA_M)
 
 
 def outlier_mask(
@@ -47,25 +49,24 @@ def outlier_mask(
     return np.asarray(np.linalg.norm(residuals, axis=1) > k * np.asarray(sigma))
 
 
-def group_sigmas(recording: Recording, residuals: Array, fitted: NDArray[np.bool_]) -> Array:
+def group_sigmas(recording: Recording, residuals: Array) -> Array:
     """(n,) robust sigma [m] for judging each measurement: that of its group (its circle
-    sweep; the general poses of its source), never below that of all fitted points.
+    sweep; the general poses of its source), never below that of all points.
 
     An unmodelled effect of one joint leaves its residual mostly in that joint's own
     sweeps, tens of sigmas of the other sweeps' noise: judged against its own sweep, such
     structure is the bulk and not flagged, while a blunder still stands out among its
-    neighbours. residuals : (n, 3) of every measurement [m]; fitted : (n,) the points the
-    model was fitted on (only they set the scales)."""
-    floor = robust_sigma(residuals[fitted])
+    neighbours. residuals : (n, 3) of every measurement [m], flagged ones included (a
+    median ignores a minority of blunders; leaving them out would shrink the scale)."""
+    floor = robust_sigma(residuals)
     out = np.full(len(recording), floor)
     groups = [s.index for s in recording.sweeps]
     general = recording.general
     groups += [np.flatnonzero(general & (recording.bag_index == b))
                for b in np.unique(recording.bag_index)]  # fmt: skip
     for index in groups:
-        members = index[fitted[index]]
-        if len(members):
-            out[index] = max(floor, robust_sigma(residuals[members]))
+        if len(index):
+            out[index] = max(floor, robust_sigma(residuals[index]))
     return out
 
 

@@ -91,6 +91,7 @@ def judge(case: Case, diagnosis: Diagnosis) -> dict[str, Any]:
         "ratio_to_floor": ratio,
         "at_floor": bool(at_floor),
         "hit": bool(named and (at_floor or outside)),
+        "outliers": len(diagnosis.outliers),  # the harness injects no blunder: must be 0
     }
 
 
