@@ -21,7 +21,6 @@ from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.identify.calibrate import Calibration, calibrate, model_name
 from robot_calib.identify.fit import blocked_jacobian, fit_model
 from robot_calib.identify.outliers import (
-    OUTLIER_K,
     Outlier,
     describe_outliers,
     outlier_mask,
@@ -36,6 +35,7 @@ N_FOLDS = 5
 MAX_RUNGS = 4
 MIN_GAIN = 0.05  # a candidate must cut the held-out rms by 5 % ...
 AT_FLOOR = 1.2  # ... and the ladder stops once held-out rms <= 1.2 x the noise floor
+HOLDOUT_K = 12.0  # hold-out blunders: scored only, never refitted, so a higher bar
 TRY_TOP = 3  # candidates refitted per round when the best one's refit disappoints
 Log = Callable[[str], None]
 
@@ -188,22 +188,38 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
 
     Tracker blunders never become robot effects: the measurements the geometric
     calibration flags (`calibrate`'s outlier screening) and the hold-out points beyond
-    OUTLIER_K robust sigmas of the geometric model's hold-out residuals are left out of
-    every rung, its scores and the noise floor, and listed in `Ladder.outliers`."""
+    HOLDOUT_K robust sigmas of the best rung's hold-out residuals (then the ladder is
+    climbed again without them) are left out of every rung, its scores and the noise floor,
+    and listed in `Ladder.outliers`."""
     say = log or (lambda _m: None)
     geo = calibrate(recording, robot, "geometric", log=log)
     outliers = geo.outliers
     if geo.inliers is not None:
         recording = recording.subset(geo.inliers)
-    if holdout is not None:
-        h_res = geo.predict(holdout.poses) - holdout.points
+    rungs, noise, scored_on, rounds = _climb(recording, robot, holdout, geo, say)
+    if holdout is not None:  # judged against the best model: an effect's structure is not
+        best = rungs[-1].calibration  # a blunder; no refit possible, so a higher bar
+        h_res = best.predict(holdout.poses) - holdout.points
         sigma = robust_sigma(h_res)
-        flagged = outlier_mask(h_res, sigma)
+        flagged = outlier_mask(h_res, sigma, HOLDOUT_K)
         if flagged.any():
             outliers += describe_outliers(holdout, flagged, h_res, sigma)
             holdout = holdout.subset(~flagged)
-            say(f"outliers: {int(flagged.sum())} hold-out points beyond {OUTLIER_K:g} robust "
-                f"sigmas ({sigma * 1e3:.4f} mm) of the geometric model: not scored")  # fmt: skip
+            say(f"outliers: {int(flagged.sum())} hold-out points beyond {HOLDOUT_K:g} robust "
+                f"sigmas ({sigma * 1e3:.4f} mm) of {best.name}: not scored; climbing again")
+            rungs, noise, scored_on, rounds = _climb(recording, robot, holdout, geo, say)
+    return Ladder(rungs, noise, scored_on, rounds, recording, holdout, outliers)
+
+
+def _climb(
+    recording: Recording,
+    robot: RobotDescription,
+    holdout: Recording | None,
+    geo: Calibration,
+    say: Log,
+) -> tuple[list[Rung], NoiseLevel, str, list[list[tuple[str, float]]]]:
+    """The rungs from `geo` (the geometric calibration of `recording`) up, the noise level,
+    what they are scored on and the candidates of every round."""
     noise = estimate_noise(recording, geo.residuals, int(geo.parameters.free.sum()))
     scored_on = "hold-out bags" if holdout is not None else f"{N_FOLDS}-fold CV over poses"
     say(f"noise: {noise.sigma_m * 1e3:.4f} mm per axis ({noise.source}, {noise.n}); "
@@ -245,4 +261,4 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
         if accepted is None:
             break
         rungs.append(accepted)
-    return Ladder(rungs, noise, scored_on, rounds, recording, holdout, outliers)
+    return rungs, noise, scored_on, rounds
