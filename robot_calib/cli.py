@@ -452,11 +452,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-_SIGNALLED: list[int] = []  # signals received (SIGINT, SIGTERM) while a verb runs
+_SIGNALLED: list[int] = []  # signals received (SIGINT, SIGTERM, SIGHUP) while a verb runs
 
 
 def _interrupt(signum: int, _frame: object) -> NoReturn:
-    """Ctrl-C and SIGTERM: unwind (staged outputs are removed), 'interrupted', exit 130."""
+    """Ctrl-C, SIGTERM and SIGHUP (the terminal closed): unwind (staged outputs are
+    removed), 'interrupted', exit 130."""
     _SIGNALLED.append(signum)
     raise KeyboardInterrupt
 
@@ -464,6 +465,8 @@ def _interrupt(signum: int, _frame: object) -> NoReturn:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     signal.signal(signal.SIGTERM, _interrupt)
+    if signal.getsignal(signal.SIGHUP) is signal.SIG_DFL:  # not under nohup (ignored)
+        signal.signal(signal.SIGHUP, _interrupt)
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
         signal.signal(signal.SIGINT, _interrupt)
     try:

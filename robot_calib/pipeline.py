@@ -16,6 +16,8 @@ from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from robot_calib.errors import InputError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.kinematics.description import RobotDescription
@@ -205,7 +207,9 @@ def read_bags(
     from robot_calib.bag.read import read_recording
 
     check_distinct_bags(bags)
-    return read_recording(bags, robot, pair_tolerance, log=log)
+    recording = read_recording(bags, robot, pair_tolerance, log=log)
+    check_distinct_recordings(recording)
+    return recording
 
 
 def check_distinct_bags(bags: Sequence[str | Path], holdout: Sequence[str | Path] = ()) -> None:
@@ -222,6 +226,26 @@ def check_distinct_bags(bags: Sequence[str | Path], holdout: Sequence[str | Path
                 how = "twice" if role == other_role else "as calibration and as hold-out bag"
                 raise InputError(f"{path}: the same bag given {how} (as {other}); give it once")
         seen.append((path, role))
+
+
+def check_distinct_recordings(*recordings: Recording) -> None:
+    """InputError when two sources (bags) of `recordings` hold the same measurements, as a
+    copy of a bag under another name does: half or more of one's point stamps are also the
+    other's (the path check, `check_distinct_bags`, cannot see a copy)."""
+    sources = [
+        (rec.sources[b], rec.stamp_ns[rec.bag_index == b])
+        for rec in recordings
+        if rec.stamp_ns is not None
+        for b in range(len(rec.sources))
+    ]
+    for k, (first, stamps) in enumerate(sources):
+        for second, others in sources[k + 1 :]:
+            shared = len(np.intersect1d(stamps, others))
+            if len(stamps) and len(others) and shared >= 0.5 * min(len(stamps), len(others)):
+                raise InputError(
+                    f"{second}: {shared} of its point stamps are also in {first}: the same "
+                    "measurements twice (a copy?); give them once"
+                )
 
 
 def calibrate_recording(
@@ -349,6 +373,8 @@ def diagnose_bags(
     check_distinct_bags(bags, holdout)
     recording = read_bags(bags, robot, pair_tolerance, log)
     held = read_bags(holdout, robot, pair_tolerance, log) if holdout else None
+    if held is not None:
+        check_distinct_recordings(recording, held)
     diagnosis, ladder = diagnose_recordings(recording, robot, held, log)
     return diagnosis, ladder, recording
 
@@ -394,7 +420,8 @@ def write_diagnosis(
     report = report_path(output)
     with staged_outputs(output.parent, force) as stage:
         write_json_atomic(diagnosis.to_dict(), stage / output.name)
-        write_report(diagnosis, ladder, recording, stage / report.name)
+        fitted = ladder.recording if ladder.recording is not None else recording  # no outliers
+        write_report(diagnosis, ladder, fitted, stage / report.name)
     return report
 
 

@@ -406,3 +406,33 @@ def test_node_destroyed_mid_solve_publishes_nothing(
     assert calibrator.solves == 0 and calibrator.calibration is None
     err = capfd.readouterr().err
     assert "never retrieved" not in err and "Destroyable" not in err, err
+
+
+def test_bag_with_a_blunder_is_calibrated_and_published_without_it(
+    context: Context, tmp_path: Path
+) -> None:
+    """A point 5 mm off: the node publishes every result; the summary and PARAMS.json list
+    the outlier; the residuals and markers hold the fitted points only."""
+    from test_recording import write_measurements
+
+    rec = read_recording([SAMPLE], load_world().model.robot)
+    points = rec.points.copy()
+    points[150] += [0.0, 0.0, 5e-3]
+    bag = tmp_path / "blunder.mcap"
+    write_measurements(bag, rec.poses.q, points)
+    calibrator = CalibratorNode(bags=[bag], context=context)
+    listener = Listener(context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(calibrator)
+    executor.add_node(listener)
+    try:
+        spin_until(executor, lambda: listener.has_all() or calibrator.error is not None)
+    finally:
+        executor.shutdown()
+        calibrator.destroy_node()
+        listener.destroy_node()
+    assert calibrator.error is None and calibrator.solves == 1
+    doc = json.loads(listener.last["parameters"].data)
+    assert [o["index"] for o in doc["outliers"]] == [150]
+    assert f"{bag} point 150" in listener.last["summary"].data
+    assert listener.last["residuals"].layout.dim[0].size == len(points) - 1

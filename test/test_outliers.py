@@ -168,5 +168,5 @@ def test_too_few_measurements_is_exit_2_naming_how_many(
                            "--model", model, "-o", str(out)],
                           capture_output=True, text=True, check=False)  # fmt: skip
     assert proc.returncode == 2, proc.stderr
-    assert f"at least {needed} measurements are needed" in proc.stderr
+    assert f"at least {needed} distinct poses are needed" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()

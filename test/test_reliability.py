@@ -176,6 +176,35 @@ def mixed_units(folder: Path) -> None:
     (folder / "in.csv").write_text("\n".join(lines) + "\n")
 
 
+def sample_bag(change: str) -> Callable[[Path], None]:
+    """in.mcap: the sample's measurements with a change: 'blunders' (points 40, 150, 250
+    moved 5 mm), 'blunder-1m' (point 150 moved 1 m), 'swapped' (joint 2 and 3 readings
+    swapped), 'repeats' (3 poses measured 10 times each), 'copy' (the sample, unchanged:
+    a copy under another name)."""
+
+    def make(folder: Path) -> None:
+        if change == "copy":
+            (folder / "in.mcap").write_bytes(SAMPLE.read_bytes())
+            return
+        q, points = sample_measurements()
+        q, points = q.copy(), points.copy()
+        if change == "blunders":
+            points[[40, 150, 250]] += [0.0, 0.0, 5e-3]
+        elif change == "blunder-1m":
+            points[150] += [1.0, 0.0, 0.0]
+        elif change == "swapped":
+            q[:, [1, 2]] = q[:, [2, 1]]
+        elif change == "repeats":
+            q, points = (
+                np.repeat(q[[0, 100, 200]], 10, axis=0),
+                np.repeat(points[[0, 100, 200]], 10, axis=0),
+            )
+        js = [(T0 + i * STEP, qi) for i, qi in enumerate(q)]
+        write_bag(folder / "in.mcap", js, [(T0 + i * STEP, p) for i, p in enumerate(points)])
+
+    return make
+
+
 def text(name: str, content: str) -> Callable[[Path], None]:
     def make(folder: Path) -> None:
         (folder / name).write_text(content)
@@ -289,6 +318,14 @@ CASES = [
     Case("full disk: simulate", None, "simulate --plan paper-test1 -o s.mcap", 2, "File too large", ("s.mcap", "s.world.yaml"), fsize=16_384),  # noqa: E501
     Case("Ctrl-C in simulate", None, "simulate --plan random --n-random 20000 -o s.mcap", 130, "robot-calib simulate: interrupted", ("s.mcap", "s.world.yaml"), interrupt=signal.SIGINT),  # noqa: E501
     Case("SIGTERM in simulate", None, "simulate --plan random --n-random 20000 -o s.mcap", 130, "robot-calib simulate: interrupted", ("s.mcap", "s.world.yaml"), interrupt=signal.SIGTERM),  # noqa: E501
+    # --- outliers, plausibility, too little data ----------------------------------------------
+    Case("calibrate: 3 blunders of 5 mm", sample_bag("blunders"), "calibrate in.mcap -o p.json", 0, "in.mcap point 150, stamp 1700000150.000 s: 5.0", present=("p.json",)),  # noqa: E501
+    Case("calibrate: a blunder of 1 m", sample_bag("blunder-1m"), "calibrate in.mcap -o p.json", 0, "in.mcap point 150, stamp 1700000150.000 s: 1000.0", present=("p.json",)),  # noqa: E501
+    Case("diagnose: blunders are no robot effect", sample_bag("blunders"), "diagnose in.mcap -o d.json", 0, "dominant effect: null", present=("d.json", "d.md")),  # noqa: E501
+    Case("calibrate as the wrong robot", sample_bag("copy"), "calibrate in.mcap --robot ur10 -o p.json", 0, "warning: parameters far from nominal (ur10)", present=("p.json",)),  # noqa: E501
+    Case("calibrate: joints 2 and 3 swapped", sample_bag("swapped"), "calibrate in.mcap -o p.json", 0, "readings outside its limits", present=("p.json",)),  # noqa: E501
+    Case("calibrate: 3 poses measured 10 times", sample_bag("repeats"), "calibrate in.mcap -o p.json", 2, "3 distinct poses (9 residuals) cannot determine 27 free parameters: at least 10 distinct poses are needed", ("p.json",)),  # noqa: E501
+    Case("a copy of a bag as hold-out", sample_bag("copy"), "diagnose {sample} --holdout in.mcap -o d.json", 2, "the same measurements twice (a copy?)", ("d.json",)),  # noqa: E501
     # --- other cases -------------------------------------------------------------------------
     Case("one bag twice", None, "calibrate {sample} {sample} -o p.json", 2, "paper_test3.mcap: the same bag given twice", ("p.json",)),  # noqa: E501
     Case("calibration bag as hold-out", None, "diagnose {sample} --holdout {sample} -o d.json", 2, "the same bag given as calibration and as hold-out bag", ("d.json",)),  # noqa: E501

@@ -100,6 +100,7 @@ class Diagnosis(Record):
     recordings: list[str]
     holdout: list[str]
     outliers: list[Outlier] = field(default_factory=list)  # tracker blunders, never fitted
+    warnings: list[str] = field(default_factory=list)  # implausible geometric calibration
     format: str = FORMAT
 
     def to_dict(self) -> dict[str, Any]:
@@ -258,5 +259,6 @@ def diagnose(
         recordings=sources,
         holdout=[] if holdout_sources is None else list(holdout_sources.sources),
         outliers=list(ladder.outliers),
+        warnings=list(geo.warnings),
     )
     return diagnosis, ladder

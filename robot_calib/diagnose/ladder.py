@@ -205,8 +205,10 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
         if flagged.any():
             outliers += describe_outliers(holdout, flagged, h_res, sigma)
             holdout = holdout.subset(~flagged)
-            say(f"outliers: {int(flagged.sum())} hold-out points beyond {HOLDOUT_K:g} robust "
-                f"sigmas ({sigma * 1e3:.4f} mm) of {best.name}: not scored; climbing again")
+            say(
+                f"outliers: {int(flagged.sum())} hold-out points beyond {HOLDOUT_K:g} robust "
+                f"sigmas ({sigma * 1e3:.4f} mm) of {best.name}: not scored; climbing again"
+            )
             rungs, noise, scored_on, rounds = _climb(recording, robot, holdout, geo, say)
     return Ladder(rungs, noise, scored_on, rounds, recording, holdout, outliers)
 

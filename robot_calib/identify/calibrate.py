@@ -43,7 +43,7 @@ from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
 from robot_calib.model import TARGET, KinematicModel
-from robot_calib.poses import Poses
+from robot_calib.poses import JOINT_CHANGE_TOLERANCE, Poses
 
 BASE_MODELS = ("nominal", "cpa", "geometric")
 OBJECTIVES = ("absolute", "seed")
@@ -231,7 +231,10 @@ def calibrate(
     if base != "cpa":  # too few measurements: say so before any work
         free = KinematicModel(robot, tuple(effects)).parameters().free
         n_free = len(TARGET) + 6 if base == "nominal" else int(free.sum())
-        check_enough_data(3 * len(recording), len(recording), n_free)
+        # repeats of one pose add noise, not information: count distinct poses
+        steps = np.round(recording.poses.q / JOINT_CHANGE_TOLERANCE)
+        n_poses = len(np.unique(steps, axis=0)) if len(steps) else 0
+        check_enough_data(3 * n_poses, n_poses, n_free, "distinct poses")
     fit = _calibrate_once(recording, robot, model_spec, ecc_order, log, start, objective)
     cal = _screened(fit, recording, robot, model_spec, ecc_order, log, start, objective) \
         if screen_outliers else fit  # fmt: skip
@@ -269,12 +272,15 @@ def _screened(
     for round_ in range(1, MAX_OUTLIER_ROUNDS + 1):
         say(f"outliers: {int(flagged.sum())} of {len(flagged)} measurements beyond "
             f"{OUTLIER_K:g} robust sigmas of their sweep: fitted without them")  # fmt: skip
-        cal = _calibrate_once(recording.subset(~flagged), robot, model_spec, ecc_order, log,
-                              start, objective)  # fmt: skip
+        try:
+            cal = _calibrate_once(recording.subset(~flagged), robot, model_spec, ecc_order,
+                                  log, start, objective)  # fmt: skip
+        except InputError as exc:
+            raise InputError(f"{exc} (after leaving out {int(flagged.sum())} outliers)") from None
         residual_all = cal.predict(recording.poses) - recording.points
         sigmas = group_sigmas(recording, residual_all)
         again = outlier_mask(residual_all, sigmas)
-        if np.array_equal(again, flagged) or not again.any() or round_ == MAX_OUTLIER_ROUNDS:
+        if np.array_equal(again, flagged) or round_ == MAX_OUTLIER_ROUNDS:
             break  # `cal` is the fit without `flagged`
         flagged = again  # re-admit what the cleaner model explains, flag what it does not
     outliers = describe_outliers(recording, flagged, residual_all, sigmas)

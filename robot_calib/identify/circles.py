@@ -112,7 +112,11 @@ def _circle_through(a: Array, b: Array, c: Array) -> Circle | None:
 
 
 def robust_circle(
-    points: Array, where: str = "sweep", k: float = 8.0, n_trials: int = 12
+    points: Array,
+    where: str = "sweep",
+    k: float = 8.0,
+    n_trials: int = 12,
+    max_fraction: float = 0.1,
 ) -> tuple[Circle, NDArray[np.bool_]]:
     """`fit_circle` that leaves out blunders (a lost beam, a reseated target).
 
@@ -121,8 +125,10 @@ def robust_circle(
     through three points spread over the sweep, whose median distance to all the points is
     least (least median of squares); the points within k robust sigmas of it are fitted,
     and the set is updated against that fit until it is stable (a good point misjudged by
-    the start comes back). On clean data the plain fit wins and every point is kept: the
-    result is `fit_circle`'s.
+    the start comes back). Blunders are few: when more than `max_fraction` of the points
+    (and more than one) would go, the arc itself is bent (an effect, e.g. compliance) and
+    the plain fit is kept. On clean data the plain fit wins and every point is kept: the result is
+    `fit_circle`'s.
 
     Returns
     -------
@@ -150,4 +156,6 @@ def robust_circle(
             break
         keep, fitted = again, True
         circle = plain if keep.all() else fit_circle(points[keep], where)
+    if (~keep).sum() > max(1.0, max_fraction * n):
+        return plain, np.ones(n, dtype=bool)
     return circle, keep

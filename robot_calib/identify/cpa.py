@@ -181,7 +181,14 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
         for s in recording.sweeps_of(j):
             readings = recording.poses.q[s.index, j - 1]
             line, circle = axis_from_sweep(recording.points[s.index], readings, j)
-            fits.append(SweepFit(j, s.n_poses, float(np.ptp(readings)), circle))
+            n_fitted = len(circle.plane_residuals)
+            if n_fitted < s.n_poses:
+                warnings.append(
+                    f"warning: sweep of joint {j} at measurements {s.index[0] + 1}-"
+                    f"{s.index[-1] + 1}: {s.n_poses - n_fitted} point(s) far off its circle "
+                    "left out of the circle fit (blunders?)"
+                )
+            fits.append(SweepFit(j, n_fitted, float(np.ptp(readings)), circle))
             lines.append((s.n_poses, line))
         weights = np.array([w for w, _ in lines], dtype=float)
         direction = sum((w * ln.direction for w, ln in lines), np.zeros(3))

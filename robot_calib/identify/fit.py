@@ -234,14 +234,17 @@ def _structurally_identifiable(
     return params, ident.fixed
 
 
-def check_enough_data(n_residuals: int, n_points: int, n_free: int) -> None:
+def check_enough_data(
+    n_residuals: int, n_points: int, n_free: int, what: str = "measurements"
+) -> None:
     """InputError unless the residuals outnumber the free parameters: fewer would leave
-    the fit undetermined (and its 1-sigma meaningless). Names how many points are needed."""
+    the fit undetermined (and its 1-sigma meaningless). Names how many `what` (3 residuals
+    each) are needed."""
     if n_residuals <= n_free:
         needed = n_free // 3 + 1
         raise InputError(
-            f"{n_points} measurements ({n_residuals} residuals) cannot determine "
-            f"{n_free} free parameters: at least {needed} measurements are needed"
+            f"{n_points} {what} ({n_residuals} residuals) cannot determine "
+            f"{n_free} free parameters: at least {needed} {what} are needed"
         )
 
 

@@ -24,7 +24,7 @@ from robot_calib.kinematics.frames import Array
 from robot_calib.measurements import Recording
 from robot_calib.records import Record
 
-#: a point beyond this many robust sigmas (of one residual component) is a blunder
+#: a point whose residual norm exceeds this many robust sigmas (per axis) is a blunder
 OUTLIER_K = 8.0
 #: the robust sigma never goes below this [m]: no tracker resolves better, and exact
 #: (noise-free) data would otherwise flag round-off

@@ -158,9 +158,11 @@ def outlier_lines(outliers: Sequence[Outlier]) -> list[str]:
     """Human lines for the flagged measurements (none: no line)."""
     if not outliers:
         return []
-    return [
-        f"outliers: {len(outliers)} measurement(s) flagged as tracker blunders, not fitted:"
-    ] + [f"  {o.line()}" for o in outliers]
+    head = (
+        f"outliers: {len(outliers)} measurement(s) flagged as tracker blunders, left out of "
+        "the fit (hold-out ones: not scored):"
+    )
+    return [head] + [f"  {o.line()}" for o in outliers]
 
 
 def summary(cal: Calibration, recording: Recording) -> str:

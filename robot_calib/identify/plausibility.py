@@ -39,6 +39,11 @@ def recording_warnings(recording: Recording, robot: RobotDescription) -> list[st
     q = recording.poses.q
     moving = np.ptp(q, axis=0) > JOINT_CHANGE_TOLERANCE
     names = robot.joint_names
+    if not moving.any() and len(q):
+        out.append(
+            f"warning: no joint moves: all {len(q)} measurements are of one pose; nothing "
+            "of the robot can be identified"
+        )
     if moving.any():
         for j in (int(k) for k in np.flatnonzero(~moving)):
             out.append(

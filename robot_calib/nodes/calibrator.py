@@ -369,12 +369,14 @@ class CalibratorNode(Node):
             except OSError as exc:
                 raise InputError(f"{self.output}: cannot write ({exc.strerror})") from None
         self._result_publishers["parameters"].publish(String(data=json.dumps(doc)))
+        # residuals and markers of the points fitted (tracker blunders are left out)
+        fitted_points = recording.points if cal.inliers is None else recording.points[cal.inliers]
         self._result_publishers["summary"].publish(String(data=summary(cal, recording)))
         self._result_publishers["residuals"].publish(
-            residuals_message(recording.points, cal.residuals)
+            residuals_message(fitted_points, cal.residuals)
         )
         self._result_publishers["markers"].publish(
-            calibration_markers(cal, recording.points, self.residual_scale)
+            calibration_markers(cal, fitted_points, self.residual_scale)
         )
         if self.diagnose:
             self._diagnose(recording)

@@ -54,9 +54,10 @@ def _spin_until(
 
 @contextlib.contextmanager
 def _deferred_signals() -> Iterator[list[int]]:
-    """While the graph runs, SIGINT and SIGTERM (where Python handles them: Ctrl-C, the
-    CLI's SIGTERM) only record the signal; the driver raises KeyboardInterrupt at its next
-    step, so an interruption never lands inside an rclpy callback. Handlers restored after.
+    """While the graph runs, SIGINT, SIGTERM and SIGHUP (where Python handles them: Ctrl-C,
+    the CLI's SIGTERM and SIGHUP) only record the signal; the driver raises
+    KeyboardInterrupt at its next step, so an interruption never lands inside an rclpy
+    callback. Handlers restored after.
 
     Yields
     ------
@@ -66,7 +67,7 @@ def _deferred_signals() -> Iterator[list[int]]:
     received: list[int] = []
     previous = {}
     if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
             handler = signal.getsignal(sig)
             if callable(handler):  # not SIG_DFL / SIG_IGN: those stay as they are
                 previous[sig] = handler
