@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -235,9 +236,10 @@ def calibrate(
         steps = np.round(recording.poses.q / JOINT_CHANGE_TOLERANCE)
         n_poses = len(np.unique(steps, axis=0)) if len(steps) else 0
         check_enough_data(3 * n_poses, n_poses, n_free, "distinct poses")
-    fit = _calibrate_once(recording, robot, model_spec, ecc_order, log, start, objective)
-    cal = _screened(fit, recording, robot, model_spec, ecc_order, log, start, objective) \
-        if screen_outliers else fit  # fmt: skip
+    identify = partial(_calibrate_once, robot=robot, model_spec=model_spec,
+                       ecc_order=ecc_order, log=log, start=start, objective=objective)  # fmt: skip
+    fit = identify(recording)
+    cal = _screened(fit, recording, identify, log) if screen_outliers else fit
     geometry_fitted = base not in ("nominal", "cpa")
     warnings = tuple(
         recording_warnings(recording, robot) + calibration_warnings(cal, geometry_fitted)
@@ -250,15 +252,12 @@ def calibrate(
 def _screened(
     cal: Calibration,
     recording: Recording,
-    robot: RobotDescription,
-    model_spec: str,
-    ecc_order: int,
+    identify: Callable[[Recording], Calibration],
     log: Log | None,
-    start: Calibration | None,
-    objective: str,
 ) -> Calibration:
     """`cal` (a fit of every measurement), or, when some lie beyond OUTLIER_K robust
-    sigmas of their sweep, the fit without the blunders, with `outliers` and `inliers`."""
+    sigmas of their sweep, the fit without the blunders (`identify` of the rest), with
+    `outliers` and `inliers`."""
     sigmas = group_sigmas(recording, cal.residuals)
     if not outlier_mask(cal.residuals, sigmas).any():
         return cal
@@ -273,8 +272,7 @@ def _screened(
         say(f"outliers: {int(flagged.sum())} of {len(flagged)} measurements beyond "
             f"{OUTLIER_K:g} robust sigmas of their sweep: fitted without them")  # fmt: skip
         try:
-            cal = _calibrate_once(recording.subset(~flagged), robot, model_spec, ecc_order,
-                                  log, start, objective)  # fmt: skip
+            cal = identify(recording.subset(~flagged))
         except InputError as exc:
             raise InputError(f"{exc} (after leaving out {int(flagged.sum())} outliers)") from None
         residual_all = cal.predict(recording.poses) - recording.points
