@@ -67,6 +67,10 @@ class CPAResult:
     warnings: tuple[str, ...]
 
 
+#: a circle that fixes its axis direction worse than this [rad] (1-sigma) gets a warning
+NEAR_AXIS_SIGMA_RAD = 1e-3
+
+
 def _link(theta: float, d: float, a: float, alpha: float, beta: float) -> Array:
     return link_transforms(DHTable(*(np.array([[v]]) for v in (theta, d, a, alpha, beta))))[0, 0]
 
@@ -80,15 +84,29 @@ def _angle_about(axis: Array, start: Array, end: Array) -> float:
     return float(np.arctan2(np.cross(start, end) @ axis, start @ end))
 
 
+def turning_sign(circle: Circle, points: Array, readings: Array) -> float:
+    """+1 when the points (k, 3) [m] turn positively about `circle.normal` as the readings
+    (k,) [rad] grow, else -1. Taken from the readings, never from the order of the points:
+    each point's angle about the normal must equal +-reading up to one constant, and the
+    sign whose differences agree best (largest mean resultant length) wins. Steps above
+    180 deg (144 deg over +-360 deg, or every other of those: 288 deg) work, where
+    neighbouring points seem to turn the short way, backwards."""
+    angles = circle.angles(points)
+    return max((1.0, -1.0), key=lambda s: abs(np.mean(np.exp(1j * (angles - s * readings)))))
+
+
+def direction_sigma(circle: Circle, n_points: int) -> float:
+    """1-sigma [rad] of the axis direction a circle gives: noise (its rms) over the radius
+    and sqrt(n/2) points' worth of lever."""
+    return float(circle.rms / max(circle.radius, 1e-12) / np.sqrt(max(n_points, 2) / 2.0))
+
+
 def axis_from_sweep(points: Array, readings: Array, joint: int) -> tuple[AxisLine, Circle]:
     """Axis line and circle of one sweep: points (k, 3) [m], the turning joint's readings
-    (k,) [rad]; the direction follows the readings (right-hand rule)."""
+    (k,) [rad]; the direction follows the readings (right-hand rule, `turning_sign`)."""
     circle, keep = robust_circle(points, f"sweep of joint {joint}")  # blunders left out
     points, readings = points[keep], readings[keep]
-    rel = points - circle.centre
-    step = np.sign(np.diff(readings))
-    turning = (np.cross(rel[:-1], rel[1:]) * step[:, None]).sum(axis=0)
-    direction = circle.normal if turning @ circle.normal >= 0 else -circle.normal
+    direction = circle.normal * turning_sign(circle, points, readings)
     return AxisLine(circle.centre, direction), circle
 
 
@@ -187,6 +205,14 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
                     f"warning: sweep of joint {j} at measurements {s.index[0] + 1}-"
                     f"{s.index[-1] + 1}: {s.n_poses - n_fitted} point(s) far off its circle "
                     "left out of the circle fit (blunders?)"
+                )
+            if direction_sigma(circle, n_fitted) > NEAR_AXIS_SIGMA_RAD:
+                warnings.append(
+                    f"warning: sweep of joint {j} at measurements {s.index[0] + 1}-"
+                    f"{s.index[-1] + 1}: the target is {circle.radius * 1e3:.2f} mm from the "
+                    f"axis, too close for its circle ({circle.rms * 1e3:.4f} mm rms) to fix the "
+                    f"axis direction (1-sigma {np.degrees(direction_sigma(circle, n_fitted)):.3f}"
+                    " deg): put the target farther off this axis"
                 )
             fits.append(SweepFit(j, n_fitted, float(np.ptp(readings)), circle))
             lines.append((s.n_poses, line))
