@@ -246,6 +246,57 @@ def cmd_predict(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_split(args: argparse.Namespace) -> int:
+    """One bag -> a calibration bag and a hold-out bag (random share, or the last share)."""
+    from robot_calib import pipeline
+    from robot_calib.bag.csv_import import write_measurement_bag
+    from robot_calib.measurements.split import holdout_mask
+
+    robot = load_robot(args.robot)
+    source = Path(args.bag)
+    stem = source.with_suffix("")
+    outputs = [Path(args.calibration_out or f"{stem}.cal.mcap"),
+               Path(args.holdout_out or f"{stem}.holdout.mcap")]  # fmt: skip
+    for out in outputs:
+        output_path(out, "the split bag", [source], args.force)
+    if len(set(map(str, outputs))) < 2:
+        raise InputError("--calibration-out and --holdout-out name the same file")
+    recording = pipeline.read_bags([args.bag], robot, args.pair_tolerance, _log)
+    held = holdout_mask(recording, args.holdout, args.by, args.seed)
+    for out, rows in zip(outputs, (~held, held)):
+        part = recording.subset(rows)
+        counts = write_measurement_bag(
+            out, part.poses.q, part.points, robot.joint_names, part.poses.time, args.force,
+            part.poses.direction,
+        )  # fmt: skip
+        print(f"{out}: {counts[next(iter(counts))]} poses "
+              f"({'hold-out' if rows is held else 'calibration'}, split {args.by})")  # fmt: skip
+    return 0
+
+
+def cmd_score(args: argparse.Namespace) -> int:
+    """A calibration scored on bags it was not fitted on (absolute and seed criterion)."""
+    from robot_calib import pipeline
+    from robot_calib.identify.params_file import load_params
+    from robot_calib.predict import check_params_document
+    from robot_calib.score import score, write_points_table
+
+    model, params, doc = load_params(args.params)
+    check_params_document(doc, model.parameters(), args.params)
+    table = None
+    if args.points_csv:
+        table = output_path(args.points_csv, "the per-point table",
+                            [args.params, *args.bags], args.force)  # fmt: skip
+    recording = pipeline.read_bags(args.bags, model.robot, args.pair_tolerance, _log)
+    result = score(model, params, recording)
+    for line in result.lines(", ".join(args.bags)):
+        print(line)
+    if table is not None:
+        write_points_table(result, recording, table)
+        print(f"{table}: {len(recording)} points (bag, index, x/y/z, dx/dy/dz, error in m)")
+    return 0
+
+
 def cmd_repair(args: argparse.Namespace) -> int:
     """Copy every complete message of a crashed (or intact) bag into a new, indexed bag."""
     from robot_calib.bag.repair import repair_bag
@@ -424,6 +475,38 @@ def build_parser() -> argparse.ArgumentParser:
     pred.add_argument("--joints", required=True, help="JOINTS.csv: q1..q6 [rad] (+t, dir1..6)")
     pred.add_argument("-o", "--output", required=True, help="POINTS.csv to write (x,y,z m)")
     _add_force(pred)
+
+    spl = add("split", cmd_split, "one bag -> a calibration bag and a hold-out bag")
+    spl.add_argument("bag", metavar="BAG", help="the bag to split (.mcap)")
+    spl.add_argument("--holdout", type=float, default=0.3, help="share held out (0.3)")
+    spl.add_argument(
+        "--by",
+        default="random",
+        choices=("random", "order", "time"),
+        help="random share (default), or the last share in order or time",
+    )
+    spl.add_argument("--seed", type=_count, default=0, help="seed of the random split (0)")
+    spl.add_argument("--calibration-out", help="calibration bag (default BAG.cal.mcap)")
+    spl.add_argument("--holdout-out", help="hold-out bag (default BAG.holdout.mcap)")
+    spl.add_argument(
+        "--pair-tolerance",
+        type=_tolerance,
+        default=PAIR_TOLERANCE_S,
+        help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
+    )
+    _add_force(spl)
+
+    sco = add("score", cmd_score, "score a calibration on bags it was not fitted on")
+    sco.add_argument("params", metavar="PARAMS.json")
+    sco.add_argument("bags", nargs="+", metavar="BAG", help="bag(s) to score on (.mcap)")
+    sco.add_argument("--points-csv", help="also write a per-point table (CSV, m)")
+    sco.add_argument(
+        "--pair-tolerance",
+        type=_tolerance,
+        default=PAIR_TOLERANCE_S,
+        help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
+    )
+    _add_force(sco)
 
     rep = add("repair", cmd_repair, "recover the messages of a crashed recording -> a new bag")
     rep.add_argument("bag", metavar="BAG", help="bag whose writer was killed (.mcap)")

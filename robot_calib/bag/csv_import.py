@@ -283,12 +283,15 @@ def read_measurement_csv(
 
 def write_measurement_bag(
     output: str | Path, q: Array, points: Array, joint_names: tuple[str, ...],
-    time: Array | None = None, force: bool = False,
+    time: Array | None = None, force: bool = False, direction: Array | None = None,
 ) -> dict[str, int]:  # fmt: skip
     """A contract bag: one JointState and one PointStamped per pose, stamped in row order
-    (`time` [s] from the first pose, else 1 s apart). Written under a temporary name and
-    moved in when complete (an existing `output` is replaced only with `force`): a failure
-    or Ctrl-C leaves nothing. Returns messages per topic."""
+    (`time` [s] from the first pose, else 1 s apart). `direction` (n, J) +1/-1: each joint's
+    approach direction, written as the sign of the JointState velocity (the contract's
+    direct form), so that a subset of poses keeps the directions they were measured with.
+    Written under a temporary name and moved in when complete (an existing `output` is
+    replaced only with `force`): a failure or Ctrl-C leaves nothing. Returns messages per
+    topic."""
     output = Path(output)
     if len(joint_names) != q.shape[1]:
         raise InputError(f"{q.shape[1]} joint columns for a robot with {len(joint_names)} joints")
@@ -301,12 +304,14 @@ def write_measurement_bag(
     with staged_outputs(output.parent, force) as stage, BagWriter(stage / output.name) as writer:
         writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         writer.add_topic(POINT_TOPIC, POINT_TYPE)
-        for qi, pi, offset in zip(q, points, offsets):
+        velocities = np.zeros((len(q), 0)) if direction is None else np.asarray(direction)
+        for qi, pi, offset, vi in zip(q, points, offsets, velocities):
             stamp_ns = START_NS + int(offset)
             stamp = types["builtin_interfaces/msg/Time"](*ns_to_sec_nanosec(stamp_ns))
             js = types[JOINT_STATE_TYPE](
                 header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
-                name=list(joint_names), position=qi, velocity=np.empty(0), effort=np.empty(0),
+                name=list(joint_names), position=qi, velocity=np.asarray(vi, dtype=float),
+                effort=np.empty(0),
             )  # fmt: skip
             writer.write(JOINT_STATES_TOPIC, store.serialize_cdr(js, JOINT_STATE_TYPE), stamp_ns)
             pt = types[POINT_TYPE](

@@ -1,0 +1,82 @@
+"""`robot-calib split` and `score` (issue 13): verbs that replace users' scripts. A split
+keeps every measurement exactly once, with the approach directions it was measured with;
+a score is the calibration's error on a bag it was not fitted on."""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robot_calib.accuracy import accuracy
+from robot_calib.bag.read import read_recording
+from robot_calib.identify.params_file import load_params
+from robot_calib.kinematics.description import load_robot
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "bags" / "paper_test3.mcap"
+ROBOT = load_robot("kr5_sixx_r650")
+
+
+def cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "robot_calib", *args], capture_output=True,
+                          text=True, check=False)  # fmt: skip
+
+
+@pytest.mark.parametrize("by", ["random", "order", "time"])
+def test_split_keeps_every_measurement_once_with_its_direction(tmp_path: Path, by: str) -> None:
+    cal, hold = tmp_path / "cal.mcap", tmp_path / "hold.mcap"
+    proc = cli("split", str(SAMPLE), "--holdout", "0.3", "--by", by, "--seed", "4",
+               "--calibration-out", str(cal), "--holdout-out", str(hold))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    whole = read_recording([SAMPLE], ROBOT)
+    parts = [read_recording([path], ROBOT) for path in (cal, hold)]
+    assert [len(p) for p in parts] == [203, 87]
+    rows = {tuple(np.round(p, 12)): i for i, p in enumerate(whole.points)}
+    for part in parts:
+        index = [rows[tuple(np.round(p, 12))] for p in part.points]
+        np.testing.assert_array_equal(part.poses.q, whole.poses.q[index])
+        np.testing.assert_array_equal(part.poses.direction, whole.poses.direction[index])
+        if by != "random":  # the last 30 % in order (= in time here)
+            assert (part is parts[1]) == (min(index) >= 203)
+    assert len({tuple(np.round(p, 12)) for part in parts for p in part.points}) == len(whole)
+
+
+def test_score_is_the_error_on_a_bag_not_fitted(tmp_path: Path) -> None:
+    cal, hold, params = tmp_path / "cal.mcap", tmp_path / "hold.mcap", tmp_path / "p.json"
+    assert cli("split", str(SAMPLE), "--calibration-out", str(cal), "--holdout-out",
+               str(hold)).returncode == 0  # fmt: skip
+    assert cli("calibrate", str(cal), "-o", str(params)).returncode == 0
+    table = tmp_path / "points.csv"
+    proc = cli("score", str(params), str(hold), "--points-csv", str(table))
+    assert proc.returncode == 0, proc.stderr
+    model, values, _ = load_params(params)
+    held = read_recording([hold], ROBOT)
+    acc = accuracy(held.points, model.target_points(values, held.poses))
+    assert f"absolute error mean {acc.absolute_mean_mm:.4f}" in proc.stdout
+    assert f"seed criterion (pairwise distances) mean {acc.pairwise_mean_mm:.4f}" in proc.stdout
+    assert acc.absolute_rms_mm < 0.02  # the sample world has no effect: the noise
+    rows = list(csv.DictReader(table.open()))
+    assert len(rows) == len(held) and rows[0]["bag"] == str(hold)
+    errors = np.array([float(r["error_m"]) for r in rows])
+    assert errors.mean() * 1e3 == pytest.approx(acc.absolute_mean_mm, rel=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["split", str(SAMPLE), "--holdout", "1.5"], "a fraction between 0 and 1"),
+        (["split", str(SAMPLE), "--calibration-out", "x.mcap", "--holdout-out", "x.mcap"],
+         "name the same file"),
+        (["score", "nosuch.json", str(SAMPLE)], "no such parameter file"),
+    ],
+)  # fmt: skip
+def test_bad_split_and_score_inputs(tmp_path: Path, args: list[str], message: str) -> None:
+    proc = subprocess.run([sys.executable, "-m", "robot_calib", *args], capture_output=True,
+                          text=True, check=False, cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 2 and message in proc.stderr, proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1 and list(tmp_path.iterdir()) == []
