@@ -1,8 +1,10 @@
 """The measurement noise level, estimated from the data, not assumed.
 
-1. Repeat poses: consecutive measurements at the same readings and approach directions
-   (e.g. the turn-around of a forth-and-back sweep) differ only by noise:
-   sigma^2 = mean |p_a - p_b|^2 / 6 per axis.
+1. Repeat poses: measurements of one bag at the same readings and approach directions,
+   anywhere in the recording but at most MAX_REPEAT_GAP_S apart (e.g. the turn-around of a
+   forth-and-back sweep, or a pose revisited a few rows later), differ only by noise:
+   sigma^2 = mean |p_a - p_b|^2 / 6 per axis. (Farther apart in time, a warming robot
+   would add its drift to the noise.)
 2. Circle sweeps: each circle fit leaves 2 of the 3 noise components (plane, radial):
    sigma^2 = sum(residual^2) / (2 n - 6 per sweep) (an upper bound if effects bend circles).
    Where both exist and agree (circles within 1.5 x), they are pooled by degrees of freedom
@@ -20,11 +22,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from robot_calib.identify.circles import fit_circle
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE
 
 MIN_REPEATS = 3
+MAX_REPEAT_GAP_S = 60.0  # repeats farther apart in time may include drift, not only noise
+MAX_REPEAT_LAG = 50  # rows between a pose and its repeat, at most
 AGREE = 1.5  # circle-fit noise within this factor of the repeat-pose noise: pool them
 
 
@@ -63,14 +67,24 @@ def _circle_noise(recording: Recording) -> NoiseLevel | None:
     return NoiseLevel(float(np.sqrt(total / dof)), "circle fits", dof) if dof > 0 else None
 
 
-def repeat_pairs(recording: Recording) -> Array:
-    """Index pairs (k, 2) of consecutive measurements with equal readings and directions."""
-    q, d = recording.poses.q, recording.poses.direction
-    same = np.all(np.abs(np.diff(q, axis=0)) <= JOINT_CHANGE_TOLERANCE, axis=1)
-    same &= np.all(d[1:] == d[:-1], axis=1)
-    same &= recording.bag_index[1:] == recording.bag_index[:-1]
-    first = np.flatnonzero(same)
-    return np.stack([first, first + 1], axis=1)
+def repeat_pairs(recording: Recording) -> IntArray:
+    """Index pairs (k, 2) [a, b], a < b: each measurement with the next one of the same bag
+    at equal readings (within JOINT_CHANGE_TOLERANCE) and approach directions, at most
+    MAX_REPEAT_GAP_S later (and at most MAX_REPEAT_LAG rows on)."""
+    q, d, t = recording.poses.q, recording.poses.direction, recording.poses.time
+    n = len(q)
+    partner = np.full(n, -1)
+    for lag in range(1, min(MAX_REPEAT_LAG, n - 1) + 1):
+        a = np.arange(n - lag)
+        b = a + lag
+        same = np.all(np.abs(q[b] - q[a]) <= JOINT_CHANGE_TOLERANCE, axis=1)
+        same &= np.all(d[b] == d[a], axis=1)
+        same &= recording.bag_index[b] == recording.bag_index[a]
+        same &= np.abs(t[b] - t[a]) <= MAX_REPEAT_GAP_S
+        same &= partner[a] < 0  # the nearest repeat only
+        partner[a[same]] = b[same]
+    first = np.flatnonzero(partner >= 0)
+    return np.stack([first, partner[first]], axis=1)
 
 
 def estimate_noise(recording: Recording, fallback_residuals: Array | None = None,
