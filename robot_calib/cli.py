@@ -373,7 +373,16 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument(
             "--robot",
             default=DEFAULT_ROBOT if robot is None else None,
-            help=f"built-in robot name or robot YAML file (default {robot or DEFAULT_ROBOT})",
+            help=f"built-in robot name, robot YAML file or URDF file (.urdf) "
+            f"(default {robot or DEFAULT_ROBOT})",
+        )
+        p.add_argument(
+            "--base-link", help="URDF robots: the chain's base link (default: the root link)"
+        )
+        p.add_argument(
+            "--tip-link",
+            help="URDF robots: the chain's tip link, the flange (default: tool0, else flange, "
+            "else the end of the longest chain)",
         )
         p.set_defaults(func=func)
         return p
@@ -553,6 +562,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
         signal.signal(signal.SIGINT, _interrupt)
     try:
+        if args.base_link or args.tip_link:  # carried in the robot reference (PARAMS.json)
+            from robot_calib.kinematics.urdf import urdf_reference
+
+            args.robot = urdf_reference(args.robot or "", args.base_link, args.tip_link)
         return int(args.func(args))
     except BaseException as exc:
         # A signal can surface as another exception when it lands in a C extension's call

@@ -3,15 +3,10 @@ DH/Hayati parameters by the geometry of consecutive axis lines (seed eq. 6-9).
 
 Every sweep turns one joint while the others hold a common reference configuration
 `q_ref`, so all axis lines are found in that one configuration, in the tracker frame.
-From them, frame by frame (`frame_{j}` = `frame_{j-1}` * link j):
-
-- DH link (axes j, j+1 skew or intersecting): x_j along the common normal of the two axis
-  lines, sign chosen nearest the nominal alpha_j; d_j = offset along axis j to the common
-  normal's foot, a_j = length of the common normal, alpha_j = angle between the axes about
-  x_j, theta_j = angle from x_{j-1} to x_j about axis j (eq. 6-9).
-- Hayati link (axes j, j+1 nominally parallel): d_j = 0, x_j points from frame j-1's
-  origin to where axis j+1 meets the plane normal to axis j through that origin; alpha_j and
-  beta_j turn axis j onto axis j+1 (Rx(alpha) Ry(beta)).
+From them, frame by frame, the DH/Hayati links by the line geometry of
+`kinematics/axes.py` (`dh_from_axes`, shared with the URDF loader): common normals for
+skew or intersecting axes, the Hayati alpha/beta for nominally parallel ones, the signs
+chosen nearest the nominal alpha_j and a_j.
 
 The base frame lies on axis 1 with d1 and theta1 at their nominal values (they are
 redundant with the tracker pose); the target offset in the flange frame comes from the
@@ -26,23 +21,21 @@ import numpy as np
 
 from robot_calib.errors import InputError
 from robot_calib.identify.circles import Circle, robust_circle
+from robot_calib.kinematics.axes import (
+    AxisLine,
+    common_normal,
+    dh_from_axes,
+    link_transform,
+    rotate,
+    wrap,
+)
 from robot_calib.kinematics.description import RobotDescription
-from robot_calib.kinematics.dh import DHTable, link_transforms
 from robot_calib.kinematics.frames import Array, matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
 from robot_calib.model import geometric_parameters
 
 REF_CONSISTENCY_RAD = 1e-3  # sweeps whose held joints differ by more break the CPA premise
-
-
-@dataclass(frozen=True)
-class AxisLine:
-    """A joint axis in the tracker frame: `point` (3,) [m] on it, unit `direction` (3,),
-    oriented so that increasing the joint's reading turns positively about it."""
-
-    point: Array
-    direction: Array
 
 
 @dataclass(frozen=True)
@@ -71,19 +64,6 @@ class CPAResult:
 NEAR_AXIS_SIGMA_RAD = 1e-3
 
 
-def _link(theta: float, d: float, a: float, alpha: float, beta: float) -> Array:
-    return link_transforms(DHTable(*(np.array([[v]]) for v in (theta, d, a, alpha, beta))))[0, 0]
-
-
-def _wrap(angle: float) -> float:
-    return float((angle + np.pi) % (2 * np.pi) - np.pi)
-
-
-def _angle_about(axis: Array, start: Array, end: Array) -> float:
-    """Angle [rad] turning `start` to `end` about unit `axis` (both perpendicular to it)."""
-    return float(np.arctan2(np.cross(start, end) @ axis, start @ end))
-
-
 def turning_sign(circle: Circle, points: Array, readings: Array) -> float:
     """+1 when the points (k, 3) [m] turn positively about `circle.normal` as the readings
     (k,) [rad] grow, else -1. Taken from the readings, never from the order of the points:
@@ -108,56 +88,6 @@ def axis_from_sweep(points: Array, readings: Array, joint: int) -> tuple[AxisLin
     points, readings = points[keep], readings[keep]
     direction = circle.normal * turning_sign(circle, points, readings)
     return AxisLine(circle.centre, direction), circle
-
-
-def common_normal(o: Array, z: Array, c: Array, u: Array) -> tuple[float, Array, Array]:
-    """Closest points of lines (o, z) and (c, u): offset s along z of the foot on the first
-    line, the foot on the first line, the foot on the second (unit directions)."""
-    b = z @ u
-    w0 = o - c
-    denom = 1.0 - b * b
-    if denom < 1e-12:
-        raise InputError("common normal of parallel axes: use the Hayati parameters")
-    s = (b * (u @ w0) - z @ w0) / denom
-    t = (u @ w0 - b * (z @ w0)) / denom
-    return float(s), o + s * z, c + t * u
-
-
-def _dh_link(frame: Array, line: AxisLine, alpha_nominal: float) -> tuple[float, ...]:
-    """(theta_full, d, a, alpha, 0) of a DH link from `frame` (4, 4) to the next axis line."""
-    x_prev, z, o = frame[:3, 0], frame[:3, 2], frame[:3, 3]
-    u = line.direction
-    d, foot, foot_next = common_normal(o, z, line.point, u)
-    cross = np.cross(z, u)
-    best = None
-    for sign in (1.0, -1.0):
-        x = sign * cross / np.linalg.norm(cross)
-        alpha = float(np.arctan2(cross @ x, z @ u))
-        miss = abs(_wrap(alpha - alpha_nominal))
-        if best is None or miss < best[0]:
-            best = (miss, x, alpha)
-    assert best is not None
-    _, x, alpha = best
-    a = float((foot_next - foot) @ x)
-    return _angle_about(z, x_prev, x), d, a, alpha, 0.0
-
-
-def _hayati_link(frame: Array, line: AxisLine, a_nominal: float) -> tuple[float, ...]:
-    """(theta_full, 0, a, alpha, beta) of a Hayati link (nearly parallel axes)."""
-    x_prev, z, o = frame[:3, 0], frame[:3, 2], frame[:3, 3]
-    u = line.direction
-    s = (o - line.point) @ z / (u @ z)
-    to_axis = line.point + s * u - o
-    a = float(np.linalg.norm(to_axis))
-    x = to_axis / a
-    if a_nominal < 0:
-        a, x = -a, -x
-    theta = _angle_about(z, x_prev, x)
-    turned = frame[:3, :3] @ _link(theta, 0.0, 0.0, 0.0, 0.0)[:3, :3]
-    uu = turned.T @ u
-    beta = float(np.arcsin(np.clip(uu[0], -1.0, 1.0)))
-    alpha = float(np.arctan2(-uu[1], uu[2]))
-    return theta, 0.0, a, alpha, beta
 
 
 def reference_readings(recording: Recording, n_joints: int) -> tuple[Array, list[str]]:
@@ -227,31 +157,30 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
     _, foot, _ = common_normal(axes[0].point, z0, axes[1].point, axes[1].direction)
     cross = np.cross(z0, axes[1].direction)
     x1 = cross / np.linalg.norm(cross)
-    if abs(_wrap(np.arctan2(cross @ x1, z0 @ axes[1].direction) - robot.alpha[0])) > np.pi / 2:
+    if abs(wrap(np.arctan2(cross @ x1, z0 @ axes[1].direction) - robot.alpha[0])) > np.pi / 2:
         x1 = -x1
-    x0 = _rotate(x1, z0, -(robot.theta[0] + q_ref[0]))
+    x0 = rotate(x1, z0, -(robot.theta[0] + q_ref[0]))
     frame = np.eye(4)
     frame[:3, :3] = np.column_stack([x0, np.cross(z0, x0), z0])
     frame[:3, 3] = foot - robot.d[0] * z0
     base2tracker = frame.copy()
 
+    links = dh_from_axes(axes, frame, robot.hayati, robot.alpha, robot.a)
+    frame = links.frames[-1]
     values: dict[str, float] = {}
     for j in range(1, n):
-        if robot.hayati[j - 1]:
-            link = _hayati_link(frame, axes[j], robot.a[j - 1])
-        else:
-            link = _dh_link(frame, axes[j], robot.alpha[j - 1])
-        theta, d, a, alpha, beta = link
-        values.update({f"theta{j}": _wrap(theta - q_ref[j - 1]), f"a{j}": a, f"alpha{j}": alpha})
+        theta, d, a, alpha, beta = (
+            float(row[j - 1]) for row in (links.theta, links.d, links.a, links.alpha, links.beta)
+        )
+        values.update({f"theta{j}": wrap(theta - q_ref[j - 1]), f"a{j}": a, f"alpha{j}": alpha})
         if robot.hayati[j - 1]:
             values[f"beta{j}"] = beta
         else:
             values[f"d{j}"] = d
-        frame = frame @ _link(theta, d, a, alpha, beta)
     # Unwrap thetas to the nominal branch.
     for j in range(1, n):
         nominal = robot.theta[j - 1]
-        values[f"theta{j}"] = nominal + _wrap(values[f"theta{j}"] - nominal)
+        values[f"theta{j}"] = nominal + wrap(values[f"theta{j}"] - nominal)
     values["theta1"], values["d1"] = float(robot.theta[0]), float(robot.d[0])
 
     # Target in the flange frame from the last joint's sweep(s).
@@ -259,7 +188,7 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
     qn = recording.poses.q[last, n - 1]
     flanges = np.array(
         [
-            frame @ _link(robot.theta[n - 1] + q, robot.d[n - 1], robot.a[n - 1],
+            frame @ link_transform(robot.theta[n - 1] + q, robot.d[n - 1], robot.a[n - 1],
                           robot.alpha[n - 1], robot.beta[n - 1])
             for q in qn
         ]
@@ -272,9 +201,3 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
         robot, tuple(base2tracker[:3, 3]) + rpy, tuple(target)
     ).with_values(values)
     return CPAResult(params, tuple(axes), tuple(fits), q_ref, tuple(warnings))
-
-
-def _rotate(v: Array, axis: Array, angle: float) -> Array:
-    """v (3,) turned by `angle` [rad] about unit `axis` (Rodrigues)."""
-    c, s = np.cos(angle), np.sin(angle)
-    return v * c + np.cross(axis, v) * s + axis * (axis @ v) * (1 - c)

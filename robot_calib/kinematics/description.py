@@ -68,7 +68,11 @@ def available_robots() -> list[str]:
 
 
 def load_robot(name_or_path: str | Path) -> RobotDescription:
-    """A built-in robot by name, or a robot YAML file by path."""
+    """A built-in robot by name, a robot YAML file by path, or a URDF (kinematics/urdf.py)."""
+    from robot_calib.kinematics import urdf  # imports this module: loaded on use
+
+    if urdf.is_urdf_reference(name_or_path):
+        return urdf.load_urdf_reference(name_or_path)
     path = Path(name_or_path)
     if not path.suffix:
         path = ROBOTS_DIR / f"{name_or_path}.yaml"

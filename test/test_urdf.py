@@ -1,0 +1,228 @@
+"""URDF robot descriptions (kinematics/urdf.py): the conversion to DH/Hayati against an
+independent URDF forward kinematics and against the built-in YAML descriptions.
+
+Fixtures: test/data/*.urdf, written by hand in ur_description's and kuka_experimental's
+layouts (each file says where its numbers come from). The URDF forward kinematics here
+reads the XML itself (xml.etree) and multiplies joint origins and axis rotations, so it
+shares nothing with the loader but the file.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robot_calib.errors import RobotDescriptionError
+from robot_calib.kinematics.description import RobotDescription, load_robot
+from robot_calib.kinematics.dh import DHTable, chain
+from robot_calib.kinematics.urdf import load_urdf
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "test" / "data"
+# Points rigidly attached to the tip link, in its frame [m]: its origin and two off it.
+TIP_POINTS = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]])
+# The UR YAML's base is the controller's base frame: ur_description's `base` link.
+BASE_LINK = {"kr5_sixx_r650": "base_link", "ur5": "base", "ur10": "base"}
+N_POSES = 50
+UM = 1e-6
+
+
+def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def _origin(element: ET.Element | None) -> np.ndarray:
+    out = np.eye(4)
+    if element is None:
+        return out
+    roll, pitch, yaw = (float(v) for v in element.get("rpy", "0 0 0").split())
+    out[:3, :3] = (
+        _rot(np.array([0.0, 0, 1]), yaw)
+        @ _rot(np.array([0.0, 1, 0]), pitch)
+        @ _rot(np.array([1.0, 0, 0]), roll)
+    )
+    out[:3, 3] = [float(v) for v in element.get("xyz", "0 0 0").split()]
+    return out
+
+
+def urdf_tip2base(path: Path, base: str, tip: str, q: dict[str, float]) -> np.ndarray:
+    """Tip link frame in the base link frame, shape (4, 4), for joint values q [rad]: the
+    product of joint origins and rotations about their axes, up to the root and down."""
+    joints = {j.find("child").get("link"): j for j in ET.parse(path).getroot().iter("joint")}  # type: ignore[union-attr]
+
+    def link2root(link: str) -> np.ndarray:
+        out = np.eye(4)
+        while link in joints:
+            joint = joints[link]
+            motion = np.eye(4)
+            if joint.get("type") != "fixed":
+                axis = np.array([float(v) for v in joint.find("axis").get("xyz").split()])  # type: ignore[union-attr]
+                motion[:3, :3] = _rot(axis / np.linalg.norm(axis), q[joint.get("name")])  # type: ignore[index]
+            out = _origin(joint.find("origin")) @ motion @ out
+            link = joint.find("parent").get("link")  # type: ignore[union-attr,assignment]
+        return out
+
+    return np.linalg.inv(link2root(base)) @ link2root(tip)
+
+
+def model_flange2base(robot: RobotDescription, q: np.ndarray) -> np.ndarray:
+    """Our model's flange (DH frame J) in its base frame, (n, 4, 4), for readings q (n, J)."""
+    dh = DHTable(robot.theta + q, robot.d, robot.a, robot.alpha, robot.beta)
+    return chain(dh)[:, -1]
+
+
+def points(frames: np.ndarray) -> np.ndarray:
+    """TIP_POINTS carried by frames (n, 4, 4) -> (n, 4, 3)."""
+    return np.einsum("nij,kj->nki", frames[:, :3, :3], TIP_POINTS) + frames[:, None, :3, 3]
+
+
+def random_readings(robot: RobotDescription, seed: int) -> np.ndarray:
+    lo, hi = np.maximum(robot.limits[:, 0], -np.pi), np.minimum(robot.limits[:, 1], np.pi)
+    return np.random.default_rng(seed).uniform(lo, hi, size=(N_POSES, robot.n_joints))
+
+
+@pytest.mark.parametrize("name", ["kr5_sixx_r650", "ur5", "ur10"])
+def test_urdf_model_matches_urdf_and_yaml_forward_kinematics(name: str) -> None:
+    path = DATA / f"{name}.urdf"
+    urdf = load_urdf(path, BASE_LINK[name], "tool0")
+    robot = urdf.description
+    yaml_robot = load_robot(name)
+    assert robot.n_joints == 6 and robot.hayati.tolist() == yaml_robot.hayati.tolist()
+    q = random_readings(robot, seed=len(name))
+
+    # (i) our model built from the URDF-derived table vs the URDF's own kinematics
+    direct = np.array(
+        [urdf_tip2base(path, BASE_LINK[name], "tool0", dict(zip(robot.joint_names, qi)))
+         for qi in q]
+    )  # fmt: skip
+    ours = urdf.dh02base @ model_flange2base(robot, q) @ urdf.tip2flange
+    gap_urdf = np.linalg.norm(points(ours) - points(direct), axis=-1).max()
+    # (ii) the URDF-derived table vs the built-in YAML table: the same flange
+    gap_yaml = np.linalg.norm(
+        points(model_flange2base(robot, q)) - points(model_flange2base(yaml_robot, q)), axis=-1
+    ).max()
+    print(f"{name}: max |URDF FK - model| {gap_urdf / UM:.2e} um, "
+          f"|URDF table - YAML table| {gap_yaml / UM:.2e} um")  # fmt: skip
+    assert gap_urdf < UM and gap_yaml < UM
+    # tool0 is DH frame 6 and the base (z up, on axis 1) DH frame 0: no leftovers
+    np.testing.assert_allclose(urdf.tip2flange, np.eye(4), atol=1e-9)
+    np.testing.assert_allclose(urdf.dh02base, np.eye(4), atol=1e-9)
+
+
+def test_kr5_table_is_the_seed_table_and_ur_differs_only_by_sign_conventions() -> None:
+    kr5, yaml_kr5 = load_urdf(DATA / "kr5_sixx_r650.urdf").description, load_robot("kr5_sixx_r650")
+    for field in ("d", "a", "alpha", "beta"):
+        np.testing.assert_allclose(getattr(kr5, field), getattr(yaml_kr5, field), atol=1e-12)
+    wrapped = (kr5.theta - yaml_kr5.theta + np.pi) % (2 * np.pi) - np.pi
+    np.testing.assert_allclose(wrapped, 0, atol=1e-12)
+    ur5 = load_urdf(DATA / "ur5.urdf", "base").description
+    np.testing.assert_allclose(np.abs(ur5.a), np.abs(load_robot("ur5").a), atol=1e-9)
+    assert ur5.joint_names[0] == "shoulder_pan_joint"
+    np.testing.assert_allclose(np.degrees(ur5.limits[2]), [-180, 180])
+
+
+def test_other_tip_and_default_base_keep_the_kinematics() -> None:
+    """tip = `flange` (x along the last axis): the rest is in tip2flange; base = the root
+    `base_link` (turned by pi from UR's base): the same points in that frame."""
+    path = DATA / "ur10.urdf"
+    urdf = load_urdf(path, tip_link="flange")
+    assert urdf.base_link == "base_link" and urdf.tip_link == "flange"
+    assert not np.allclose(urdf.tip2flange, np.eye(4), atol=1e-6)
+    q = random_readings(urdf.description, seed=3)
+    ours = urdf.dh02base @ model_flange2base(urdf.description, q) @ urdf.tip2flange
+    direct = np.array(
+        [urdf_tip2base(path, "base_link", "flange", dict(zip(urdf.description.joint_names, qi)))
+         for qi in q]
+    )  # fmt: skip
+    assert np.linalg.norm(points(ours) - points(direct), axis=-1).max() < UM
+
+
+def test_masses_and_centres_of_mass_come_from_the_inertials() -> None:
+    path = DATA / "ur5.urdf"
+    urdf = load_urdf(path, "base")
+    robot = urdf.description
+    # base_link_inertia (4 kg) sits before joint 1: not part of any moving link
+    np.testing.assert_allclose(robot.link_mass, [3.7, 8.393, 2.275, 1.219, 1.219, 0.1879])
+    # the upper arm's centre of mass: (a2/2, 0, 0.12) in upper_arm_link, wherever the arm is
+    q = random_readings(robot, seed=5)[:3]
+    frames = chain(DHTable(robot.theta + q, robot.d, robot.a, robot.alpha, robot.beta))
+    for qi, f in zip(q, frames):
+        upper_arm = urdf_tip2base(path, "base", "upper_arm_link", dict(zip(robot.joint_names, qi)))
+        expected = upper_arm[:3, :3] @ [-0.2125, 0, 0.12] + upper_arm[:3, 3]
+        np.testing.assert_allclose(f[2, :3, :3] @ robot.link_com[1] + f[2, :3, 3], expected,
+                                   atol=1e-12)  # fmt: skip
+
+
+def _write(tmp_path: Path, body: str) -> Path:
+    path = tmp_path / "bad.urdf"
+    path.write_text(f'<robot name="bad">{body}</robot>')
+    return path
+
+
+LINKS = '<link name="a"/><link name="b"/><link name="c"/>'
+
+
+def _joint(name: str, parent: str, child: str, kind: str = "continuous", extra: str = "") -> str:
+    return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
+            f'<child link="{child}"/><axis xyz="0 0 1"/>{extra}</joint>')  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("body", "options", "message"),
+    [
+        ("<robot", {}, "not a valid URDF"),
+        (LINKS + _joint("j1", "a", "b"), {}, "exactly one root link"),
+        (LINKS + _joint("j1", "a", "b") + _joint("j2", "b", "c", "prismatic"), {},
+         "j2 is prismatic"),
+        (LINKS + _joint("j1", "a", "b") + _joint("j2", "b", "c"), {}, "coincide"),
+        (LINKS + _joint("j1", "a", "b") + _joint("j2", "b", "c"), {"tip_link": "x"},
+         "no tip link 'x'"),
+        (LINKS + _joint("j1", "a", "b") + _joint("j2", "b", "c"), {"base_link": "c"},
+         "0 moving joint"),
+    ],
+)  # fmt: skip
+def test_bad_urdf_is_one_error_naming_the_file(
+    tmp_path: Path, body: str, options: dict[str, str], message: str
+) -> None:
+    with pytest.raises(RobotDescriptionError, match=message) as info:
+        load_urdf(_write(tmp_path, body), **options)
+    assert "bad.urdf" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_cli_calibrate_then_predict_with_a_urdf(tmp_path: Path) -> None:
+    """`--robot x.urdf` through calibrate; PARAMS.json keeps the URDF reference, so predict
+    reloads it; a broken URDF is one line and exit 2."""
+    run = [sys.executable, "-m", "robot_calib"]
+    urdf = DATA / "kr5_sixx_r650.urdf"
+    params = tmp_path / "params.json"
+    proc = subprocess.run(
+        [*run, "calibrate", str(ROOT / "bags" / "paper_test3.mcap"), "--model", "cpa",
+         "--robot", str(urdf), "--tip-link", "tool0", "-o", str(params)],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    reference = json.loads(params.read_text())["robot"]
+    assert reference == f"{urdf}#base_link=base_link&tip_link=tool0"
+    joints = tmp_path / "joints.csv"
+    joints.write_text("q1,q2,q3,q4,q5,q6\n0,-1.5,1.5,0,0.5,0\n")
+    points = tmp_path / "points.csv"
+    proc = subprocess.run([*run, "predict", str(params), "--joints", str(joints), "-o",
+                           str(points)], capture_output=True, text=True, check=False)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert np.loadtxt(points, delimiter=",", skiprows=1).shape == (3,)
+
+    bad = _write(tmp_path, "<link")
+    proc = subprocess.run([*run, "calibrate", "x.mcap", "--robot", str(bad), "-o", "p.json"],
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
+    assert "bad.urdf: not a valid URDF" in proc.stderr
+    proc = subprocess.run([*run, "calibrate", "x.mcap", "--base-link", "base", "-o", "p.json"],
+                          capture_output=True, text=True, check=False)  # fmt: skip
+    assert proc.returncode == 2 and "--base-link/--tip-link need --robot FILE.urdf" in proc.stderr
