@@ -13,6 +13,10 @@ From them, frame by frame (`frame_{j}` = `frame_{j-1}` * link j):
   origin to where axis j+1 meets the plane normal to axis j through that origin; alpha_j and
   beta_j turn axis j onto axis j+1 (Rx(alpha) Ry(beta)).
 
+Sweeps, reference configuration and turning directions are in the robot's joint variables
+(`RobotDescription.joint_variables`: the readings unless the robot declares a mapping), so a
+sweep of joint j turns DH joint variable j even where two readings change together.
+
 The base frame lies on axis 1 with d1 and theta1 at their nominal values (they are
 redundant with the tracker pose); the target offset in the flange frame comes from the
 last joint's sweep; link J keeps its nominal values (redundant with the target offset).
@@ -39,7 +43,8 @@ REF_CONSISTENCY_RAD = 1e-3  # sweeps whose held joints differ by more break the 
 @dataclass(frozen=True)
 class AxisLine:
     """A joint axis in the tracker frame: `point` (3,) [m] on it, unit `direction` (3,),
-    oriented so that increasing the joint's reading turns positively about it."""
+    oriented so that increasing the joint's variable (its reading, without a mapping) turns
+    positively about it."""
 
     point: Array
     direction: Array
@@ -58,7 +63,8 @@ class SweepFit:
 @dataclass(frozen=True)
 class CPAResult:
     """Identified parameters (geometric vector, tracker pose and target included), axis lines
-    (J,), per-sweep circle fits, the reference readings q_ref (J,) [rad] and warnings."""
+    (J,), per-sweep circle fits, the reference joint variables q_ref (J,) [rad] (the
+    reference readings, for a robot without a mapping) and warnings."""
 
     parameters: ParameterVector
     axes: tuple[AxisLine, ...]
@@ -81,8 +87,8 @@ def _angle_about(axis: Array, start: Array, end: Array) -> float:
 
 
 def axis_from_sweep(points: Array, readings: Array, joint: int) -> tuple[AxisLine, Circle]:
-    """Axis line and circle of one sweep: points (k, 3) [m], the turning joint's readings
-    (k,) [rad]; the direction follows the readings (right-hand rule)."""
+    """Axis line and circle of one sweep: points (k, 3) [m], the turning joint's variable
+    (k,) [rad]; the direction follows it (right-hand rule)."""
     circle, keep = robust_circle(points, f"sweep of joint {joint}")  # blunders left out
     points, readings = points[keep], readings[keep]
     rel = points - circle.centre
@@ -142,10 +148,13 @@ def _hayati_link(frame: Array, line: AxisLine, a_nominal: float) -> tuple[float,
     return theta, 0.0, a, alpha, beta
 
 
-def reference_readings(recording: Recording, n_joints: int) -> tuple[Array, list[str]]:
-    """q_ref (J,) [rad]: each joint's reading while later joints sweep (median), and warnings
-    where sweeps were taken in different configurations of the joints before them."""
-    q = recording.poses.q
+def reference_readings(
+    recording: Recording, n_joints: int, q: Array | None = None
+) -> tuple[Array, list[str]]:
+    """q_ref (J,) [rad]: each joint's value in `q` (n, J) [rad] (default: the readings)
+    while later joints sweep (median), and warnings where sweeps were taken in different
+    configurations of the joints before them."""
+    q = recording.poses.q if q is None else q
     q_ref = np.zeros(n_joints)
     warnings = []
     for i in range(1, n_joints + 1):
@@ -174,13 +183,14 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
         )
     if robot.hayati[0]:
         raise InputError(f"{robot.name}: CPA needs axes 1 and 2 not parallel")
-    q_ref, warnings = reference_readings(recording, n)
+    variables = robot.joint_variables(recording.poses.q)  # (n, J) [rad]
+    q_ref, warnings = reference_readings(recording, n, variables)
     fits, axes = [], []
     for j in range(1, n + 1):
         lines = []
         for s in recording.sweeps_of(j):
-            readings = recording.poses.q[s.index, j - 1]
-            line, circle = axis_from_sweep(recording.points[s.index], readings, j)
+            turned = variables[s.index, j - 1]
+            line, circle = axis_from_sweep(recording.points[s.index], turned, j)
             n_fitted = len(circle.plane_residuals)
             if n_fitted < s.n_poses:
                 warnings.append(
@@ -188,7 +198,7 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
                     f"{s.index[-1] + 1}: {s.n_poses - n_fitted} point(s) far off its circle "
                     "left out of the circle fit (blunders?)"
                 )
-            fits.append(SweepFit(j, n_fitted, float(np.ptp(readings)), circle))
+            fits.append(SweepFit(j, n_fitted, float(np.ptp(turned)), circle))
             lines.append((s.n_poses, line))
         weights = np.array([w for w, _ in lines], dtype=float)
         direction = sum((w * ln.direction for w, ln in lines), np.zeros(3))
@@ -230,7 +240,7 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
 
     # Target in the flange frame from the last joint's sweep(s).
     last = np.concatenate([s.index for s in recording.sweeps_of(n)])
-    qn = recording.poses.q[last, n - 1]
+    qn = variables[last, n - 1]
     flanges = np.array(
         [
             frame @ _link(robot.theta[n - 1] + q, robot.d[n - 1], robot.a[n - 1],
