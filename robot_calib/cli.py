@@ -124,13 +124,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from robot_calib import pipeline
 
     world = pipeline.simulation_world(args.world, args.robot, args.effects or (), args.seed)
-    if args.joint_names:
-        from dataclasses import replace
-
-        from robot_calib.model import KinematicModel
-
-        robot = with_joint_names(world.model.robot, args.joint_names)
-        world = replace(world, model=KinematicModel(robot, world.model.effects))
     sim = pipeline.simulate(
         args.output, args.plan, world, args.seed, args.n_random, _progress(), args.force
     )
@@ -370,7 +363,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="effects to switch on, e.g. backlash:4 eccentricity:1,2 "
         "thermal_drift compliance:2=2e-5 (default magnitudes unless =VALUE)",
     )
-    _add_joint_names(sim, "names to publish for joints 1..J")
     sim.add_argument("--seed", type=_count, help="random seed of noise and plan (>= 0)")
     sim.add_argument(
         "--n-random", type=_positive, default=N_RANDOM_POSES, help="poses of the random plan"
