@@ -18,7 +18,7 @@ import numpy as np
 
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
-from robot_calib.kinematics.description import RobotDescription, load_robot
+from robot_calib.kinematics.description import RobotDescription, load_robot, with_joint_names
 from robot_calib.measurements import PAIR_TOLERANCE_S
 from robot_calib.pipeline import (
     DEFAULT_PLAN,
@@ -48,6 +48,12 @@ def _robot_table(robot: RobotDescription) -> str:
             f"  {beta}  [{lo:.0f}, {hi:.0f}]"
         )
     return "\n".join(lines)
+
+
+def _robot(args: argparse.Namespace, name: str | None = None) -> RobotDescription:
+    """--robot (or `name`) loaded, its joints renamed by --joint-names where given."""
+    robot = load_robot(args.robot if name is None else name)
+    return with_joint_names(robot, args.joint_names) if args.joint_names else robot
 
 
 def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: float) -> None:
@@ -138,7 +144,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from robot_calib import pipeline
     from robot_calib.identify.params_file import summary, write_json_atomic
 
-    robot = load_robot(args.robot)
+    robot = _robot(args)
     output = pipeline.output_path(args.output, "PARAMS.json", args.bags, args.force)
     started = time.perf_counter()
     cal, recording = pipeline.calibrate_bags(
@@ -154,7 +160,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots."""
     from robot_calib import pipeline
 
-    robot = load_robot(args.robot)
+    robot = _robot(args)
     inputs = [*args.bags, *(args.holdout or ())]
     output = pipeline.output_path(args.output, "DIAGNOSIS.json", inputs, args.force)
     pipeline.output_path(pipeline.report_path(output), "the report", inputs, args.force)
@@ -181,7 +187,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     robot_name = args.robot
     if preset is not None and preset.robot and args.robot == DEFAULT_ROBOT:
         robot_name = preset.robot  # the preset's robot unless --robot says otherwise
-    robot = load_robot(robot_name)
+    robot = _robot(args, robot_name)
     output = output_path(args.output, "the bag", args.csv, args.force)
     if args.preset:
         if args.preset not in PRESETS:
@@ -356,6 +362,17 @@ def _add_force(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_joint_names(
+    p: argparse.ArgumentParser, what: str = "the bags' JointState names of joints 1..J"
+) -> None:
+    p.add_argument(
+        "--joint-names",
+        metavar="NAME1,...,NAMEJ",
+        help=f"{what}, in joint order, where they are not the robot's own "
+        "(e.g. j1,j2,j3,j4,j5,j6)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _OneLineParser(
         prog="robot-calib",
@@ -442,6 +459,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=PAIR_TOLERANCE_S,
         help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
     )
+    _add_joint_names(cal)
     cal.add_argument("-o", "--output", required=True, help="PARAMS.json to write")
     _add_force(cal)
 
@@ -454,6 +472,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=PAIR_TOLERANCE_S,
         help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
     )
+    _add_joint_names(diag)
     diag.add_argument(
         "-o",
         "--output",
@@ -476,6 +495,7 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--angle-unit", choices=("deg", "rad"), help="joint angle unit")
     imp.add_argument("--length-unit", choices=("mm", "m"), help="point unit")
     imp.add_argument("--no-header", action="store_true", help="the CSV has no header row")
+    _add_joint_names(imp, "JointState names to write for joints 1..J")
     imp.add_argument("-o", "--output", required=True, help="bag to write (BAG.mcap)")
     _add_force(imp)
 

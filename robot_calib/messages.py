@@ -37,7 +37,16 @@ def joint_positions(
     names = list(msg.name)
     missing = [n for n in joint_names if n not in names]
     if missing:
-        raise InputError(f"{where}: JointState lacks joints {missing} (has {names})")
+        what = (
+            f"are not the robot's joints {list(joint_names)}"
+            if len(missing) == len(joint_names)
+            else f"lack the robot's joints {missing} (robot: {list(joint_names)})"
+        )
+        raise InputError(
+            f"{where}: JointState names {names} {what}; map them with --joint-names "
+            f"NAME1,...,NAME{len(joint_names)} (node parameter joint_names): the message's "
+            f"names of joints 1..{len(joint_names)} in order"
+        )
     if len(msg.position) != len(names):
         raise InputError(
             f"{where}: JointState has {len(names)} names but {len(msg.position)} positions"

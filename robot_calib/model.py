@@ -5,6 +5,10 @@ predicted in the laser-tracker frame:
 
     p_in_tracker = base2tracker * flange2base(q) * target_in_flange
 
+Readings enter the DH table only as the robot's joint variables
+(`RobotDescription.joint_variables`: the readings themselves unless the robot declares a
+`reading_to_joint` mapping); effects stay functions of the readings (CONTRACT.md).
+
 Parameter layout (names are the public vocabulary of PARAMS.json):
   thetaJ, dJ, aJ, alphaJ [rad, m, m, rad] for every joint, betaJ [rad] for Hayati joints;
   base2tracker_x/y/z [m], base2tracker_roll/pitch/yaw [rad] (Rz(yaw) Ry(pitch) Rx(roll));
@@ -162,9 +166,11 @@ class KinematicModel:
         }
 
     def dh_table(self, params: ParameterVector, q: Array) -> DHTable:
-        """Geometric DH/Hayati values (no effects), (n, J) each, for readings q (n, J)."""
+        """Geometric DH/Hayati values (no effects), (n, J) each, for readings q (n, J); theta
+        takes the robot's joint variables of q (`RobotDescription.joint_variables`)."""
         row = self._nominal_rows(params)
-        return DHTable(row["theta"] + q, row["d"], row["a"], row["alpha"], row["beta"])
+        theta = row["theta"] + self.robot.joint_variables(q)
+        return DHTable(theta, row["d"], row["a"], row["alpha"], row["beta"])
 
     @staticmethod
     def base2tracker(params: ParameterVector) -> Array:
@@ -214,7 +220,7 @@ class KinematicModel:
                 housing = c.housing if housing is None else housing + c.housing
         scale = (1.0 + strain)[:, None]
         dh = DHTable(
-            row["theta"] + poses.q + offset,
+            row["theta"] + self.robot.joint_variables(poses.q) + offset,
             row["d"] * scale,
             row["a"] * scale,
             row["alpha"],

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from sensor_msgs.msg import JointState
 from robot_calib.bag import BagWriter
 from robot_calib.bag.read import read_recording
 from robot_calib.errors import RobotCalibError
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.description import load_robot, with_joint_names
 from robot_calib.measurements import find_sweeps, recording_from_arrays
 from robot_calib.sim.plans import paper_test_plan, random_plan
 
@@ -115,7 +116,7 @@ def test_unpaired_points_are_counted_and_reported(tmp_path: Path) -> None:
         ("wrong_type", "has type geometry_msgs/msg/PointStamped, not sensor_msgs/msg/JointState"),
         ("nan", "is not finite"),
         ("millimetres", "look like millimetres"),
-        ("names", "lacks joints"),
+        ("names", "are not the robot's joints ['joint_a1', 'joint_a2', 'joint_a3', 'joint_a4', "),
         ("truncated", "truncated MCAP file"),
     ],
 )
@@ -162,3 +163,42 @@ def test_small_sweeps_are_used_as_general_poses_with_a_warning() -> None:
     rec = recording_from_arrays(q, np.random.default_rng(0).normal(size=(5, 3)))
     assert rec.sweeps == () and rec.general.all()
     assert "too small to fit a circle" in rec.warnings[0]
+
+
+def test_joint_names_map_another_naming(tmp_path: Path) -> None:
+    """A bag whose JointState names are not the robot's reads as the robot with renamed
+    joints (`--joint-names`), with the same readings and sweeps as the robot's own names."""
+    plan = paper_test_plan(3)
+    points = np.random.default_rng(1).normal(2.0, 0.1, (len(plan.q), 3))
+    own, other = tmp_path / "own.mcap", tmp_path / "other.mcap"
+    names = [f"j{j}" for j in range(1, 7)]
+    write_measurements(own, plan.q, points)
+    write_measurements(other, plan.q[:, ::-1], points, names=names[::-1])  # any order
+    expected = read_recording([own], ROBOT)
+    renamed = read_recording([other], with_joint_names(ROBOT, ",".join(names)))
+    np.testing.assert_array_equal(renamed.poses.q, expected.poses.q)
+    assert [(s.joint, s.index.tolist()) for s in renamed.sweeps] == [
+        (s.joint, s.index.tolist()) for s in expected.sweeps
+    ]
+    out = tmp_path / "p.json"
+    proc = subprocess.run(
+        [sys.executable, "-m", "robot_calib", "calibrate", str(other), "--model", "nominal",
+         "--joint-names", ",".join(names), "-o", str(out)],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 0 and out.exists(), proc.stderr
+
+
+def test_coupled_readings_sweep_one_joint() -> None:
+    """With a J3 += J2 coupling, the plan's joint-2 sweep moves readings 2 and 3 together:
+    on the readings it is no sweep, on the robot's joint variables it is joint 2's."""
+    coupled = replace(ROBOT, reading_matrix=np.eye(6) + np.eye(6, k=-1) * (np.arange(6) == 1))
+    assert coupled.reading_matrix is not None and coupled.reading_matrix[2, 1] == 1.0
+    plan = paper_test_plan(2)
+    q = coupled.readings(plan.q)
+    points = np.random.default_rng(2).normal(2.0, 0.1, (len(q), 3))
+    assert 2 not in {s.joint for s in find_sweeps(q)}
+    rec = recording_from_arrays(q, points, robot=coupled)
+    assert [s.joint for s in rec.sweeps] == [1, 2, 3, 4, 5, 6]
+    plain = recording_from_arrays(plan.q, points)
+    assert [s.index.tolist() for s in rec.sweeps] == [s.index.tolist() for s in plain.sweeps]

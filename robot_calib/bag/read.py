@@ -114,6 +114,7 @@ def read_bag(
         pair_tolerance,
         source=str(path),
         error=BagError,
+        robot=robot,
     )
     return replace(rec, warnings=tuple(warnings) + rec.warnings)
 

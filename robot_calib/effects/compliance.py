@@ -29,9 +29,10 @@ def gravity_torques(robot: RobotDescription, q: Array) -> Array:
     """Gravity torque about every joint axis, shape (n, J) [N m], for readings q (n, J) [rad].
 
     tau_j = z_{j-1} . sum_{i >= j} (c_i - o_{j-1}) x (m_i g), with c_i the centre of mass
-    of link i (moved by joint i), all on the nominal kinematics.
+    of link i (moved by joint i), all on the nominal kinematics (the robot's joint
+    variables of q).
     """
-    dh = DHTable(robot.theta + q, robot.d, robot.a, robot.alpha, robot.beta)
+    dh = DHTable(robot.theta + robot.joint_variables(q), robot.d, robot.a, robot.alpha, robot.beta)
     frames = chain(dh)  # (n, J + 1, 4, 4)
     com = np.einsum("njab,jb->nja", frames[:, 1:, :3, :3], robot.link_com) + frames[:, 1:, :3, 3]
     force = robot.link_mass[:, None] * GRAVITY  # (J, 3)

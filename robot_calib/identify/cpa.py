@@ -8,6 +8,10 @@ From them, frame by frame, the DH/Hayati links by the line geometry of
 skew or intersecting axes, the Hayati alpha/beta for nominally parallel ones, the signs
 chosen nearest the nominal alpha_j and a_j.
 
+Sweeps, reference configuration and turning directions are in the robot's joint variables
+(`RobotDescription.joint_variables`: the readings unless the robot declares a mapping), so a
+sweep of joint j turns DH joint variable j even where two readings change together.
+
 The base frame lies on axis 1 with d1 and theta1 at their nominal values (they are
 redundant with the tracker pose); the target offset in the flange frame comes from the
 last joint's sweep; link J keeps its nominal values (redundant with the target offset).
@@ -51,7 +55,8 @@ class SweepFit:
 @dataclass(frozen=True)
 class CPAResult:
     """Identified parameters (geometric vector, tracker pose and target included), axis lines
-    (J,), per-sweep circle fits, the reference readings q_ref (J,) [rad] and warnings."""
+    (J,), per-sweep circle fits, the reference joint variables q_ref (J,) [rad] (the
+    reference readings, for a robot without a mapping) and warnings."""
 
     parameters: ParameterVector
     axes: tuple[AxisLine, ...]
@@ -82,18 +87,22 @@ def direction_sigma(circle: Circle, n_points: int) -> float:
 
 
 def axis_from_sweep(points: Array, readings: Array, joint: int) -> tuple[AxisLine, Circle]:
-    """Axis line and circle of one sweep: points (k, 3) [m], the turning joint's readings
-    (k,) [rad]; the direction follows the readings (right-hand rule, `turning_sign`)."""
+    """Axis line and circle of one sweep: points (k, 3) [m], the turning joint's variable
+    (k,) [rad] (its reading, without a mapping); the direction follows it (right-hand rule,
+    `turning_sign`)."""
     circle, keep = robust_circle(points, f"sweep of joint {joint}")  # blunders left out
     points, readings = points[keep], readings[keep]
     direction = circle.normal * turning_sign(circle, points, readings)
     return AxisLine(circle.centre, direction), circle
 
 
-def reference_readings(recording: Recording, n_joints: int) -> tuple[Array, list[str]]:
-    """q_ref (J,) [rad]: each joint's reading while later joints sweep (median), and warnings
-    where sweeps were taken in different configurations of the joints before them."""
-    q = recording.poses.q
+def reference_readings(
+    recording: Recording, n_joints: int, q: Array | None = None
+) -> tuple[Array, list[str]]:
+    """q_ref (J,) [rad]: each joint's value in `q` (n, J) [rad] (default: the readings)
+    while later joints sweep (median), and warnings where sweeps were taken in different
+    configurations of the joints before them."""
+    q = recording.poses.q if q is None else q
     q_ref = np.zeros(n_joints)
     warnings = []
     for i in range(1, n_joints + 1):
@@ -122,13 +131,14 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
         )
     if robot.hayati[0]:
         raise InputError(f"{robot.name}: CPA needs axes 1 and 2 not parallel")
-    q_ref, warnings = reference_readings(recording, n)
+    variables = robot.joint_variables(recording.poses.q)  # (n, J) [rad]
+    q_ref, warnings = reference_readings(recording, n, variables)
     fits, axes = [], []
     for j in range(1, n + 1):
         lines = []
         for s in recording.sweeps_of(j):
-            readings = recording.poses.q[s.index, j - 1]
-            line, circle = axis_from_sweep(recording.points[s.index], readings, j)
+            turned = variables[s.index, j - 1]
+            line, circle = axis_from_sweep(recording.points[s.index], turned, j)
             n_fitted = len(circle.plane_residuals)
             if n_fitted < s.n_poses:
                 warnings.append(
@@ -144,7 +154,7 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
                     f"axis direction (1-sigma {np.degrees(direction_sigma(circle, n_fitted)):.3f}"
                     " deg): put the target farther off this axis"
                 )
-            fits.append(SweepFit(j, n_fitted, float(np.ptp(readings)), circle))
+            fits.append(SweepFit(j, n_fitted, float(np.ptp(turned)), circle))
             lines.append((s.n_poses, line))
         weights = np.array([w for w, _ in lines], dtype=float)
         direction = sum((w * ln.direction for w, ln in lines), np.zeros(3))
@@ -185,7 +195,7 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
 
     # Target in the flange frame from the last joint's sweep(s).
     last = np.concatenate([s.index for s in recording.sweeps_of(n)])
-    qn = recording.poses.q[last, n - 1]
+    qn = variables[last, n - 1]
     flanges = np.array(
         [
             frame @ link_transform(robot.theta[n - 1] + q, robot.d[n - 1], robot.a[n - 1],

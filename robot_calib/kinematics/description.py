@@ -3,11 +3,18 @@
 Built-ins live in `robots/*.yaml`; a user passes a YAML file of the same format. Lengths
 are in m; angles in rad unless the file says ``angle_unit: deg`` (converted on load).
 See `robots/kr5_sixx_r650.yaml` for a commented example. Keys outside `ROBOT_KEYS` (top
-level) and `JOINT_KEYS` (each joint) are rejected, so a misspelt key is not silently ignored.
+level), `JOINT_KEYS` (each joint) and `MAPPING_KEYS` (`reading_to_joint`) are rejected, so a
+misspelt key is not silently ignored.
+
+Readings to joint variables (CONTRACT.md, "Joint and model conventions"; msgs_doc/robots.md):
+the DH joint variable is ``theta_j = theta_j(table) + (M q + offset)_j`` with q the readings
+and ``M = diag(sign) + coupling``; without a `reading_to_joint` section M = I and offset = 0
+(the contract's default), and `joint_variables` returns the readings themselves.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -20,8 +27,10 @@ from robot_calib.kinematics.frames import Array
 
 ROBOTS_DIR = Path(__file__).resolve().parent / "robots"
 DH_FIELDS = ("theta", "d", "a", "alpha")
-ROBOT_KEYS = ("name", "source", "angle_unit", "joints")  # top level of a robot YAML file
+# top level of a robot YAML file
+ROBOT_KEYS = ("name", "source", "angle_unit", "reading_to_joint", "joints")
 JOINT_KEYS = ("name", *DH_FIELDS, "beta", "hayati", "limits", "mass", "com")  # each joint
+MAPPING_KEYS = ("sign", "offset", "coupling")  # the `reading_to_joint` section
 
 
 @dataclass(frozen=True)
@@ -33,6 +42,8 @@ class RobotDescription:
     limits : shape (J, 2), [min, max] joint readings [rad]
     link_mass : shape (J,) [kg], mass of the link moved by joint j (approximate)
     link_com : shape (J, 3) [m], its centre of mass in DH frame j (approximate)
+    reading_matrix : shape (J, J) or None — M of the joint variables M q + offset (None: M = I)
+    reading_offset : shape (J,) [rad] or None — offset of the joint variables (None: 0)
     """
 
     name: str
@@ -48,10 +59,42 @@ class RobotDescription:
     link_com: Array
     source: str = ""
     path: str = ""  # absolute path of the YAML file it was loaded from ('' if built in code)
+    reading_matrix: Array | None = None
+    reading_offset: Array | None = None
 
     @property
     def n_joints(self) -> int:
         return len(self.joint_names)
+
+    @property
+    def has_mapping(self) -> bool:
+        """True when the joint variables differ from the readings (a `reading_to_joint`)."""
+        return self.reading_matrix is not None or self.reading_offset is not None
+
+    def joint_variables(self, q: Array) -> Array:
+        """Joint variables M q + offset, shape (n, J) [rad], of readings q (n, J) [rad]: what
+        the DH table's theta_j adds to its nominal value. The readings themselves (the same
+        array) when the robot declares no mapping."""
+        if not self.has_mapping:
+            return q
+        out = np.asarray(q, dtype=float)
+        if self.reading_matrix is not None:
+            out = out @ self.reading_matrix.T
+        if self.reading_offset is not None:
+            out = out + self.reading_offset
+        return out
+
+    def readings(self, joint_variables: Array) -> Array:
+        """Readings q (n, J) [rad] of joint variables (n, J) [rad]: the inverse of
+        `joint_variables` (the same array when the robot declares no mapping)."""
+        if not self.has_mapping:
+            return joint_variables
+        out = np.asarray(joint_variables, dtype=float)
+        if self.reading_offset is not None:
+            out = out - self.reading_offset
+        if self.reading_matrix is not None:
+            out = np.linalg.solve(self.reading_matrix, out.T).T
+        return out
 
     def reference(self) -> str:
         """What `load_robot` needs to load it again: the built-in name, else the absolute
@@ -65,6 +108,27 @@ class RobotDescription:
 def available_robots() -> list[str]:
     """Names of the built-in descriptions."""
     return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))
+
+
+def with_joint_names(robot: RobotDescription, names: Sequence[str] | str) -> RobotDescription:
+    """`robot` with the JointState names of its joints 1..J replaced by `names` (a sequence
+    or 'a,b,c,...'), e.g. for a bag written with another naming (`--joint-names`).
+    Raises RobotDescriptionError unless there is one distinct, non-empty name per joint."""
+    if isinstance(names, str):
+        names = [n.strip() for n in names.split(",")]
+    names = tuple(str(n) for n in names)
+    where = f"joint names {','.join(names)}"
+    if len(names) != robot.n_joints:
+        raise RobotDescriptionError(
+            f"{where}: {len(names)} names for robot {robot.name} with {robot.n_joints} joints "
+            f"({', '.join(robot.joint_names)}); give one per joint, in joint order"
+        )
+    if not all(names):
+        raise RobotDescriptionError(f"{where}: empty name")
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise RobotDescriptionError(f"{where}: names must be distinct; {repeated} repeated")
+    return replace(robot, joint_names=names)
 
 
 def load_robot(name_or_path: str | Path) -> RobotDescription:
@@ -150,6 +214,7 @@ def parse_robot(data: Any, source: str) -> RobotDescription:
         raise RobotDescriptionError(
             f"{source}: joint names must be distinct; {repeated} given more than once"
         )
+    matrix, offset = _reading_to_joint(data.get("reading_to_joint"), len(joints), to_rad, source)
     return RobotDescription(
         name=str(data.get("name", Path(source).stem)),
         joint_names=tuple(names),
@@ -163,4 +228,68 @@ def parse_robot(data: Any, source: str) -> RobotDescription:
         link_mass=np.array(mass),
         link_com=np.array(com),
         source=str(data.get("source", source)),
+        reading_matrix=matrix,
+        reading_offset=offset,
     )
+
+
+def _reading_to_joint(
+    section: Any, n_joints: int, to_rad: float, source: str
+) -> tuple[Array | None, Array | None]:
+    """M (J, J) and offset (J,) [rad] of a `reading_to_joint` section, None for identity
+    parts. `sign`: J values +1/-1; `offset`: J angles (angle_unit); `coupling`: a mapping
+    {j: {k: c}} (1-based: joint variable j += c * reading k) or a J x J list with a zero
+    diagonal (the diagonal is `sign`)."""
+    where = f"{source}: reading_to_joint"
+    if section is None:
+        return None, None
+    if not isinstance(section, dict):
+        raise RobotDescriptionError(f"{where}: expected a mapping with {', '.join(MAPPING_KEYS)}")
+    check_keys(section, MAPPING_KEYS, where, RobotDescriptionError)
+
+    def vector(key: str) -> Array:
+        values = section[key]
+        if not (isinstance(values, list) and len(values) == n_joints):
+            raise RobotDescriptionError(f"{where}: {key} must be a list of {n_joints} numbers")
+        return np.array([_number(v, f"{where} {key}") for v in values])
+
+    sign = vector("sign") if "sign" in section else np.ones(n_joints)
+    if not np.all(np.abs(sign) == 1.0):
+        raise RobotDescriptionError(f"{where}: sign must be +1 or -1 per joint, got {sign}")
+    offset = vector("offset") * to_rad if "offset" in section else np.zeros(n_joints)
+    coupling = np.zeros((n_joints, n_joints))
+    raw = section.get("coupling")
+    if isinstance(raw, dict):
+        for j, row in raw.items():
+            if not (isinstance(j, int) and 1 <= j <= n_joints and isinstance(row, dict)):
+                raise RobotDescriptionError(
+                    f"{where}: coupling must map joints 1..{n_joints} to {{reading: factor}}"
+                    f", got {j!r}: {row!r}"
+                )
+            for k, c in row.items():
+                if not (isinstance(k, int) and 1 <= k <= n_joints and k != j):
+                    raise RobotDescriptionError(
+                        f"{where}: coupling of joint {j}: reading {k!r} must be another "
+                        f"joint in 1..{n_joints}"
+                    )
+                coupling[j - 1, k - 1] = _number(c, f"{where} coupling {j}.{k}")
+    elif isinstance(raw, list):
+        if len(raw) != n_joints or not all(
+            isinstance(r, list) and len(r) == n_joints for r in raw
+        ):
+            raise RobotDescriptionError(f"{where}: coupling must be {n_joints} x {n_joints}")
+        coupling = np.array([[_number(v, f"{where} coupling") for v in r] for r in raw])
+        if np.any(np.diag(coupling) != 0.0):
+            raise RobotDescriptionError(
+                f"{where}: the coupling's diagonal must be 0 (each joint's own factor is sign)"
+            )
+    elif raw is not None:
+        raise RobotDescriptionError(f"{where}: coupling must be {{j: {{k: c}}}} or a matrix")
+    matrix = np.diag(sign) + coupling
+    if np.linalg.cond(matrix) > 1e8:
+        raise RobotDescriptionError(
+            f"{where}: the mapping diag(sign) + coupling is singular: readings could not be "
+            "recovered from joint variables"
+        )
+    identity = np.array_equal(matrix, np.eye(n_joints))
+    return (None if identity else matrix), (None if not offset.any() else offset)

@@ -2,7 +2,9 @@
 
 Each tracker point is paired with the joint state nearest in stamp (within
 `PAIR_TOLERANCE_S`); approach directions and time since the first measurement follow;
-circle sweeps are found. Unpaired points are counted and reported, never dropped silently.
+circle sweeps are found (in the robot's joint variables where a robot with a reading-to-joint
+mapping is given: a coupled sweep moves two readings but one joint). Unpaired points are
+counted and reported, never dropped silently.
 This is the measurement model only: where the stamps and values come from (a bag, live
 topics, arrays in memory) is the caller's business (`robot_calib.bag.read`, the nodes).
 """
@@ -11,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,6 +22,9 @@ from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements.sweeps import MIN_SWEEP_POSES, Sweep, usable_sweeps
 from robot_calib.poses import Poses, approach_directions
+
+if TYPE_CHECKING:
+    from robot_calib.kinematics.description import RobotDescription
 
 PAIR_TOLERANCE_S = 0.05  # contract default: the one place this number is written
 MAX_PLAUSIBLE_RANGE_M = 50.0  # a laser tracker's range; larger coordinates look like mm
@@ -181,11 +187,24 @@ def _distinct_joint_states(
     return keep
 
 
+def _sweeps(
+    q: Array, robot: RobotDescription | None, source: str, warnings: list[str]
+) -> list[Sweep]:
+    """Usable sweeps of readings q (n, J) [rad], found on `robot`'s joint variables (the
+    readings themselves without a robot or a mapping)."""
+    return usable_sweeps(q if robot is None else robot.joint_variables(q), source, warnings)
+
+
 def recording_from_arrays(
-    q: Array, points: Array, time: Array | None = None, source: str = "arrays"
+    q: Array,
+    points: Array,
+    time: Array | None = None,
+    source: str = "arrays",
+    robot: RobotDescription | None = None,
 ) -> Recording:
     """A recording of measurements already paired in memory (one source, visiting order):
-    q (n, J) [rad], points (n, 3) [m], time (n,) [s].
+    q (n, J) [rad], points (n, 3) [m], time (n,) [s]; sweeps are found on `robot`'s joint
+    variables (None: the readings).
 
     Returns
     -------
@@ -197,7 +216,7 @@ def recording_from_arrays(
     """
     poses = Poses.from_readings(q, time=time)
     warnings: list[str] = []
-    sweeps = usable_sweeps(poses.q, source, warnings)
+    sweeps = _sweeps(poses.q, robot, source, warnings)
     return Recording(
         (source,),
         poses,
@@ -218,9 +237,10 @@ def recording_from_stream(
     pair_tolerance: float = PAIR_TOLERANCE_S,
     source: str = "live",
     error: type[Exception] = InputError,
+    robot: RobotDescription | None = None,
 ) -> Recording:
     """A recording of one source from its stamped messages (a bag's or live), paired by
-    the contract's rule.
+    the contract's rule; sweeps are found on `robot`'s joint variables (None: readings).
 
     js_ns (m,) joint-state stamps [ns], q (m, J) readings [rad], velocity_sign (m, J) (+1/-1,
     0 = no velocity); point_ns (n,) point stamps [ns], points (n, 3) tracker frame [m]; each
@@ -292,7 +312,7 @@ def recording_from_stream(
     q, velocity = q[pick[ok]], velocity_sign[pick[ok]]
     direction = np.where(velocity != 0, velocity, approach_directions(q))
     time = (point_ns[ok] - point_ns[ok][0]) * 1e-9
-    sweeps = usable_sweeps(q, source, warnings)
+    sweeps = _sweeps(q, robot, source, warnings)
     return Recording(
         (source,),
         Poses(q, direction, time),

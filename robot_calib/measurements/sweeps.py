@@ -1,5 +1,7 @@
 """Circle sweeps (CONTRACT.md section 1): runs of >= 3 consecutive poses in which exactly one
-joint changes. Found from the readings alone; the rest are general poses."""
+joint changes. Found from the readings, or from the joint variables of a robot whose readings
+are coupled (`RobotDescription.joint_variables`, passed in by the caller); the rest are
+general poses."""
 
 from __future__ import annotations
 

@@ -46,7 +46,7 @@ from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.calibrate import Calibration, parse_model
 from robot_calib.identify.params_file import summary, write_json_atomic
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.description import load_robot, with_joint_names
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements import PAIR_TOLERANCE_S, Recording, recording_from_stream
 from robot_calib.messages import (
@@ -237,6 +237,12 @@ class CalibratorNode(Node):
         robot_name: str = declare(
             self, "robot", DEFAULT_ROBOT, "built-in robot name or robot YAML file"
         )
+        joint_names: list[str] = declare(
+            self,
+            "joint_names",
+            [],
+            "JointState names of joints 1..J in order, if not the robot's own; empty: the robot's",
+        )
         self.pair_tolerance: float = declare(
             self,
             "pair_tolerance",
@@ -275,6 +281,8 @@ class CalibratorNode(Node):
             "live mode: history depth of the two subscriptions [messages]",
         )
         self.robot = load_robot(robot_name)
+        if joint_names:
+            self.robot = with_joint_names(self.robot, joint_names)
         parse_model(self.model_spec, self.robot, self.ecc_order)  # a bad model fails now
         name = self.get_name()
         if self.ecc_order < 1:
@@ -328,7 +336,7 @@ class CalibratorNode(Node):
         try:
             recording = recording_from_stream(
                 js_ns, js_q, js_v, pt_ns, pt_xyz, self.pair_tolerance,
-                source=f"live {JOINT_STATES_TOPIC} + {POINT_TOPIC}",
+                source=f"live {JOINT_STATES_TOPIC} + {POINT_TOPIC}", robot=self.robot,
             )  # fmt: skip
             for warning in recording.warnings:
                 self._log(warning)

@@ -54,7 +54,9 @@ def random_effect(
 def _record(world: World, plan: Plan, rng: np.random.Generator) -> Recording:
     time = plan_times(plan, world.timing)
     poses = Poses.from_readings(plan.q, time=time)
-    return recording_from_arrays(plan.q, physical_points(world, poses, rng), time)
+    return recording_from_arrays(
+        plan.q, physical_points(world, poses, rng), time, robot=world.model.robot
+    )
 
 
 def make_case(effect: str, seed: int, n_holdout: int = 200) -> Case:

@@ -2,7 +2,9 @@
 
 - `paper-test1` .. `paper-test6`: the seed's Table 2. Each joint in turn sweeps from Start
   to End in `points` steps and back (forth and back = the "measured points" row:
-  120/580/290/290/290/290), the other joints at the home pose.
+  120/580/290/290/290/290), the other joints at the home pose. The angles are DH joint
+  variables; `make_plan` turns them into the robot's readings (the same numbers unless the
+  robot declares a reading-to-joint mapping).
 - `random`: general poses uniform within the joint limits.
 - `iso9283`: the ISO 9283 cube positions P1..P5 (centre and four points on the diagonal
   plane, 10 % of the diagonal in from the corners), visited in cycles.
@@ -10,7 +12,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -137,7 +139,7 @@ def iso9283_plan(
     """ISO 9283 cube test: P1 (centre) then P2..P5 on the cube's diagonal plane, `cycles`
     times P1 -> P2 -> P3 -> P4 -> P5, flange orientation of the home pose throughout.
     The cube (edge `side_m`) is centred on the home pose's flange."""
-    home_q = np.radians(home_deg)
+    home_q = model.robot.readings(np.radians(home_deg)[None, :])[0]  # home_deg: variables
     home = model.flange2base(params, Poses.from_readings(home_q[None, :]))[0]
     half = side_m / 2
     # Diagonal plane through cube corners C1 (-,-,-), C2 (+,+,-), C7 (+,+,+), C8 (-,-,+):
@@ -162,7 +164,10 @@ def make_plan(
 ) -> Plan:
     """A plan by name (PLAN_NAMES); `params` are the controller's (nominal) parameters."""
     if name.startswith("paper-test") and name[10:].isdigit():
-        return paper_test_plan(int(name[10:]))
+        plan = paper_test_plan(int(name[10:]))
+        # Table 2's angles are joint variables: single-joint sweeps of the DH joints, which
+        # a robot with coupled readings (reading_to_joint) reads as two readings changing.
+        return replace(plan, q=model.robot.readings(plan.q))
     if name == "random":
         return random_plan(model.robot, n_random, rng)
     if name == "iso9283":
