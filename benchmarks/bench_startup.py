@@ -43,9 +43,9 @@ def main() -> int:
             "python -c 'import numpy'": [sys.executable, "-c", "import numpy"],
             "robot-calib --help": [*cli, "--help"],
             "robot-calib predict": [*cli, "predict", str(params), "--joints", str(joints),
-                                    "-o", str(Path(tmp) / "points.csv")],
+                                    "-o", str(Path(tmp) / "points.csv"), "--force"],
             "robot-calib calibrate (sample bag)": [*cli, "calibrate", str(SAMPLE), "-o",
-                                                   str(Path(tmp) / "p2.json")],
+                                                   str(Path(tmp) / "p2.json"), "--force"],
         }  # fmt: skip
         times: dict[str, list[float]] = {name: [] for name in commands}
         for _ in range(args.repeat):  # alternate: each round runs every command once
