@@ -31,6 +31,8 @@ from robot_calib.pipeline import (
 
 if TYPE_CHECKING:
     from robot_calib.diagnose.diagnosis import Diagnosis
+    from robot_calib.kinematics.parameters import ParameterVector
+    from robot_calib.model import KinematicModel
 
 
 def _robot_table(robot: RobotDescription) -> str:
@@ -234,10 +236,11 @@ def cmd_import(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_predict(args: argparse.Namespace) -> int:
-    """Target positions (tracker frame, m) for the joint angles of JOINTS.csv."""
+def _calibration(args: argparse.Namespace) -> tuple[KinematicModel, ParameterVector]:
+    """The model and parameters of args.params (PARAMS.json), checked (finite SI values)
+    and for the robot --robot names, if it names one."""
     from robot_calib.identify.params_file import load_params
-    from robot_calib.predict import check_params_document, read_joints_csv, write_points_csv
+    from robot_calib.predict import check_params_document
 
     model, params, doc = load_params(args.params)
     check_params_document(doc, model.parameters(), args.params)
@@ -245,6 +248,14 @@ def cmd_predict(args: argparse.Namespace) -> int:
         raise InputError(
             f"{args.params}: identified for robot {model.robot.name}, not --robot {args.robot}"
         )
+    return model, params
+
+
+def cmd_predict(args: argparse.Namespace) -> int:
+    """Target positions (tracker frame, m) for the joint angles of JOINTS.csv."""
+    from robot_calib.predict import read_joints_csv, write_points_csv
+
+    model, params = _calibration(args)
     poses = read_joints_csv(args.joints, model.robot.n_joints)
     output = output_path(args.output, "POINTS.csv", [args.params, args.joints], args.force)
     write_points_csv(model.target_points(params, poses), output)
@@ -258,7 +269,7 @@ def cmd_split(args: argparse.Namespace) -> int:
     from robot_calib.bag.csv_import import write_measurement_bag
     from robot_calib.measurements.split import holdout_mask
 
-    robot = load_robot(args.robot)
+    robot = _robot(args)
     source = Path(args.bag)
     stem = source.with_suffix("")
     outputs = [Path(args.calibration_out or f"{stem}.cal.mcap"),
@@ -283,17 +294,15 @@ def cmd_split(args: argparse.Namespace) -> int:
 def cmd_score(args: argparse.Namespace) -> int:
     """A calibration scored on bags it was not fitted on (absolute and seed criterion)."""
     from robot_calib import pipeline
-    from robot_calib.identify.params_file import load_params
-    from robot_calib.predict import check_params_document
     from robot_calib.score import score, write_points_table
 
-    model, params, doc = load_params(args.params)
-    check_params_document(doc, model.parameters(), args.params)
+    model, params = _calibration(args)
+    robot = with_joint_names(model.robot, args.joint_names) if args.joint_names else model.robot
     table = None
     if args.points_csv:
         table = output_path(args.points_csv, "the per-point table",
                             [args.params, *args.bags], args.force)  # fmt: skip
-    recording = pipeline.read_bags(args.bags, model.robot, args.pair_tolerance, _log)
+    recording = pipeline.read_bags(args.bags, robot, args.pair_tolerance, _log)
     result = score(model, params, recording)
     for line in result.lines(", ".join(args.bags)):
         print(line)
@@ -359,6 +368,15 @@ def _add_force(p: argparse.ArgumentParser) -> None:
         "--force",
         action="store_true",
         help="replace existing outputs (never an input of the command)",
+    )
+
+
+def _add_pair_tolerance(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--pair-tolerance",
+        type=_tolerance,
+        default=PAIR_TOLERANCE_S,
+        help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
     )
 
 
@@ -453,12 +471,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="absolute tracker-frame residuals (O(N), default) or the seed's pairwise "
         "distances anchored on the CPA centres of circles 1, 3, 5 (O(N^2))",
     )
-    cal.add_argument(
-        "--pair-tolerance",
-        type=_tolerance,
-        default=PAIR_TOLERANCE_S,
-        help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
-    )
+    _add_pair_tolerance(cal)
     _add_joint_names(cal)
     cal.add_argument("-o", "--output", required=True, help="PARAMS.json to write")
     _add_force(cal)
@@ -466,12 +479,7 @@ def build_parser() -> argparse.ArgumentParser:
     diag = add("diagnose", cmd_diagnose, "sim-to-real gap diagnosis -> DIAGNOSIS.json + report")
     diag.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
     diag.add_argument("--holdout", nargs="*", metavar="BAG", help="hold-out bag(s): scored only")
-    diag.add_argument(
-        "--pair-tolerance",
-        type=_tolerance,
-        default=PAIR_TOLERANCE_S,
-        help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
-    )
+    _add_pair_tolerance(diag)
     _add_joint_names(diag)
     diag.add_argument(
         "-o",
@@ -507,6 +515,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     spl = add("split", cmd_split, "one bag -> a calibration bag and a hold-out bag")
     spl.add_argument("bag", metavar="BAG", help="the bag to split (.mcap)")
+    _add_joint_names(spl)
     spl.add_argument("--holdout", type=float, default=0.3, help="share held out (0.3)")
     spl.add_argument(
         "--by",
@@ -517,24 +526,15 @@ def build_parser() -> argparse.ArgumentParser:
     spl.add_argument("--seed", type=_count, default=0, help="seed of the random split (0)")
     spl.add_argument("--calibration-out", help="calibration bag (default BAG.cal.mcap)")
     spl.add_argument("--holdout-out", help="hold-out bag (default BAG.holdout.mcap)")
-    spl.add_argument(
-        "--pair-tolerance",
-        type=_tolerance,
-        default=PAIR_TOLERANCE_S,
-        help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
-    )
+    _add_pair_tolerance(spl)
     _add_force(spl)
 
     sco = add("score", cmd_score, "score a calibration on bags it was not fitted on")
     sco.add_argument("params", metavar="PARAMS.json")
     sco.add_argument("bags", nargs="+", metavar="BAG", help="bag(s) to score on (.mcap)")
     sco.add_argument("--points-csv", help="also write a per-point table (CSV, m)")
-    sco.add_argument(
-        "--pair-tolerance",
-        type=_tolerance,
-        default=PAIR_TOLERANCE_S,
-        help=f"point/joint-state pairing [s] (default {PAIR_TOLERANCE_S})",
-    )
+    _add_joint_names(sco)
+    _add_pair_tolerance(sco)
     _add_force(sco)
 
     rep = add("repair", cmd_repair, "recover the messages of a crashed recording -> a new bag")
