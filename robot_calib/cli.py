@@ -264,9 +264,11 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
 
 def cmd_split(args: argparse.Namespace) -> int:
-    """One bag -> a calibration bag and a hold-out bag (random share, or the last share)."""
+    """One bag -> a calibration bag and a hold-out bag (random share, or the last share),
+    both in one folder, written together (a failure leaves neither)."""
     from robot_calib import pipeline
-    from robot_calib.bag.csv_import import write_measurement_bag
+    from robot_calib.atomic import staged_outputs
+    from robot_calib.bag.csv_import import START_NS, write_measurements
     from robot_calib.measurements.split import holdout_mask
 
     robot = _robot(args)
@@ -276,18 +278,30 @@ def cmd_split(args: argparse.Namespace) -> int:
                Path(args.holdout_out or f"{stem}.holdout.mcap")]  # fmt: skip
     for out in outputs:
         output_path(out, "the split bag", [source], args.force)
-    if len(set(map(str, outputs))) < 2:
-        raise InputError("--calibration-out and --holdout-out name the same file")
+    if outputs[0].resolve() == outputs[1].resolve():
+        raise InputError(f"{outputs[1]}: --calibration-out and --holdout-out name one file")
+    if outputs[0].resolve().parent != outputs[1].resolve().parent:
+        raise InputError(f"{outputs[1]}: write both bags into one folder (they are written "
+                         "together)")  # fmt: skip
     recording = pipeline.read_bags([args.bag], robot, args.pair_tolerance, _log)
     held = holdout_mask(recording, args.holdout, args.by, args.seed)
-    for out, rows in zip(outputs, (~held, held)):
-        part = recording.subset(rows)
-        counts = write_measurement_bag(
-            out, part.poses.q, part.points, robot.joint_names, part.poses.time, args.force,
-            part.poses.direction,
-        )  # fmt: skip
-        print(f"{out}: {counts[next(iter(counts))]} poses "
-              f"({'hold-out' if rows is held else 'calibration'}, split {args.by})")  # fmt: skip
+    stamps = (recording.stamp_ns if recording.stamp_ns is not None
+              else START_NS + np.round(recording.poses.time * 1e9).astype(np.int64))  # fmt: skip
+    with staged_outputs(outputs[0].resolve().parent, args.force) as stage:
+        counts = [
+            write_measurements(
+                stage / out.name,
+                recording.poses.q[rows],
+                recording.points[rows],
+                robot.joint_names,
+                stamps[rows],
+                recording.poses.direction[rows],
+            )  # fmt: skip
+            for out, rows in zip(outputs, (~held, held))
+        ]
+    for out, role, count in zip(outputs, ("calibration", "hold-out"), counts):
+        print(f"{out}: {count[next(iter(count))]} poses ({role}, split {args.by}; the "
+              "original stamps and approach directions)")  # fmt: skip
     return 0
 
 

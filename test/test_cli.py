@@ -133,3 +133,27 @@ def test_bad_world_files_are_one_line_errors(tmp_path: Path, text: str, message:
     world.write_text(text + "\n")
     one_line_error(run("simulate", "--world", str(world), "-o", str(tmp_path / "x.mcap")), message)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["w.yaml"]
+
+
+def test_a_robot_file_edited_after_calibration_is_noticed(tmp_path: Path) -> None:
+    """PARAMS.json keeps the description's fingerprint: predicting with an edited robot
+    file is refused instead of silently wrong."""
+    robot = tmp_path / "my_kr5.yaml"
+    shutil.copy(ROBOTS / "kr5_sixx_r650.yaml", robot)
+    params, joints = tmp_path / "p.json", tmp_path / "j.csv"
+    sample = ROOT / "bags" / "paper_test3.mcap"
+    assert run("calibrate", str(sample), "--robot", str(robot), "-o", str(params)).returncode == 0
+    joints.write_text("q1,q2,q3,q4,q5,q6\n0,-1.5,1.5,0,0.7,0\n")
+    assert run("predict", str(params), "--joints", str(joints), "-o",
+               str(tmp_path / "a.csv")).returncode == 0  # fmt: skip
+    text = robot.read_text()
+    robot.write_text(
+        text.replace(
+            "name: kr5_sixx_r650",
+            "name: kr5_sixx_r650\nreading_to_joint: {sign: [1, 1, 1, -1, 1, 1]}",
+            1,
+        )
+    )  # noqa: E501
+    proc = run("predict", str(params), "--joints", str(joints), "-o", str(tmp_path / "b.csv"))
+    one_line_error(proc, "is not the one it was calibrated with")
+    assert not (tmp_path / "b.csv").exists()

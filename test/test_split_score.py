@@ -44,6 +44,11 @@ def test_split_keeps_every_measurement_once_with_its_direction(tmp_path: Path, b
         if by != "random":  # the last 30 % in order (= in time here)
             assert (part is parts[1]) == (min(index) >= 203)
     assert len({tuple(np.round(p, 12)) for part in parts for p in part.points}) == len(whole)
+    # The original stamps: the halves share none, so they can be used together.
+    stamps = [set(part.stamp_ns.tolist()) for part in parts]
+    assert not stamps[0] & stamps[1] and stamps[0] | stamps[1] == set(whole.stamp_ns.tolist())
+    proc = cli("calibrate", str(cal), str(hold), "-o", str(tmp_path / "both.json"))
+    assert proc.returncode == 0, proc.stderr
 
 
 def test_score_is_the_error_on_a_bag_not_fitted(tmp_path: Path) -> None:
@@ -71,8 +76,10 @@ def test_score_is_the_error_on_a_bag_not_fitted(tmp_path: Path) -> None:
     [
         (["split", str(SAMPLE), "--holdout", "1.5"], "a fraction between 0 and 1"),
         (["split", str(SAMPLE), "--calibration-out", "x.mcap", "--holdout-out", "x.mcap"],
-         "name the same file"),
+         "name one file"),
         (["score", "nosuch.json", str(SAMPLE)], "no such parameter file"),
+        (["split", str(SAMPLE), "--calibration-out", "a/x.mcap", "--holdout-out", "y.mcap"],
+         "no such folder"),
     ],
 )  # fmt: skip
 def test_bad_split_and_score_inputs(tmp_path: Path, args: list[str], message: str) -> None:

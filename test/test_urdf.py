@@ -226,3 +226,15 @@ def test_cli_calibrate_then_predict_with_a_urdf(tmp_path: Path) -> None:
     proc = subprocess.run([*run, "calibrate", "x.mcap", "--base-link", "base", "-o", "p.json"],
                           capture_output=True, text=True, check=False)  # fmt: skip
     assert proc.returncode == 2 and "--base-link/--tip-link need --robot FILE.urdf" in proc.stderr
+
+
+def test_a_typo_inside_a_joint_is_an_error(tmp_path: Path) -> None:
+    """`<axs>` for `<axis>`: the parser would fall back to the default axis silently."""
+    from robot_calib.errors import RobotDescriptionError
+    from robot_calib.kinematics.description import load_robot
+
+    text = (DATA / "kr5_sixx_r650.urdf").read_text().replace("<axis ", "<axs ", 1)
+    bad = tmp_path / "typo.urdf"
+    bad.write_text(text)
+    with pytest.raises(RobotDescriptionError, match='Unknown tag "axs"'):
+        load_robot(str(bad))

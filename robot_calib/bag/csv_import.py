@@ -23,7 +23,7 @@ from robot_calib.atomic import staged_outputs
 from robot_calib.bag.mcap_writer import BagWriter
 from robot_calib.bag.ros2_formats import typestore
 from robot_calib.errors import InputError
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.messages import (
     JOINT_STATE_TYPE,
     JOINT_STATES_TOPIC,
@@ -286,39 +286,52 @@ def write_measurement_bag(
     time: Array | None = None, force: bool = False, direction: Array | None = None,
 ) -> dict[str, int]:  # fmt: skip
     """A contract bag: one JointState and one PointStamped per pose, stamped in row order
-    (`time` [s] from the first pose, else 1 s apart). `direction` (n, J) +1/-1: each joint's
-    approach direction, written as the sign of the JointState velocity (the contract's
-    direct form), so that a subset of poses keeps the directions they were measured with.
-    Written under a temporary name and moved in when complete (an existing `output` is
-    replaced only with `force`): a failure or Ctrl-C leaves nothing. Returns messages per
-    topic."""
+    (`time` [s] from the first pose, else 1 s apart; see `write_measurements`). Written
+    under a temporary name and moved in when complete (an existing `output` is replaced
+    only with `force`): a failure or Ctrl-C leaves nothing. Returns messages per topic."""
     output = Path(output)
-    if len(joint_names) != q.shape[1]:
-        raise InputError(f"{q.shape[1]} joint columns for a robot with {len(joint_names)} joints")
     offsets = (np.arange(len(q)) * STEP_NS if time is None
                else np.round((time - time[0]) * 1e9).astype(np.int64))  # fmt: skip
     if np.any(np.diff(offsets) <= 0):
         raise InputError("time column must increase from row to row")
+    with staged_outputs(output.parent, force) as stage:
+        return write_measurements(
+            stage / output.name, q, points, joint_names, START_NS + offsets, direction
+        )
+
+
+def write_measurements(
+    path: Path, q: Array, points: Array, joint_names: tuple[str, ...], stamps_ns: IntArray,
+    direction: Array | None = None,
+) -> dict[str, int]:  # fmt: skip
+    """Write a contract bag at `path` directly (callers stage it): per pose i a JointState
+    (readings q (n, J) [rad] of `joint_names`) and a PointStamped (points (n, 3) [m],
+    tracker frame), both stamped stamps_ns[i] [ns] (non-decreasing). `direction` (n, J)
+    +1/-1: each joint's approach direction, written as the sign of the JointState velocity
+    (the contract's direct form), so that a subset of poses keeps the directions they were
+    measured with. Returns messages per topic."""
+    if len(joint_names) != q.shape[1]:
+        raise InputError(f"{q.shape[1]} joint columns for a robot with {len(joint_names)} joints")
     store = typestore(JOINT_STATE_TYPE, POINT_TYPE)
     types = store.types
-    with staged_outputs(output.parent, force) as stage, BagWriter(stage / output.name) as writer:
+    with BagWriter(path) as writer:
         writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         writer.add_topic(POINT_TOPIC, POINT_TYPE)
         velocities = np.zeros((len(q), 0)) if direction is None else np.asarray(direction)
-        for qi, pi, offset, vi in zip(q, points, offsets, velocities):
-            stamp_ns = START_NS + int(offset)
-            stamp = types["builtin_interfaces/msg/Time"](*ns_to_sec_nanosec(stamp_ns))
+        for qi, pi, stamp_ns, vi in zip(q, points, stamps_ns, velocities):
+            stamp = types["builtin_interfaces/msg/Time"](*ns_to_sec_nanosec(int(stamp_ns)))
             js = types[JOINT_STATE_TYPE](
                 header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
                 name=list(joint_names), position=qi, velocity=np.asarray(vi, dtype=float),
                 effort=np.empty(0),
             )  # fmt: skip
-            writer.write(JOINT_STATES_TOPIC, store.serialize_cdr(js, JOINT_STATE_TYPE), stamp_ns)
+            serialized = store.serialize_cdr(js, JOINT_STATE_TYPE)
+            writer.write(JOINT_STATES_TOPIC, serialized, int(stamp_ns))
             pt = types[POINT_TYPE](
                 header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=TRACKER_FRAME),
                 point=types["geometry_msgs/msg/Point"](*map(float, pi)),
             )
-            writer.write(POINT_TOPIC, store.serialize_cdr(pt, POINT_TYPE), stamp_ns + 1)
+            writer.write(POINT_TOPIC, store.serialize_cdr(pt, POINT_TYPE), int(stamp_ns) + 1)
         writer.close()
         return writer.counts
 

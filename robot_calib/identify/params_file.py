@@ -46,6 +46,7 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
         "format": FORMAT,
         "model": cal.name,
         "robot": robot.reference(),
+        "robot_fingerprint": robot.fingerprint(),
         "effects": [e.to_dict() for e in cal.model.effects],
         "parameters": records,
         "fixed": [
@@ -119,6 +120,12 @@ def params_from_dict(
     """The forward model and parameters of a PARAMS.json document; errors name `where`."""
     try:
         robot = load_robot(doc["robot"])
+        stored = doc.get("robot_fingerprint")
+        if stored is not None and stored != robot.fingerprint():
+            raise InputError(
+                f"robot description {doc['robot']} is not the one it was calibrated "
+                "with (edited or replaced since): its joints or kinematics differ"
+            )
         records = doc.get("effects", [])
         if not isinstance(records, list):
             raise InputError(f"{where}: 'effects' must be a list of effect records")

@@ -14,6 +14,7 @@ and ``M = diag(sign) + coupling``; without a `reading_to_joint` section M = I an
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -95,6 +96,18 @@ class RobotDescription:
         if self.reading_matrix is not None:
             out = np.linalg.solve(self.reading_matrix, out.T).T
         return out
+
+    def fingerprint(self) -> str:
+        """SHA-256 of what the model uses from this description (joint names, the DH/Hayati
+        table, limits, masses, the reading-to-joint mapping): PARAMS.json stores it, so a
+        description file edited or replaced after the calibration is noticed on reading."""
+        digest = hashlib.sha256("\n".join(self.joint_names).encode())
+        for array in (self.theta, self.d, self.a, self.alpha, self.beta, self.hayati,
+                      self.limits, self.link_mass, self.link_com, self.reading_matrix,
+                      self.reading_offset):  # fmt: skip
+            if array is not None:
+                digest.update(np.ascontiguousarray(array, dtype=float).tobytes())
+        return digest.hexdigest()
 
     def reference(self) -> str:
         """What `load_robot` needs to load it again: the built-in name, else the absolute

@@ -132,15 +132,18 @@ def load_urdf(
 
 
 @contextlib.contextmanager
-def _quiet_parser() -> Iterator[None]:
-    """urdf_parser_py prints unknown tags (ros2_control, gazebo, ...) to stderr: those are
-    not ours to judge, so they are dropped while parsing."""
+def _quiet_parser() -> Iterator[list[str]]:
+    """urdf_parser_py prints what it does not know to stderr: collect it instead (yields
+    the list). Extras at the top level (ros2_control, gazebo, ...) are not ours to judge;
+    an unknown tag or attribute inside a joint or link (a typo such as `<axs>`) is, since
+    the parser would silently fall back to a default axis or limit."""
     from urdf_parser_py.xml_reflection import core
 
     saved = core.on_error
-    core.on_error = lambda message: None
+    messages: list[str] = []
+    core.on_error = messages.append
     try:
-        yield
+        yield messages
     finally:
         core.on_error = saved
 
@@ -155,11 +158,14 @@ def read_urdf(path: str | Path) -> UrdfModel:
 
     try:
         text = path.read_bytes()
-        with _quiet_parser():
+        with _quiet_parser() as messages:
             urdf = URDF.from_xml_string(text)
     except Exception as exc:  # noqa: BLE001 - the parser raises bare Exception and others
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise RobotDescriptionError(f"{path}: not a valid URDF ({first})") from None
+    typos = [m for m in messages if "/joint[" in m or "/link[" in m]
+    if typos:
+        raise RobotDescriptionError(f"{path}: {typos[0]} (a typo? the parser would ignore it)")
     return _model(urdf, str(path))
 
 
