@@ -55,7 +55,7 @@ def _robot_table(robot: RobotDescription) -> str:
 def _robot(args: argparse.Namespace, name: str | None = None) -> RobotDescription:
     """--robot (or `name`) loaded, its joints renamed by --joint-names where given."""
     robot = load_robot(args.robot if name is None else name)
-    return with_joint_names(robot, args.joint_names) if args.joint_names else robot
+    return robot if args.joint_names is None else with_joint_names(robot, args.joint_names)
 
 
 def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: float) -> None:
@@ -311,7 +311,9 @@ def cmd_score(args: argparse.Namespace) -> int:
     from robot_calib.score import score, write_points_table
 
     model, params = _calibration(args)
-    robot = with_joint_names(model.robot, args.joint_names) if args.joint_names else model.robot
+    robot = model.robot
+    if args.joint_names is not None:
+        robot = with_joint_names(robot, args.joint_names)
     table = None
     if args.points_csv:
         table = output_path(args.points_csv, "the per-point table",
