@@ -188,3 +188,26 @@ def test_cli_unknown_robot_key_exits_2_with_one_line(tmp_path: Path) -> None:
     assert "did you mean 'mass'?" in lines[0]
     assert not out.exists()
     assert list(tmp_path.iterdir()) == [bad]
+
+
+@pytest.mark.parametrize("name", available_robots())
+def test_every_built_in_robot_names_its_source_and_calibrates_to_the_noise(name: str) -> None:
+    """Each built-in description says where its numbers come from, and a simulated robot of
+    it (nominal geometry, default noise) calibrates to the noise with no warning."""
+    import numpy as np
+
+    from robot_calib.identify.calibrate import calibrate
+    from robot_calib.measurements import recording_from_arrays
+    from robot_calib.poses import Poses
+    from robot_calib.sim.measure import physical_points
+    from robot_calib.sim.plans import random_plan
+    from robot_calib.sim.world import build_world
+
+    robot = load_robot(name)
+    assert robot.source and robot.source != name
+    world = build_world({"robot": name, "geometry": "nominal"}, name)
+    rng = np.random.default_rng(0)
+    q = random_plan(robot, 150, rng).q
+    points = physical_points(world, Poses.from_readings(q), rng)
+    cal = calibrate(recording_from_arrays(q, points), robot)
+    assert cal.accuracy.absolute_rms_mm < 0.02 and cal.warnings == ()
