@@ -12,11 +12,11 @@ the joint-2 sweep moves readings 2 and 3 together).
 from __future__ import annotations
 
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import robot_calib
 
 from robot_calib.accuracy import accuracy
 from robot_calib.errors import RobotDescriptionError
@@ -51,13 +51,7 @@ def coupled_yaml(folder: Path, mapping: str = MAPPING) -> Path:
 
 
 def run(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "robot_calib", *args],
-        capture_output=True,
-        text=True,
-        check=False,
-        cwd=cwd,
-    )
+    return robot_calib(*args, cwd=cwd)
 
 
 def test_the_mapping_is_diag_sign_plus_coupling(tmp_path: Path) -> None:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from cli_runner import robot_calib
 from mcap.reader import make_reader
 from rclpy.context import Context
 from rclpy.node import Node
@@ -68,14 +69,7 @@ def source(context: Context) -> Iterator[Node]:
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "robot_calib", *args],
-        capture_output=True,
-        text=True,
-        check=False,
-        cwd=REPO,
-        timeout=120,
-    )
+    return robot_calib(*args, cwd=REPO, timeout=120)
 
 
 def killed_writer_bag(path: Path, n: int) -> int:
