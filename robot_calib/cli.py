@@ -12,7 +12,7 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
@@ -236,9 +236,11 @@ def cmd_import(args: argparse.Namespace) -> int:
     return 0
 
 
-def _calibration(args: argparse.Namespace) -> tuple[KinematicModel, ParameterVector]:
-    """The model and parameters of args.params (PARAMS.json), checked (finite SI values)
-    and for the robot --robot names, if it names one."""
+def _calibration(
+    args: argparse.Namespace,
+) -> tuple[KinematicModel, ParameterVector, dict[str, Any]]:
+    """The model, parameters and document of args.params (PARAMS.json), checked (finite SI
+    values) and for the robot --robot names, if it names one."""
     from robot_calib.identify.params_file import load_params
     from robot_calib.predict import check_params_document
 
@@ -248,14 +250,14 @@ def _calibration(args: argparse.Namespace) -> tuple[KinematicModel, ParameterVec
         raise InputError(
             f"{args.params}: identified for robot {model.robot.name}, not --robot {args.robot}"
         )
-    return model, params
+    return model, params, doc
 
 
 def cmd_predict(args: argparse.Namespace) -> int:
     """Target positions (tracker frame, m) for the joint angles of JOINTS.csv."""
     from robot_calib.predict import read_joints_csv, write_points_csv
 
-    model, params = _calibration(args)
+    model, params, _ = _calibration(args)
     poses = read_joints_csv(args.joints, model.robot.n_joints)
     output = output_path(args.output, "POINTS.csv", [args.params, args.joints], args.force)
     write_points_csv(model.target_points(params, poses), output)
@@ -310,7 +312,13 @@ def cmd_score(args: argparse.Namespace) -> int:
     from robot_calib import pipeline
     from robot_calib.score import score, write_points_table
 
-    model, params = _calibration(args)
+    model, params, doc = _calibration(args)
+    fitted = [Path(str(p)) for p in doc.get("recordings", [])]  # as given then (maybe relative)
+    for bag in args.bags:
+        if any(Path(bag).resolve() == f.resolve() or Path(bag).name == f.name for f in fitted):
+            print(f"warning: {bag} looks like a bag this calibration was fitted on (same "
+                  "path or name): its score would be in-sample, not held out",
+                  file=sys.stderr)  # fmt: skip
     robot = model.robot
     if args.joint_names is not None:
         robot = with_joint_names(robot, args.joint_names)

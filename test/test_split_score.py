@@ -69,6 +69,9 @@ def test_score_is_the_error_on_a_bag_not_fitted(tmp_path: Path) -> None:
     assert len(rows) == len(held) and rows[0]["bag"] == str(hold)
     errors = np.array([float(r["error_m"]) for r in rows])
     assert errors.mean() * 1e3 == pytest.approx(acc.absolute_mean_mm, rel=1e-9)
+    assert "warning" not in proc.stderr
+    # Scoring the calibration bag itself says the score is in-sample.
+    assert "would be in-sample" in cli("score", str(params), str(cal)).stderr
 
 
 @pytest.mark.parametrize(
