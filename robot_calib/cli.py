@@ -207,6 +207,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         dif=split(args.dif),
         dif_sign=args.dif_sign,
         time=args.time,
+        temperature=args.temperature,
         separator=args.sep,
         decimal_comma=True if args.decimal_comma else None,
         angle_unit=args.angle_unit,
@@ -230,7 +231,12 @@ def cmd_import(args: argparse.Namespace) -> int:
     stamps = [t.time for t in tables if t.time is not None]
     if len(stamps) == len(tables):
         times = np.concatenate([s - s[0] + k * 1e6 for k, s in enumerate(stamps)])
-    counts = write_measurement_bag(output, q, points, robot.joint_names, times, args.force)
+    temperature = None
+    if all(t.temperature is not None for t in tables):
+        temperature = np.concatenate([t.temperature for t in tables if t.temperature is not None])
+    counts = write_measurement_bag(
+        output, q, points, robot.joint_names, times, args.force, temperature=temperature
+    )
     print(f"{output}: {', '.join(f'{k}={v}' for k, v in counts.items())} messages "
           f"({robot.name}, {fmt.angle_unit}/{fmt.length_unit} -> rad/m)")  # fmt: skip
     return 0
@@ -522,6 +528,10 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--dif", help="difference columns dx,dy,dz: point = point + sign * dif")
     imp.add_argument("--dif-sign", type=float, choices=(-1.0, 1.0), help="sign of --dif (+1/-1)")
     imp.add_argument("--time", help="time column [s] (default: poses 1 s apart)")
+    imp.add_argument(
+        "--temperature",
+        help="a temperature column [deg C]: written to /temperature (sensor_msgs/Temperature)",
+    )
     imp.add_argument("--sep", help="field separator (default ',')")
     imp.add_argument("--decimal-comma", action="store_true", help="numbers written 1,5")
     imp.add_argument("--angle-unit", choices=("deg", "rad"), help="joint angle unit")

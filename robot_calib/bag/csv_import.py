@@ -37,6 +37,8 @@ ANGLE_UNITS = {"deg": np.pi / 180.0, "rad": 1.0}
 LENGTH_UNITS = {"mm": 1e-3, "m": 1.0}
 START_NS = 1_700_000_000_000_000_000  # stamp of the first pose when the CSV has no time
 STEP_NS = 1_000_000_000
+TEMPERATURE_TOPIC = "/temperature"  # side data of an import (msgs_doc/temperature.md)
+TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
 
 
 @dataclass(frozen=True)
@@ -51,6 +53,7 @@ class CsvFormat:
     dif: tuple[str, str, str] | None = None
     dif_sign: float = 1.0
     time: str | None = None
+    temperature: str | None = None  # a temperature column [deg C], onto /temperature
     separator: str = ","
     decimal_comma: bool = False
     angle_unit: str = "rad"
@@ -80,13 +83,15 @@ PRESETS = {
 @dataclass(frozen=True)
 class ImportedTable:
     """q (n, J) [rad], points (n, 3) [m], time (n,) [s] or None; bad_rows: (line, why);
-    warnings: labelled 'warning: ...' lines about the whole file (e.g. units)."""
+    warnings: labelled 'warning: ...' lines about the whole file (e.g. units);
+    temperature (n,) [deg C] or None."""
 
     q: Array
     points: Array
     time: Array | None
     bad_rows: tuple[tuple[int, str], ...]
     warnings: tuple[str, ...] = ()
+    temperature: Array | None = None
 
 
 MAX_TRACKER_RANGE_M = 50.0  # beyond a laser tracker's range: millimetres read as metres
@@ -230,7 +235,8 @@ def read_measurement_csv(
         n_fields, of = int(counts.argmax()), "most rows have"
     refs = (
         list(fmt.joints) + list(fmt.point) + list(fmt.dif or ()) + ([fmt.time] if fmt.time else [])
-    )
+        + ([fmt.temperature] if fmt.temperature else [])
+    )  # fmt: skip
     cols = [_column(r, header, path) for r in refs]
     if max(cols) >= n_fields:
         raise InputError(f"{path}: no column {max(cols)} ({of} {n_fields} fields)")
@@ -271,19 +277,22 @@ def read_measurement_csv(
     if fmt.dif:
         points = points + fmt.dif_sign * table[:, n_j + 3 : n_j + 6]
     points = points * LENGTH_UNITS[fmt.length_unit]
-    time = table[:, -1] if fmt.time else None
+    after = n_j + 3 + (3 if fmt.dif else 0)  # the optional columns follow, in this order
+    time = table[:, after] if fmt.time else None
+    temperature = table[:, after + (1 if fmt.time else 0)] if fmt.temperature else None
     if time is not None and np.any(np.diff(time) <= 0):
         k = int(np.flatnonzero(np.diff(time) <= 0)[0]) + 1
         raise InputError(
             f"{path}:{lines[k]}: time {time[k]:g} s does not increase (previous row: "
             f"{time[k - 1]:g} s); rows must be in measurement order"
         )
-    return ImportedTable(q, points, time, tuple(bad), tuple(warnings))
+    return ImportedTable(q, points, time, tuple(bad), tuple(warnings), temperature)
 
 
 def write_measurement_bag(
     output: str | Path, q: Array, points: Array, joint_names: tuple[str, ...],
     time: Array | None = None, force: bool = False, direction: Array | None = None,
+    temperature: Array | None = None,
 ) -> dict[str, int]:  # fmt: skip
     """A contract bag: one JointState and one PointStamped per pose, stamped in row order
     (`time` [s] from the first pose, else 1 s apart; see `write_measurements`). Written
@@ -296,29 +305,34 @@ def write_measurement_bag(
         raise InputError("time column must increase from row to row")
     with staged_outputs(output.parent, force) as stage:
         return write_measurements(
-            stage / output.name, q, points, joint_names, START_NS + offsets, direction
-        )
+            stage / output.name, q, points, joint_names, START_NS + offsets, direction,
+            temperature,
+        )  # fmt: skip
 
 
 def write_measurements(
     path: Path, q: Array, points: Array, joint_names: tuple[str, ...], stamps_ns: IntArray,
-    direction: Array | None = None,
+    direction: Array | None = None, temperature: Array | None = None,
 ) -> dict[str, int]:  # fmt: skip
     """Write a contract bag at `path` directly (callers stage it): per pose i a JointState
     (readings q (n, J) [rad] of `joint_names`) and a PointStamped (points (n, 3) [m],
     tracker frame), both stamped stamps_ns[i] [ns] (non-decreasing). `direction` (n, J)
     +1/-1: each joint's approach direction, written as the sign of the JointState velocity
     (the contract's direct form), so that a subset of poses keeps the directions they were
-    measured with. Returns messages per topic."""
+    measured with. `temperature` (n,) [deg C]: a sensor_msgs/Temperature per pose on
+    TEMPERATURE_TOPIC, stamped as the pose (side data, msgs_doc/temperature.md). Returns
+    messages per topic."""
     if len(joint_names) != q.shape[1]:
         raise InputError(f"{q.shape[1]} joint columns for a robot with {len(joint_names)} joints")
-    store = typestore(JOINT_STATE_TYPE, POINT_TYPE)
+    store = typestore(JOINT_STATE_TYPE, POINT_TYPE, TEMPERATURE_TYPE)
     types = store.types
     with BagWriter(path) as writer:
         writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         writer.add_topic(POINT_TOPIC, POINT_TYPE)
+        if temperature is not None:
+            writer.add_topic(TEMPERATURE_TOPIC, TEMPERATURE_TYPE)
         velocities = np.zeros((len(q), 0)) if direction is None else np.asarray(direction)
-        for qi, pi, stamp_ns, vi in zip(q, points, stamps_ns, velocities):
+        for k, (qi, pi, stamp_ns, vi) in enumerate(zip(q, points, stamps_ns, velocities)):
             stamp = types["builtin_interfaces/msg/Time"](*ns_to_sec_nanosec(int(stamp_ns)))
             js = types[JOINT_STATE_TYPE](
                 header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
@@ -332,6 +346,13 @@ def write_measurements(
                 point=types["geometry_msgs/msg/Point"](*map(float, pi)),
             )
             writer.write(POINT_TOPIC, store.serialize_cdr(pt, POINT_TYPE), int(stamp_ns) + 1)
+            if temperature is not None:  # side data, in time order with the pose
+                msg = types[TEMPERATURE_TYPE](
+                    header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
+                    temperature=float(temperature[k]), variance=0.0,
+                )  # fmt: skip
+                serialized = store.serialize_cdr(msg, TEMPERATURE_TYPE)
+                writer.write(TEMPERATURE_TOPIC, serialized, int(stamp_ns) + 2)
         writer.close()
         return writer.counts
 
