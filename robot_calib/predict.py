@@ -9,21 +9,15 @@ from __future__ import annotations
 
 import csv
 import io
-import math
 import re
-from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from robot_calib.atomic import write_text_atomic
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
-from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.poses import Poses
-
-SI_UNITS = ("m", "rad", "1", "1/s", "rad/(N m)")  # the units parameters are stored in
 
 
 def read_joints_csv(path: str | Path, n_joints: int) -> Poses:
@@ -84,25 +78,3 @@ def write_points_csv(points: Array, path: str | Path) -> None:
     writer.writerow(["x", "y", "z"])
     writer.writerows([[repr(float(v)) for v in p] for p in points])
     write_text_atomic(path, text.getvalue())
-
-
-def check_params_document(
-    doc: Mapping[str, Any], params: ParameterVector, where: str | Path
-) -> None:
-    """InputError (one line, naming `where` and the parameter) when a PARAMS.json record
-    has a value, nominal or 1-sigma that is not a finite number, or a unit other than the
-    SI unit the model declares for it (m, rad, 1, 1/s, rad/(N m)): such a file was edited
-    or written by another tool, and predicting from it would be silently wrong."""
-    units = {p.name: p.unit for p in params.parameters}
-    for record in doc.get("parameters", []):
-        name = record.get("name")
-        for key in ("value", "nominal", "std"):
-            value = record.get(key, 0.0)
-            if not isinstance(value, int | float) or not math.isfinite(value):
-                raise InputError(f"{where}: parameter {name} {key} {value!r} is not finite")
-        unit = record.get("unit")
-        if unit != units.get(name) or unit not in SI_UNITS:
-            raise InputError(
-                f"{where}: parameter {name} has unit {unit!r}, expected {units.get(name)!r}: "
-                f"parameter files are in SI ({', '.join(SI_UNITS)})"
-            )

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot_calib.errors import InputError
+from robot_calib.identify.outliers import OUTLIER_K
 from robot_calib.kinematics.frames import Array
 
 
@@ -114,7 +115,7 @@ def _circle_through(a: Array, b: Array, c: Array) -> Circle | None:
 def robust_circle(
     points: Array,
     where: str = "sweep",
-    k: float = 8.0,
+    k: float = OUTLIER_K,
     n_trials: int = 12,
     max_fraction: float = 0.1,
 ) -> tuple[Circle, NDArray[np.bool_]]:

@@ -6,6 +6,7 @@ Values are SI (m, rad); the summary printed for people is in mm and deg, labelle
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -25,6 +26,7 @@ if TYPE_CHECKING:  # light at run time: reading a parameter file needs no scipy
     from robot_calib.measurements import Recording
 
 FORMAT = "robot_calib.params/1"
+SI_UNITS = ("m", "rad", "1", "1/s", "rad/(N m)")  # the units parameters are stored in
 
 
 def human_value(name: str, unit: str, value: float) -> tuple[float, str]:
@@ -140,7 +142,30 @@ def params_from_dict(
         raise InputError(f"{where}: malformed parameter file ({exc})") from None
     except RobotCalibError as exc:
         raise InputError(f"{where}: {exc}") from None
+    check_params_document(doc, model.parameters(), where)
     return model, params
+
+
+def check_params_document(
+    doc: Mapping[str, Any], params: ParameterVector, where: str | Path
+) -> None:
+    """InputError (one line, naming `where` and the parameter) when a PARAMS.json record
+    has a value, nominal or 1-sigma that is not a finite number, or a unit other than the
+    SI unit the model declares for it (m, rad, 1, 1/s, rad/(N m)): such a file was edited
+    or written by another tool, and predicting from it would be silently wrong."""
+    units = {p.name: p.unit for p in params.parameters}
+    for record in doc.get("parameters", []):
+        name = record.get("name")
+        for key in ("value", "nominal", "std"):
+            value = record.get(key, 0.0)
+            if not isinstance(value, int | float) or not math.isfinite(value):
+                raise InputError(f"{where}: parameter {name} {key} {value!r} is not finite")
+        unit = record.get("unit")
+        if unit != units.get(name) or unit not in SI_UNITS:
+            raise InputError(
+                f"{where}: parameter {name} has unit {unit!r}, expected {units.get(name)!r}: "
+                f"parameter files are in SI ({', '.join(SI_UNITS)})"
+            )
 
 
 def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict[str, Any]]:
