@@ -43,7 +43,7 @@ from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
-from robot_calib.model import TARGET, KinematicModel
+from robot_calib.model import KinematicModel
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE, Poses
 
 BASE_MODELS = ("nominal", "cpa", "geometric")
@@ -230,8 +230,8 @@ def calibrate(
     """
     base, effects = parse_model(model_spec, robot, ecc_order)
     if base != "cpa":  # too few measurements: say so before any work
-        free = KinematicModel(robot, tuple(effects)).parameters().free
-        n_free = len(TARGET) + 6 if base == "nominal" else int(free.sum())
+        fitted = KinematicModel(robot, tuple(effects)).parameters().parameters
+        n_free = sum(p.free and (base != "nominal" or p.group == "frames") for p in fitted)
         # repeats of one pose add noise, not information: count distinct poses
         steps = np.round(recording.poses.q / JOINT_CHANGE_TOLERANCE)
         n_poses = len(np.unique(steps, axis=0)) if len(steps) else 0
