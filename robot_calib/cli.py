@@ -213,6 +213,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         angle_unit=args.angle_unit,
         length_unit=args.length_unit,
         header=False if args.no_header else None,
+        targets=_target_columns(args.target) if args.target else None,
     )
     if len(fmt.point) != 3 or (fmt.dif is not None and len(fmt.dif) != 3):
         raise InputError("--point and --dif take three columns: x,y,z")
@@ -234,12 +235,35 @@ def cmd_import(args: argparse.Namespace) -> int:
     temperature = None
     if all(t.temperature is not None for t in tables):
         temperature = np.concatenate([t.temperature for t in tables if t.temperature is not None])
+    extra = {
+        name: np.concatenate([t.extra_points[name] for t in tables]) for name, _ in fmt.targets
+    }
     counts = write_measurement_bag(
-        output, q, points, robot.joint_names, times, args.force, temperature=temperature
-    )
+        output, q, points, robot.joint_names, times, args.force, temperature=temperature,
+        extra_points=extra,
+    )  # fmt: skip
     print(f"{output}: {', '.join(f'{k}={v}' for k, v in counts.items())} messages "
           f"({robot.name}, {fmt.angle_unit}/{fmt.length_unit} -> rad/m)")  # fmt: skip
     return 0
+
+
+def _target_columns(specs: list[str]) -> tuple[tuple[str, tuple[str, str, str]], ...]:
+    """--target NAME:X,Y,Z (repeated) -> ((NAME, (X, Y, Z)), ...); InputError on a bad one."""
+    from robot_calib.poses import TARGET_NAME
+
+    out: list[tuple[str, tuple[str, str, str]]] = []
+    for spec in specs:
+        name, _, columns = spec.partition(":")
+        cols = tuple(columns.split(","))
+        if not TARGET_NAME.fullmatch(name) or len(cols) != 3 or not all(cols):
+            raise InputError(
+                f"--target {spec}: expected NAME:X,Y,Z (NAME letters, digits, underscores, "
+                "starting with a letter; three columns)"
+            )
+        if name in (n for n, _ in out):
+            raise InputError(f"--target {spec}: target {name} given twice")
+        out.append((name, (cols[0], cols[1], cols[2])))
+    return tuple(out)
 
 
 def _calibration(
@@ -526,6 +550,11 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--dif", help="difference columns dx,dy,dz: point = point + sign * dif")
     imp.add_argument("--dif-sign", type=float, choices=(-1.0, 1.0), help="sign of --dif (+1/-1)")
     imp.add_argument("--time", help="time column [s] (default: poses 1 s apart)")
+    imp.add_argument(
+        "--target", action="append", metavar="NAME:X,Y,Z",
+        help="a further target (SMR) measured at each pose: its name and x,y,z columns, onto "
+        "/laser_tracker/NAME/point (repeat per target; an empty cell: not measured there)",
+    )  # fmt: skip
     imp.add_argument(
         "--temperature",
         help="a temperature column [deg C]: written to /temperature (sensor_msgs/Temperature)",

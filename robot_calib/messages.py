@@ -6,6 +6,7 @@ Duck-typed on field names, so they serve rclpy messages and messages decoded fro
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import numpy as np
@@ -18,6 +19,18 @@ POINT_TOPIC = "/laser_tracker/point"
 TRACKER_FRAME = "laser_tracker"
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 POINT_TYPE = "geometry_msgs/msg/PointStamped"
+TARGET_TOPIC = re.compile(r"/laser_tracker/([A-Za-z][A-Za-z0-9_]*)/point")
+
+
+def target_topic(name: str) -> str:
+    """The topic of target `name` ('' = the contract's POINT_TOPIC; msgs_doc/targets.md)."""
+    return POINT_TOPIC if not name else f"/laser_tracker/{name}/point"
+
+
+def target_topic_name(topic: str) -> str | None:
+    """The target name of a further target's topic /laser_tracker/NAME/point, else None."""
+    match = TARGET_TOPIC.fullmatch(topic)
+    return match.group(1) if match else None
 
 
 def stamp_to_ns(stamp: Any) -> int:

@@ -12,11 +12,15 @@ Readings enter the DH table only as the robot's joint variables
 Parameter layout (names are the public vocabulary of PARAMS.json):
   thetaJ, dJ, aJ, alphaJ [rad, m, m, rad] for every joint, betaJ [rad] for Hayati joints;
   base2tracker_x/y/z [m], base2tracker_roll/pitch/yaw [rad] (Rz(yaw) Ry(pitch) Rx(roll));
-  target_x/y/z [m] in the flange frame (DH frame 6).
+  target_x/y/z [m] in the flange frame (DH frame 6); with several targets on the flange
+  (msgs_doc/targets.md) each further target NAME has its own target_NAME_x/y/z, all sharing
+  the tracker pose. Which target a measurement is of is `Poses.target` (an index into the
+  model's `targets`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,7 +31,7 @@ from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, chain, point_derivatives
 from robot_calib.kinematics.frames import Array, matrix_to_rpy, rot_x, rot_y, rot_z
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
-from robot_calib.poses import Poses
+from robot_calib.poses import PRIMARY_TARGET, Poses
 
 BASE_TRANSLATION = ("base2tracker_x", "base2tracker_y", "base2tracker_z")
 BASE_ROTATION = ("base2tracker_roll", "base2tracker_pitch", "base2tracker_yaw")
@@ -39,15 +43,28 @@ REASON_BASE = "redundant with base2tracker (rotation about and shift along joint
 REASON_TARGET = "redundant with the target offset (a point target on the last link)"
 
 
+def target_parameters(name: str) -> tuple[str, str, str]:
+    """Names of the x, y, z offset parameters of target `name` ('' = the contract's single
+    target: target_x/y/z; else target_NAME_x/y/z)."""
+    if name == PRIMARY_TARGET:
+        return TARGET
+    return (f"target_{name}_x", f"target_{name}_y", f"target_{name}_z")
+
+
 def geometric_parameters(
     robot: RobotDescription,
     base2tracker: tuple[float, float, float, float, float, float] = (0.0,) * 6,
     target_in_flange: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    targets: tuple[str, ...] = (PRIMARY_TARGET,),
+    offsets: Mapping[str, tuple[float, float, float]] | None = None,
 ) -> ParameterVector:
     """The nominal geometric parameter vector of `robot`.
 
     base2tracker : (x, y, z [m], roll, pitch, yaw [rad]) of the robot base in the tracker.
-    target_in_flange : target centre in the flange frame [m].
+    target_in_flange : the first target's centre in the flange frame [m].
+    targets : the names of the targets measured (the first is the one of
+      `target_in_flange`); offsets : the others' centres in the flange frame [m] (default
+      that of the first).
     Parameters that a point target and a free tracker pose can never separate are fixed,
     each with its reason (the data-driven identifiability check comes on top).
     """
@@ -69,8 +86,10 @@ def geometric_parameters(
     for name, value in zip(BASE_TRANSLATION + BASE_ROTATION, base2tracker):
         unit = "m" if name in BASE_TRANSLATION else "rad"
         params.append(Parameter(name, unit, float(value), group="frames"))
-    for name, value in zip(TARGET, target_in_flange):
-        params.append(Parameter(name, "m", float(value), group="frames"))
+    for k, target in enumerate(targets):
+        xyz = target_in_flange if k == 0 else (offsets or {}).get(target, target_in_flange)
+        for name, value in zip(target_parameters(target), xyz):
+            params.append(Parameter(name, "m", float(value), group="frames"))
     return ParameterVector(params)
 
 
@@ -125,10 +144,12 @@ def housing_transforms(housing: Array) -> Array:
 
 @dataclass(frozen=True)
 class KinematicModel:
-    """Forward model and analytic Jacobian: a robot description plus effects."""
+    """Forward model and analytic Jacobian: a robot description plus effects, measured at
+    the targets `targets` (names; measurement i is of target `poses.target[i]`)."""
 
     robot: RobotDescription
     effects: tuple[Effect, ...] = ()
+    targets: tuple[str, ...] = (PRIMARY_TARGET,)
 
     def __post_init__(self) -> None:
         for effect in self.effects:
@@ -142,16 +163,28 @@ class KinematicModel:
         self,
         base2tracker: tuple[float, float, float, float, float, float] = (0.0,) * 6,
         target_in_flange: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        offsets: Mapping[str, tuple[float, float, float]] | None = None,
     ) -> ParameterVector:
-        """Nominal geometric parameters followed by every effect's (nominal 0)."""
-        params = geometric_parameters(self.robot, base2tracker, target_in_flange)
+        """Nominal geometric parameters followed by every effect's (nominal 0); the first
+        target at `target_in_flange`, the others at `offsets` (default: the same) [m]."""
+        params = geometric_parameters(
+            self.robot, base2tracker, target_in_flange, self.targets, offsets
+        )
         for effect in self.effects:
             params = params.concat(ParameterVector(effect.parameters(self.robot)))
         return params
 
     def with_effects(self, *effects: Effect) -> KinematicModel:
         """The same robot with `effects` added."""
-        return KinematicModel(self.robot, self.effects + tuple(effects))
+        return KinematicModel(self.robot, self.effects + tuple(effects), self.targets)
+
+    def with_targets(self, targets: tuple[str, ...]) -> KinematicModel:
+        """The same robot and effects measured at the targets named `targets`."""
+        return KinematicModel(self.robot, self.effects, tuple(targets))
+
+    def target_offsets(self, params: ParameterVector) -> Array:
+        """Every target's centre in the flange frame, shape (T, 3) [m], in `targets` order."""
+        return np.array([[params[k] for k in target_parameters(t)] for t in self.targets])
 
     def _nominal_rows(self, params: ParameterVector) -> dict[str, Array]:
         n = self.robot.n_joints
@@ -241,9 +274,15 @@ class KinematicModel:
             ch.rows,
             ch.scale,
         )
-        target = np.array([params[k] for k in TARGET])
+        which = poses.target_index
+        if len(which) and (which.min() < 0 or which.max() >= len(self.targets)):
+            raise InputError(
+                f"measurements of target {int(which.max())} but the model has "
+                f"{len(self.targets)} target(s) {list(self.targets)}"
+            )
+        target = self.target_offsets(params)[which]  # (n, 3) flange frame
         flange = frames[:, -1]
-        p_in_base = flange[:, :3, :3] @ target + flange[:, :3, 3]
+        p_in_base = np.einsum("nab,nb->na", flange[:, :3, :3], target) + flange[:, :3, 3]
         b2t = self.base2tracker(params)
         rot = b2t[:3, :3]
         points = p_in_base @ rot.T + b2t[:3, 3]
@@ -276,8 +315,10 @@ class KinematicModel:
         for name, axis_vec in axes.items():
             jac[:, :, params.index(name)] = np.cross(axis_vec, lever)
         flange_in_tracker = rot @ flange[:, :3, :3]  # (n, 3, 3)
-        for axis, name in enumerate(TARGET):
-            jac[:, :, params.index(name)] = flange_in_tracker[:, :, axis]
+        for k, name in enumerate(self.targets):
+            rows = which == k
+            for axis, pname in enumerate(target_parameters(name)):
+                jac[rows, :, params.index(pname)] = flange_in_tracker[rows, :, axis]
 
         d_housing = None
         if housing is not None:

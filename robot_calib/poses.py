@@ -8,6 +8,7 @@ at the first pose every direction is +1.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,6 +18,8 @@ from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array, IntArray
 
 JOINT_CHANGE_TOLERANCE = 1e-4  # rad, contract default
+PRIMARY_TARGET = ""  # name of the contract's single target (/laser_tracker/point)
+TARGET_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")  # a further target's name: a topic token
 
 
 def next_direction(
@@ -51,11 +54,22 @@ class Poses:
     q : shape (n, J), joint readings [rad]
     direction : shape (n, J), approach direction +1/-1 of every joint
     time : shape (n,), seconds since the first measurement of the recording [s]
+    target : shape (n,), which target (SMR) on the flange each measurement is of: an index
+      into the model's and recording's target names (None: all the first target, the
+      contract's single `/laser_tracker/point`; msgs_doc/targets.md)
     """
 
     q: Array
     direction: Array
     time: Array
+    target: IntArray | None = None
+
+    @property
+    def target_index(self) -> IntArray:
+        """(n,) target of each measurement (zeros when `target` is None)."""
+        if self.target is None:
+            return np.zeros(len(self), dtype=np.int64)
+        return self.target
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
@@ -79,4 +93,5 @@ class Poses:
 
     def subset(self, index: slice | IntArray | NDArray[np.bool_]) -> Poses:
         """The poses selected by an index or boolean mask (directions kept as recorded)."""
-        return Poses(self.q[index], self.direction[index], self.time[index])
+        target = None if self.target is None else self.target[index]
+        return Poses(self.q[index], self.direction[index], self.time[index], target)

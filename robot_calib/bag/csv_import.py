@@ -12,7 +12,8 @@ column, else 1 s apart) and each point carries its joint state's stamp.
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +32,7 @@ from robot_calib.messages import (
     POINT_TYPE,
     TRACKER_FRAME,
     ns_to_sec_nanosec,
+    target_topic,
 )
 
 ANGLE_UNITS = {"deg": np.pi / 180.0, "rad": 1.0}
@@ -54,6 +56,9 @@ class CsvFormat:
     dif_sign: float = 1.0
     time: str | None = None
     temperature: str | None = None  # a temperature column [deg C], onto /temperature
+    # further targets measured at each pose: (NAME, (x, y, z) columns), each onto
+    # /laser_tracker/NAME/point (msgs_doc/targets.md); an empty cell: not measured there
+    targets: tuple[tuple[str, tuple[str, str, str]], ...] = ()
     separator: str = ","
     decimal_comma: bool = False
     angle_unit: str = "rad"
@@ -84,7 +89,8 @@ PRESETS = {
 class ImportedTable:
     """q (n, J) [rad], points (n, 3) [m], time (n,) [s] or None; bad_rows: (line, why);
     warnings: labelled 'warning: ...' lines about the whole file (e.g. units);
-    temperature (n,) [deg C] or None."""
+    temperature (n,) [deg C] or None; extra_points {NAME: (n, 3) [m], NaN where that
+    target was not measured} of the further targets."""
 
     q: Array
     points: Array
@@ -92,6 +98,7 @@ class ImportedTable:
     bad_rows: tuple[tuple[int, str], ...]
     warnings: tuple[str, ...] = ()
     temperature: Array | None = None
+    extra_points: Mapping[str, Array] = field(default_factory=dict)
 
 
 MAX_TRACKER_RANGE_M = 50.0  # beyond a laser tracker's range: millimetres read as metres
@@ -237,6 +244,8 @@ def read_measurement_csv(
         list(fmt.joints) + list(fmt.point) + list(fmt.dif or ()) + ([fmt.time] if fmt.time else [])
         + ([fmt.temperature] if fmt.temperature else [])
     )  # fmt: skip
+    n_required = len(refs)  # the further targets' cells may be empty (not measured)
+    refs += [c for _, triple in fmt.targets for c in triple]
     cols = [_column(r, header, path) for r in refs]
     if max(cols) >= n_fields:
         raise InputError(f"{path}: no column {max(cols)} ({of} {n_fields} fields)")
@@ -256,11 +265,11 @@ def read_measurement_csv(
         if fmt.decimal_comma:
             fields = [f.replace(".", "").replace(",", ".") for f in fields]
         try:
-            numbers = [float(f) for f in fields]
+            numbers = [float(f) if f or k < n_required else np.nan for k, f in enumerate(fields)]
         except ValueError:
             bad.append((line, f"not a number in {fields}"))
             continue
-        if not np.all(np.isfinite(numbers)):
+        if not np.all(np.isfinite(numbers[:n_required])):
             bad.append((line, "value not finite"))
             continue
         values.append(numbers)
@@ -280,19 +289,31 @@ def read_measurement_csv(
     after = n_j + 3 + (3 if fmt.dif else 0)  # the optional columns follow, in this order
     time = table[:, after] if fmt.time else None
     temperature = table[:, after + (1 if fmt.time else 0)] if fmt.temperature else None
+    extra = {
+        name: table[:, n_required + 3 * k : n_required + 3 * k + 3] * LENGTH_UNITS[fmt.length_unit]
+        for k, (name, _) in enumerate(fmt.targets)
+    }
+    for name, xyz in extra.items():
+        partial = np.isnan(xyz).any(axis=1) & ~np.isnan(xyz).all(axis=1)
+        if partial.any():
+            k = int(np.flatnonzero(partial)[0])
+            raise InputError(
+                f"{path}:{lines[k]}: target {name} has some of its x, y, z cells empty: a "
+                "target is measured whole or not at all"
+            )
     if time is not None and np.any(np.diff(time) <= 0):
         k = int(np.flatnonzero(np.diff(time) <= 0)[0]) + 1
         raise InputError(
             f"{path}:{lines[k]}: time {time[k]:g} s does not increase (previous row: "
             f"{time[k - 1]:g} s); rows must be in measurement order"
         )
-    return ImportedTable(q, points, time, tuple(bad), tuple(warnings), temperature)
+    return ImportedTable(q, points, time, tuple(bad), tuple(warnings), temperature, extra)
 
 
 def write_measurement_bag(
     output: str | Path, q: Array, points: Array, joint_names: tuple[str, ...],
     time: Array | None = None, force: bool = False, direction: Array | None = None,
-    temperature: Array | None = None,
+    temperature: Array | None = None, extra_points: Mapping[str, Array] | None = None,
 ) -> dict[str, int]:  # fmt: skip
     """A contract bag: one JointState and one PointStamped per pose, stamped in row order
     (`time` [s] from the first pose, else 1 s apart; see `write_measurements`). Written
@@ -306,13 +327,14 @@ def write_measurement_bag(
     with staged_outputs(output.parent, force) as stage:
         return write_measurements(
             stage / output.name, q, points, joint_names, START_NS + offsets, direction,
-            temperature,
+            temperature, extra_points,
         )  # fmt: skip
 
 
 def write_measurements(
     path: Path, q: Array, points: Array, joint_names: tuple[str, ...], stamps_ns: IntArray,
     direction: Array | None = None, temperature: Array | None = None,
+    extra_points: Mapping[str, Array] | None = None,
 ) -> dict[str, int]:  # fmt: skip
     """Write a contract bag at `path` directly (callers stage it): per pose i a JointState
     (readings q (n, J) [rad] of `joint_names`) and a PointStamped (points (n, 3) [m],
@@ -320,8 +342,10 @@ def write_measurements(
     +1/-1: each joint's approach direction, written as the sign of the JointState velocity
     (the contract's direct form), so that a subset of poses keeps the directions they were
     measured with. `temperature` (n,) [deg C]: a sensor_msgs/Temperature per pose on
-    TEMPERATURE_TOPIC, stamped as the pose (side data, msgs_doc/temperature.md). Returns
-    messages per topic."""
+    TEMPERATURE_TOPIC, stamped as the pose (side data, msgs_doc/temperature.md).
+    `extra_points` {NAME: (n, 3) [m]}: further targets measured at the same poses, each on
+    /laser_tracker/NAME/point stamped as its pose (a NaN row: not measured at that pose;
+    msgs_doc/targets.md). Returns messages per topic."""
     if len(joint_names) != q.shape[1]:
         raise InputError(f"{q.shape[1]} joint columns for a robot with {len(joint_names)} joints")
     store = typestore(JOINT_STATE_TYPE, POINT_TYPE, TEMPERATURE_TYPE)
@@ -331,6 +355,11 @@ def write_measurements(
         writer.add_topic(POINT_TOPIC, POINT_TYPE)
         if temperature is not None:
             writer.add_topic(TEMPERATURE_TOPIC, TEMPERATURE_TYPE)
+        extra = {
+            target_topic(k): np.asarray(v, dtype=float) for k, v in (extra_points or {}).items()
+        }
+        for topic in extra:
+            writer.add_topic(topic, POINT_TYPE)
         velocities = np.zeros((len(q), 0)) if direction is None else np.asarray(direction)
         for k, (qi, pi, stamp_ns, vi) in enumerate(zip(q, points, stamps_ns, velocities)):
             stamp = types["builtin_interfaces/msg/Time"](*ns_to_sec_nanosec(int(stamp_ns)))
@@ -341,11 +370,14 @@ def write_measurements(
             )  # fmt: skip
             serialized = store.serialize_cdr(js, JOINT_STATE_TYPE)
             writer.write(JOINT_STATES_TOPIC, serialized, int(stamp_ns))
-            pt = types[POINT_TYPE](
-                header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=TRACKER_FRAME),
-                point=types["geometry_msgs/msg/Point"](*map(float, pi)),
-            )
-            writer.write(POINT_TOPIC, store.serialize_cdr(pt, POINT_TYPE), int(stamp_ns) + 1)
+            for topic, xyz in ((POINT_TOPIC, pi), *((t, v[k]) for t, v in extra.items())):
+                if not np.all(np.isfinite(xyz)):
+                    continue  # this target not measured at this pose
+                pt = types[POINT_TYPE](
+                    header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=TRACKER_FRAME),
+                    point=types["geometry_msgs/msg/Point"](*map(float, xyz)),
+                )
+                writer.write(topic, store.serialize_cdr(pt, POINT_TYPE), int(stamp_ns) + 1)
             if temperature is not None:  # side data, in time order with the pose
                 msg = types[TEMPERATURE_TYPE](
                     header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),

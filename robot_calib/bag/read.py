@@ -30,8 +30,10 @@ from robot_calib.messages import (
     TRACKER_FRAME,
     joint_positions,
     stamp_to_ns,
+    target_topic_name,
     velocity_signs,
 )
+from robot_calib.poses import PRIMARY_TARGET
 
 
 def _check_topic(reader: BagReader, topic: str, type_name: str) -> None:
@@ -67,6 +69,7 @@ def read_bag(
     js_q: list[Array] = []
     js_v: list[Array] = []
     pts: list[Array] = []
+    pt_target: list[int] = []
     frames: set[str] = set()
     names_seen: tuple[str, ...] = robot.joint_names
     try:
@@ -79,7 +82,15 @@ def read_bag(
     with reader:
         _check_topic(reader, JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         _check_topic(reader, POINT_TOPIC, POINT_TYPE)
-        for m in reader.messages([JOINT_STATES_TOPIC, POINT_TOPIC]):
+        target_topics = {POINT_TOPIC: 0}  # further targets (msgs_doc/targets.md) follow
+        names = [PRIMARY_TARGET]
+        for topic in sorted(reader.topics):
+            name = target_topic_name(topic)
+            if name is not None:
+                _check_topic(reader, topic, POINT_TYPE)
+                target_topics[topic] = len(names)
+                names.append(name)
+        for m in reader.messages([JOINT_STATES_TOPIC, *target_topics]):
             msg = m.decode()
             if m.topic == JOINT_STATES_TOPIC:
                 js_q.append(
@@ -92,16 +103,18 @@ def read_bag(
                 js_v.append(velocity_signs(msg, robot.joint_names))
             else:
                 p = np.array([msg.point.x, msg.point.y, msg.point.z])
+                k = target_topics[m.topic]
                 if not np.all(np.isfinite(p)):
                     raise BagError(
-                        f"{path}: {POINT_TOPIC} message {len(pts) + 1} is not finite: {p}"
+                        f"{path}: {m.topic} message {pt_target.count(k) + 1} is not finite: {p}"
                     )
                 frames.add(msg.header.frame_id)
                 pt_t.append(stamp_to_ns(msg.header.stamp))
                 pts.append(p)
+                pt_target.append(k)
     if frames != {TRACKER_FRAME}:
         warnings.append(
-            f"warning: {path}: {POINT_TOPIC} frame_id {sorted(frames)} is not "
+            f"warning: {path}: tracker point frame_id {sorted(frames)} is not "
             f"'{TRACKER_FRAME}' (used as the tracker frame anyway)"
         )
     n_joints = robot.n_joints
@@ -115,6 +128,8 @@ def read_bag(
         source=str(path),
         error=BagError,
         robot=robot,
+        point_target=np.array(pt_target, dtype=np.int64) if len(names) > 1 else None,
+        target_names=tuple(names),
     )
     return replace(rec, warnings=tuple(warnings) + rec.warnings)
 

@@ -230,10 +230,12 @@ def calibrate(
     """
     base, effects = parse_model(model_spec, robot, ecc_order)
     if base != "cpa":  # too few measurements: say so before any work
-        fitted = KinematicModel(robot, tuple(effects)).parameters().parameters
+        targets = recording.target_names
+        fitted = KinematicModel(robot, tuple(effects), targets).parameters().parameters
         n_free = sum(p.free and (base != "nominal" or p.group == "frames") for p in fitted)
-        # repeats of one pose add noise, not information: count distinct poses
+        # repeats of one pose add noise, not information: count distinct poses (of a target)
         steps = np.round(recording.poses.q / JOINT_CHANGE_TOLERANCE)
+        steps = np.column_stack([steps, recording.poses.target_index])
         n_poses = len(np.unique(steps, axis=0)) if len(steps) else 0
         check_enough_data(3 * n_poses, n_poses, n_free, "distinct poses")
     identify = partial(_calibrate_once, robot=robot, model_spec=model_spec,
@@ -302,7 +304,7 @@ def _calibrate_once(
     say = log or (lambda _msg: None)
     base, effects = parse_model(model_spec, robot, ecc_order)
     poses, points = recording.poses, recording.points
-    geometric = KinematicModel(robot)
+    geometric = KinematicModel(robot, targets=recording.target_names)
     has_sweeps = all(recording.sweeps_of(j) for j in range(1, robot.n_joints + 1))
     if base == "nominal":
         say("nominal: fitting the tracker pose and target offset only")
@@ -337,7 +339,7 @@ def _calibrate_once(
         say(f"geometric: Levenberg-Marquardt on {len(points)} points, before the effects")
         geo = fit_model(geometric, _seeded(geometric, initial), poses, points, progress=say)
         initial = geo.parameters
-    model = KinematicModel(robot, tuple(effects))
+    model = KinematicModel(robot, tuple(effects), recording.target_names)
     params = _seeded(model, initial)
     say(f"{model_spec}: Levenberg-Marquardt on {len(points)} points, {int(params.free.sum())} "
         "free parameters before the identifiability check")  # fmt: skip

@@ -37,6 +37,7 @@ from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array, matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
+from robot_calib.messages import target_topic
 from robot_calib.model import geometric_parameters
 
 REF_CONSISTENCY_RAD = 1e-3  # sweeps whose held joints differ by more break the CPA premise
@@ -96,6 +97,47 @@ def axis_from_sweep(points: Array, readings: Array, joint: int) -> tuple[AxisLin
     return AxisLine(circle.centre, direction), circle
 
 
+def _near_axis_warnings(recording: Recording, joint: int, fits: list[SweepFit]) -> list[str]:
+    """A warning for each circle of `joint` too small to fix the axis direction, saying
+    whether other circles of the joint (other targets or sweeps) carry it instead."""
+    sweeps = recording.sweeps_of(joint)
+    sigma = [direction_sigma(f.circle, f.n_points) for f in fits]
+    good = sum(sd <= NEAR_AXIS_SIGMA_RAD for sd in sigma)
+    out = []
+    for s, fit, sd in zip(sweeps, fits, sigma):
+        if sd <= NEAR_AXIS_SIGMA_RAD:
+            continue
+        name = recording.target_names[int(recording.poses.target_index[s.index[0]])]
+        who = "the target" if len(recording.target_names) == 1 else f"target {target_topic(name)}"
+        then = (
+            f"CPA leans on the joint's {good} other circle(s) instead"
+            if good
+            else "put a target farther off this axis"
+        )
+        out.append(
+            f"warning: sweep of joint {joint} at measurements {s.index[0] + 1}-"
+            f"{s.index[-1] + 1}: {who} is {fit.circle.radius * 1e3:.2f} mm from the axis, too "
+            f"close for its circle ({fit.circle.rms * 1e3:.4f} mm rms) to fix the axis "
+            f"direction (1-sigma {np.degrees(sd):.3f} deg): {then}"
+        )
+    return out
+
+
+def combine_lines(lines: list[tuple[int, float, AxisLine]]) -> AxisLine:
+    """One axis line from the circles of its sweeps, each given as (points, direction
+    1-sigma [rad], line): directions averaged by inverse variance, so that a target near
+    the axis (a circle too small to fix the direction) gives way to the other targets and
+    sweeps; the point on the line is the points-weighted mean of the circle centres (any
+    point of a well-fixed circle's centre lies on the axis, whatever its target)."""
+    sigma = np.array([max(sd, 1e-12) for _, sd, _ in lines])
+    weights = 1.0 / sigma**2
+    direction = sum((w * ln.direction for w, (_, _, ln) in zip(weights, lines)), np.zeros(3))
+    direction = direction / np.linalg.norm(direction)
+    counts = np.array([c for c, _, _ in lines], dtype=float)
+    point = sum((c * ln.point for c, (_, _, ln) in zip(counts, lines)), np.zeros(3))
+    return AxisLine(point / counts.sum(), direction)
+
+
 def reference_readings(
     recording: Recording, n_joints: int, q: Array | None = None
 ) -> tuple[Array, list[str]]:
@@ -146,21 +188,10 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
                     f"{s.index[-1] + 1}: {s.n_poses - n_fitted} point(s) far off its circle "
                     "left out of the circle fit (blunders?)"
                 )
-            if direction_sigma(circle, n_fitted) > NEAR_AXIS_SIGMA_RAD:
-                warnings.append(
-                    f"warning: sweep of joint {j} at measurements {s.index[0] + 1}-"
-                    f"{s.index[-1] + 1}: the target is {circle.radius * 1e3:.2f} mm from the "
-                    f"axis, too close for its circle ({circle.rms * 1e3:.4f} mm rms) to fix the "
-                    f"axis direction (1-sigma {np.degrees(direction_sigma(circle, n_fitted)):.3f}"
-                    " deg): put the target farther off this axis"
-                )
             fits.append(SweepFit(j, n_fitted, float(np.ptp(turned)), circle))
-            lines.append((s.n_poses, line))
-        weights = np.array([w for w, _ in lines], dtype=float)
-        direction = sum((w * ln.direction for w, ln in lines), np.zeros(3))
-        direction = direction / np.linalg.norm(direction)
-        point = sum((w * ln.point for w, ln in lines), np.zeros(3)) / weights.sum()
-        axes.append(AxisLine(point, direction))
+            lines.append((s.n_poses, direction_sigma(circle, n_fitted), line))
+        warnings += _near_axis_warnings(recording, j, fits[-len(lines) :])
+        axes.append(combine_lines(lines))
 
     # Base frame: on axis 1, d1 and theta1 nominal.
     z0 = axes[0].direction
@@ -193,7 +224,7 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
         values[f"theta{j}"] = nominal + wrap(values[f"theta{j}"] - nominal)
     values["theta1"], values["d1"] = float(robot.theta[0]), float(robot.d[0])
 
-    # Target in the flange frame from the last joint's sweep(s).
+    # Each target's centre in the flange frame from the last joint's sweep(s).
     last = np.concatenate([s.index for s in recording.sweeps_of(n)])
     qn = variables[last, n - 1]
     flanges = np.array(
@@ -204,10 +235,21 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
         ]
     )  # fmt: skip
     rel = recording.points[last] - flanges[:, :3, 3]
-    target = np.einsum("nji,nj->ni", flanges[:, :3, :3], rel).mean(axis=0)
+    in_flange = np.einsum("nji,nj->ni", flanges[:, :3, :3], rel)  # (k, 3)
+    which = recording.poses.target_index[last]
+    offsets: dict[str, tuple[float, float, float]] = {}
+    for k, name in enumerate(recording.target_names):
+        if not np.any(which == k):
+            raise InputError(
+                f"{', '.join(recording.sources)}: target {target_topic(name)} has no sweep "
+                f"of joint {n}: CPA finds each target's offset from the last joint's circles"
+            )
+        x, y, z = (float(v) for v in in_flange[which == k].mean(axis=0))
+        offsets[name] = (x, y, z)
 
     rpy = matrix_to_rpy(base2tracker[:3, :3])
+    first = offsets[recording.target_names[0]]
     params = geometric_parameters(
-        robot, tuple(base2tracker[:3, 3]) + rpy, tuple(target)
+        robot, tuple(base2tracker[:3, 3]) + rpy, first, recording.target_names, offsets
     ).with_values(values)
     return CPAResult(params, tuple(axes), tuple(fits), q_ref, tuple(warnings))

@@ -15,7 +15,12 @@ import numpy as np
 from robot_calib.identify.fit import FitResult, fit_model
 from robot_calib.kinematics.frames import Array, matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
-from robot_calib.model import BASE_ROTATION, BASE_TRANSLATION, TARGET, KinematicModel
+from robot_calib.model import (
+    BASE_ROTATION,
+    BASE_TRANSLATION,
+    KinematicModel,
+    target_parameters,
+)
 from robot_calib.poses import Poses
 
 REASON_FRAMES_ONLY = "held: only the tracker pose and target offset are fitted in this model"
@@ -42,29 +47,37 @@ def initial_frames(
 ) -> ParameterVector:
     """`params` with base2tracker and the target offset found globally for the geometry in
     `params`: alternately the rigid fit of the predicted onto the measured points (n, 3)
-    [m] and the linear least squares of target offset and translation for that rotation,
-    until the offset moves by less than 1 nm."""
+    [m] and the linear least squares of the target offsets (one per target of the model)
+    and translation for that rotation, until the offsets move by less than 1 nm."""
     at_origin = params.with_values({k: 0.0 for k in BASE_TRANSLATION + BASE_ROTATION})
     flange = model.flange2base(at_origin, poses)  # (n, 4, 4), robot base frame
     flange_rot, flange_pos = flange[:, :3, :3], flange[:, :3, 3]
-    target = np.array([params[k] for k in TARGET])
-    n = len(points)
+    offsets = model.target_offsets(params)  # (T, 3), one per target, flange frame
+    which = poses.target_index  # (n,)
+    n, n_targets = len(points), len(offsets)
     for _ in range(iterations):
-        rotation, translation = rigid_transform(flange_pos + flange_rot @ target, points)
-        design = np.zeros((n, 3, 6))  # d measured / d (t, b) for this rotation
-        design[:, :, :3] = rotation @ flange_rot
-        design[:, :, 3:] = np.eye(3)
+        in_base = flange_pos + np.einsum("nab,nb->na", flange_rot, offsets[which])
+        rotation, translation = rigid_transform(in_base, points)
+        design = np.zeros((n, 3, 3 * n_targets + 3))  # d measured / d (t_1..t_T, b)
+        for k in range(n_targets):
+            rows = which == k
+            design[rows, :, 3 * k : 3 * k + 3] = rotation @ flange_rot[rows]
+        design[:, :, -3:] = np.eye(3)
         rhs = points - flange_pos @ rotation.T
-        solution = np.linalg.lstsq(design.reshape(-1, 6), rhs.reshape(-1), rcond=None)[0]
-        moved = float(np.linalg.norm(solution[:3] - target))
-        target = solution[:3]
+        solution = np.linalg.lstsq(design.reshape(-1, design.shape[-1]), rhs.reshape(-1),
+                                   rcond=None)[0]  # fmt: skip
+        found: Array = np.asarray(solution[:-3], dtype=float).reshape(n_targets, 3)
+        moved = float(np.linalg.norm(found - offsets))
+        offsets = found
         if moved < 1e-9:
             break
-    rotation, translation = rigid_transform(flange_pos + flange_rot @ target, points)
+    in_base = flange_pos + np.einsum("nab,nb->na", flange_rot, offsets[which])
+    rotation, translation = rigid_transform(in_base, points)
     roll, pitch, yaw = matrix_to_rpy(rotation)
     updates = dict(zip(BASE_TRANSLATION, translation))
     updates.update(dict(zip(BASE_ROTATION, (roll, pitch, yaw))))
-    updates.update(dict(zip(TARGET, target)))
+    for name, xyz in zip(model.targets, offsets):
+        updates.update(dict(zip(target_parameters(name), xyz)))
     return params.with_values(updates)
 
 

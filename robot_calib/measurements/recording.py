@@ -12,7 +12,7 @@ topics, arrays in memory) is the caller's business (`robot_calib.bag.read`, the 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -21,7 +21,8 @@ from numpy.typing import NDArray
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements.sweeps import MIN_SWEEP_POSES, Sweep, usable_sweeps
-from robot_calib.poses import Poses, approach_directions
+from robot_calib.messages import target_topic
+from robot_calib.poses import PRIMARY_TARGET, Poses, approach_directions
 
 if TYPE_CHECKING:
     from robot_calib.kinematics.description import RobotDescription
@@ -41,7 +42,9 @@ class Recording:
     warnings : labelled problems that did not stop the reading;
     point_index : (n,) 0-based index of each point's message among its source's tracker
       points, in the order read (None: 0, 1, ... per source);
-    stamp_ns : (n,) the points' header stamps [ns] (None: unknown, e.g. arrays in memory).
+    stamp_ns : (n,) the points' header stamps [ns] (None: unknown, e.g. arrays in memory);
+    target_names : the targets measured (several SMRs on one flange, msgs_doc/targets.md);
+      `poses.target` indexes them ('' = the contract's single target).
     """
 
     sources: tuple[str, ...]
@@ -53,6 +56,7 @@ class Recording:
     warnings: tuple[str, ...] = field(default=())
     point_index: IntArray | None = None
     stamp_ns: IntArray | None = None
+    target_names: tuple[str, ...] = (PRIMARY_TARGET,)
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -88,7 +92,25 @@ class Recording:
             self.warnings,
             self.message_indices()[keep],
             None if self.stamp_ns is None else self.stamp_ns[keep],
+            self.target_names,
         )
+
+    def with_targets(self, names: Sequence[str]) -> Recording:
+        """The same measurements with targets indexed by `names` (e.g. a model's), which
+        must include every target measured here; InputError naming the unknown ones."""
+        names = tuple(names)
+        if names == self.target_names:
+            return self
+        unknown = [t for t in self.target_names if t not in names]
+        if unknown:
+            raise InputError(
+                f"{', '.join(self.sources)}: measurements of target(s) "
+                f"{[target_topic(t) for t in unknown]} that the model does not have "
+                f"({[target_topic(t) for t in names]})"
+            )
+        remap = np.array([names.index(t) for t in self.target_names], dtype=np.int64)
+        poses = replace(self.poses, target=remap[self.poses.target_index])
+        return replace(self, poses=poses, target_names=names)
 
     @property
     def general(self) -> NDArray[np.bool_]:
@@ -119,6 +141,10 @@ class Recording:
         origin and direction history; sweeps never cross a source boundary)."""
         if not parts:
             raise InputError("no recording given")
+        names: list[str] = []
+        for part in parts:
+            names += [t for t in part.target_names if t not in names]
+        parts = [p.with_targets(names) for p in parts]
         sweeps: list[Sweep] = []
         offset = 0
         for part in parts:
@@ -130,6 +156,7 @@ class Recording:
                 np.concatenate([p.poses.q for p in parts]),
                 np.concatenate([p.poses.direction for p in parts]),
                 np.concatenate([p.poses.time for p in parts]),
+                np.concatenate([p.poses.target_index for p in parts]) if len(names) > 1 else None,
             ),
             np.concatenate([p.points for p in parts]),
             tuple(sweeps),
@@ -140,6 +167,7 @@ class Recording:
             None
             if any(p.stamp_ns is None for p in parts)
             else np.concatenate([p.stamp_ns for p in parts if p.stamp_ns is not None]),
+            tuple(names),
         )
 
 
@@ -188,11 +216,25 @@ def _distinct_joint_states(
 
 
 def _sweeps(
-    q: Array, robot: RobotDescription | None, source: str, warnings: list[str]
+    q: Array,
+    robot: RobotDescription | None,
+    source: str,
+    warnings: list[str],
+    target: IntArray | None = None,
+    target_names: tuple[str, ...] = (PRIMARY_TARGET,),
 ) -> list[Sweep]:
     """Usable sweeps of readings q (n, J) [rad], found on `robot`'s joint variables (the
-    readings themselves without a robot or a mapping)."""
-    return usable_sweeps(q if robot is None else robot.joint_variables(q), source, warnings)
+    readings themselves without a robot or a mapping); with several targets (`target` (n,)
+    indexing `target_names`) among the measurements of each target, so that every target
+    has its own circles of each sweep."""
+    variables = q if robot is None else robot.joint_variables(q)
+    if target is None or len(target_names) == 1:
+        return usable_sweeps(variables, source, warnings)
+    out: list[Sweep] = []
+    for k, name in enumerate(target_names):
+        rows = np.flatnonzero(target == k)
+        out += usable_sweeps(variables[rows], f"{source} {target_topic(name)}", warnings, rows)
+    return sorted(out, key=lambda s: (int(s.index[0]), s.joint))
 
 
 def recording_from_arrays(
@@ -201,10 +243,13 @@ def recording_from_arrays(
     time: Array | None = None,
     source: str = "arrays",
     robot: RobotDescription | None = None,
+    target: IntArray | None = None,
+    target_names: tuple[str, ...] = (PRIMARY_TARGET,),
 ) -> Recording:
     """A recording of measurements already paired in memory (one source, visiting order):
-    q (n, J) [rad], points (n, 3) [m], time (n,) [s]; sweeps are found on `robot`'s joint
-    variables (None: the readings).
+    q (n, J) [rad], points (n, 3) [m], time (n,) [s], target (n,) which of `target_names`
+    each point is of (None: the first); sweeps are found on `robot`'s joint variables
+    (None: the readings), per target.
 
     Returns
     -------
@@ -215,8 +260,10 @@ def recording_from_arrays(
         n_unpaired 0; warnings for sweeps too short to use.
     """
     poses = Poses.from_readings(q, time=time)
+    index = _target_index(target, len(poses), target_names, source)
+    poses = replace(poses, target=index)
     warnings: list[str] = []
-    sweeps = _sweeps(poses.q, robot, source, warnings)
+    sweeps = _sweeps(poses.q, robot, source, warnings, index, target_names)
     return Recording(
         (source,),
         poses,
@@ -225,7 +272,25 @@ def recording_from_arrays(
         np.zeros(len(poses), dtype=int),
         0,
         tuple(warnings),
+        target_names=tuple(target_names),
     )
+
+
+def _target_index(
+    target: IntArray | None, n: int, target_names: tuple[str, ...], source: str
+) -> IntArray | None:
+    """`target` (n,) checked against `target_names` (None stays None: all the first)."""
+    if len(set(target_names)) != len(target_names) or not target_names:
+        raise InputError(f"{source}: target names {list(target_names)} must be distinct")
+    if target is None:
+        return None
+    index = np.asarray(target, dtype=np.int64)
+    if index.shape != (n,) or (n and (index.min() < 0 or index.max() >= len(target_names))):
+        raise InputError(
+            f"{source}: target indices of shape {index.shape} for {n} points and "
+            f"{len(target_names)} target(s)"
+        )
+    return index
 
 
 def recording_from_stream(
@@ -238,9 +303,14 @@ def recording_from_stream(
     source: str = "live",
     error: type[Exception] = InputError,
     robot: RobotDescription | None = None,
+    point_target: IntArray | None = None,
+    target_names: tuple[str, ...] = (PRIMARY_TARGET,),
 ) -> Recording:
     """A recording of one source from its stamped messages (a bag's or live), paired by
     the contract's rule; sweeps are found on `robot`'s joint variables (None: readings).
+    point_target (n,): which of `target_names` each point is of (several targets on the
+    flange, msgs_doc/targets.md; None: all the first); measurements of one stamp are
+    ordered by target.
 
     js_ns (m,) joint-state stamps [ns], q (m, J) readings [rad], velocity_sign (m, J) (+1/-1,
     0 = no velocity); point_ns (n,) point stamps [ns], points (n, 3) tracker frame [m]; each
@@ -280,14 +350,22 @@ def recording_from_stream(
     if not (np.isfinite(pair_tolerance) and pair_tolerance >= 0):
         raise InputError(f"pair tolerance {pair_tolerance} s: need a finite number >= 0")
     check_metres(points, source, error)
+    target = _target_index(point_target, len(points), target_names, source)
     js_order = np.argsort(js_ns, kind="stable")
-    pt_order = np.argsort(point_ns, kind="stable")
+    if target is None:
+        pt_order = np.argsort(point_ns, kind="stable")
+    else:
+        pt_order = np.lexsort((target, point_ns))
+        target = target[pt_order]
     js_ns, q, velocity_sign = js_ns[js_order], q[js_order], velocity_sign[js_order]
     point_ns, points = point_ns[pt_order], points[pt_order]
     keep = _distinct_joint_states(js_ns, q, js_order, source, error)
     js_ns, q, velocity_sign = js_ns[keep], q[keep], velocity_sign[keep]
     warnings: list[str] = []
-    shared = np.flatnonzero(np.diff(point_ns) == 0)
+    same_target = np.ones(max(len(point_ns) - 1, 0), dtype=bool)
+    if target is not None:
+        same_target = np.diff(target) == 0
+    shared = np.flatnonzero((np.diff(point_ns) == 0) & same_target)
     if len(shared):
         warnings.append(
             f"warning: {source}: {len(shared)} tracker points share their stamp with the "
@@ -312,15 +390,30 @@ def recording_from_stream(
     q, velocity = q[pick[ok]], velocity_sign[pick[ok]]
     direction = np.where(velocity != 0, velocity, approach_directions(q))
     time = (point_ns[ok] - point_ns[ok][0]) * 1e-9
-    sweeps = _sweeps(q, robot, source, warnings)
+    target = None if target is None else target[ok]
+    sweeps = _sweeps(q, robot, source, warnings, target, target_names)
     return Recording(
         (source,),
-        Poses(q, direction, time),
+        Poses(q, direction, time, target),
         points[ok],
         tuple(sweeps),
         np.zeros(len(q), dtype=int),
         int((~ok).sum()),
         tuple(warnings),
-        pt_order[ok],
+        _per_target_index(pt_order[ok], point_target),
         point_ns[ok],
+        tuple(target_names),
     )
+
+
+def _per_target_index(order: IntArray, point_target: IntArray | None) -> IntArray:
+    """Index of each kept point's message among its own target's messages (the order
+    read), from its position `order` among all points read and their targets."""
+    if point_target is None:
+        return order
+    point_target = np.asarray(point_target, dtype=np.int64)
+    rank = np.zeros(len(point_target), dtype=np.int64)
+    for k in np.unique(point_target):
+        rows = point_target == k
+        rank[rows] = np.arange(int(rows.sum()))
+    return rank[order]

@@ -56,12 +56,17 @@ def find_sweeps(
     return sweeps
 
 
-def usable_sweeps(q: Array, where: str, warnings: list[str]) -> list[Sweep]:
+def usable_sweeps(
+    q: Array, where: str, warnings: list[str], rows: IntArray | None = None
+) -> list[Sweep]:
     """The sweeps of readings q (n, J) [rad] that span enough angle to fit a circle; the
-    others are left as general poses with a warning appended to `warnings`."""
+    others are left as general poses with a warning appended to `warnings`. `rows` (n,):
+    the recording's measurement index of each row of q (the sweeps' indices are mapped to
+    them; None: 0..n-1), for the measurements of one target among several."""
     out = []
-    for s in find_sweeps(q):
-        span = np.ptp(q[s.index, s.joint - 1])
+    for found in find_sweeps(q):
+        span = np.ptp(q[found.index, found.joint - 1])
+        s = found if rows is None else Sweep(found.joint, rows[found.index])
         if span < MIN_SWEEP_ANGLE_RAD:
             warnings.append(
                 f"warning: {where}: sweep of joint {s.joint} at measurements "

@@ -43,8 +43,14 @@ def physical_points(
     (readings, approach directions, time). noisy=False gives the exact true points."""
     if not noisy:
         return world.model.target_points(world.truth, poses)
-    jitter = rng.normal(0.0, world.noise.joint_sigma_rad, poses.q.shape)
-    physical = Poses(poses.q + jitter, poses.direction, poses.time)
+    # One physical joint angle per pose: targets measured at the same pose (same readings
+    # and time, consecutive) share its repeatability jitter.
+    new_pose = np.ones(len(poses), dtype=bool)
+    if len(poses) > 1:
+        new_pose[1:] = np.any(np.diff(poses.q, axis=0) != 0, axis=1) | (np.diff(poses.time) != 0)
+    jitter = rng.normal(0.0, world.noise.joint_sigma_rad, (int(new_pose.sum()), poses.q.shape[1]))
+    jitter = jitter[np.cumsum(new_pose) - 1]
+    physical = Poses(poses.q + jitter, poses.direction, poses.time, poses.target)
     points = world.model.target_points(world.truth, physical)
     return points + tracker_noise(world.noise, points, rng)
 

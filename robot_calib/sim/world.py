@@ -26,7 +26,8 @@ from robot_calib.effects import (
 from robot_calib.errors import InputError, RobotCalibError, check_keys
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
-from robot_calib.model import KinematicModel
+from robot_calib.model import KinematicModel, target_parameters
+from robot_calib.poses import PRIMARY_TARGET, TARGET_NAME
 
 WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
 DEG = np.pi / 180.0
@@ -100,7 +101,7 @@ class World:
 
 
 TOP_KEYS = (
-    "robot", "seed", "geometry", "deviations", "base2tracker", "target_in_flange_m",
+    "robot", "seed", "geometry", "deviations", "base2tracker", "target_in_flange_m", "targets",
     "effects", "truth", "noise", "tracker", "timing",
 )  # fmt: skip
 FRAME_KEYS = ("xyz_m", "rpy_deg")
@@ -179,6 +180,24 @@ def _speeds(value: Any, n_joints: int, where: str) -> tuple[float, ...]:  # noqa
     return tuple(float(v) for v in value)
 
 
+def _targets(value: Any, source: str) -> dict[str, tuple[float, float, float]]:  # noqa: ANN401
+    """Further targets on the flange of a world file (`targets: {NAME: [x, y, z]}` [m], each
+    measured on /laser_tracker/NAME/point beside the first, msgs_doc/targets.md)."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise InputError(f"{source}: targets: expected a mapping NAME: [x, y, z], got {value!r}")
+    out = {}
+    for name, xyz in value.items():
+        if not isinstance(name, str) or not TARGET_NAME.fullmatch(name):
+            raise InputError(
+                f"{source}: targets: name {name!r} must be a ROS topic token "
+                "(letters, digits, underscores; not starting with a digit)"
+            )
+        out[name] = _triple(xyz, f"{source}: targets.{name}")
+    return out
+
+
 def _seed(value: Any, source: str) -> int:  # noqa: ANN401 - YAML
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
         raise InputError(f"{source}: seed: expected an integer >= 0, got {value!r}")
@@ -209,7 +228,9 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
             data.get("target_in_flange_m", [0.06, 0.0, 0.05]), f"{source}: target_in_flange_m"
         )
         rpy = (math.radians(roll), math.radians(pitch), math.radians(yaw))
-        truth = model.parameters((*xyz, *rpy), target)
+        extra = _targets(data.get("targets"), source)
+        model = model.with_targets((PRIMARY_TARGET, *extra))
+        truth = model.parameters((*xyz, *rpy), target, extra)
         geometry = data.get("geometry", "seed_table3_avg_2_6")
         if geometry == "seed_table3_avg_2_6":
             if robot.name != "kr5_sixx_r650":
@@ -282,6 +303,9 @@ def world_to_dict(world: World) -> dict[str, Any]:
         "seed": world.seed,
         "geometry": "nominal",
         "effects": effects,
+        "targets": {
+            t: [world.truth[k] for k in target_parameters(t)] for t in world.model.targets[1:]
+        },
         "truth": {n: float(v) for n, v in zip(world.truth.names, world.truth.values)},
         "noise": asdict(world.noise),
         "tracker": asdict(world.tracker),
