@@ -314,18 +314,23 @@ def cmd_split(args: argparse.Namespace) -> int:
         raise InputError(f"{outputs[1]}: write both bags into one folder (they are written "
                          "together)")  # fmt: skip
     recording = pipeline.read_bags([args.bag], robot, args.pair_tolerance, _log)
-    held = holdout_mask(recording, args.holdout, args.by, args.seed)
-    stamps = (recording.stamp_ns if recording.stamp_ns is not None
-              else START_NS + np.round(recording.poses.time * 1e9).astype(np.int64))  # fmt: skip
+    first, points = recording.points_by_target()  # per pose: every target measured there
+    poses = recording.subset(np.isin(np.arange(len(recording)), first))
+    held = holdout_mask(poses, args.holdout, args.by, args.seed)
+    stamps = (poses.stamp_ns if poses.stamp_ns is not None
+              else START_NS + np.round(poses.poses.time * 1e9).astype(np.int64))  # fmt: skip
     with staged_outputs(outputs[0].resolve().parent, args.force) as stage:
         counts = [
             write_measurements(
                 stage / out.name,
-                recording.poses.q[rows],
-                recording.points[rows],
+                poses.poses.q[rows],
+                points[0][rows],
                 robot.joint_names,
                 stamps[rows],
-                recording.poses.direction[rows],
+                poses.poses.direction[rows],
+                extra_points={
+                    name: points[k][rows] for k, name in enumerate(recording.target_names) if k
+                },
             )  # fmt: skip
             for out, rows in zip(outputs, (~held, held))
         ]

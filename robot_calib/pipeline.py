@@ -351,6 +351,8 @@ def diagnose_recordings(
     """
     from robot_calib.diagnose.diagnosis import diagnose
 
+    if holdout is not None:  # index the hold-out's targets as the calibration's
+        holdout = holdout.with_targets(recording.target_names)
     return diagnose(recording, robot, holdout, log=log)
 
 

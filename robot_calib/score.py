@@ -18,6 +18,7 @@ from robot_calib.identify.outliers import OUTLIER_K, outlier_mask, robust_sigma
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
+from robot_calib.messages import target_topic
 from robot_calib.model import KinematicModel
 
 
@@ -49,7 +50,9 @@ class Score:
 
 
 def score(model: KinematicModel, params: ParameterVector, recording: Recording) -> Score:
-    """The calibration `model` at `params` scored on every measurement of `recording`."""
+    """The calibration `model` at `params` scored on every measurement of `recording`
+    (of the model's targets; InputError naming a target the model has not identified)."""
+    recording = recording.with_targets(model.targets)
     predicted = model.target_points(params, recording.poses)
     residuals = predicted - recording.points
     n_suspect = int(outlier_mask(residuals, robust_sigma(residuals)).sum())
@@ -58,15 +61,18 @@ def score(model: KinematicModel, params: ParameterVector, recording: Recording) 
 
 def write_points_table(result: Score, recording: Recording, path: str | Path) -> None:
     """Per-point CSV: source bag, message index, measured x, y, z [m], residual dx, dy, dz
-    (predicted - measured) [m] and its norm [m]; written atomically."""
+    (predicted - measured) [m], its norm [m] and the target's topic; written atomically."""
     text = io.StringIO(newline="")
     writer = csv.writer(text)
-    writer.writerow(["bag", "index", "x_m", "y_m", "z_m", "dx_m", "dy_m", "dz_m", "error_m"])
+    header = ["bag", "index", "x_m", "y_m", "z_m", "dx_m", "dy_m", "dz_m", "error_m", "target"]
+    writer.writerow(header)
+    targets = [target_topic(t) for t in recording.target_names]
     indices = recording.message_indices()
     norms = np.linalg.norm(result.residuals, axis=1)
     for i, (point, residual) in enumerate(zip(recording.points, result.residuals)):
         writer.writerow(
             [recording.sources[int(recording.bag_index[i])], int(indices[i])]
             + [repr(float(v)) for v in (*point, *residual, norms[i])]
+            + [targets[int(recording.poses.target_index[i])]]
         )
     write_text_atomic(path, text.getvalue())

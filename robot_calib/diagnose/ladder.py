@@ -82,6 +82,13 @@ def folds(n: int, k: int = N_FOLDS, seed: int = 0) -> IntArray:
     return np.random.default_rng(seed).permutation(n) % k
 
 
+def pose_folds(recording: Recording) -> IntArray:
+    """Fold number (n,) of every measurement: `folds` of the recording's poses, so that the
+    targets measured at one pose fall in one fold (one target per pose: `folds(n)`)."""
+    pose = recording.pose_index()
+    return folds(int(pose[-1]) + 1 if len(pose) else 0)[pose]
+
+
 def _replace(present: tuple[Effect, ...], new: Effect,
              robot: RobotDescription) -> tuple[Effect, ...]:  # fmt: skip
     """`present` plus `new`, which replaces what it covers (e.g. a lower order)."""
@@ -100,19 +107,18 @@ def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
             widest[covered[0]] = e  # in place: the parameter order stays that of `every`
         elif not any(w.covers(e, robot) for w in widest):
             widest.append(e)
-    superset = KinematicModel(robot, tuple(widest))
+    superset = KinematicModel(robot, tuple(widest), cal.model.targets)
     params = superset.parameters().with_values(
         dict(zip(cal.parameters.names, cal.parameters.values))
     )
     predicted, jac = blocked_jacobian(superset, params, recording.poses)
-    n = len(recording)
     residual = predicted - recording.points
     base_cols = [params.index(name) for name in cal.parameters.free_names]
     h_res = h_jac = None
     if holdout is not None:
         h_pred, h_jac = blocked_jacobian(superset, params, holdout.poses)
         h_res = h_pred - holdout.points
-    fold = folds(n)
+    fold = pose_folds(recording)
 
     def score(cols: list[int]) -> float:
         h_cols = None if h_jac is None else h_jac[:, :, cols]
@@ -171,7 +177,7 @@ def score_rung(cal: Calibration, recording: Recording,
 
 
 def _kfold(cal: Calibration, recording: Recording) -> tuple[Accuracy, Array]:
-    fold = folds(len(recording))
+    fold = pose_folds(recording)
     predicted = np.empty_like(recording.points)
     for f in range(N_FOLDS):
         train = fold != f

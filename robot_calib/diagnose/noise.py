@@ -69,17 +69,20 @@ def _circle_noise(recording: Recording) -> NoiseLevel | None:
 
 def repeat_pairs(recording: Recording) -> IntArray:
     """Index pairs (k, 2) [a, b], a < b: each measurement with the next one of the same bag
-    at equal readings (within JOINT_CHANGE_TOLERANCE) and approach directions, at most
+    and target at equal readings (within JOINT_CHANGE_TOLERANCE) and approach directions, at most
     MAX_REPEAT_GAP_S later (and at most MAX_REPEAT_LAG rows on)."""
     q, d, t = recording.poses.q, recording.poses.direction, recording.poses.time
+    target = recording.poses.target_index
     n = len(q)
     partner = np.full(n, -1)
-    for lag in range(1, min(MAX_REPEAT_LAG, n - 1) + 1):
+    max_lag = MAX_REPEAT_LAG * len(recording.target_names)  # rows: every target of a pose
+    for lag in range(1, min(max_lag, n - 1) + 1):
         a = np.arange(n - lag)
         b = a + lag
         same = np.all(np.abs(q[b] - q[a]) <= JOINT_CHANGE_TOLERANCE, axis=1)
         same &= np.all(d[b] == d[a], axis=1)
         same &= recording.bag_index[b] == recording.bag_index[a]
+        same &= target[b] == target[a]
         same &= np.abs(t[b] - t[a]) <= MAX_REPEAT_GAP_S
         same &= partner[a] < 0  # the nearest repeat only
         partner[a[same]] = b[same]

@@ -27,7 +27,11 @@ from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
 from robot_calib.identify.fit import FitResult, SolverReport, check_enough_data, fit_model
-from robot_calib.identify.identifiability import Identifiability
+from robot_calib.identify.identifiability import (
+    Identifiability,
+    fix_poorly_determined,
+    fix_unidentifiable,
+)
 from robot_calib.identify.objectives import AbsoluteObjective, Objective, SeedObjective
 from robot_calib.identify.outliers import (
     OUTLIER_K,
@@ -43,7 +47,8 @@ from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
-from robot_calib.model import KinematicModel
+from robot_calib.messages import target_topic
+from robot_calib.model import KinematicModel, target_parameters
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE, Poses
 
 BASE_MODELS = ("nominal", "cpa", "geometric")
@@ -105,6 +110,9 @@ class Calibration:
     outliers: tuple[Outlier, ...] = ()  # measurements flagged as blunders, not fitted
     warnings: tuple[str, ...] = ()  # implausible results, labelled (`plausibility`)
     inliers: NDArray[np.bool_] | None = None  # (n,) of the recording given; None: all
+    # free parameters that the first target's measurements alone could not identify: what
+    # the further targets add (msgs_doc/targets.md); empty with one target
+    by_extra_targets: tuple[str, ...] = ()
 
     def predict(self, poses: Poses) -> Array:
         """Target points (n, 3) [m] in the tracker frame."""
@@ -246,9 +254,41 @@ def calibrate(
     warnings = tuple(
         recording_warnings(recording, robot) + calibration_warnings(cal, geometry_fitted)
     )
+    say = log or (lambda _msg: None)
     for warning in warnings:
-        (log or (lambda _msg: None))(warning)
-    return replace(cal, warnings=warnings)
+        say(warning)
+    extra = _by_extra_targets(cal, recording)
+    if len(cal.model.targets) > 1:
+        counts = np.bincount(recording.poses.target_index, minlength=len(cal.model.targets))
+        say(
+            f"targets: {len(counts)} ("
+            + ", ".join(f"{target_topic(t)} {c}" for t, c in zip(cal.model.targets, counts))
+            + "); identifiable only with the further targets: "
+            + (", ".join(extra) if extra else "none")
+        )
+    return replace(cal, warnings=warnings, by_extra_targets=extra)
+
+
+def _by_extra_targets(cal: Calibration, recording: Recording) -> tuple[str, ...]:
+    """The free parameters of `cal` that the measurements of the first target alone leave
+    unidentifiable or poorly determined (the fit's two analyses, at the solution, with the
+    solution's residuals as the noise), the further targets' own offsets aside: what
+    measuring several targets adds."""
+    if len(cal.model.targets) < 2 or cal.identifiability is None:
+        return ()
+    first = recording.poses.target_index == 0
+    if cal.inliers is not None:
+        first &= cal.inliers
+    if not first.any():
+        return tuple(n for n in cal.parameters.free_names if n.startswith("target"))
+    own = {p for t in cal.model.targets[1:] for p in target_parameters(t)}
+    params = cal.parameters.fixed(sorted(own & set(cal.parameters.free_names)), "other target")
+    _, jac = cal.model.jacobian(params, recording.poses.subset(first))
+    jac = jac.reshape(-1, jac.shape[-1])
+    kept, analysis = fix_unidentifiable(params, jac)
+    residuals = (cal.predict(recording.poses) - recording.points)[first].reshape(-1)
+    _, weak = fix_poorly_determined(kept, jac, residuals)
+    return tuple(name for name, _ in analysis.fixed + tuple(weak))
 
 
 def _screened(

@@ -18,7 +18,9 @@ from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
-from robot_calib.model import KinematicModel
+from robot_calib.messages import target_topic
+from robot_calib.model import KinematicModel, target_parameters
+from robot_calib.poses import PRIMARY_TARGET
 
 if TYPE_CHECKING:  # light at run time: reading a parameter file needs no scipy
     from robot_calib.identify.calibrate import Calibration
@@ -67,7 +69,18 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
         },
         "warnings": list(recording.warnings) + list(cal.warnings),
         "outliers": [o.to_dict() for o in cal.outliers],
+        "targets": [
+            {
+                "name": name,
+                "topic": target_topic(name),
+                "measurements": int(np.sum(recording.poses.target_index == k)),
+                "offset_m": [cal.parameters[p] for p in target_parameters(name)],
+            }
+            for k, name in enumerate(cal.model.targets)
+        ],
     }
+    if len(cal.model.targets) > 1:
+        doc["identifiable_only_with_extra_targets"] = list(cal.by_extra_targets)
     if cal.identifiability is not None:
         ident = cal.identifiability
         doc["identifiability"] = {
@@ -132,7 +145,10 @@ def params_from_dict(
         if not isinstance(records, list):
             raise InputError(f"{where}: 'effects' must be a list of effect records")
         effects = tuple(effect_from_dict(e) for e in records)
-        model = KinematicModel(robot, effects)
+        targets = doc.get("targets", [{"name": PRIMARY_TARGET}])
+        if not isinstance(targets, list) or not targets:
+            raise InputError(f"{where}: 'targets' must be a non-empty list of target records")
+        model = KinematicModel(robot, effects, tuple(str(t["name"]) for t in targets))
         params = ParameterVector.from_dict(doc["parameters"])
         expected = model.parameters().names
         if params.names != expected:

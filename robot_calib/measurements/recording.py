@@ -95,6 +95,38 @@ class Recording:
             self.target_names,
         )
 
+    def pose_index(self) -> IntArray:
+        """(n,) 0-based pose of each measurement: consecutive measurements of one source at
+        the same readings and time are one pose (the targets measured there)."""
+        if len(self) == 0:
+            return np.zeros(0, dtype=np.int64)
+        new = np.ones(len(self), dtype=bool)
+        q, t = self.poses.q, self.poses.time
+        new[1:] = (
+            np.any(q[1:] != q[:-1], axis=1) | (t[1:] != t[:-1])
+            | (self.bag_index[1:] != self.bag_index[:-1])
+            | (self.poses.target_index[1:] <= self.poses.target_index[:-1])
+        )  # fmt: skip
+        return np.cumsum(new) - 1
+
+    def points_by_target(self) -> tuple[IntArray, Array]:
+        """Per pose (`pose_index`): its first measurement (m,) and every target's point
+        (T, m, 3) [m], NaN where that target was not measured at the pose."""
+        pose = self.pose_index()
+        m = int(pose[-1]) + 1 if len(pose) else 0
+        out = np.full((len(self.target_names), m, 3), np.nan)
+        out[self.poses.target_index, pose] = self.points
+        first = np.flatnonzero(np.r_[True, np.diff(pose) != 0]) if m else pose
+        return first, out
+
+    def only_target(self, name: str) -> Recording:
+        """The measurements of target `name` alone, as a one-target recording."""
+        if name not in self.target_names:
+            raise InputError(f"{', '.join(self.sources)}: no target {target_topic(name)}")
+        part = self.subset(self.poses.target_index == self.target_names.index(name))
+        poses = replace(part.poses, target=None)
+        return replace(part, poses=poses, target_names=(name,))
+
     def with_targets(self, names: Sequence[str]) -> Recording:
         """The same measurements with targets indexed by `names` (e.g. a model's), which
         must include every target measured here; InputError naming the unknown ones."""

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from robot_calib.kinematics.frames import Array
-from robot_calib.poses import Poses, next_direction
+from robot_calib.poses import Poses, approach_directions, next_direction
 from robot_calib.sim.world import NoiseModel, World
 
 
@@ -86,3 +86,21 @@ class StreamingTracker:
         poses = Poses(q[None, :], self._direction[None, :], np.array([stamp_s - self._t0]))
         self.count += 1
         return physical_points(self.world, poses, self.rng)[0], latency
+
+
+def measure_every_target(
+    world: World, q: Array, time: Array, rng: np.random.Generator, noisy: bool = True
+) -> tuple[Poses, Array]:
+    """Every target of the world measured at each of the poses q (m, J) [rad] visited in
+    order at `time` (m,) [s]: poses (m T,) in order, each pose's targets together in the
+    model's order (they share the pose's physical joint angles), and their points
+    (m T, 3) [m] in the tracker frame."""
+    n_targets = len(world.model.targets)
+    rows_q = np.repeat(np.asarray(q, dtype=float), n_targets, axis=0)
+    poses = Poses(
+        rows_q,
+        approach_directions(rows_q),
+        np.repeat(np.asarray(time, dtype=float), n_targets),
+        np.tile(np.arange(n_targets), len(q)),
+    )
+    return poses, physical_points(world, poses, rng, noisy)
