@@ -17,6 +17,8 @@ from robot_calib.errors import InputError
 from robot_calib.identify.outliers import OUTLIER_K
 from robot_calib.kinematics.frames import Array
 
+MIN_SCREENED_POINTS = 7  # 2 n - 6 >= 8 residual degrees of freedom to judge a point by
+
 
 @dataclass(frozen=True)
 class Circle:
@@ -129,7 +131,9 @@ def robust_circle(
     the start comes back). Blunders are few: when more than `max_fraction` of the points
     (and more than one) would go, the arc itself is bent (an effect, e.g. compliance) and
     the plain fit is kept. On clean data the plain fit wins and every point is kept: the result is
-    `fit_circle`'s.
+    `fit_circle`'s. Below MIN_SCREENED_POINTS points nothing is screened: a circle through
+    three of four points fits them exactly, and the fourth would look like a blunder
+    whatever its noise (sweeps of 6 poses with 144 deg steps, some of them 360 deg apart).
 
     Returns
     -------
@@ -141,6 +145,8 @@ def robust_circle(
     points = np.asarray(points, dtype=float)
     n = len(points)
     plain = fit_circle(points, where)
+    if n < MIN_SCREENED_POINTS:  # too little redundancy to tell a blunder from the noise
+        return plain, np.ones(n, dtype=bool)
     candidates = [plain]
     third = n // 3
     for i in np.unique(np.linspace(0, max(third - 1, 0), min(n_trials, third)).astype(int)):

@@ -81,10 +81,26 @@ def turning_sign(circle: Circle, points: Array, readings: Array) -> float:
     return max((1.0, -1.0), key=lambda s: abs(np.mean(np.exp(1j * (angles - s * readings)))))
 
 
-def direction_sigma(circle: Circle, n_points: int) -> float:
-    """1-sigma [rad] of the axis direction a circle gives: noise (its rms) over the radius
-    and sqrt(n/2) points' worth of lever."""
-    return float(circle.rms / max(circle.radius, 1e-12) / np.sqrt(max(n_points, 2) / 2.0))
+def direction_sigma(circle: Circle, n_points: int, noise: float = 0.0) -> float:
+    """1-sigma [rad] of the axis direction a circle gives: the noise over the radius and
+    sqrt(n/2) points' worth of lever. The noise is the circle's rms, but at least `noise`
+    [m] (`pooled_circle_noise`): a circle of few points fits them nearly exactly (three
+    distinct points: rms 0), which says nothing about how well it fixes its axis."""
+    rms = max(circle.rms, noise)
+    return float(rms / max(circle.radius, 1e-12) / np.sqrt(max(n_points, 2) / 2.0))
+
+
+def pooled_circle_noise(fits: list[SweepFit]) -> float:
+    """The noise of the circle fits [m, per residual component]: the residuals of every
+    circle pooled over their degrees of freedom (2 n - 6 each: plane and radial residual
+    per point, 6 circle parameters); 0 when no circle has any to spare."""
+    total = sum(
+        float(np.sum(f.circle.plane_residuals**2) + np.sum(f.circle.radial_residuals**2))
+        for f in fits
+        if 2 * f.n_points > 6
+    )
+    dof = sum(2 * f.n_points - 6 for f in fits if 2 * f.n_points > 6)
+    return float(np.sqrt(total / dof)) if dof > 0 else 0.0
 
 
 def axis_from_sweep(points: Array, readings: Array, joint: int) -> tuple[AxisLine, Circle]:
@@ -97,11 +113,13 @@ def axis_from_sweep(points: Array, readings: Array, joint: int) -> tuple[AxisLin
     return AxisLine(circle.centre, direction), circle
 
 
-def _near_axis_warnings(recording: Recording, joint: int, fits: list[SweepFit]) -> list[str]:
-    """A warning for each circle of `joint` too small to fix the axis direction, saying
-    whether other circles of the joint (other targets or sweeps) carry it instead."""
+def _near_axis_warnings(
+    recording: Recording, joint: int, fits: list[SweepFit], sigma: list[float]
+) -> list[str]:
+    """A warning for each circle of `joint` (`fits`, their direction 1-sigma `sigma`
+    [rad]) too small to fix the axis direction, saying whether other circles of the joint
+    (other targets or sweeps) carry it instead."""
     sweeps = recording.sweeps_of(joint)
-    sigma = [direction_sigma(f.circle, f.n_points) for f in fits]
     good = sum(sd <= NEAR_AXIS_SIGMA_RAD for sd in sigma)
     out = []
     for s, fit, sd in zip(sweeps, fits, sigma):
@@ -175,9 +193,9 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
         raise InputError(f"{robot.name}: CPA needs axes 1 and 2 not parallel")
     variables = robot.joint_variables(recording.poses.q)  # (n, J) [rad]
     q_ref, warnings = reference_readings(recording, n, variables)
-    fits, axes = [], []
+    fits: list[SweepFit] = []
+    lines: dict[int, list[AxisLine]] = {j: [] for j in range(1, n + 1)}
     for j in range(1, n + 1):
-        lines = []
         for s in recording.sweeps_of(j):
             turned = variables[s.index, j - 1]
             line, circle = axis_from_sweep(recording.points[s.index], turned, j)
@@ -189,9 +207,15 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
                     "left out of the circle fit (blunders?)"
                 )
             fits.append(SweepFit(j, n_fitted, float(np.ptp(turned)), circle))
-            lines.append((s.n_poses, direction_sigma(circle, n_fitted), line))
-        warnings += _near_axis_warnings(recording, j, fits[-len(lines) :])
-        axes.append(combine_lines(lines))
+            lines[j].append(line)
+    noise = pooled_circle_noise(fits)
+    axes = []
+    for j in range(1, n + 1):
+        of_joint = [f for f in fits if f.joint == j]
+        sigma = [direction_sigma(f.circle, f.n_points, noise) for f in of_joint]
+        warnings += _near_axis_warnings(recording, j, of_joint, sigma)
+        axes.append(combine_lines([(f.n_points, sd, ln)
+                                   for f, sd, ln in zip(of_joint, sigma, lines[j])]))  # fmt: skip
 
     # Base frame: on axis 1, d1 and theta1 nominal.
     z0 = axes[0].direction
