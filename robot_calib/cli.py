@@ -18,7 +18,12 @@ import numpy as np
 
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
-from robot_calib.kinematics.description import RobotDescription, load_robot, with_joint_names
+from robot_calib.kinematics.description import (
+    RobotDescription,
+    available_robots,
+    load_robot,
+    with_joint_names,
+)
 from robot_calib.measurements import PAIR_TOLERANCE_S
 from robot_calib.pipeline import (
     DEFAULT_PLAN,
@@ -465,8 +470,8 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument(
             "--robot",
             default=DEFAULT_ROBOT if robot is None else None,
-            help=f"built-in robot name, robot YAML file or URDF file (.urdf) "
-            f"(default {robot or DEFAULT_ROBOT})",
+            help=f"built-in robot name ({', '.join(available_robots())}), robot YAML file "
+            f"or URDF file (.urdf) (default {robot or DEFAULT_ROBOT})",
         )
         p.add_argument(
             "--base-link", help="URDF robots: the chain's base link (default: the root link)"

@@ -65,3 +65,18 @@ def test_implausible_results_warn(case: str, expected: str) -> None:
         world = with_effect(WORLD, make_effect("backlash", [2]), {"backlash2": 0.02})
         points = physical_points(world, Poses.from_readings(q), np.random.default_rng(3))
     assert expected in warnings_of(q, robot, points)
+
+
+def test_readings_within_a_joints_own_limits_beyond_2pi_are_not_degrees() -> None:
+    """The GP25's T axis turns +-455 deg: readings within its limits are rad, not degrees;
+    beyond both them and 2 pi they still look like degrees."""
+    from robot_calib.identify.plausibility import recording_warnings
+
+    robot = load_robot("gp25")
+    q = np.tile(np.linspace(0.1, 0.3, 3)[:, None], (1, 6))
+    q[:, 5] = np.radians([-450.0, 0.0, 450.0])
+    recording = recording_from_arrays(q, np.zeros((3, 3)))
+    assert recording_warnings(recording, robot) == []
+    q[2, 5] = 30.0
+    warnings = recording_warnings(recording_from_arrays(q, np.zeros((3, 3))), robot)
+    assert any("joint 6 (joint_6_t) readings reach 30.0 rad" in w for w in warnings), warnings

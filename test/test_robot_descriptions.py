@@ -32,6 +32,18 @@ def test_builtins() -> None:
     assert load_robot("ur5").a[1] == pytest.approx(-0.425)
 
 
+def test_help_lists_every_built_in(capsys: pytest.CaptureFixture[str]) -> None:
+    from robot_calib.cli import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["calibrate", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert all(name in text for name in available_robots())
+    assert {"kr6_r900_sixx", "irb120_3_58", "r2000ic_165f", "m20ia", "gp25"} <= set(
+        available_robots()
+    )
+
+
 def test_user_yaml_in_degrees(tmp_path: Path) -> None:
     path = tmp_path / "two_link.yaml"
     path.write_text(

@@ -73,9 +73,15 @@ def urdf_tip2base(path: Path, base: str, tip: str, q: dict[str, float]) -> np.nd
 
 
 def model_flange2base(robot: RobotDescription, q: np.ndarray) -> np.ndarray:
-    """Our model's flange (DH frame J) in its base frame, (n, 4, 4), for readings q (n, J)."""
-    dh = DHTable(robot.theta + q, robot.d, robot.a, robot.alpha, robot.beta)
-    return chain(dh)[:, -1]
+    """Our model's flange (DH frame J) in its base frame, (n, 4, 4), for readings q (n, J)
+    (through the robot's reading_to_joint mapping, if it declares one)."""
+    return model_frames(robot, q)[:, -1]
+
+
+def model_frames(robot: RobotDescription, q: np.ndarray) -> np.ndarray:
+    """DH frames 0..J of our model in its base frame, (n, J + 1, 4, 4), for readings q."""
+    dh = DHTable(robot.theta + robot.joint_variables(q), robot.d, robot.a, robot.alpha, robot.beta)
+    return chain(dh)
 
 
 def points(frames: np.ndarray) -> np.ndarray:
@@ -114,6 +120,68 @@ def test_urdf_model_matches_urdf_and_yaml_forward_kinematics(name: str) -> None:
     # tool0 is DH frame 6 and the base (z up, on axis 1) DH frame 0: no leftovers
     np.testing.assert_allclose(urdf.tip2flange, np.eye(4), atol=1e-9)
     np.testing.assert_allclose(urdf.dh02base, np.eye(4), atol=1e-9)
+
+
+# Built-ins from manufacturers' URDFs: test/data/NAME.urdf is the source the YAML names,
+# transcribed (joint origins, axes, limits; `base` = the manufacturer's base frame, `tool0` =
+# the flange frame).
+MANUFACTURER_URDFS = [
+    "kr6_r900_sixx", "kr16_2", "kr210_r2700_extra",
+    "irb120_3_58", "irb2600_12_165", "irb6700_200_260",
+    "r2000ic_165f", "m20ia",
+    "gp7", "gp8", "gp25",
+]  # fmt: skip
+# FANUC: the URDF's joint_3 (upper arm to forearm) is J2 + J3 of the controller's readings
+# (ROS-Industrial's fanuc_driver, J23_factor 1); the YAML declares that coupling.
+FANUC_J23 = {"r2000ic_165f", "m20ia"}
+
+
+def urdf_joint_values(name: str, q: np.ndarray) -> np.ndarray:
+    """The URDF's joint values (n, J) of the robot's readings q (n, J) [rad]."""
+    out = q.copy()
+    if name in FANUC_J23:
+        out[:, 2] = q[:, 2] + q[:, 1]
+    return out
+
+
+@pytest.mark.parametrize("name", MANUFACTURER_URDFS)
+def test_built_in_robot_is_the_manufacturers_urdf(name: str) -> None:
+    """The built-in YAML's flange (DH frame 6) at readings q is the URDF's tool0 in its `base`
+    at the URDF's joint values of q, to < 1 um (joint zeros, turning directions and the
+    FANUC J2-J3 coupling included); the same names and limits; and the URDF converted by
+    kinematics/urdf.py gives the same flange."""
+    path = DATA / f"{name}.urdf"
+    robot = load_robot(name)
+    urdf = load_urdf(path, "base", "tool0")
+    assert urdf.description.joint_names == robot.joint_names
+    assert urdf.description.hayati.tolist() == robot.hayati.tolist()
+    # the YAML writes the URDF's rad limits (3-6 decimals) in degrees: equal to 0.06 deg
+    np.testing.assert_allclose(robot.limits, urdf.description.limits, atol=1e-3)
+    q = random_readings(robot, seed=len(name))
+    q_urdf = urdf_joint_values(name, q)
+    direct = np.array(
+        [urdf_tip2base(path, "base", "tool0", dict(zip(robot.joint_names, qi))) for qi in q_urdf]
+    )
+    gap_yaml = np.linalg.norm(points(model_flange2base(robot, q)) - points(direct), axis=-1)
+    converted = urdf.dh02base @ model_flange2base(urdf.description, q_urdf) @ urdf.tip2flange
+    gap_urdf = np.linalg.norm(points(converted) - points(direct), axis=-1)
+    print(f"{name}: max |URDF FK - YAML model| {gap_yaml.max() / UM:.2e} um, "
+          f"|URDF FK - URDF model| {gap_urdf.max() / UM:.2e} um")  # fmt: skip
+    assert gap_yaml.max() < UM and gap_urdf.max() < UM
+
+
+def test_irb120_mass_model_is_the_urdfs_inertials() -> None:
+    """irb120_3_58's masses are the URDF's link masses and its centres of mass (in DH frames
+    j) sit where the URDF's are, in any pose (< 1 um)."""
+    robot = load_robot("irb120_3_58")
+    urdf = load_urdf(DATA / "irb120_3_58.urdf", "base", "tool0")
+    np.testing.assert_allclose(robot.link_mass, urdf.description.link_mass, rtol=1e-12)
+    q = random_readings(robot, seed=7)[:10]
+    ours, theirs = model_frames(robot, q), urdf.dh02base @ model_frames(urdf.description, q)
+    for j in range(robot.n_joints):
+        mine = ours[:, j + 1, :3, :3] @ robot.link_com[j] + ours[:, j + 1, :3, 3]
+        other = theirs[:, j + 1, :3, :3] @ urdf.description.link_com[j] + theirs[:, j + 1, :3, 3]
+        assert np.linalg.norm(mine - other, axis=-1).max() < UM, j + 1
 
 
 def test_kr5_table_is_the_seed_table_and_ur_differs_only_by_sign_conventions() -> None:

@@ -34,7 +34,8 @@ HINT = "a wrong --robot, two joints' readings swapped, or readings in other unit
 
 def recording_warnings(recording: Recording, robot: RobotDescription) -> list[str]:
     """Stuck joints (never moving while others do), readings outside the joint limits, and
-    readings that look like degrees (beyond 2 pi)."""
+    readings that look like degrees (beyond 2 pi and beyond the joint's own limits: a
+    Yaskawa GP25's T axis turns +-455 deg)."""
     out: list[str] = []
     q = recording.poses.q
     moving = np.ptp(q, axis=0) > JOINT_CHANGE_TOLERANCE
@@ -53,7 +54,7 @@ def recording_warnings(recording: Recording, robot: RobotDescription) -> list[st
             )
     for j in range(robot.n_joints):
         peak = float(np.max(np.abs(q[:, j])))
-        if peak > 2 * np.pi + LIMIT_MARGIN_RAD:
+        if peak > max(2 * np.pi, *np.abs(robot.limits[j])) + LIMIT_MARGIN_RAD:
             out.append(
                 f"warning: joint {j + 1} ({names[j]}) readings reach {peak:.1f} rad "
                 f"({np.degrees(peak):.0f} deg): they look like degrees; the contract wants rad"
