@@ -6,6 +6,7 @@ Every bad input ends in one line on stderr naming the file/value and exit status
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import signal
 import sys
@@ -288,13 +289,21 @@ def _calibration(
 
 def cmd_predict(args: argparse.Namespace) -> int:
     """Target positions (tracker frame, m) for the joint angles of JOINTS.csv."""
+    from robot_calib.messages import target_topic
     from robot_calib.predict import read_joints_csv, write_points_csv
 
     model, params, _ = _calibration(args)
+    args.target = model.targets[0] if args.target is None else args.target
+    if args.target not in model.targets:
+        known = ", ".join(repr(t) for t in model.targets)
+        raise InputError(f"{args.params}: no target {args.target!r} (its targets: {known})")
     poses = read_joints_csv(args.joints, model.robot.n_joints)
+    index = np.full(len(poses), model.targets.index(args.target))
+    poses = dataclasses.replace(poses, target=index)
     output = output_path(args.output, "POINTS.csv", [args.params, args.joints], args.force)
     write_points_csv(model.target_points(params, poses), output)
-    print(f"{output}: {len(poses)} points (m, laser_tracker frame)")
+    which = "" if len(model.targets) == 1 else f", target {target_topic(args.target)}"
+    print(f"{output}: {len(poses)} points (m, laser_tracker frame{which})")
     return 0
 
 
@@ -582,6 +591,11 @@ def build_parser() -> argparse.ArgumentParser:
     pred.add_argument("params", metavar="PARAMS.json")
     pred.add_argument("--joints", required=True, help="JOINTS.csv: q1..q6 [rad] (+t, dir1..6)")
     pred.add_argument("-o", "--output", required=True, help="POINTS.csv to write (x,y,z m)")
+    pred.add_argument(
+        "--target", metavar="NAME",
+        help="which target of a several-target calibration (msgs_doc/targets.md; default: "
+        "the first, /laser_tracker/point)",
+    )  # fmt: skip
     _add_force(pred)
 
     spl = add("split", cmd_split, "one bag -> a calibration bag and a hold-out bag")

@@ -201,3 +201,27 @@ def test_import_takes_one_column_triple_per_target(tmp_path: Path) -> None:
 def test_world_target_names_are_topic_tokens(bad: str) -> None:
     with pytest.raises(Exception, match="ROS topic token"):
         build_world({"targets": {bad: [0.0, 0.0, 0.1]}})
+
+
+def test_predict_takes_the_target_of_a_several_target_calibration(tmp_path: Path) -> None:
+    recording = simulated(WORLD)
+    cal = calibrate(recording, ROBOT, "geometric")
+    params = tmp_path / "p.json"
+    params.write_text(json.dumps(cal.to_dict(recording)))
+    joints = tmp_path / "joints.csv"
+    q = recording.poses.q[recording.poses.target_index == 0][:5]  # one row per pose
+    joints.write_text(
+        "q1,q2,q3,q4,q5,q6\n" + "\n".join(",".join(f"{v!r}" for v in r.tolist()) for r in q)
+    )
+    for name in ("", "smr3"):
+        out = tmp_path / f"points{name}.csv"
+        args = ("--target", name) if name else ()
+        proc = robot_calib("predict", str(params), "--joints", str(joints), "-o", str(out), *args)
+        assert proc.returncode == 0, proc.stderr
+        predicted = np.loadtxt(out, delimiter=",", skiprows=1)
+        k = WORLD.model.targets.index(name)
+        measured = recording.points[recording.poses.target_index == k][: len(q)]
+        assert np.abs(predicted - measured).max() < 5e-5  # the noise, not another target
+    proc = robot_calib("predict", str(params), "--joints", str(joints), "-o",
+                       str(tmp_path / "x.csv"), "--target", "smr9")  # fmt: skip
+    assert proc.returncode == 2 and "no target 'smr9'" in proc.stderr
