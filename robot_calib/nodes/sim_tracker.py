@@ -21,11 +21,11 @@ from sensor_msgs.msg import JointState
 from robot_calib.errors import InputError
 from robot_calib.messages import (
     JOINT_STATES_TOPIC,
-    POINT_TOPIC,
     TRACKER_FRAME,
     joint_positions,
     ns_to_sec_nanosec,
     stamp_to_ns,
+    target_topic,
 )
 from robot_calib.nodes._common import declare, run_node
 from robot_calib.nodes.sim_robot import QOS
@@ -50,7 +50,12 @@ class SimTrackerNode(Node):
             "subscribe to /joint_states only once this many readers of the points are matched"
             " (so a robot that waits for its own readers starts only when no point is lost)",
         )
-        self.publisher = self.create_publisher(PointStamped, POINT_TOPIC, QOS)
+        # one topic per target of the world (msgs_doc/targets.md); the first is POINT_TOPIC
+        self.topics = [target_topic(t) for t in self.world.model.targets]
+        self.publishers_by_target = [
+            self.create_publisher(PointStamped, topic, QOS) for topic in self.topics
+        ]
+        self.publisher = self.publishers_by_target[0]
         self.subscription: Subscription | None = None
         self.received = 0
         self.published = 0
@@ -76,18 +81,19 @@ class SimTrackerNode(Node):
             self.get_logger().error(str(exc))
             return
         stamp = stamp_to_ns(msg.header.stamp)
-        result = self.tracker.measure(q, stamp * 1e-9)
+        result = self.tracker.measure_targets(q, stamp * 1e-9)
         if result is None:
             self.dropped += 1
             return
-        point, latency_s = result
-        out = PointStamped()
-        out.header.frame_id = TRACKER_FRAME
-        out.header.stamp.sec, out.header.stamp.nanosec = ns_to_sec_nanosec(
-            stamp - int(round(latency_s * 1e9))
-        )
-        out.point.x, out.point.y, out.point.z = (float(v) for v in point)
-        self.publisher.publish(out)
+        points, latency_s = result
+        for publisher, point in zip(self.publishers_by_target, points):
+            out = PointStamped()
+            out.header.frame_id = TRACKER_FRAME
+            out.header.stamp.sec, out.header.stamp.nanosec = ns_to_sec_nanosec(
+                stamp - int(round(latency_s * 1e9))
+            )
+            out.point.x, out.point.y, out.point.z = (float(v) for v in point)
+            publisher.publish(out)
         self.published += 1
 
 

@@ -23,7 +23,7 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from robot_calib.errors import RobotCalibError
-from robot_calib.messages import JOINT_STATES_TOPIC, POINT_TOPIC
+from robot_calib.messages import JOINT_STATES_TOPIC
 from robot_calib.nodes.recorder import RecorderNode
 from robot_calib.nodes.sim_robot import SimRobotNode
 from robot_calib.nodes.sim_tracker import SimTrackerNode
@@ -134,7 +134,7 @@ def _simulate_bag(
             parameter_overrides=[
                 sim_time,
                 Parameter("output", value=str(output)),
-                Parameter("topics", value=[JOINT_STATES_TOPIC, POINT_TOPIC]),
+                Parameter("topics", value=[JOINT_STATES_TOPIC, *tracker.topics]),
             ]
         )
         nodes.append(recorder)
@@ -143,7 +143,10 @@ def _simulate_bag(
             executor.add_node(node)
         _spin_until(
             executor,
-            lambda: robot.ready() and tracker.publisher.get_subscription_count() >= 1,
+            lambda: (
+                robot.ready()
+                and all(p.get_subscription_count() >= 1 for p in tracker.publishers_by_target)
+            ),
             "discovery",
             received,
         )
@@ -155,7 +158,7 @@ def _simulate_bag(
             return (
                 tracker.received == sent
                 and recorder.counts.get(JOINT_STATES_TOPIC, 0) == sent
-                and recorder.counts.get(POINT_TOPIC, 0) == tracker.published
+                and all(recorder.counts.get(t, 0) == tracker.published for t in tracker.topics)
             )
 
         total = len(robot.plan)

@@ -68,8 +68,16 @@ class StreamingTracker:
     count: int = field(default=0)
 
     def measure(self, q: Array, stamp_s: float) -> tuple[Array, float] | None:
-        """Point (3,) [m] for reading q (J,) stamped `stamp_s`, and the latency [s] by which
-        the tracker's measurement precedes that stamp; None when the point is dropped."""
+        """Point (3,) [m] of the first target for reading q (J,) stamped `stamp_s`, and the
+        latency [s] by which the tracker's measurement precedes that stamp; None when the
+        point is dropped."""
+        result = self.measure_targets(q, stamp_s)
+        return None if result is None else (result[0][0], result[1])
+
+    def measure_targets(self, q: Array, stamp_s: float) -> tuple[Array, float] | None:
+        """Every target's point (T, 3) [m] (the world's targets, in order; one physical
+        joint angle for all) for reading q (J,) stamped `stamp_s`, and the latency [s];
+        None when the pose is dropped."""
         q = np.asarray(q, dtype=float)
         if self._last_q is None:
             self._direction = np.ones_like(q)
@@ -83,9 +91,15 @@ class StreamingTracker:
         latency = self.rng.uniform(0.0, options.latency_max_s)
         if self.rng.random() < options.dropout_probability:
             return None
-        poses = Poses(q[None, :], self._direction[None, :], np.array([stamp_s - self._t0]))
+        n_targets = len(self.world.model.targets)
+        poses = Poses(
+            np.repeat(q[None, :], n_targets, axis=0),
+            np.repeat(self._direction[None, :], n_targets, axis=0),
+            np.full(n_targets, stamp_s - self._t0),
+            np.arange(n_targets) if n_targets > 1 else None,
+        )
         self.count += 1
-        return physical_points(self.world, poses, self.rng)[0], latency
+        return physical_points(self.world, poses, self.rng), latency
 
 
 def measure_every_target(
