@@ -244,6 +244,10 @@ def cmd_import(args: argparse.Namespace) -> int:
     extra = {
         name: np.concatenate([t.extra_points[name] for t in tables]) for name, _ in fmt.targets
     }
+    for name, xyz in extra.items():
+        if not np.isfinite(xyz).all(axis=1).any():
+            _log(f"warning: {', '.join(args.csv)}: target {name} has no measured point: no "
+                 "topic written for it")  # fmt: skip
     counts = write_measurement_bag(
         output, q, points, robot.joint_names, times, args.force, temperature=temperature,
         extra_points=extra,

@@ -187,6 +187,16 @@ def test_joint_names_map_another_naming(tmp_path: Path) -> None:
         capture_output=True, text=True, check=False,
     )  # fmt: skip
     assert proc.returncode == 0 and out.exists(), proc.stderr
+    # The calibration is of the same robot: score and predict read it (names aside).
+    joints = tmp_path / "joints.csv"
+    joints.write_text("q1,q2,q3,q4,q5,q6\n0,0,0,0,0,0\n")
+    for args in (
+        ["score", str(out), str(other), "--joint-names", ",".join(names)],
+        ["predict", str(out), "--joints", str(joints), "-o", str(tmp_path / "x.csv")],
+    ):
+        proc = subprocess.run([sys.executable, "-m", "robot_calib", *args],
+                              capture_output=True, text=True, check=False)  # fmt: skip
+        assert proc.returncode == 0, (args[0], proc.stderr)
 
 
 def test_coupled_readings_sweep_one_joint() -> None:

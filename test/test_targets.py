@@ -225,3 +225,21 @@ def test_predict_takes_the_target_of_a_several_target_calibration(tmp_path: Path
     proc = robot_calib("predict", str(params), "--joints", str(joints), "-o",
                        str(tmp_path / "x.csv"), "--target", "smr9")  # fmt: skip
     assert proc.returncode == 2 and "no target 'smr9'" in proc.stderr
+
+
+def test_a_target_missing_from_the_last_joints_sweep_still_calibrates() -> None:
+    """smr3 out of sight during the whole joint-6 sweep: its offset comes through the
+    geometry of the others (with a warning), and the geometric fit is exact again."""
+    recording = simulated(WORLD)
+    j6 = np.concatenate([s.index for s in recording.sweeps_of(6)])
+    hidden = np.zeros(len(recording), dtype=bool)
+    hidden[j6] = recording.poses.target_index[j6] == 2
+    part = recording.subset(~hidden)
+    truth = absorb_base_offsets(ROBOT, WORLD.truth)
+    messages: list[str] = []
+    cpa = calibrate(part, ROBOT, "cpa", log=messages.append)
+    assert any("smr3/point has no sweep of joint 6" in m for m in messages)
+    assert abs(cpa.parameters["target_smr3_z"] - truth["target_smr3_z"]) < 1e-4
+    geo = calibrate(part, ROBOT, "geometric")
+    for p in target_parameters("smr3"):
+        assert abs(geo.parameters[p] - truth[p]) < 5e-6, p

@@ -293,7 +293,16 @@ def read_measurement_csv(
         name: table[:, n_required + 3 * k : n_required + 3 * k + 3] * LENGTH_UNITS[fmt.length_unit]
         for k, (name, _) in enumerate(fmt.targets)
     }
-    for name, xyz in extra.items():
+    for (name, columns), xyz in zip(fmt.targets, extra.values()):
+        if set(columns) == set(fmt.point):
+            raise InputError(f"{path}: --target {name} names the --point columns {columns}")
+        dist_m = np.linalg.norm(xyz[np.isfinite(xyz).all(axis=1)], axis=1)
+        if len(dist_m) and not MIN_TRACKER_RANGE_M <= np.median(dist_m) <= MAX_TRACKER_RANGE_M:
+            raise InputError(
+                f"{path}: target {name} columns {'/'.join(columns)} are "
+                f"{np.median(dist_m):.3g} m from the tracker read as {fmt.length_unit} "
+                f"(the --point columns' unit): another unit, or not point columns?"
+            )
         partial = np.isnan(xyz).any(axis=1) & ~np.isnan(xyz).all(axis=1)
         if partial.any():
             k = int(np.flatnonzero(partial)[0])
@@ -355,8 +364,10 @@ def write_measurements(
         writer.add_topic(POINT_TOPIC, POINT_TYPE)
         if temperature is not None:
             writer.add_topic(TEMPERATURE_TOPIC, TEMPERATURE_TYPE)
-        extra = {
-            target_topic(k): np.asarray(v, dtype=float) for k, v in (extra_points or {}).items()
+        extra = {  # a target never measured here gets no topic (an empty one says nothing)
+            target_topic(k): np.asarray(v, dtype=float)
+            for k, v in (extra_points or {}).items()
+            if np.isfinite(v).all(axis=1).any()
         }
         for topic in extra:
             writer.add_topic(topic, POINT_TYPE)

@@ -86,10 +86,16 @@ def read_bag(
         names = [PRIMARY_TARGET]
         for topic in sorted(reader.topics):
             name = target_topic_name(topic)
-            if name is not None:
-                _check_topic(reader, topic, POINT_TYPE)
-                target_topics[topic] = len(names)
-                names.append(name)
+            if name is None:
+                continue
+            if reader.topics[topic].message_count == 0:
+                warnings.append(
+                    f"warning: {path}: {topic} has no messages: target {name} left out"
+                )
+                continue
+            _check_topic(reader, topic, POINT_TYPE)
+            target_topics[topic] = len(names)
+            names.append(name)
         for m in reader.messages([JOINT_STATES_TOPIC, *target_topics]):
             msg = m.decode()
             if m.topic == JOINT_STATES_TOPIC:

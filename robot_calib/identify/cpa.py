@@ -36,21 +36,30 @@ from robot_calib.kinematics.axes import (
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array, matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
-from robot_calib.measurements import Recording
+from robot_calib.measurements import Recording, Sweep
 from robot_calib.messages import target_topic
-from robot_calib.model import geometric_parameters
+from robot_calib.model import KinematicModel, geometric_parameters, target_parameters
 
 REF_CONSISTENCY_RAD = 1e-3  # sweeps whose held joints differ by more break the CPA premise
 
 
 @dataclass(frozen=True)
 class SweepFit:
-    """The circle of one sweep: joint, number of points, angle span [rad], circle."""
+    """The circle of one sweep: joint, number of points, angle span [rad], circle, and the
+    largest distance of its points from their centroid [m] (a circle fitted to points that
+    hardly move, a target on the axis, can come out with any radius: this bounds it)."""
 
     joint: int
     n_points: int
     span_rad: float
     circle: Circle
+    spread_m: float = float("inf")
+
+    @property
+    def lever_m(self) -> float:
+        """The radius the axis direction can lean on [m]: the fitted one, at most the
+        points' spread."""
+        return min(self.circle.radius, self.spread_m)
 
 
 @dataclass(frozen=True)
@@ -81,26 +90,32 @@ def turning_sign(circle: Circle, points: Array, readings: Array) -> float:
     return max((1.0, -1.0), key=lambda s: abs(np.mean(np.exp(1j * (angles - s * readings)))))
 
 
-def direction_sigma(circle: Circle, n_points: int, noise: float = 0.0) -> float:
-    """1-sigma [rad] of the axis direction a circle gives: the noise over the radius and
-    sqrt(n/2) points' worth of lever. The noise is the circle's rms, but at least `noise`
-    [m] (`pooled_circle_noise`): a circle of few points fits them nearly exactly (three
-    distinct points: rms 0), which says nothing about how well it fixes its axis."""
+def direction_sigma(
+    circle: Circle, n_points: int, noise: float = 0.0, lever: float | None = None
+) -> float:
+    """1-sigma [rad] of the axis direction a circle gives: the noise over the lever (the
+    radius, or `lever` [m], e.g. `SweepFit.lever_m`) and sqrt(n/2) points' worth of lever.
+    The noise is the circle's rms, but at least `noise` [m] (`pooled_circle_noise`): a
+    circle of few points fits them nearly exactly (three distinct points: rms 0), which
+    says nothing about how well it fixes its axis."""
     rms = max(circle.rms, noise)
-    return float(rms / max(circle.radius, 1e-12) / np.sqrt(max(n_points, 2) / 2.0))
+    radius = circle.radius if lever is None else lever
+    return float(rms / max(radius, 1e-12) / np.sqrt(max(n_points, 2) / 2.0))
 
 
 def pooled_circle_noise(fits: list[SweepFit]) -> float:
-    """The noise of the circle fits [m, per residual component]: the residuals of every
-    circle pooled over their degrees of freedom (2 n - 6 each: plane and radial residual
-    per point, 6 circle parameters); 0 when no circle has any to spare."""
-    total = sum(
-        float(np.sum(f.circle.plane_residuals**2) + np.sum(f.circle.radial_residuals**2))
+    """The noise of the circle fits [m, per residual component]: the median over the
+    circles with residual degrees of freedom to spare (2 n - 6 > 0: plane and radial
+    residual per point, 6 circle parameters) of their rms scaled to those degrees of
+    freedom (a median: one circle fitted to a target on its axis can diverge and must
+    not set the noise of all); 0 when no circle has any to spare."""
+    levels = [
+        float(np.sqrt((np.sum(f.circle.plane_residuals**2)
+                       + np.sum(f.circle.radial_residuals**2)) / (2 * f.n_points - 6)))
         for f in fits
         if 2 * f.n_points > 6
-    )
-    dof = sum(2 * f.n_points - 6 for f in fits if 2 * f.n_points > 6)
-    return float(np.sqrt(total / dof)) if dof > 0 else 0.0
+    ]  # fmt: skip
+    return float(np.median(levels)) if levels else 0.0
 
 
 def axis_from_sweep(points: Array, readings: Array, joint: int) -> tuple[AxisLine, Circle]:
@@ -113,13 +128,22 @@ def axis_from_sweep(points: Array, readings: Array, joint: int) -> tuple[AxisLin
     return AxisLine(circle.centre, direction), circle
 
 
+def _sweep_name(recording: Recording, sweep: Sweep) -> str:
+    """'sweep of joint J at measurements A-B' (and its target, when there are several)."""
+    out = (f"sweep of joint {sweep.joint} at measurements {sweep.index[0] + 1}-"
+           f"{sweep.index[-1] + 1}")  # fmt: skip
+    if len(recording.target_names) > 1:
+        name = recording.target_names[int(recording.poses.target_index[sweep.index[0]])]
+        out += f" of {target_topic(name)}"
+    return out
+
+
 def _near_axis_warnings(
-    recording: Recording, joint: int, fits: list[SweepFit], sigma: list[float]
+    recording: Recording, sweeps: list[Sweep], fits: list[SweepFit], sigma: list[float]
 ) -> list[str]:
-    """A warning for each circle of `joint` (`fits`, their direction 1-sigma `sigma`
-    [rad]) too small to fix the axis direction, saying whether other circles of the joint
-    (other targets or sweeps) carry it instead."""
-    sweeps = recording.sweeps_of(joint)
+    """A warning for each circle of one joint (its `sweeps`, their `fits` and direction
+    1-sigma `sigma` [rad]) too small to fix the axis direction, saying whether other
+    circles of the joint (other targets or sweeps) carry it instead."""
     good = sum(sd <= NEAR_AXIS_SIGMA_RAD for sd in sigma)
     out = []
     for s, fit, sd in zip(sweeps, fits, sigma):
@@ -133,8 +157,8 @@ def _near_axis_warnings(
             else "put a target farther off this axis"
         )
         out.append(
-            f"warning: sweep of joint {joint} at measurements {s.index[0] + 1}-"
-            f"{s.index[-1] + 1}: {who} is {fit.circle.radius * 1e3:.2f} mm from the axis, too "
+            f"warning: sweep of joint {s.joint} at measurements {s.index[0] + 1}-"
+            f"{s.index[-1] + 1}: {who} is {fit.lever_m * 1e3:.2f} mm from the axis, too "
             f"close for its circle ({fit.circle.rms * 1e3:.4f} mm rms) to fix the axis "
             f"direction (1-sigma {np.degrees(sd):.3f} deg): {then}"
         )
@@ -145,15 +169,33 @@ def combine_lines(lines: list[tuple[int, float, AxisLine]]) -> AxisLine:
     """One axis line from the circles of its sweeps, each given as (points, direction
     1-sigma [rad], line): directions averaged by inverse variance, so that a target near
     the axis (a circle too small to fix the direction) gives way to the other targets and
-    sweeps; the point on the line is the points-weighted mean of the circle centres (any
-    point of a well-fixed circle's centre lies on the axis, whatever its target)."""
+    sweeps; the point on the line is the points-weighted mean of the centres of the
+    circles that fix their direction (all, when none does): any well-fixed circle's centre
+    lies on the axis, whatever its target, while one fitted to a target on the axis may
+    lie anywhere."""
     sigma = np.array([max(sd, 1e-12) for _, sd, _ in lines])
     weights = 1.0 / sigma**2
     direction = sum((w * ln.direction for w, (_, _, ln) in zip(weights, lines)), np.zeros(3))
     direction = direction / np.linalg.norm(direction)
-    counts = np.array([c for c, _, _ in lines], dtype=float)
+    good = sigma <= NEAR_AXIS_SIGMA_RAD
+    counts = np.array([c for c, _, _ in lines], dtype=float) * (good if good.any() else 1.0)
     point = sum((c * ln.point for c, (_, _, ln) in zip(counts, lines)), np.zeros(3))
     return AxisLine(point / counts.sum(), direction)
+
+
+def _target_from_geometry(
+    recording: Recording, robot: RobotDescription, params: ParameterVector, name: str
+) -> ParameterVector:
+    """`params` with target `name`'s offset the mean of its points mapped into the flange
+    frame by the geometry and tracker pose in `params` (every measurement of it)."""
+    model = KinematicModel(robot, targets=recording.target_names)
+    rows = recording.poses.target_index == recording.target_names.index(name)
+    flange = model.flange2base(params, recording.poses.subset(rows))  # (k, 4, 4) base
+    b2t = model.base2tracker(params)
+    in_base = (recording.points[rows] - b2t[:3, 3]) @ b2t[:3, :3]  # R^T (p - t), (k, 3)
+    rel = in_base - flange[:, :3, 3]
+    offset = np.einsum("nji,nj->ni", flange[:, :3, :3], rel).mean(axis=0)
+    return params.with_values(dict(zip(target_parameters(name), map(float, offset))))
 
 
 def reference_readings(
@@ -193,29 +235,40 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
         raise InputError(f"{robot.name}: CPA needs axes 1 and 2 not parallel")
     variables = robot.joint_variables(recording.poses.q)  # (n, J) [rad]
     q_ref, warnings = reference_readings(recording, n, variables)
-    fits: list[SweepFit] = []
+    fits: dict[int, list[SweepFit]] = {j: [] for j in range(1, n + 1)}
     lines: dict[int, list[AxisLine]] = {j: [] for j in range(1, n + 1)}
+    used: dict[int, list[Sweep]] = {j: [] for j in range(1, n + 1)}
     for j in range(1, n + 1):
         for s in recording.sweeps_of(j):
             turned = variables[s.index, j - 1]
-            line, circle = axis_from_sweep(recording.points[s.index], turned, j)
+            where = _sweep_name(recording, s)
+            try:
+                line, circle = axis_from_sweep(recording.points[s.index], turned, j)
+            except InputError as exc:  # e.g. a target on the axis, noise-free: no circle
+                if len(recording.sweeps_of(j)) == 1:
+                    raise InputError(f"{where}: {exc}") from None
+                warnings.append(f"warning: {where}: {exc}: left out, the joint's other "
+                                "circles give its axis")  # fmt: skip
+                continue
             n_fitted = len(circle.plane_residuals)
             if n_fitted < s.n_poses:
                 warnings.append(
-                    f"warning: sweep of joint {j} at measurements {s.index[0] + 1}-"
-                    f"{s.index[-1] + 1}: {s.n_poses - n_fitted} point(s) far off its circle "
+                    f"warning: {where}: {s.n_poses - n_fitted} point(s) far off its circle "
                     "left out of the circle fit (blunders?)"
                 )
-            fits.append(SweepFit(j, n_fitted, float(np.ptp(turned)), circle))
+            fitted = recording.points[s.index]
+            spread = float(np.linalg.norm(fitted - fitted.mean(axis=0), axis=1).max())
+            fits[j].append(SweepFit(j, n_fitted, float(np.ptp(turned)), circle, spread))
             lines[j].append(line)
-    noise = pooled_circle_noise(fits)
+            used[j].append(s)
+    every = [f for j in fits for f in fits[j]]
+    noise = pooled_circle_noise(every)
     axes = []
     for j in range(1, n + 1):
-        of_joint = [f for f in fits if f.joint == j]
-        sigma = [direction_sigma(f.circle, f.n_points, noise) for f in of_joint]
-        warnings += _near_axis_warnings(recording, j, of_joint, sigma)
+        sigma = [direction_sigma(f.circle, f.n_points, noise, f.lever_m) for f in fits[j]]
+        warnings += _near_axis_warnings(recording, used[j], fits[j], sigma)
         axes.append(combine_lines([(f.n_points, sd, ln)
-                                   for f, sd, ln in zip(of_joint, sigma, lines[j])]))  # fmt: skip
+                                   for f, sd, ln in zip(fits[j], sigma, lines[j])]))  # fmt: skip
 
     # Base frame: on axis 1, d1 and theta1 nominal.
     z0 = axes[0].direction
@@ -262,18 +315,29 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
     in_flange = np.einsum("nji,nj->ni", flanges[:, :3, :3], rel)  # (k, 3)
     which = recording.poses.target_index[last]
     offsets: dict[str, tuple[float, float, float]] = {}
+    unswept = []
     for k, name in enumerate(recording.target_names):
         if not np.any(which == k):
-            raise InputError(
-                f"{', '.join(recording.sources)}: target {target_topic(name)} has no sweep "
-                f"of joint {n}: CPA finds each target's offset from the last joint's circles"
-            )
+            unswept.append(k)
+            continue
         x, y, z = (float(v) for v in in_flange[which == k].mean(axis=0))
         offsets[name] = (x, y, z)
+    if not offsets:
+        raise InputError(
+            f"{', '.join(recording.sources)}: no target has a sweep of joint {n}: CPA finds "
+            "the targets' offsets from the last joint's circles"
+        )
 
     rpy = matrix_to_rpy(base2tracker[:3, :3])
-    first = offsets[recording.target_names[0]]
+    first = offsets.get(recording.target_names[0], next(iter(offsets.values())))
     params = geometric_parameters(
         robot, tuple(base2tracker[:3, 3]) + rpy, first, recording.target_names, offsets
     ).with_values(values)
-    return CPAResult(params, tuple(axes), tuple(fits), q_ref, tuple(warnings))
+    for k in unswept:  # from all its measurements, through the geometry just found
+        name = recording.target_names[k]
+        params = _target_from_geometry(recording, robot, params, name)
+        warnings.append(
+            f"warning: target {target_topic(name)} has no sweep of joint {n}: its offset "
+            "comes from its measurements through the CPA geometry (less exact)"
+        )
+    return CPAResult(params, tuple(axes), tuple(every), q_ref, tuple(warnings))

@@ -136,7 +136,7 @@ def params_from_dict(
     try:
         robot = load_robot(doc["robot"])
         stored = doc.get("robot_fingerprint")
-        if stored is not None and stored != robot.fingerprint():
+        if stored is not None and stored not in (robot.fingerprint(), robot.fingerprint(True)):
             raise InputError(
                 f"robot description {doc['robot']} is not the one it was calibrated "
                 "with (edited or replaced since): its joints or kinematics differ"

@@ -97,11 +97,14 @@ class RobotDescription:
             out = np.linalg.solve(self.reading_matrix, out.T).T
         return out
 
-    def fingerprint(self) -> str:
-        """SHA-256 of what the model uses from this description (joint names, the DH/Hayati
-        table, limits, masses, the reading-to-joint mapping): PARAMS.json stores it, so a
-        description file edited or replaced after the calibration is noticed on reading."""
-        digest = hashlib.sha256("\n".join(self.joint_names).encode())
+    def fingerprint(self, with_names: bool = False) -> str:
+        """SHA-256 of what the model uses from this description (the DH/Hayati table,
+        limits, masses, the reading-to-joint mapping): PARAMS.json stores it, so a
+        description file edited or replaced after the calibration is noticed on reading.
+        The joint names are left out: they only say how bags name the joints (a calibration
+        made with --joint-names is of the same robot); `with_names` gives the digest that
+        files written before that rule store."""
+        digest = hashlib.sha256("\n".join(self.joint_names).encode() if with_names else b"")
         for array in (self.theta, self.d, self.a, self.alpha, self.beta, self.hayati,
                       self.limits, self.link_mass, self.link_com, self.reading_matrix,
                       self.reading_offset):  # fmt: skip

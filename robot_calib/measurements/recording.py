@@ -97,17 +97,22 @@ class Recording:
 
     def pose_index(self) -> IntArray:
         """(n,) 0-based pose of each measurement: consecutive measurements of one source at
-        the same readings and time are one pose (the targets measured there)."""
-        if len(self) == 0:
-            return np.zeros(0, dtype=np.int64)
-        new = np.ones(len(self), dtype=bool)
-        q, t = self.poses.q, self.poses.time
-        new[1:] = (
-            np.any(q[1:] != q[:-1], axis=1) | (t[1:] != t[:-1])
-            | (self.bag_index[1:] != self.bag_index[:-1])
-            | (self.poses.target_index[1:] <= self.poses.target_index[:-1])
-        )  # fmt: skip
-        return np.cumsum(new) - 1
+        the same readings (paired with one joint state), each of a target not yet measured
+        there, are one pose (the targets measured there, whatever their own stamps)."""
+        n = len(self)
+        out = np.zeros(n, dtype=np.int64)
+        q, bag, target = self.poses.q, self.bag_index, self.poses.target_index
+        pose, seen = -1, set[int]()
+        for i in range(n):
+            same = (
+                i > 0 and bag[i] == bag[i - 1] and int(target[i]) not in seen
+                and bool(np.array_equal(q[i], q[i - 1]))
+            )  # fmt: skip
+            if not same:
+                pose, seen = pose + 1, set()
+            seen.add(int(target[i]))
+            out[i] = pose
+        return out
 
     def points_by_target(self) -> tuple[IntArray, Array]:
         """Per pose (`pose_index`): its first measurement (m,) and every target's point
