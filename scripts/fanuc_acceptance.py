@@ -15,25 +15,8 @@ import numpy as np
 
 from robot_calib.accuracy import accuracy
 from robot_calib.identify.calibrate import calibrate
-from robot_calib.measurements import Recording
 from robot_calib.model import absorb_base_offsets
-from robot_calib.sim.scenarios import fanuc_like
-from robot_calib.sim.world import World
-
-
-def noise_mm(world: World, recording: Recording) -> float:
-    exact = world.model.target_points(world.truth, recording.poses)
-    return float(np.sqrt(np.mean(np.sum((recording.points - exact) ** 2, axis=1))) * 1e3)
-
-
-def wrist_subset(recording: Recording) -> Recording:
-    """Poses 1, 3, 5, 6 of the J4 and J6 sweeps (288 deg steps)."""
-    pose = recording.pose_index()
-    keep = np.ones(len(recording), dtype=bool)
-    for joint in (4, 6):
-        for k in (1, 3):
-            keep[pose == 6 * (joint - 1) + k] = False
-    return recording.subset(keep)
+from robot_calib.sim.scenarios import fanuc_like, noise_rms_mm, wrist_288_subset
 
 
 def main() -> None:
@@ -47,14 +30,14 @@ def main() -> None:
         truth = absorb_base_offsets(world.model.robot, world.truth)
         for label, recording in (
             ("", scenario.calibration),
-            (" (288 deg wrist steps)", wrist_subset(scenario.calibration)),
+            (" (288 deg wrist steps)", wrist_288_subset(scenario.calibration)),
         ):
             for model in ("cpa", "geometric"):
                 cal = calibrate(recording, world.model.robot, model)
                 out = accuracy(held.points, cal.model.target_points(cal.parameters, held.poses))
                 rows.setdefault(model + label, []).append((
-                    cal.accuracy.absolute_rms_mm / noise_mm(world, recording),
-                    out.absolute_rms_mm / noise_mm(world, held),
+                    cal.accuracy.absolute_rms_mm / noise_rms_mm(world, recording),
+                    out.absolute_rms_mm / noise_rms_mm(world, held),
                     abs(cal.parameters["a3"] - truth["a3"]) * 1e6,
                 ))  # fmt: skip
     print(f"FANUC-like campaign, {args.seeds} seeds (rms / simulated noise rms; worst of seeds)")

@@ -9,19 +9,12 @@ import numpy as np
 
 from robot_calib.accuracy import accuracy
 from robot_calib.identify.calibrate import calibrate
-from robot_calib.measurements import Recording
 from robot_calib.model import absorb_base_offsets
-from robot_calib.sim.scenarios import fanuc_like
+from robot_calib.sim.scenarios import fanuc_like, noise_rms_mm, wrist_288_subset
 
 SCENARIO = fanuc_like(seed=0)
 WORLD = SCENARIO.world
 ROBOT = WORLD.model.robot
-
-
-def _noise_rms_mm(recording: Recording) -> float:
-    """rms of measured - exact true points [mm]: the floor no model can beat."""
-    exact = WORLD.model.target_points(WORLD.truth, recording.poses)
-    return float(np.sqrt(np.mean(np.sum((recording.points - exact) ** 2, axis=1))) * 1e3)
 
 
 def test_cpa_and_geometric_reach_the_noise_with_all_three_targets_in_one_calibration() -> None:
@@ -31,7 +24,7 @@ def test_cpa_and_geometric_reach_the_noise_with_all_three_targets_in_one_calibra
     # The coupled J2 sweep moves readings 2 and 3 together and is still a sweep of joint 2.
     j2 = recording.sweeps_of(2)[0]
     assert np.ptp(recording.poses.q[j2.index, 2]) > 0.5
-    floor = _noise_rms_mm(recording)
+    floor = noise_rms_mm(WORLD, recording)
     truth = absorb_base_offsets(ROBOT, WORLD.truth)
     for model, bound in (("cpa", 1.4), ("geometric", 1.1)):
         messages: list[str] = []
@@ -45,24 +38,18 @@ def test_cpa_and_geometric_reach_the_noise_with_all_three_targets_in_one_calibra
         assert "leans on the joint's 2 other circle(s)" in near[0]
         held = accuracy(holdout.points, cal.model.target_points(cal.parameters, holdout.poses))
         # 36 poses identify ~30 parameters: held-out error is a few times the noise, not mm.
-        assert held.absolute_rms_mm < 4.0 * _noise_rms_mm(holdout), (model, held)
+        assert held.absolute_rms_mm < 4.0 * noise_rms_mm(WORLD, holdout), (model, held)
 
 
 def test_every_other_pose_of_the_wrist_sweeps_288_deg_steps_flips_no_axis() -> None:
     """Poses 1, 3, 5, 6 of the J4 and J6 sweeps (-360, -72, 216, 360 deg: steps of 288 deg,
     two of them the same place): the axes still come from the readings, no circle point
     is taken for a blunder, and the geometry stays within tens of um."""
-    recording = SCENARIO.calibration
-    pose = recording.pose_index()
-    keep = np.ones(len(recording), dtype=bool)
-    for joint in (4, 6):
-        for k in (1, 3):
-            keep[pose == 6 * (joint - 1) + k] = False
-    subset = recording.subset(keep)
+    subset = wrist_288_subset(SCENARIO.calibration)
     messages: list[str] = []
     cal = calibrate(subset, ROBOT, "cpa", log=messages.append)
     assert not [m for m in messages if "blunders" in m]
     truth = absorb_base_offsets(ROBOT, WORLD.truth)
     for p in ("a3", "d4", "alpha4", "alpha5"):
         assert abs(cal.parameters[p] - truth[p]) < 1e-4, p
-    assert cal.accuracy.absolute_rms_mm < 2.0 * _noise_rms_mm(subset)
+    assert cal.accuracy.absolute_rms_mm < 2.0 * noise_rms_mm(WORLD, subset)

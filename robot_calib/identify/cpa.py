@@ -149,16 +149,14 @@ def _near_axis_warnings(
     for s, fit, sd in zip(sweeps, fits, sigma):
         if sd <= NEAR_AXIS_SIGMA_RAD:
             continue
-        name = recording.target_names[int(recording.poses.target_index[s.index[0]])]
-        who = "the target" if len(recording.target_names) == 1 else f"target {target_topic(name)}"
         then = (
             f"CPA leans on the joint's {good} other circle(s) instead"
             if good
             else "put a target farther off this axis"
         )
         out.append(
-            f"warning: sweep of joint {s.joint} at measurements {s.index[0] + 1}-"
-            f"{s.index[-1] + 1}: {who} is {fit.lever_m * 1e3:.2f} mm from the axis, too "
+            f"warning: {_sweep_name(recording, s)}: the target is {fit.lever_m * 1e3:.2f} mm "
+            "from the axis, too "
             f"close for its circle ({fit.circle.rms * 1e3:.4f} mm rms) to fix the axis "
             f"direction (1-sigma {np.degrees(sd):.3f} deg): {then}"
         )

@@ -93,3 +93,21 @@ def fanuc_like(seed: int = 0, n_holdout: int = 100, robot: str = FANUC_ROBOT) ->
     held = random_plan(world.model.robot, n_holdout, rng, margin=0.15)
     holdout = _recording(world, held.q, plan_times(held, world.timing), seed + 1, "holdout")
     return Scenario(world, calibration, holdout)
+
+
+def noise_rms_mm(world: World, recording: Recording) -> float:
+    """rms of measured - exact true points of `recording` in `world` [mm]: the floor no
+    model can beat."""
+    exact = world.model.target_points(world.truth, recording.poses)
+    return float(np.sqrt(np.mean(np.sum((recording.points - exact) ** 2, axis=1))) * 1e3)
+
+
+def wrist_288_subset(recording: Recording) -> Recording:
+    """A `fanuc_like` calibration recording with only poses 1, 3, 5, 6 of its J4 and J6
+    sweeps (-360, -72, 216, 360 deg: steps of 288 deg, two of them the same place)."""
+    pose = recording.pose_index()
+    keep = np.ones(len(recording), dtype=bool)
+    for joint in (4, 6):
+        for k in (1, 3):
+            keep[pose == 6 * (joint - 1) + k] = False
+    return recording.subset(keep)
