@@ -1,7 +1,7 @@
 """Conversions between the contract's messages and arrays (CONTRACT.md section 1).
 
 Duck-typed on field names, so they serve rclpy messages and messages decoded from a bag
-(mcap_ros2) alike; no ROS import here.
+(mcap_ros2) alike; no ROS import here. Quaternions go through scipy's `Rotation`.
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ import re
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
@@ -20,6 +21,13 @@ TRACKER_FRAME = "laser_tracker"
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 POINT_TYPE = "geometry_msgs/msg/PointStamped"
 TARGET_TOPIC = re.compile(r"/laser_tracker/([A-Za-z][A-Za-z0-9_]*)/point")
+# 6-DoF probes (msgs_doc/six_dof.md): a pose topic beside a target's point topic
+POSE_TOPIC = "/laser_tracker/pose"
+POSE_TYPE = "geometry_msgs/msg/PoseStamped"
+POSE_COV_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+POSE_TYPES = (POSE_TYPE, POSE_COV_TYPE)
+TARGET_POSE_TOPIC = re.compile(r"/laser_tracker/(?:([A-Za-z][A-Za-z0-9_]*)/)?pose")
+QUATERNION_TOLERANCE = 1e-3  # |q| - 1 beyond this is no rotation (a column mix-up)
 
 
 def target_topic(name: str) -> str:
@@ -31,6 +39,59 @@ def target_topic_name(topic: str) -> str | None:
     """The target name of a further target's topic /laser_tracker/NAME/point, else None."""
     match = TARGET_TOPIC.fullmatch(topic)
     return match.group(1) if match else None
+
+
+def pose_topic(name: str) -> str:
+    """The 6-DoF topic of target `name` ('' = POSE_TOPIC, else /laser_tracker/NAME/pose)."""
+    return POSE_TOPIC if not name else f"/laser_tracker/{name}/pose"
+
+
+def pose_topic_name(topic: str) -> str | None:
+    """The target name of a 6-DoF topic ('' for POSE_TOPIC), None for any other topic."""
+    match = TARGET_POSE_TOPIC.fullmatch(topic)
+    return None if match is None else match.group(1) or ""
+
+
+def pose_measurement(msg: Any, where: str) -> tuple[Array, Array, Array]:
+    """A PoseStamped or PoseWithCovarianceStamped of a 6-DoF probe -> position (3,) [m],
+    orientation (3, 3) in the tracker frame (NaN when the covariance marks it not measured:
+    a negative rotation variance) and stated standard deviations (2,) [m, rad] (NaN: not
+    stated, i.e. no covariance or a zero one). InputError naming `where` when the
+    quaternion is not a unit one."""
+    pose = msg.pose.pose if hasattr(msg.pose, "covariance") else msg.pose
+    p = np.array([pose.position.x, pose.position.y, pose.position.z], dtype=float)
+    o = pose.orientation
+    quat = np.array([o.x, o.y, o.z, o.w], dtype=float)
+    sigma = np.full(2, np.nan)
+    measured = True
+    if hasattr(msg.pose, "covariance"):
+        diag = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6).diagonal()
+        if np.all(diag[:3] > 0):
+            sigma[0] = np.sqrt(diag[:3].mean())
+        measured = not np.any(diag[3:] < 0)
+        if measured and np.all(diag[3:] > 0):
+            sigma[1] = np.sqrt(diag[3:].mean())
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(quat))):
+        raise InputError(f"{where}: pose not finite: {p.tolist()} {quat.tolist()}")
+    if not measured:
+        return p, np.full((3, 3), np.nan), sigma
+    if abs(np.linalg.norm(quat) - 1.0) > QUATERNION_TOLERANCE:
+        raise InputError(
+            f"{where}: orientation quaternion (x, y, z, w) {quat.tolist()} has norm "
+            f"{np.linalg.norm(quat):.6g}, not 1"
+        )
+    return p, Rotation.from_quat(quat).as_matrix(), sigma
+
+
+def pose_covariance(sigma: Array, oriented: bool) -> list[float]:
+    """The 36 covariance entries (row-major x, y, z, rot x, rot y, rot z) of stated
+    standard deviations sigma (2,) [m, rad] (NaN: not stated -> 0); rotation variances -1
+    when the orientation was not measured (`pose_measurement`'s reading)."""
+    cov = np.zeros((6, 6))
+    position, rotation = (0.0 if not np.isfinite(v) else float(v) ** 2 for v in sigma)
+    cov[range(3), range(3)] = position
+    cov[range(3, 6), range(3, 6)] = rotation if oriented else -1.0
+    return [float(v) for v in cov.reshape(-1)]
 
 
 def stamp_to_ns(stamp: Any) -> int:

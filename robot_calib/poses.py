@@ -57,12 +57,20 @@ class Poses:
     target : shape (n,), which target (SMR) on the flange each measurement is of: an index
       into the model's and recording's target names (None: all the first target, the
       contract's single `/laser_tracker/point`; msgs_doc/targets.md)
+    rotation : shape (n, 3, 3), what a 6-DoF probe measured besides its point: the probe
+      frame's orientation in the tracker frame (columns: its x, y, z axes), NaN where only
+      the point was measured (None: no orientation at all; msgs_doc/six_dof.md)
+    sigma : shape (n, 2), the standard deviations the tracker stated for each measurement:
+      position [m] (per coordinate) and orientation [rad] (per axis), NaN where none was
+      stated (None: none at all); they weight the residuals (`identify.weights`)
     """
 
     q: Array
     direction: Array
     time: Array
     target: IntArray | None = None
+    rotation: Array | None = None
+    sigma: Array | None = None
 
     @property
     def target_index(self) -> IntArray:
@@ -70,6 +78,13 @@ class Poses:
         if self.target is None:
             return np.zeros(len(self), dtype=np.int64)
         return self.target
+
+    @property
+    def oriented(self) -> NDArray[np.bool_]:
+        """(n,) which measurements carry a measured orientation (6-DoF probe)."""
+        if self.rotation is None:
+            return np.zeros(len(self), dtype=bool)
+        return np.all(np.isfinite(self.rotation), axis=(1, 2))
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
@@ -91,7 +106,35 @@ class Poses:
             raise InputError(f"time must be finite of shape ({n},), got {t.shape}")
         return cls(q, d, t)
 
+    @classmethod
+    def concatenate(cls, parts: list[Poses], with_target: bool = True) -> Poses:
+        """The poses of `parts` one after the other; optional per-measurement fields are
+        kept when any part has them (NaN where a part has none), `target` only with
+        `with_target`."""
+
+        def joined(field: str, shape: tuple[int, ...]) -> Array | None:
+            values = [getattr(p, field) for p in parts]
+            if all(v is None for v in values):
+                return None
+            return np.concatenate(
+                [np.full((len(p), *shape), np.nan) if v is None else v
+                 for p, v in zip(parts, values)]
+            )  # fmt: skip
+
+        return cls(
+            np.concatenate([p.q for p in parts]),
+            np.concatenate([p.direction for p in parts]),
+            np.concatenate([p.time for p in parts]),
+            np.concatenate([p.target_index for p in parts]) if with_target else None,
+            joined("rotation", (3, 3)),
+            joined("sigma", (2,)),
+        )
+
     def subset(self, index: slice | IntArray | NDArray[np.bool_]) -> Poses:
         """The poses selected by an index or boolean mask (directions kept as recorded)."""
         target = None if self.target is None else self.target[index]
-        return Poses(self.q[index], self.direction[index], self.time[index], target)
+        rotation = None if self.rotation is None else self.rotation[index]
+        sigma = None if self.sigma is None else self.sigma[index]
+        return Poses(
+            self.q[index], self.direction[index], self.time[index], target, rotation, sigma
+        )

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from robot_calib.atomic import staged_outputs
 from robot_calib.bag.mcap_writer import BagWriter
@@ -30,8 +31,12 @@ from robot_calib.messages import (
     JOINT_STATES_TOPIC,
     POINT_TOPIC,
     POINT_TYPE,
+    POSE_COV_TYPE,
+    POSE_TYPE,
     TRACKER_FRAME,
     ns_to_sec_nanosec,
+    pose_covariance,
+    pose_topic,
     target_topic,
 )
 
@@ -323,6 +328,7 @@ def write_measurement_bag(
     output: str | Path, q: Array, points: Array, joint_names: tuple[str, ...],
     time: Array | None = None, force: bool = False, direction: Array | None = None,
     temperature: Array | None = None, extra_points: Mapping[str, Array] | None = None,
+    six_dof: Mapping[str, SixDof] | None = None,
 ) -> dict[str, int]:  # fmt: skip
     """A contract bag: one JointState and one PointStamped per pose, stamped in row order
     (`time` [s] from the first pose, else 1 s apart; see `write_measurements`). Written
@@ -336,14 +342,14 @@ def write_measurement_bag(
     with staged_outputs(output.parent, force) as stage:
         return write_measurements(
             stage / output.name, q, points, joint_names, START_NS + offsets, direction,
-            temperature, extra_points,
+            temperature, extra_points, six_dof,
         )  # fmt: skip
 
 
 def write_measurements(
     path: Path, q: Array, points: Array, joint_names: tuple[str, ...], stamps_ns: IntArray,
     direction: Array | None = None, temperature: Array | None = None,
-    extra_points: Mapping[str, Array] | None = None,
+    extra_points: Mapping[str, Array] | None = None, six_dof: Mapping[str, SixDof] | None = None,
 ) -> dict[str, int]:  # fmt: skip
     """Write a contract bag at `path` directly (callers stage it): per pose i a JointState
     (readings q (n, J) [rad] of `joint_names`) and a PointStamped (points (n, 3) [m],
@@ -354,11 +360,15 @@ def write_measurements(
     TEMPERATURE_TOPIC, stamped as the pose (side data, msgs_doc/temperature.md).
     `extra_points` {NAME: (n, 3) [m]}: further targets measured at the same poses, each on
     /laser_tracker/NAME/point stamped as its pose (a NaN row: not measured at that pose;
-    msgs_doc/targets.md). Returns messages per topic."""
+    msgs_doc/targets.md). `six_dof` {NAME: (rotation (n, 3, 3), sigma (n, 2))}: what a 6-DoF
+    probe measured at target NAME besides its point, written beside the point as a pose on
+    /laser_tracker/(NAME/)pose: a PoseWithCovarianceStamped where standard deviations are
+    stated, else a PoseStamped (msgs_doc/six_dof.md). Returns messages per topic."""
     if len(joint_names) != q.shape[1]:
         raise InputError(f"{q.shape[1]} joint columns for a robot with {len(joint_names)} joints")
-    store = typestore(JOINT_STATE_TYPE, POINT_TYPE, TEMPERATURE_TYPE)
+    store = typestore(JOINT_STATE_TYPE, POINT_TYPE, TEMPERATURE_TYPE, POSE_TYPE, POSE_COV_TYPE)
     types = store.types
+    poses = _pose_writers(store, six_dof or {})
     with BagWriter(path) as writer:
         writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         writer.add_topic(POINT_TOPIC, POINT_TYPE)
@@ -371,6 +381,8 @@ def write_measurements(
         }
         for topic in extra:
             writer.add_topic(topic, POINT_TYPE)
+        for pose in poses:
+            writer.add_topic(pose.topic, pose.type_name)
         velocities = np.zeros((len(q), 0)) if direction is None else np.asarray(direction)
         for k, (qi, pi, stamp_ns, vi) in enumerate(zip(q, points, stamps_ns, velocities)):
             stamp = types["builtin_interfaces/msg/Time"](*ns_to_sec_nanosec(int(stamp_ns)))
@@ -389,6 +401,11 @@ def write_measurements(
                     point=types["geometry_msgs/msg/Point"](*map(float, xyz)),
                 )
                 writer.write(topic, store.serialize_cdr(pt, POINT_TYPE), int(stamp_ns) + 1)
+            for pose in poses:
+                xyz = points[k] if not pose.name else extra_points_of(extra_points, pose.name, k)
+                pose_cdr = pose.serialize(k, xyz, stamp)
+                if pose_cdr is not None:
+                    writer.write(pose.topic, pose_cdr, int(stamp_ns) + 1)
             if temperature is not None:  # side data, in time order with the pose
                 msg = types[TEMPERATURE_TYPE](
                     header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
@@ -398,6 +415,66 @@ def write_measurements(
                 writer.write(TEMPERATURE_TOPIC, serialized, int(stamp_ns) + 2)
         writer.close()
         return writer.counts
+
+
+SixDof = tuple[Array, Array]  # rotation (n, 3, 3) and sigma (n, 2) [m, rad] of one target
+
+
+def extra_points_of(extra_points: Mapping[str, Array] | None, name: str, k: int) -> Array:
+    """Point k (3,) [m] of further target `name` (NaN when it has none)."""
+    values = (extra_points or {}).get(name)
+    return np.full(3, np.nan) if values is None else np.asarray(values[k], dtype=float)
+
+
+@dataclass(frozen=True)
+class _PoseWriter:
+    """Serialises the 6-DoF messages of one target (`write_measurements`)."""
+
+    name: str
+    rotation: Array  # (n, 3, 3), NaN rows: not measured
+    sigma: Array  # (n, 2) [m, rad], NaN: not stated
+    store: Any  # rosbags Typestore with the pose types
+
+    @property
+    def topic(self) -> str:
+        return pose_topic(self.name)
+
+    @property
+    def type_name(self) -> str:
+        return POSE_COV_TYPE if np.isfinite(self.sigma).any() else POSE_TYPE
+
+    def serialize(self, k: int, xyz: Array, stamp: Any) -> bytes | None:
+        """Row k's message (position xyz (3,) [m]), None when row k has neither a point,
+        nor an orientation or stated accuracy."""
+        oriented = bool(np.all(np.isfinite(self.rotation[k])))
+        if not np.all(np.isfinite(xyz)) or not (oriented or np.isfinite(self.sigma[k]).any()):
+            return None
+        t = self.store.types
+        quat = Rotation.from_matrix(self.rotation[k]).as_quat() if oriented else [0, 0, 0, 1]
+        pose = t["geometry_msgs/msg/Pose"](
+            position=t["geometry_msgs/msg/Point"](*map(float, xyz)),
+            orientation=t["geometry_msgs/msg/Quaternion"](*map(float, quat)),
+        )
+        header = t["std_msgs/msg/Header"](stamp=stamp, frame_id=TRACKER_FRAME)
+        if self.type_name == POSE_TYPE:
+            msg = t[POSE_TYPE](header=header, pose=pose)
+        else:
+            cov = np.array(pose_covariance(self.sigma[k], oriented))
+            msg = t[POSE_COV_TYPE](
+                header=header,
+                pose=t["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
+            )
+        return bytes(self.store.serialize_cdr(msg, self.type_name))
+
+
+def _pose_writers(store: Any, six_dof: Mapping[str, SixDof]) -> list[_PoseWriter]:
+    """One writer per target with any orientation or stated accuracy."""
+    out = []
+    for name, (rotation, sigma) in six_dof.items():
+        rotation, sigma = np.asarray(rotation, dtype=float), np.asarray(sigma, dtype=float)
+        if np.isfinite(rotation).any() or np.isfinite(sigma).any():
+            out.append(_PoseWriter(name, rotation, sigma, store))
+    return out
 
 
 def with_overrides(fmt: CsvFormat, **changes: Any) -> CsvFormat:

@@ -27,13 +27,21 @@ from robot_calib.messages import (
     JOINT_STATES_TOPIC,
     POINT_TOPIC,
     POINT_TYPE,
+    POSE_TOPIC,
+    POSE_TYPES,
     TRACKER_FRAME,
     joint_positions,
+    pose_measurement,
+    pose_topic,
+    pose_topic_name,
     stamp_to_ns,
+    target_topic,
     target_topic_name,
     velocity_signs,
 )
 from robot_calib.poses import PRIMARY_TARGET
+
+POSE_POINT_TOLERANCE_M = 1e-6  # a pose's position and its point's: the same measurement
 
 
 def _check_topic(reader: BagReader, topic: str, type_name: str) -> None:
@@ -55,6 +63,87 @@ def _check_no_extra_joints(names: tuple[str, ...], robot: RobotDescription, path
             f"{path}: {JOINT_STATES_TOPIC} has joints {extra} that robot {robot.name} "
             f"({robot.n_joints} joints: {list(robot.joint_names)}) does not have; wrong --robot?"
         )
+
+
+def _target_topics(
+    reader: BagReader, path: Path, warnings: list[str]
+) -> tuple[dict[str, int], dict[str, int], list[str]]:
+    """The bag's targets: point topics {topic: target index}, 6-DoF pose topics {topic:
+    target index} (msgs_doc/six_dof.md) and the target names ('' first). The first target
+    needs POINT_TOPIC or POSE_TOPIC; a topic without messages is left out (warning)."""
+    point_topics: dict[str, int] = {}
+    pose_topics: dict[str, int] = {}
+    names: list[str] = [PRIMARY_TARGET]
+    if POSE_TOPIC not in reader.topics or POINT_TOPIC in reader.topics:
+        _check_topic(reader, POINT_TOPIC, POINT_TYPE)
+        point_topics[POINT_TOPIC] = 0
+    for topic in sorted(reader.topics):
+        point_name, pose_name = target_topic_name(topic), pose_topic_name(topic)
+        name = point_name if point_name is not None else pose_name
+        if name is None or topic == POINT_TOPIC:
+            continue
+        if reader.topics[topic].message_count == 0:
+            if name:
+                warnings.append(f"warning: {path}: {topic} has no messages: left out")
+                continue
+            if topic == POSE_TOPIC and POINT_TOPIC in point_topics:
+                continue
+        info = reader.topics[topic]
+        if pose_name is not None and info.type_name not in POSE_TYPES:
+            raise BagError(
+                f"{path}: topic {topic} has type {info.type_name}, not one of "
+                f"{', '.join(POSE_TYPES)}"
+            )
+        if point_name is not None:
+            _check_topic(reader, topic, POINT_TYPE)
+        if name not in names:
+            names.append(name)
+        (point_topics if point_name is not None else pose_topics)[topic] = names.index(name)
+    return point_topics, pose_topics, names
+
+
+def _six_dof_rows(
+    path: Path,
+    names: list[str],
+    with_points: set[int],
+    poses: list[dict[int, tuple[Array, Array, Array]]],
+    pt_t: list[int],
+    pts: list[Array],
+    pt_target: list[int],
+) -> tuple[Array | None, Array | None]:
+    """Orientation (n, 3, 3) and stated standard deviations (n, 2) of every point, from the
+    6-DoF messages `poses` (per target, by stamp [ns]); a target with a pose topic but no
+    point topic gets its points from the poses (appended to pt_t, pts, pt_target). BagError
+    when a pose and the point of its stamp disagree, or a pose has no point."""
+    if not any(poses):
+        return None, None
+    for k, by_stamp in enumerate(poses):
+        if k not in with_points:
+            for stamp, (p, _, _) in by_stamp.items():
+                pt_t.append(stamp)
+                pts.append(p)
+                pt_target.append(k)
+    rotation = np.full((len(pts), 3, 3), np.nan)
+    sigma = np.full((len(pts), 2), np.nan)
+    used = [0] * len(names)
+    for i, (stamp, p, k) in enumerate(zip(pt_t, pts, pt_target)):
+        found = poses[k].get(stamp)
+        if found is None:
+            continue
+        if np.linalg.norm(found[0] - p) > POSE_POINT_TOLERANCE_M:
+            raise BagError(
+                f"{path}: {pose_topic(names[k])} at stamp {stamp} ns is at {found[0].tolist()} "
+                f"but {target_topic(names[k])} at {p.tolist()} m"
+            )
+        rotation[i], sigma[i] = found[1], found[2]
+        used[k] += 1
+    for k, by_stamp in enumerate(poses):
+        if len(by_stamp) > used[k]:
+            raise BagError(
+                f"{path}: {len(by_stamp) - used[k]} of {len(by_stamp)} messages of "
+                f"{pose_topic(names[k])} have no {target_topic(names[k])} message of their stamp"
+            )
+    return rotation, sigma
 
 
 def read_bag(
@@ -81,22 +170,9 @@ def read_bag(
         ) from None
     with reader:
         _check_topic(reader, JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
-        _check_topic(reader, POINT_TOPIC, POINT_TYPE)
-        target_topics = {POINT_TOPIC: 0}  # further targets (msgs_doc/targets.md) follow
-        names = [PRIMARY_TARGET]
-        for topic in sorted(reader.topics):
-            name = target_topic_name(topic)
-            if name is None:
-                continue
-            if reader.topics[topic].message_count == 0:
-                warnings.append(
-                    f"warning: {path}: {topic} has no messages: target {name} left out"
-                )
-                continue
-            _check_topic(reader, topic, POINT_TYPE)
-            target_topics[topic] = len(names)
-            names.append(name)
-        for m in reader.messages([JOINT_STATES_TOPIC, *target_topics]):
+        target_topics, pose_topics, names = _target_topics(reader, path, warnings)
+        poses: list[dict[int, tuple[Array, Array, Array]]] = [{} for _ in names]
+        for m in reader.messages([JOINT_STATES_TOPIC, *target_topics, *pose_topics]):
             msg = m.decode()
             if m.topic == JOINT_STATES_TOPIC:
                 js_q.append(
@@ -107,22 +183,32 @@ def read_bag(
                     _check_no_extra_joints(names_seen, robot, path)
                 js_t.append(stamp_to_ns(msg.header.stamp))
                 js_v.append(velocity_signs(msg, robot.joint_names))
-            else:
-                p = np.array([msg.point.x, msg.point.y, msg.point.z])
-                k = target_topics[m.topic]
-                if not np.all(np.isfinite(p)):
-                    raise BagError(
-                        f"{path}: {m.topic} message {pt_target.count(k) + 1} is not finite: {p}"
-                    )
-                frames.add(msg.header.frame_id)
-                pt_t.append(stamp_to_ns(msg.header.stamp))
-                pts.append(p)
-                pt_target.append(k)
+                continue
+            frames.add(msg.header.frame_id)
+            if m.topic in pose_topics:
+                k = pose_topics[m.topic]
+                where = f"{path}: {m.topic} message {len(poses[k]) + 1}"
+                try:
+                    poses[k][stamp_to_ns(msg.header.stamp)] = pose_measurement(msg, where)
+                except InputError as exc:
+                    raise BagError(str(exc)) from None
+                continue
+            p = np.array([msg.point.x, msg.point.y, msg.point.z])
+            k = target_topics[m.topic]
+            if not np.all(np.isfinite(p)):
+                raise BagError(
+                    f"{path}: {m.topic} message {pt_target.count(k) + 1} is not finite: {p}"
+                )
+            pt_t.append(stamp_to_ns(msg.header.stamp))
+            pts.append(p)
+            pt_target.append(k)
     if frames != {TRACKER_FRAME}:
         warnings.append(
             f"warning: {path}: tracker point frame_id {sorted(frames)} is not "
             f"'{TRACKER_FRAME}' (used as the tracker frame anyway)"
         )
+    rotation, sigma = _six_dof_rows(path, names, set(target_topics.values()), poses,
+                                    pt_t, pts, pt_target)  # fmt: skip
     n_joints = robot.n_joints
     rec = recording_from_stream(
         np.array(js_t, dtype=np.int64),
@@ -136,6 +222,8 @@ def read_bag(
         robot=robot,
         point_target=np.array(pt_target, dtype=np.int64) if len(names) > 1 else None,
         target_names=tuple(names),
+        rotation=rotation,
+        sigma=sigma,
     )
     return replace(rec, warnings=tuple(warnings) + rec.warnings)
 

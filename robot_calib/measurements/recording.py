@@ -150,6 +150,13 @@ class Recording:
         return replace(self, poses=poses, target_names=names)
 
     @property
+    def oriented_targets(self) -> tuple[str, ...]:
+        """The targets of which some measurement carries an orientation (6-DoF probes,
+        msgs_doc/six_dof.md), in `target_names` order."""
+        which = np.unique(self.poses.target_index[self.poses.oriented])
+        return tuple(self.target_names[int(k)] for k in which)
+
+    @property
     def general(self) -> NDArray[np.bool_]:
         """Boolean mask (n,): poses that belong to no sweep."""
         mask = np.ones(len(self), dtype=bool)
@@ -189,12 +196,7 @@ class Recording:
             offset += len(part)
         return cls(
             tuple(s for p in parts for s in p.sources),
-            Poses(
-                np.concatenate([p.poses.q for p in parts]),
-                np.concatenate([p.poses.direction for p in parts]),
-                np.concatenate([p.poses.time for p in parts]),
-                np.concatenate([p.poses.target_index for p in parts]) if len(names) > 1 else None,
-            ),
+            Poses.concatenate([p.poses for p in parts], with_target=len(names) > 1),
             np.concatenate([p.points for p in parts]),
             tuple(sweeps),
             np.concatenate([np.full(len(p), b) for b, p in enumerate(parts)]),
@@ -282,11 +284,14 @@ def recording_from_arrays(
     robot: RobotDescription | None = None,
     target: IntArray | None = None,
     target_names: tuple[str, ...] = (PRIMARY_TARGET,),
+    rotation: Array | None = None,
+    sigma: Array | None = None,
 ) -> Recording:
     """A recording of measurements already paired in memory (one source, visiting order):
     q (n, J) [rad], points (n, 3) [m], time (n,) [s], target (n,) which of `target_names`
-    each point is of (None: the first); sweeps are found on `robot`'s joint variables
-    (None: the readings), per target.
+    each point is of (None: the first); rotation (n, 3, 3) and sigma (n, 2) what a 6-DoF
+    probe measured and the stated accuracies (`Poses`); sweeps are found on `robot`'s joint
+    variables (None: the readings), per target.
 
     Returns
     -------
@@ -298,7 +303,8 @@ def recording_from_arrays(
     """
     poses = Poses.from_readings(q, time=time)
     index = _target_index(target, len(poses), target_names, source)
-    poses = replace(poses, target=index)
+    six_dof = _six_dof(rotation, sigma, len(poses), source)
+    poses = replace(poses, target=index, rotation=six_dof["rotation"], sigma=six_dof["sigma"])
     warnings: list[str] = []
     sweeps = _sweeps(poses.q, robot, source, warnings, index, target_names)
     return Recording(
@@ -311,6 +317,36 @@ def recording_from_arrays(
         tuple(warnings),
         target_names=tuple(target_names),
     )
+
+
+def _six_dof(
+    rotation: Array | None, sigma: Array | None, n: int, source: str
+) -> dict[str, Array | None]:
+    """`Poses` fields rotation (n, 3, 3) and sigma (n, 2) checked: shapes, a rotation is
+    orthonormal (1e-6) or all NaN, a standard deviation > 0 or NaN."""
+    out: dict[str, Array | None] = {"rotation": None, "sigma": None}
+    if rotation is not None:
+        r = np.asarray(rotation, dtype=float)
+        if r.shape != (n, 3, 3):
+            raise InputError(f"{source}: orientations of shape {r.shape} for {n} points")
+        given = np.all(np.isfinite(r), axis=(1, 2))
+        if np.any(np.isfinite(r[~given])):
+            raise InputError(f"{source}: an orientation partly given (NaN and numbers)")
+        error = np.abs(np.einsum("nji,njk->nik", r[given], r[given]) - np.eye(3)).max(axis=(1, 2))
+        det = np.linalg.det(r[given]) if given.any() else np.ones(0)
+        if np.any(error > 1e-6) or np.any(det < 0):
+            bad = int(np.flatnonzero(given)[np.argmax(error)]) + 1
+            raise InputError(f"{source}: orientation {bad} is not a rotation")
+        out["rotation"] = r if given.any() else None
+    if sigma is not None:
+        sd = np.asarray(sigma, dtype=float)
+        if sd.shape != (n, 2) or np.any(sd[np.isfinite(sd)] <= 0) or np.any(np.isinf(sd)):
+            raise InputError(
+                f"{source}: standard deviations must be (n, 2) [m, rad], > 0 or NaN "
+                f"(not stated); got shape {sd.shape}"
+            )
+        out["sigma"] = sd if np.isfinite(sd).any() else None
+    return out
 
 
 def _target_index(
@@ -342,12 +378,15 @@ def recording_from_stream(
     robot: RobotDescription | None = None,
     point_target: IntArray | None = None,
     target_names: tuple[str, ...] = (PRIMARY_TARGET,),
+    rotation: Array | None = None,
+    sigma: Array | None = None,
 ) -> Recording:
     """A recording of one source from its stamped messages (a bag's or live), paired by
     the contract's rule; sweeps are found on `robot`'s joint variables (None: readings).
     point_target (n,): which of `target_names` each point is of (several targets on the
     flange, msgs_doc/targets.md; None: all the first); measurements of one stamp are
-    ordered by target.
+    ordered by target. rotation (n, 3, 3), sigma (n, 2): what 6-DoF probes measured
+    besides each point and the stated accuracies (`Poses`; NaN rows: none).
 
     js_ns (m,) joint-state stamps [ns], q (m, J) readings [rad], velocity_sign (m, J) (+1/-1,
     0 = no velocity); point_ns (n,) point stamps [ns], points (n, 3) tracker frame [m]; each
@@ -388,6 +427,7 @@ def recording_from_stream(
         raise InputError(f"pair tolerance {pair_tolerance} s: need a finite number >= 0")
     check_metres(points, source, error)
     target = _target_index(point_target, len(points), target_names, source)
+    six_dof = _six_dof(rotation, sigma, len(points), source)
     js_order = np.argsort(js_ns, kind="stable")
     if target is None:
         pt_order = np.argsort(point_ns, kind="stable")
@@ -396,6 +436,7 @@ def recording_from_stream(
         target = target[pt_order]
     js_ns, q, velocity_sign = js_ns[js_order], q[js_order], velocity_sign[js_order]
     point_ns, points = point_ns[pt_order], points[pt_order]
+    six_dof = {k: None if v is None else v[pt_order] for k, v in six_dof.items()}
     keep = _distinct_joint_states(js_ns, q, js_order, source, error)
     js_ns, q, velocity_sign = js_ns[keep], q[keep], velocity_sign[keep]
     warnings: list[str] = []
@@ -428,10 +469,11 @@ def recording_from_stream(
     direction = np.where(velocity != 0, velocity, approach_directions(q))
     time = (point_ns[ok] - point_ns[ok][0]) * 1e-9
     target = None if target is None else target[ok]
+    six_dof = {k: None if v is None else v[ok] for k, v in six_dof.items()}
     sweeps = _sweeps(q, robot, source, warnings, target, target_names)
     return Recording(
         (source,),
-        Poses(q, direction, time, target),
+        Poses(q, direction, time, target, six_dof["rotation"], six_dof["sigma"]),
         points[ok],
         tuple(sweeps),
         np.zeros(len(q), dtype=int),
