@@ -76,3 +76,36 @@ def accuracy(measured: Array, predicted: Array) -> Accuracy:
         float(np.sqrt(np.mean(absolute**2)) * 1e3),
         float(absolute.max() * 1e3),
     )
+
+
+@dataclass(frozen=True)
+class OrientationAccuracy(Record):
+    """Angle between predicted and measured 6-DoF probe frames (the rotation vector's
+    norm) over n measurements, in urad for humans (1 urad = 0.0573 mdeg)."""
+
+    n_measurements: int
+    mean_urad: float
+    rms_urad: float
+    max_urad: float
+
+    def line(self) -> str:
+        return (
+            f"orientation mean {self.mean_urad:.1f} / rms {self.rms_urad:.1f} / max "
+            f"{self.max_urad:.1f} urad ({np.degrees(self.rms_urad * 1e-6) * 1e3:.2f} mdeg rms; "
+            f"{self.n_measurements} 6-DoF measurements)"
+        )
+
+
+def orientation_accuracy(errors: Array) -> OrientationAccuracy | None:
+    """Figures of rotation vectors errors (n, 3) [rad] (NaN rows: no orientation; None
+    when there is none)."""
+    rows = np.all(np.isfinite(errors), axis=1)
+    if not rows.any():
+        return None
+    angle = np.linalg.norm(errors[rows], axis=1) * 1e6
+    return OrientationAccuracy(
+        int(rows.sum()),
+        float(angle.mean()),
+        float(np.sqrt(np.mean(angle**2))),
+        float(angle.max()),
+    )

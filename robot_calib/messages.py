@@ -10,7 +10,6 @@ import re
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
@@ -75,6 +74,8 @@ def pose_measurement(msg: Any, where: str) -> tuple[Array, Array, Array]:
         raise InputError(f"{where}: pose not finite: {p.tolist()} {quat.tolist()}")
     if not measured:
         return p, np.full((3, 3), np.nan), sigma
+    from scipy.spatial.transform import Rotation  # scipy only where poses are read
+
     if abs(np.linalg.norm(quat) - 1.0) > QUATERNION_TOLERANCE:
         raise InputError(
             f"{where}: orientation quaternion (x, y, z, w) {quat.tolist()} has norm "

@@ -16,12 +16,15 @@ Parameter layout (names are the public vocabulary of PARAMS.json):
   (msgs_doc/targets.md) each further target NAME has its own target_NAME_x/y/z, all sharing
   the tracker pose. Which target a measurement is of is `Poses.target` (an index into the
   model's `targets`).
+  A 6-DoF probe (msgs_doc/six_dof.md) at target NAME also has the orientation of its frame
+  in the flange frame: target_roll/pitch/yaw or target_NAME_roll/pitch/yaw [rad]
+  (Rz(yaw) Ry(pitch) Rx(roll)), for the targets in the model's `oriented`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -29,7 +32,14 @@ from robot_calib.effects.base import Contribution, Effect
 from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, chain, point_derivatives
-from robot_calib.kinematics.frames import Array, matrix_to_rpy, rot_x, rot_y, rot_z
+from robot_calib.kinematics.frames import (
+    Array,
+    matrix_to_rpy,
+    rot_x,
+    rot_y,
+    rot_z,
+    rpy_to_matrix,
+)
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import PRIMARY_TARGET, Poses
 
@@ -51,12 +61,20 @@ def target_parameters(name: str) -> tuple[str, str, str]:
     return (f"target_{name}_x", f"target_{name}_y", f"target_{name}_z")
 
 
+def tool_rotation_parameters(name: str) -> tuple[str, str, str]:
+    """Names of the roll, pitch, yaw parameters of 6-DoF target `name`'s frame in the
+    flange frame (target_roll/pitch/yaw for the first target)."""
+    stem = "target" if name == PRIMARY_TARGET else f"target_{name}"
+    return (f"{stem}_roll", f"{stem}_pitch", f"{stem}_yaw")
+
+
 def geometric_parameters(
     robot: RobotDescription,
     base2tracker: tuple[float, float, float, float, float, float] = (0.0,) * 6,
     target_in_flange: tuple[float, float, float] = (0.0, 0.0, 0.0),
     targets: tuple[str, ...] = (PRIMARY_TARGET,),
     offsets: Mapping[str, tuple[float, float, float]] | None = None,
+    oriented: tuple[str, ...] = (),
 ) -> ParameterVector:
     """The nominal geometric parameter vector of `robot`.
 
@@ -64,7 +82,8 @@ def geometric_parameters(
     target_in_flange : the first target's centre in the flange frame [m].
     targets : the names of the targets measured (the first is the one of
       `target_in_flange`); offsets : the others' centres in the flange frame [m] (default
-      that of the first).
+      that of the first); oriented : the targets measured by 6-DoF probes, whose frame's
+      orientation in the flange frame is a parameter too (nominal: the flange's).
     Parameters that a point target and a free tracker pose can never separate are fixed,
     each with its reason (the data-driven identifiability check comes on top).
     """
@@ -90,6 +109,9 @@ def geometric_parameters(
         xyz = target_in_flange if k == 0 else (offsets or {}).get(target, target_in_flange)
         for name, value in zip(target_parameters(target), xyz):
             params.append(Parameter(name, "m", float(value), group="frames"))
+    for target in oriented:
+        for name in tool_rotation_parameters(target):
+            params.append(Parameter(name, "rad", 0.0, group="frames"))
     return ParameterVector(params)
 
 
@@ -150,8 +172,12 @@ class KinematicModel:
     robot: RobotDescription
     effects: tuple[Effect, ...] = ()
     targets: tuple[str, ...] = (PRIMARY_TARGET,)
+    oriented: tuple[str, ...] = ()  # targets measured by 6-DoF probes (a subset of targets)
 
     def __post_init__(self) -> None:
+        unknown = [t for t in self.oriented if t not in self.targets]
+        if unknown:
+            raise InputError(f"6-DoF targets {unknown} are not among the targets {self.targets}")
         for effect in self.effects:
             bad = [j for j in effect.joints if not 1 <= j <= self.robot.n_joints]
             if bad:
@@ -168,7 +194,7 @@ class KinematicModel:
         """Nominal geometric parameters followed by every effect's (nominal 0); the first
         target at `target_in_flange`, the others at `offsets` (default: the same) [m]."""
         params = geometric_parameters(
-            self.robot, base2tracker, target_in_flange, self.targets, offsets
+            self.robot, base2tracker, target_in_flange, self.targets, offsets, self.oriented
         )
         for effect in self.effects:
             params = params.concat(ParameterVector(effect.parameters(self.robot)))
@@ -176,11 +202,69 @@ class KinematicModel:
 
     def with_effects(self, *effects: Effect) -> KinematicModel:
         """The same robot with `effects` added."""
-        return KinematicModel(self.robot, self.effects + tuple(effects), self.targets)
+        return replace(self, effects=self.effects + tuple(effects))
 
-    def with_targets(self, targets: tuple[str, ...]) -> KinematicModel:
-        """The same robot and effects measured at the targets named `targets`."""
-        return KinematicModel(self.robot, self.effects, tuple(targets))
+    def with_targets(
+        self, targets: tuple[str, ...], oriented: tuple[str, ...] = ()
+    ) -> KinematicModel:
+        """The same robot and effects measured at the targets named `targets`, those of
+        `oriented` by 6-DoF probes."""
+        return replace(self, targets=tuple(targets), oriented=tuple(oriented))
+
+    def tool_rotations(self, params: ParameterVector) -> Array:
+        """Every target's frame in the flange frame, shape (T, 3, 3), `targets` order
+        (identity for targets not in `oriented`)."""
+        out = np.tile(np.eye(3), (len(self.targets), 1, 1))
+        for name in self.oriented:
+            roll, pitch, yaw = (params[k] for k in tool_rotation_parameters(name))
+            out[self.targets.index(name)] = rpy_to_matrix(roll, pitch, yaw)
+        return out
+
+    def probe_orientations(self, params: ParameterVector, poses: Poses) -> Array:
+        """Predicted probe frames in the tracker frame, shape (n, 3, 3) (columns: the
+        probe's x, y, z axes): base2tracker * flange2base(q) * tool rotation."""
+        flange = self.flange2base(params, poses)[:, :3, :3]
+        rot = self.base2tracker(params)[:3, :3]
+        return rot @ flange @ self.tool_rotations(params)[poses.target_index]
+
+    def orientation_jacobian(self, params: ParameterVector, poses: Poses) -> tuple[Array, Array]:
+        """Probe frames (n, 3, 3) as `probe_orientations` and their small rotation per unit
+        change of each parameter, omega (n, 3, P) [rad per parameter unit], tracker frame.
+
+        Every parameter moves the flange as a rigid body, so a point's Jacobian is
+        v + omega x p: the Jacobians at the probe's point and at points a unit along its
+        frame's x and y axes differ by omega x w_x and omega x w_y, from which omega
+        follows; the tool rotation's own columns are added analytically."""
+        n = len(poses)
+        tool = self.tool_rotations(params)[poses.target_index]  # (n, 3, 3) flange frame
+        _, jac0 = self._evaluate(params, poses, True)
+        _, jac_x = self._evaluate(params, poses, True, shift=tool[:, :, 0])
+        _, jac_y = self._evaluate(params, poses, True, shift=tool[:, :, 1])
+        assert jac0 is not None and jac_x is not None and jac_y is not None
+        frames = self.probe_orientations(params, poses)
+        w_x, w_y, w_z = frames[:, :, 0], frames[:, :, 1], frames[:, :, 2]
+        d_x, d_y = jac_x - jac0, jac_y - jac0  # omega x w_x, omega x w_y (n, 3, P)
+
+        def along(w: Array, d: Array) -> Array:
+            return np.einsum("na,nap->np", w, d)
+
+        omega = (
+            along(w_z, d_y)[:, None, :] * w_x[:, :, None]
+            - along(w_z, d_x)[:, None, :] * w_y[:, :, None]
+            + along(w_y, d_x)[:, None, :] * w_z[:, :, None]
+        )
+        if self.oriented:
+            flange_in_tracker = (
+                self.base2tracker(params)[:3, :3] @ (self.flange2base(params, poses)[:, :3, :3])
+            )
+            for name in self.oriented:
+                rows = poses.target_index == self.targets.index(name)
+                roll, pitch, yaw = (params[k] for k in tool_rotation_parameters(name))
+                rz, ry = rot_z([yaw])[0], rot_y([pitch])[0]
+                axes = (rz @ ry[:, 0], rz[:, 1], np.array([0.0, 0.0, 1.0]))  # flange frame
+                for pname, axis in zip(tool_rotation_parameters(name), axes):
+                    omega[rows, :, params.index(pname)] = flange_in_tracker[rows] @ axis
+        return frames, omega.reshape(n, 3, len(params))
 
     def target_offsets(self, params: ParameterVector) -> Array:
         """Every target's centre in the flange frame, shape (T, 3) [m], in `targets` order."""
@@ -263,8 +347,14 @@ class KinematicModel:
         return Chain(dh, chain(dh, errors), errors, housing, contributions, row, scale)
 
     def _evaluate(
-        self, params: ParameterVector, poses: Poses, with_jacobian: bool
+        self,
+        params: ParameterVector,
+        poses: Poses,
+        with_jacobian: bool,
+        shift: Array | None = None,
     ) -> tuple[Array, Array | None]:
+        """Points (n, 3) and, `with_jacobian`, d points / d parameters (n, 3, P); `shift`
+        (n, 3) [m] moves each measurement's target by that much in the flange frame."""
         ch = self._chain(params, poses)
         dh, frames, errors, housing, row, scale = (
             ch.dh,
@@ -281,6 +371,8 @@ class KinematicModel:
                 f"{len(self.targets)} target(s) {list(self.targets)}"
             )
         target = self.target_offsets(params)[which]  # (n, 3) flange frame
+        if shift is not None:
+            target = target + shift
         flange = frames[:, -1]
         p_in_base = np.einsum("nab,nb->na", flange[:, :3, :3], target) + flange[:, :3, 3]
         b2t = self.base2tracker(params)

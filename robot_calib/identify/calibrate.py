@@ -26,7 +26,13 @@ from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
-from robot_calib.identify.fit import FitResult, SolverReport, check_enough_data, fit_model
+from robot_calib.identify.fit import (
+    FitResult,
+    SolverReport,
+    check_enough_data,
+    fit_model,
+    fitted_orientations,
+)
 from robot_calib.identify.identifiability import (
     Identifiability,
     fix_poorly_determined,
@@ -42,7 +48,8 @@ from robot_calib.identify.outliers import (
     robust_sigma,
 )
 from robot_calib.identify.plausibility import calibration_warnings, recording_warnings
-from robot_calib.identify.registration import fit_frames
+from robot_calib.identify.registration import fit_frames, initial_tool_rotations
+from robot_calib.identify.weights import orientation_errors
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
@@ -113,6 +120,9 @@ class Calibration:
     # free parameters that the first target's measurements alone could not identify: what
     # the further targets add (msgs_doc/targets.md); empty with one target
     by_extra_targets: tuple[str, ...] = ()
+    # (n, 3) rotation vectors of predicted * measured 6-DoF orientation [rad], tracker
+    # frame, NaN where none was fitted; None without 6-DoF measurements
+    orientation_residuals: Array | None = None
 
     def predict(self, poses: Poses) -> Array:
         """Target points (n, 3) [m] in the tracker frame."""
@@ -175,7 +185,23 @@ def _from_fit(name: str, model: KinematicModel, fit: FitResult, points: Array,
         fit.identifiability,
         fit.solver,
         cpa,
+        orientation_residuals=fit.orientation_residuals,
     )
+
+
+def orientation_residuals(
+    model: KinematicModel, params: ParameterVector, poses: Poses
+) -> Array | None:
+    """(n, 3) rotation vectors of predicted * measured orientation [rad] of the 6-DoF
+    measurements of `model`'s oriented targets, NaN elsewhere; None when there are none."""
+    rows = fitted_orientations(model, poses)
+    if not rows.any() or poses.rotation is None:
+        return None
+    out = np.full((len(poses), 3), np.nan)
+    sub = poses.subset(rows)
+    assert sub.rotation is not None
+    out[rows] = orientation_errors(model.probe_orientations(params, sub), sub.rotation)
+    return out
 
 
 def calibrate(
@@ -238,8 +264,8 @@ def calibrate(
     """
     base, effects = parse_model(model_spec, robot, ecc_order)
     if base != "cpa":  # too few measurements: say so before any work
-        targets = recording.target_names
-        fitted = KinematicModel(robot, tuple(effects), targets).parameters().parameters
+        targets, oriented = recording.target_names, recording.oriented_targets
+        fitted = KinematicModel(robot, tuple(effects), targets, oriented).parameters().parameters
         n_free = sum(p.free and (base != "nominal" or p.group == "frames") for p in fitted)
         # repeats of one pose add noise, not information: count distinct poses (of a target)
         steps = np.round(recording.poses.q / JOINT_CHANGE_TOLERANCE)
@@ -344,7 +370,9 @@ def _calibrate_once(
     say = log or (lambda _msg: None)
     base, effects = parse_model(model_spec, robot, ecc_order)
     poses, points = recording.poses, recording.points
-    geometric = KinematicModel(robot, targets=recording.target_names)
+    geometric = KinematicModel(
+        robot, targets=recording.target_names, oriented=recording.oriented_targets
+    )
     has_sweeps = all(recording.sweeps_of(j) for j in range(1, robot.n_joints + 1))
     if base == "nominal":
         say("nominal: fitting the tracker pose and target offset only")
@@ -357,16 +385,18 @@ def _calibrate_once(
             say(w)
     if base == "cpa":
         assert cpa is not None
-        predicted = geometric.target_points(cpa.parameters, poses)
+        cpa_params = initial_tool_rotations(geometric, _seeded(geometric, cpa.parameters), poses)
+        predicted = geometric.target_points(cpa_params, poses)
         return Calibration(
             "cpa",
             geometric,
-            cpa.parameters,
-            np.zeros(len(cpa.parameters)),
+            cpa_params,
+            np.zeros(len(cpa_params)),
             accuracy(points, predicted),
             predicted - points,
             solver=SolverReport("circle point analysis (seed section 5)"),
             cpa=cpa,
+            orientation_residuals=orientation_residuals(geometric, cpa_params, poses),
         )
     if start is not None:
         initial = start.parameters
@@ -375,11 +405,12 @@ def _calibrate_once(
     else:
         say("geometric: no sweep of every joint, starting from the nominal model")
         initial = fit_frames(geometric, geometric.parameters(), poses, points).parameters
+    initial = initial_tool_rotations(geometric, _seeded(geometric, initial), poses)
     if effects and start is None:  # the geometry first; the effects start from it
         say(f"geometric: Levenberg-Marquardt on {len(points)} points, before the effects")
-        geo = fit_model(geometric, _seeded(geometric, initial), poses, points, progress=say)
+        geo = fit_model(geometric, initial, poses, points, progress=say)
         initial = geo.parameters
-    model = KinematicModel(robot, tuple(effects), recording.target_names)
+    model = KinematicModel(robot, tuple(effects), recording.target_names, geometric.oriented)
     params = _seeded(model, initial)
     say(f"{model_spec}: Levenberg-Marquardt on {len(points)} points, {int(params.free.sum())} "
         "free parameters before the identifiability check")  # fmt: skip

@@ -1,7 +1,9 @@
 """Levenberg-Marquardt fit of any `KinematicModel` to measured points (absolute residuals,
 tracker frame, O(N) in the number of poses), with analytic Jacobians.
 
-residual_i = predicted target (params, pose_i) - measured point_i   [m], 3 per pose.
+residual_i = predicted target (params, pose_i) - measured point_i   [m], 3 per pose,
+plus, for a 6-DoF probe's measurement, the rotation vector of predicted * measured
+orientation [rad], 3 more; all weighted by the stated accuracies (`identify.weights`).
 Before solving, parameters the data cannot identify are fixed (`identifiability`); after,
 the standard deviation of every free parameter comes from the Jacobian and the residual.
 """
@@ -13,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from robot_calib.errors import InputError
@@ -24,6 +27,7 @@ from robot_calib.identify.identifiability import (
     fix_unidentifiable,
 )
 from robot_calib.identify.objectives import AbsoluteObjective, Objective
+from robot_calib.identify.weights import orientation_errors, row_weights
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
@@ -71,13 +75,16 @@ class FitResult:
     """parameters: fitted vector (fixed flags and reasons included); std : (P,) 1-sigma of
     each parameter in its unit (0 for fixed), from the objective's residuals;
     residuals : (n, 3) predicted - measured points [m] (whatever the objective);
-    identifiability of the free set; solver : scipy's whole result and our timing."""
+    identifiability of the free set; solver : scipy's whole result and our timing;
+    orientation_residuals : (n, 3) rotation vectors of predicted * measured orientation
+    [rad], tracker frame, NaN where no orientation was fitted (None: none at all)."""
 
     parameters: ParameterVector
     std: Array
     residuals: Array
     identifiability: Identifiability
     solver: SolverReport
+    orientation_residuals: Array | None = None
 
 
 @dataclass(frozen=True)
@@ -154,16 +161,25 @@ def blocked_jacobian(
     return points, jac
 
 
+def fitted_orientations(model: KinematicModel, poses: Poses) -> NDArray[np.bool_]:
+    """(n,) the measurements whose orientation `model` predicts: measured by a 6-DoF probe
+    at a target of the model's `oriented`."""
+    which = [model.targets.index(t) for t in model.oriented]
+    return poses.oriented & np.isin(poses.target_index, which)
+
+
 class _Problem:
     """Residuals and Jacobian of the free parameters, evaluated once per x (LM asks for
     both at the same point).
 
-    With the absolute objective (3 rows per pose) the Jacobian is written block by block
-    (BLOCK_POSES poses) into one C-ordered (3n, n_free) array, reused at every x: no
-    (n, 3, P) array and no copy of the free columns. scipy copies what it is given (its
-    VectorFunction returns J.astype(...), MINPACK copies into its own fjac), so the buffer
-    may be overwritten at the next x. C order: MINPACK would first copy a Fortran array
-    into C order. Other objectives (rows from pairs of poses) get the full (n, 3, P).
+    With the absolute objective (3 rows per pose, then 3 per 6-DoF orientation, weighted
+    by `identify.weights`) the Jacobian is written block by block (BLOCK_POSES poses) into
+    one C-ordered (3n + 3m, n_free) array, reused at every x: no (n, 3, P) array and no
+    copy of the free columns. scipy copies what it is given (its VectorFunction returns
+    J.astype(...), MINPACK copies into its own fjac), so the buffer may be overwritten at
+    the next x. C order: MINPACK would first copy a Fortran array into C order. Other
+    objectives (rows from pairs of poses) get the full (n, 3, P), unweighted and without
+    orientations.
     """
 
     def __init__(
@@ -173,16 +189,22 @@ class _Problem:
         poses: Poses,
         points: Array,
         objective: Objective,
+        fallback: tuple[float, float] | None = None,
     ) -> None:
         self.model, self.start, self.poses, self.points = model, start, poses, points
-        self.objective = objective
+        self.objective, self.fallback = objective, fallback
         self._x: Array | None = None
         self._cache: tuple[Array, Array] = (np.empty(0), np.empty((0, 0)))
         self.predicted = np.empty((0, 3))
         self.evaluations = 0
-        self._jac: Array | None = None  # (3n, n_free) buffer of the blocked path
+        self._jac: Array | None = None  # (3n + 3m, n_free) buffer of the blocked path
+        self.weights = row_weights(poses, fitted_orientations(model, poses), fallback)
+        self.rows6 = np.zeros(0, dtype=np.int64)  # measurements with an orientation row
+        self.orientation_error = np.zeros((0, 3))  # (m, 3) [rad] at the last x
         if type(objective) is AbsoluteObjective:  # not a subclass with other residuals
-            self._jac = np.empty((3 * len(poses), int(start.free.sum())))
+            self.rows6 = np.flatnonzero(self.weights.oriented)
+            n_rows = 3 * (len(poses) + len(self.rows6))
+            self._jac = np.empty((n_rows, int(start.free.sum())))
 
     def evaluate(self, x: Array) -> tuple[Array, Array]:
         """Objective residuals (m,) [m] and their Jacobian (m, n_free) at free values x.
@@ -195,12 +217,64 @@ class _Problem:
                     predicted, jac[:, :, params.free], self.points
                 )
             else:
-                predicted = self._free_jacobian(params, self._jac)
-                self._cache = ((predicted - self.points).reshape(-1), self._jac)
+                predicted, residual = self._weighted(params, self._jac)
+                self._cache = (residual, self._jac)
             self.predicted = predicted
             self._x = x.copy()
             self.evaluations += 1
         return self._cache
+
+    def _weighted(self, params: ParameterVector, out: Array) -> tuple[Array, Array]:
+        """Points (n, 3) [m] and the weighted residuals (3n + 3m,); their Jacobian written
+        into `out` (3n + 3m, n_free)."""
+        n, w = len(self.poses), self.weights
+        predicted = self._free_jacobian(params, out[: 3 * n])
+        residual = ((predicted - self.points) * w.position[:, None]).reshape(-1)
+        if not w.uniform:
+            out[: 3 * n] *= np.repeat(w.position, 3)[:, None]
+        if not len(self.rows6):
+            return predicted, residual
+        sub = self.poses.subset(self.rows6)
+        assert sub.rotation is not None
+        frames, omega = self.model.orientation_jacobian(params, sub)
+        self.orientation_error = orientation_errors(frames, sub.rotation)
+        factor = w.orientation[self.rows6]
+        out[3 * n :] = (omega[:, :, params.free] * factor[:, None, None]).reshape(-1, out.shape[1])
+        rotation_rows = (self.orientation_error * factor[:, None]).reshape(-1)
+        return predicted, np.concatenate([residual, rotation_rows])
+
+    def residual_sigmas(self, x: Array) -> tuple[float, float] | None:
+        """Standard deviations (position per coordinate [m], orientation per axis [rad]) of
+        the unweighted residuals at x, when orientations are fitted and some accuracy was
+        not stated (the weights then rest on the data: one variance component per kind);
+        None otherwise, or when already reweighted."""
+        stated = self.weights.stated
+        if not len(self.rows6) or self.fallback is not None or stated.all():
+            return None
+        self.evaluate(x)
+        position = float(np.sqrt(np.mean((self.predicted - self.points) ** 2)))
+        orientation = float(np.sqrt(np.mean(self.orientation_error**2)))
+        if not (position > 0 and orientation > 0):
+            return None
+        return position, orientation
+
+    def reweighted(
+        self, fallback: tuple[float, float] | None, start: ParameterVector | None = None
+    ) -> _Problem:
+        """The same problem (from `start`, default the same) with accuracies not stated
+        taken as `fallback` (position [m], orientation [rad]); evaluations carried on."""
+        out = _Problem(self.model, start or self.start, self.poses, self.points,
+                       self.objective, fallback)  # fmt: skip
+        out.evaluations = self.evaluations
+        return out
+
+    def orientation_residuals(self) -> Array | None:
+        """(n, 3) [rad] at the last x, NaN where no orientation is fitted (None: none)."""
+        if not len(self.rows6):
+            return None
+        out = np.full((len(self.poses), 3), np.nan)
+        out[self.rows6] = self.orientation_error
+        return out
 
     def _free_jacobian(self, params: ParameterVector, out: Array) -> Array:
         """Points (n, 3) [m]; d points / d free parameters written into `out` (3n, n_free),
@@ -228,8 +302,8 @@ def _structurally_identifiable(
     property of the Jacobian's structure that no start changes) fixed, and (name, reason)
     of each. Its own function so that the full Jacobian at the start, (n, 3, P), is freed
     before the solver allocates its own."""
-    predicted, jac = blocked_jacobian(model, start, poses)
-    _, jac_full = objective.residuals(predicted, jac, points)
+    every = start.freed(start.names)  # columns of all P parameters, in vector order
+    _, jac_full = _Problem(model, every, poses, points, objective).evaluate(every.pack())
     params, ident = fix_unidentifiable(start, jac_full)
     return params, ident.fixed
 
@@ -305,6 +379,11 @@ def fit_model(
     # solve (ROUGH_TOLERANCE) gets near enough to judge it, then the exact solve runs.
     rough = check_identifiability and robust_scale is None
     solved = _solve(problem, params.pack(), progress, robust_scale, rough=rough)
+    # Positions and orientations with accuracies not stated: their weights from the
+    # first solution's residuals (one variance component each), then solved again.
+    fallback = problem.residual_sigmas(solved.x)
+    if fallback is not None:
+        problem = problem.reweighted(fallback)
     if check_identifiability and len(solved.x):
         residual, jac_free = problem.evaluate(solved.x)
         at_solution = params.unpack(solved.x)
@@ -315,11 +394,11 @@ def fit_model(
             for name, reason in weak:
                 params = params.fixed([name], reason)
             fixed = fixed + tuple(weak)
-            first_evaluations = problem.evaluations
-            problem = _Problem(model, params, poses, points, goal)
-            problem.evaluations += first_evaluations
-        if weak or rough:
+            problem = problem.reweighted(problem.fallback, params)
+        if weak or rough or fallback is not None:
             solved = _solve(problem, params.pack() if weak else solved.x, progress, robust_scale)
+    elif fallback is not None:
+        solved = _solve(problem, solved.x, progress, robust_scale)
     x = solved.x
     status, message, nfev, njev, optimality = (
         solved.status, solved.message, solved.nfev, solved.njev, solved.optimality
@@ -351,4 +430,5 @@ def fit_model(
             evaluations=problem.evaluations,
             time_s=time.perf_counter() - started,
         ),
+        problem.orientation_residuals(),
     )

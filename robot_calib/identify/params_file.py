@@ -13,13 +13,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from robot_calib.accuracy import orientation_accuracy
 from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.messages import target_topic
-from robot_calib.model import KinematicModel, target_parameters
+from robot_calib.model import KinematicModel, target_parameters, tool_rotation_parameters
 from robot_calib.poses import PRIMARY_TARGET
 
 if TYPE_CHECKING:  # light at run time: reading a parameter file needs no scipy
@@ -75,10 +76,24 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
                 "topic": target_topic(name),
                 "measurements": int(np.sum(recording.poses.target_index == k)),
                 "offset_m": [cal.parameters[p] for p in target_parameters(name)],
+                **(
+                    {
+                        "six_dof": True,
+                        "probe_rpy_deg": np.degrees(
+                            [cal.parameters[p] for p in tool_rotation_parameters(name)]
+                        ).tolist(),
+                    }
+                    if name in cal.model.oriented
+                    else {}
+                ),
             }
             for k, name in enumerate(cal.model.targets)
         ],
     }
+    if cal.orientation_residuals is not None:
+        figures = orientation_accuracy(cal.orientation_residuals)
+        if figures is not None:
+            doc["orientation_residuals"] = figures.to_dict()
     if len(cal.model.targets) > 1:
         doc["identifiable_only_with_extra_targets"] = list(cal.by_extra_targets)
     if cal.identifiability is not None:
@@ -148,7 +163,12 @@ def params_from_dict(
         targets = doc.get("targets", [{"name": PRIMARY_TARGET}])
         if not isinstance(targets, list) or not targets:
             raise InputError(f"{where}: 'targets' must be a non-empty list of target records")
-        model = KinematicModel(robot, effects, tuple(str(t["name"]) for t in targets))
+        model = KinematicModel(
+            robot,
+            effects,
+            tuple(str(t["name"]) for t in targets),
+            tuple(str(t["name"]) for t in targets if t.get("six_dof")),
+        )
         params = ParameterVector.from_dict(doc["parameters"])
         expected = model.parameters().names
         if params.names != expected:
@@ -244,6 +264,10 @@ def summary(cal: Calibration, recording: Recording) -> str:
             shown = ", ".join(names[:8]) + (f" (+{len(names) - 8} more)" if len(names) > 8 else "")
             lines.append(f"fixed ({reason}): {shown}")
     lines.append(f"residuals (in-sample): {cal.accuracy.line()}")
+    if cal.orientation_residuals is not None:
+        figures = orientation_accuracy(cal.orientation_residuals)
+        if figures is not None:
+            lines.append(f"residuals (in-sample): {figures.line()}")
     lines += outlier_lines(cal.outliers)
     lines += list(cal.warnings)
     if cal.solver.time_s is not None:

@@ -5,12 +5,14 @@ measured_i = R (flange_p_i + flange_R_i t) + b is bilinear in the unknowns: for 
 rotation R it is linear in the target offset t and the translation b, and for a fixed t
 the best R, b is a rigid fit (Kabsch / Horn). Alternating the two from t = 0 reaches the
 global solution in a few steps whatever the start, also for targets far from the flange
-(0.3 m on large robots), where a rigid fit with t = 0 alone leaves 100 mm.
+(0.3 m on large robots), where a rigid fit with t = 0 alone leaves 100 mm. A 6-DoF
+probe's frame in the flange frame follows in closed form (`initial_tool_rotations`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from robot_calib.identify.fit import FitResult, fit_model
 from robot_calib.kinematics.frames import Array, matrix_to_rpy
@@ -20,6 +22,7 @@ from robot_calib.model import (
     BASE_TRANSLATION,
     KinematicModel,
     target_parameters,
+    tool_rotation_parameters,
 )
 from robot_calib.poses import Poses
 
@@ -78,6 +81,28 @@ def initial_frames(
     updates.update(dict(zip(BASE_ROTATION, (roll, pitch, yaw))))
     for name, xyz in zip(model.targets, offsets):
         updates.update(dict(zip(target_parameters(name), xyz)))
+    return initial_tool_rotations(model, params.with_values(updates), poses)
+
+
+def initial_tool_rotations(
+    model: KinematicModel, params: ParameterVector, poses: Poses
+) -> ParameterVector:
+    """`params` with the frame of every 6-DoF target of `model` (its `oriented`) in the
+    flange frame found in closed form for the geometry and tracker pose in `params`: the
+    mean rotation (scipy `Rotation.mean`) of predicted flange^T * measured probe frame."""
+    if not model.oriented or poses.rotation is None:
+        return params
+    flange_in_tracker = (
+        model.base2tracker(params)[:3, :3] @ model.flange2base(params, poses)[:, :3, :3]
+    )
+    updates: dict[str, float] = {}
+    for name in model.oriented:
+        rows = poses.oriented & (poses.target_index == model.targets.index(name))
+        if not rows.any():
+            continue
+        tool = np.transpose(flange_in_tracker[rows], (0, 2, 1)) @ poses.rotation[rows]
+        mean = Rotation.from_matrix(tool).mean().as_matrix()
+        updates.update(zip(tool_rotation_parameters(name), matrix_to_rpy(mean)))
     return params.with_values(updates)
 
 

@@ -5,9 +5,10 @@ direction history and time), plus tracker and target noise, latency and dropouts
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from robot_calib.kinematics.frames import Array
 from robot_calib.poses import Poses, approach_directions, next_direction
@@ -36,23 +37,47 @@ def tracker_noise(noise: NoiseModel, p_in_tracker: Array, rng: np.random.Generat
     )
 
 
+def physical_poses(world: World, poses: Poses, rng: np.random.Generator) -> Poses:
+    """`poses` at their physical joint angles: readings plus the robot's repeatability
+    jitter, one draw per pose (targets measured at the same pose, same readings and time,
+    consecutive, share it)."""
+    new_pose = np.ones(len(poses), dtype=bool)
+    if len(poses) > 1:
+        new_pose[1:] = np.any(np.diff(poses.q, axis=0) != 0, axis=1) | (np.diff(poses.time) != 0)
+    jitter = rng.normal(0.0, world.noise.joint_sigma_rad, (int(new_pose.sum()), poses.q.shape[1]))
+    return replace(poses, q=poses.q + jitter[np.cumsum(new_pose) - 1])
+
+
 def physical_points(
     world: World, poses: Poses, rng: np.random.Generator, noisy: bool = True
 ) -> Array:
     """Measured target centres in the tracker frame, shape (n, 3) [m], for `poses`
     (readings, approach directions, time). noisy=False gives the exact true points."""
-    if not noisy:
-        return world.model.target_points(world.truth, poses)
-    # One physical joint angle per pose: targets measured at the same pose (same readings
-    # and time, consecutive) share its repeatability jitter.
-    new_pose = np.ones(len(poses), dtype=bool)
-    if len(poses) > 1:
-        new_pose[1:] = np.any(np.diff(poses.q, axis=0) != 0, axis=1) | (np.diff(poses.time) != 0)
-    jitter = rng.normal(0.0, world.noise.joint_sigma_rad, (int(new_pose.sum()), poses.q.shape[1]))
-    jitter = jitter[np.cumsum(new_pose) - 1]
-    physical = Poses(poses.q + jitter, poses.direction, poses.time, poses.target)
-    points = world.model.target_points(world.truth, physical)
-    return points + tracker_noise(world.noise, points, rng)
+    return measure_six_dof(world, poses, rng, noisy)[0]
+
+
+def measure_six_dof(
+    world: World, poses: Poses, rng: np.random.Generator, noisy: bool = True
+) -> tuple[Array, Array | None]:
+    """What the tracker measures at `poses`: points (n, 3) [m] as `physical_points` and,
+    where the world has 6-DoF probes (`model.oriented`), their frames (n, 3, 3) in the
+    tracker frame, each turned by a random rotation vector of noise.orientation_sigma_rad
+    per axis (NaN rows for targets without a probe; None when the world has none). The
+    random draws of the points come first, so the points equal `physical_points`'."""
+    model, truth = world.model, world.truth
+    physical = physical_poses(world, poses, rng) if noisy else poses
+    points = model.target_points(truth, physical)
+    if noisy:
+        points = points + tracker_noise(world.noise, points, rng)
+    if not model.oriented:
+        return points, None
+    frames = model.probe_orientations(truth, physical)
+    if noisy:
+        turn = rng.normal(0.0, world.noise.orientation_sigma_rad, (len(poses), 3))
+        frames = Rotation.from_rotvec(turn).as_matrix() @ frames
+    probes = [model.targets.index(t) for t in model.oriented]
+    frames[~np.isin(poses.target_index, probes)] = np.nan
+    return points, frames
 
 
 @dataclass
@@ -107,8 +132,8 @@ def measure_every_target(
 ) -> tuple[Poses, Array]:
     """Every target of the world measured at each of the poses q (m, J) [rad] visited in
     order at `time` (m,) [s]: poses (m T,) in order, each pose's targets together in the
-    model's order (they share the pose's physical joint angles), and their points
-    (m T, 3) [m] in the tracker frame."""
+    model's order (they share the pose's physical joint angles; with 6-DoF probes their
+    measured frames as `rotation`), and their points (m T, 3) [m] in the tracker frame."""
     n_targets = len(world.model.targets)
     rows_q = np.repeat(np.asarray(q, dtype=float), n_targets, axis=0)
     poses = Poses(
@@ -117,4 +142,5 @@ def measure_every_target(
         np.repeat(np.asarray(time, dtype=float), n_targets),
         np.tile(np.arange(n_targets), len(q)),
     )
-    return poses, physical_points(world, poses, rng, noisy)
+    points, rotation = measure_six_dof(world, poses, rng, noisy)
+    return replace(poses, rotation=rotation), points

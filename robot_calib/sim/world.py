@@ -26,7 +26,7 @@ from robot_calib.effects import (
 from robot_calib.errors import InputError, RobotCalibError, check_keys
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
-from robot_calib.model import KinematicModel, target_parameters
+from robot_calib.model import KinematicModel, target_parameters, tool_rotation_parameters
 from robot_calib.poses import PRIMARY_TARGET, TARGET_NAME
 
 WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
@@ -51,6 +51,8 @@ class NoiseModel:
     tracker_transverse_sigma_rad x range across it (angle encoders), as tracker MPE specs give.
     target_sigma_m : target centring noise [m] (seed: active target +-3 um).
     joint_sigma_rad : robot repeatability noise on the physical joint angle [rad].
+    orientation_sigma_rad : a 6-DoF probe's orientation noise per axis [rad] (worlds with
+      `six_dof` probes; msgs_doc/six_dof.md).
     """
 
     tracker_sigma_m: float = 3.75e-6
@@ -59,6 +61,7 @@ class NoiseModel:
     tracker_transverse_sigma_rad: float = 2.0e-6
     target_sigma_m: float = 3.0e-6
     joint_sigma_rad: float = 5.0e-6
+    orientation_sigma_rad: float = 50e-6
 
 
 @dataclass(frozen=True)
@@ -102,8 +105,9 @@ class World:
 
 TOP_KEYS = (
     "robot", "seed", "geometry", "deviations", "base2tracker", "target_in_flange_m", "targets",
-    "effects", "truth", "noise", "tracker", "timing",
+    "effects", "truth", "noise", "tracker", "timing", "six_dof",
 )  # fmt: skip
+FIRST_TARGET_KEY = "first"  # the first target's key in `six_dof` (its name is '')
 FRAME_KEYS = ("xyz_m", "rpy_deg")
 EFFECT_KEYS = ("name", "joints", "values")  # plus the effect's own options (e.g. order)
 
@@ -198,6 +202,28 @@ def _targets(value: Any, source: str) -> dict[str, tuple[float, float, float]]: 
     return out
 
 
+def _six_dof(
+    value: Any,
+    targets: tuple[str, ...],
+    source: str,  # noqa: ANN401 - YAML
+) -> dict[str, tuple[float, float, float]]:
+    """The 6-DoF probes of a world file (`six_dof: {first|NAME: [roll, pitch, yaw]}` [deg],
+    the probe frame in the flange frame, msgs_doc/six_dof.md): {target name: angles [rad]}."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise InputError(f"{source}: six_dof: expected a mapping first|NAME: [roll, pitch, yaw]")
+    out = {}
+    for key, rpy_deg in value.items():
+        name = PRIMARY_TARGET if key == FIRST_TARGET_KEY else str(key)
+        if name not in targets:
+            known = [FIRST_TARGET_KEY, *targets[1:]]
+            raise InputError(f"{source}: six_dof: {key!r} is not a target ({known})")
+        angles = _triple(rpy_deg, f"{source}: six_dof.{key}")
+        out[name] = (math.radians(angles[0]), math.radians(angles[1]), math.radians(angles[2]))
+    return out
+
+
 def _seed(value: Any, source: str) -> int:  # noqa: ANN401 - YAML
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
         raise InputError(f"{source}: seed: expected an integer >= 0, got {value!r}")
@@ -229,8 +255,11 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         )
         rpy = (math.radians(roll), math.radians(pitch), math.radians(yaw))
         extra = _targets(data.get("targets"), source)
-        model = model.with_targets((PRIMARY_TARGET, *extra))
+        probes = _six_dof(data.get("six_dof"), (PRIMARY_TARGET, *extra), source)
+        model = model.with_targets((PRIMARY_TARGET, *extra), tuple(probes))
         truth = model.parameters((*xyz, *rpy), target, extra)
+        for name, angles in probes.items():
+            truth = truth.with_values(dict(zip(tool_rotation_parameters(name), angles)))
         geometry = data.get("geometry", "seed_table3_avg_2_6")
         if geometry == "seed_table3_avg_2_6":
             if robot.name != "kr5_sixx_r650":
@@ -298,7 +327,12 @@ def world_to_dict(world: World) -> dict[str, Any]:
     timing = asdict(world.timing)
     timing["max_joint_speed_deg_s"] = np.degrees(timing.pop("max_joint_speed_rad_s")).tolist()
     robot = world.model.robot
+    probes = {
+        t or FIRST_TARGET_KEY: np.degrees([world.truth[k] for k in tool_rotation_parameters(t)])
+        for t in world.model.oriented
+    }
     return {
+        **({"six_dof": {k: v.tolist() for k, v in probes.items()}} if probes else {}),
         "robot": robot.reference(),
         "seed": world.seed,
         "geometry": "nominal",

@@ -1,0 +1,195 @@
+"""6-DoF measurements (issue 13, msgs_doc/six_dof.md): a tracker's 6-DoF probe measures the
+probe frame's orientation besides its point; bags carry it on /laser_tracker/(NAME/)pose
+(PoseStamped, or PoseWithCovarianceStamped with the stated accuracies); the fit weights
+every residual by the stated accuracies and identifies the whole tool frame (offset and
+orientation in the flange frame). Known answers: a simulated KR5 with a probe.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+from scipy.spatial.transform import Rotation
+
+from robot_calib.bag.csv_import import write_measurement_bag
+from robot_calib.bag.mcap_writer import BagWriter
+from robot_calib.bag.read import read_recording
+from robot_calib.bag.ros2_formats import typestore
+from robot_calib.errors import BagError
+from robot_calib.identify.calibrate import calibrate
+from robot_calib.measurements import Recording, recording_from_arrays
+from robot_calib.messages import JOINT_STATE_TYPE, POINT_TYPE, POSE_TYPE
+from robot_calib.model import absorb_base_offsets, target_parameters, tool_rotation_parameters
+from robot_calib.poses import Poses
+from robot_calib.sim.measure import measure_every_target
+from robot_calib.sim.plans import plan_times, random_plan
+from robot_calib.sim.world import World, build_world
+
+PROBE_RPY_DEG = [20.0, 35.0, -30.0]
+ORIENTATION_SIGMA = 50e-6  # rad per axis
+WORLD = build_world(
+    {
+        "seed": 3,
+        "six_dof": {"first": PROBE_RPY_DEG},
+        "noise": {"orientation_sigma_rad": ORIENTATION_SIGMA},
+    }
+)
+ROBOT = WORLD.model.robot
+
+
+def measured(world: World = WORLD, n: int = 150, seed: int = 1) -> tuple[Poses, np.ndarray]:
+    plan = random_plan(ROBOT, n, np.random.default_rng(seed))
+    return measure_every_target(
+        world, plan.q, plan_times(plan, world.timing), np.random.default_rng(seed + 1)
+    )
+
+
+def as_recording(poses: Poses, points: np.ndarray, sigma: np.ndarray | None = None) -> Recording:
+    return recording_from_arrays(
+        poses.q, points, poses.time, robot=ROBOT, rotation=poses.rotation, sigma=sigma
+    )
+
+
+def test_the_whole_tool_frame_is_identified_through_a_bag(tmp_path: Path) -> None:
+    poses, points = measured()
+    sigma = np.tile([10e-6, ORIENTATION_SIGMA], (len(poses), 1))
+    bag = tmp_path / "six_dof.mcap"
+    write_measurement_bag(
+        bag, poses.q, points, ROBOT.joint_names, poses.time, six_dof={"": (poses.rotation, sigma)}
+    )
+    recording = read_recording([bag], ROBOT)
+    assert recording.oriented_targets == ("",)
+    assert recording.poses.rotation is not None
+    np.testing.assert_allclose(recording.poses.rotation, poses.rotation, atol=1e-12)
+    np.testing.assert_allclose(recording.poses.sigma, sigma)
+    truth = absorb_base_offsets(ROBOT, WORLD.truth)
+    cal = calibrate(recording, ROBOT, "geometric")
+    names = target_parameters("") + tool_rotation_parameters("")
+    for name in names:
+        k = cal.parameters.index(name)
+        assert cal.parameters.free[k], name
+        error = abs(cal.parameters[name] - truth[name])
+        assert error < 4 * cal.std[k] + 1e-9, (name, error, cal.std[k])
+    # the probe's frame to a few urad, its offset to a micrometre
+    rotation = [cal.parameters[n] - truth[n] for n in tool_rotation_parameters("")]
+    assert max(abs(v) for v in rotation) < 2e-5
+    assert cal.orientation_residuals is not None
+    rms = np.sqrt(np.mean(cal.orientation_residuals**2))
+    assert 0.8 * ORIENTATION_SIGMA < rms < 1.2 * ORIENTATION_SIGMA  # the simulated noise
+    assert cal.accuracy.absolute_rms_mm < 0.012  # points: ~9 um rms of noise
+    assert not cal.warnings
+    # the nominal rung (tracker pose and tool frame only) starts from the closed form
+    nominal = calibrate(recording, ROBOT, "nominal")
+    assert abs(nominal.parameters["target_pitch"] - truth["target_pitch"]) < 0.01
+
+
+def test_residuals_are_weighted_by_the_stated_accuracies() -> None:
+    """Half the points 20x noisier, and said so: the weighted fit explains the accurate
+    half to its noise; the same data without stated accuracies cannot."""
+    poses, points = measured(n=200, seed=5)
+    rng = np.random.default_rng(9)
+    noisy = np.arange(len(points)) % 2 == 1
+    points = points.copy()
+    points[noisy] += rng.normal(0.0, 200e-6, (int(noisy.sum()), 3))
+    sigma = np.column_stack([np.where(noisy, 200e-6, 10e-6), np.full(len(points), np.nan)])
+    exact = WORLD.model.target_points(WORLD.truth, poses)
+    errors = {}
+    for stated in (sigma, None):
+        recording = as_recording(replace(poses, rotation=None), points, stated)
+        cal = calibrate(recording, ROBOT, "geometric", screen_outliers=False)
+        predicted = cal.predict(recording.poses)
+        errors[stated is None] = np.sqrt(np.mean((predicted - exact)[~noisy] ** 2)) * 1e3
+    assert errors[False] < 0.5 * errors[True], errors  # weighted: model error halves at least
+
+
+def test_orientation_makes_the_tool_frame_identifiable_where_points_cannot() -> None:
+    """With points alone the probe's orientation is not a parameter at all; with 6-DoF
+    measurements it is free and determined, and the geometry is no worse."""
+    poses, points = measured()
+    six = calibrate(as_recording(poses, points), ROBOT, "geometric")
+    three = calibrate(as_recording(replace(poses, rotation=None), points), ROBOT, "geometric")
+    assert "target_roll" not in three.parameters
+    assert six.parameters.free.sum() == three.parameters.free.sum() + 3
+    truth = absorb_base_offsets(ROBOT, WORLD.truth)
+    for name in ("a2", "a3", "d4", "alpha3"):
+        k6, k3 = six.parameters.index(name), three.parameters.index(name)
+        assert abs(six.parameters[name] - truth[name]) < 4 * six.std[k6] + 1e-9
+        assert six.std[k6] <= 1.05 * three.std[k3], name
+
+
+def write_poses(tmp_path: Path, poses: Poses, points: np.ndarray, name: str = "a") -> Path:
+    bag = tmp_path / f"{name}.mcap"
+    write_measurement_bag(
+        bag, poses.q, points, ROBOT.joint_names, poses.time,
+        six_dof={"": (poses.rotation, np.full((len(poses), 2), np.nan))},
+    )  # fmt: skip
+    return bag
+
+
+def test_a_pose_topic_is_readable_by_rosbags_and_read_back(tmp_path: Path) -> None:
+    poses, points = measured(n=20)
+    bag = write_poses(tmp_path, poses, points)
+    with AnyReader([bag]) as reader:
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        assert topics["/laser_tracker/pose"] == "geometry_msgs/msg/PoseStamped"
+        connection = next(c for c in reader.connections if c.topic == "/laser_tracker/pose")
+        first = next(reader.messages(connections=[connection]))
+        msg = reader.deserialize(first[2], connection.msgtype)
+        assert msg.pose.position.x == pytest.approx(points[0, 0], abs=1e-12)
+        assert msg.header.frame_id == "laser_tracker"
+    recording = read_recording([bag], ROBOT)
+    assert recording.poses.oriented.all() and recording.poses.sigma is None
+
+
+def write_raw(path: Path, q: np.ndarray, points: np.ndarray | None, poses: np.ndarray,
+              quats: np.ndarray) -> Path:  # fmt: skip
+    """A bag written message by message: joint states, points (None: no point topic) and
+    PoseStamped of positions `poses` (n, 3) and quaternions `quats` (n, 4) x, y, z, w."""
+    store = typestore(JOINT_STATE_TYPE, POINT_TYPE, POSE_TYPE)
+    t = store.types
+    with BagWriter(path) as writer:
+        writer.add_topic("/joint_states", JOINT_STATE_TYPE)
+        writer.add_topic("/laser_tracker/pose", POSE_TYPE)
+        if points is not None:
+            writer.add_topic("/laser_tracker/point", POINT_TYPE)
+        for k in range(len(q)):
+            ns = 1_700_000_000_000_000_000 + k * 1_000_000_000
+            stamp = t["builtin_interfaces/msg/Time"](ns // 10**9, ns % 10**9)
+            header = t["std_msgs/msg/Header"](stamp=stamp, frame_id="laser_tracker")
+            js = t[JOINT_STATE_TYPE](header=header, name=list(ROBOT.joint_names),
+                                     position=q[k], velocity=np.empty(0), effort=np.empty(0))  # fmt: skip
+            writer.write("/joint_states", store.serialize_cdr(js, JOINT_STATE_TYPE), ns)
+            if points is not None:
+                pt = t[POINT_TYPE](header=header, point=t["geometry_msgs/msg/Point"](*points[k]))
+                writer.write("/laser_tracker/point", store.serialize_cdr(pt, POINT_TYPE), ns + 1)
+            pose = t["geometry_msgs/msg/Pose"](
+                position=t["geometry_msgs/msg/Point"](*poses[k]),
+                orientation=t["geometry_msgs/msg/Quaternion"](*quats[k]),
+            )
+            msg = t[POSE_TYPE](header=header, pose=pose)
+            writer.write("/laser_tracker/pose", store.serialize_cdr(msg, POSE_TYPE), ns + 1)
+        writer.close()
+    return path
+
+
+def test_a_bag_of_poses_alone_reads_and_bad_poses_are_one_line_errors(tmp_path: Path) -> None:
+    poses, points = measured(n=20)
+    quats = Rotation.from_matrix(poses.rotation).as_quat()
+    alone = read_recording([write_raw(tmp_path / "alone.mcap", poses.q, None, points, quats)],
+                           ROBOT)  # fmt: skip
+    np.testing.assert_allclose(alone.points, points, atol=1e-12)
+    assert alone.poses.oriented.all()
+    moved = points.copy()
+    moved[4] += 1e-3
+    bag = write_raw(tmp_path / "moved.mcap", poses.q, points, moved, quats)
+    with pytest.raises(BagError, match=r"moved.mcap: /laser_tracker/pose at stamp .* but"):
+        read_recording([bag], ROBOT)
+    scaled = quats.copy()
+    scaled[7] *= 2.0
+    bag = write_raw(tmp_path / "scaled.mcap", poses.q, points, points, scaled)
+    with pytest.raises(BagError, match=r"scaled.mcap: /laser_tracker/pose message 8: .* norm 2"):
+        read_recording([bag], ROBOT)
