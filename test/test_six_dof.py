@@ -160,8 +160,10 @@ def write_raw(path: Path, q: np.ndarray, points: np.ndarray | None, poses: np.nd
             ns = 1_700_000_000_000_000_000 + k * 1_000_000_000
             stamp = t["builtin_interfaces/msg/Time"](ns // 10**9, ns % 10**9)
             header = t["std_msgs/msg/Header"](stamp=stamp, frame_id="laser_tracker")
-            js = t[JOINT_STATE_TYPE](header=header, name=list(ROBOT.joint_names),
-                                     position=q[k], velocity=np.empty(0), effort=np.empty(0))  # fmt: skip
+            js = t[JOINT_STATE_TYPE](
+                header=header, name=list(ROBOT.joint_names), position=q[k],
+                velocity=np.empty(0), effort=np.empty(0),
+            )  # fmt: skip
             writer.write("/joint_states", store.serialize_cdr(js, JOINT_STATE_TYPE), ns)
             if points is not None:
                 pt = t[POINT_TYPE](header=header, point=t["geometry_msgs/msg/Point"](*points[k]))
