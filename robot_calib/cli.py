@@ -305,9 +305,16 @@ def cmd_predict(args: argparse.Namespace) -> int:
     index = np.full(len(poses), model.targets.index(args.target))
     poses = dataclasses.replace(poses, target=index)
     output = output_path(args.output, "POINTS.csv", [args.params, args.joints], args.force)
-    write_points_csv(model.target_points(params, poses), output)
+    quaternions = None
+    if args.target in model.oriented:  # a 6-DoF probe: its frame too (msgs_doc/six_dof.md)
+        from scipy.spatial.transform import Rotation
+
+        frames = model.probe_orientations(params, poses)
+        quaternions = Rotation.from_matrix(frames).as_quat()
+    write_points_csv(model.target_points(params, poses), output, quaternions)
     which = "" if len(model.targets) == 1 else f", target {target_topic(args.target)}"
-    print(f"{output}: {len(poses)} points (m, laser_tracker frame{which})")
+    frames_too = "" if quaternions is None else " with the probe frame as qx,qy,qz,qw"
+    print(f"{output}: {len(poses)} points (m, laser_tracker frame{which}){frames_too}")
     return 0
 
 
@@ -335,6 +342,14 @@ def cmd_split(args: argparse.Namespace) -> int:
     first, points = recording.points_by_target()  # per pose: every target measured there
     poses = recording.subset(np.isin(np.arange(len(recording)), first))
     held = holdout_mask(poses, args.holdout, args.by, args.seed)
+    n = len(recording)
+    rotation = recording.by_target(
+        np.full((n, 3, 3), np.nan) if recording.poses.rotation is None
+        else recording.poses.rotation
+    )[1]  # fmt: skip
+    sigma = recording.by_target(
+        np.full((n, 2), np.nan) if recording.poses.sigma is None else recording.poses.sigma
+    )[1]
     stamps = (poses.stamp_ns if poses.stamp_ns is not None
               else START_NS + np.round(poses.poses.time * 1e9).astype(np.int64))  # fmt: skip
     with staged_outputs(outputs[0].resolve().parent, args.force) as stage:
@@ -348,6 +363,10 @@ def cmd_split(args: argparse.Namespace) -> int:
                 poses.poses.direction[rows],
                 extra_points={
                     name: points[k][rows] for k, name in enumerate(recording.target_names) if k
+                },
+                six_dof={
+                    name: (rotation[k][rows], sigma[k][rows])
+                    for k, name in enumerate(recording.target_names)
                 },
             )  # fmt: skip
             for out, rows in zip(outputs, (~held, held))

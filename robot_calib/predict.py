@@ -71,10 +71,13 @@ def read_joints_csv(path: str | Path, n_joints: int) -> Poses:
     return Poses.from_readings(q, direction, time)
 
 
-def write_points_csv(points: Array, path: str | Path) -> None:
-    """POINTS.csv with header x,y,z [m], written atomically (temporary file + rename)."""
+def write_points_csv(points: Array, path: str | Path, quaternions: Array | None = None) -> None:
+    """POINTS.csv with header x,y,z [m] (and qx,qy,qz,qw: a 6-DoF probe's frame in the
+    tracker frame, when `quaternions` (n, 4) are given), written atomically (temporary
+    file + rename)."""
     text = io.StringIO(newline="")
     writer = csv.writer(text)
-    writer.writerow(["x", "y", "z"])
-    writer.writerows([[repr(float(v)) for v in p] for p in points])
+    writer.writerow(["x", "y", "z"] + ([] if quaternions is None else ["qx", "qy", "qz", "qw"]))
+    rows = points if quaternions is None else np.hstack([points, quaternions])
+    writer.writerows([[repr(float(v)) for v in p] for p in rows])
     write_text_atomic(path, text.getvalue())

@@ -12,8 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_calib.accuracy import Accuracy, accuracy
+from robot_calib.accuracy import Accuracy, OrientationAccuracy, accuracy, orientation_accuracy
 from robot_calib.atomic import write_text_atomic
+from robot_calib.identify.fit import orientation_residuals
 from robot_calib.identify.outliers import OUTLIER_K, outlier_mask, robust_sigma
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
@@ -31,6 +32,10 @@ class Score:
     accuracy: Accuracy
     residuals: Array
     n_suspect: int
+    # 6-DoF measurements (msgs_doc/six_dof.md): (n, 3) rotation vectors of predicted *
+    # measured orientation [rad], NaN where none; their figures (None: none)
+    orientation_residuals: Array | None = None
+    orientation: OrientationAccuracy | None = None
 
     def lines(self, where: str) -> list[str]:
         """Human lines: absolute mean / rms / max and the seed criterion, in mm."""
@@ -41,6 +46,8 @@ class Score:
             f"(pairwise distances) mean {acc.pairwise_mean_mm:.4f} / max "
             f"{acc.pairwise_max_mm:.4f} mm"
         ]
+        if self.orientation is not None:
+            out.append(f"{where}: {self.orientation.line()}")
         if self.n_suspect:
             out.append(
                 f"warning: {self.n_suspect} point(s) beyond {OUTLIER_K:g} robust sigmas of "
@@ -56,15 +63,27 @@ def score(model: KinematicModel, params: ParameterVector, recording: Recording) 
     predicted = model.target_points(params, recording.poses)
     residuals = predicted - recording.points
     n_suspect = int(outlier_mask(residuals, robust_sigma(residuals)).sum())
-    return Score(accuracy(recording.points, predicted), residuals, n_suspect)
+    rotation = orientation_residuals(model, params, recording.poses)
+    return Score(
+        accuracy(recording.points, predicted),
+        residuals,
+        n_suspect,
+        rotation,
+        None if rotation is None else orientation_accuracy(rotation),
+    )
 
 
 def write_points_table(result: Score, recording: Recording, path: str | Path) -> None:
     """Per-point CSV: source bag, message index, measured x, y, z [m], residual dx, dy, dz
-    (predicted - measured) [m], its norm [m] and the target's topic; written atomically."""
+    (predicted - measured) [m], its norm [m] and the target's topic; with 6-DoF
+    measurements also the orientation error's rotation vector rx, ry, rz and angle [rad]
+    (empty where none); written atomically."""
     text = io.StringIO(newline="")
     writer = csv.writer(text)
     header = ["bag", "index", "x_m", "y_m", "z_m", "dx_m", "dy_m", "dz_m", "error_m", "target"]
+    rotation = result.orientation_residuals
+    if rotation is not None:
+        header += ["rx_rad", "ry_rad", "rz_rad", "angle_rad"]
     writer.writerow(header)
     targets = [target_topic(t) for t in recording.target_names]
     indices = recording.message_indices()
@@ -74,5 +93,13 @@ def write_points_table(result: Score, recording: Recording, path: str | Path) ->
             [recording.sources[int(recording.bag_index[i])], int(indices[i])]
             + [repr(float(v)) for v in (*point, *residual, norms[i])]
             + [targets[int(recording.poses.target_index[i])]]
+            + ([] if rotation is None else _rotation_cells(rotation[i]))
         )
     write_text_atomic(path, text.getvalue())
+
+
+def _rotation_cells(error: Array) -> list[str]:
+    """rx, ry, rz, angle [rad] of one orientation error (3,), empty cells when NaN."""
+    if not np.all(np.isfinite(error)):
+        return ["", "", "", ""]
+    return [repr(float(v)) for v in (*error, np.linalg.norm(error))]

@@ -7,11 +7,14 @@ orientation in the flange frame). Known answers: a simulated KR5 with a probe.
 
 from __future__ import annotations
 
+import csv
+import json
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import robot_calib
 from rosbags.highlevel import AnyReader
 from scipy.spatial.transform import Rotation
 
@@ -195,3 +198,51 @@ def test_a_bag_of_poses_alone_reads_and_bad_poses_are_one_line_errors(tmp_path: 
     bag = write_raw(tmp_path / "scaled.mcap", poses.q, points, points, scaled)
     with pytest.raises(BagError, match=r"scaled.mcap: /laser_tracker/pose message 8: .* norm 2"):
         read_recording([bag], ROBOT)
+
+
+def test_split_calibrate_and_score_keep_the_orientations(tmp_path: Path) -> None:
+    """The verbs on a 6-DoF bag: `split` keeps every pose's orientation and stated
+    accuracy, `calibrate` prints the orientation residual, `score` the held-out one, and
+    its per-point table has the rotation columns."""
+    poses, points = measured(n=120, seed=11)
+    sigma = np.tile([5e-6, ORIENTATION_SIGMA], (len(poses), 1))
+    bag = tmp_path / "probe.mcap"
+    write_measurement_bag(
+        bag, poses.q, points, ROBOT.joint_names, poses.time, six_dof={"": (poses.rotation, sigma)}
+    )
+    assert robot_calib("split", str(bag), "--holdout", "0.3", "--seed", "2").returncode == 0
+    parts = [read_recording([tmp_path / f"probe.{p}.mcap"], ROBOT) for p in ("cal", "holdout")]
+    assert sum(len(p) for p in parts) == len(poses)
+    for part in parts:
+        assert part.poses.oriented.all() and part.poses.sigma is not None
+        np.testing.assert_allclose(part.poses.sigma, sigma[: len(part)])
+    params = tmp_path / "p.json"
+    proc = robot_calib("calibrate", str(tmp_path / "probe.cal.mcap"), "-o", str(params))
+    assert proc.returncode == 0, proc.stderr
+    assert "residuals (in-sample): orientation mean" in proc.stdout
+    doc = json.loads(params.read_text())
+    assert doc["targets"][0]["six_dof"] is True
+    assert doc["orientation_residuals"]["n_measurements"] == len(parts[0])
+    table = tmp_path / "points.csv"
+    proc = robot_calib("score", str(params), str(tmp_path / "probe.holdout.mcap"),
+                       "--points-csv", str(table))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    line = next(x for x in proc.stdout.splitlines() if "orientation mean" in x)
+    rms_urad = float(line.split("rms ")[1].split(" ")[0])
+    angle_rms = ORIENTATION_SIGMA * 1e6 * np.sqrt(3)  # |3 axes of noise| [urad]
+    assert 0.7 * angle_rms < rms_urad < 1.5 * angle_rms
+    with table.open() as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(parts[1]) and float(rows[0]["angle_rad"]) > 0
+    # predict gives the probe frame as a quaternion beside the point
+    joints = tmp_path / "joints.csv"
+    q_cal = parts[1].poses.q
+    np.savetxt(joints, q_cal, delimiter=",", comments="",
+               header=",".join(f"q{j + 1}" for j in range(6)))  # fmt: skip
+    out = tmp_path / "points_out.csv"
+    proc = robot_calib("predict", str(params), "--joints", str(joints), "-o", str(out))
+    assert proc.returncode == 0 and "qx,qy,qz,qw" in proc.stdout, proc.stderr
+    predicted = np.loadtxt(out, delimiter=",", skiprows=1)
+    truth = WORLD.model.probe_orientations(WORLD.truth, Poses.from_readings(q_cal))
+    turn = Rotation.from_quat(predicted[:, 3:]) * Rotation.from_matrix(truth).inv()
+    assert np.abs(turn.magnitude()).max() < 1e-4  # the calibrated frame within 100 urad

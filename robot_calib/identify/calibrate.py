@@ -31,7 +31,7 @@ from robot_calib.identify.fit import (
     SolverReport,
     check_enough_data,
     fit_model,
-    fitted_orientations,
+    orientation_residuals,
 )
 from robot_calib.identify.identifiability import (
     Identifiability,
@@ -49,7 +49,6 @@ from robot_calib.identify.outliers import (
 )
 from robot_calib.identify.plausibility import calibration_warnings, recording_warnings
 from robot_calib.identify.registration import fit_frames, initial_tool_rotations
-from robot_calib.identify.weights import orientation_errors
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
@@ -187,21 +186,6 @@ def _from_fit(name: str, model: KinematicModel, fit: FitResult, points: Array,
         cpa,
         orientation_residuals=fit.orientation_residuals,
     )
-
-
-def orientation_residuals(
-    model: KinematicModel, params: ParameterVector, poses: Poses
-) -> Array | None:
-    """(n, 3) rotation vectors of predicted * measured orientation [rad] of the 6-DoF
-    measurements of `model`'s oriented targets, NaN elsewhere; None when there are none."""
-    rows = fitted_orientations(model, poses)
-    if not rows.any() or poses.rotation is None:
-        return None
-    out = np.full((len(poses), 3), np.nan)
-    sub = poses.subset(rows)
-    assert sub.rotation is not None
-    out[rows] = orientation_errors(model.probe_orientations(params, sub), sub.rotation)
-    return out
 
 
 def calibrate(

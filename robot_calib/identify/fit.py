@@ -168,6 +168,21 @@ def fitted_orientations(model: KinematicModel, poses: Poses) -> NDArray[np.bool_
     return poses.oriented & np.isin(poses.target_index, which)
 
 
+def orientation_residuals(
+    model: KinematicModel, params: ParameterVector, poses: Poses
+) -> Array | None:
+    """(n, 3) rotation vectors of predicted * measured orientation [rad] of the 6-DoF
+    measurements of `model`'s oriented targets, NaN elsewhere; None when there are none."""
+    rows = fitted_orientations(model, poses)
+    if not rows.any() or poses.rotation is None:
+        return None
+    out = np.full((len(poses), 3), np.nan)
+    sub = poses.subset(rows)
+    assert sub.rotation is not None
+    out[rows] = orientation_errors(model.probe_orientations(params, sub), sub.rotation)
+    return out
+
+
 class _Problem:
     """Residuals and Jacobian of the free parameters, evaluated once per x (LM asks for
     both at the same point).

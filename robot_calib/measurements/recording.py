@@ -117,10 +117,16 @@ class Recording:
     def points_by_target(self) -> tuple[IntArray, Array]:
         """Per pose (`pose_index`): its first measurement (m,) and every target's point
         (T, m, 3) [m], NaN where that target was not measured at the pose."""
+        return self.by_target(self.points)
+
+    def by_target(self, values: Array) -> tuple[IntArray, Array]:
+        """Per pose (`pose_index`): its first measurement (m,) and every target's value of
+        the per-measurement `values` (n, ...) as (T, m, ...), NaN where that target was not
+        measured at the pose."""
         pose = self.pose_index()
         m = int(pose[-1]) + 1 if len(pose) else 0
-        out = np.full((len(self.target_names), m, 3), np.nan)
-        out[self.poses.target_index, pose] = self.points
+        out = np.full((len(self.target_names), m, *values.shape[1:]), np.nan)
+        out[self.poses.target_index, pose] = values
         first = np.flatnonzero(np.r_[True, np.diff(pose) != 0]) if m else pose
         return first, out
 
