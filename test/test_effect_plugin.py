@@ -32,7 +32,9 @@ from robot_calib.sim.world import build_world
 
 
 class CosineOffset(JointOffsetEffect):
-    """theta_j += c_j cos(q_j): a joint-angle error that peaks at the zero reading."""
+    """theta_j += c_j cos(q_k), k the next joint (joint 1 after the last): a joint-angle
+    error that follows another joint's reading (a coupling nobody declared), which no
+    effect of the vocabulary (functions of the joint's own reading, or gravity) forms."""
 
     name = "cosine_offset"
     unit = "rad"
@@ -41,7 +43,7 @@ class CosineOffset(JointOffsetEffect):
     draw_signed = True
 
     def signal(self, robot: RobotDescription, poses: Poses) -> Array:
-        return np.cos(poses.q)
+        return np.cos(np.roll(poses.q, -1, axis=1))
 
 
 @pytest.fixture

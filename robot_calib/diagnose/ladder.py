@@ -28,6 +28,7 @@ from robot_calib.identify.outliers import (
 )
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array, IntArray
+from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
 
@@ -176,15 +177,27 @@ def score_rung(cal: Calibration, recording: Recording,
     return accuracy(holdout.points, predicted), h_res, combined_rms(cv_res, h_res)
 
 
-def _kfold(cal: Calibration, recording: Recording) -> tuple[Accuracy, Array]:
+def kfold_parameters(
+    cal: Calibration, recording: Recording
+) -> tuple[IntArray, dict[int, ParameterVector]]:
+    """The folds (n,) of `recording` (`pose_folds`) and, per fold, the parameters of `cal`'s
+    model refitted (from its solution) without that fold's measurements."""
     fold = pose_folds(recording)
-    predicted = np.empty_like(recording.points)
-    for f in range(N_FOLDS):
+    fitted = {}
+    for f in np.unique(fold):
         train = fold != f
-        fit = fit_model(cal.model, cal.parameters, recording.poses.subset(train),
-                        recording.points[train], check_identifiability=False)  # fmt: skip
-        test = recording.poses.subset(~train)
-        predicted[~train] = cal.model.target_points(fit.parameters, test)
+        fitted[int(f)] = fit_model(cal.model, cal.parameters, recording.poses.subset(train),
+                                   recording.points[train],
+                                   check_identifiability=False).parameters  # fmt: skip
+    return fold, fitted
+
+
+def _kfold(cal: Calibration, recording: Recording) -> tuple[Accuracy, Array]:
+    fold, fitted = kfold_parameters(cal, recording)
+    predicted = np.empty_like(recording.points)
+    for f, params in fitted.items():
+        test = fold == f
+        predicted[test] = cal.model.target_points(params, recording.poses.subset(test))
     return accuracy(recording.points, predicted), predicted - recording.points
 
 
