@@ -84,6 +84,18 @@ def pose_measurement(msg: Any, where: str) -> tuple[Array, Array, Array]:
     return p, Rotation.from_quat(quat).as_matrix(), sigma
 
 
+def orientation_quaternion(rotation: Array) -> tuple[float, float, float, float]:
+    """A `geometry_msgs/Quaternion`'s (x, y, z, w) of a probe frame rotation (3, 3) (the
+    reading of `pose_measurement`); the identity (0, 0, 0, 1) where it is NaN (not
+    measured: the covariance says so)."""
+    if not np.all(np.isfinite(rotation)):
+        return 0.0, 0.0, 0.0, 1.0
+    from scipy.spatial.transform import Rotation  # scipy only where poses are written
+
+    x, y, z, w = (float(v) for v in Rotation.from_matrix(rotation).as_quat())
+    return x, y, z, w
+
+
 def pose_covariance(sigma: Array, oriented: bool) -> list[float]:
     """The 36 covariance entries (row-major x, y, z, rot x, rot y, rot z) of stated
     standard deviations sigma (2,) [m, rad] (NaN: not stated -> 0); rotation variances -1

@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from robot_calib.atomic import staged_outputs
 from robot_calib.bag.mcap_writer import BagWriter
@@ -35,6 +34,7 @@ from robot_calib.messages import (
     POSE_TYPE,
     TRACKER_FRAME,
     ns_to_sec_nanosec,
+    orientation_quaternion,
     pose_covariance,
     pose_topic,
     target_topic,
@@ -450,10 +450,11 @@ class _PoseWriter:
         if not np.all(np.isfinite(xyz)) or not (oriented or np.isfinite(self.sigma[k]).any()):
             return None
         t = self.store.types
-        quat = Rotation.from_matrix(self.rotation[k]).as_quat() if oriented else [0, 0, 0, 1]
         pose = t["geometry_msgs/msg/Pose"](
             position=t["geometry_msgs/msg/Point"](*map(float, xyz)),
-            orientation=t["geometry_msgs/msg/Quaternion"](*map(float, quat)),
+            orientation=t["geometry_msgs/msg/Quaternion"](
+                *orientation_quaternion(self.rotation[k])
+            ),
         )
         header = t["std_msgs/msg/Header"](stamp=stamp, frame_id=TRACKER_FRAME)
         if self.type_name == POSE_TYPE:

@@ -22,6 +22,7 @@ from robot_calib.measurements.recording import (
     Recording,
     recording_from_stream,
 )
+from robot_calib.measurements.six_dof import PoseReading, join_poses
 from robot_calib.messages import (
     JOINT_STATE_TYPE,
     JOINT_STATES_TOPIC,
@@ -32,16 +33,12 @@ from robot_calib.messages import (
     TRACKER_FRAME,
     joint_positions,
     pose_measurement,
-    pose_topic,
     pose_topic_name,
     stamp_to_ns,
-    target_topic,
     target_topic_name,
     velocity_signs,
 )
 from robot_calib.poses import PRIMARY_TARGET
-
-POSE_POINT_TOLERANCE_M = 1e-6  # a pose's position and its point's: the same measurement
 
 
 def _check_topic(reader: BagReader, topic: str, type_name: str) -> None:
@@ -102,50 +99,6 @@ def _target_topics(
     return point_topics, pose_topics, names
 
 
-def _six_dof_rows(
-    path: Path,
-    names: list[str],
-    with_points: set[int],
-    poses: list[dict[int, tuple[Array, Array, Array]]],
-    pt_t: list[int],
-    pts: list[Array],
-    pt_target: list[int],
-) -> tuple[Array | None, Array | None]:
-    """Orientation (n, 3, 3) and stated standard deviations (n, 2) of every point, from the
-    6-DoF messages `poses` (per target, by stamp [ns]); a target with a pose topic but no
-    point topic gets its points from the poses (appended to pt_t, pts, pt_target). BagError
-    when a pose and the point of its stamp disagree, or a pose has no point."""
-    if not any(poses):
-        return None, None
-    for k, by_stamp in enumerate(poses):
-        if k not in with_points:
-            for stamp, (p, _, _) in by_stamp.items():
-                pt_t.append(stamp)
-                pts.append(p)
-                pt_target.append(k)
-    rotation = np.full((len(pts), 3, 3), np.nan)
-    sigma = np.full((len(pts), 2), np.nan)
-    used = [0] * len(names)
-    for i, (stamp, p, k) in enumerate(zip(pt_t, pts, pt_target)):
-        found = poses[k].get(stamp)
-        if found is None:
-            continue
-        if np.linalg.norm(found[0] - p) > POSE_POINT_TOLERANCE_M:
-            raise BagError(
-                f"{path}: {pose_topic(names[k])} at stamp {stamp} ns is at {found[0].tolist()} "
-                f"but {target_topic(names[k])} at {p.tolist()} m"
-            )
-        rotation[i], sigma[i] = found[1], found[2]
-        used[k] += 1
-    for k, by_stamp in enumerate(poses):
-        if len(by_stamp) > used[k]:
-            raise BagError(
-                f"{path}: {len(by_stamp) - used[k]} of {len(by_stamp)} messages of "
-                f"{pose_topic(names[k])} have no {target_topic(names[k])} message of their stamp"
-            )
-    return rotation, sigma
-
-
 def read_bag(
     path: Path, robot: RobotDescription, pair_tolerance: float = PAIR_TOLERANCE_S
 ) -> Recording:
@@ -171,7 +124,7 @@ def read_bag(
     with reader:
         _check_topic(reader, JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         target_topics, pose_topics, names = _target_topics(reader, path, warnings)
-        poses: list[dict[int, tuple[Array, Array, Array]]] = [{} for _ in names]
+        poses: list[dict[int, PoseReading]] = [{} for _ in names]
         for m in reader.messages([JOINT_STATES_TOPIC, *target_topics, *pose_topics]):
             msg = m.decode()
             if m.topic == JOINT_STATES_TOPIC:
@@ -207,23 +160,24 @@ def read_bag(
             f"warning: {path}: tracker point frame_id {sorted(frames)} is not "
             f"'{TRACKER_FRAME}' (used as the tracker frame anyway)"
         )
-    rotation, sigma = _six_dof_rows(path, names, set(target_topics.values()), poses,
-                                    pt_t, pts, pt_target)  # fmt: skip
+    stamped = join_poses(
+        str(path), names, pt_t, pts, pt_target, poses, set(target_topics.values()), BagError
+    )
     n_joints = robot.n_joints
     rec = recording_from_stream(
         np.array(js_t, dtype=np.int64),
         np.array(js_q).reshape(-1, n_joints),
         np.array(js_v).reshape(-1, n_joints),
-        np.array(pt_t, dtype=np.int64),
-        np.array(pts).reshape(-1, 3),
+        stamped.point_ns,
+        stamped.points,
         pair_tolerance,
         source=str(path),
         error=BagError,
         robot=robot,
-        point_target=np.array(pt_target, dtype=np.int64) if len(names) > 1 else None,
+        point_target=stamped.point_target if len(names) > 1 else None,
         target_names=tuple(names),
-        rotation=rotation,
-        sigma=sigma,
+        rotation=stamped.rotation,
+        sigma=stamped.sigma,
     )
     return replace(rec, warnings=tuple(warnings) + rec.warnings)
 

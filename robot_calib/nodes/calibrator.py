@@ -2,13 +2,14 @@
 
 Bag mode (parameter `bags` set): once at start, read and pair the bags (CONTRACT.md
 section 1), calibrate, publish. Live mode (`bags` empty): buffer /joint_states and
-/laser_tracker/point; on a call of the service `~/calibrate` (diagnostic_msgs/srv/SelfTest:
-empty request, the outcome as a DiagnosticStatus; std_srvs is not a dependency), a
-std_msgs/Empty on `~/solve`, or after `solve_after_idle_s` without a new point
-("the plan has ended"), pair everything received so far exactly as a bag is paired and
-calibrate. Results go out on latched (transient local) topics: `~/parameters` (the
-PARAMS.json document), `~/summary`, `~/residuals` and `~/markers` (RViz / Foxglove).
-Topics, layouts and parameters: msgs_doc/calibrator.md.
+/laser_tracker/point (with parameter `targets` also further targets' /laser_tracker/NAME/point,
+with `six_dof_targets` 6-DoF probes' /laser_tracker/(NAME/)pose); on a call of the service
+`~/calibrate` (diagnostic_msgs/srv/SelfTest: empty request, the outcome as a
+DiagnosticStatus; std_srvs is not a dependency), a std_msgs/Empty on `~/solve`, or after
+`solve_after_idle_s` without a new point ("the plan has ended"), pair everything received
+so far exactly as a bag is paired and calibrate. Results go out on latched (transient
+local) topics: `~/parameters` (the PARAMS.json document), `~/summary`, `~/residuals` and
+`~/markers` (RViz / Foxglove). Topics, layouts and parameters: msgs_doc/calibrator.md.
 
 Bad input (RobotCalibError) is logged as one error line. A live node keeps running;
 standalone in bag mode the node then exits with status 2.
@@ -30,7 +31,7 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from diagnostic_msgs.srv import SelfTest
-from geometry_msgs.msg import Point, PointStamped
+from geometry_msgs.msg import Point, PointStamped, PoseStamped, PoseWithCovarianceStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import QoSRequestedIncompatibleQoSInfo, SubscriptionEventCallbacks
@@ -49,12 +50,17 @@ from robot_calib.identify.params_file import summary, write_json_atomic
 from robot_calib.kinematics.description import load_robot, with_joint_names
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements import PAIR_TOLERANCE_S, Recording, recording_from_stream
+from robot_calib.measurements.six_dof import PoseReading, join_poses
 from robot_calib.messages import (
     JOINT_STATES_TOPIC,
-    POINT_TOPIC,
+    POSE_COV_TYPE,
+    POSE_TYPE,
     TRACKER_FRAME,
     joint_positions,
+    pose_measurement,
+    pose_topic,
     stamp_to_ns,
+    target_topic,
     velocity_signs,
 )
 from robot_calib.nodes._common import declare, overrides, run_node
@@ -64,6 +70,7 @@ from robot_calib.pipeline import (
     diagnose_recordings,
     read_bags,
 )
+from robot_calib.poses import PRIMARY_TARGET, TARGET_NAME
 
 LATCHED = QoSProfile(  # late joiners (RViz, a test, `ros2 topic echo`) get the last result
     history=HistoryPolicy.KEEP_LAST,
@@ -76,6 +83,9 @@ AXIS_LENGTH_M = 0.3  # drawn length of an identified joint axis, centred on its 
 CIRCLE_SEGMENTS = 72
 RESIDUAL_FIELDS = "x,y,z,residual"  # the columns of ~/residuals (msgs_doc/calibrator.md)
 STEADY = ClockType.STEADY_TIME  # timers run on wall time also when /clock stands still
+FIRST_TARGET = "first"  # the first target's name in `six_dof_targets` (as in a world file)
+POSE_CLASSES = {POSE_TYPE: PoseStamped, POSE_COV_TYPE: PoseWithCovarianceStamped}
+DISCOVERY_PERIOD_S = 0.1  # how often the graph is asked for the type of a pose topic
 
 
 class CalibratorNode(Node):
@@ -153,6 +163,9 @@ class CalibratorNode(Node):
         self._js_v: list[Array] = []
         self._pt_ns: list[int] = []
         self._pt_xyz: list[Array] = []
+        self._pt_target: list[int] = []  # index into target_names
+        self._poses: list[dict[int, PoseReading]] = [{} for _ in self.target_names]
+        self._counts = dict.fromkeys([JOINT_STATES_TOPIC, *self.live_topics], 0)
         self.rejected = 0
         self._last_point_s: float | None = None
         self._unsolved = False
@@ -162,19 +175,19 @@ class CalibratorNode(Node):
             reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.VOLATILE,
         )
-        for msg_type, topic, callback in (
-            (JointState, JOINT_STATES_TOPIC, self._on_joint_state),
-            (PointStamped, POINT_TOPIC, self._on_point),
-        ):
-            self.create_subscription(
-                msg_type,
-                topic,
-                callback,
-                live_qos,
-                event_callbacks=SubscriptionEventCallbacks(
-                    incompatible_qos=partial(self._on_incompatible_qos, topic)
-                ),
+        self._live_qos = live_qos
+        self._subscribe(JointState, JOINT_STATES_TOPIC, self._on_joint_state)
+        for k, name in enumerate(self.target_names):
+            if name in self.point_targets:
+                self._subscribe(PointStamped, target_topic(name), partial(self._on_point, k))
+        # a pose topic's type (PoseStamped or PoseWithCovarianceStamped) comes from the graph
+        self._pending_poses = {pose_topic(t): k for k, t in enumerate(self.target_names)
+                               if t in self.six_dof_targets}  # fmt: skip
+        if self._pending_poses:
+            self._discovery_timer = self.create_timer(
+                DISCOVERY_PERIOD_S, self._discover_poses, clock=steady
             )
+            self._discover_poses()
         group = self._solver_group
         self.create_subscription(Empty, "~/solve", self._on_solve, 10, callback_group=group)
         self.create_service(SelfTest, "~/calibrate", self._on_calibrate, callback_group=group)
@@ -188,8 +201,9 @@ class CalibratorNode(Node):
             if self.solve_after_idle_s > 0
             else ""
         )
+        topics = [JOINT_STATES_TOPIC, *self.live_topics]
         self.get_logger().info(
-            f"collecting {JOINT_STATES_TOPIC} and {POINT_TOPIC}; solving {self.model_spec} "
+            f"collecting {', '.join(topics[:-1])} and {topics[-1]}; solving {self.model_spec} "
             f"on {self.resolve_topic_name('~/solve')}{idle}"
         )
 
@@ -278,7 +292,20 @@ class CalibratorNode(Node):
             self,
             "qos_depth",
             DEFAULT_QOS_DEPTH,
-            "live mode: history depth of the two subscriptions [messages]",
+            "live mode: history depth of the topic subscriptions [messages]",
+        )
+        further: list[str] = declare(
+            self,
+            "targets",
+            [],
+            "live mode: further targets NAME whose /laser_tracker/NAME/point to take too",
+        )
+        six_dof: list[str] = declare(
+            self,
+            "six_dof_targets",
+            [],
+            f"live mode: targets with a 6-DoF probe whose /laser_tracker/(NAME/)pose to take "
+            f"('{FIRST_TARGET}' = the first target, /laser_tracker/pose)",
         )
         self.robot = load_robot(robot_name)
         if joint_names:
@@ -297,6 +324,33 @@ class CalibratorNode(Node):
             raise InputError(f"{name}: parameter 'qos_depth' must be >= 1")
         if self.output and not Path(self.output).parent.is_dir():
             raise InputError(f"{self.output}: no such folder for the parameter file")
+        self._live_targets(further, six_dof)
+
+    def _live_targets(self, further: list[str], six_dof: list[str]) -> None:
+        """The targets of live mode from the parameters `targets` and `six_dof_targets`:
+        `target_names` ('' first, then by name, as a bag's topics are read), `point_targets`
+        (point topics taken), `six_dof_targets` (pose topics taken) and `live_topics`."""
+        name = self.get_name()
+        for param, values in (("targets", further), ("six_dof_targets", six_dof)):
+            bad = [v for v in values if v != FIRST_TARGET and not TARGET_NAME.fullmatch(v)]
+            if param == "targets" and FIRST_TARGET in values:
+                bad.append(FIRST_TARGET)  # names the first target in six_dof_targets
+            if bad or len(set(values)) != len(values):
+                raise InputError(
+                    f"{name}: parameter {param!r}: {values}: want distinct target names "
+                    f"(letters, digits, underscores, starting with a letter; '{FIRST_TARGET}' "
+                    "in six_dof_targets only, for the first target)"
+                )
+        probes = {PRIMARY_TARGET if t == FIRST_TARGET else t for t in six_dof}
+        self.point_targets: tuple[str, ...] = (PRIMARY_TARGET, *further)
+        self.six_dof_targets: tuple[str, ...] = tuple(sorted(probes))
+        self.target_names: tuple[str, ...] = (
+            PRIMARY_TARGET, *sorted((set(further) | probes) - {PRIMARY_TARGET}),
+        )  # fmt: skip
+        self.live_topics: list[str] = [
+            *(target_topic(t) for t in self.target_names if t in self.point_targets),
+            *(pose_topic(t) for t in self.six_dof_targets),
+        ]
 
     # --- public ---------------------------------------------------------------------------
 
@@ -317,7 +371,7 @@ class CalibratorNode(Node):
         if self.bags:
             return {}
         with self._lock:
-            return {JOINT_STATES_TOPIC: len(self._js_ns), POINT_TOPIC: len(self._pt_ns)}
+            return dict(self._counts)
 
     def solve(self) -> Calibration | None:
         """Live mode: pair everything received so far, calibrate and publish. Bad input is
@@ -331,12 +385,18 @@ class CalibratorNode(Node):
             js_ns = np.array(self._js_ns, dtype=np.int64)
             js_q = np.array(self._js_q).reshape(-1, len(names))
             js_v = np.array(self._js_v).reshape(-1, len(names))
-            pt_ns = np.array(self._pt_ns, dtype=np.int64)
-            pt_xyz = np.array(self._pt_xyz).reshape(-1, 3)
+            pt_ns, pt_xyz, pt_target = list(self._pt_ns), list(self._pt_xyz), list(self._pt_target)
+            poses = [dict(by_stamp) for by_stamp in self._poses]
+        source = "live " + " + ".join([JOINT_STATES_TOPIC, *self.live_topics])
+        targets = self.target_names
         try:
+            # a pose joins the point of its target and stamp, as in a bag (msgs_doc/six_dof.md)
+            stamped = join_poses(source, targets, pt_ns, pt_xyz, pt_target, poses, set(pt_target))
             recording = recording_from_stream(
-                js_ns, js_q, js_v, pt_ns, pt_xyz, self.pair_tolerance,
-                source=f"live {JOINT_STATES_TOPIC} + {POINT_TOPIC}", robot=self.robot,
+                js_ns, js_q, js_v, stamped.point_ns, stamped.points, self.pair_tolerance,
+                source=source, robot=self.robot,
+                point_target=stamped.point_target if len(targets) > 1 else None,
+                target_names=targets, rotation=stamped.rotation, sigma=stamped.sigma,
             )  # fmt: skip
             for warning in recording.warnings:
                 self._log(warning)
@@ -442,21 +502,75 @@ class CalibratorNode(Node):
             self._js_ns.append(stamp_to_ns(msg.header.stamp))
             self._js_q.append(q)
             self._js_v.append(velocity_signs(msg, names))
+            self._counts[JOINT_STATES_TOPIC] += 1
 
-    def _on_point(self, msg: PointStamped) -> None:
-        xyz = np.array([msg.point.x, msg.point.y, msg.point.z])
-        if not np.all(np.isfinite(xyz)):
-            self.get_logger().warning(f"{POINT_TOPIC}: point not finite {xyz}: ignored")
-            return
-        if msg.header.frame_id != TRACKER_FRAME:
+    def _subscribe(self, msg_type: type, topic: str, callback: Any) -> None:
+        """A live subscription (RELIABLE, VOLATILE, qos_depth) warning of incompatible QoS."""
+        self.create_subscription(
+            msg_type,
+            topic,
+            callback,
+            self._live_qos,
+            event_callbacks=SubscriptionEventCallbacks(
+                incompatible_qos=partial(self._on_incompatible_qos, topic)
+            ),
+        )
+
+    def _discover_poses(self) -> None:
+        """Subscribe to each pose topic once the graph shows its type (a publisher exists)."""
+        graph = dict(self.get_topic_names_and_types())
+        for topic, k in list(self._pending_poses.items()):
+            types = [t for t in graph.get(topic, []) if t in POSE_CLASSES]
+            if not types:
+                if graph.get(topic):
+                    self.get_logger().warning(
+                        f"{topic}: type {graph[topic]} is none of {list(POSE_CLASSES)}: "
+                        "waiting for a publisher of one of them",
+                        throttle_duration_sec=10.0,
+                    )
+                continue
+            del self._pending_poses[topic]
+            self._subscribe(POSE_CLASSES[types[0]], topic, partial(self._on_pose, k, topic))
+            self.get_logger().info(f"{topic}: subscribed as {types[0]}")
+        if not self._pending_poses:
+            self._discovery_timer.cancel()
+
+    def _check_frame(self, topic: str, frame_id: str) -> None:
+        if frame_id != TRACKER_FRAME:
             self.get_logger().warning(
-                f"{POINT_TOPIC}: frame_id {msg.header.frame_id!r} is not '{TRACKER_FRAME}' "
+                f"{topic}: frame_id {frame_id!r} is not '{TRACKER_FRAME}' "
                 "(used as the tracker frame anyway)",
                 once=True,
             )
+
+    def _on_point(self, target: int, msg: PointStamped) -> None:
+        topic = target_topic(self.target_names[target])
+        xyz = np.array([msg.point.x, msg.point.y, msg.point.z])
+        if not np.all(np.isfinite(xyz)):
+            self.get_logger().warning(f"{topic}: point not finite {xyz}: ignored")
+            return
+        self._check_frame(topic, msg.header.frame_id)
         with self._lock:
             self._pt_ns.append(stamp_to_ns(msg.header.stamp))
             self._pt_xyz.append(xyz)
+            self._pt_target.append(target)
+            self._counts[topic] += 1
+            self._last_point_s = time.monotonic()
+            self._unsolved = True
+
+    def _on_pose(
+        self, target: int, topic: str, msg: PoseStamped | PoseWithCovarianceStamped
+    ) -> None:
+        try:
+            where = f"{topic} message {self._counts[topic] + 1}"
+            reading = pose_measurement(msg, where)
+        except InputError as exc:
+            self.get_logger().warning(f"{exc}: ignored", throttle_duration_sec=10.0)
+            return
+        self._check_frame(topic, msg.header.frame_id)
+        with self._lock:
+            self._poses[target][stamp_to_ns(msg.header.stamp)] = reading
+            self._counts[topic] += 1
             self._last_point_s = time.monotonic()
             self._unsolved = True
 
@@ -468,11 +582,10 @@ class CalibratorNode(Node):
                 and self._last_point_s is not None
                 and time.monotonic() - self._last_point_s >= self.solve_after_idle_s
             )
-            n_points = len(self._pt_ns)
+            n_poses = sum(len(by_stamp) for by_stamp in self._poses)
+            what = f"{len(self._pt_ns)} points" + (f" and {n_poses} poses" if n_poses else "")
         if due:
-            self.get_logger().info(
-                f"no new point for {self.solve_after_idle_s} s: solving {n_points} points"
-            )
+            self.get_logger().info(f"no new point for {self.solve_after_idle_s} s: solving {what}")
             self.solve()
 
 

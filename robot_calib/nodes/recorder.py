@@ -2,10 +2,11 @@
 
 Subscribes to each topic with raw=True (CDR bytes kept as received, never re-serialised)
 and writes them with the middleware's receive time [ns] as log and publish time (with
-use_sim_time the node clock's time at the callback, as rosbag2 does). The
-contract's topics have known types; other topics are subscribed once the graph shows their
-type. A topic's channel is created at its first message, with the publishers' offered QoS
-and type hash as the graph reports them then. Topics and parameters: msgs_doc/recorder.md.
+use_sim_time the node clock's time at the callback, as rosbag2 does). The contract's
+topics and further targets' /laser_tracker/NAME/point have known types; other topics (a
+6-DoF probe's pose: two types possible) are subscribed once the graph shows their type. A
+topic's channel is created at its first message, with the publishers' offered QoS and type
+hash as the graph reports them then. Topics and parameters: msgs_doc/recorder.md.
 
 Standalone: `ros2 run robot_calib recorder --ros-args -p output:=run.mcap`; SIGINT, SIGTERM or
 SIGHUP closes the bag (summary written) and prints the message counts per topic (SIGKILL
@@ -35,14 +36,30 @@ from rclpy.subscription import Subscription
 from robot_calib.bag import BagWriter
 from robot_calib.bag.mcap_writer import DEFAULT_CHUNK_SIZE, DEFAULT_MAX_CHUNK_AGE_S
 from robot_calib.errors import BagError, InputError, RobotCalibError
+from robot_calib.messages import (
+    JOINT_STATE_TYPE,
+    JOINT_STATES_TOPIC,
+    POINT_TOPIC,
+    POINT_TYPE,
+    target_topic_name,
+)
 from robot_calib.nodes._common import declare, message_class, overrides, qos_to_record, run_node
 
-DEFAULT_TOPICS = ["/joint_states", "/laser_tracker/point"]
+DEFAULT_TOPICS = [JOINT_STATES_TOPIC, POINT_TOPIC]
 KNOWN_TYPES = {  # CONTRACT.md section 1
-    "/joint_states": "sensor_msgs/msg/JointState",
-    "/laser_tracker/point": "geometry_msgs/msg/PointStamped",
+    JOINT_STATES_TOPIC: JOINT_STATE_TYPE,
+    POINT_TOPIC: POINT_TYPE,
 }
 DEFAULT_QOS_DEPTH = 10000
+
+
+def known_type(topic: str) -> str | None:
+    """The type of a topic of the contract or of msgs_doc/targets.md (a further target's
+    /laser_tracker/NAME/point), None for others: their type comes from the graph (as a 6-DoF
+    probe's pose topic, PoseStamped or PoseWithCovarianceStamped, msgs_doc/six_dof.md)."""
+    if topic in KNOWN_TYPES:
+        return KNOWN_TYPES[topic]
+    return POINT_TYPE if target_topic_name(topic) is not None else None
 
 
 class RecorderNode(Node):
@@ -124,14 +141,15 @@ class RecorderNode(Node):
         self._counts = dict.fromkeys(self._topics, 0)
         self._types: dict[str, str] = {}
         self._subscriptions_by_topic: dict[str, Subscription] = {}
-        self._pending = [t for t in self._topics if t not in KNOWN_TYPES]
+        self._pending = [t for t in self._topics if known_type(t) is None]
         self._closed = False
         self.lost: dict[str, int] = {}
         """Messages the middleware reported lost before they reached the recorder, per topic."""
         self._use_sim_time = bool(self.get_parameter("use_sim_time").value)
         for topic in self._topics:
-            if topic in KNOWN_TYPES:
-                self._subscribe(topic, KNOWN_TYPES[topic])
+            type_name = known_type(topic)
+            if type_name is not None:
+                self._subscribe(topic, type_name)
         self._discover()
         self._flush_timer = self.create_timer(  # steady: flushes also while sim time stands
             min(max_chunk_age / 2, 0.5),

@@ -3,8 +3,11 @@
 Subscribes /joint_states; for every reading computes the physical target of the world's
 true model (effects see the approach-direction history and the time since the first
 reading), adds tracker/target noise, and publishes geometry_msgs/PointStamped on
-/laser_tracker/point (frame `laser_tracker`, metres). Its stamp precedes the joint-state
-stamp by a random latency; points may drop out (line of sight), as the world says.
+/laser_tracker/point (frame `laser_tracker`, metres), and on /laser_tracker/NAME/point for
+each further target. Its stamp precedes the joint-state stamp by a random latency; points
+may drop out (line of sight), as the world says. A target with a 6-DoF probe (world
+`six_dof`) also gets its measured frame, with the world's noise stated as covariance, as a
+geometry_msgs/PoseWithCovarianceStamped on /laser_tracker/(NAME/)pose (msgs_doc/six_dof.md).
 """
 
 from __future__ import annotations
@@ -13,17 +16,22 @@ import sys
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import PointStamped
+from geometry_msgs.msg import Point, PointStamped, PoseWithCovarianceStamped
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 
 from robot_calib.errors import InputError
+from robot_calib.kinematics.frames import Array
 from robot_calib.messages import (
     JOINT_STATES_TOPIC,
     TRACKER_FRAME,
     joint_positions,
     ns_to_sec_nanosec,
+    orientation_quaternion,
+    pose_covariance,
+    pose_topic,
     stamp_to_ns,
     target_topic,
 )
@@ -34,7 +42,9 @@ from robot_calib.sim.world import load_world
 
 
 class SimTrackerNode(Node):
-    """One point per received JointState (unless dropped); counts in `received`/`published`."""
+    """Per received JointState (unless dropped) one point per target and one pose per 6-DoF
+    probe; counts in `received`/`published` (poses measured). `topics` are the topics it
+    publishes: every target's point topic, then the probes' pose topics."""
 
     def __init__(self, **kwargs: Any) -> None:  # rclpy.node.Node's keyword arguments
         super().__init__("sim_tracker", **kwargs)
@@ -47,15 +57,24 @@ class SimTrackerNode(Node):
             self,
             "wait_for_subscribers",
             0,
-            "subscribe to /joint_states only once this many readers of the points are matched"
-            " (so a robot that waits for its own readers starts only when no point is lost)",
+            "subscribe to /joint_states only once this many readers of each topic published "
+            "are matched (so a robot that waits for its own readers starts only when no "
+            "point or pose is lost)",
         )
+        model = self.world.model
         # one topic per target of the world (msgs_doc/targets.md); the first is POINT_TOPIC
-        self.topics = [target_topic(t) for t in self.world.model.targets]
-        self.publishers_by_target = [
-            self.create_publisher(PointStamped, topic, QOS) for topic in self.topics
+        self.point_publishers = [
+            self.create_publisher(PointStamped, target_topic(t), QOS) for t in model.targets
         ]
-        self.publisher = self.publishers_by_target[0]
+        # and one per 6-DoF probe (msgs_doc/six_dof.md), by target index
+        self.pose_publishers = {
+            model.targets.index(t): self.create_publisher(
+                PoseWithCovarianceStamped, pose_topic(t), QOS
+            )
+            for t in model.oriented
+        }
+        self.all_publishers = [*self.point_publishers, *self.pose_publishers.values()]
+        self.topics = [p.topic_name for p in self.all_publishers]
         self.subscription: Subscription | None = None
         self.received = 0
         self.published = 0
@@ -66,7 +85,7 @@ class SimTrackerNode(Node):
     def _subscribe_when_ready(self) -> None:
         if self.subscription is not None:
             return
-        if self.publisher.get_subscription_count() < self.wait_for:
+        if min(p.get_subscription_count() for p in self.all_publishers) < self.wait_for:
             return
         self.destroy_timer(self._wait_timer)
         self.subscription = self.create_subscription(
@@ -81,20 +100,41 @@ class SimTrackerNode(Node):
             self.get_logger().error(str(exc))
             return
         stamp = stamp_to_ns(msg.header.stamp)
-        result = self.tracker.measure_targets(q, stamp * 1e-9)
-        if result is None:
+        reading = self.tracker.measure_all(q, stamp * 1e-9)
+        if reading is None:
             self.dropped += 1
             return
-        points, latency_s = result
-        for publisher, point in zip(self.publishers_by_target, points):
-            out = PointStamped()
-            out.header.frame_id = TRACKER_FRAME
-            out.header.stamp.sec, out.header.stamp.nanosec = ns_to_sec_nanosec(
-                stamp - int(round(latency_s * 1e9))
+        header = Header(frame_id=TRACKER_FRAME)
+        header.stamp.sec, header.stamp.nanosec = ns_to_sec_nanosec(
+            stamp - int(round(reading.latency_s * 1e9))
+        )
+        for publisher, xyz in zip(self.point_publishers, reading.points):
+            publisher.publish(PointStamped(header=header, point=point_message(xyz)))
+        for k, publisher in self.pose_publishers.items():
+            assert reading.frames is not None  # the world has probes
+            publisher.publish(
+                pose_message(header, reading.points[k], reading.frames[k], reading.sigma[k])
             )
-            out.point.x, out.point.y, out.point.z = (float(v) for v in point)
-            publisher.publish(out)
         self.published += 1
+
+
+def point_message(xyz: Array) -> Point:
+    """geometry_msgs/Point of xyz (3,) [m]."""
+    return Point(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
+
+
+def pose_message(
+    header: Header, xyz: Array, rotation: Array, sigma: Array
+) -> PoseWithCovarianceStamped:
+    """The 6-DoF message of a probe (msgs_doc/six_dof.md): its point xyz (3,) [m] and frame
+    rotation (3, 3) in the tracker frame, the stated standard deviations sigma (2,) [m, rad]
+    as covariance; `header` that of its point."""
+    out = PoseWithCovarianceStamped(header=header)
+    out.pose.pose.position = point_message(xyz)
+    o = out.pose.pose.orientation
+    o.x, o.y, o.z, o.w = orientation_quaternion(rotation)
+    out.pose.covariance = pose_covariance(sigma, oriented=True)
+    return out
 
 
 def main(args: list[str] | None = None) -> None:

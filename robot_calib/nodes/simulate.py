@@ -2,7 +2,8 @@
 
 The three real nodes share one SingleThreadedExecutor. sim_robot drives /clock (every node
 has use_sim_time), and the driver steps the graph in lockstep: advance the clock to pose k,
-publish its joint state, spin until the tracker has answered and the recorder holds both.
+publish its joint state, spin until the tracker has answered and the recorder holds the
+joint state and every topic of the tracker (each target's point, each 6-DoF probe's pose).
 Nothing waits on the wall clock, so a 580-pose bag takes about a second.
 """
 
@@ -145,7 +146,7 @@ def _simulate_bag(
             executor,
             lambda: (
                 robot.ready()
-                and all(p.get_subscription_count() >= 1 for p in tracker.publishers_by_target)
+                and all(p.get_subscription_count() >= 1 for p in tracker.all_publishers)
             ),
             "discovery",
             received,

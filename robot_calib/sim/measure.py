@@ -37,6 +37,23 @@ def tracker_noise(noise: NoiseModel, p_in_tracker: Array, rng: np.random.Generat
     )
 
 
+def stated_accuracy(noise: NoiseModel, p_in_tracker: Array) -> Array:
+    """The standard deviations (n, 2) [m, rad] the simulated tracker states with its
+    measurements at p_in_tracker (n, 3) [m] (tracker at the origin), as a 6-DoF tracker
+    reports them (msgs_doc/six_dof.md): position per coordinate, the rms over x, y, z of
+    the tracker and target noise of `tracker_noise` (anisotropic: radial and transverse at
+    the point's range); orientation per axis, noise.orientation_sigma_rad. The robot's
+    repeatability is not the tracker's to state: not included. 0 = no noise (not stated)."""
+    n = p_in_tracker.shape[0]
+    if noise.anisotropic:
+        across = noise.tracker_transverse_sigma_rad * np.linalg.norm(p_in_tracker, axis=1)
+        tracker_variance = (noise.tracker_radial_sigma_m**2 + 2.0 * across**2) / 3.0
+    else:
+        tracker_variance = np.full(n, noise.tracker_sigma_m**2)
+    position = np.sqrt(noise.target_sigma_m**2 + tracker_variance)
+    return np.column_stack([position, np.full(n, noise.orientation_sigma_rad)])
+
+
 def physical_poses(world: World, poses: Poses, rng: np.random.Generator) -> Poses:
     """`poses` at their physical joint angles: readings plus the robot's repeatability
     jitter, one draw per pose (targets measured at the same pose, same readings and time,
@@ -80,6 +97,23 @@ def measure_six_dof(
     return points, frames
 
 
+@dataclass(frozen=True)
+class TrackerReading:
+    """What the streaming tracker measured at one pose.
+
+    points : (T, 3) every target's point, tracker frame [m] (the world's targets in order)
+    frames : (T, 3, 3) the 6-DoF probes' measured frames in the tracker frame, NaN for a
+      target without a probe; None when the world has no probe (msgs_doc/six_dof.md)
+    sigma : (T, 2) the standard deviations the tracker states [m, rad] (`stated_accuracy`)
+    latency_s : by how much the measurement precedes the joint state's stamp [s]
+    """
+
+    points: Array
+    frames: Array | None
+    sigma: Array
+    latency_s: float
+
+
 @dataclass
 class StreamingTracker:
     """The tracker as a stream: one reading at a time, keeping the direction history and
@@ -103,6 +137,14 @@ class StreamingTracker:
         """Every target's point (T, 3) [m] (the world's targets, in order; one physical
         joint angle for all) for reading q (J,) stamped `stamp_s`, and the latency [s];
         None when the pose is dropped."""
+        reading = self.measure_all(q, stamp_s)
+        return None if reading is None else (reading.points, reading.latency_s)
+
+    def measure_all(self, q: Array, stamp_s: float) -> TrackerReading | None:
+        """What the tracker measures of every target at reading q (J,) stamped `stamp_s`
+        (`TrackerReading`: points, 6-DoF probe frames, stated accuracies, latency), None
+        when the pose is dropped. Points and frames come from `measure_six_dof`: those of
+        one pose share its physical joint angles (one repeatability draw)."""
         q = np.asarray(q, dtype=float)
         if self._last_q is None:
             self._direction = np.ones_like(q)
@@ -124,7 +166,8 @@ class StreamingTracker:
             np.arange(n_targets) if n_targets > 1 else None,
         )
         self.count += 1
-        return physical_points(self.world, poses, self.rng), latency
+        points, frames = measure_six_dof(self.world, poses, self.rng)
+        return TrackerReading(points, frames, stated_accuracy(self.world.noise, points), latency)
 
 
 def measure_every_target(
