@@ -246,3 +246,22 @@ def test_split_calibrate_and_score_keep_the_orientations(tmp_path: Path) -> None
     truth = WORLD.model.probe_orientations(WORLD.truth, Poses.from_readings(q_cal))
     turn = Rotation.from_quat(predicted[:, 3:]) * Rotation.from_matrix(truth).inv()
     assert np.abs(turn.magnitude()).max() < 1e-4  # the calibrated frame within 100 urad
+
+
+def test_a_probe_with_a_further_target_keeps_its_frame_to_itself() -> None:
+    """What the further targets add is judged on the rows the fit sees: the probe's
+    orientation rows identify its frame, so the frame is not credited to the SMR."""
+    world = build_world({"seed": 3, "six_dof": {"first": PROBE_RPY_DEG},
+                         "targets": {"smr2": [0.0, 0.08, 0.04]}})  # fmt: skip
+    poses, points = measured(world, n=80)
+    recording = recording_from_arrays(
+        poses.q, points, poses.time, robot=ROBOT, target=poses.target,
+        target_names=world.model.targets, rotation=poses.rotation,
+    )  # fmt: skip
+    cal = calibrate(recording, ROBOT, "geometric")
+    assert cal.model.oriented == ("",)
+    assert not set(tool_rotation_parameters("")) & set(cal.by_extra_targets)
+    truth = absorb_base_offsets(ROBOT, world.truth)
+    for name in tool_rotation_parameters("") + target_parameters("smr2"):
+        k = cal.parameters.index(name)
+        assert abs(cal.parameters[name] - truth[name]) < 4 * cal.std[k] + 1e-9, name

@@ -32,6 +32,7 @@ from robot_calib.identify.fit import (
     check_enough_data,
     fit_model,
     orientation_residuals,
+    weighted_jacobian,
 )
 from robot_calib.identify.identifiability import (
     Identifiability,
@@ -293,10 +294,11 @@ def _by_extra_targets(cal: Calibration, recording: Recording) -> tuple[str, ...]
         return tuple(n for n in cal.parameters.free_names if n.startswith("target"))
     own = {p for t in cal.model.targets[1:] for p in target_parameters(t)}
     params = cal.parameters.fixed(sorted(own & set(cal.parameters.free_names)), "other target")
-    _, jac = cal.model.jacobian(params, recording.poses.subset(first))
-    jac = jac.reshape(-1, jac.shape[-1])
+    # rows as the fit sees them: a 6-DoF probe's orientation rows and the weights included
+    residuals, jac = weighted_jacobian(
+        cal.model, params, recording.poses.subset(first), recording.points[first]
+    )
     kept, analysis = fix_unidentifiable(params, jac)
-    residuals = (cal.predict(recording.poses) - recording.points)[first].reshape(-1)
     _, weak = fix_poorly_determined(kept, jac, residuals)
     return tuple(name for name, _ in analysis.fixed + tuple(weak))
 

@@ -306,6 +306,22 @@ class _Problem:
         return points
 
 
+def weighted_jacobian(
+    model: KinematicModel,
+    params: ParameterVector,
+    poses: Poses,
+    points: Array,
+    objective: Objective | None = None,
+) -> tuple[Array, Array]:
+    """The objective's residuals (m,) and their Jacobian (m, P) with respect to every
+    parameter (free or not, vector order) at `params`: rows as the fit sees them (6-DoF
+    orientation rows and the stated accuracies' weights included)."""
+    every = params.freed(params.names)
+    problem = _Problem(model, every, poses, points, objective or AbsoluteObjective())
+    residual, jac = problem.evaluate(every.pack())
+    return residual, jac.copy()
+
+
 def _structurally_identifiable(
     model: KinematicModel,
     start: ParameterVector,
@@ -317,8 +333,7 @@ def _structurally_identifiable(
     property of the Jacobian's structure that no start changes) fixed, and (name, reason)
     of each. Its own function so that the full Jacobian at the start, (n, 3, P), is freed
     before the solver allocates its own."""
-    every = start.freed(start.names)  # columns of all P parameters, in vector order
-    _, jac_full = _Problem(model, every, poses, points, objective).evaluate(every.pack())
+    _, jac_full = weighted_jacobian(model, start, poses, points, objective)
     params, ident = fix_unidentifiable(start, jac_full)
     return params, ident.fixed
 
