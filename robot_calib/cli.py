@@ -36,6 +36,7 @@ from robot_calib.pipeline import (
 )
 
 if TYPE_CHECKING:
+    from robot_calib.bag.csv_import import OrientationColumns, SigmaColumns
     from robot_calib.diagnose.diagnosis import Diagnosis
     from robot_calib.kinematics.parameters import ParameterVector
     from robot_calib.model import KinematicModel
@@ -187,6 +188,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         PRESETS,
         CsvFormat,
         read_measurement_csv,
+        target_label,
         with_overrides,
         write_measurement_bag,
     )
@@ -220,6 +222,11 @@ def cmd_import(args: argparse.Namespace) -> int:
         length_unit=args.length_unit,
         header=False if args.no_header else None,
         targets=_target_columns(args.target) if args.target else None,
+        orientations=_orientation_columns(args.orientation, args.orientation_rpy),
+        sigmas=_sigma_columns(args.sigma),
+        orientation_unit=args.orientation_unit,
+        sigma_unit=args.sigma_unit,
+        sigma_angle_unit=args.sigma_angle_unit,
     )
     if len(fmt.point) != 3 or (fmt.dif is not None and len(fmt.dif) != 3):
         raise InputError("--point and --dif take three columns: x,y,z")
@@ -231,6 +238,10 @@ def cmd_import(args: argparse.Namespace) -> int:
         for line, why in table.bad_rows:
             _log(f"warning: {csv_path}:{line}: {why}: row skipped")
         print(f"{csv_path}: {len(table.q)} rows imported, {len(table.bad_rows)} bad rows skipped")
+        for name, (rotation, sigma) in table.six_dof.items():
+            print(f"  {target_label(name)}: {np.isfinite(rotation).all(axis=(1, 2)).sum()} "
+                  f"orientations, {np.isfinite(sigma).any(axis=1).sum()} rows with stated "
+                  "standard deviations")  # fmt: skip
         tables.append(table)
     q = np.concatenate([t.q for t in tables])
     points = np.concatenate([t.points for t in tables])
@@ -248,9 +259,18 @@ def cmd_import(args: argparse.Namespace) -> int:
         if not np.isfinite(xyz).all(axis=1).any():
             _log(f"warning: {', '.join(args.csv)}: target {name} has no measured point: no "
                  "topic written for it")  # fmt: skip
+    six_dof = {
+        name: (np.concatenate([t.six_dof[name][0] for t in tables]),
+               np.concatenate([t.six_dof[name][1] for t in tables]))
+        for name in tables[0].six_dof
+    }  # fmt: skip
+    for o in fmt.orientations:
+        if not np.isfinite(six_dof[o.target][0]).any():
+            _log(f"warning: {', '.join(args.csv)}: {o.option}: every cell is empty: "
+                 f"{target_label(o.target)} has no orientation")  # fmt: skip
     counts = write_measurement_bag(
         output, q, points, robot.joint_names, times, args.force, temperature=temperature,
-        extra_points=extra,
+        extra_points=extra, six_dof=six_dof,
     )  # fmt: skip
     print(f"{output}: {', '.join(f'{k}={v}' for k, v in counts.items())} messages "
           f"({robot.name}, {fmt.angle_unit}/{fmt.length_unit} -> rad/m)")  # fmt: skip
@@ -273,6 +293,51 @@ def _target_columns(specs: list[str]) -> tuple[tuple[str, tuple[str, str, str]],
         if name in (n for n, _ in out):
             raise InputError(f"--target {spec}: target {name} given twice")
         out.append((name, (cols[0], cols[1], cols[2])))
+    return tuple(out)
+
+
+def _named_columns(option: str, spec: str, n_columns: tuple[int, ...]) -> tuple[str, list[str]]:
+    """'[NAME:]C,C,...' of `option` -> (NAME or '' for the first target, the columns);
+    InputError unless the columns are non-empty and their number is one of `n_columns`."""
+    name, colon, columns = spec.partition(":")
+    if not colon:
+        name, columns = "", spec
+    cols = columns.split(",")
+    if (colon and not name) or len(cols) not in n_columns or not all(cols):
+        counts = " or ".join(map(str, n_columns))
+        raise InputError(f"{option} {spec}: expected [NAME:] and {counts} columns, comma-"
+                         "separated (without NAME: the first target)")  # fmt: skip
+    return name, cols
+
+
+def _orientation_columns(
+    quaternions: list[str] | None, rpys: list[str] | None
+) -> tuple[OrientationColumns, ...] | None:
+    """--orientation [NAME:]QX,QY,QZ,QW and --orientation-rpy [NAME:]R,P,Y (each repeated)
+    -> the format's orientation columns (None when neither is given)."""
+    from robot_calib.bag.csv_import import OrientationColumns
+
+    if not quaternions and not rpys:
+        return None
+    out = []
+    for kind, option, specs, n in (("quaternion", "--orientation", quaternions, 4),
+                                   ("rpy", "--orientation-rpy", rpys, 3)):  # fmt: skip
+        for spec in specs or ():
+            name, cols = _named_columns(option, spec, (n,))
+            out.append(OrientationColumns(name, kind, tuple(cols)))
+    return tuple(out)
+
+
+def _sigma_columns(specs: list[str] | None) -> tuple[SigmaColumns, ...] | None:
+    """--sigma [NAME:]SP[,SR] (repeated) -> the format's standard deviation columns."""
+    from robot_calib.bag.csv_import import SigmaColumns
+
+    if not specs:
+        return None
+    out = []
+    for spec in specs:
+        name, cols = _named_columns("--sigma", spec, (1, 2))
+        out.append(SigmaColumns(name, cols[0], cols[1] if len(cols) == 2 else None))
     return tuple(out)
 
 
@@ -601,6 +666,36 @@ def build_parser() -> argparse.ArgumentParser:
         "--temperature",
         help="a temperature column [deg C]: written to /temperature (sensor_msgs/Temperature)",
     )
+    imp.add_argument(
+        "--orientation", action="append", metavar="[NAME:]QX,QY,QZ,QW",
+        help="a 6-DoF probe's orientation as unit quaternion columns in x, y, z, w order, onto "
+        "/laser_tracker/(NAME/)pose; without NAME the first target, else the --target NAME "
+        "(repeat per target; empty cells: orientation not measured at that pose)",
+    )  # fmt: skip
+    imp.add_argument(
+        "--orientation-rpy", action="append", metavar="[NAME:]R,P,Y",
+        help="as --orientation, as roll, pitch, yaw columns: R = Rz(yaw) Ry(pitch) Rx(roll), "
+        "in --orientation-unit",
+    )  # fmt: skip
+    imp.add_argument(
+        "--orientation-unit", choices=("deg", "rad"),
+        help="unit of --orientation-rpy columns (default: --angle-unit)",
+    )  # fmt: skip
+    imp.add_argument(
+        "--sigma", action="append", metavar="[NAME:]SP[,SR]",
+        help="the tracker's stated standard deviations: position column (per coordinate, "
+        "--sigma-unit) and optionally orientation column (per axis, --sigma-angle-unit) of "
+        "the first target, or of target NAME (repeat per target; an empty cell: not stated)",
+    )  # fmt: skip
+    imp.add_argument(
+        "--sigma-unit", choices=("mm", "m", "um"),
+        help="unit of the position standard deviations (default: --length-unit)",
+    )  # fmt: skip
+    imp.add_argument(
+        "--sigma-angle-unit", choices=("deg", "rad", "mdeg", "urad"),
+        help="unit of the orientation standard deviations (default: --orientation-unit, "
+        "else --angle-unit)",
+    )  # fmt: skip
     imp.add_argument("--sep", help="field separator (default ',')")
     imp.add_argument("--decimal-comma", action="store_true", help="numbers written 1,5")
     imp.add_argument("--angle-unit", choices=("deg", "rad"), help="joint angle unit")

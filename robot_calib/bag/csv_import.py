@@ -2,7 +2,9 @@
 takes exactly the path of simulated data (CONTRACT.md section 2, `import`).
 
 A row is one measurement pose: joint angles and the measured target point (optionally as a
-commanded point plus a difference column, as some exports give it), optionally a time.
+commanded point plus a difference column, as some exports give it), optionally a time;
+further targets' points, a 6-DoF probe's orientation (quaternion or roll-pitch-yaw columns)
+and the tracker's stated standard deviations may follow (msgs_doc/import.md).
 Columns are named (header) or 0-based indices; separator and decimal comma are options;
 units deg/rad and mm/m are converted to SI. Bad rows are counted and reported with their
 line numbers, never dropped silently. In the bag, poses are stamped in row order (`time`
@@ -19,6 +21,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from robot_calib.atomic import staged_outputs
 from robot_calib.bag.mcap_writer import BagWriter
@@ -32,9 +35,9 @@ from robot_calib.messages import (
     POINT_TYPE,
     POSE_COV_TYPE,
     POSE_TYPE,
+    QUATERNION_TOLERANCE,
     TRACKER_FRAME,
     ns_to_sec_nanosec,
-    orientation_quaternion,
     pose_covariance,
     pose_topic,
     target_topic,
@@ -42,10 +45,61 @@ from robot_calib.messages import (
 
 ANGLE_UNITS = {"deg": np.pi / 180.0, "rad": 1.0}
 LENGTH_UNITS = {"mm": 1e-3, "m": 1.0}
+# stated standard deviations: trackers often give micrometres and microradians/millidegrees
+SIGMA_LENGTH_UNITS = {**LENGTH_UNITS, "um": 1e-6}
+SIGMA_ANGLE_UNITS = {**ANGLE_UNITS, "mdeg": np.pi / 180e3, "urad": 1e-6}
+# plausible medians of stated standard deviations [m], [rad]: outside, a unit mix-up is
+# likelier (um read as mm, urad as rad, mdeg as deg): a warning, not an error
+PLAUSIBLE_SIGMA = {"position": (1e-7, 1e-3), "orientation": (1e-7, 2e-2)}
 START_NS = 1_700_000_000_000_000_000  # stamp of the first pose when the CSV has no time
 STEP_NS = 1_000_000_000
 TEMPERATURE_TOPIC = "/temperature"  # side data of an import (msgs_doc/temperature.md)
 TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
+
+
+SixDof = tuple[Array, Array]  # rotation (n, 3, 3) and sigma (n, 2) [m, rad] of one target
+
+
+def target_label(name: str) -> str:
+    """'the first target' ('') or 'target NAME', for messages."""
+    return "the first target" if not name else f"target {name}"
+
+
+@dataclass(frozen=True)
+class OrientationColumns:
+    """Where a 6-DoF probe's orientation (the probe frame in the tracker frame) is in a CSV.
+
+    kind 'quaternion': columns x, y, z, w of a unit quaternion; kind 'rpy': roll, pitch, yaw
+    with R = Rz(yaw) Ry(pitch) Rx(roll) (`kinematics.frames.rpy_to_matrix`), in the
+    format's orientation unit. target: '' the first target, else a further target's NAME.
+    """
+
+    target: str
+    kind: str  # 'quaternion' | 'rpy'
+    columns: tuple[str, ...]
+
+    @property
+    def option(self) -> str:
+        """How the command line spells it: '--orientation[-rpy] [NAME:]C,C,...'."""
+        flag = "--orientation" if self.kind == "quaternion" else "--orientation-rpy"
+        return f"{flag} {self.target + ':' if self.target else ''}{','.join(self.columns)}"
+
+
+@dataclass(frozen=True)
+class SigmaColumns:
+    """Where a target's stated standard deviations are in a CSV: `position` (per coordinate,
+    in the format's sigma unit) and optionally `orientation` (per axis, in its sigma angle
+    unit); an empty cell: not stated at that pose. target as in OrientationColumns."""
+
+    target: str
+    position: str
+    orientation: str | None = None
+
+    @property
+    def option(self) -> str:
+        """How the command line spells it: '--sigma [NAME:]SP[,SR]'."""
+        columns = self.position + (f",{self.orientation}" if self.orientation else "")
+        return f"--sigma {self.target + ':' if self.target else ''}{columns}"
 
 
 @dataclass(frozen=True)
@@ -64,6 +118,13 @@ class CsvFormat:
     # further targets measured at each pose: (NAME, (x, y, z) columns), each onto
     # /laser_tracker/NAME/point (msgs_doc/targets.md); an empty cell: not measured there
     targets: tuple[tuple[str, tuple[str, str, str]], ...] = ()
+    # 6-DoF probes (msgs_doc/six_dof.md): orientation columns and stated standard deviations
+    # per target ('' the first), at most one of each per target
+    orientations: tuple[OrientationColumns, ...] = ()
+    sigmas: tuple[SigmaColumns, ...] = ()
+    orientation_unit: str | None = None  # of roll-pitch-yaw columns (None: angle_unit)
+    sigma_unit: str | None = None  # position sigma: mm|m|um (None: length_unit)
+    sigma_angle_unit: str | None = None  # orientation sigma: deg|rad|mdeg|urad (None: as rpy)
     separator: str = ","
     decimal_comma: bool = False
     angle_unit: str = "rad"
@@ -95,7 +156,10 @@ class ImportedTable:
     """q (n, J) [rad], points (n, 3) [m], time (n,) [s] or None; bad_rows: (line, why);
     warnings: labelled 'warning: ...' lines about the whole file (e.g. units);
     temperature (n,) [deg C] or None; extra_points {NAME: (n, 3) [m], NaN where that
-    target was not measured} of the further targets."""
+    target was not measured} of the further targets; six_dof {NAME ('' the first target):
+    (rotation (n, 3, 3) in the tracker frame, NaN where no orientation was measured, sigma
+    (n, 2) [m, rad], NaN where none was stated)} of the targets given orientation or
+    standard deviation columns."""
 
     q: Array
     points: Array
@@ -104,6 +168,7 @@ class ImportedTable:
     warnings: tuple[str, ...] = ()
     temperature: Array | None = None
     extra_points: Mapping[str, Array] = field(default_factory=dict)
+    six_dof: Mapping[str, SixDof] = field(default_factory=dict)
 
 
 MAX_TRACKER_RANGE_M = 50.0  # beyond a laser tracker's range: millimetres read as metres
@@ -218,6 +283,9 @@ def read_measurement_csv(
     other units than the rest is a bad row; a file whose numbers or units contradict `fmt`
     (decimal mark, deg/rad, mm/m) raises InputError naming the column. `limits` (J, 2)
     [rad]: the robot's joint limits, for the degrees check (default: |q| <= 2 pi).
+    Orientation and standard deviation columns (fmt.orientations, fmt.sigmas) may be empty
+    (not measured, not stated); a bad cell in them is an InputError naming its line
+    (`_six_dof_columns`).
     """
     path = Path(path)
     if not path.is_file():
@@ -226,6 +294,7 @@ def read_measurement_csv(
         raise InputError(
             f"units must be deg|rad and mm|m, got {fmt.angle_unit}, {fmt.length_unit}"
         )
+    _check_six_dof_format(path, fmt)
     try:
         with path.open(newline="", encoding="utf-8-sig") as handle:
             rows = list(csv.reader(handle, delimiter=fmt.separator))
@@ -251,6 +320,9 @@ def read_measurement_csv(
     )  # fmt: skip
     n_required = len(refs)  # the further targets' cells may be empty (not measured)
     refs += [c for _, triple in fmt.targets for c in triple]
+    n_optional = len(refs)  # then the 6-DoF columns: orientations, then sigmas, in fmt order
+    refs += [c for o in fmt.orientations for c in o.columns]
+    refs += [c for s in fmt.sigmas for c in (s.position, s.orientation) if c]
     cols = [_column(r, header, path) for r in refs]
     if max(cols) >= n_fields:
         raise InputError(f"{path}: no column {max(cols)} ({of} {n_fields} fields)")
@@ -265,7 +337,7 @@ def read_measurement_csv(
         raw.append(fields)
         lines.append(line)
     _check_decimal_mark(path, fmt, cells)
-    values, kept_lines = [], []
+    values, kept_lines, filled = [], [], []
     for line, fields in zip(lines, raw):
         if fmt.decimal_comma:
             fields = [f.replace(".", "").replace(",", ".") for f in fields]
@@ -279,12 +351,14 @@ def read_measurement_csv(
             continue
         values.append(numbers)
         kept_lines.append(line)
+        filled.append([bool(f) for f in fields[n_optional:]])  # empty 6-DoF cell: none
     if not values:
         raise InputError(f"{path}: no usable rows ({len(bad)} bad)")
     table = np.array(values)
     keep, mixed, warnings = _unit_checks(path, fmt, table, kept_lines, limits)
     bad = sorted(bad + mixed)
     table, lines = table[keep], [line for line, k in zip(kept_lines, keep) if k]
+    given = np.array(filled, dtype=bool)[keep]  # (n, 6-DoF columns)
     n_j = len(fmt.joints)
     q = table[:, :n_j] * ANGLE_UNITS[fmt.angle_unit]
     points = table[:, n_j : n_j + 3]
@@ -321,7 +395,194 @@ def read_measurement_csv(
             f"{path}:{lines[k]}: time {time[k]:g} s does not increase (previous row: "
             f"{time[k - 1]:g} s); rows must be in measurement order"
         )
-    return ImportedTable(q, points, time, tuple(bad), tuple(warnings), temperature, extra)
+    measured: dict[str, NDArray[np.bool_]] = {"": np.ones(len(table), dtype=bool)}
+    for name, xyz in extra.items():
+        measured[name] = np.asarray(np.isfinite(xyz).all(axis=1), dtype=bool)
+    six_dof, more = _six_dof_columns(path, fmt, table[:, n_optional:], given, lines, measured)
+    return ImportedTable(
+        q, points, time, tuple(bad), (*warnings, *more), temperature, extra, six_dof
+    )
+
+
+def _check_six_dof_format(path: Path, fmt: CsvFormat) -> None:
+    """InputError (naming `path`) when the 6-DoF columns of `fmt` name a target that is not
+    among fmt.targets, give one target two orientations (or both kinds) or two sigma
+    specifications, have the wrong number of columns, give an orientation standard
+    deviation without an orientation, or a unit is not understood."""
+    for unit, known, option in (
+        (fmt.orientation_unit, ANGLE_UNITS, "--orientation-unit"),
+        (fmt.sigma_unit, SIGMA_LENGTH_UNITS, "--sigma-unit"),
+        (fmt.sigma_angle_unit, SIGMA_ANGLE_UNITS, "--sigma-angle-unit"),
+    ):
+        if unit is not None and unit not in known:
+            raise InputError(f"{path}: {option} {unit}: expected one of {'|'.join(known)}")
+    names = [name for name, _ in fmt.targets]
+    known_targets = ", ".join(names) or "none given"
+    oriented: dict[str, OrientationColumns] = {}
+    specs: list[OrientationColumns | SigmaColumns] = [*fmt.orientations, *fmt.sigmas]
+    for spec in specs:
+        if spec.target and spec.target not in names:
+            raise InputError(
+                f"{path}: {spec.option}: no target {spec.target} among the --target names "
+                f"({known_targets}); without NAME: the first target"
+            )
+    for o in fmt.orientations:
+        n_columns = 4 if o.kind == "quaternion" else 3
+        if o.kind not in ("quaternion", "rpy") or len(o.columns) != n_columns:
+            raise InputError(f"{path}: {o.option}: expected {n_columns} columns")
+        if o.target in oriented:
+            raise InputError(
+                f"{path}: {oriented[o.target].option} and {o.option}: one orientation per "
+                f"target ({target_label(o.target)})"
+            )
+        oriented[o.target] = o
+    stated: set[str] = set()
+    for sig in fmt.sigmas:
+        if sig.target in stated:
+            raise InputError(f"{path}: {sig.option}: {target_label(sig.target)} given twice")
+        stated.add(sig.target)
+        if sig.orientation and sig.target not in oriented:
+            raise InputError(
+                f"{path}: {sig.option}: an orientation standard deviation, but no "
+                f"--orientation or --orientation-rpy for {target_label(sig.target)}"
+            )
+
+
+def _six_dof_columns(
+    path: Path, fmt: CsvFormat, table: Array, given: NDArray[np.bool_], lines: list[int],
+    measured: Mapping[str, NDArray[np.bool_]],
+) -> tuple[dict[str, SixDof], list[str]]:  # fmt: skip
+    """Rotations and stated standard deviations of the targets with 6-DoF columns.
+
+    Parameters
+    ----------
+    table : shape (n, C), the 6-DoF columns in the file's units, in the order of
+        fmt.orientations then fmt.sigmas (NaN where a cell is empty)
+    given : shape (n, C), which of those cells are not empty
+    lines : the rows' line numbers (n,)
+    measured : {target: shape (n,)}, whether the target's point was measured in the row
+
+    Returns
+    -------
+    six_dof : {target: (rotation (n, 3, 3), sigma (n, 2) [m, rad])}, NaN where none
+    warnings : 'warning: ...' lines (standard deviations of implausible size)
+
+    Every cell error is an InputError naming `path` and the line (`_orientation`, `_sigma`).
+    """
+    n = len(table)
+    out: dict[str, SixDof] = {}
+    start = 0
+    for o in fmt.orientations:
+        span = slice(start, start + len(o.columns))
+        start = span.stop
+        rotation = _orientation(path, fmt, o, table[:, span], given[:, span], lines,
+                                measured[o.target])  # fmt: skip
+        out[o.target] = (rotation, np.full((n, 2), np.nan))
+    warnings = []
+    for sig in fmt.sigmas:
+        rotation = out.get(sig.target, (np.full((n, 3, 3), np.nan), None))[0]
+        sigma = np.full((n, 2), np.nan)
+        for kind in range(1 if sig.orientation is None else 2):
+            cells, filled = table[:, start], given[:, start]
+            start += 1
+            sigma[:, kind], warning = _sigma(
+                path, fmt, sig, kind, cells, filled, lines, measured[sig.target]
+            )
+            warnings += warning
+        out[sig.target] = (rotation, sigma)
+    return out, warnings
+
+
+def _first_row(mask: Any) -> int | None:
+    """The first row where `mask` (n,) of bool holds, None when none does."""
+    rows = np.flatnonzero(mask)
+    return int(rows[0]) if len(rows) else None
+
+
+def _orientation(
+    path: Path, fmt: CsvFormat, spec: OrientationColumns, cells: Array,
+    filled: NDArray[np.bool_], lines: list[int], measured: NDArray[np.bool_],
+) -> Array:  # fmt: skip
+    """Rotations (n, 3, 3) of the orientation cells (n, 3 or 4) (NaN rows where all are
+    empty: orientation not measured there). InputError FILE:LINE when some of a row's cells
+    are empty, a row without the target's point has an orientation, a cell is not finite,
+    a quaternion's norm is off 1 by more than QUATERNION_TOLERANCE, or roll-pitch-yaw read
+    as rad go beyond 2 pi."""
+    label, columns = target_label(spec.target), ",".join(spec.columns)
+    whole = filled.all(axis=1)
+    if (k := _first_row(filled.any(axis=1) & ~whole)) is not None:
+        raise InputError(
+            f"{path}:{lines[k]}: {label} has some of its orientation cells ({columns}) "
+            "empty: an orientation is measured whole or not at all"
+        )
+    if (k := _first_row(whole & ~measured)) is not None:
+        raise InputError(f"{path}:{lines[k]}: {label} has an orientation but no point (its "
+                         "x, y, z cells are empty)")  # fmt: skip
+    if (k := _first_row(whole & ~np.isfinite(cells).all(axis=1))) is not None:
+        raise InputError(f"{path}:{lines[k]}: {label}'s orientation {columns} is not finite: "
+                         f"{cells[k].tolist()}")  # fmt: skip
+    rotation = np.full((len(cells), 3, 3), np.nan)
+    if not whole.any():
+        return rotation
+    if spec.kind == "quaternion":
+        norm = np.linalg.norm(cells, axis=1)
+        if (k := _first_row(whole & (np.abs(norm - 1.0) > QUATERNION_TOLERANCE))) is not None:
+            raise InputError(
+                f"{path}:{lines[k]}: quaternion {columns} (x, y, z, w) of {label} has norm "
+                f"{norm[k]:.6g}, not 1: not a rotation (a column mix-up?)"
+            )
+        rotation[whole] = Rotation.from_quat(cells[whole]).as_matrix()
+        return rotation
+    unit = fmt.orientation_unit or fmt.angle_unit
+    beyond = whole & (np.abs(cells) > 2 * np.pi).any(axis=1)
+    if unit == "rad" and (k := _first_row(beyond)) is not None:
+        raise InputError(
+            f"{path}:{lines[k]}: roll-pitch-yaw {columns} of {label} = {cells[k].tolist()} "
+            "go beyond 2 pi read as rad: they look like degrees; give --orientation-unit deg"
+        )
+    # lowercase 'xyz': extrinsic (fixed axes) x, then y, then z, i.e. R = Rz Ry Rx
+    rotation[whole] = Rotation.from_euler("xyz", cells[whole] * ANGLE_UNITS[unit]).as_matrix()
+    return rotation
+
+
+def _sigma(
+    path: Path, fmt: CsvFormat, spec: SigmaColumns, kind: int, cells: Array,
+    filled: NDArray[np.bool_], lines: list[int], measured: NDArray[np.bool_],
+) -> tuple[Array, list[str]]:  # fmt: skip
+    """Standard deviations (n,) in SI of the cells (n,) of spec's position (kind 0) or
+    orientation (kind 1) column (NaN where empty: not stated), and a warning when their
+    median is implausible for a tracker. InputError FILE:LINE when a cell is not a finite
+    number > 0 or a row without the target's point states one."""
+    what = ("position", "orientation")[kind]
+    column = (spec.position, spec.orientation)[kind]
+    label = target_label(spec.target)
+    if (k := _first_row(filled & ~measured)) is not None:
+        raise InputError(f"{path}:{lines[k]}: {label} has a {what} standard deviation "
+                         f"({column}) but no point (its x, y, z cells are empty)")  # fmt: skip
+    with np.errstate(invalid="ignore"):
+        wrong = filled & ~(np.isfinite(cells) & (cells > 0))
+    if (k := _first_row(wrong)) is not None:
+        raise InputError(
+            f"{path}:{lines[k]}: {what} standard deviation {column} of {label} is "
+            f"{cells[k]:g}: need a finite number > 0 (an empty cell: not stated)"
+        )
+    if kind == 0:
+        unit = fmt.sigma_unit or fmt.length_unit
+        scale, si = SIGMA_LENGTH_UNITS[unit], "m"
+    else:
+        unit = fmt.sigma_angle_unit or fmt.orientation_unit or fmt.angle_unit
+        scale, si = SIGMA_ANGLE_UNITS[unit], "rad"
+    sigma = np.where(filled, cells * scale, np.nan)
+    low, high = PLAUSIBLE_SIGMA[what]
+    median = float(np.median(sigma[filled])) if filled.any() else low
+    if low <= median <= high:
+        return sigma, []
+    option = "--sigma-unit" if kind == 0 else "--sigma-angle-unit"
+    return sigma, [
+        f"warning: {path}: {what} standard deviations {column} of {label} have a median of "
+        f"{median:.3g} {si} read as {unit}, outside the plausible {low:g}..{high:g} {si}: "
+        f"another unit? ({option})"
+    ]
 
 
 def write_measurement_bag(
@@ -417,9 +678,6 @@ def write_measurements(
         return writer.counts
 
 
-SixDof = tuple[Array, Array]  # rotation (n, 3, 3) and sigma (n, 2) [m, rad] of one target
-
-
 def extra_points_of(extra_points: Mapping[str, Array] | None, name: str, k: int) -> Array:
     """Point k (3,) [m] of further target `name` (NaN when it has none)."""
     values = (extra_points or {}).get(name)
@@ -431,7 +689,7 @@ class _PoseWriter:
     """Serialises the 6-DoF messages of one target (`write_measurements`)."""
 
     name: str
-    rotation: Array  # (n, 3, 3), NaN rows: not measured
+    quat: Array  # (n, 4) x, y, z, w of the measured rotations, NaN rows: not measured
     sigma: Array  # (n, 2) [m, rad], NaN: not stated
     store: Any  # rosbags Typestore with the pose types
 
@@ -446,15 +704,14 @@ class _PoseWriter:
     def serialize(self, k: int, xyz: Array, stamp: Any) -> bytes | None:
         """Row k's message (position xyz (3,) [m]), None when row k has neither a point,
         nor an orientation or stated accuracy."""
-        oriented = bool(np.all(np.isfinite(self.rotation[k])))
+        oriented = bool(np.all(np.isfinite(self.quat[k])))
         if not np.all(np.isfinite(xyz)) or not (oriented or np.isfinite(self.sigma[k]).any()):
             return None
         t = self.store.types
+        quat = self.quat[k] if oriented else [0.0, 0.0, 0.0, 1.0]
         pose = t["geometry_msgs/msg/Pose"](
             position=t["geometry_msgs/msg/Point"](*map(float, xyz)),
-            orientation=t["geometry_msgs/msg/Quaternion"](
-                *orientation_quaternion(self.rotation[k])
-            ),
+            orientation=t["geometry_msgs/msg/Quaternion"](*map(float, quat)),
         )
         header = t["std_msgs/msg/Header"](stamp=stamp, frame_id=TRACKER_FRAME)
         if self.type_name == POSE_TYPE:
@@ -473,8 +730,12 @@ def _pose_writers(store: Any, six_dof: Mapping[str, SixDof]) -> list[_PoseWriter
     out = []
     for name, (rotation, sigma) in six_dof.items():
         rotation, sigma = np.asarray(rotation, dtype=float), np.asarray(sigma, dtype=float)
-        if np.isfinite(rotation).any() or np.isfinite(sigma).any():
-            out.append(_PoseWriter(name, rotation, sigma, store))
+        oriented = np.isfinite(rotation).all(axis=(1, 2))
+        if oriented.any() or np.isfinite(sigma).any():
+            quat = np.full((len(rotation), 4), np.nan)
+            if oriented.any():  # all at once: scipy's per-call overhead is most of the cost
+                quat[oriented] = Rotation.from_matrix(rotation[oriented]).as_quat()
+            out.append(_PoseWriter(name, quat, sigma, store))
     return out
 
 
