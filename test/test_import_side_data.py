@@ -42,3 +42,17 @@ def test_a_temperature_column_is_imported_onto_its_topic(tmp_path: Path) -> None
     recording = read_recording([bag], load_robot("kr5_sixx_r650"))
     np.testing.assert_allclose(recording.poses.q, q, atol=1e-9)
     np.testing.assert_allclose(recording.poses.time, 10.0 * np.arange(n), atol=1e-9)
+    # `split` carries each pose's temperature into the bag its pose goes to
+    proc = robot_calib("split", "out.mcap", "--holdout", "0.3", "--seed", "1", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    by_stamp = {stamp_to_ns(m.header.stamp): m.temperature for m in side}
+    total = 0
+    for part in ("out.cal.mcap", "out.holdout.mcap"):
+        with BagReader(tmp_path / part) as reader:
+            kept = [m.decode() for m in reader.messages(["/temperature"])]
+            n_poses = reader.topics["/laser_tracker/point"].message_count
+        assert len(kept) == n_poses
+        for m in kept:
+            assert m.temperature == by_stamp[stamp_to_ns(m.header.stamp)]
+        total += len(kept)
+    assert total == n

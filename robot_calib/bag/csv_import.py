@@ -618,7 +618,8 @@ def write_measurements(
     +1/-1: each joint's approach direction, written as the sign of the JointState velocity
     (the contract's direct form), so that a subset of poses keeps the directions they were
     measured with. `temperature` (n,) [deg C]: a sensor_msgs/Temperature per pose on
-    TEMPERATURE_TOPIC, stamped as the pose (side data, msgs_doc/temperature.md).
+    TEMPERATURE_TOPIC, stamped as the pose (side data, msgs_doc/temperature.md; NaN: none
+    at that pose).
     `extra_points` {NAME: (n, 3) [m]}: further targets measured at the same poses, each on
     /laser_tracker/NAME/point stamped as its pose (a NaN row: not measured at that pose;
     msgs_doc/targets.md). `six_dof` {NAME: (rotation (n, 3, 3), sigma (n, 2))}: what a 6-DoF
@@ -667,7 +668,7 @@ def write_measurements(
                 pose_cdr = pose.serialize(k, xyz, stamp)
                 if pose_cdr is not None:
                     writer.write(pose.topic, pose_cdr, int(stamp_ns) + 1)
-            if temperature is not None:  # side data, in time order with the pose
+            if temperature is not None and np.isfinite(temperature[k]):  # side data
                 msg = types[TEMPERATURE_TYPE](
                     header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
                     temperature=float(temperature[k]), variance=0.0,

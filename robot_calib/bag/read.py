@@ -207,3 +207,25 @@ def read_recording(
         if log:
             log(w)
     return recording
+
+
+def side_temperatures(path: Path) -> tuple[dict[int, float], list[str]]:
+    """The side topic TEMPERATURE_TOPIC of a bag (msgs_doc/temperature.md): {header stamp
+    [ns]: temperature [deg C]}, and the bag's topics that are neither measurements (joint
+    states, points, poses) nor that side topic (which a rewrite of its measurements would
+    not carry)."""
+    from robot_calib.bag.csv_import import TEMPERATURE_TOPIC
+
+    out: dict[int, float] = {}
+    with BagReader(path) as reader:
+        others = [
+            t for t in reader.topics
+            if t not in (JOINT_STATES_TOPIC, TEMPERATURE_TOPIC)
+            and target_topic_name(t) is None and pose_topic_name(t) is None
+            and t != POINT_TOPIC
+        ]  # fmt: skip
+        if TEMPERATURE_TOPIC in reader.topics:
+            for m in reader.messages([TEMPERATURE_TOPIC]):
+                msg = m.decode()
+                out[stamp_to_ns(msg.header.stamp)] = float(msg.temperature)
+    return out, others
