@@ -70,15 +70,21 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
     the measurements left out as tracker blunders."""
     from robot_calib.identify.params_file import outlier_lines
 
-    dom = diagnosis.dominant_effect
     print(f"{'model':<40}{'held-out mean/max [mm]':>24}{'abs rms [mm]':>14}")
     for rung in diagnosis.ladder:
         print(f"{rung.model:<40}{rung.holdout_mean_mm:>11.4f} / {rung.holdout_max_mm:<9.4f}"
               f"{rung.holdout_abs_rms_mm:>14.4f}")  # fmt: skip
-    print(f"noise floor (abs rms): {diagnosis.noise.floor_abs_rms_mm:.4f} mm "
-          f"({diagnosis.noise.source})")  # fmt: skip
-    print("dominant effect: " + ("null (geometric reaches the noise level)" if dom is None
-                                 else f"{dom.effect} joints {dom.joints}"))  # fmt: skip
+    floor = diagnosis.noise.floor_abs_rms_mm
+    unknown = "unknown (no repeat poses, circle sweeps or stated accuracy; --tracker-accuracy)"
+    known = f"{floor:.4f} mm ({diagnosis.noise.source})" if floor is not None else ""
+    print(f"noise floor (abs rms): {known or unknown}")
+    if diagnosis.learnable is not None:
+        print(diagnosis.learnable.line())
+        shares = [f"{r.model} {100 * r.learnable_gap_share:.0f} %"
+                  for r in diagnosis.ladder[1:] if r.learnable_gap_share is not None]  # fmt: skip
+        if shares:
+            print("share of the learnable gap closed: " + ", ".join(shares))
+    print(f"dominant effect: {diagnosis.verdict}")
     print(f"unexplained: {diagnosis.unexplained.note}")
     for line in outlier_lines(diagnosis.outliers):
         print(line)
@@ -174,9 +180,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     output = pipeline.output_path(args.output, "DIAGNOSIS.json", inputs, args.force)
     pipeline.output_path(pipeline.report_path(output), "the report", inputs, args.force)
     started = time.perf_counter()
+    accuracy = args.tracker_accuracy
+    if accuracy is not None and not (math.isfinite(accuracy) and 0 < accuracy < 10):
+        raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, > 0 and < 10")
     diagnosis, ladder, recording = pipeline.diagnose_bags(
-        args.bags, robot, args.holdout or (), args.pair_tolerance, _log
-    )
+        args.bags, robot, args.holdout or (), args.pair_tolerance, _log,
+        None if accuracy is None else accuracy * 1e-3,
+    )  # fmt: skip
     report = pipeline.write_diagnosis(diagnosis, ladder, recording, output, args.force)
     _print_diagnosis(diagnosis, output, report, time.perf_counter() - started)
     return 0
@@ -647,6 +657,14 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("--holdout", nargs="*", metavar="BAG", help="hold-out bag(s): scored only")
     _add_pair_tolerance(diag)
     _add_joint_names(diag)
+    diag.add_argument(
+        "--tracker-accuracy",
+        type=float,
+        metavar="MM",
+        help="the tracker's stated 1-sigma per axis of a point [mm], e.g. 0.005: the noise floor "
+        "when the data have no repeat poses or circle sweeps (default: none; then the floor "
+        "is unknown and said so)",
+    )
     diag.add_argument(
         "-o",
         "--output",

@@ -339,8 +339,10 @@ def diagnose_recordings(
     robot: RobotDescription,
     holdout: Recording | None = None,
     log: Log | None = None,
+    tracker_sigma_m: float | None = None,
 ) -> tuple[Diagnosis, Ladder]:
-    """The sim-to-real gap diagnosis of `recording`, scored on `holdout` (else k-fold).
+    """The sim-to-real gap diagnosis of `recording`, scored on `holdout` (else k-fold);
+    `tracker_sigma_m`: a stated 1-sigma per axis [m], the floor when the data give none.
 
     Returns
     -------
@@ -353,7 +355,7 @@ def diagnose_recordings(
 
     if holdout is not None:  # index the hold-out's targets as the calibration's
         holdout = holdout.with_targets(recording.target_names)
-    return diagnose(recording, robot, holdout, log=log)
+    return diagnose(recording, robot, holdout, log=log, tracker_sigma_m=tracker_sigma_m)
 
 
 def diagnose_bags(
@@ -362,8 +364,10 @@ def diagnose_bags(
     holdout: Sequence[str | Path] = (),
     pair_tolerance: float = PAIR_TOLERANCE_S,
     log: Log | None = None,
+    tracker_sigma_m: float | None = None,
 ) -> tuple[Diagnosis, Ladder, Recording]:
-    """The diagnosis of `bags` scored on the `holdout` bags (none: k-fold CV over poses).
+    """The diagnosis of `bags` scored on the `holdout` bags (none: k-fold CV over poses);
+    `tracker_sigma_m` as in `diagnose_recordings`.
 
     Returns
     -------
@@ -377,7 +381,7 @@ def diagnose_bags(
     held = read_bags(holdout, robot, pair_tolerance, log) if holdout else None
     if held is not None:
         check_distinct_recordings(recording, held)
-    diagnosis, ladder = diagnose_recordings(recording, robot, held, log)
+    diagnosis, ladder = diagnose_recordings(recording, robot, held, log, tracker_sigma_m)
     return diagnosis, ladder, recording
 
 

@@ -67,6 +67,6 @@ def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:
     assert doc["dominant_effect"] is None  # the sample world has no effect
     assert doc["scored_on"] == "5-fold CV over poses"
     report = out.with_suffix(".md").read_text()
-    assert "geometric already reaches the noise level" in report
+    assert "null (geometric reaches the noise level): no dominant unmodelled effect" in report
     for suffix in ("_ladder.png", "_angle.png", "_time.png"):
         assert (tmp_path / f"diagnosis{suffix}").stat().st_size > 1000

@@ -159,11 +159,12 @@ def test_simulator_defaults_are_realistic(name: str) -> None:
 
 
 def test_registry_order_and_vocabulary_are_the_contracts() -> None:
-    """The contract's vocabulary (section 3) is registered; simulator-only effects are not
-    in it; model names print and parse through the registry."""
-    assert set(vocabulary()) == {
-        "eccentricity", "backlash", "compliance", "encoder_scale", "thermal_drift"
-    }  # fmt: skip
+    """The contract's vocabulary (section 3) is registered, extended (msgs_doc/effects.md)
+    and never renamed; simulator-only effects are not in it; model names print and parse
+    through the registry."""
+    contract = {"eccentricity", "backlash", "compliance", "encoder_scale", "thermal_drift"}
+    assert set(vocabulary()) == contract | {"transmission_error"}
+    assert "joint_ripple" not in vocabulary()
     base, effects = parse_model("geometric+eccentricity:6:order=3+thermal_drift", ROBOT)
     assert base == "geometric" and [e.spec for e in effects] == [
         "eccentricity:6:order=3",

@@ -265,3 +265,18 @@ def test_a_probe_with_a_further_target_keeps_its_frame_to_itself() -> None:
     for name in tool_rotation_parameters("") + target_parameters("smr2"):
         k = cal.parameters.index(name)
         assert abs(cal.parameters[name] - truth[name]) < 4 * cal.std[k] + 1e-9, name
+
+
+def test_diagnose_takes_6dof_measurements() -> None:
+    """The ladder's screening model keeps the probe (its frame's parameters): diagnose runs
+    on 6-DoF data and, on a world without effects, finds none."""
+    from robot_calib.diagnose.diagnosis import diagnose
+
+    poses, points = measured(n=120, seed=21)
+    held_poses, held_points = measured(n=60, seed=22)
+    diagnosis, ladder = diagnose(
+        as_recording(poses, points), ROBOT, as_recording(held_poses, held_points),
+        tracker_sigma_m=4.8e-6,
+    )  # fmt: skip
+    assert ladder.rungs[0].calibration.model.oriented == ("",)
+    assert diagnosis.dominant_effect is None

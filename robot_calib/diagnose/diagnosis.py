@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from robot_calib.diagnose.ladder import AT_FLOOR, N_FOLDS, Ladder, Rung, run_ladder
+from robot_calib.diagnose.learnable import MIN_LEARNABLE_SHARE, LearnableBound
 from robot_calib.diagnose.noise import NoiseLevel, refine_with_model
 from robot_calib.diagnose.signatures import WhereItLies, where_it_lies
 from robot_calib.errors import InputError
@@ -43,14 +44,22 @@ class RungScore(Record):
     insample_mean_mm: float
     insample_abs_rms_mm: float
     free_parameters: int
+    # share of the learnable gap this rung closes: (geometric - rung) / (geometric - bound)
+    # held-out rms, the bound the lower of the residual model's and the best rung's; None
+    # where there is no learnable gap
+    learnable_gap_share: float | None = None
 
     @classmethod
-    def of(cls, rung: Rung) -> RungScore:
+    def of(cls, rung: Rung, gap: tuple[float, float] | None = None) -> RungScore:
+        """The rung's figures; gap: (geometric's held-out rms, the bound's) [mm]."""
         held, fit = rung.heldout, rung.calibration.accuracy
+        share = None
+        if gap is not None and gap[0] > gap[1]:
+            share = (gap[0] - held.absolute_rms_mm) / (gap[0] - gap[1])
         return cls(
             rung.model, held.pairwise_mean_mm, held.pairwise_max_mm, held.absolute_mean_mm,
             held.absolute_max_mm, held.absolute_rms_mm, fit.pairwise_mean_mm,
-            fit.absolute_rms_mm, int(rung.calibration.parameters.free.sum()),
+            fit.absolute_rms_mm, int(rung.calibration.parameters.free.sum()), share,
         )  # fmt: skip
 
 
@@ -60,23 +69,25 @@ class Unexplained(Record):
 
     holdout_mean_mm: float
     holdout_abs_rms_mm: float
-    noise_floor_abs_rms_mm: float
-    ratio_to_noise_floor: float
+    noise_floor_abs_rms_mm: float | None  # None: the floor is unknown
+    ratio_to_noise_floor: float | None
     note: str
     where: WhereItLies
 
 
 @dataclass(frozen=True)
 class NoiseReport(Record):
-    """The noise floor of the verdict (msgs_doc/diagnosis.md, `noise`)."""
+    """The noise floor of the verdict (msgs_doc/diagnosis.md, `noise`); sigma and floor
+    None when unknown (no repeat poses, circle sweeps or stated accuracy)."""
 
-    sigma_mm: float
+    sigma_mm: float | None
     source: str
     n: int
-    floor_abs_rms_mm: float
-    floor_abs_mean_mm: float
+    floor_abs_rms_mm: float | None
+    floor_abs_mean_mm: float | None
     ladder_sigma_mm: float
     ladder_source: str
+    floor_known: bool = True
 
 
 @dataclass(frozen=True)
@@ -101,6 +112,7 @@ class Diagnosis(Record):
     holdout: list[str]
     outliers: list[Outlier] = field(default_factory=list)  # tracker blunders, never fitted
     warnings: list[str] = field(default_factory=list)  # implausible geometric calibration
+    learnable: LearnableBound | None = None  # what a residual model reaches held out
     format: str = FORMAT
 
     def to_dict(self) -> dict[str, Any]:
@@ -118,7 +130,9 @@ class Diagnosis(Record):
         """One phrase: the dominant effect and its joints, or null."""
         dom = self.dominant_effect
         if dom is None:
-            return "null (geometric reaches the noise level)"
+            if self.noise.floor_known:
+                return "null (geometric reaches the noise level)"
+            return "null (noise floor unknown; no residual model learns more from the data)"
         return f"{dom.effect} on joints {dom.joints}"
 
     def summary(self) -> str:
@@ -133,19 +147,38 @@ class Diagnosis(Record):
             if self.outliers
             else ""
         )  # fmt: skip
+        floor = self.noise.floor_abs_rms_mm
+        floor_text = "unknown" if floor is None else f"{floor:.4f} mm rms"
+        bound = f" {self.learnable.line()}." if self.learnable is not None else ""
         return (
             f"dominant effect: {self.verdict}. Ladder (held-out seed criterion mean/max, "
-            f"{self.scored_on}): {rungs}. Noise floor {self.noise.floor_abs_rms_mm:.4f} mm "
-            f"rms. {self.unexplained.note}.{blunders}"
+            f"{self.scored_on}): {rungs}. Noise floor {floor_text}.{bound} "
+            f"{self.unexplained.note}.{blunders}"
         )
+
+
+def learnable_gap(ladder: Ladder) -> tuple[float, float] | None:
+    """(geometric's held-out rms, the bound's) [mm]: the bound is the lower of the residual
+    model's and the best rung's (a physical model that beats the residual model shows more
+    was learnable); None when it is not MIN_LEARNABLE_SHARE below geometric."""
+    bound = ladder.learnable
+    if bound is None:
+        return None
+    geometric = bound.geometric_abs_rms_mm
+    lowest = min([bound.holdout_abs_rms_mm] + [r.heldout.absolute_rms_mm for r in ladder.rungs])
+    if geometric - lowest < MIN_LEARNABLE_SHARE * geometric:
+        return None
+    return geometric, lowest
 
 
 def dominant_effect(
     ladder: Ladder, where: WhereItLies, noise: NoiseLevel
 ) -> DominantEffect | None:
     """The effect that removed most of what `geometric` left (with its joints); None when
-    geometric is already at the noise level; 'unknown' with the joints of the strongest
-    residual signature when structure remains that no candidate explains."""
+    geometric is already at the noise level, or, the floor unknown, when no residual model
+    learns more than geometric from the data (`Ladder.learnable`): never because geometric
+    fits itself; 'unknown' with the joints of the strongest residual signature when
+    structure remains that no candidate explains."""
     rungs = ladder.rungs
     floor_mm = noise.floor_rms_m * 1e3
     gains: dict[str, float] = {}
@@ -158,8 +191,10 @@ def dominant_effect(
     if gains:
         name = max(gains, key=gains.__getitem__)
         return DominantEffect(name, sorted(joints[name]))
-    if rungs[0].heldout.absolute_rms_mm <= NULL_FACTOR * floor_mm or not noise.independent:
-        return None  # at the noise level, or (noise unknown) no candidate helps
+    if noise.independent and rungs[0].heldout.absolute_rms_mm <= NULL_FACTOR * floor_mm:
+        return None  # at the noise level
+    if not noise.independent and not (ladder.learnable and ladder.learnable.structure_left):
+        return None  # floor unknown, and nothing learnable left: no evidence of structure
     strongest = where.strongest_signature
     return DominantEffect(UNKNOWN, [strongest.joint] if strongest else [])
 
@@ -169,9 +204,12 @@ def diagnose(
     robot: RobotDescription,
     holdout: Recording | None = None,
     log: Callable[[str], None] | None = None,
+    tracker_sigma_m: float | None = None,
 ) -> tuple[Diagnosis, Ladder]:
     """The sim-to-real gap diagnosis of `recording`: the model ladder (geometric, then the
-    effects that lower the held-out error), scored on `holdout` (None: k-fold over poses).
+    effects that lower the held-out error), scored on `holdout` (None: k-fold over poses);
+    the noise floor from the data, else `tracker_sigma_m` (a stated 1-sigma per axis [m]),
+    else unknown.
 
     Returns
     -------
@@ -201,7 +239,7 @@ def diagnose(
         The rungs (each with its Calibration and held-out residuals (m, 3) [m]), the noise
         level used [m] and the candidates of every round (model, score [m]).
     """
-    ladder = run_ladder(recording, robot, holdout, log)
+    ladder = run_ladder(recording, robot, holdout, log, tracker_sigma_m)
     sources, holdout_sources = list(recording.sources), holdout
     recording = ladder.recording if ladder.recording is not None else recording  # no outliers
     best = ladder.rungs[-1]
@@ -214,15 +252,17 @@ def diagnose(
     )  # fmt: skip
     noise = refine_with_model(ladder.noise, best.calibration.residuals,
                               int(best.calibration.parameters.free.sum()))  # fmt: skip
-    floor_mm = noise.floor_rms_m * 1e3
-    ratio = best.heldout.absolute_rms_mm / floor_mm
+    floor_mm = noise.floor_rms_m * 1e3 if noise.independent else None
+    ratio = None if floor_mm is None else best.heldout.absolute_rms_mm / floor_mm
     sig = after.strongest_signature
     structure = f"; strongest structure: {sig.text}" if sig else ""
-    if not noise.independent:
+    learnable = ladder.learnable
+    if ratio is None:
         note = (
-            "noise level not known independently of the model (no repeat poses or circle "
-            f"sweeps): the floor is the geometric model's own residual; held-out rms {ratio:.2f}"
-            " x that" + structure
+            "noise floor unknown (no repeat poses, circle sweeps or stated tracker accuracy; "
+            "give --tracker-accuracy): held-out errors are not compared with one"
+            + (f"; {learnable.line()}" if learnable is not None else "")
+            + structure
         )
     elif ratio <= AT_FLOOR:
         note = f"at the noise level: held-out rms {ratio:.2f} x the noise floor"
@@ -233,7 +273,7 @@ def diagnose(
         )
     diagnosis = Diagnosis(
         dominant_effect=dominant_effect(ladder, where, noise),
-        ladder=[RungScore.of(r) for r in ladder.rungs],
+        ladder=[RungScore.of(r, learnable_gap(ladder)) for r in ladder.rungs],
         unexplained=Unexplained(
             best.heldout.pairwise_mean_mm,
             best.heldout.absolute_rms_mm,
@@ -243,13 +283,14 @@ def diagnose(
             after,
         ),  # fmt: skip
         noise=NoiseReport(
-            noise.sigma_m * 1e3,
-            noise.source,
+            noise.sigma_m * 1e3 if noise.independent else None,
+            noise.source if noise.independent else "unknown",
             noise.n,
             floor_mm,
-            noise.floor_mean_m * 1e3,
+            noise.floor_mean_m * 1e3 if noise.independent else None,
             ladder.noise.sigma_m * 1e3,
             ladder.noise.source,
+            noise.independent,
         ),  # fmt: skip
         scored_on=ladder.scored_on,
         selected_on=f"{N_FOLDS}-fold CV over poses"
@@ -260,5 +301,6 @@ def diagnose(
         holdout=[] if holdout_sources is None else list(holdout_sources.sources),
         outliers=list(ladder.outliers),
         warnings=list(geo.warnings),
+        learnable=learnable,
     )
     return diagnosis, ladder

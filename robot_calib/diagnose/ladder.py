@@ -12,10 +12,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
+from robot_calib.diagnose.learnable import LearnableBound, learnable_bound
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.identify.calibrate import Calibration, calibrate, model_name
@@ -65,6 +67,7 @@ class Ladder:
     recording: Recording | None = None
     holdout: Recording | None = None
     outliers: tuple[Outlier, ...] = ()
+    learnable: LearnableBound | None = None  # what a residual model reaches (learnable.py)
 
 
 def candidates(robot: RobotDescription, recording: Recording,
@@ -108,7 +111,7 @@ def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
             widest[covered[0]] = e  # in place: the parameter order stays that of `every`
         elif not any(w.covers(e, robot) for w in widest):
             widest.append(e)
-    superset = KinematicModel(robot, tuple(widest), cal.model.targets)
+    superset = KinematicModel(robot, tuple(widest), cal.model.targets, cal.model.oriented)
     params = superset.parameters().with_values(
         dict(zip(cal.parameters.names, cal.parameters.values))
     )
@@ -201,9 +204,16 @@ def _kfold(cal: Calibration, recording: Recording) -> tuple[Accuracy, Array]:
     return accuracy(recording.points, predicted), predicted - recording.points
 
 
-def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording | None = None,
-               log: Log | None = None) -> Ladder:  # fmt: skip
-    """Climb the ladder on `recording`, scoring on `holdout` (or k-fold CV).
+def run_ladder(
+    recording: Recording,
+    robot: RobotDescription,
+    holdout: Recording | None = None,
+    log: Log | None = None,
+    tracker_sigma_m: float | None = None,
+) -> Ladder:
+    """Climb the ladder on `recording`, scoring on `holdout` (or k-fold CV); the noise
+    floor from the data, else `tracker_sigma_m` (a stated 1-sigma per axis [m]), else
+    unknown (`estimate_noise`). Ends with the learnable bound (`learnable_bound`).
 
     Tracker blunders never become robot effects: the measurements the geometric
     calibration flags (`calibrate`'s outlier screening) and the hold-out points beyond
@@ -215,7 +225,8 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
     outliers = geo.outliers
     if geo.inliers is not None:
         recording = recording.subset(geo.inliers)
-    rungs, noise, scored_on, rounds = _climb(recording, robot, holdout, geo, say)
+    climb = partial(_climb, robot=robot, geo=geo, say=say, tracker_sigma_m=tracker_sigma_m)
+    rungs, noise, scored_on, rounds = climb(recording, holdout=holdout)
     if holdout is not None:  # judged against the best model: an effect's structure is not
         best = rungs[-1].calibration  # a blunder; no refit possible, so a higher bar
         h_res = best.predict(holdout.poses) - holdout.points
@@ -228,8 +239,12 @@ def run_ladder(recording: Recording, robot: RobotDescription, holdout: Recording
                 f"outliers: {int(flagged.sum())} hold-out points beyond {HOLDOUT_K:g} robust "
                 f"sigmas ({sigma * 1e3:.4f} mm) of {best.name}: not scored; climbing again"
             )
-            rungs, noise, scored_on, rounds = _climb(recording, robot, holdout, geo, say)
-    return Ladder(rungs, noise, scored_on, rounds, recording, holdout, outliers)
+            rungs, noise, scored_on, rounds = climb(recording, holdout=holdout)
+    geometric = rungs[0].calibration
+    fold, fitted = kfold_parameters(geometric, recording)
+    bound = learnable_bound(geometric, recording, holdout, fold, fitted, scored_on)
+    say(bound.line())
+    return Ladder(rungs, noise, scored_on, rounds, recording, holdout, outliers, bound)
 
 
 def _climb(
@@ -238,18 +253,22 @@ def _climb(
     holdout: Recording | None,
     geo: Calibration,
     say: Log,
+    tracker_sigma_m: float | None = None,
 ) -> tuple[list[Rung], NoiseLevel, str, list[list[tuple[str, float]]]]:
     """The rungs from `geo` (the geometric calibration of `recording`) up, the noise level,
     what they are scored on and the candidates of every round."""
-    noise = estimate_noise(recording, geo.residuals, int(geo.parameters.free.sum()))
+    noise = estimate_noise(recording, geo.residuals, int(geo.parameters.free.sum()),
+                           tracker_sigma_m)  # fmt: skip
     scored_on = "hold-out bags" if holdout is not None else f"{N_FOLDS}-fold CV over poses"
-    say(f"noise: {noise.sigma_m * 1e3:.4f} mm per axis ({noise.source}, {noise.n}); "
-        f"scoring on {scored_on}")  # fmt: skip
+    floor = (f"{noise.sigma_m * 1e3:.4f} mm per axis ({noise.source}, {noise.n})"
+             if noise.independent else "unknown (no repeat poses, circle sweeps or stated "
+             "accuracy)")  # fmt: skip
+    say(f"noise floor: {floor}; scoring on {scored_on}")
     acc, res, score = score_rung(geo, recording, holdout)
     rungs = [Rung("geometric", (), geo, acc, res, score)]
     rounds: list[list[tuple[str, float]]] = []
-    say(f"  geometric: held-out rms {acc.absolute_rms_mm:.4f} mm "
-        f"(floor {noise.floor_rms_m * 1e3:.4f})")  # fmt: skip
+    say(f"  geometric: held-out rms {acc.absolute_rms_mm:.4f} mm"
+        + (f" (floor {noise.floor_rms_m * 1e3:.4f})" if noise.independent else ""))  # fmt: skip
     while len(rungs) <= MAX_RUNGS:
         current = rungs[-1]
         at_floor = current.heldout.absolute_rms_mm <= AT_FLOOR * noise.floor_rms_m * 1e3

@@ -9,8 +9,11 @@
    sigma^2 = sum(residual^2) / (2 n - 6 per sweep) (an upper bound if effects bend circles).
    Where both exist and agree (circles within 1.5 x), they are pooled by degrees of freedom
    (a handful of repeat pairs alone scatters by +-20 %); else the repeat poses win.
-3. Else the in-sample residual of a fitted model with its degrees of freedom (then the
-   floor is not independent of the model, and the diagnosis says so).
+3. Else a stated accuracy: the user's `--tracker-accuracy`, or the median of the
+   standard deviations the tracker stated per point (msgs_doc/six_dof.md).
+4. Else the floor is unknown: the in-sample residual of a fitted model with its degrees of
+   freedom serves the ladder's internal tests only (`NoiseLevel.independent` is False), and
+   every output says the floor is unknown.
 The final verdict pools the independent estimate with the best model's in-sample residual
 where they agree (`refine_with_model`).
 """
@@ -27,6 +30,7 @@ from robot_calib.measurements import Recording
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE
 
 MIN_REPEATS = 3
+STATED = "stated tracker accuracy"
 MAX_REPEAT_GAP_S = 60.0  # repeats farther apart in time may include drift, not only noise
 MAX_REPEAT_LAG = 50  # rows between a pose and its repeat, at most
 AGREE = 1.5  # circle-fit noise within this factor of the repeat-pose noise: pool them
@@ -90,10 +94,15 @@ def repeat_pairs(recording: Recording) -> IntArray:
     return np.stack([first, partner[first]], axis=1)
 
 
-def estimate_noise(recording: Recording, fallback_residuals: Array | None = None,
-                   fallback_dof: int = 0) -> NoiseLevel:  # fmt: skip
+def estimate_noise(
+    recording: Recording,
+    fallback_residuals: Array | None = None,
+    fallback_dof: int = 0,
+    stated_sigma_m: float | None = None,
+) -> NoiseLevel:
     """The noise level of `recording` (see the module docstring for the order of methods);
-    fallback_residuals (n, 3) [m] of a fitted model with `fallback_dof` free parameters."""
+    fallback_residuals (n, 3) [m] of a fitted model with `fallback_dof` free parameters;
+    stated_sigma_m: the tracker's accuracy as the user states it (1-sigma per axis [m])."""
     pairs = repeat_pairs(recording)
     repeat = None
     if len(pairs) >= MIN_REPEATS:
@@ -108,9 +117,24 @@ def estimate_noise(recording: Recording, fallback_residuals: Array | None = None
         return repeat
     if circles is not None:
         return circles
+    stated = _stated(recording, stated_sigma_m)
+    if stated is not None:
+        return stated
     if fallback_residuals is not None:
         return _model_noise(fallback_residuals, fallback_dof)
     return NoiseLevel(float("nan"), "unknown", 0)
+
+
+def _stated(recording: Recording, stated_sigma_m: float | None) -> NoiseLevel | None:
+    """The user's stated accuracy, else the median of the per-point position standard
+    deviations the recording states, else None."""
+    if stated_sigma_m is not None:
+        return NoiseLevel(float(stated_sigma_m), f"{STATED} (--tracker-accuracy)", 0)
+    sigma = recording.poses.sigma
+    if sigma is not None and np.isfinite(sigma[:, 0]).any():
+        stated = sigma[np.isfinite(sigma[:, 0]), 0]
+        return NoiseLevel(float(np.median(stated)), f"{STATED} (per point)", len(stated))
+    return None
 
 
 def _model_noise(residuals: Array, n_free: int) -> NoiseLevel:
@@ -131,8 +155,8 @@ def refine_with_model(noise: NoiseLevel, residuals: Array, n_free: int) -> Noise
     when the two agree (within AGREE): the model then leaves only noise, and its thousands of
     degrees of freedom steady an estimate from a handful of repeat poses. Unchanged when
     they disagree (the model misses structure) or when `noise` is not independent."""
-    if not noise.independent or residuals.size - n_free <= 0:
-        return noise
+    if not noise.independent or residuals.size - n_free <= 0 or noise.source.startswith(STATED):
+        return noise  # a stated accuracy is the user's word: not pooled with a residual
     model = _model_noise(residuals, n_free)
     if model.sigma_m > AGREE * noise.sigma_m:
         return noise

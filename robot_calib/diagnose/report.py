@@ -7,14 +7,14 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_calib.diagnose.diagnosis import Diagnosis
+from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport
 from robot_calib.diagnose.ladder import Ladder
 from robot_calib.diagnose.signatures import ArcSignature, JointTerms, arc_angle_errors
 from robot_calib.measurements import Recording
 
 
 def _plots(
-    ladder: Ladder, recording: Recording, stem: Path, floor_mm: float
+    ladder: Ladder, recording: Recording, stem: Path, floor_mm: float | None
 ) -> list[tuple[str, str]]:
     import matplotlib
 
@@ -28,7 +28,11 @@ def _plots(
         range(len(names)), [r.heldout.absolute_rms_mm for r in ladder.rungs], color="#4878a8"
     )
     ax.bar_label(bars, fmt="%.4f mm", fontsize=8)
-    ax.axhline(floor_mm, color="k", ls="--", label="noise floor")
+    if floor_mm is not None:
+        ax.axhline(floor_mm, color="k", ls="--", label="noise floor")
+    if ladder.learnable is not None:
+        ax.axhline(ladder.learnable.holdout_abs_rms_mm, color="#c44e52", ls=":",
+                   label="learnable bound (residual model)")  # fmt: skip
     ax.set_xticks(range(len(names)), names, rotation=15, ha="right", fontsize=8)
     ax.set_ylabel("held-out rms error [mm]")
     ax.set_title(f"the ladder (scored on {ladder.scored_on})")
@@ -80,6 +84,24 @@ def _harmonics(entry: ArcSignature | JointTerms) -> str:
     return ", ".join(f"{a:.1f} ({s:.0f}x)" for a, s in pairs)
 
 
+def _floor_sentence(noise: NoiseReport) -> str:
+    """The report's sentence on the noise floor (or that it is unknown)."""
+    if noise.sigma_mm is None or noise.floor_abs_rms_mm is None:
+        return (
+            "Noise floor **unknown**: the data have no repeat poses or circle sweeps and no "
+            "accuracy is stated (`--tracker-accuracy`); held-out errors are not compared "
+            "with a floor."
+        )
+    return (
+        f"Noise level ({noise.source}, n = {noise.n}): {noise.sigma_mm * 1e3:.1f} um per axis; "
+        f"a perfect model would leave {noise.floor_abs_rms_mm:.4f} mm rms on held-out points."
+    )
+
+
+def _times_floor(value_mm: float, floor_mm: float | None) -> str:
+    return "unknown" if floor_mm is None else f"{value_mm / floor_mm:.2f}"
+
+
 def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
                  path: Path) -> None:  # fmt: skip
     """Markdown report `path` (+ PNGs beside it named after it)."""
@@ -87,7 +109,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
     plots = _plots(ladder, recording, path.with_suffix(""), noise.floor_abs_rms_mm)
     dom = diagnosis.dominant_effect
     verdict = (
-        "geometric already reaches the noise level: no dominant unmodelled effect"
+        f"{diagnosis.verdict}: no dominant unmodelled effect"
         if dom is None
         else f"dominant effect: **{dom.effect}** on joint(s) {dom.joints or '-'}"
     )
@@ -100,20 +122,28 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
         "",
         f"**Verdict** — {verdict}.",
         "",
-        f"Noise level from the data ({noise.source}, n = {noise.n}): "
-        f"{noise.sigma_mm * 1e3:.1f} um per axis; a perfect model would leave "
-        f"{noise.floor_abs_rms_mm:.4f} mm rms on held-out points.",
+        _floor_sentence(noise),
         "",
         "| model | held-out seed criterion mean / max [mm] "
-        "| held-out absolute mean / rms [mm] | x noise floor |",
-        "|---|---|---|---|",
+        "| held-out absolute mean / rms [mm] | x noise floor | share of the learnable gap |",
+        "|---|---|---|---|---|",
     ]
     for rung in diagnosis.ladder:
+        share = rung.learnable_gap_share
         lines.append(
             f"| {rung.model} | {rung.holdout_mean_mm:.4f} / {rung.holdout_max_mm:.4f} "
             f"| {rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f} "
-            f"| {rung.holdout_abs_rms_mm / noise.floor_abs_rms_mm:.2f} |"
+            f"| {_times_floor(rung.holdout_abs_rms_mm, noise.floor_abs_rms_mm)} "
+            f"| {'-' if share is None else f'{100 * share:.0f} %'} |"
         )
+    if diagnosis.learnable is not None:
+        bound = diagnosis.learnable
+        lines += [
+            "",
+            f"Learnable bound: {bound.line().removeprefix('learnable bound: ')}. "
+            f"Method: {bound.method}. The last column: the share of that learnable gap "
+            "(geometric's held-out rms minus the bound) each rung closes.",
+        ]
     if diagnosis.outliers:
         lines += [
             "",

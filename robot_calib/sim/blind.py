@@ -84,7 +84,7 @@ def judge(case: Case, diagnosis: Diagnosis) -> dict[str, Any]:
         named = dom is not None and list(case.joints) == dom.joints
     else:
         named = dom is not None and dom.effect == case.effect and (dom.joints == list(case.joints))
-    at_floor = ratio <= FLOOR_FACTOR
+    at_floor = ratio is not None and ratio <= FLOOR_FACTOR
     return {
         "effect": case.effect,
         "joints": list(case.joints),
