@@ -81,19 +81,29 @@ def accuracy(measured: Array, predicted: Array) -> Accuracy:
 @dataclass(frozen=True)
 class OrientationAccuracy(Record):
     """Angle between predicted and measured 6-DoF probe frames (the rotation vector's
-    norm) over n measurements, in urad for humans (1 urad = 0.0573 mdeg)."""
+    norm: all three axes together) over n measurements, and the rms per axis (comparable
+    with a per-axis standard deviation: the angle's rms is sqrt(3) x that for equal
+    noise on every axis), in urad for humans (1 urad = 0.0573 mdeg)."""
 
     n_measurements: int
     mean_urad: float
     rms_urad: float
     max_urad: float
+    per_axis_rms_urad: float
 
     def line(self) -> str:
         return (
-            f"orientation mean {self.mean_urad:.1f} / rms {self.rms_urad:.1f} / max "
-            f"{self.max_urad:.1f} urad ({np.degrees(self.rms_urad * 1e-6) * 1e3:.2f} mdeg rms; "
-            f"{self.n_measurements} 6-DoF measurements)"
+            f"orientation error angle mean {_angle(self.mean_urad)} / rms "
+            f"{_angle(self.rms_urad)} / max {_angle(self.max_urad)}; per axis rms "
+            f"{_angle(self.per_axis_rms_urad)} ({self.n_measurements} 6-DoF measurements)"
         )
+
+
+def _angle(urad: float) -> str:
+    """A small angle for humans: urad below 10 mrad, else deg."""
+    if urad < 1e4:
+        return f"{urad:.1f} urad"
+    return f"{np.degrees(urad * 1e-6):.2f} deg"
 
 
 def orientation_accuracy(errors: Array) -> OrientationAccuracy | None:
@@ -108,4 +118,5 @@ def orientation_accuracy(errors: Array) -> OrientationAccuracy | None:
         float(angle.mean()),
         float(np.sqrt(np.mean(angle**2))),
         float(angle.max()),
+        float(np.sqrt(np.mean(errors[rows] ** 2)) * 1e6),
     )

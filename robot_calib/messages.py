@@ -65,6 +65,13 @@ def pose_measurement(msg: Any, where: str) -> tuple[Array, Array, Array]:
     measured = True
     if hasattr(msg.pose, "covariance"):
         diag = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6).diagonal()
+        if not np.all(np.isfinite(diag)):
+            raise InputError(f"{where}: covariance diagonal not finite: {diag.tolist()}")
+        if np.any(diag[:3] > 0) and not np.all(diag[:3] > 0):
+            raise InputError(
+                f"{where}: position variances {diag[:3].tolist()} partly zero: all three "
+                "stated (> 0) or none (0)"
+            )
         if np.all(diag[:3] > 0):
             sigma[0] = np.sqrt(diag[:3].mean())
         measured = not np.any(diag[3:] < 0)

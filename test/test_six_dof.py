@@ -219,7 +219,7 @@ def test_split_calibrate_and_score_keep_the_orientations(tmp_path: Path) -> None
     params = tmp_path / "p.json"
     proc = robot_calib("calibrate", str(tmp_path / "probe.cal.mcap"), "-o", str(params))
     assert proc.returncode == 0, proc.stderr
-    assert "residuals (in-sample): orientation mean" in proc.stdout
+    assert "residuals (in-sample): orientation error angle mean" in proc.stdout
     doc = json.loads(params.read_text())
     assert doc["targets"][0]["six_dof"] is True
     assert doc["orientation_residuals"]["n_measurements"] == len(parts[0])
@@ -227,10 +227,9 @@ def test_split_calibrate_and_score_keep_the_orientations(tmp_path: Path) -> None
     proc = robot_calib("score", str(params), str(tmp_path / "probe.holdout.mcap"),
                        "--points-csv", str(table))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
-    line = next(x for x in proc.stdout.splitlines() if "orientation mean" in x)
-    rms_urad = float(line.split("rms ")[1].split(" ")[0])
-    angle_rms = ORIENTATION_SIGMA * 1e6 * np.sqrt(3)  # |3 axes of noise| [urad]
-    assert 0.7 * angle_rms < rms_urad < 1.5 * angle_rms
+    line = next(x for x in proc.stdout.splitlines() if "orientation error angle" in x)
+    rms_urad = float(line.split("per axis rms ")[1].split(" ")[0])
+    assert 0.8 * ORIENTATION_SIGMA * 1e6 < rms_urad < 1.3 * ORIENTATION_SIGMA * 1e6
     with table.open() as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == len(parts[1]) and float(rows[0]["angle_rad"]) > 0
@@ -280,3 +279,53 @@ def test_diagnose_takes_6dof_measurements() -> None:
     )  # fmt: skip
     assert ladder.rungs[0].calibration.model.oriented == ("",)
     assert diagnosis.dominant_effect is None
+
+
+def test_orientation_columns_mixed_up_are_flagged_and_the_points_calibrate_alone() -> None:
+    """Quaternions read in the wrong order (w taken for x) are still unit quaternions, but
+    no probe frame explains them: the calibration says so, names the likely cause and
+    calibrates from the points alone (positions at the noise, no probe parameters)."""
+    poses, points = measured()
+    quat = Rotation.from_matrix(poses.rotation).as_quat()  # x, y, z, w
+    wrong = Rotation.from_quat(np.roll(quat, 1, axis=1)).as_matrix()  # w, x, y, z as x..w
+    stated = np.tile([5e-6, ORIENTATION_SIGMA], (len(poses), 1))
+    cal = calibrate(as_recording(replace(poses, rotation=wrong), points, stated), ROBOT,
+                    "geometric")  # fmt: skip
+    warning = next(w for w in cal.warnings if "orientations disagree" in w)
+    assert "quaternion order" in warning and "points alone" in warning
+    assert cal.model.oriented == () and "target_roll" not in cal.parameters
+    assert cal.accuracy.absolute_rms_mm < 0.012
+
+
+def test_orientation_blunders_are_left_out_their_points_kept() -> None:
+    """Three orientations 5 deg off (a probe knocked, a line of sight to a wrong LED): they
+    are flagged and left out, their points still fitted, and the probe frame comes out as
+    without them."""
+    poses, points = measured()
+    rotation = poses.rotation.copy()
+    for k, axis in ((10, [1.0, 0, 0]), (60, [0, 1.0, 0]), (120, [0, 0, 1.0])):
+        rotation[k] = (
+            Rotation.from_rotvec(np.radians(5.0) * np.array(axis)).as_matrix() @ rotation[k]
+        )
+    stated = np.tile([5e-6, ORIENTATION_SIGMA], (len(poses), 1))
+    cal = calibrate(as_recording(replace(poses, rotation=rotation), points, stated), ROBOT,
+                    "geometric")  # fmt: skip
+    warning = next(w for w in cal.warnings if "6-DoF orientation(s)" in w)
+    assert warning.startswith("warning: outliers: 3 6-DoF orientation(s)")
+    assert cal.orientation_residuals is not None
+    assert np.isnan(cal.orientation_residuals[[10, 60, 120]]).all()
+    assert len(cal.residuals) == len(points)  # every point kept
+    truth = absorb_base_offsets(ROBOT, WORLD.truth)
+    frame = [cal.parameters[n] - truth[n] for n in tool_rotation_parameters("")]
+    assert max(abs(v) for v in frame) < 2e-5
+
+
+def test_stated_accuracies_far_from_the_residuals_are_flagged() -> None:
+    """An orientation accuracy stated 10 x too good (5 urad for 50 urad of noise): the fit
+    weights by it, and says that the residual is 10 x the stated figure."""
+    poses, points = measured()
+    stated = np.tile([5e-6, ORIENTATION_SIGMA / 10], (len(poses), 1))
+    cal = calibrate(as_recording(poses, points, stated), ROBOT, "geometric")
+    warning = next(w for w in cal.warnings if w.startswith("warning: orientation residual"))
+    assert "x the stated accuracy (5 urad)" in warning
+    assert not any(w.startswith("warning: position residual") for w in cal.warnings)

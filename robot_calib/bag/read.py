@@ -141,8 +141,11 @@ def read_bag(
             if m.topic in pose_topics:
                 k = pose_topics[m.topic]
                 where = f"{path}: {m.topic} message {len(poses[k]) + 1}"
+                stamp = stamp_to_ns(msg.header.stamp)
+                if stamp in poses[k]:
+                    raise BagError(f"{where}: a second pose at stamp {stamp} ns")
                 try:
-                    poses[k][stamp_to_ns(msg.header.stamp)] = pose_measurement(msg, where)
+                    poses[k][stamp] = pose_measurement(msg, where)
                 except InputError as exc:
                     raise BagError(str(exc)) from None
                 continue

@@ -48,7 +48,12 @@ from robot_calib.identify.outliers import (
     outlier_mask,
     robust_sigma,
 )
-from robot_calib.identify.plausibility import calibration_warnings, recording_warnings
+from robot_calib.identify.plausibility import (
+    calibration_warnings,
+    inconsistent_orientations,
+    recording_warnings,
+    stated_accuracy_warnings,
+)
 from robot_calib.identify.registration import fit_frames, initial_tool_rotations
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
@@ -262,8 +267,20 @@ def calibrate(
     fit = identify(recording)
     cal = _screened(fit, recording, identify, log) if screen_outliers else fit
     geometry_fitted = base not in ("nominal", "cpa")
+    blunders: list[str] = []
+    if screen_outliers:
+        cal, recording, blunders = _orientation_blunders(cal, recording, identify, log)
+    mixed_up = inconsistent_orientations(cal, recording, geometry_fitted)
+    if mixed_up is not None:  # orientations no rotation explains: the points alone
+        recording = replace(recording, poses=replace(recording.poses, rotation=None))
+        fit = identify(recording)
+        cal = _screened(fit, recording, identify, log) if screen_outliers else fit
     warnings = tuple(
-        recording_warnings(recording, robot) + calibration_warnings(cal, geometry_fitted)
+        recording_warnings(recording, robot)
+        + blunders
+        + ([mixed_up] if mixed_up else [])
+        + calibration_warnings(cal, geometry_fitted)
+        + (stated_accuracy_warnings(cal, recording) if geometry_fitted else [])
     )
     say = log or (lambda _msg: None)
     for warning in warnings:
@@ -339,6 +356,46 @@ def _screened(
     for outlier in outliers:
         say(f"outlier: {outlier.line()}")
     return replace(cal, outliers=outliers, inliers=~flagged)
+
+
+def _orientation_blunders(
+    cal: Calibration,
+    recording: Recording,
+    identify: Callable[[Recording], Calibration],
+    log: Log | None,
+) -> tuple[Calibration, Recording, list[str]]:
+    """`cal` and `recording` unchanged, or, when 6-DoF orientations lie beyond OUTLIER_K
+    robust sigmas (per axis, of all orientation residuals), the recording without those
+    orientations (their points kept: a probe's point and frame are separate readings), the
+    calibration of it, and a warning line naming them."""
+    errors = cal.orientation_residuals
+    if errors is None or recording.poses.rotation is None:
+        return cal, recording, []
+    rows = np.flatnonzero(np.all(np.isfinite(errors), axis=1))
+    sigma = robust_sigma(errors[rows])
+    flagged = rows[outlier_mask(errors[rows], sigma)]
+    if not len(flagged):
+        return cal, recording, []
+    rotation = recording.poses.rotation.copy()
+    rotation[flagged] = np.nan
+    cleaned = replace(recording, poses=replace(recording.poses, rotation=rotation))
+    refit = identify(cleaned)
+    if cal.outliers:  # keep the point outliers' screening of the first pass
+        refit = _screened(refit, cleaned, identify, None)
+    index = recording.message_indices()
+    named = ", ".join(
+        f"{recording.sources[int(recording.bag_index[i])]} point {int(index[i])}: "
+        f"{np.degrees(np.linalg.norm(errors[i])):.3g} deg"
+        for i in flagged[:5]
+    ) + (f" (+{len(flagged) - 5} more)" if len(flagged) > 5 else "")
+    line = (
+        f"warning: outliers: {len(flagged)} 6-DoF orientation(s) beyond {OUTLIER_K:g} robust "
+        f"sigmas ({sigma * 1e6:.1f} urad per axis) of the fit, left out (their points kept): "
+        + named
+    )
+    if log:
+        log(line)
+    return refit, cleaned, [line]
 
 
 def _calibrate_once(

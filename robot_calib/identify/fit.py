@@ -254,7 +254,8 @@ class _Problem:
         frames, omega = self.model.orientation_jacobian(params, sub)
         self.orientation_error = orientation_errors(frames, sub.rotation)
         factor = w.orientation[self.rows6]
-        out[3 * n :] = (omega[:, :, params.free] * factor[:, None, None]).reshape(-1, out.shape[1])
+        rows = (omega[:, :, params.free] * factor[:, None, None]).reshape(3 * len(self.rows6), -1)
+        out[3 * n :] = rows  # (no free parameter: an empty (3m, 0) block)
         rotation_rows = (self.orientation_error * factor[:, None]).reshape(-1)
         return predicted, np.concatenate([residual, rotation_rows])
 

@@ -233,6 +233,33 @@ def outlier_lines(outliers: Sequence[Outlier]) -> list[str]:
     return [head] + [f"  {o.line()}" for o in outliers]
 
 
+GIMBAL_LOCK_DEG = 1.0  # pitch within this of +-90 deg: roll and yaw turn about one axis
+
+
+def probe_lines(cal: Calibration) -> list[str]:
+    """Each 6-DoF probe's frame in the flange frame as a quaternion (free of roll-pitch-
+    yaw's singularity), with a note when the pitch is at +-90 deg (gimbal lock: only roll
+    -/+ yaw is determined, the frame itself is)."""
+    from scipy.spatial.transform import Rotation
+
+    out = []
+    for name in cal.model.oriented:
+        roll, pitch, yaw = (cal.parameters[p] for p in tool_rotation_parameters(name))
+        quat = Rotation.from_euler("xyz", [roll, pitch, yaw]).as_quat()
+        where = target_topic(name).replace("/point", "")
+        line = (
+            f"probe frame in the flange ({where}): quaternion x, y, z, w = "
+            f"{', '.join(f'{v:.6f}' for v in quat)}"
+        )
+        if abs(abs(np.degrees(pitch)) - 90.0) < GIMBAL_LOCK_DEG:
+            line += (
+                f" (pitch {np.degrees(pitch):.3f} deg: roll and yaw turn about one axis, only "
+                "roll - yaw (or + yaw) is determined; the frame is)"
+            )
+        out.append(line)
+    return out
+
+
 def summary(cal: Calibration, recording: Recording) -> str:
     """Human summary: measurements, parameters (mm/deg) with 1-sigma, fixed, residuals."""
     lines = [recording.summary(), f"model: {cal.name}"]
@@ -263,6 +290,7 @@ def summary(cal: Calibration, recording: Recording) -> str:
         for reason, names in reasons.items():
             shown = ", ".join(names[:8]) + (f" (+{len(names) - 8} more)" if len(names) > 8 else "")
             lines.append(f"fixed ({reason}): {shown}")
+    lines += probe_lines(cal)
     lines.append(f"residuals (in-sample): {cal.accuracy.line()}")
     if cal.orientation_residuals is not None:
         figures = orientation_accuracy(cal.orientation_residuals)

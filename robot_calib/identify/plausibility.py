@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from robot_calib.identify.weights import DEFAULT_ORIENTATION_SIGMA_RAD
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import Recording
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE
@@ -115,5 +116,74 @@ def calibration_warnings(cal: Calibration, geometry_fitted: bool = True) -> list
                 f"{per_axis / noise:.0f} x the noise ({noise * 1e3:.4f} mm, {source}): "
                 "the model misses something large: an unmodelled effect (see `robot-calib "
                 f"diagnose`), {HINT}"
+            )
+    return out
+
+
+#: a 6-DoF probe's orientation residual per axis beyond RESIDUAL_FACTOR times its stated
+#: (or default) standard deviation, and beyond this floor, is no measurement noise: the
+#: floor with the geometry fitted, and with it nominal (cpa, nominal: a real robot's
+#: uncalibrated orientation error stays below a few mrad; a column mix-up gives ~1 rad)
+ORIENTATION_FLOOR_RAD = 1e-3
+ORIENTATION_FLOOR_NOMINAL_RAD = 30e-3
+
+
+def inconsistent_orientations(
+    cal: Calibration, recording: Recording, geometry_fitted: bool = True
+) -> str | None:
+    """A warning when the fitted 6-DoF orientations disagree with the points far beyond
+    their accuracy (a column mix-up: quaternion order, roll-pitch-yaw order or convention),
+    None otherwise. The caller then calibrates from the points alone."""
+    if cal.orientation_residuals is None:
+        return None
+    rows = np.all(np.isfinite(cal.orientation_residuals), axis=1)
+    if not rows.any():
+        return None
+    per_axis = float(np.sqrt(np.mean(cal.orientation_residuals[rows] ** 2)))
+    sigma = recording.poses.sigma
+    stated = sigma[:, 1][np.isfinite(sigma[:, 1])] if sigma is not None else np.zeros(0)
+    noise = float(np.median(stated)) if len(stated) else DEFAULT_ORIENTATION_SIGMA_RAD
+    said = "stated" if len(stated) else "assumed"
+    floor = ORIENTATION_FLOOR_RAD if geometry_fitted else ORIENTATION_FLOOR_NOMINAL_RAD
+    if per_axis <= max(RESIDUAL_FACTOR * noise, floor):
+        return None
+    return (
+        f"warning: {', '.join(recording.sources)}: the 6-DoF orientations disagree with the "
+        f"points: residual {per_axis * 1e3:.3g} mrad per axis ({per_axis / noise:.0f} x the "
+        f"{said} {noise * 1e6:.0f} urad): check the orientation columns (quaternion order "
+        "x, y, z, w: where is w?; roll-pitch-yaw order and convention, units); calibrated "
+        "from the points alone"
+    )
+
+
+#: residual rms over the stated standard deviation (per kind) beyond which the stated
+#: accuracies, and the 1-sigma figures computed from them, are not to be trusted
+STATED_FACTOR = 3.0
+
+
+def stated_accuracy_warnings(cal: Calibration, recording: Recording) -> list[str]:
+    """A warning per kind (position, orientation) whose in-sample residual rms per axis is
+    more than STATED_FACTOR times (or less than 1 / STATED_FACTOR of) the median standard
+    deviation the tracker stated: the weights rest on those figures."""
+    sigma = recording.poses.sigma
+    if sigma is None or not len(cal.residuals):
+        return []
+    kinds = [("position", cal.residuals, sigma[:, 0], 1e3, "mm")]
+    if cal.orientation_residuals is not None:
+        kinds.append(("orientation", cal.orientation_residuals, sigma[:, 1], 1e6, "urad"))
+    out = []
+    for kind, residuals, stated, scale, unit in kinds:
+        rows = np.all(np.isfinite(residuals), axis=1) & np.isfinite(stated)
+        if not rows.any():
+            continue
+        rms = float(np.sqrt(np.mean(residuals[rows] ** 2)))
+        said = float(np.median(stated[rows]))
+        factor = rms / said
+        if factor > STATED_FACTOR or factor < 1.0 / STATED_FACTOR:
+            out.append(
+                f"warning: {kind} residual {rms * scale:.4g} {unit} per axis is {factor:.2g} x "
+                f"the stated accuracy ({said * scale:.4g} {unit}): the weights and 1-sigma "
+                "figures rest on the stated figures; check their units, or the model misses "
+                "something (see `robot-calib diagnose`)"
             )
     return out

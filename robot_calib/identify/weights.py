@@ -4,11 +4,13 @@ Each measurement's position residual (3 rows) is weighted by sigma_ref / sigma_p
 and, for a 6-DoF probe, its orientation residual (3 rows, the rotation vector of
 predicted * measured^T [rad]) by sigma_ref / sigma_orientation, where sigma_ref is the
 median position standard deviation: weighted residuals stay in metres, a measurement
-twice as accurate counts twice as much, and an orientation error of sigma_orientation
-counts as much as a position error of sigma_position. Standard deviations not stated take
-the median of those stated, else a fallback: the fit's own residual rms of that kind
-(`identify.fit` solves once with the defaults below, a laser tracker's point and a 6-DoF
-probe's orientation, then again with the residuals' figures).
+twice as accurate counts four times as much (1 / sigma^2 in the sum of squares), and an
+orientation error of sigma_orientation counts as much as a position error of
+sigma_position. Where orientations are fitted and some standard deviation is not stated,
+the fit solves once with the median of those stated (else the defaults below: a laser
+tracker's point, a 6-DoF probe's orientation), then again with the unstated ones taken as
+the first solution's residual rms of their kind (one variance component per kind);
+without orientations, unstated ones take the median of those stated.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ class RowWeights:
 
 
 def _filled(values: Array, default: float) -> Array:
+    """`values` with NaN (not stated) replaced by the median of the others, else `default`."""
     stated = values[np.isfinite(values)]
     return np.where(np.isfinite(values), values, np.median(stated) if len(stated) else default)
 
