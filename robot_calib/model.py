@@ -17,8 +17,9 @@ Parameter layout (names are the public vocabulary of PARAMS.json):
   the tracker pose. Which target a measurement is of is `Poses.target` (an index into the
   model's `targets`).
   A 6-DoF probe (msgs_doc/six_dof.md) at target NAME also has the orientation of its frame
-  in the flange frame: target_roll/pitch/yaw or target_NAME_roll/pitch/yaw [rad]
-  (Rz(yaw) Ry(pitch) Rx(roll)), for the targets in the model's `oriented`.
+  in the flange frame: target_rx/ry/rz or target_NAME_rx/ry/rz [rad], a rotation vector
+  (axis times angle: no gimbal lock, unlike roll-pitch-yaw, for any probe turned by less
+  than 360 deg), for the targets in the model's `oriented`.
 """
 
 from __future__ import annotations
@@ -38,7 +39,8 @@ from robot_calib.kinematics.frames import (
     rot_x,
     rot_y,
     rot_z,
-    rpy_to_matrix,
+    rotvec_left_jacobian,
+    rotvec_to_matrix,
 )
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import PRIMARY_TARGET, Poses
@@ -62,10 +64,10 @@ def target_parameters(name: str) -> tuple[str, str, str]:
 
 
 def tool_rotation_parameters(name: str) -> tuple[str, str, str]:
-    """Names of the roll, pitch, yaw parameters of 6-DoF target `name`'s frame in the
-    flange frame (target_roll/pitch/yaw for the first target)."""
+    """Names of the rotation-vector parameters (x, y, z [rad]) of 6-DoF target `name`'s
+    frame in the flange frame (target_rx/ry/rz for the first target)."""
     stem = "target" if name == PRIMARY_TARGET else f"target_{name}"
-    return (f"{stem}_roll", f"{stem}_pitch", f"{stem}_yaw")
+    return (f"{stem}_rx", f"{stem}_ry", f"{stem}_rz")
 
 
 def geometric_parameters(
@@ -216,8 +218,8 @@ class KinematicModel:
         (identity for targets not in `oriented`)."""
         out = np.tile(np.eye(3), (len(self.targets), 1, 1))
         for name in self.oriented:
-            roll, pitch, yaw = (params[k] for k in tool_rotation_parameters(name))
-            out[self.targets.index(name)] = rpy_to_matrix(roll, pitch, yaw)
+            rotvec = np.array([params[k] for k in tool_rotation_parameters(name)])
+            out[self.targets.index(name)] = rotvec_to_matrix(rotvec)
         return out
 
     def probe_orientations(self, params: ParameterVector, poses: Poses) -> Array:
@@ -259,11 +261,10 @@ class KinematicModel:
             )
             for name in self.oriented:
                 rows = poses.target_index == self.targets.index(name)
-                roll, pitch, yaw = (params[k] for k in tool_rotation_parameters(name))
-                rz, ry = rot_z([yaw])[0], rot_y([pitch])[0]
-                axes = (rz @ ry[:, 0], rz[:, 1], np.array([0.0, 0.0, 1.0]))  # flange frame
-                for pname, axis in zip(tool_rotation_parameters(name), axes):
-                    omega[rows, :, params.index(pname)] = flange_in_tracker[rows] @ axis
+                rotvec = np.array([params[k] for k in tool_rotation_parameters(name)])
+                turns = rotvec_left_jacobian(rotvec)  # columns: flange-frame rotations
+                for k, pname in enumerate(tool_rotation_parameters(name)):
+                    omega[rows, :, params.index(pname)] = flange_in_tracker[rows] @ turns[:, k]
         return frames, omega.reshape(n, 3, len(params))
 
     def target_offsets(self, params: ParameterVector) -> Array:

@@ -110,7 +110,7 @@ def test_simulated_bag_carries_every_probe_orientation_and_identifies_the_tool_f
         assert cal.parameters.free[k], name
         error = abs(cal.parameters[name] - truth[name])
         assert error < 5e-5 and error < 5 * cal.std[k], (name, error, cal.std[k])
-    assert "target_smr2_roll" not in cal.parameters  # a plain SMR has no frame
+    assert "target_smr2_rx" not in cal.parameters  # a plain SMR has no frame
     assert cal.orientation_residuals is not None
     assert np.sqrt(np.nanmean(cal.orientation_residuals**2)) < 1.25 * ORIENTATION_SIGMA
     assert cal.accuracy.absolute_rms_mm < 0.012  # the points' noise, ~9 um rms
@@ -173,7 +173,7 @@ def test_live_calibrator_with_a_further_target_and_poses_equals_the_bag(
 
     offline = calibrate(bag, ROBOT, "geometric")
     assert live.parameters.names == offline.parameters.names
-    assert "target_roll" in live.parameters and "target_smr2_x" in live.parameters
+    assert "target_rx" in live.parameters and "target_smr2_x" in live.parameters
     np.testing.assert_allclose(live.parameters.values, offline.parameters.values, atol=1e-12)
 
 

@@ -18,9 +18,10 @@ from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
 from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.frames import matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.messages import target_topic
-from robot_calib.model import KinematicModel, target_parameters, tool_rotation_parameters
+from robot_calib.model import KinematicModel, target_parameters
 from robot_calib.poses import PRIMARY_TARGET
 
 if TYPE_CHECKING:  # light at run time: reading a parameter file needs no scipy
@@ -80,7 +81,7 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
                     {
                         "six_dof": True,
                         "probe_rpy_deg": np.degrees(
-                            [cal.parameters[p] for p in tool_rotation_parameters(name)]
+                            matrix_to_rpy(cal.model.tool_rotations(cal.parameters)[k])
                         ).tolist(),
                     }
                     if name in cal.model.oriented
@@ -233,30 +234,22 @@ def outlier_lines(outliers: Sequence[Outlier]) -> list[str]:
     return [head] + [f"  {o.line()}" for o in outliers]
 
 
-GIMBAL_LOCK_DEG = 1.0  # pitch within this of +-90 deg: roll and yaw turn about one axis
-
-
 def probe_lines(cal: Calibration) -> list[str]:
-    """Each 6-DoF probe's frame in the flange frame as a quaternion (free of roll-pitch-
-    yaw's singularity), with a note when the pitch is at +-90 deg (gimbal lock: only roll
-    -/+ yaw is determined, the frame itself is)."""
+    """Each 6-DoF probe's frame in the flange frame for people: roll, pitch, yaw [deg]
+    (Rz Ry Rx) and the quaternion (the parameters themselves are a rotation vector)."""
     from scipy.spatial.transform import Rotation
 
     out = []
+    tools = cal.model.tool_rotations(cal.parameters)
     for name in cal.model.oriented:
-        roll, pitch, yaw = (cal.parameters[p] for p in tool_rotation_parameters(name))
-        quat = Rotation.from_euler("xyz", [roll, pitch, yaw]).as_quat()
+        tool = tools[cal.model.targets.index(name)]
         where = target_topic(name).replace("/point", "")
-        line = (
-            f"probe frame in the flange ({where}): quaternion x, y, z, w = "
-            f"{', '.join(f'{v:.6f}' for v in quat)}"
+        out.append(
+            f"probe frame in the flange ({where}): roll, pitch, yaw "
+            f"{', '.join(f'{v:.4f}' for v in np.degrees(matrix_to_rpy(tool)))} deg; "
+            "quaternion x, y, z, w "
+            f"{', '.join(f'{v:.6f}' for v in Rotation.from_matrix(tool).as_quat())}"
         )
-        if abs(abs(np.degrees(pitch)) - 90.0) < GIMBAL_LOCK_DEG:
-            line += (
-                f" (pitch {np.degrees(pitch):.3f} deg: roll and yaw turn about one axis, only "
-                "roll - yaw (or + yaw) is determined; the frame is)"
-            )
-        out.append(line)
     return out
 
 

@@ -101,8 +101,8 @@ def initial_tool_rotations(
         if not rows.any():
             continue
         tool = np.transpose(flange_in_tracker[rows], (0, 2, 1)) @ poses.rotation[rows]
-        mean = Rotation.from_matrix(tool).mean().as_matrix()
-        updates.update(zip(tool_rotation_parameters(name), matrix_to_rpy(mean)))
+        rotvec = Rotation.from_matrix(tool).mean().as_rotvec()  # |angle| <= pi
+        updates.update(zip(tool_rotation_parameters(name), map(float, rotvec)))
     return params.with_values(updates)
 
 

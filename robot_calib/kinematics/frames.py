@@ -56,6 +56,34 @@ def matrix_to_rpy(rotation: Array) -> tuple[float, float, float]:
     return roll, pitch, yaw
 
 
+def skew(v: Array) -> Array:
+    """The cross-product matrix [v]x (3, 3) of a vector v (3,): [v]x w = v x w."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def rotvec_to_matrix(rotvec: Array) -> Array:
+    """Rotation (3, 3) of a rotation vector (3,) [rad] (axis times angle; Rodrigues). Here,
+    not through scipy, because `predict` keeps its imports light."""
+    theta = float(np.linalg.norm(rotvec))
+    k = skew(np.asarray(rotvec, dtype=float))
+    if theta < 1e-12:
+        return np.eye(3) + k
+    return np.eye(3) + np.sin(theta) / theta * k + (1.0 - np.cos(theta)) / theta**2 * (k @ k)
+
+
+def rotvec_left_jacobian(rotvec: Array) -> Array:
+    """J (3, 3) with exp([r + dr]x) = exp([J dr]x) exp([r]x) to first order: column k is
+    the small rotation [rad] (frame of the rotated vectors) per unit change of r_k.
+    Regular for |r| < 2 pi: no gimbal lock, unlike roll-pitch-yaw."""
+    theta = float(np.linalg.norm(rotvec))
+    k = skew(np.asarray(rotvec, dtype=float))
+    if theta < 1e-8:
+        return np.eye(3) + 0.5 * k
+    a = (1.0 - np.cos(theta)) / theta**2
+    b = (theta - np.sin(theta)) / theta**3
+    return np.eye(3) + a * k + b * (k @ k)
+
+
 def homogeneous(rotation: Array, translation: Array) -> Array:
     """Stack rotations (..., 3, 3) and translations (..., 3) into (..., 4, 4) transforms."""
     shape = np.broadcast_shapes(rotation.shape[:-2], translation.shape[:-1])

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from scipy.spatial.transform import Rotation
 
 from robot_calib.effects import (
     Effect,
@@ -25,6 +26,7 @@ from robot_calib.effects import (
 )
 from robot_calib.errors import InputError, RobotCalibError, check_keys
 from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.frames import matrix_to_rpy, rpy_to_matrix
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel, target_parameters, tool_rotation_parameters
 from robot_calib.poses import PRIMARY_TARGET, TARGET_NAME
@@ -258,8 +260,9 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         probes = _six_dof(data.get("six_dof"), (PRIMARY_TARGET, *extra), source)
         model = model.with_targets((PRIMARY_TARGET, *extra), tuple(probes))
         truth = model.parameters((*xyz, *rpy), target, extra)
-        for name, angles in probes.items():
-            truth = truth.with_values(dict(zip(tool_rotation_parameters(name), angles)))
+        for name, (r, p, y) in probes.items():
+            rotvec = Rotation.from_matrix(rpy_to_matrix(r, p, y)).as_rotvec()
+            truth = truth.with_values(dict(zip(tool_rotation_parameters(name), rotvec)))
         geometry = data.get("geometry", "seed_table3_avg_2_6")
         if geometry == "seed_table3_avg_2_6":
             if robot.name != "kr5_sixx_r650":
@@ -328,7 +331,9 @@ def world_to_dict(world: World) -> dict[str, Any]:
     timing["max_joint_speed_deg_s"] = np.degrees(timing.pop("max_joint_speed_rad_s")).tolist()
     robot = world.model.robot
     probes = {
-        t or FIRST_TARGET_KEY: np.degrees([world.truth[k] for k in tool_rotation_parameters(t)])
+        t or FIRST_TARGET_KEY: np.degrees(
+            matrix_to_rpy(world.model.tool_rotations(world.truth)[world.model.targets.index(t)])
+        )
         for t in world.model.oriented
     }
     return {
