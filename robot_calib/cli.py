@@ -24,6 +24,7 @@ from robot_calib.kinematics.description import (
     available_robots,
     load_robot,
     with_joint_names,
+    with_payload,
 )
 from robot_calib.measurements import PAIR_TOLERANCE_S
 from robot_calib.pipeline import (
@@ -62,7 +63,24 @@ def _robot_table(robot: RobotDescription) -> str:
 def _robot(args: argparse.Namespace, name: str | None = None) -> RobotDescription:
     """--robot (or `name`) loaded, its joints renamed by --joint-names where given."""
     robot = load_robot(args.robot if name is None else name)
+    if getattr(args, "payload", None) is not None:
+        robot = with_payload(robot, *_payload(args.payload))
     return robot if args.joint_names is None else with_joint_names(robot, args.joint_names)
+
+
+def _payload(text: str) -> tuple[float, tuple[float, float, float]]:
+    """--payload KG[:X,Y,Z] -> (mass [kg], centre of mass in the flange frame [m])."""
+    mass, _, centre = text.partition(":")
+    try:
+        values = [float(v) for v in centre.split(",")] if centre else [0.0, 0.0, 0.0]
+        kg = float(mass)
+    except ValueError:
+        raise InputError(
+            f"--payload {text}: expected KG or KG:X,Y,Z (kg; m, flange frame)"
+        ) from None
+    if len(values) != 3:
+        raise InputError(f"--payload {text}: the centre of mass takes three values X,Y,Z [m]")
+    return kg, (values[0], values[1], values[2])
 
 
 def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: float) -> None:
@@ -556,6 +574,16 @@ def _add_pair_tolerance(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_payload(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--payload",
+        metavar="KG[:X,Y,Z]",
+        help="a payload on the flange during the measurements: mass [kg] and centre of mass "
+        "in the flange frame [m] (default: none), e.g. 3:0,0,0.08; gravity compliance then "
+        "includes it; PARAMS.json keeps it",
+    )
+
+
 def _add_joint_names(
     p: argparse.ArgumentParser, what: str = "the bags' JointState names of joints 1..J"
 ) -> None:
@@ -649,6 +677,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_pair_tolerance(cal)
     _add_joint_names(cal)
+    _add_payload(cal)
     cal.add_argument("-o", "--output", required=True, help="PARAMS.json to write")
     _add_force(cal)
 
@@ -657,6 +686,7 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("--holdout", nargs="*", metavar="BAG", help="hold-out bag(s): scored only")
     _add_pair_tolerance(diag)
     _add_joint_names(diag)
+    _add_payload(diag)
     diag.add_argument(
         "--tracker-accuracy",
         type=float,

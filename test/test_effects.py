@@ -163,7 +163,8 @@ def test_registry_order_and_vocabulary_are_the_contracts() -> None:
     and never renamed; simulator-only effects are not in it; model names print and parse
     through the registry."""
     contract = {"eccentricity", "backlash", "compliance", "encoder_scale", "thermal_drift"}
-    assert set(vocabulary()) == contract | {"transmission_error"}
+    added = {"transmission_error", "gravity_compliance", "thermal_warmup"}  # issue 14
+    assert set(vocabulary()) == contract | added
     assert "joint_ripple" not in vocabulary()
     base, effects = parse_model("geometric+eccentricity:6:order=3+thermal_drift", ROBOT)
     assert base == "geometric" and [e.spec for e in effects] == [

@@ -144,6 +144,12 @@ class Effect(ABC):
         mine = set(self.parameter_names(robot))
         return type(other) is type(self) and set(other.parameter_names(robot)) <= mine
 
+    def fit_start(self, robot: RobotDescription) -> dict[str, float]:
+        """Values to start a fit from where the nominal ones would stall it (default none):
+        an effect nonlinear in its parameters whose other derivatives vanish at zero
+        amplitude (thermal_warmup's time constant) starts at a small amplitude instead."""
+        return {}
+
     # -- simulator ------------------------------------------------------------------------
     @abstractmethod
     def default_values(self, robot: RobotDescription) -> dict[str, float]:

@@ -463,9 +463,12 @@ def _calibrate_once(
 
 
 def _seeded(model: KinematicModel, values: ParameterVector) -> ParameterVector:
-    """`model`'s parameters (fresh free flags) with the values that `values` also has."""
+    """`model`'s parameters (fresh free flags) with the values that `values` also has; the
+    effects' own fit starts (`Effect.fit_start`) for the parameters it has not."""
     fresh = model.parameters()
-    return fresh.with_values({k: v for k, v in zip(values.names, values.values) if k in fresh})
+    starts = {k: v for e in model.effects for k, v in e.fit_start(model.robot).items()}
+    known = {k: v for k, v in zip(values.names, values.values) if k in fresh}
+    return fresh.with_values({**starts, **known})
 
 
 def _objective(name: str, cpa: CPAResult | None) -> Objective:

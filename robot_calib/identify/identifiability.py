@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from robot_calib.kinematics.frames import Array
-from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.kinematics.parameters import Parameter, ParameterVector
 
 #: A unit column whose part outside the accepted columns is below this is unidentifiable:
 #: 1e-6 is far below what tracker noise can resolve over a robot's reach.
@@ -183,7 +183,11 @@ def describe(
 
 #: A free parameter whose 1-sigma from the data would exceed this (by unit) is not
 #: identified in any useful sense: 1 mm for a length, 0.01 rad (0.6 deg) for an angle.
-STD_BOUNDS = {"m": 1e-3, "rad": 1e-2, "1": 1e-2, "rad/(N m)": 1e-3, "1/s": 1e-4}
+STD_BOUNDS = {"m": 1e-3, "rad": 1e-2, "1": 1e-2, "rad/(N m)": 1e-3, "1/s": 1e-4, "s": 1e4,
+              "rad/m": 1e-4}  # fmt: skip
+#: tighter bounds for the parameters of one effect (`Parameter.group`) whose values are
+#: small in their unit: gravity_compliance's lumped moments k g m c are a few 1e-4 rad
+GROUP_STD_BOUNDS = {"gravity_compliance": 5e-5}
 
 
 def covariance(jac_free: Array, residuals: Array, rows: int | None = None) -> Array:
@@ -209,6 +213,12 @@ def covariance(jac_free: Array, residuals: Array, rows: int | None = None) -> Ar
     keep = s > s[0] * 1e-12
     scaled = vt[keep].T / s[keep]
     return sigma2 * scaled @ scaled.T
+
+
+def _std_bound(p: Parameter) -> float:
+    """The largest 1-sigma parameter `p` may have and stay free (its group's, else its
+    unit's, else none)."""
+    return GROUP_STD_BOUNDS.get(p.group, STD_BOUNDS.get(p.unit, np.inf))
 
 
 def fix_poorly_determined(
@@ -250,7 +260,7 @@ def fix_poorly_determined(
         step = np.linalg.lstsq(jac, -res, rcond=1e-12)[0]
         cov = covariance(jac, res + jac @ step, rows=m)
         std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        bounds = np.array([STD_BOUNDS.get(params.parameters[i].unit, np.inf) for i in free])
+        bounds = np.array([_std_bound(params.parameters[i]) for i in free])
         ratio = std / bounds
         worst = int(np.argmax(ratio))
         if ratio[worst] <= 1.0:

@@ -17,7 +17,7 @@ from robot_calib.accuracy import orientation_accuracy
 from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.description import load_robot, with_payload
 from robot_calib.kinematics.frames import matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.messages import target_topic
@@ -30,7 +30,7 @@ if TYPE_CHECKING:  # light at run time: reading a parameter file needs no scipy
     from robot_calib.measurements import Recording
 
 FORMAT = "robot_calib.params/1"
-SI_UNITS = ("m", "rad", "1", "1/s", "rad/(N m)")  # the units parameters are stored in
+SI_UNITS = ("m", "rad", "1", "1/s", "s", "rad/m", "rad/(N m)")  # units parameters are stored in
 
 
 def human_value(name: str, unit: str, value: float) -> tuple[float, str]:
@@ -53,6 +53,11 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
         "model": cal.name,
         "robot": robot.reference(),
         "robot_fingerprint": robot.fingerprint(),
+        **(
+            {"payload": {"mass_kg": robot.payload_kg, "com_m": list(robot.payload_com_m)}}
+            if robot.payload_kg
+            else {}
+        ),
         "effects": [e.to_dict() for e in cal.model.effects],
         "parameters": records,
         "fixed": [
@@ -151,6 +156,9 @@ def params_from_dict(
     """The forward model and parameters of a PARAMS.json document; errors name `where`."""
     try:
         robot = load_robot(doc["robot"])
+        payload = doc.get("payload")
+        if payload is not None:  # the calibration's payload (--payload), masses and all
+            robot = with_payload(robot, float(payload["mass_kg"]), payload["com_m"])
         stored = doc.get("robot_fingerprint")
         if stored is not None and stored not in (robot.fingerprint(), robot.fingerprint(True)):
             raise InputError(

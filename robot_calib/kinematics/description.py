@@ -45,6 +45,9 @@ class RobotDescription:
     link_com : shape (J, 3) [m], its centre of mass in DH frame j (approximate)
     reading_matrix : shape (J, J) or None — M of the joint variables M q + offset (None: M = I)
     reading_offset : shape (J,) [rad] or None — offset of the joint variables (None: 0)
+    payload_kg, payload_com_m : a payload on the flange [kg] and its centre of mass in the
+      flange frame (DH frame J) [m], already included in the last link's mass and centre
+      of mass (`with_payload`); 0 and the origin without one
     """
 
     name: str
@@ -62,6 +65,8 @@ class RobotDescription:
     path: str = ""  # absolute path of the YAML file it was loaded from ('' if built in code)
     reading_matrix: Array | None = None
     reading_offset: Array | None = None
+    payload_kg: float = 0.0
+    payload_com_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def n_joints(self) -> int:
@@ -124,6 +129,35 @@ class RobotDescription:
 def available_robots() -> list[str]:
     """Names of the built-in descriptions."""
     return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))
+
+
+MAX_PAYLOAD_KG = 5000.0  # beyond any industrial robot's rated payload
+
+
+def with_payload(
+    robot: RobotDescription, mass_kg: float, com_m: Sequence[float] = (0.0, 0.0, 0.0)
+) -> RobotDescription:
+    """`robot` carrying a payload of `mass_kg` [kg] with its centre of mass at `com_m` (3,)
+    in the flange frame (DH frame J) [m]: the last link's mass and centre of mass become
+    those of link and payload together (what gravity acts on, `effects.compliance`).
+    Replaces a payload the description already carries. RobotDescriptionError unless
+    0 <= mass_kg <= MAX_PAYLOAD_KG and the centre is finite and within 5 m."""
+    com = np.asarray(com_m, dtype=float)
+    if not (np.isfinite(mass_kg) and 0.0 <= mass_kg <= MAX_PAYLOAD_KG):
+        raise RobotDescriptionError(f"payload {mass_kg} kg: need 0 .. {MAX_PAYLOAD_KG:g} kg")
+    if com.shape != (3,) or not np.all(np.isfinite(com)) or np.linalg.norm(com) > 5.0:
+        raise RobotDescriptionError(
+            f"payload centre of mass {com.tolist()} m: three finite coordinates in the "
+            "flange frame, within 5 m"
+        )
+    mass, centre = robot.link_mass.copy(), robot.link_com.copy()
+    old = np.asarray(robot.payload_com_m)
+    link = mass[-1] - robot.payload_kg  # the bare last link
+    bare = centre[-1] if link <= 0 else (mass[-1] * centre[-1] - robot.payload_kg * old) / link
+    mass[-1] = link + mass_kg
+    centre[-1] = bare if mass[-1] <= 0 else (link * bare + mass_kg * com) / mass[-1]
+    return replace(robot, link_mass=mass, link_com=centre, payload_kg=float(mass_kg),
+                   payload_com_m=(float(com[0]), float(com[1]), float(com[2])))  # fmt: skip
 
 
 def with_joint_names(robot: RobotDescription, names: Sequence[str] | str) -> RobotDescription:

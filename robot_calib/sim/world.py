@@ -25,7 +25,7 @@ from robot_calib.effects import (
     parse_effect,
 )
 from robot_calib.errors import InputError, RobotCalibError, check_keys
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.description import load_robot, with_payload
 from robot_calib.kinematics.frames import matrix_to_rpy, rpy_to_matrix
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel, target_parameters, tool_rotation_parameters
@@ -107,8 +107,9 @@ class World:
 
 TOP_KEYS = (
     "robot", "seed", "geometry", "deviations", "base2tracker", "target_in_flange_m", "targets",
-    "effects", "truth", "noise", "tracker", "timing", "six_dof",
+    "effects", "truth", "noise", "tracker", "timing", "six_dof", "payload",
 )  # fmt: skip
+PAYLOAD_KEYS = ("mass_kg", "com_m")
 FIRST_TARGET_KEY = "first"  # the first target's key in `six_dof` (its name is '')
 FRAME_KEYS = ("xyz_m", "rpy_deg")
 EFFECT_KEYS = ("name", "joints", "values")  # plus the effect's own options (e.g. order)
@@ -239,6 +240,11 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
     check_keys(data, TOP_KEYS, source)
     try:
         robot = load_robot(data.get("robot", "kr5_sixx_r650"))
+        payload = _mapping(data, "payload", source)
+        if payload:  # the true robot carries it (gravity compliance acts on it)
+            check_keys(payload, PAYLOAD_KEYS, f"{source}: payload")
+            com = _triple(payload.get("com_m", [0.0, 0.0, 0.0]), f"{source}: payload.com_m")
+            robot = with_payload(robot, float(payload.get("mass_kg", 0.0)), com)
         effects = []
         effect_values: dict[str, float] = {}
         for spec in data.get("effects", []) or []:
@@ -336,8 +342,10 @@ def world_to_dict(world: World) -> dict[str, Any]:
         )
         for t in world.model.oriented
     }
+    payload = {"mass_kg": robot.payload_kg, "com_m": list(robot.payload_com_m)}
     return {
         **({"six_dof": {k: v.tolist() for k, v in probes.items()}} if probes else {}),
+        **({"payload": payload} if robot.payload_kg else {}),
         "robot": robot.reference(),
         "seed": world.seed,
         "geometry": "nominal",
