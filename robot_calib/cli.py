@@ -215,6 +215,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     from robot_calib.bag.csv_import import (
         PRESETS,
         CsvFormat,
+        counted,
         read_measurement_csv,
         target_label,
         with_overrides,
@@ -222,9 +223,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     )
 
     preset = PRESETS.get(args.preset or "")
-    robot_name = args.robot
-    if preset is not None and preset.robot and args.robot == DEFAULT_ROBOT:
-        robot_name = preset.robot  # the preset's robot unless --robot says otherwise
+    robot_name = args.robot  # else the preset's robot, else the default robot
+    if robot_name is None:
+        robot_name = preset.robot if preset is not None and preset.robot else DEFAULT_ROBOT
     robot = _robot(args, robot_name)
     output = output_path(args.output, "the bag", args.csv, args.force)
     if args.preset:
@@ -265,7 +266,8 @@ def cmd_import(args: argparse.Namespace) -> int:
             _log(warning)
         for line, why in table.bad_rows:
             _log(f"warning: {csv_path}:{line}: {why}: row skipped")
-        print(f"{csv_path}: {len(table.q)} rows imported, {len(table.bad_rows)} bad rows skipped")
+        print(f"{csv_path}: {counted(len(table.q), 'row')} imported, "
+              f"{counted(len(table.bad_rows), 'bad row')} skipped")  # fmt: skip
         for name, (rotation, sigma) in table.six_dof.items():
             print(f"  {target_label(name)}: {np.isfinite(rotation).all(axis=(1, 2)).sum()} "
                   f"orientations, {np.isfinite(sigma).any(axis=1).sum()} rows with stated "
@@ -373,11 +375,12 @@ def _calibration(
     args: argparse.Namespace,
 ) -> tuple[KinematicModel, ParameterVector, dict[str, Any]]:
     """The model, parameters and document of args.params (PARAMS.json), checked (finite SI
-    values) and for the robot --robot names, if it names one."""
+    values) and for the robot --robot names, if it names one (its default is None: the
+    calibration's robot, so that an explicit --robot of the default robot is checked too)."""
     from robot_calib.identify.params_file import load_params
 
     model, params, doc = load_params(args.params)  # checked: finite SI values, robot unchanged
-    if args.robot != DEFAULT_ROBOT and load_robot(args.robot).name != model.robot.name:
+    if args.robot is not None and load_robot(args.robot).name != model.robot.name:
         raise InputError(
             f"{args.params}: identified for robot {model.robot.name}, not --robot {args.robot}"
         )
@@ -394,7 +397,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
     if args.target not in model.targets:
         known = ", ".join(repr(t) for t in model.targets)
         raise InputError(f"{args.params}: no target {args.target!r} (its targets: {known})")
-    poses = read_joints_csv(args.joints, model.robot.n_joints)
+    poses = read_joints_csv(args.joints, model.robot.n_joints, model.robot.limits)
     index = np.full(len(poses), model.targets.index(args.target))
     poses = dataclasses.replace(poses, target=index)
     output = output_path(args.output, "POINTS.csv", [args.params, args.joints], args.force)
@@ -480,15 +483,14 @@ def cmd_split(args: argparse.Namespace) -> int:
 def cmd_score(args: argparse.Namespace) -> int:
     """A calibration scored on bags it was not fitted on (absolute and seed criterion)."""
     from robot_calib import pipeline
+    from robot_calib.identify.params_file import in_sample_accuracy
     from robot_calib.score import score, write_points_table
 
     model, params, doc = _calibration(args)
-    fitted = [Path(str(p)) for p in doc.get("recordings", [])]  # as given then (maybe relative)
-    for bag in args.bags:
-        if any(Path(bag).resolve() == f.resolve() or Path(bag).name == f.name for f in fitted):
-            print(f"warning: {bag} looks like a bag this calibration was fitted on (same "
-                  "path or name): its score would be in-sample, not held out",
-                  file=sys.stderr)  # fmt: skip
+    in_sample = in_sample_accuracy(doc, args.params)
+    fitted = doc.get("recordings", [])
+    if not isinstance(fitted, list) or not all(isinstance(f, str) for f in fitted):
+        raise InputError(f"{args.params}: 'recordings' must be a list of bag paths")
     robot = model.robot
     if args.joint_names is not None:
         robot = with_joint_names(robot, args.joint_names)
@@ -497,7 +499,9 @@ def cmd_score(args: argparse.Namespace) -> int:
         table = output_path(args.points_csv, "the per-point table",
                             [args.params, *args.bags], args.force)  # fmt: skip
     recording = pipeline.read_bags(args.bags, robot, args.pair_tolerance, _log)
-    result = score(model, params, recording)
+    result = score(model, params, recording, in_sample, fitted)
+    for warning in result.warnings:  # also in stdout and the per-point table
+        _log(warning)
     for line in result.lines(", ".join(args.bags)):
         print(line)
     if table is not None:
@@ -550,6 +554,15 @@ def _tolerance(text: str) -> float:
     return value
 
 
+def _separator(text: str) -> str:
+    """An argparse type: a CSV field separator, one character; 'tab' or '\\t' for a tab."""
+    if text in ("tab", "\\t"):
+        return "\t"
+    if len(text) != 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: one character (tab: a tab)")
+    return text
+
+
 OVERWRITE_POLICY = (
     "Files: an existing output is never overwritten unless --force (then it is replaced "
     "whole: written under a temporary name and renamed); an input is never overwritten, "
@@ -593,6 +606,10 @@ def _add_joint_names(
         help=f"{what}, in joint order, where they are not the robot's own "
         "(e.g. j1,j2,j3,j4,j5,j6)",
     )
+
+
+# predict and score: the robot is PARAMS.json's; --robot, when given, must name it
+CALIBRATION_ROBOT = "PARAMS.json's robot; when given, it must be that robot"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -704,28 +721,45 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_force(diag)
 
-    imp = add("import", cmd_import, "measurement CSV(s) -> a bag of the contract")
+    imp = add("import", cmd_import, "measurement CSV(s) -> a bag of the contract",
+              robot=f"{DEFAULT_ROBOT}; with --preset, the preset's robot")  # fmt: skip
     imp.add_argument("csv", nargs="+", metavar="CSV", help="CSV file(s), rows in visiting order")
-    imp.add_argument("--preset", help="a known export format: ur5_jacobi2025")
-    imp.add_argument("--joints", help="joint columns, names or 0-based indices: q1,q2,...")
-    imp.add_argument("--point", help="measured point columns x,y,z")
-    imp.add_argument("--dif", help="difference columns dx,dy,dz: point = point + sign * dif")
-    imp.add_argument("--dif-sign", type=float, choices=(-1.0, 1.0), help="sign of --dif (+1/-1)")
-    imp.add_argument("--time", help="time column [s] (default: poses 1 s apart)")
+    imp.add_argument(
+        "--preset",
+        help="a known export format: ur5_jacobi2025 (its columns, units and robot; options "
+        "given override them) (default: none; then --joints and --point)",
+    )
+    imp.add_argument(
+        "--joints",
+        help="joint columns, names or 0-based indices: q1,q2,... (default: the preset's)",
+    )
+    imp.add_argument("--point", help="measured point columns x,y,z (default: the preset's)")
+    imp.add_argument(
+        "--dif",
+        help="difference columns dx,dy,dz: point = point + sign * dif (default: none, or the "
+        "preset's)",
+    )
+    imp.add_argument(
+        "--dif-sign", type=float, choices=(-1.0, 1.0),
+        help="sign of --dif (+1/-1) (default +1; ur5_jacobi2025: -1)",
+    )  # fmt: skip
+    imp.add_argument("--time", help="time column [s] (default: none; poses 1 s apart)")
     imp.add_argument(
         "--target", action="append", metavar="NAME:X,Y,Z",
         help="a further target (SMR) measured at each pose: its name and x,y,z columns, onto "
-        "/laser_tracker/NAME/point (repeat per target; an empty cell: not measured there)",
+        "/laser_tracker/NAME/point (repeat per target; an empty cell: not measured there) "
+        "(default: none)",
     )  # fmt: skip
     imp.add_argument(
         "--temperature",
-        help="a temperature column [deg C]: written to /temperature (sensor_msgs/Temperature)",
+        help="a temperature column [deg C]: written to /temperature (sensor_msgs/Temperature) "
+        "(default: none)",
     )
     imp.add_argument(
         "--orientation", action="append", metavar="[NAME:]QX,QY,QZ,QW",
         help="a 6-DoF probe's orientation as unit quaternion columns in x, y, z, w order, onto "
         "/laser_tracker/(NAME/)pose; without NAME the first target, else the --target NAME "
-        "(repeat per target; empty cells: orientation not measured at that pose)",
+        "(repeat per target; empty cells: orientation not measured at that pose) (default: none)",
     )  # fmt: skip
     imp.add_argument(
         "--orientation-rpy", action="append", metavar="[NAME:]R,P,Y",
@@ -740,7 +774,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--sigma", action="append", metavar="[NAME:]SP[,SR]",
         help="the tracker's stated standard deviations: position column (per coordinate, "
         "--sigma-unit) and optionally orientation column (per axis, --sigma-angle-unit) of "
-        "the first target, or of target NAME (repeat per target; an empty cell: not stated)",
+        "the first target, or of target NAME (repeat per target; an empty cell: not stated) "
+        "(default: none)",
     )  # fmt: skip
     imp.add_argument(
         "--sigma-unit", choices=("mm", "m", "um"),
@@ -751,18 +786,39 @@ def build_parser() -> argparse.ArgumentParser:
         help="unit of the orientation standard deviations (default: --orientation-unit, "
         "else --angle-unit)",
     )  # fmt: skip
-    imp.add_argument("--sep", help="field separator (default ',')")
-    imp.add_argument("--decimal-comma", action="store_true", help="numbers written 1,5")
-    imp.add_argument("--angle-unit", choices=("deg", "rad"), help="joint angle unit")
-    imp.add_argument("--length-unit", choices=("mm", "m"), help="point unit")
-    imp.add_argument("--no-header", action="store_true", help="the CSV has no header row")
+    imp.add_argument(
+        "--sep", type=_separator,
+        help="field separator, one character; tab: a tab (default ',')",
+    )  # fmt: skip
+    imp.add_argument(
+        "--decimal-comma", action="store_true",
+        help="numbers written 1,5 (default: off, numbers written 1.5)",
+    )  # fmt: skip
+    imp.add_argument(
+        "--angle-unit", choices=("deg", "rad"),
+        help="joint angle unit (default rad; ur5_jacobi2025: deg)",
+    )  # fmt: skip
+    imp.add_argument(
+        "--length-unit", choices=("mm", "m"),
+        help="unit of the point, --dif and --target columns (default m; ur5_jacobi2025: mm)",
+    )  # fmt: skip
+    imp.add_argument(
+        "--no-header", action="store_true",
+        help="the CSV has no header row (default: the first row is the header)",
+    )  # fmt: skip
     _add_joint_names(imp, "JointState names to write for joints 1..J")
     imp.add_argument("-o", "--output", required=True, help="bag to write (BAG.mcap)")
     _add_force(imp)
 
-    pred = add("predict", cmd_predict, "target positions for joint angles (JOINTS.csv)")
+    pred = add("predict", cmd_predict, "target positions for joint angles (JOINTS.csv)",
+               robot=CALIBRATION_ROBOT)  # fmt: skip
     pred.add_argument("params", metavar="PARAMS.json")
-    pred.add_argument("--joints", required=True, help="JOINTS.csv: q1..q6 [rad] (+t, dir1..6)")
+    pred.add_argument(
+        "--joints", required=True,
+        help="JOINTS.csv, header q1..qJ [rad]: the readings of the robot's J joints, in rad "
+        "(optional columns t [s] and dir1..dirJ: approach directions +1/-1); a reading beyond "
+        "any reading of its joint in rad (degrees?) is refused",
+    )  # fmt: skip
     pred.add_argument("-o", "--output", required=True, help="POINTS.csv to write (x,y,z m)")
     pred.add_argument(
         "--target", metavar="NAME",
@@ -787,7 +843,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_pair_tolerance(spl)
     _add_force(spl)
 
-    sco = add("score", cmd_score, "score a calibration on bags it was not fitted on")
+    sco = add("score", cmd_score, "score a calibration on bags it was not fitted on",
+              robot=CALIBRATION_ROBOT)  # fmt: skip
     sco.add_argument("params", metavar="PARAMS.json")
     sco.add_argument("bags", nargs="+", metavar="BAG", help="bag(s) to score on (.mcap)")
     sco.add_argument("--points-csv", help="also write a per-point table (CSV, m)")

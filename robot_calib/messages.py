@@ -131,13 +131,23 @@ def joint_positions(
     names = list(msg.name)
     missing = [n for n in joint_names if n not in names]
     if missing:
+        from robot_calib.kinematics.description import robots_with_joint_names
+
         what = (
             f"are not the robot's joints {list(joint_names)}"
             if len(missing) == len(joint_names)
             else f"lack the robot's joints {missing} (robot: {list(joint_names)})"
         )
+        robots = robots_with_joint_names(names)  # a wrong --robot is likelier than renaming
+        other = (
+            f"they are the joints of built-in robot{'s' if len(robots) > 1 else ''} "
+            f"{', '.join(robots)}: give --robot {robots[0]} ("
+            f"{'or another of them; ' if len(robots) > 1 else ''}node parameter robot), or "
+            if robots
+            else ""
+        )
         raise InputError(
-            f"{where}: JointState names {names} {what}; map them with --joint-names "
+            f"{where}: JointState names {names} {what}; {other}map them with --joint-names "
             f"NAME1,...,NAME{len(joint_names)} (node parameter joint_names): the message's "
             f"names of joints 1..{len(joint_names)} in order"
         )

@@ -20,6 +20,28 @@ from robot_calib.kinematics.frames import Array, IntArray
 JOINT_CHANGE_TOLERANCE = 1e-4  # rad, contract default
 PRIMARY_TARGET = ""  # name of the contract's single target (/laser_tracker/point)
 TARGET_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")  # a further target's name: a topic token
+#: a reading in rad beyond this factor x its joint's largest |limit| (and beyond 2 pi) is
+#: no reading of that joint: it looks like degrees
+REACH_FACTOR = 1.5
+
+
+def beyond_reach(q: Array, limits: Array | None = None) -> tuple[NDArray[np.bool_], Array]:
+    """Which readings look like degrees: beyond any reading in rad of their joint.
+
+    q : shape (n, J), joint readings read as rad
+    limits : shape (J, 2), the robot's joint limits [rad] (None, or another J: 2 pi only)
+
+    Returns
+    -------
+    beyond : shape (n, J) bool, |q| beyond the reach of its joint
+    reach : shape (J,) [rad], 2 pi, or REACH_FACTOR x the joint's largest |limit| where
+        that is larger (a Yaskawa GP25's T axis turns +-455 deg)
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    reach = np.full(q.shape[1], 2 * np.pi)
+    if limits is not None and len(limits) == q.shape[1]:
+        reach = np.maximum(reach, REACH_FACTOR * np.abs(limits).max(axis=1))
+    return np.abs(q) > reach, reach
 
 
 def next_direction(

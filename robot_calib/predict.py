@@ -1,7 +1,9 @@
 """`robot-calib predict`: target positions for given joint angles (CONTRACT.md section 2).
 
 JOINTS.csv: header q1..qJ [rad], optional leading column t [s] and optional dir1..dirJ (+1/-1);
-without dir columns the directions follow the row order, without t the time is 0.
+without dir columns the directions follow the row order, without t the time is 0. A reading
+beyond any reading of its joint in rad (degrees, most likely; `poses.beyond_reach`, the
+check `import` makes) is refused, naming its line and column.
 POINTS.csv: header x,y,z [m], one row per input row, in the laser_tracker frame.
 """
 
@@ -17,11 +19,13 @@ import numpy as np
 from robot_calib.atomic import write_text_atomic
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
-from robot_calib.poses import Poses
+from robot_calib.poses import Poses, beyond_reach
 
 
-def read_joints_csv(path: str | Path, n_joints: int) -> Poses:
-    """Poses of a JOINTS.csv; a bad header or row raises InputError naming file and line."""
+def read_joints_csv(path: str | Path, n_joints: int, limits: Array | None = None) -> Poses:
+    """Poses of a JOINTS.csv; a bad header or row raises InputError naming file and line,
+    and a reading beyond any reading of its joint in rad (`poses.beyond_reach` with the
+    robot's `limits` (J, 2) [rad]: degrees, most likely) names its line and column too."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such joints file")
@@ -46,7 +50,7 @@ def read_joints_csv(path: str | Path, n_joints: int) -> Poses:
     has_dir = all(c in header for c in dir_cols)
     if not has_dir and any(c in header for c in dir_cols):
         raise InputError(f"{path}: give all of {dir_cols} or none")
-    values = []
+    values, lines = [], []
     for line, row in enumerate(rows[1:], start=2):
         if not row or all(not c.strip() for c in row):
             continue
@@ -56,14 +60,23 @@ def read_joints_csv(path: str | Path, n_joints: int) -> Poses:
             values.append([float(c) for c in row])
         except ValueError:
             raise InputError(f"{path}:{line}: not a number in {row}") from None
+        lines.append(line)
     if not values:
         raise InputError(f"{path}: no poses")
     table = np.array(values)
     if not np.all(np.isfinite(table)):
-        bad = int(np.flatnonzero(~np.isfinite(table).all(axis=1))[0]) + 2
+        bad = lines[int(np.flatnonzero(~np.isfinite(table).all(axis=1))[0])]
         raise InputError(f"{path}:{bad}: value not finite")
     col = {name: k for k, name in enumerate(header)}
     q = table[:, [col[c] for c in q_cols]]
+    beyond, reach = beyond_reach(q, limits)
+    if beyond.any():
+        k, j = (int(i) for i in np.argwhere(beyond)[0])
+        raise InputError(
+            f"{path}:{lines[k]}: column {q_cols[j]} (field {col[q_cols[j]] + 1}) = "
+            f"{q[k, j]:g} is beyond any reading of joint {j + 1} in rad (|q| <= "
+            f"{reach[j]:.2f}): degrees? JOINTS.csv takes rad"
+        )
     direction = table[:, [col[c] for c in dir_cols]] if has_dir else None
     time = table[:, col["t"]] if "t" in col else None
     if direction is not None and not np.all(np.abs(direction) == 1.0):

@@ -1,12 +1,14 @@
 """`robot-calib score`: how well a calibration (PARAMS.json) predicts measurements it was
 not fitted on: absolute errors in the tracker frame (the tracker has not moved since the
 calibration, CONTRACT.md section 1) and the seed's frame-free pairwise criterion, with a
-per-point table for plots."""
+per-point table for plots. A score far above the calibration's own in-sample residual, and
+orientations that one side has and the other cannot use, are said in warnings."""
 
 from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +24,12 @@ from robot_calib.measurements import Recording
 from robot_calib.messages import target_topic
 from robot_calib.model import KinematicModel
 
+#: a held-out rms this many times the calibration's in-sample rms, and above
+#: IMPLAUSIBLE_MM, is no generalisation gap: the calibration does not describe these data
+IMPLAUSIBLE_FACTOR = 10.0
+IMPLAUSIBLE_MM = 1.0
+IMPLAUSIBLE_HINT = "wrong robot, wrong bag, or the tracker moved since the calibration?"
+
 
 @dataclass(frozen=True)
 class Score:
@@ -36,9 +44,12 @@ class Score:
     # measured orientation [rad], NaN where none; their figures (None: none)
     orientation_residuals: Array | None = None
     orientation: OrientationAccuracy | None = None
+    # 'warning: ...' lines (`score_warnings`), for every output: stdout, stderr, the table
+    warnings: tuple[str, ...] = ()
 
     def lines(self, where: str) -> list[str]:
-        """Human lines: absolute mean / rms / max and the seed criterion, in mm."""
+        """Human lines: absolute mean / rms / max and the seed criterion, in mm, the
+        orientation figures, then the warnings."""
         acc = self.accuracy
         out = [
             f"{where}: {acc.n_points} points, absolute error mean {acc.absolute_mean_mm:.4f} / "
@@ -48,37 +59,100 @@ class Score:
         ]
         if self.orientation is not None:
             out.append(f"{where}: {self.orientation.line()}")
-        if self.n_suspect:
-            out.append(
-                f"warning: {self.n_suspect} point(s) beyond {OUTLIER_K:g} robust sigmas of "
-                "the others: tracker blunders, or the model does not hold there"
-            )
-        return out
+        return out + list(self.warnings)
 
 
-def score(model: KinematicModel, params: ParameterVector, recording: Recording) -> Score:
+def score(
+    model: KinematicModel,
+    params: ParameterVector,
+    recording: Recording,
+    in_sample: Accuracy | None = None,
+    fitted: Sequence[str | Path] = (),
+) -> Score:
     """The calibration `model` at `params` scored on every measurement of `recording`
-    (of the model's targets; InputError naming a target the model has not identified)."""
+    (of the model's targets; InputError naming a target the model has not identified).
+    in_sample, fitted: the calibration's own figures and recordings (PARAMS.json
+    `residuals`, `recordings`), to flag a score far above them, or of a bag it was fitted
+    on (`score_warnings`)."""
     recording = recording.with_targets(model.targets)
     predicted = model.target_points(params, recording.poses)
     residuals = predicted - recording.points
     n_suspect = int(outlier_mask(residuals, robust_sigma(residuals)).sum())
     rotation = orientation_residuals(model, params, recording.poses)
+    figures = accuracy(recording.points, predicted)
+    warnings = score_warnings(figures, in_sample, fitted, model, recording)
+    if n_suspect:
+        warnings.append(
+            f"warning: {n_suspect} point(s) beyond {OUTLIER_K:g} robust sigmas of the "
+            "others: tracker blunders, or the model does not hold there"
+        )
     return Score(
-        accuracy(recording.points, predicted),
+        figures,
         residuals,
         n_suspect,
         rotation,
         None if rotation is None else orientation_accuracy(rotation),
+        tuple(warnings),
     )
+
+
+def score_warnings(
+    held_out: Accuracy,
+    in_sample: Accuracy | None,
+    fitted: Sequence[str | Path],
+    model: KinematicModel,
+    recording: Recording,
+) -> list[str]:
+    """'warning: ...' lines for a score that cannot be taken at face value: a bag among the
+    `fitted` recordings (same path or name: the score is in-sample); an absolute rms above
+    IMPLAUSIBLE_FACTOR x the `in_sample` rms and above IMPLAUSIBLE_MM (the calibration does
+    not describe these data); 6-DoF orientations that the recording has and the model does
+    not use, or the model expects and the recording lacks. `recording` indexed by the
+    model's targets."""
+    out = []
+    known = [Path(str(f)) for f in fitted]  # as given then (maybe relative)
+    for bag in map(Path, recording.sources):
+        if any(bag.resolve() == f.resolve() or bag.name == f.name for f in known):
+            out.append(f"warning: {bag} looks like a bag this calibration was fitted on (same "
+                       "path or name): its score would be in-sample, not held out")  # fmt: skip
+    where = ", ".join(recording.sources)
+    if in_sample is not None:
+        rms, fitted_rms = held_out.absolute_rms_mm, in_sample.absolute_rms_mm
+        if rms > IMPLAUSIBLE_MM and rms > IMPLAUSIBLE_FACTOR * fitted_rms:
+            times = f"{rms / fitted_rms:.0f} x" if fitted_rms > 0 else "far above"
+            out.append(
+                f"warning: {where}: absolute error rms {rms:.4f} mm is {times} the "
+                f"calibration's in-sample rms {fitted_rms:.4f} mm: implausible for held-out "
+                f"data: {IMPLAUSIBLE_HINT}"
+            )
+    measured = {recording.target_names[int(k)] for k in np.unique(recording.poses.target_index)}
+    oriented = recording.oriented_targets
+    unused = [target_topic(t) for t in oriented if t not in model.oriented]
+    if unused:
+        out.append(
+            f"warning: {where}: 6-DoF orientations at {', '.join(unused)}, but the "
+            "calibration has no probe there (its targets lack six_dof: true): the "
+            "orientations are not scored, only the points"
+        )
+    lacking = [target_topic(t) for t in model.oriented if t in measured and t not in oriented]
+    if lacking:
+        out.append(
+            f"warning: {where}: no 6-DoF orientations at {', '.join(lacking)}, where the "
+            "calibration has a probe (six_dof: true): its orientation is not scored, only "
+            "the points"
+        )
+    return out
 
 
 def write_points_table(result: Score, recording: Recording, path: str | Path) -> None:
     """Per-point CSV: source bag, message index, measured x, y, z [m], residual dx, dy, dz
     (predicted - measured) [m], its norm [m] and the target's topic; with 6-DoF
     measurements also the orientation error's rotation vector rx, ry, rz and angle [rad]
-    (empty where none); written atomically."""
+    (empty where none); written atomically. The score's warnings come first, as lines
+    starting with '# ' (comment lines: pandas `comment='#'`, numpy `comments='#'`)."""
     text = io.StringIO(newline="")
+    for warning in result.warnings:
+        text.write(f"# {warning}\r\n")  # as csv.writer ends its lines
     writer = csv.writer(text)
     header = ["bag", "index", "x_m", "y_m", "z_m", "dx_m", "dy_m", "dz_m", "error_m", "target"]
     rotation = result.orientation_residuals

@@ -42,6 +42,7 @@ from robot_calib.messages import (
     pose_topic,
     target_topic,
 )
+from robot_calib.poses import beyond_reach
 
 ANGLE_UNITS = {"deg": np.pi / 180.0, "rad": 1.0}
 LENGTH_UNITS = {"mm": 1e-3, "m": 1.0}
@@ -185,6 +186,66 @@ def _column(ref: str, header: list[str] | None, path: Path) -> int:
     return header.index(ref)
 
 
+def counted(n: int, noun: str) -> str:
+    """'1 bad row', '3 bad rows'."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
+def _column_label(ref: str, col: int, header: list[str] | None) -> str:
+    """How a message names a column: as referenced, with its header name for an index."""
+    if ref.isdigit() and header is not None and header[col] != ref:
+        return f"{ref} ({header[col]})"
+    return ref
+
+
+def _row_numbers(
+    fields: list[str], names: list[str], n_required: int, decimal_comma: bool
+) -> tuple[list[float], str]:
+    """The numbers of one row's cells (NaN for an empty optional cell) and why the row is
+    bad ('' when it is not): the required columns (the first `n_required`) that are empty
+    or not finite, else the cells that are not numbers, named by column."""
+    numbers, empty, not_number, not_finite = [], [], [], []
+    for k, (cell, name) in enumerate(zip(fields, names)):
+        if not cell:
+            numbers.append(np.nan)
+            if k < n_required:
+                empty.append(name)
+            continue
+        try:
+            value = float(cell.replace(".", "").replace(",", ".") if decimal_comma else cell)
+        except ValueError:
+            not_number.append(f"{name} {cell!r}")
+            value = np.nan
+        else:
+            if k < n_required and not np.isfinite(value):
+                not_finite.append(f"{name} {cell!r}")
+        numbers.append(value)
+    for bad, what in ((empty, "empty"), (not_number, "not a number"), (not_finite, "not finite")):
+        if bad:
+            one = len(bad) == 1
+            return numbers, f"{'column' if one else 'columns'} {', '.join(bad)} " + (
+                f"{'is' if one else 'are'} {what}"
+            )
+    return numbers, ""
+
+
+SEPARATORS = {";": "';'", "\t": "tab", ",": "','", "|": "'|'"}  # as --sep spells them
+
+
+def _check_separator(path: Path, fmt: CsvFormat, line: int, row: list[str]) -> None:
+    """InputError when the first row (`line`, the header unless fmt.header is False) is one
+    column holding another common separator: the file is split by that one (--sep)."""
+    found = {sep: row[0].count(sep) for sep in SEPARATORS if sep != fmt.separator}
+    sep = max(found, key=lambda k: found[k])
+    if found[sep]:
+        first = "the header" if fmt.header else "the first row"
+        raise InputError(
+            f"{path}:{line}: {first} is one column containing {found[sep]} {SEPARATORS[sep]} "
+            f"(separator {SEPARATORS.get(fmt.separator, repr(fmt.separator))}): give --sep "
+            f"{SEPARATORS[sep]}"
+        )
+
+
 def _check_decimal_mark(path: Path, fmt: CsvFormat, cells: list[tuple[int, str]]) -> None:
     """InputError when --decimal-comma meets numbers written with a decimal point (it would
     read '1.5' as 15), or numbers with a decimal comma come without it."""
@@ -207,7 +268,7 @@ def _unit_checks(
     path: Path, fmt: CsvFormat, table: Array, lines: list[int], limits: Array | None
 ) -> tuple[NDArray[np.bool_], list[tuple[int, str]], list[str]]:
     """Per-column unit sanity of the rows read (table in the file's units): a joint column
-    in rad beyond any joint reading (> 2 pi, or 1.5 x the joint's limit) looks like degrees,
+    in rad beyond any joint reading (`poses.beyond_reach`) looks like degrees,
     a point in m beyond a tracker's range looks like millimetres, one in mm nearer than
     MIN_TRACKER_RANGE_M looks like metres. When most rows look so, InputError naming the
     column; when a few do, they are rows in mixed units: bad rows.
@@ -226,10 +287,7 @@ def _unit_checks(
     why = [""] * len(table)
     q = table[:, :n_j]
     if fmt.angle_unit == "rad":
-        reach = np.full(n_j, 2 * np.pi)
-        if limits is not None and len(limits) == n_j:
-            reach = np.maximum(reach, 1.5 * np.abs(limits).max(axis=1))
-        beyond = np.abs(q) > reach
+        beyond, reach = beyond_reach(q, limits)
         for j in range(n_j):
             if beyond[:, j].mean() > 0.5:
                 raise InputError(
@@ -295,6 +353,8 @@ def read_measurement_csv(
             f"units must be deg|rad and mm|m, got {fmt.angle_unit}, {fmt.length_unit}"
         )
     _check_six_dof_format(path, fmt)
+    if len(fmt.separator) != 1:
+        raise InputError(f"{path}: separator {fmt.separator!r}: one character (--sep tab: a tab)")
     try:
         with path.open(newline="", encoding="utf-8-sig") as handle:
             rows = list(csv.reader(handle, delimiter=fmt.separator))
@@ -314,6 +374,8 @@ def read_measurement_csv(
     else:
         counts = np.bincount([len(row) for _, row in body])
         n_fields, of = int(counts.argmax()), "most rows have"
+    if n_fields == 1:
+        _check_separator(path, fmt, *numbered[0])
     refs = (
         list(fmt.joints) + list(fmt.point) + list(fmt.dif or ()) + ([fmt.time] if fmt.time else [])
         + ([fmt.temperature] if fmt.temperature else [])
@@ -325,7 +387,7 @@ def read_measurement_csv(
     refs += [c for s in fmt.sigmas for c in (s.position, s.orientation) if c]
     cols = [_column(r, header, path) for r in refs]
     if max(cols) >= n_fields:
-        raise InputError(f"{path}: no column {max(cols)} ({of} {n_fields} fields)")
+        raise InputError(f"{path}: no column {max(cols)} ({of} {counted(n_fields, 'field')})")
     cells: list[tuple[int, str]] = []
     raw, bad, lines = [], [], []
     for line, row in body:
@@ -337,23 +399,20 @@ def read_measurement_csv(
         raw.append(fields)
         lines.append(line)
     _check_decimal_mark(path, fmt, cells)
+    names = [_column_label(r, c, header) for r, c in zip(refs, cols)]
     values, kept_lines, filled = [], [], []
     for line, fields in zip(lines, raw):
-        if fmt.decimal_comma:
-            fields = [f.replace(".", "").replace(",", ".") for f in fields]
-        try:
-            numbers = [float(f) if f or k < n_required else np.nan for k, f in enumerate(fields)]
-        except ValueError:
-            bad.append((line, f"not a number in {fields}"))
-            continue
-        if not np.all(np.isfinite(numbers[:n_required])):
-            bad.append((line, "value not finite"))
+        numbers, why = _row_numbers(fields, names, n_required, fmt.decimal_comma)
+        if why:
+            bad.append((line, why))
             continue
         values.append(numbers)
         kept_lines.append(line)
         filled.append([bool(f) for f in fields[n_optional:]])  # empty 6-DoF cell: none
     if not values:
-        raise InputError(f"{path}: no usable rows ({len(bad)} bad)")
+        line, why = min(bad)
+        which = "the only row" if len(bad) == 1 else f"the first of {len(bad)} bad rows"
+        raise InputError(f"{path}:{line}: {why} ({which}: no usable row)")
     table = np.array(values)
     keep, mixed, warnings = _unit_checks(path, fmt, table, kept_lines, limits)
     bad = sorted(bad + mixed)

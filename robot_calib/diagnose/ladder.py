@@ -281,7 +281,7 @@ def _climb(
     noise = estimate_noise(recording, geo.residuals, int(geo.parameters.free.sum()),
                            tracker_sigma_m)  # fmt: skip
     scored_on = "hold-out bags" if holdout is not None else f"{N_FOLDS}-fold CV over poses"
-    floor = (f"{noise.sigma_m * 1e3:.4f} mm per axis ({noise.source}, {noise.n})"
+    floor = (f"{noise.sigma_m * 1e3:.4f} mm per axis ({noise.basis})"
              if noise.independent else "unknown (no repeat poses, circle sweeps or stated "
              "accuracy)")  # fmt: skip
     say(f"noise floor: {floor}; scoring on {scored_on}")

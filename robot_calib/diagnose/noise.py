@@ -36,6 +36,15 @@ MAX_REPEAT_LAG = 50  # rows between a pose and its repeat, at most
 AGREE = 1.5  # circle-fit noise within this factor of the repeat-pose noise: pool them
 
 
+def noise_basis(source: str, n: int) -> str:
+    """How a noise level was found, for people: its source and what its n counts
+    ('circle fits, 601 degrees of freedom'; 'stated tracker accuracy (per point), median
+    of 300 values'; a user's --tracker-accuracy has no n)."""
+    if source.startswith(STATED):
+        return f"{source}, median of {n} values" if n else source
+    return f"{source}, {n} degrees of freedom"
+
+
 @dataclass(frozen=True)
 class NoiseLevel:
     """sigma_m: per-axis 1-sigma noise of a measured point [m]; source: how it was found;
@@ -44,6 +53,11 @@ class NoiseLevel:
     sigma_m: float
     source: str
     n: int
+
+    @property
+    def basis(self) -> str:
+        """Source and n, labelled (`noise_basis`)."""
+        return noise_basis(self.source, self.n)
 
     @property
     def independent(self) -> bool:

@@ -9,6 +9,7 @@ import numpy as np
 
 from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport
 from robot_calib.diagnose.ladder import Ladder
+from robot_calib.diagnose.noise import noise_basis
 from robot_calib.diagnose.signatures import ArcSignature, JointTerms, arc_angle_errors
 from robot_calib.measurements import Recording
 
@@ -93,8 +94,9 @@ def _floor_sentence(noise: NoiseReport) -> str:
             "with a floor."
         )
     return (
-        f"Noise level ({noise.source}, n = {noise.n}): {noise.sigma_mm * 1e3:.1f} um per axis; "
-        f"a perfect model would leave {noise.floor_abs_rms_mm:.4f} mm rms on held-out points."
+        f"Noise level ({noise_basis(noise.source, noise.n)}): {noise.sigma_mm * 1e3:.1f} um per "
+        f"axis; a perfect model would leave {noise.floor_abs_rms_mm:.4f} mm rms on held-out "
+        "points."
     )
 
 

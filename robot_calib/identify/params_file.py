@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from robot_calib.accuracy import orientation_accuracy
+from robot_calib.accuracy import Accuracy, orientation_accuracy
 from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
@@ -221,6 +221,23 @@ def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict
     doc = _read_document(path)
     model, params = params_from_dict(doc, str(path))
     return model, params, doc
+
+
+def in_sample_accuracy(doc: Mapping[str, Any], where: str | Path) -> Accuracy | None:
+    """The calibration's in-sample figures (PARAMS.json `residuals`, mm), None when the file
+    has none; InputError naming `where` when they are not finite numbers >= 0."""
+    if "residuals" not in doc:
+        return None
+    try:
+        figures = Accuracy.from_dict(doc["residuals"])
+    except InputError as exc:
+        raise InputError(f"{where}: residuals: {exc}") from None
+    for name, value in figures.to_dict().items():
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
+            raise InputError(f"{where}: residuals: {name} {value!r} is not a number >= 0")
+        if not math.isfinite(value):
+            raise InputError(f"{where}: residuals: {name} {value!r} is not finite")
+    return figures
 
 
 def load_calibration(path: str | Path) -> Calibration:

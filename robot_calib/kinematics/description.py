@@ -14,6 +14,7 @@ and ``M = diag(sign) + coupling``; without a `reading_to_joint` section M = I an
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -158,6 +159,19 @@ def with_payload(
     centre[-1] = bare if mass[-1] <= 0 else (link * bare + mass_kg * com) / mass[-1]
     return replace(robot, link_mass=mass, link_com=centre, payload_kg=float(mass_kg),
                    payload_com_m=(float(com[0]), float(com[1]), float(com[2])))  # fmt: skip
+
+
+@functools.cache
+def _builtin_joint_names() -> dict[str, tuple[str, ...]]:
+    """{built-in robot: its JointState names}, read once per process."""
+    return {name: load_robot(name).joint_names for name in available_robots()}
+
+
+def robots_with_joint_names(names: Sequence[str]) -> list[str]:
+    """The built-in robots (sorted) all of whose JointState names are among `names` (e.g. a
+    message's): the robots a recording with these names may be of."""
+    given = set(names)
+    return [r for r, joints in _builtin_joint_names().items() if given.issuperset(joints)]
 
 
 def with_joint_names(robot: RobotDescription, names: Sequence[str] | str) -> RobotDescription:
