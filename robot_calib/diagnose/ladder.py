@@ -78,7 +78,7 @@ def candidates(robot: RobotDescription, recording: Recording,
     (not already present, nor covered by a present effect, e.g. a lower order)."""
     return [
         e for e in ladder_candidates(robot, recording.poses)
-        if not any(p.covers(e, robot) for p in present)
+        if not any(p.supersedes(e, robot) for p in present)
     ]  # fmt: skip
 
 
@@ -96,8 +96,8 @@ def pose_folds(recording: Recording) -> IntArray:
 
 def _replace(present: tuple[Effect, ...], new: Effect,
              robot: RobotDescription) -> tuple[Effect, ...]:  # fmt: skip
-    """`present` plus `new`, which replaces what it covers (e.g. a lower order)."""
-    return tuple(e for e in present if not new.covers(e, robot)) + (new,)
+    """`present` plus `new`, which replaces what it supersedes (e.g. a lower order)."""
+    return tuple(e for e in present if not new.supersedes(e, robot)) + (new,)
 
 
 def _screen(cal: Calibration, pool: list[Effect], recording: Recording,

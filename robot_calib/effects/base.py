@@ -144,11 +144,18 @@ class Effect(ABC):
         mine = set(self.parameter_names(robot))
         return type(other) is type(self) and set(other.parameter_names(robot)) <= mine
 
-    def fit_start(self, robot: RobotDescription) -> dict[str, float]:
-        """Values to start a fit from where the nominal ones would stall it (default none):
-        an effect nonlinear in its parameters whose other derivatives vanish at zero
-        amplitude (thermal_warmup's time constant) starts at a small amplitude instead."""
-        return {}
+    def fit_starts(self, robot: RobotDescription) -> list[dict[str, float]]:
+        """Values to start a fit from where the nominal ones would stall it: one fit per
+        entry, the best kept (default: the nominal values only). An effect nonlinear in its
+        parameters (thermal_warmup: its time constant moves no point at zero amplitude, and
+        a fit from one time constant can slide off to another) gives several."""
+        return [{}]
+
+    def supersedes(self, other: Effect, robot: RobotDescription) -> bool:
+        """True when a model with this effect needs no `other` besides (the ladder replaces
+        `other` by it, and offers no `other` next to it): `covers`, or a physical
+        relation an effect declares (thermal_warmup's start is thermal_drift's line)."""
+        return self.covers(other, robot)
 
     # -- simulator ------------------------------------------------------------------------
     @abstractmethod

@@ -5,8 +5,9 @@ scaled by 1 + A (1 - exp(-t / tau)), with t the time since the first measurement
 recording, A the steady-state strain [1] and tau the time constant [s], both identified.
 For t << tau it starts as `thermal_drift`'s line (rate A / tau); over a recording of a
 few time constants it levels off, which a line cannot follow. It belongs to no joint.
-Parameters `thermal_warmup_strain` [1] and `thermal_warmup_tau` [s] (nominal 1200 s, the
-start of the fit; with no strain the time constant is not identifiable and stays there).
+Parameters `thermal_warmup_strain` [1] and `thermal_warmup_ln_tau` [1] = ln(tau / 1 s)
+(nominal ln 1200: the start of a fit): the logarithm keeps tau > 0 however a fit moves
+it (tau = exp(value) s).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from robot_calib.effects.base import Contribution, Effect, register_effect
+from robot_calib.effects.thermal_drift import ThermalDrift
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
@@ -22,8 +24,9 @@ NOMINAL_TAU_S = 1200.0
 DEFAULT_STRAIN = 3e-4  # 0.03 %: about 0.3 mm on a 1 m reach
 DRAW_STRAIN = (2e-4, 5e-4)  # blind tests
 DRAW_TAU_S = (300.0, 1200.0)
-MIN_TAU_S = 1.0  # the fit never takes the time constant below this
-START_STRAIN = 1e-5  # where a fit starts (`fit_start`)
+START_STRAIN = 1e-5  # where a fit starts (`fit_starts`)
+FIT_START_TAUS_S = (200.0, 800.0, 3200.0)
+LN_TAU_RANGE = (0.0, 14.0)  # tau 1 s .. 14 days: exp() kept finite wherever a fit wanders
 
 
 @register_effect
@@ -33,41 +36,49 @@ class ThermalWarmup(Effect):
 
     @property
     def names(self) -> tuple[str, str]:
-        return f"{self.name}_strain", f"{self.name}_tau"
+        return f"{self.name}_strain", f"{self.name}_ln_tau"
 
     def parameters(self, robot: RobotDescription) -> list[Parameter]:
-        strain, tau = self.names
+        strain, ln_tau = self.names
         return [
             Parameter(strain, "1", 0.0, group=self.name),
-            Parameter(tau, "s", NOMINAL_TAU_S, group=self.name),
+            Parameter(ln_tau, "1", float(np.log(NOMINAL_TAU_S)), group=self.name),
         ]
 
     def contribution(
         self, robot: RobotDescription, params: ParameterVector, poses: Poses
     ) -> Contribution:
-        strain_name, tau_name = self.names
-        amplitude, tau = params[strain_name], max(params[tau_name], MIN_TAU_S)
+        strain_name, ln_tau_name = self.names
+        ln_tau = float(np.clip(params[ln_tau_name], *LN_TAU_RANGE))
+        amplitude, tau = params[strain_name], float(np.exp(ln_tau))
         t = poses.time.astype(float)
-        rise = 1.0 - np.exp(-t / tau)
-        jac = np.column_stack([rise, -amplitude * t / tau**2 * np.exp(-t / tau)])
-        return Contribution(length_strain=amplitude * rise, length_strain_jac=jac)
+        decay = np.exp(-t / tau)
+        # d/d ln tau = tau d/d tau = -A (t / tau) exp(-t / tau)
+        jac = np.column_stack([1.0 - decay, -amplitude * (t / tau) * decay])
+        return Contribution(length_strain=amplitude * (1.0 - decay), length_strain_jac=jac)
 
-    def fit_start(self, robot: RobotDescription) -> dict[str, float]:
-        """A small strain: at zero the time constant moves no point (and would be fixed)."""
-        return {self.names[0]: START_STRAIN}
+    def fit_starts(self, robot: RobotDescription) -> list[dict[str, float]]:
+        """A small strain (at zero the time constant moves no point) at time constants
+        spread over FIT_START_TAUS_S: the fit from each, the best kept."""
+        strain, ln_tau = self.names
+        return [{strain: START_STRAIN, ln_tau: float(np.log(tau))} for tau in FIT_START_TAUS_S]
+
+    def supersedes(self, other: Effect, robot: RobotDescription) -> bool:
+        """A warm-up holds thermal_drift's line (its start) too: it replaces it."""
+        return isinstance(other, ThermalDrift) or super().supersedes(other, robot)
 
     def default_values(self, robot: RobotDescription) -> dict[str, float]:
-        strain, tau = self.names
-        return {strain: DEFAULT_STRAIN, tau: 600.0}
+        strain, ln_tau = self.names
+        return {strain: DEFAULT_STRAIN, ln_tau: float(np.log(600.0))}
 
     @classmethod
     def draw(
         cls, robot: RobotDescription, rng: np.random.Generator, joint: int
     ) -> tuple[Effect, dict[str, float]]:
         effect = cls()
-        strain, tau = effect.names
+        strain, ln_tau = effect.names
         return effect, {strain: float(rng.uniform(*DRAW_STRAIN)),
-                        tau: float(rng.uniform(*DRAW_TAU_S))}  # fmt: skip
+                        ln_tau: float(np.log(rng.uniform(*DRAW_TAU_S)))}  # fmt: skip
 
     @classmethod
     def ladder_candidates(cls, robot: RobotDescription, poses: Poses) -> list[Effect]:

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import partial
@@ -454,21 +455,27 @@ def _calibrate_once(
         geo = fit_model(geometric, initial, poses, points, progress=say)
         initial = geo.parameters
     model = KinematicModel(robot, tuple(effects), recording.target_names, geometric.oriented)
-    params = _seeded(model, initial)
-    say(f"{model_spec}: Levenberg-Marquardt on {len(points)} points, {int(params.free.sum())} "
-        "free parameters before the identifiability check")  # fmt: skip
-    fit = fit_model(model, params, poses, points, progress=say,
-                    objective=_objective(objective, cpa))  # fmt: skip
+    fits = []
+    new = [e for e in model.effects if not set(e.parameter_names(robot)) <= set(initial.names)]
+    for starts in itertools.product(*(e.fit_starts(robot) for e in new)):  # one fit per start
+        params = _seeded(model, initial, {k: v for start in starts for k, v in start.items()})
+        n_free = int(params.free.sum())
+        say(f"{model_spec}: Levenberg-Marquardt on {len(points)} points, {n_free} free "
+            "parameters before the identifiability check")  # fmt: skip
+        fits.append(fit_model(model, params, poses, points, progress=say,
+                              objective=_objective(objective, cpa)))  # fmt: skip
+    fit = min(fits, key=lambda f: f.solver.cost_m2 or 0.0)  # several starts: the best
     return _from_fit(model_spec, model, fit, points, cpa)
 
 
-def _seeded(model: KinematicModel, values: ParameterVector) -> ParameterVector:
-    """`model`'s parameters (fresh free flags) with the values that `values` also has; the
-    effects' own fit starts (`Effect.fit_start`) for the parameters it has not."""
+def _seeded(
+    model: KinematicModel, values: ParameterVector, starts: Mapping[str, float] | None = None
+) -> ParameterVector:
+    """`model`'s parameters (fresh free flags) with the values that `values` also has, and
+    `starts` (an effect's fit start, `Effect.fit_starts`) for the parameters it has not."""
     fresh = model.parameters()
-    starts = {k: v for e in model.effects for k, v in e.fit_start(model.robot).items()}
     known = {k: v for k, v in zip(values.names, values.values) if k in fresh}
-    return fresh.with_values({**starts, **known})
+    return fresh.with_values({**(starts or {}), **known})
 
 
 def _objective(name: str, cpa: CPAResult | None) -> Objective:
