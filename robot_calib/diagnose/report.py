@@ -4,6 +4,7 @@ joint angle split by approach direction, residual against time), readable withou
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -64,6 +65,10 @@ def _plots(
         plt.close(fig)
         out.append(("Residual against each joint angle, by approach direction", path.name))
 
+    path = stem.with_name(stem.name + "_map.png")
+    _residual_map(plt, ladder, recording, path)
+    out.append(("Residual maps: against reach, height and every joint's reading", path.name))
+
     fig, ax = plt.subplots(figsize=(7, 3.2))
     for rung in (ladder.rungs[0], ladder.rungs[-1])[: len(ladder.rungs)]:
         norm = np.linalg.norm(rung.calibration.residuals, axis=1) * 1e3
@@ -79,10 +84,55 @@ def _plots(
     return out
 
 
+def _residual_map(plt: Any, ladder: Ladder, recording: Recording, path: Path) -> None:
+    """|residual| of the geometric model and of the best rung (in-sample) against the
+    measured point's reach (distance from joint 1's axis) and height in the robot base
+    frame, and against every joint's reading: where in the workspace the error lives."""
+    geo = ladder.rungs[0].calibration
+    base2tracker = geo.model.base2tracker(geo.parameters)
+    in_base = (recording.points - base2tracker[:3, 3]) @ base2tracker[:3, :3]
+    axes_x = {
+        "reach [mm]": np.hypot(in_base[:, 0], in_base[:, 1]) * 1e3,
+        "height [mm]": in_base[:, 2] * 1e3,
+    }
+    for j in range(recording.poses.q.shape[1]):
+        axes_x[f"joint {j + 1} reading [deg]"] = np.degrees(recording.poses.q[:, j])
+    n_cols = 4
+    n_rows = -(-len(axes_x) // n_cols)
+    fig, axes = plt.subplots(n_rows, n_cols, figsize=(12, 2.6 * n_rows), sharey=True)
+    rungs = (ladder.rungs[0], ladder.rungs[-1])[: len(ladder.rungs)]
+    for ax, (label, x) in zip(np.ravel(axes), axes_x.items()):
+        for rung in rungs:
+            norm = np.linalg.norm(rung.calibration.residuals, axis=1) * 1e3
+            ax.plot(x, norm, ".", ms=2, label=rung.model)
+        ax.set_xlabel(label, fontsize=8)
+    for ax in np.ravel(axes)[len(axes_x) :]:
+        ax.set_visible(False)
+    np.ravel(axes)[0].set_ylabel("|residual| [mm]", fontsize=8)
+    np.ravel(axes)[0].legend(fontsize=7)
+    fig.suptitle("in-sample |residual| against reach, height (robot base frame) and readings")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
 def _harmonics(entry: ArcSignature | JointTerms) -> str:
     """'a1 (s1x), a2 (s2x), ...': harmonic amplitudes [urad] with their significance."""
+    if entry.harmonics_urad is None or entry.harmonics_significance is None:
+        return _unobservable(entry)
     pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
     return ", ".join(f"{a:.1f} ({s:.0f}x)" for a, s in pairs)
+
+
+def _unobservable(entry: ArcSignature | JointTerms) -> str:
+    lever = "" if entry.lever_mm is None else f" {entry.lever_mm:.2f} mm"
+    return f"not observable (target{lever} from the axis)"
+
+
+def _value(value: float | None, digits: int, significance: float | None = None) -> str:
+    if value is None:
+        return "-"
+    return f"{value:.{digits}f}" + ("" if significance is None else f" ({significance:.0f}x)")
 
 
 def _floor_sentence(noise: NoiseReport) -> str:
@@ -155,18 +205,27 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
         ]
         lines += [f"- {o.line()}" for o in diagnosis.outliers]  # fmt: skip
     lines += ["", f"What remains: {diagnosis.unexplained.note}.", "",
-              "## Where the residual lies",
-              "", "Geometric model, per joint from its sweeps (angle-equivalent error along the "
-              "arc):", "",
-              "| joint | rms [urad] | harmonics 1-4 [urad] (x their noise sigma) "
-              "| forth-back split [urad] "
-              "| slope vs angle [urad/rad] | corr. with gravity torque |",
-              "|---|---|---|---|---|---|"]  # fmt: skip
-    for j in where.joints:
+              "## Where the residual lies", ""]  # fmt: skip
+    if where.joints:
+        lines += [
+            "Geometric model, per joint from its sweeps (angle-equivalent error along the "
+            "arc; a joint is observable only through targets at least 5 mm from its axis):",
+            "",
+            "| joint | rms [urad] | harmonics 1-4 [urad] (x their noise sigma) "
+            "| forth-back split [urad] | slope vs angle [urad/rad] | corr. with gravity torque |",
+            "|---|---|---|---|---|---|",
+        ]
+        for j in where.joints:
+            lines.append(
+                f"| {j.joint} | {_value(j.arc_rms_urad, 1)} | {_harmonics(j)} | "
+                f"{_value(j.direction_split_urad, 1)} | "
+                f"{_value(j.slope_vs_angle_urad_per_rad, 1)} | "
+                f"{_value(j.gravity_torque_correlation, 2)} |"
+            )
+    else:
         lines.append(
-            f"| {j.joint} | {j.arc_rms_urad:.1f} | {_harmonics(j)} | "
-            f"{j.direction_split_urad:.1f} | {j.slope_vs_angle_urad_per_rad:.1f} | "
-            f"{j.gravity_torque_correlation:.2f} |"
+            "No circle sweeps in the recording (no run of poses in which one joint moves "
+            "alone): no per-joint arc figures; the per-joint terms below come from every pose."
         )
     lines += [
         "",
@@ -180,9 +239,9 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
     for t in where.joints_from_all_poses:
         lines.append(
             f"| {t.joint} | {_harmonics(t)} "
-            f"| {t.direction_urad:.1f} ({t.direction_significance:.0f}x) "
-            f"| {t.scale_urad_per_rad:.1f} ({t.scale_significance:.0f}x) "
-            f"| {t.gravity_urad_per_Nm:.2f} ({t.gravity_significance:.0f}x) |"
+            f"| {_value(t.direction_urad, 1, t.direction_significance)} "
+            f"| {_value(t.scale_urad_per_rad, 1, t.scale_significance)} "
+            f"| {_value(t.gravity_urad_per_Nm, 2, t.gravity_significance)} |"
         )
     if where.strongest_signature:
         lines += ["", f"Strongest structure: {where.strongest_signature.text}."]

@@ -24,35 +24,49 @@ from robot_calib.model import KinematicModel
 from robot_calib.records import Record
 
 HARMONICS = 4
+#: a joint-angle error is observable only through a target at least this far from the
+#: joint's axis: at 5 um of tracker noise, 5 mm of lever leaves 1 mrad of angle noise (a
+#: target 0.2 mm from the axis would turn noise into 25 mrad of "harmonics")
+MIN_LEVER_M = 5e-3
+MIN_OBSERVABLE_POSES = 3
 
 
 @dataclass(frozen=True)
 class ArcSignature(Record):
-    """A joint's error along the arc of its own sweeps, as a joint-angle error [urad]."""
+    """A joint's error along the arc of its own sweeps, as a joint-angle error [urad], from
+    the measurements at least MIN_LEVER_M from its axis; None where fewer than
+    MIN_OBSERVABLE_POSES are (`observable` False: the targets sit on or near the axis,
+    `lever_mm` the largest of their distances)."""
 
     joint: int
-    arc_rms_urad: float
-    harmonics_urad: list[float]  # harmonics 1..HARMONICS of the reading
-    harmonics_significance: list[float]  # amplitude / its 1-sigma
-    direction_split_urad: float  # forth minus back (backlash-like)
-    slope_vs_angle_urad_per_rad: float  # (scale-like)
-    gravity_torque_correlation: float  # (compliance-like), -1..1
+    arc_rms_urad: float | None
+    harmonics_urad: list[float] | None  # harmonics 1..HARMONICS of the reading
+    harmonics_significance: list[float] | None  # amplitude / its 1-sigma
+    direction_split_urad: float | None  # forth minus back (backlash-like)
+    slope_vs_angle_urad_per_rad: float | None  # (scale-like)
+    gravity_torque_correlation: float | None  # (compliance-like), -1..1
+    observable: bool = True
+    lever_mm: float | None = None
 
 
 @dataclass(frozen=True)
 class JointTerms(Record):
     """What each signature family explains of a joint, from every pose, beyond the
-    geometry: its value and its significance (sqrt of chi^2 explained, in noise units)."""
+    geometry: its value and its significance (sqrt of chi^2 explained, in noise units).
+    Not `observable` (values None, significances 0) when most measured points lie within
+    MIN_LEVER_M of the joint's axis (`lever_mm`: their median distance)."""
 
     joint: int
-    harmonics_urad: list[float]
+    harmonics_urad: list[float] | None
     harmonics_significance: list[float]
-    direction_urad: float
+    direction_urad: float | None
     direction_significance: float
-    scale_urad_per_rad: float
+    scale_urad_per_rad: float | None
     scale_significance: float
-    gravity_urad_per_Nm: float
+    gravity_urad_per_Nm: float | None
     gravity_significance: float
+    observable: bool = True
+    lever_mm: float | None = None
 
 
 @dataclass(frozen=True)
@@ -154,6 +168,12 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
 
     out = []
     for j in range(n_joints):
+        lever = float(np.median(np.linalg.norm(motion[:, j, :], axis=1)))
+        if lever < MIN_LEVER_M:
+            zeros = [0.0] * HARMONICS
+            out.append(JointTerms(j + 1, None, zeros, None, 0.0, None, 0.0, None, 0.0,
+                                  False, lever * 1e3))  # fmt: skip
+            continue
         qj = poses.q[:, j]
         amps, sig = [], []
         for k in range(1, HARMONICS + 1):
@@ -168,6 +188,8 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
                 *family(poses.direction[:, j], j),
                 *family(qj, j),
                 *family(tau[:, j], j),
+                True,
+                lever * 1e3,
             )  # fmt: skip
         )
     return out
@@ -187,6 +209,8 @@ def strongest_signature(terms: list[JointTerms]) -> Signature | None:
     best: tuple[float, int, int | None, float, str] | None = None
     for entry in terms:
         j = entry.joint
+        if not entry.observable or entry.harmonics_urad is None:
+            continue
         pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
         for k, (amp, sig) in enumerate(pairs, start=1):
             text = (f"{ORDINAL.get(k, f'{k}th')} harmonic of joint {j} ({amp:.1f} urad of "
@@ -212,6 +236,12 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
     joints = []
     tau = gravity_torques(model.robot, q)
     for j, (idx, err, lever) in arc_angle_errors(model, params, recording, residuals).items():
+        seen = lever >= MIN_LEVER_M
+        if seen.sum() < MIN_OBSERVABLE_POSES:
+            joints.append(ArcSignature(j, None, None, None, None, None, None, False,
+                                       float(lever.max() * 1e3)))  # fmt: skip
+            continue
+        idx, err, lever = idx[seen], err[seen], lever[seen]
         qj = q[idx, j - 1]
         forth = direction[idx, j - 1] > 0
         split = (
@@ -232,6 +262,8 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
                 split * 1e6,
                 slope * 1e6,
                 corr,
+                True,
+                float(np.median(lever) * 1e3),
             )
         )
     norm = np.linalg.norm(residuals, axis=1)
