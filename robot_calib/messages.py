@@ -20,6 +20,8 @@ TRACKER_FRAME = "laser_tracker"
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 POINT_TYPE = "geometry_msgs/msg/PointStamped"
 TARGET_TOPIC = re.compile(r"/laser_tracker/([A-Za-z][A-Za-z0-9_]*)/point")
+TEMPERATURE_TOPIC = "/temperature"  # side data (msgs_doc/temperature.md)
+TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
 # 6-DoF probes (msgs_doc/six_dof.md): a pose topic beside a target's point topic
 POSE_TOPIC = "/laser_tracker/pose"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"

@@ -85,6 +85,9 @@ class Poses:
     sigma : shape (n, 2), the standard deviations the tracker stated for each measurement:
       position [m] (per coordinate) and orientation [rad] (per axis), NaN where none was
       stated (None: none at all); they weight the residuals (`identify.weights`)
+    temperature : shape (n,), the robot's temperature at each measurement [deg C] from the
+      recording's side topic (msgs_doc/temperature.md; None: none recorded), for effects
+      driven by it (`thermal_temperature`)
     """
 
     q: Array
@@ -93,6 +96,7 @@ class Poses:
     target: IntArray | None = None
     rotation: Array | None = None
     sigma: Array | None = None
+    temperature: Array | None = None
 
     @property
     def target_index(self) -> IntArray:
@@ -150,6 +154,7 @@ class Poses:
             np.concatenate([p.target_index for p in parts]) if with_target else None,
             joined("rotation", (3, 3)),
             joined("sigma", (2,)),
+            joined("temperature", ()),
         )
 
     def subset(self, index: slice | IntArray | NDArray[np.bool_]) -> Poses:
@@ -157,6 +162,8 @@ class Poses:
         target = None if self.target is None else self.target[index]
         rotation = None if self.rotation is None else self.rotation[index]
         sigma = None if self.sigma is None else self.sigma[index]
+        temperature = None if self.temperature is None else self.temperature[index]
         return Poses(
-            self.q[index], self.direction[index], self.time[index], target, rotation, sigma
-        )
+            self.q[index], self.direction[index], self.time[index], target, rotation, sigma,
+            temperature,
+        )  # fmt: skip

@@ -36,6 +36,8 @@ from robot_calib.messages import (
     POSE_COV_TYPE,
     POSE_TYPE,
     QUATERNION_TOLERANCE,
+    TEMPERATURE_TOPIC,
+    TEMPERATURE_TYPE,
     TRACKER_FRAME,
     ns_to_sec_nanosec,
     pose_covariance,
@@ -54,8 +56,6 @@ SIGMA_ANGLE_UNITS = {**ANGLE_UNITS, "mdeg": np.pi / 180e3, "urad": 1e-6}
 PLAUSIBLE_SIGMA = {"position": (1e-7, 1e-3), "orientation": (1e-7, 2e-2)}
 START_NS = 1_700_000_000_000_000_000  # stamp of the first pose when the CSV has no time
 STEP_NS = 1_000_000_000
-TEMPERATURE_TOPIC = "/temperature"  # side data of an import (msgs_doc/temperature.md)
-TEMPERATURE_TYPE = "sensor_msgs/msg/Temperature"
 
 
 SixDof = tuple[Array, Array]  # rotation (n, 3, 3) and sigma (n, 2) [m, rad] of one target

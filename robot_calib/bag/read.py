@@ -16,7 +16,7 @@ import numpy as np
 from robot_calib.bag.mcap_reader import BagReader
 from robot_calib.errors import BagError, InputError, TruncatedBagError
 from robot_calib.kinematics.description import RobotDescription
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements.recording import (
     PAIR_TOLERANCE_S,
     Recording,
@@ -30,6 +30,7 @@ from robot_calib.messages import (
     POINT_TYPE,
     POSE_TOPIC,
     POSE_TYPES,
+    TEMPERATURE_TOPIC,
     TRACKER_FRAME,
     joint_positions,
     pose_measurement,
@@ -125,8 +126,13 @@ def read_bag(
         _check_topic(reader, JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         target_topics, pose_topics, names = _target_topics(reader, path, warnings)
         poses: list[dict[int, PoseReading]] = [{} for _ in names]
-        for m in reader.messages([JOINT_STATES_TOPIC, *target_topics, *pose_topics]):
+        side = [TEMPERATURE_TOPIC] if TEMPERATURE_TOPIC in reader.topics else []
+        celsius: list[tuple[int, float]] = []  # (stamp [ns], deg C) of the side topic
+        for m in reader.messages([JOINT_STATES_TOPIC, *target_topics, *pose_topics, *side]):
             msg = m.decode()
+            if m.topic == TEMPERATURE_TOPIC:
+                celsius.append((stamp_to_ns(msg.header.stamp), float(msg.temperature)))
+                continue
             if m.topic == JOINT_STATES_TOPIC:
                 js_q.append(
                     joint_positions(msg, robot.joint_names, f"{path}: {JOINT_STATES_TOPIC}")
@@ -181,8 +187,23 @@ def read_bag(
         target_names=tuple(names),
         rotation=stamped.rotation,
         sigma=stamped.sigma,
+        temperature=_temperature_at(path, celsius, stamped.point_ns),
     )
     return replace(rec, warnings=tuple(warnings) + rec.warnings)
+
+
+def _temperature_at(
+    path: Path, celsius: list[tuple[int, float]], point_ns: IntArray
+) -> Array | None:
+    """The side topic's temperature [deg C] at each point stamp (n,) [ns], linear between
+    its messages (held beyond the first and last); None without the topic. BagError when a
+    temperature is not finite."""
+    if not celsius:
+        return None
+    stamps, values = (np.array(v) for v in zip(*sorted(celsius)))
+    if not np.all(np.isfinite(values)):
+        raise BagError(f"{path}: {TEMPERATURE_TOPIC} has a temperature that is not finite")
+    return np.interp(np.asarray(point_ns, dtype=float), stamps.astype(float), values)
 
 
 def read_recording(
@@ -217,8 +238,6 @@ def side_temperatures(path: Path) -> tuple[dict[int, float], list[str]]:
     [ns]: temperature [deg C]}, and the bag's topics that are neither measurements (joint
     states, points, poses) nor that side topic (which a rewrite of its measurements would
     not carry)."""
-    from robot_calib.bag.csv_import import TEMPERATURE_TOPIC
-
     out: dict[int, float] = {}
     with BagReader(path) as reader:
         others = [

@@ -183,11 +183,14 @@ def describe(
 
 #: A free parameter whose 1-sigma from the data would exceed this (by unit) is not
 #: identified in any useful sense: 1 mm for a length, 0.01 rad (0.6 deg) for an angle.
-STD_BOUNDS = {"m": 1e-3, "rad": 1e-2, "1": 1e-2, "rad/(N m)": 1e-3, "1/s": 1e-4, "s": 1e4,
-              "rad/m": 1e-4}  # fmt: skip
+STD_BOUNDS = {"m": 1e-3, "rad": 1e-2, "1": 1e-2, "rad/(N m)": 1e-3, "1/s": 1e-4,
+              "1/K": 1e-4, "s": 1e4, "rad/m": 1e-4}  # fmt: skip
 #: tighter bounds for the parameters of one effect (`Parameter.group`) whose values are
 #: small in their unit: gravity_compliance's lumped moments k g m c are a few 1e-4 rad
 GROUP_STD_BOUNDS = {"gravity_compliance": 5e-5}
+#: and for single parameters: thermal_warmup's ln(time constant) is useful to +-0.5 (a
+#: factor 1.6 on tau), far beyond the 0.01 of a dimensionless scale
+NAME_STD_BOUNDS = {"thermal_warmup_ln_tau": 0.5}
 
 
 def covariance(jac_free: Array, residuals: Array, rows: int | None = None) -> Array:
@@ -216,8 +219,10 @@ def covariance(jac_free: Array, residuals: Array, rows: int | None = None) -> Ar
 
 
 def _std_bound(p: Parameter) -> float:
-    """The largest 1-sigma parameter `p` may have and stay free (its group's, else its
-    unit's, else none)."""
+    """The largest 1-sigma parameter `p` may have and stay free (its own, else its
+    group's, else its unit's, else none)."""
+    if p.name in NAME_STD_BOUNDS:
+        return NAME_STD_BOUNDS[p.name]
     return GROUP_STD_BOUNDS.get(p.group, STD_BOUNDS.get(p.unit, np.inf))
 
 

@@ -30,7 +30,16 @@ if TYPE_CHECKING:  # light at run time: reading a parameter file needs no scipy
     from robot_calib.measurements import Recording
 
 FORMAT = "robot_calib.params/1"
-SI_UNITS = ("m", "rad", "1", "1/s", "s", "rad/m", "rad/(N m)")  # units parameters are stored in
+SI_UNITS = (
+    "m",
+    "rad",
+    "1",
+    "1/s",
+    "1/K",
+    "s",
+    "rad/m",
+    "rad/(N m)",
+)  # units parameters are stored in
 
 
 def human_value(name: str, unit: str, value: float) -> tuple[float, str]:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -292,12 +292,13 @@ def recording_from_arrays(
     target_names: tuple[str, ...] = (PRIMARY_TARGET,),
     rotation: Array | None = None,
     sigma: Array | None = None,
+    temperature: Array | None = None,
 ) -> Recording:
     """A recording of measurements already paired in memory (one source, visiting order):
     q (n, J) [rad], points (n, 3) [m], time (n,) [s], target (n,) which of `target_names`
     each point is of (None: the first); rotation (n, 3, 3) and sigma (n, 2) what a 6-DoF
-    probe measured and the stated accuracies (`Poses`); sweeps are found on `robot`'s joint
-    variables (None: the readings), per target.
+    probe measured and the stated accuracies, temperature (n,) [deg C] (`Poses`); sweeps
+    are found on `robot`'s joint variables (None: the readings), per target.
 
     Returns
     -------
@@ -309,8 +310,8 @@ def recording_from_arrays(
     """
     poses = Poses.from_readings(q, time=time)
     index = _target_index(target, len(poses), target_names, source)
-    six_dof = _six_dof(rotation, sigma, len(poses), source)
-    poses = replace(poses, target=index, rotation=six_dof["rotation"], sigma=six_dof["sigma"])
+    extra = _extras(rotation, sigma, temperature, len(poses), source)
+    poses = replace(poses, target=index, **extra._asdict())
     warnings: list[str] = []
     sweeps = _sweeps(poses.q, robot, source, warnings, index, target_names)
     return Recording(
@@ -325,12 +326,26 @@ def recording_from_arrays(
     )
 
 
-def _six_dof(
-    rotation: Array | None, sigma: Array | None, n: int, source: str
-) -> dict[str, Array | None]:
-    """`Poses` fields rotation (n, 3, 3) and sigma (n, 2) checked: shapes, a rotation is
-    orthonormal (1e-6) or all NaN, a standard deviation > 0 or NaN."""
-    out: dict[str, Array | None] = {"rotation": None, "sigma": None}
+class Extras(NamedTuple):
+    """What a measurement carries besides its point, aligned with the points (`Poses`):
+    rotation (n, 3, 3) a 6-DoF probe's frame, sigma (n, 2) stated accuracies [m, rad],
+    temperature (n,) [deg C]; None where the source has none."""
+
+    rotation: Array | None = None
+    sigma: Array | None = None
+    temperature: Array | None = None
+
+    def take(self, index: IntArray | NDArray[np.bool_]) -> Extras:
+        """The extras of the measurements `index` selects (reordered as it says)."""
+        return Extras(*(None if v is None else v[index] for v in self))
+
+
+def _extras(
+    rotation: Array | None, sigma: Array | None, temperature: Array | None, n: int, source: str
+) -> Extras:
+    """The extras checked: shapes; a rotation orthonormal (1e-6) or all NaN; a standard
+    deviation > 0 or NaN; a temperature finite."""
+    out = Extras()
     if rotation is not None:
         r = np.asarray(rotation, dtype=float)
         if r.shape != (n, 3, 3):
@@ -343,7 +358,7 @@ def _six_dof(
         if np.any(error > 1e-6) or np.any(det < 0):
             bad = int(np.flatnonzero(given)[np.argmax(error)]) + 1
             raise InputError(f"{source}: orientation {bad} is not a rotation")
-        out["rotation"] = r if given.any() else None
+        out = out._replace(rotation=r if given.any() else None)
     if sigma is not None:
         sd = np.asarray(sigma, dtype=float)
         if sd.shape != (n, 2) or np.any(sd[np.isfinite(sd)] <= 0) or np.any(np.isinf(sd)):
@@ -351,7 +366,12 @@ def _six_dof(
                 f"{source}: standard deviations must be (n, 2) [m, rad], > 0 or NaN "
                 f"(not stated); got shape {sd.shape}"
             )
-        out["sigma"] = sd if np.isfinite(sd).any() else None
+        out = out._replace(sigma=sd if np.isfinite(sd).any() else None)
+    if temperature is not None:
+        celsius = np.asarray(temperature, dtype=float)
+        if celsius.shape != (n,) or not np.all(np.isfinite(celsius)):
+            raise InputError(f"{source}: temperatures must be finite, one per point")
+        out = out._replace(temperature=celsius)
     return out
 
 
@@ -386,13 +406,15 @@ def recording_from_stream(
     target_names: tuple[str, ...] = (PRIMARY_TARGET,),
     rotation: Array | None = None,
     sigma: Array | None = None,
+    temperature: Array | None = None,
 ) -> Recording:
     """A recording of one source from its stamped messages (a bag's or live), paired by
     the contract's rule; sweeps are found on `robot`'s joint variables (None: readings).
     point_target (n,): which of `target_names` each point is of (several targets on the
     flange, msgs_doc/targets.md; None: all the first); measurements of one stamp are
     ordered by target. rotation (n, 3, 3), sigma (n, 2): what 6-DoF probes measured
-    besides each point and the stated accuracies (`Poses`; NaN rows: none).
+    besides each point and the stated accuracies (`Poses`; NaN rows: none); temperature
+    (n,) [deg C] at each point (the side topic, interpolated to the point stamps).
 
     js_ns (m,) joint-state stamps [ns], q (m, J) readings [rad], velocity_sign (m, J) (+1/-1,
     0 = no velocity); point_ns (n,) point stamps [ns], points (n, 3) tracker frame [m]; each
@@ -433,7 +455,7 @@ def recording_from_stream(
         raise InputError(f"pair tolerance {pair_tolerance} s: need a finite number >= 0")
     check_metres(points, source, error)
     target = _target_index(point_target, len(points), target_names, source)
-    six_dof = _six_dof(rotation, sigma, len(points), source)
+    extra = _extras(rotation, sigma, temperature, len(points), source)
     js_order = np.argsort(js_ns, kind="stable")
     if target is None:
         pt_order = np.argsort(point_ns, kind="stable")
@@ -442,7 +464,7 @@ def recording_from_stream(
         target = target[pt_order]
     js_ns, q, velocity_sign = js_ns[js_order], q[js_order], velocity_sign[js_order]
     point_ns, points = point_ns[pt_order], points[pt_order]
-    six_dof = {k: None if v is None else v[pt_order] for k, v in six_dof.items()}
+    extra = extra.take(pt_order)
     keep = _distinct_joint_states(js_ns, q, js_order, source, error)
     js_ns, q, velocity_sign = js_ns[keep], q[keep], velocity_sign[keep]
     warnings: list[str] = []
@@ -475,11 +497,11 @@ def recording_from_stream(
     direction = np.where(velocity != 0, velocity, approach_directions(q))
     time = (point_ns[ok] - point_ns[ok][0]) * 1e-9
     target = None if target is None else target[ok]
-    six_dof = {k: None if v is None else v[ok] for k, v in six_dof.items()}
+    extra = extra.take(ok)
     sweeps = _sweeps(q, robot, source, warnings, target, target_names)
     return Recording(
         (source,),
-        Poses(q, direction, time, target, six_dof["rotation"], six_dof["sigma"]),
+        Poses(q, direction, time, target, *extra),
         points[ok],
         tuple(sweeps),
         np.zeros(len(q), dtype=int),

@@ -31,6 +31,7 @@ from robot_calib.effects import EFFECTS, Effect, effect_class
 from robot_calib.effects.compliance import Compliance
 from robot_calib.effects.ripple import DRAW_RANGE as RIPPLE_RANGE
 from robot_calib.effects.ripple import JointRipple
+from robot_calib.effects.thermal_temperature import ThermalTemperature
 from robot_calib.effects.thermal_warmup import ThermalWarmup
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.fit import fit_model
@@ -40,7 +41,7 @@ from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points
 from robot_calib.sim.plans import Plan, paper_test_plan, plan_times, random_plan
-from robot_calib.sim.world import World, load_world, with_effect
+from robot_calib.sim.world import TemperatureProfile, World, load_world, with_effect
 
 NONE = "none"  # the class of cases with no withheld effect (geometric only)
 FLOOR_FACTOR = 1.5
@@ -120,15 +121,19 @@ def _withheld(name: str, world: World, rng: np.random.Generator) -> Withheld:
         world = with_effect(world, drawn_effect, drawn)
     if name == NONE:
         random_effect(NONE, robot, rng)  # the same random streams as before
+    if any(isinstance(e, ThermalTemperature) for e in effects):
+        world = replace(world, temperature=TemperatureProfile())  # a recorded temperature
     return world, effects, values
 
 
 def _record(world: World, plan: Plan, rng: np.random.Generator) -> Recording:
     time = plan_times(plan, world.timing)
-    poses = Poses.from_readings(plan.q, time=time)
+    celsius = None if world.temperature is None else world.temperature.at(time)
+    poses = replace(Poses.from_readings(plan.q, time=time), temperature=celsius)
     return recording_from_arrays(
-        plan.q, physical_points(world, poses, rng), time, robot=world.model.robot
-    )
+        plan.q, physical_points(world, poses, rng), time, robot=world.model.robot,
+        temperature=celsius,
+    )  # fmt: skip
 
 
 def make_case(effect: str, seed: int, n_holdout: int = 200) -> Case:

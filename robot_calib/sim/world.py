@@ -26,7 +26,7 @@ from robot_calib.effects import (
 )
 from robot_calib.errors import InputError, RobotCalibError, check_keys
 from robot_calib.kinematics.description import load_robot, with_payload
-from robot_calib.kinematics.frames import matrix_to_rpy, rpy_to_matrix
+from robot_calib.kinematics.frames import Array, matrix_to_rpy, rpy_to_matrix
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel, target_parameters, tool_rotation_parameters
 from robot_calib.poses import PRIMARY_TARGET, TARGET_NAME
@@ -89,6 +89,28 @@ class Timing:
 
 
 @dataclass(frozen=True)
+class TemperatureProfile:
+    """The robot's temperature over a recording [deg C], t since its first measurement:
+    start_c + rise_c (1 - exp(-t / tau_s)) + wave_c sin(2 pi t / period_s) (a warm-up and
+    the hall's air conditioning), recorded on the side topic (msgs_doc/temperature.md)."""
+
+    start_c: float = 21.0
+    rise_c: float = 6.0
+    tau_s: float = 900.0
+    wave_c: float = 1.5
+    period_s: float = 700.0
+
+    def at(self, time: Array) -> Array:
+        """Temperatures (n,) [deg C] at times (n,) [s]."""
+        t = np.asarray(time, dtype=float)
+        return (
+            self.start_c
+            + self.rise_c * (1.0 - np.exp(-t / self.tau_s))
+            + self.wave_c * np.sin(2.0 * np.pi * t / self.period_s)
+        )
+
+
+@dataclass(frozen=True)
 class World:
     """A complete simulated world; `truth` holds every true parameter value (SI)."""
 
@@ -99,6 +121,7 @@ class World:
     timing: Timing = field(default_factory=Timing)
     seed: int = 0
     source: str = "built-in default"
+    temperature: TemperatureProfile | None = None  # recorded when given (no effect alone)
 
     @property
     def effects(self) -> tuple[Effect, ...]:
@@ -107,7 +130,7 @@ class World:
 
 TOP_KEYS = (
     "robot", "seed", "geometry", "deviations", "base2tracker", "target_in_flange_m", "targets",
-    "effects", "truth", "noise", "tracker", "timing", "six_dof", "payload",
+    "effects", "truth", "noise", "tracker", "timing", "six_dof", "payload", "temperature",
 )  # fmt: skip
 PAYLOAD_KEYS = ("mass_kg", "com_m")
 FIRST_TARGET_KEY = "first"  # the first target's key in `six_dof` (its name is '')
@@ -323,11 +346,23 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
             )
         timing = Timing(**timing_data)
         seed = _seed(data.get("seed", 0), source)
+        temperature = None
+        if data.get("temperature") is not None:
+            temperature = TemperatureProfile(
+                **_checked_values(
+                    _section(data, "temperature", TemperatureProfile, source),
+                    "temperature",
+                    TemperatureProfile,
+                    source,
+                )
+            )
+            if temperature.tau_s <= 0 or temperature.period_s <= 0:
+                raise InputError(f"{source}: temperature.tau_s and period_s must be > 0")
     except RobotCalibError as exc:  # name the file once
         raise InputError(str(exc) if str(exc).startswith(source) else f"{source}: {exc}") from None
     except (TypeError, KeyError, ValueError) as exc:
         raise InputError(f"{source}: malformed world ({type(exc).__name__}: {exc})") from None
-    return World(model, truth, noise, tracker, timing, seed, source)
+    return World(model, truth, noise, tracker, timing, seed, source, temperature)
 
 
 def world_to_dict(world: World) -> dict[str, Any]:
@@ -346,6 +381,7 @@ def world_to_dict(world: World) -> dict[str, Any]:
     return {
         **({"six_dof": {k: v.tolist() for k, v in probes.items()}} if probes else {}),
         **({"payload": payload} if robot.payload_kg else {}),
+        **({"temperature": asdict(world.temperature)} if world.temperature else {}),
         "robot": robot.reference(),
         "seed": world.seed,
         "geometry": "nominal",
