@@ -9,6 +9,7 @@ model, and its simulator defaults (they move the target by a realistic amount).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -38,10 +39,12 @@ ROBOT = WORLD.model.robot
 
 
 def random_poses(rng: np.random.Generator, n: int) -> Poses:
-    """n random poses within the limits, both approach directions, an hour of time."""
+    """n random poses within the limits, both approach directions, an hour of time and a
+    recorded temperature (20-30 deg C, for effects that follow it)."""
     lo, hi = ROBOT.limits.T
-    return Poses.from_readings(rng.uniform(lo, hi, (n, ROBOT.n_joints)),
-                               time=np.sort(rng.uniform(0, 3600, n)))  # fmt: skip
+    poses = Poses.from_readings(rng.uniform(lo, hi, (n, ROBOT.n_joints)),
+                                time=np.sort(rng.uniform(0, 3600, n)))  # fmt: skip
+    return replace(poses, temperature=rng.uniform(20.0, 30.0, n))
 
 
 def finite_difference(
@@ -163,7 +166,9 @@ def test_registry_order_and_vocabulary_are_the_contracts() -> None:
     and never renamed; simulator-only effects are not in it; model names print and parse
     through the registry."""
     contract = {"eccentricity", "backlash", "compliance", "encoder_scale", "thermal_drift"}
-    added = {"transmission_error", "gravity_compliance", "thermal_warmup"}  # issue 14
+    added = {  # issue 14
+        "transmission_error", "gravity_compliance", "thermal_warmup", "thermal_temperature"
+    }  # fmt: skip
     assert set(vocabulary()) == contract | added
     assert "joint_ripple" not in vocabulary()
     base, effects = parse_model("geometric+eccentricity:6:order=3+thermal_drift", ROBOT)
