@@ -27,8 +27,9 @@ from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
 
-#: Fourier orders the diagnosis ladder tries per joint (order K holds harmonics 1..K)
-LADDER_ORDERS = (1, 2, 3)
+#: Fourier orders the diagnosis ladder tries per joint (order K holds harmonics 1..K):
+#: up to a gear's 6th harmonic
+LADDER_ORDERS = (1, 2, 3, 4, 6)
 DEFAULT_AMPLITUDE = 1.5e-4  # rad, the 2nd harmonic of a harmonic drive (about 0.5 arcmin)
 DRAW_RANGE = (1e-4, 4e-4)  # rad, blind tests: one harmonic of order 1..3
 
