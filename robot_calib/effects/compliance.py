@@ -54,6 +54,14 @@ def gravity_joints(robot: RobotDescription) -> tuple[int, ...]:
     return tuple(int(j) + 1 for j in np.flatnonzero(peak > SIGNIFICANT_TORQUE_NM))
 
 
+def visible_gravity_joints(robot: RobotDescription, poses: Poses) -> list[int]:
+    """Joints (1-based) whose gravity torque varies over `poses` by more than
+    VISIBLE_TORQUE_RANGE_NM: the ladder's gravity candidates (else nothing to see)."""
+    tau = gravity_torques(robot, poses.q)
+    return [j for j in range(1, robot.n_joints + 1)
+            if np.ptp(tau[:, j - 1]) > VISIBLE_TORQUE_RANGE_NM]  # fmt: skip
+
+
 @register_effect
 class Compliance(JointOffsetEffect):
     name = "compliance"
@@ -74,9 +82,4 @@ class Compliance(JointOffsetEffect):
     @classmethod
     def ladder_candidates(cls, robot: RobotDescription, poses: Poses) -> list[Effect]:
         """Joints whose gravity torque varies over the poses (else nothing to see)."""
-        tau = gravity_torques(robot, poses.q)
-        return [
-            cls(joints=(j,))
-            for j in range(1, robot.n_joints + 1)
-            if np.ptp(tau[:, j - 1]) > VISIBLE_TORQUE_RANGE_NM
-        ]
+        return [cls(joints=(j,)) for j in visible_gravity_joints(robot, poses)]

@@ -25,10 +25,9 @@ import numpy as np
 from robot_calib.effects.base import Contribution, Effect, register_effect
 from robot_calib.effects.compliance import (
     GRAVITY,
-    VISIBLE_TORQUE_RANGE_NM,
     Compliance,
     gravity_joints,
-    gravity_torques,
+    visible_gravity_joints,
 )
 from robot_calib.kinematics.description import RobotDescription, with_payload
 from robot_calib.kinematics.dh import DHTable, chain
@@ -126,9 +125,4 @@ class GravityCompliance(Effect):
     @classmethod
     def ladder_candidates(cls, robot: RobotDescription, poses: Poses) -> list[Effect]:
         """Joints whose gravity torque varies over the poses (else nothing to see)."""
-        tau = gravity_torques(robot, poses.q)
-        return [
-            cls(joints=(j,))
-            for j in range(1, robot.n_joints + 1)
-            if np.ptp(tau[:, j - 1]) > VISIBLE_TORQUE_RANGE_NM
-        ]
+        return [cls(joints=(j,)) for j in visible_gravity_joints(robot, poses)]
