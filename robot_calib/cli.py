@@ -98,10 +98,9 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
     print(f"noise floor (abs rms): {known or unknown}")
     if diagnosis.learnable is not None:
         print(diagnosis.learnable.line())
-        shares = [f"{r.model} {100 * r.learnable_gap_share:.0f} %"
-                  for r in diagnosis.ladder[1:] if r.learnable_gap_share is not None]  # fmt: skip
+        shares = [f"{effect} {100 * share:.0f} %" for effect, share in diagnosis.effect_shares()]
         if shares:
-            print("share of the learnable gap closed: " + ", ".join(shares))
+            print("share of the learnable gap each effect closed: " + ", ".join(shares))
     print(f"dominant effect: {diagnosis.verdict}")
     print(f"unexplained: {diagnosis.unexplained.note}")
     for line in outlier_lines(diagnosis.outliers):

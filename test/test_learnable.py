@@ -92,5 +92,7 @@ def test_each_rung_reports_its_share_of_the_learnable_gap() -> None:
     assert dom is not None and dom.effect == "transmission_error" and dom.joints == [2]
     shares = [r.learnable_gap_share for r in diagnosis.ladder]
     assert shares[0] == 0.0 and shares[-1] == 1.0
+    effects = dict(diagnosis.effect_shares())  # each effect's own share: here the one
+    assert effects == {diagnosis.ladder[1].model.removeprefix("geometric+"): 1.0}
     ratio = diagnosis.unexplained.ratio_to_noise_floor
     assert ratio is not None and ratio < 1.5

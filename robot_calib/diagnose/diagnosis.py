@@ -125,6 +125,18 @@ class Diagnosis(Record):
             raise InputError(f"not a robot_calib diagnosis (format {FORMAT})")
         return super().from_dict(data)
 
+    def effect_shares(self) -> list[tuple[str, float]]:
+        """(the effect each rung added, its own share of the learnable gap): the rung's
+        share minus the one before (refits are joint, so an effect's share is what adding
+        it changed); empty without a learnable gap."""
+        out = []
+        for before, rung in zip(self.ladder, self.ladder[1:]):
+            if rung.learnable_gap_share is None or before.learnable_gap_share is None:
+                continue
+            added = rung.model.removeprefix(before.model + "+") or rung.model
+            out.append((added, rung.learnable_gap_share - before.learnable_gap_share))
+        return out
+
     @property
     def verdict(self) -> str:
         """One phrase: the dominant effect and its joints, or null."""

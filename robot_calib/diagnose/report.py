@@ -194,8 +194,12 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
             "",
             f"Learnable bound: {bound.line().removeprefix('learnable bound: ')}. "
             f"Method: {bound.method}. The last column: the share of that learnable gap "
-            "(geometric's held-out rms minus the bound) each rung closes.",
-        ]
+            "(geometric's held-out rms minus the bound) each rung closes"
+            + (": by effect " + ", ".join(f"{e} {100 * v:.0f} %"
+                                          for e, v in diagnosis.effect_shares())
+               if diagnosis.effect_shares() else "")
+            + ".",
+        ]  # fmt: skip
     if diagnosis.outliers:
         lines += [
             "",
