@@ -96,6 +96,9 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
     unknown = "unknown (no repeat poses, circle sweeps or stated accuracy; --tracker-accuracy)"
     known = f"{floor:.4f} mm ({diagnosis.noise.source})" if floor is not None else ""
     print(f"noise floor (abs rms): {known or unknown}")
+    geometric = diagnosis.unexplained.geometric_ratio_to_noise_floor
+    if geometric is not None:
+        print(f"geometric held-out: {geometric:.2f} x the noise floor")
     if diagnosis.learnable is not None:
         print(diagnosis.learnable.line())
         shares = [f"{effect} {100 * share:.0f} %" for effect, share in diagnosis.effect_shares()]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import io
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,8 @@ from robot_calib.atomic import write_text_atomic
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
 from robot_calib.poses import Poses, beyond_reach
+
+TEMPERATURE_COLUMN = "temp_c"  # JOINTS.csv: the robot's temperature [deg C], optional
 
 
 def read_joints_csv(path: str | Path, n_joints: int, limits: Array | None = None) -> Poses:
@@ -81,7 +84,10 @@ def read_joints_csv(path: str | Path, n_joints: int, limits: Array | None = None
     time = table[:, col["t"]] if "t" in col else None
     if direction is not None and not np.all(np.abs(direction) == 1.0):
         raise InputError(f"{path}: dir columns must be +1 or -1")
-    return Poses.from_readings(q, direction, time)
+    poses = Poses.from_readings(q, direction, time)
+    if TEMPERATURE_COLUMN in col:  # for models that follow the temperature
+        poses = replace(poses, temperature=table[:, col[TEMPERATURE_COLUMN]])
+    return poses
 
 
 def write_points_csv(points: Array, path: str | Path, quaternions: Array | None = None) -> None:

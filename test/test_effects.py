@@ -103,7 +103,10 @@ def check_params_round_trip(cls: type[Effect], tmp_path: Path) -> None:
     plan = paper_test_plan(2)
     q = np.concatenate([plan.q, random_plan(ROBOT, 60, rng).q])
     poses = Poses.from_readings(q, time=np.arange(len(q)) * 3.0)
-    recording = recording_from_arrays(q, physical_points(world, poses, rng), poses.time)
+    celsius = 22.0 + 6.0 * np.sin(poses.time / 300.0)  # a recorded temperature
+    poses = replace(poses, temperature=celsius)
+    recording = recording_from_arrays(q, physical_points(world, poses, rng), poses.time,
+                                      temperature=celsius)  # fmt: skip
     spec = "geometric+" + effect.spec
     if cls.in_vocabulary:
         assert parse_model(spec, ROBOT)[1] == [effect]

@@ -21,6 +21,10 @@ FORMAT = "robot_calib.diagnosis/1"
 #: geometric within this factor of the noise floor on held-out data: nothing to diagnose
 NULL_FACTOR = 1.5
 UNKNOWN = "unknown"  # the verdict for structure no effect of the vocabulary explains
+#: a joint signature this significant (sqrt(chi^2) it explains, in units of the residual)
+#: is structure even where the floor is unknown and the kernel ridge learns nothing (a
+#: clean recording's strongest signature stays near 3)
+SIGNATURE_STRUCTURE = 5.0
 
 
 @dataclass(frozen=True)
@@ -73,6 +77,7 @@ class Unexplained(Record):
     ratio_to_noise_floor: float | None
     note: str
     where: WhereItLies
+    geometric_ratio_to_noise_floor: float | None = None  # geometric's held-out rms / floor
 
 
 @dataclass(frozen=True)
@@ -133,7 +138,8 @@ class Diagnosis(Record):
         for before, rung in zip(self.ladder, self.ladder[1:]):
             if rung.learnable_gap_share is None or before.learnable_gap_share is None:
                 continue
-            added = rung.model.removeprefix(before.model + "+") or rung.model
+            terms = before.model.split("+")
+            added = "+".join(t for t in rung.model.split("+") if t not in terms)
             out.append((added, rung.learnable_gap_share - before.learnable_gap_share))
         return out
 
@@ -144,7 +150,10 @@ class Diagnosis(Record):
         if dom is None:
             if self.noise.floor_known:
                 return "null (geometric reaches the noise level)"
-            return "null (noise floor unknown; no residual model learns more from the data)"
+            return (
+                "null (noise floor unknown; the kernel ridge learns nothing held out and no "
+                "joint signature stands out)"
+            )
         return f"{dom.effect} on joints {dom.joints}"
 
     def summary(self) -> str:
@@ -187,10 +196,11 @@ def dominant_effect(
     ladder: Ladder, where: WhereItLies, noise: NoiseLevel
 ) -> DominantEffect | None:
     """The effect that removed most of what `geometric` left (with its joints); None when
-    geometric is already at the noise level, or, the floor unknown, when no residual model
-    learns more than geometric from the data (`Ladder.learnable`): never because geometric
-    fits itself; 'unknown' with the joints of the strongest residual signature when
-    structure remains that no candidate explains."""
+    geometric is already at the noise level, or, the floor unknown, when neither the
+    residual model learns more than geometric held out (`Ladder.learnable`) nor a joint
+    signature reaches SIGNATURE_STRUCTURE: never because geometric fits itself; 'unknown'
+    with the joints of the strongest residual signature when structure remains that no
+    candidate explains."""
     rungs = ladder.rungs
     floor_mm = noise.floor_rms_m * 1e3
     gains: dict[str, float] = {}
@@ -205,9 +215,11 @@ def dominant_effect(
         return DominantEffect(name, sorted(joints[name]))
     if noise.independent and rungs[0].heldout.absolute_rms_mm <= NULL_FACTOR * floor_mm:
         return None  # at the noise level
-    if not noise.independent and not (ladder.learnable and ladder.learnable.structure_left):
-        return None  # floor unknown, and nothing learnable left: no evidence of structure
     strongest = where.strongest_signature
+    learnt = ladder.learnable is not None and ladder.learnable.structure_left
+    signed = strongest is not None and strongest.significance >= SIGNATURE_STRUCTURE
+    if not noise.independent and not learnt and not signed:
+        return None  # floor unknown, nothing learnable and no signature: no evidence
     return DominantEffect(UNKNOWN, [strongest.joint] if strongest else [])
 
 
@@ -293,11 +305,12 @@ def diagnose(
             ratio,
             note,
             after,
+            None if floor_mm is None else ladder.rungs[0].heldout.absolute_rms_mm / floor_mm,
         ),  # fmt: skip
         noise=NoiseReport(
             noise.sigma_m * 1e3 if noise.independent else None,
             noise.source if noise.independent else "unknown",
-            noise.n,
+            noise.n if noise.independent else 0,
             floor_mm,
             noise.floor_mean_m * 1e3 if noise.independent else None,
             ladder.noise.sigma_m * 1e3,

@@ -264,7 +264,10 @@ def run_ladder(
             )
             rungs, noise, scored_on, rounds = climb(recording, holdout=holdout)
     geometric = rungs[0].calibration
-    fold, fitted = kfold_parameters(geometric, recording)
+    if holdout is None:  # the folds' geometry refitted, for the bound's own k-fold
+        fold, fitted = kfold_parameters(geometric, recording)
+    else:
+        fold, fitted = pose_folds(recording), {}
     bound = learnable_bound(geometric, recording, holdout, fold, fitted, scored_on)
     say(bound.line())
     return Ladder(rungs, noise, scored_on, rounds, recording, holdout, outliers, bound)

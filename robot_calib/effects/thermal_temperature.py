@@ -7,7 +7,8 @@ structure's effective expansion coefficient [1/K] (steel 12e-6, aluminium 23e-6)
 constant part alpha (T_REF_C - mean T) is a length change the geometry absorbs; what the
 effect adds is the change with the temperature over the recording, warm-up and cool-down
 alike (which a time-based drift cannot follow). It belongs to no joint, and is a ladder
-candidate only where the recording has a temperature that varies.
+candidate only where every measurement has a temperature and it varies; a model with it
+meeting measurements without one is an error (never a prediction at 20 deg C).
 Parameter `thermal_temperature_alpha` [1/K].
 """
 
@@ -16,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from robot_calib.effects.base import Contribution, Effect, register_effect
+from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
@@ -41,11 +43,16 @@ class ThermalTemperature(Effect):
     def contribution(
         self, robot: RobotDescription, params: ParameterVector, poses: Poses
     ) -> Contribution:
-        """(T - T_REF_C) scales the lengths; a recording without temperature: no change."""
-        if poses.temperature is None:
-            jac = np.zeros((len(poses), 1))
-        else:
-            jac = (np.asarray(poses.temperature, dtype=float) - T_REF_C)[:, None]
+        """(T - T_REF_C) scales the lengths. InputError for poses without a temperature
+        (a bag without /temperature, a JOINTS.csv without `temp_c`): predicting as if at
+        T_REF_C would be silently wrong."""
+        if poses.temperature is None or not np.all(np.isfinite(poses.temperature)):
+            raise InputError(
+                f"{self.name}: the model follows the robot's temperature, but "
+                f"{'some' if poses.temperature is not None else 'these'} measurements have "
+                "none (a bag without /temperature, a JOINTS.csv without a temp_c column)"
+            )
+        jac = (np.asarray(poses.temperature, dtype=float) - T_REF_C)[:, None]
         return Contribution(
             length_strain=jac[:, 0] * params[self.parameter], length_strain_jac=jac
         )
@@ -64,7 +71,10 @@ class ThermalTemperature(Effect):
 
     @classmethod
     def ladder_candidates(cls, robot: RobotDescription, poses: Poses) -> list[Effect]:
-        """Only where the recording has a temperature that varies."""
-        if poses.temperature is None or np.ptp(poses.temperature) < VISIBLE_SPAN_K:
+        """Only where every measurement has a temperature and it varies."""
+        temperature = poses.temperature
+        if temperature is None or not np.all(np.isfinite(temperature)):
+            return []
+        if np.ptp(temperature) < VISIBLE_SPAN_K:
             return []
         return [cls()]

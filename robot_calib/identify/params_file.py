@@ -167,7 +167,11 @@ def params_from_dict(
         robot = load_robot(doc["robot"])
         payload = doc.get("payload")
         if payload is not None:  # the calibration's payload (--payload), masses and all
-            robot = with_payload(robot, float(payload["mass_kg"]), payload["com_m"])
+            try:
+                mass, centre = float(payload["mass_kg"]), [float(v) for v in payload["com_m"]]
+            except (ValueError, TypeError) as exc:
+                raise InputError(f"{where}: malformed payload ({exc})") from None
+            robot = with_payload(robot, mass, centre)
         stored = doc.get("robot_fingerprint")
         if stored is not None and stored not in (robot.fingerprint(), robot.fingerprint(True)):
             raise InputError(

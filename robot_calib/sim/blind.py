@@ -11,7 +11,8 @@ Case classes (`classes()`):
   compliance of the robot with an unknown 2-5 kg payload: the vocabulary's `compliance`
   assumes the robot's own masses), `drift_exponential` (a first-order warm-up, where
   `thermal_drift` is linear in time), `ripple_order5` (a 5th-harmonic joint-angle ripple,
-  beyond the ladder's transmission_error orders 1-3).
+  the simulator's joint_ripple: no single order of the ladder's transmission_error, 1, 2,
+  3, 4, 6, is it, order 6 holds it; judged by its joint, as effects outside the vocabulary).
 Every case also gets the right model's held-out error (the withheld effects, fitted as the
 diagnosis would fit them, scored on the same hold-out poses): the diagnosis's chosen rung
 over that is the `ratio_to_right` of the README.
