@@ -176,14 +176,17 @@ def measure_every_target(
     """Every target of the world measured at each of the poses q (m, J) [rad] visited in
     order at `time` (m,) [s]: poses (m T,) in order, each pose's targets together in the
     model's order (they share the pose's physical joint angles; with 6-DoF probes their
-    measured frames as `rotation`), and their points (m T, 3) [m] in the tracker frame."""
+    measured frames as `rotation`; with a temperature profile the recorded temperature),
+    and their points (m T, 3) [m] in the tracker frame."""
     n_targets = len(world.model.targets)
     rows_q = np.repeat(np.asarray(q, dtype=float), n_targets, axis=0)
+    rows_t = np.repeat(np.asarray(time, dtype=float), n_targets)
     poses = Poses(
         rows_q,
         approach_directions(rows_q),
-        np.repeat(np.asarray(time, dtype=float), n_targets),
+        rows_t,
         np.tile(np.arange(n_targets), len(q)),
+        temperature=None if world.temperature is None else world.temperature.at(rows_t),
     )
     points, rotation = measure_six_dof(world, poses, rng, noisy)
     return replace(poses, rotation=rotation), points
