@@ -279,7 +279,7 @@ def diagnose(
     floor_mm = noise.floor_rms_m * 1e3 if noise.independent else None
     ratio = None if floor_mm is None else best.heldout.absolute_rms_mm / floor_mm
     sig = after.strongest_signature
-    structure = f"; strongest structure: {sig.text}" if sig else ""
+    structure = f"; strongest structure: {sig.text}" if sig and sig.significance >= 3 else ""
     learnable = ladder.learnable
     if ratio is None:
         note = (
