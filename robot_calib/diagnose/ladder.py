@@ -239,17 +239,34 @@ def run_ladder(
     unknown (`estimate_noise`). Ends with the learnable bound (`learnable_bound`).
 
     Tracker blunders never become robot effects: the measurements the geometric
-    calibration flags (`calibrate`'s outlier screening) and the hold-out points beyond
+    calibration flags (`calibrate`'s outlier screening; those the best rung then explains
+    are re-admitted and the ladder climbed again) and the hold-out points beyond
     HOLDOUT_K robust sigmas of the best rung's hold-out residuals (then the ladder is
     climbed again without them) are left out of every rung, its scores and the noise floor,
     and listed in `Ladder.outliers`."""
     say = log or (lambda _m: None)
+    full = recording
     geo = calibrate(recording, robot, "geometric", log=log)
     outliers = geo.outliers
     if geo.inliers is not None:
         recording = recording.subset(geo.inliers)
-    climb = partial(_climb, robot=robot, geo=geo, say=say, tracker_sigma_m=tracker_sigma_m)
-    rungs, noise, scored_on, rounds = climb(recording, holdout=holdout)
+    climb = partial(_climb, robot=robot, say=say, tracker_sigma_m=tracker_sigma_m)
+    rungs, noise, scored_on, rounds = climb(recording, geo=geo, holdout=holdout)
+    if geo.inliers is not None and len(rungs) > 1:
+        # Judged again against the best rung: what an effect explains (the coldest points
+        # of a strong thermal effect, the far ends of a compliance) is no blunder.
+        best = rungs[-1].calibration
+        residual = best.predict(full.poses) - full.points
+        sigma = robust_sigma(residual[geo.inliers])
+        still = ~geo.inliers & outlier_mask(residual, sigma)
+        readmitted, n_flagged = int((~geo.inliers & ~still).sum()), int((~geo.inliers).sum())
+        if readmitted:
+            say(f"outliers: {readmitted} of the {n_flagged} flagged measurements are explained "
+                f"by {best.name}: re-admitted, climbing again")  # fmt: skip
+            recording = full.subset(~still)
+            geo = calibrate(recording, robot, "geometric", log=None, screen_outliers=False)
+            outliers = describe_outliers(full, still, residual, sigma)
+            rungs, noise, scored_on, rounds = climb(recording, geo=geo, holdout=holdout)
     if holdout is not None:  # judged against the best model: an effect's structure is not
         best = rungs[-1].calibration  # a blunder; no refit possible, so a higher bar
         h_res = best.predict(holdout.poses) - holdout.points
@@ -262,7 +279,7 @@ def run_ladder(
                 f"outliers: {int(flagged.sum())} hold-out points beyond {HOLDOUT_K:g} robust "
                 f"sigmas ({sigma * 1e3:.4f} mm) of {best.name}: not scored; climbing again"
             )
-            rungs, noise, scored_on, rounds = climb(recording, holdout=holdout)
+            rungs, noise, scored_on, rounds = climb(recording, geo=geo, holdout=holdout)
     geometric = rungs[0].calibration
     if holdout is None:  # the folds' geometry refitted, for the bound's own k-fold
         fold, fitted = kfold_parameters(geometric, recording)
