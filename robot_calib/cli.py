@@ -136,8 +136,12 @@ def cmd_run(args: argparse.Namespace) -> int:
             f"{test.pairwise_mean_mm:>15.4f} / {test.pairwise_max_mm:<8.4f}"
             f"{test.absolute_mean_mm:>17.4f}"
         )
+    for warning in result.warnings:
+        print(warning)
     seconds = time.perf_counter() - started
     _print_diagnosis(result.diagnosis, result.folder / "diagnosis.json", result.report, seconds)
+    print(f"best model (lowest held-out error): {result.best} -> "
+          f"{result.folder / 'params_best.json'}")  # fmt: skip
     print(f"done: {result.folder} (report: {result.report})")
     return 0
 
@@ -199,6 +203,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     inputs = [*args.bags, *(args.holdout or ())]
     output = pipeline.output_path(args.output, "DIAGNOSIS.json", inputs, args.force)
     pipeline.output_path(pipeline.report_path(output), "the report", inputs, args.force)
+    best = pipeline.output_path(pipeline.best_params_path(output), "the best model's PARAMS.json",
+                                inputs, args.force)  # fmt: skip
     started = time.perf_counter()
     accuracy = args.tracker_accuracy
     if accuracy is not None and not (math.isfinite(accuracy) and 0 < accuracy < 10):
@@ -209,6 +215,7 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     )  # fmt: skip
     report = pipeline.write_diagnosis(diagnosis, ladder, recording, output, args.force)
     _print_diagnosis(diagnosis, output, report, time.perf_counter() - started)
+    print(f"best model (the ladder's chosen rung): {diagnosis.ladder[-1].model} -> {best}")
     return 0
 
 
@@ -622,6 +629,9 @@ def build_parser() -> argparse.ArgumentParser:
         "units on disk are SI (m, rad), reports add mm/deg. Bad input: one line, exit 2.",
         epilog=OVERWRITE_POLICY,
     )
+    from robot_calib import __version__
+
+    parser.add_argument("--version", action="version", version=f"robot-calib {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     def add(

@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -35,8 +35,8 @@ Log = Callable[[str], None]
 Progress = Callable[[str, int, int], None]  # (plan, poses done, poses in all)
 
 DEFAULT_ROBOT = "kr5_sixx_r650"  # the seed's robot
-DEFAULT_PLAN = "paper-test3"  # `simulate` without --plan
 RUN_PLAN = "paper-test2"  # the main job's calibration plan (seed Test 2)
+DEFAULT_PLAN = RUN_PLAN  # `simulate` without --plan: the same as the main job
 RUN_HOLDOUT_POSES = 200
 RUN_MODELS = ("nominal", "cpa", "geometric")
 N_RANDOM_POSES = 200  # poses of the `random` plan
@@ -424,11 +424,41 @@ def write_diagnosis(
 
     output = Path(output)
     report = report_path(output)
+    best = best_params_path(output)
     with staged_outputs(output.parent, force) as stage:
         write_json_atomic(diagnosis.to_dict(), stage / output.name)
         fitted = ladder.recording if ladder.recording is not None else recording  # no outliers
         write_report(diagnosis, ladder, fitted, stage / report.name)
+        scores = {r.model: r.heldout.absolute_rms_mm for r in ladder.rungs}
+        chosen = ladder.rungs[-1]
+        write_json_atomic(
+            selected_document(chosen.calibration, fitted, "the diagnosis ladder's chosen rung",
+                              diagnosis.scored_on, scores),
+            stage / best.name,
+        )  # fmt: skip
     return report
+
+
+def best_params_path(output: str | Path) -> Path:
+    """The PARAMS.json of the best model beside DIAGNOSIS.json `output`:
+    `<name>.params_best.json` (msgs_doc/parameters.md, `selected`)."""
+    output = Path(output)
+    return output.with_name(f"{output.stem}.params_best.json")
+
+
+def selected_document(
+    cal: Calibration, recording: Recording, how: str, scored_on: str, scores: dict[str, float]
+) -> dict[str, Any]:
+    """The PARAMS.json document of `cal`, the model selected as the best, with a `selected`
+    section: how it was chosen, on what, and every candidate's held-out rms [mm]."""
+    doc = cal.to_dict(recording)
+    doc["selected"] = {
+        "model": cal.name,
+        "chosen_as": how,
+        "scored_on": scored_on,
+        "holdout_abs_rms_mm": scores,
+    }
+    return doc
 
 
 @dataclass(frozen=True)
@@ -451,6 +481,8 @@ class RunResult:
     models: dict[str, ModelScore]
     diagnosis: Diagnosis
     report: Path
+    best: str = ""  # the model written as params_best.json (lowest held-out error)
+    warnings: tuple[str, ...] = ()  # richer models that generalise worse than simpler ones
 
 
 def run(
@@ -524,4 +556,33 @@ def run(
     say(f"[4/{steps}] diagnose the sim-to-real gap (hold-out: {holdout.name})")
     diagnosis, ladder = diagnose_recordings(recording, description, held, log)
     report = write_diagnosis(diagnosis, ladder, recording, folder / "diagnosis.json")
-    return RunResult(folder, first, second, recording, models, diagnosis, report)
+    best, warnings = _best_model(models, ladder)
+    scores = {n: m.holdout.absolute_rms_mm for n, m in models.items()}
+    scores.update({r.model: r.heldout.absolute_rms_mm for r in ladder.rungs})
+    write_json_atomic(
+        selected_document(best, recording, "the lowest held-out error of the run's models and "
+                          "the diagnosis ladder's rungs", "hold-out bag", scores),
+        folder / "params_best.json",
+    )  # fmt: skip
+    return RunResult(folder, first, second, recording, models, diagnosis, report, best.name,
+                     tuple(warnings))  # fmt: skip
+
+
+def _best_model(models: dict[str, ModelScore], ladder: Ladder) -> tuple[Calibration, list[str]]:
+    """The calibration with the lowest held-out rms among `models` and the ladder's rungs,
+    and a warning for every richer model that generalises worse than a simpler one
+    (geometric behind cpa: its extra parameters fit the sweeps, not the robot)."""
+    candidates = [(m.holdout.absolute_rms_mm, n, m.calibration) for n, m in models.items()]
+    candidates += [(r.heldout.absolute_rms_mm, r.model, r.calibration) for r in ladder.rungs]
+    warnings = []
+    order = [n for n in RUN_MODELS if n in models]
+    for simple, rich in zip(order, order[1:]):
+        a, b = models[simple].holdout.absolute_rms_mm, models[rich].holdout.absolute_rms_mm
+        if b > a:
+            warnings.append(
+                f"warning: {rich} generalises worse than {simple} ({b:.4f} vs {a:.4f} mm "
+                f"held-out abs rms): its extra parameters fit the calibration poses, not the "
+                "robot; the best model is chosen by held-out error"
+            )
+    best = min(candidates, key=lambda c: c[0])
+    return best[2], warnings

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from robot_calib.diagnose.diagnosis import Diagnosis, DominantEffect, diagnose
+from robot_calib.identify.params_file import load_params
 from robot_calib.sim.blind import judge, make_case, run_case
 from robot_calib.sim.world import load_world
 
@@ -81,5 +82,17 @@ def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:
     assert doc["scored_on"] == "5-fold CV over poses"
     report = out.with_suffix(".md").read_text()
     assert "null (geometric reaches the noise level): no dominant unmodelled effect" in report
-    for suffix in ("_ladder.png", "_angle.png", "_time.png"):
+    for suffix in ("_ladder.png", "_angle.png", "_time.png", "_map.png"):
         assert (tmp_path / f"diagnosis{suffix}").stat().st_size > 1000
+    # the chosen rung's PARAMS.json beside it (issue 15): loadable, saying how it was chosen
+    best = tmp_path / "diagnosis.params_best.json"
+    assert f"best model (the ladder's chosen rung): geometric -> {best}" in proc.stdout
+    model, params, saved = load_params(best)
+    assert saved["selected"]["model"] == doc["ladder"][-1]["model"] == "geometric"
+    assert set(saved["selected"]["holdout_abs_rms_mm"]) == {r["model"] for r in doc["ladder"]}
+    # written once: a second run refuses to overwrite it
+    again = subprocess.run(
+        [sys.executable, "-m", "robot_calib", "diagnose", str(bag), "-o", str(out)],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert again.returncode == 2

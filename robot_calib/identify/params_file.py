@@ -309,7 +309,10 @@ def summary(cal: Calibration, recording: Recording) -> str:
         n, _ = human_value(p.name, p.unit, p.nominal)
         s, _ = human_value(p.name, p.unit, std)
         sigma = f"{s:11.5f}" if p.free else "      fixed"
-        lines.append(f"{p.name + ' [' + unit + ']':<22}{v:14.5f}{n:14.5f}{v - n:12.5f}{sigma}")
+        # the tracker pose and the target offsets have no nominal: no deviation to show
+        deviation = f"{'-':>12}" if p.group == "frames" else f"{v - n:12.5f}"
+        nominal = f"{'-':>14}" if p.group == "frames" else f"{n:14.5f}"
+        lines.append(f"{p.name + ' [' + unit + ']':<22}{v:14.5f}{nominal}{deviation}{sigma}")
     fixed = [p for p in cal.parameters.parameters if not p.free]
     if fixed:
         reasons: dict[str, list[str]] = {}
