@@ -157,3 +157,21 @@ def test_a_robot_file_edited_after_calibration_is_noticed(tmp_path: Path) -> Non
     proc = run("predict", str(params), "--joints", str(joints), "-o", str(tmp_path / "b.csv"))
     one_line_error(proc, "is not the one it was calibrated with")
     assert not (tmp_path / "b.csv").exists()
+
+
+def test_version_and_the_summary_of_frames() -> None:
+    """`--version` (issue 15); the tracker pose and target offsets have no nominal: the
+    parameter table shows '-' for their nominal and deviation, never their value again."""
+    proc = run("--version")
+    assert proc.returncode == 0 and proc.stdout.strip().startswith("robot-calib 0.")
+    bag = ROOT / "bags" / "paper_test3.mcap"
+    from robot_calib.identify.params_file import summary
+    from robot_calib.kinematics.description import load_robot
+    from robot_calib.pipeline import calibrate_bags
+
+    cal, recording = calibrate_bags([bag], load_robot("kr5_sixx_r650"), "geometric")
+    lines = summary(cal, recording).splitlines()
+    frame = next(line for line in lines if line.startswith("base2tracker_x [mm]"))
+    assert frame.split()[3:5] == ["-", "-"]
+    joint = next(line for line in lines if line.startswith("a2 [mm]"))
+    assert len(joint.split()) == 6 and joint.split()[3] != "-"
