@@ -52,7 +52,8 @@ def joint_origins(cal: Calibration) -> Array:
     """The six joint origins (6, 4, 4), each in its parent link frame (see the module)."""
     model, params = cal.model, cal.parameters
     robot = model.robot
-    if robot.joint_names != UR_JOINTS and not robot.name.startswith("ur"):
+    is_ur = robot.joint_names == UR_JOINTS or robot.name.startswith("ur")
+    if not is_ur or robot.n_joints != len(ENTRIES):
         raise ExportError(
             f"robot {robot.name} is not a Universal Robots arm: the UR calibration file is "
             "only for UR robots (use --format urdf or dh)"
@@ -84,7 +85,7 @@ def render(cal: Calibration, source: str) -> str:
     origins = joint_origins(cal)
     kinematics: dict[str, object] = {}
     for name, origin in zip(ENTRIES, origins):
-        roll, pitch, yaw = rpy(origin[:3, :3])
+        roll, pitch, yaw = (v + 0.0 for v in rpy(origin[:3, :3]))  # no -0.0
         x, y, z = (float(v) + 0.0 for v in origin[:3, 3])
         kinematics[name] = {"x": x, "y": y, "z": z, "roll": roll, "pitch": pitch, "yaw": yaw}
     digest = hashlib.sha256(np.ascontiguousarray(origins).tobytes()).hexdigest()[:16]
