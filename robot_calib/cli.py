@@ -519,6 +519,27 @@ def cmd_score(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export(args: argparse.Namespace) -> int:
+    """A calibration (PARAMS.json) in a format robots and their software read."""
+    from robot_calib.atomic import write_text_atomic
+    from robot_calib.export import FORMATS
+    from robot_calib.identify.params_file import load_calibration
+
+    cal = load_calibration(args.params)
+    robot = cal.model.robot
+    if args.robot is not None and load_robot(args.robot).name != robot.name:
+        raise InputError(
+            f"{args.params}: identified for robot {robot.name}, not --robot {args.robot}"
+        )
+    exporter = FORMATS[args.format]
+    output = output_path(args.output, f"the {args.format} export", [args.params], args.force)
+    write_text_atomic(output, exporter.render(cal, str(args.params)))
+    effects = len(cal.model.effects) if args.format in ("urdf", "ur") else 0
+    left = f"; {effects} effect(s) it cannot hold, listed in its header" if effects else ""
+    print(f"{output}: {exporter.description}, robot {robot.name}, model {cal.name}{left}")
+    return 0
+
+
 def cmd_repair(args: argparse.Namespace) -> int:
     """Copy every complete message of a crashed (or intact) bag into a new, indexed bag."""
     from robot_calib.bag.repair import repair_bag
@@ -863,6 +884,19 @@ def build_parser() -> argparse.ArgumentParser:
     _add_joint_names(sco)
     _add_pair_tolerance(sco)
     _add_force(sco)
+
+    from robot_calib.export import FORMATS
+
+    exp = add("export", cmd_export, "a calibration as a URDF, DH table, UR calibration or JSON",
+              robot=CALIBRATION_ROBOT)  # fmt: skip
+    exp.add_argument("params", metavar="PARAMS.json")
+    exp.add_argument(
+        "--format", required=True, choices=sorted(FORMATS),
+        help="; ".join(f"{k}: {v.description}" for k, v in sorted(FORMATS.items()))
+        + " (msgs_doc/export.md; no default)",
+    )  # fmt: skip
+    exp.add_argument("-o", "--output", required=True, help="file to write (e.g. robot.urdf)")
+    _add_force(exp)
 
     rep = add("repair", cmd_repair, "recover the messages of a crashed recording -> a new bag")
     rep.add_argument("bag", metavar="BAG", help="bag whose writer was killed (.mcap)")

@@ -1,0 +1,104 @@
+"""The one interface of an export format, and what several formats share: the constant
+part of each DH/Hayati row, roll-pitch-yaw of a rotation, the effects no geometry holds."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from robot_calib.errors import InputError
+from robot_calib.kinematics.dh import link_transforms
+from robot_calib.kinematics.frames import Array
+
+if TYPE_CHECKING:
+    from robot_calib.identify.calibrate import Calibration
+
+_GIMBAL_COS = 1e-9  # |cos(pitch)| below this: roll and yaw turn about one axis, roll := 0
+
+
+class ExportError(InputError):
+    """A calibration that the chosen format cannot represent (exit status 2)."""
+
+
+@dataclass(frozen=True)
+class Exporter:
+    """An export format: `render(cal, source)` is the file's text for calibration `cal`
+    read from `source` (the PARAMS.json path, named in the file's header)."""
+
+    name: str
+    suffix: str  # default file suffix, with the dot
+    description: str  # one line, for --help
+    render: Callable[[Calibration, str], str]
+
+
+def constant_rows(cal: Calibration) -> Array:
+    """The constant part of every DH/Hayati row, shape (J, 4, 4): link j's transform
+    ``Rz(theta_j + offset_j) Tz(d_j) Tx(a_j) Rx(alpha_j) Ry(beta_j)`` at joint variables
+    M q = 0 (offset_j: the robot's `reading_to_joint` offset [rad]), geometric values only
+    (no effects). Frame j = frame j-1 Rz((M q)_j) row_j."""
+    model, params = cal.model, cal.parameters
+    zero = np.zeros((1, model.robot.n_joints))
+    return link_transforms(model.dh_table(params, zero))[0]
+
+
+def joint_signs(cal: Calibration, what: str) -> Array:
+    """Each joint's reading-to-joint sign (J,) (+1/-1); ExportError naming `what` when the
+    robot couples joints (a joint variable depending on another joint's reading), which no
+    single-axis joint can hold."""
+    robot = cal.model.robot
+    matrix = robot.reading_matrix
+    if matrix is None:
+        return np.ones(robot.n_joints)
+    coupled = matrix - np.diag(np.diag(matrix))
+    if np.any(coupled != 0.0):
+        pairs = ", ".join(f"{j + 1}<-{k + 1}" for j, k in zip(*np.nonzero(coupled)))
+        raise ExportError(
+            f"robot {robot.name} couples joints (reading_to_joint coupling {pairs}): {what} "
+            "cannot hold a joint driven by another joint's reading; export --format dh or "
+            "json instead"
+        )
+    return np.diag(matrix).copy()
+
+
+def rpy(rotation: Array) -> tuple[float, float, float]:
+    """Roll, pitch, yaw [rad] of a rotation (3, 3) = Rz(yaw) Ry(pitch) Rx(roll) (URDF's
+    fixed-axis XYZ); pitch from atan2 (accurate near +-pi/2), roll 0 at gimbal lock."""
+    cos_pitch = float(np.hypot(rotation[0, 0], rotation[1, 0]))
+    pitch = float(np.arctan2(-rotation[2, 0], cos_pitch))
+    if cos_pitch < _GIMBAL_COS:
+        return 0.0, pitch, float(np.arctan2(-rotation[0, 1], rotation[1, 1]))
+    roll = float(np.arctan2(rotation[2, 1], rotation[2, 2]))
+    yaw = float(np.arctan2(rotation[1, 0], rotation[0, 0]))
+    return roll, pitch, yaw
+
+
+def _size(unit: str, value: float) -> str:
+    if unit == "m":
+        return f"{value * 1e3:.4f} mm"
+    if unit == "rad":
+        return f"{value * 1e6:.1f} urad"
+    return f"{value:.4g} {unit}"
+
+
+def effect_lines(cal: Calibration) -> list[str]:
+    """One line per effect of the calibration's model (none: an empty list): its label and
+    its largest parameter by magnitude, in mm / urad (other units as stored)."""
+    lines = []
+    params, robot = cal.parameters, cal.model.robot
+    for effect in cal.model.effects:
+        names = effect.parameter_names(robot)
+        if not names:
+            lines.append(f"{effect.label}: no parameters")
+            continue
+        largest = max(names, key=lambda n: abs(params[n]))
+        unit = params.parameters[params.index(largest)].unit
+        lines.append(f"{effect.label}: largest |{largest}| = {_size(unit, abs(params[largest]))}")
+    return lines
+
+
+def number(value: float) -> str:
+    """A float as text that reads back to the same double (repr), -0 as 0."""
+    return repr(float(value) + 0.0)
