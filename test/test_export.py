@@ -245,9 +245,18 @@ def test_the_export_verb_writes_every_format_and_keeps_the_overwrite_policy(
     def run(*args: str) -> subprocess.CompletedProcess[str]:
         return robot_calib(*args, cwd=tmp_path)
 
-    assert (
-        run("simulate", "--robot", "ur10", "--plan", "paper-test3", "-o", "x.mcap").returncode == 0
-    )
+    # a UR10 bag simulated in-process (the ROS graph's simulate is tested elsewhere)
+    from robot_calib.bag.csv_import import write_measurement_bag
+    from robot_calib.sim.measure import measure_every_target
+    from robot_calib.sim.plans import paper_test_plan, plan_times
+    from robot_calib.sim.world import build_world
+
+    world = build_world({"robot": "ur10", "geometry": "nominal", "seed": 2})
+    plan = paper_test_plan(3)
+    poses, points = measure_every_target(world, plan.q, plan_times(plan, world.timing),
+                                         np.random.default_rng(2))  # fmt: skip
+    write_measurement_bag(tmp_path / "x.mcap", poses.q, points, world.model.robot.joint_names,
+                          poses.time)  # fmt: skip
     assert run("calibrate", "x.mcap", "--robot", "ur10", "-o", "p.json").returncode == 0
     for fmt, name in (("urdf", "r.urdf"), ("dh", "r.csv"), ("ur", "r.yaml"), ("json", "r.json")):
         proc = run("export", "p.json", "--format", fmt, "-o", name)
