@@ -104,6 +104,8 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
         shares = [f"{effect} {100 * share:.0f} %" for effect, share in diagnosis.effect_shares()]
         if shares:
             print("share of the learnable gap each effect closed: " + ", ".join(shares))
+    for figures in diagnosis.iso9283:
+        print(figures.line())
     print(f"dominant effect: {diagnosis.verdict}")
     print(f"unexplained: {diagnosis.unexplained.note}")
     for line in outlier_lines(diagnosis.outliers):

@@ -7,11 +7,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from robot_calib.diagnose.iso9283 import Iso9283, iso9283, repeat_groups
 from robot_calib.diagnose.ladder import AT_FLOOR, N_FOLDS, Ladder, Rung, run_ladder
 from robot_calib.diagnose.learnable import MIN_LEARNABLE_SHARE, LearnableBound
 from robot_calib.diagnose.noise import NoiseLevel, refine_with_model
 from robot_calib.diagnose.signatures import WhereItLies, where_it_lies
 from robot_calib.errors import InputError
+from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.outliers import Outlier
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import Recording
@@ -118,6 +120,8 @@ class Diagnosis(Record):
     outliers: list[Outlier] = field(default_factory=list)  # tracker blunders, never fitted
     warnings: list[str] = field(default_factory=list)  # implausible geometric calibration
     learnable: LearnableBound | None = None  # what a residual model reaches held out
+    # ISO 9283 AP/RP of the repeated poses: before (nominal) and after (the best rung)
+    iso9283: list[Iso9283] = field(default_factory=list)
     format: str = FORMAT
 
     def to_dict(self) -> dict[str, Any]:
@@ -327,5 +331,25 @@ def diagnose(
         outliers=list(ladder.outliers),
         warnings=list(geo.warnings),
         learnable=learnable,
+        iso9283=_iso9283(ladder, recording, robot),
     )
     return diagnosis, ladder
+
+
+def _iso9283(ladder: Ladder, recording: Recording, robot: RobotDescription) -> list[Iso9283]:
+    """ISO 9283 figures before (the nominal model, its tracker pose and target fitted on
+    the calibration recording) and after calibration (the best rung), on the hold-out
+    bags' repeated poses, else the calibration recording's; empty without repeats."""
+    held = ladder.holdout
+    scored, where = (held, "hold-out bags") if held is not None and repeat_groups(held) else (
+        recording, "calibration recording")  # fmt: skip
+    if not repeat_groups(scored):
+        return []
+    nominal = calibrate(recording, robot, "nominal", screen_outliers=False)
+    best = ladder.rungs[-1]
+    out = []
+    for name, cal in (("nominal", nominal), (best.model, best.calibration)):
+        figures = iso9283(scored, cal.predict(scored.poses), name, where)
+        if figures is not None:
+            out.append(figures)
+    return out

@@ -200,6 +200,19 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
                if diagnosis.effect_shares() else "")
             + ".",
         ]  # fmt: skip
+    if diagnosis.iso9283:
+        lines += [
+            "",
+            "ISO 9283 pose accuracy (AP) and repeatability (RP) of the repeated poses, "
+            f"{diagnosis.iso9283[0].scored_on}, before and after calibration:",
+            "",
+            "| model | poses | AP max [mm] | RP max [mm] |",
+            "|---|---|---|---|",
+        ]
+        lines += [
+            f"| {f.model} | {len(f.poses)} | {f.ap_max_mm:.4f} | {f.rp_max_mm:.4f} |"
+            for f in diagnosis.iso9283
+        ]
     if diagnosis.outliers:
         lines += [
             "",

@@ -1,0 +1,83 @@
+"""ISO 9283 pose accuracy (AP) and pose repeatability (RP), positions only, from repeat
+poses: the robot commanded to the same readings several times (the `iso9283` plan's cube
+points P1..P5 over its cycles, or any pose a recording revisits).
+
+For a pose j measured n times at points x_i (tracker frame) and the position x_c a model
+says the robot is at (the "command" of ISO 9283: the nominal model before calibration, the
+calibrated one after):
+  AP_j = |mean(x_i) - x_c|                      (accuracy of the barycentre)
+  RP_j = mean(l_i) + 3 S_l, l_i = |x_i - mean(x_i)|, S_l their sample standard deviation
+RP does not depend on the model: it is the robot's (and the tracker's) repeatability; AP
+is where calibration shows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from robot_calib.kinematics.frames import Array, IntArray
+from robot_calib.measurements import Recording
+from robot_calib.poses import JOINT_CHANGE_TOLERANCE
+from robot_calib.records import Record
+
+MIN_REPEATS = 3  # measurements of one pose for its figures (ISO 9283 asks for 30 cycles)
+
+
+@dataclass(frozen=True)
+class PoseFigures(Record):
+    """One repeated pose: its measurements `n`, AP and RP [mm], and its first measurement's
+    index in the recording scored (0-based)."""
+
+    first_index: int
+    n: int
+    ap_mm: float
+    rp_mm: float
+
+
+@dataclass(frozen=True)
+class Iso9283(Record):
+    """ISO 9283 figures of one model on one recording (DIAGNOSIS.json `iso9283`)."""
+
+    model: str
+    scored_on: str
+    poses: list[PoseFigures]
+    ap_max_mm: float
+    rp_max_mm: float
+
+    def line(self) -> str:
+        return (
+            f"ISO 9283 ({self.model}, {len(self.poses)} repeated poses, {self.scored_on}): "
+            f"AP max {self.ap_max_mm:.4f} mm, RP max {self.rp_max_mm:.4f} mm"
+        )
+
+
+def repeat_groups(recording: Recording, min_repeats: int = MIN_REPEATS) -> list[IntArray]:
+    """Indices of the measurements of every pose measured at least `min_repeats` times
+    (equal readings within JOINT_CHANGE_TOLERANCE, same target), in order of first visit."""
+    key = np.column_stack(
+        [np.round(recording.poses.q / JOINT_CHANGE_TOLERANCE), recording.poses.target_index]
+    )
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    groups = [np.flatnonzero(inverse.reshape(-1) == g) for g in np.argsort(first)]
+    return [g for g in groups if len(g) >= min_repeats]
+
+
+def iso9283(recording: Recording, predicted: Array, model: str, scored_on: str) -> Iso9283 | None:
+    """AP and RP of every repeated pose of `recording` for a model predicting `predicted`
+    (n, 3) [m] at its measurements; None when no pose is repeated MIN_REPEATS times."""
+    figures = []
+    for group in repeat_groups(recording):
+        measured = recording.points[group]
+        centre = measured.mean(axis=0)
+        command = predicted[group].mean(axis=0)
+        distance = np.linalg.norm(measured - centre, axis=1)
+        rp = distance.mean() + 3.0 * distance.std(ddof=1)
+        figures.append(PoseFigures(int(group[0]), len(group),
+                                   float(np.linalg.norm(centre - command) * 1e3),
+                                   float(rp * 1e3)))  # fmt: skip
+    if not figures:
+        return None
+    return Iso9283(model, scored_on, figures, max(f.ap_mm for f in figures),
+                   max(f.rp_mm for f in figures))  # fmt: skip
