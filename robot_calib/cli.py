@@ -425,6 +425,39 @@ def cmd_predict(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_compensate(args: argparse.Namespace) -> int:
+    """Nominal joint commands -> compensated ones (msgs_doc/compensate.md)."""
+    from robot_calib.atomic import write_text_atomic
+    from robot_calib.compensate import compensate_commands
+    from robot_calib.compensate.solve import nominal_counterpart
+    from robot_calib.predict import read_joints_csv
+
+    model, params, _ = _calibration(args)
+    poses = read_joints_csv(args.joints, model.robot.n_joints, model.robot.limits)
+    output = output_path(args.output, "JOINTS.csv", [args.params, args.joints], args.force)
+    nominal, nominal_params = nominal_counterpart(model, params)
+    result = compensate_commands(model, params, nominal, nominal_params, poses)
+    n_joints = model.robot.n_joints
+    rows = [",".join([*(f"q{j + 1}" for j in range(n_joints)), "error_mm", "error_urad",
+                      "iterations"])]  # fmt: skip
+    for k in range(len(poses)):
+        rows.append(",".join([*(repr(float(v)) for v in result.q[k]),
+                              f"{result.error_m[k] * 1e3:.6f}", f"{result.error_rad[k] * 1e6:.3f}",
+                              str(int(result.iterations[k]))]))  # fmt: skip
+    write_text_atomic(output, "\n".join(rows) + "\n")
+    change = np.degrees(np.abs(result.q - poses.q)).max()
+    print(f"{output}: {len(poses)} compensated commands (rad); largest change {change:.4f} deg, "
+          f"model error max {result.error_m.max() * 1e3:.6f} mm / "
+          f"{result.error_rad.max() * 1e6:.3f} urad, {int(result.iterations.max())} iterations "
+          "at most")  # fmt: skip
+    failed = int((~result.converged).sum())
+    if failed:
+        print(f"warning: {args.joints}: {failed} command(s) not reached by the calibrated "
+              "model (near a singularity or out of reach): see their error_mm",
+              file=sys.stderr)  # fmt: skip
+    return 0
+
+
 def cmd_split(args: argparse.Namespace) -> int:
     """One bag -> a calibration bag and a hold-out bag (random share, or the last share),
     both in one folder, written together (a failure leaves neither)."""
@@ -861,6 +894,22 @@ def build_parser() -> argparse.ArgumentParser:
         "the first, /laser_tracker/point)",
     )  # fmt: skip
     _add_force(pred)
+
+    comp = add("compensate", cmd_compensate, "nominal joint commands -> compensated ones "
+               "(JOINTS.csv)", robot=CALIBRATION_ROBOT)  # fmt: skip
+    comp.add_argument("params", metavar="PARAMS.json")
+    comp.add_argument(
+        "--joints", required=True,
+        help="JOINTS.csv of the nominal program, header q1..qJ [rad] (optional t [s], "
+        "dir1..dirJ approach directions, temp_c): where the nominal model puts the tool is "
+        "where the compensated commands make the calibrated robot go",
+    )  # fmt: skip
+    comp.add_argument(
+        "-o", "--output", required=True,
+        help="JOINTS.csv to write: q1..qJ [rad] compensated, error_mm and error_urad (the "
+        "calibrated model's remaining error), iterations",
+    )  # fmt: skip
+    _add_force(comp)
 
     spl = add("split", cmd_split, "one bag -> a calibration bag and a hold-out bag")
     spl.add_argument("bag", metavar="BAG", help="the bag to split (.mcap)")
