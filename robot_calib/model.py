@@ -225,9 +225,13 @@ class KinematicModel:
     def probe_orientations(self, params: ParameterVector, poses: Poses) -> Array:
         """Predicted probe frames in the tracker frame, shape (n, 3, 3) (columns: the
         probe's x, y, z axes): base2tracker * flange2base(q) * tool rotation."""
-        flange = self.flange2base(params, poses)[:, :3, :3]
-        rot = self.base2tracker(params)[:3, :3]
-        return rot @ flange @ self.tool_rotations(params)[poses.target_index]
+        tools = self.tool_rotations(params)[poses.target_index]
+        return self.flange_rotations(params, poses) @ tools
+
+    def flange_rotations(self, params: ParameterVector, poses: Poses) -> Array:
+        """The flange's orientation in the tracker frame, shape (n, 3, 3): base2tracker's
+        rotation * flange2base(q)'s (effects included)."""
+        return self.base2tracker(params)[:3, :3] @ self.flange2base(params, poses)[:, :3, :3]
 
     def orientation_jacobian(self, params: ParameterVector, poses: Poses) -> tuple[Array, Array]:
         """Probe frames (n, 3, 3) as `probe_orientations` and their small rotation per unit
@@ -243,7 +247,8 @@ class KinematicModel:
         _, jac_x = self._evaluate(params, poses, True, shift=tool[:, :, 0])
         _, jac_y = self._evaluate(params, poses, True, shift=tool[:, :, 1])
         assert jac0 is not None and jac_x is not None and jac_y is not None
-        frames = self.probe_orientations(params, poses)
+        flange_in_tracker = self.flange_rotations(params, poses)  # (n, 3, 3)
+        frames = flange_in_tracker @ tool
         w_x, w_y, w_z = frames[:, :, 0], frames[:, :, 1], frames[:, :, 2]
         d_x, d_y = jac_x - jac0, jac_y - jac0  # omega x w_x, omega x w_y (n, 3, P)
 
@@ -255,16 +260,12 @@ class KinematicModel:
             - along(w_z, d_x)[:, None, :] * w_y[:, :, None]
             + along(w_y, d_x)[:, None, :] * w_z[:, :, None]
         )
-        if self.oriented:
-            flange_in_tracker = (
-                self.base2tracker(params)[:3, :3] @ (self.flange2base(params, poses)[:, :3, :3])
-            )
-            for name in self.oriented:
-                rows = poses.target_index == self.targets.index(name)
-                rotvec = np.array([params[k] for k in tool_rotation_parameters(name)])
-                turns = rotvec_left_jacobian(rotvec)  # columns: flange-frame rotations
-                for k, pname in enumerate(tool_rotation_parameters(name)):
-                    omega[rows, :, params.index(pname)] = flange_in_tracker[rows] @ turns[:, k]
+        for name in self.oriented:
+            rows = poses.target_index == self.targets.index(name)
+            rotvec = np.array([params[k] for k in tool_rotation_parameters(name)])
+            turns = rotvec_left_jacobian(rotvec)  # columns: flange-frame rotations
+            for k, pname in enumerate(tool_rotation_parameters(name)):
+                omega[rows, :, params.index(pname)] = flange_in_tracker[rows] @ turns[:, k]
         return frames, omega.reshape(n, 3, len(params))
 
     def target_offsets(self, params: ParameterVector) -> Array:

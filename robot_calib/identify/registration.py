@@ -92,9 +92,7 @@ def initial_tool_rotations(
     mean rotation (scipy `Rotation.mean`) of predicted flange^T * measured probe frame."""
     if not model.oriented or poses.rotation is None:
         return params
-    flange_in_tracker = (
-        model.base2tracker(params)[:3, :3] @ model.flange2base(params, poses)[:, :3, :3]
-    )
+    flange_in_tracker = model.flange_rotations(params, poses)
     updates: dict[str, float] = {}
     for name in model.oriented:
         rows = poses.oriented & (poses.target_index == model.targets.index(name))
