@@ -464,7 +464,7 @@ def cmd_split(args: argparse.Namespace) -> int:
     from robot_calib import pipeline
     from robot_calib.atomic import staged_outputs
     from robot_calib.bag.csv_import import START_NS, write_measurements
-    from robot_calib.bag.read import side_temperatures
+    from robot_calib.bag.read import other_topics
     from robot_calib.measurements.split import holdout_mask
 
     robot = _robot(args)
@@ -493,9 +493,8 @@ def cmd_split(args: argparse.Namespace) -> int:
     )[1]
     stamps = (poses.stamp_ns if poses.stamp_ns is not None
               else START_NS + np.round(poses.poses.time * 1e9).astype(np.int64))  # fmt: skip
-    celsius, others = side_temperatures(source)  # side data goes with its poses
-    temperature = (np.array([celsius.get(int(t), np.nan) for t in stamps])
-                   if celsius else None)  # fmt: skip
+    temperature = poses.poses.temperature  # the side topic at each pose (as read_bag reads it)
+    others = other_topics(source)
     if others:
         _log(f"warning: {source}: topics {others} are not measurements: not copied")
     with staged_outputs(outputs[0].resolve().parent, args.force) as stage:

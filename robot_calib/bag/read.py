@@ -233,21 +233,13 @@ def read_recording(
     return recording
 
 
-def side_temperatures(path: Path) -> tuple[dict[int, float], list[str]]:
-    """The side topic TEMPERATURE_TOPIC of a bag (msgs_doc/temperature.md): {header stamp
-    [ns]: temperature [deg C]}, and the bag's topics that are neither measurements (joint
-    states, points, poses) nor that side topic (which a rewrite of its measurements would
-    not carry)."""
-    out: dict[int, float] = {}
+def other_topics(path: Path) -> list[str]:
+    """The bag's topics that are neither measurements (joint states, points, poses) nor the
+    side topic TEMPERATURE_TOPIC (msgs_doc/temperature.md): what a rewrite of its
+    measurements (`split`) does not carry."""
     with BagReader(path) as reader:
-        others = [
+        return [
             t for t in reader.topics
-            if t not in (JOINT_STATES_TOPIC, TEMPERATURE_TOPIC)
+            if t not in (JOINT_STATES_TOPIC, TEMPERATURE_TOPIC, POINT_TOPIC)
             and target_topic_name(t) is None and pose_topic_name(t) is None
-            and t != POINT_TOPIC
         ]  # fmt: skip
-        if TEMPERATURE_TOPIC in reader.topics:
-            for m in reader.messages([TEMPERATURE_TOPIC]):
-                msg = m.decode()
-                out[stamp_to_ns(msg.header.stamp)] = float(msg.temperature)
-    return out, others
