@@ -340,16 +340,17 @@ def _iso9283(ladder: Ladder, recording: Recording, robot: RobotDescription) -> l
     """ISO 9283 figures before (the nominal model, its tracker pose and target fitted on
     the calibration recording) and after calibration (the best rung), on the hold-out
     bags' repeated poses, else the calibration recording's; empty without repeats."""
-    held = ladder.holdout
-    scored, where = (held, "hold-out bags") if held is not None and repeat_groups(held) else (
-        recording, "calibration recording")  # fmt: skip
-    if not repeat_groups(scored):
+    candidates = [(ladder.holdout, "hold-out bags"), (recording, "calibration recording")]
+    found = next(((scored, where, groups) for scored, where in candidates
+                  if scored is not None and (groups := repeat_groups(scored))), None)  # fmt: skip
+    if found is None:
         return []
+    scored, where, groups = found
     nominal = calibrate(recording, robot, "nominal", screen_outliers=False)
     best = ladder.rungs[-1]
     out = []
     for name, cal in (("nominal", nominal), (best.model, best.calibration)):
-        figures = iso9283(scored, cal.predict(scored.poses), name, where)
+        figures = iso9283(scored, cal.predict(scored.poses), name, where, groups)
         if figures is not None:
             out.append(figures)
     return out

@@ -64,11 +64,18 @@ def repeat_groups(recording: Recording, min_repeats: int = MIN_REPEATS) -> list[
     return [g for g in groups if len(g) >= min_repeats]
 
 
-def iso9283(recording: Recording, predicted: Array, model: str, scored_on: str) -> Iso9283 | None:
-    """AP and RP of every repeated pose of `recording` for a model predicting `predicted`
-    (n, 3) [m] at its measurements; None when no pose is repeated MIN_REPEATS times."""
+def iso9283(
+    recording: Recording,
+    predicted: Array,
+    model: str,
+    scored_on: str,
+    groups: list[IntArray] | None = None,
+) -> Iso9283 | None:
+    """AP and RP of every repeated pose of `recording` (`groups`, default its
+    `repeat_groups`) for a model predicting `predicted` (n, 3) [m] at its measurements;
+    None when no pose is repeated MIN_REPEATS times."""
     figures = []
-    for group in repeat_groups(recording):
+    for group in repeat_groups(recording) if groups is None else groups:
         measured = recording.points[group]
         centre = measured.mean(axis=0)
         command = predicted[group].mean(axis=0)

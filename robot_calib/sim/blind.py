@@ -28,7 +28,7 @@ import numpy as np
 
 from robot_calib.accuracy import accuracy
 from robot_calib.diagnose.diagnosis import Diagnosis, diagnose
-from robot_calib.effects import EFFECTS, Effect, effect_class
+from robot_calib.effects import EFFECTS, Effect, effect_class, parse_effect
 from robot_calib.effects.compliance import Compliance
 from robot_calib.effects.ripple import DRAW_RANGE as RIPPLE_RANGE
 from robot_calib.effects.ripple import JointRipple
@@ -187,7 +187,7 @@ def judge(case: Case, diagnosis: Diagnosis, right_rms_mm: float | None = None) -
         and case.effect not in FORM_ANSWERS
         and not all(effect_class(e.name).in_vocabulary for e in case.withheld)
     )
-    added = _rung_effects(diagnosis)
+    added = _rung_effects(diagnosis, case.world.model.robot.n_joints)
     if not case.withheld:
         named = dom is None
     elif outside:  # no model can name it: the right joints are the answer
@@ -217,15 +217,10 @@ def judge(case: Case, diagnosis: Diagnosis, right_rms_mm: float | None = None) -
     }
 
 
-def _rung_effects(diagnosis: Diagnosis) -> list[tuple[str, tuple[int, ...]]]:
+def _rung_effects(diagnosis: Diagnosis, n_joints: int) -> list[tuple[str, tuple[int, ...]]]:
     """(effect name, joints) of every term of the chosen rung's model name."""
-    from robot_calib.effects import parse_effect
-
-    out = []
-    for term in diagnosis.ladder[-1].model.split("+")[1:]:
-        effect = parse_effect(term, load_world().model.robot.n_joints)
-        out.append((effect.name, effect.joints))
-    return out
+    terms = diagnosis.ladder[-1].model.split("+")[1:]
+    return [(e.name, e.joints) for e in (parse_effect(t, n_joints) for t in terms)]
 
 
 def run_case(effect: str, seed: int) -> dict[str, Any]:
