@@ -566,8 +566,17 @@ def cmd_export(args: argparse.Namespace) -> int:
             f"{args.params}: identified for robot {robot.name}, not --robot {args.robot}"
         )
     exporter = FORMATS[args.format]
-    output = output_path(args.output, f"the {args.format} export", [args.params], args.force)
-    write_text_atomic(output, exporter.render(cal, str(args.params)))
+    inputs = [args.params] + ([args.nominal_urdf] if args.nominal_urdf else [])
+    output = output_path(args.output, f"the {args.format} export", inputs, args.force)
+    if args.nominal_urdf is not None:
+        from robot_calib.export.urdf_nominal import render_on_nominal
+
+        if args.format != "urdf":
+            raise InputError(f"--nominal-urdf is for --format urdf, not {args.format}")
+        text = render_on_nominal(cal, str(args.params), args.nominal_urdf)
+    else:
+        text = exporter.render(cal, str(args.params))
+    write_text_atomic(output, text)
     effects = len(cal.model.effects) if args.format in ("urdf", "ur") else 0
     left = f"; {effects} effect(s) it cannot hold, listed in its header" if effects else ""
     print(f"{output}: {exporter.description}, robot {robot.name}, model {cal.name}{left}")
@@ -946,6 +955,11 @@ def build_parser() -> argparse.ArgumentParser:
         + " (msgs_doc/export.md; no default)",
     )  # fmt: skip
     exp.add_argument("-o", "--output", required=True, help="file to write (e.g. robot.urdf)")
+    exp.add_argument(
+        "--nominal-urdf", metavar="NOMINAL.urdf",
+        help="--format urdf: write the calibrated joint origins into this nominal URDF of the "
+        "robot, keeping its link names, limits, meshes and other tags (default: a bare chain)",
+    )  # fmt: skip
     _add_force(exp)
 
     rep = add("repair", cmd_repair, "recover the messages of a crashed recording -> a new bag")

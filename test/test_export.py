@@ -31,6 +31,7 @@ from robot_calib.sim.plans import random_plan
 
 N_POSES = 50
 FK_TOLERANCE_M = 1e-6
+DATA = Path(__file__).parent / "data"
 
 
 def calibration(
@@ -275,3 +276,106 @@ def test_the_export_verb_writes_every_format_and_keeps_the_overwrite_policy(
         ]
         assert message in proc.stderr, proc.stderr
     assert run("export", "p.json", "--format", "dh", "-o", "r.csv", "--force").returncode == 0
+    for name in ("ur10.urdf", "kr16_2.urdf"):
+        (tmp_path / name).write_bytes((DATA / name).read_bytes())
+    proc = run(
+        "export", "p.json", "--format", "urdf", "--nominal-urdf", "ur10.urdf", "-o", "n.urdf"
+    )
+    assert (
+        proc.returncode == 0
+        and "ur10" in URDF.from_xml_string((tmp_path / "n.urdf").read_bytes()).name
+    ), proc.stderr
+    for args, message in (
+        (("--format", "dh", "--nominal-urdf", "ur10.urdf", "-o", "d.csv"), "for --format urdf"),
+        (("--nominal-urdf", "kr16_2.urdf", "-o", "k.urdf"), "not robot ur10's nominal"),
+        (("--nominal-urdf", "ur10.urdf", "-o", "ur10.urdf", "--force"), "is an input"),
+        (("--nominal-urdf", "none.urdf", "-o", "z.urdf"), "none.urdf: no such nominal URDF"),
+    ):
+        args = args if "--format" in args else ("--format", "urdf", *args)
+        proc = run("export", "p.json", *args)
+        assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+        assert message in proc.stderr, proc.stderr
+    assert not (tmp_path / "k.urdf").exists() and not (tmp_path / "d.csv").exists()
+
+
+def _with_meshes(name: str) -> bytes:
+    """Fixture URDF `name` with a visual mesh on every link and a ros2_control tag: what a
+    vendor's URDF carries and the export must keep."""
+    text = (DATA / name).read_text()
+    text = text.replace("/>", "/>", 0)
+    import re
+
+    text = re.sub(
+        r'<link name="([^"]+)"/>',
+        r'<link name="\1"><visual><geometry><mesh filename="package://m/\1.dae"/></geometry>'
+        r"</visual></link>",
+        text,
+    )
+    return text.replace("</robot>", '<ros2_control name="hw" type="system"/></robot>').encode()
+
+
+@pytest.mark.parametrize(("robot_name", "file"), [("ur5", "ur5.urdf"), ("kr16_2", "kr16_2.urdf")])
+def test_the_calibration_written_into_the_nominal_urdf_keeps_it_and_is_the_model(
+    tmp_path: Path, robot_name: str, file: str
+) -> None:
+    from robot_calib.export.urdf_nominal import render_on_nominal
+
+    nominal_file = tmp_path / file
+    nominal_file.write_bytes(_with_meshes(file))
+    cal = calibration(robot_name)
+    model = cal.model
+    # the nominal calibration written into the nominal file gives its origins back (to 1 nm:
+    # the fixture rounds its roll to 1.570796327 and has 1e-11 m terms)
+    nominal_params = model.parameters().with_values(
+        {p.name: cal.parameters[p.name] for p in model.parameters().parameters
+         if p.group == "frames"}
+    )  # fmt: skip
+    same = render_on_nominal(replace(cal, parameters=nominal_params), "p.json", nominal_file)
+    before = {j.name: j for j in URDF.from_xml_string(nominal_file.read_bytes()).joints}
+    after = URDF.from_xml_string(same.encode())
+    for joint in after.joints:
+        if joint.name in before:
+            old = before[joint.name].origin
+            assert np.allclose(joint.origin.xyz, old.xyz, atol=1e-9), joint.name
+            assert np.allclose(
+                Rotation.from_euler("xyz", joint.origin.rpy).as_matrix(),
+                Rotation.from_euler("xyz", old.rpy).as_matrix(), atol=1e-9,
+            ), joint.name  # fmt: skip
+    # the calibration: the file's tcp seen from its laser_tracker is the model's point
+    text = render_on_nominal(cal, "p.json", nominal_file)
+    q = random_plan(model.robot, N_POSES, np.random.default_rng(3)).q
+    frames = urdf_frames(text.encode(), q)
+    poses = Poses.from_readings(q)
+    tracker = np.linalg.inv(frames["laser_tracker"])
+    error = np.linalg.norm(
+        (tracker @ frames["tcp"])[:, :3, 3] - model.target_points(cal.parameters, poses), axis=1
+    )
+    assert error.max() < FK_TOLERANCE_M
+    # tool0 moves with the calibrated flange: rigid to the tcp at every pose
+    tool_in_tcp = np.linalg.inv(frames["tcp"]) @ frames["tool0"]
+    assert np.abs(tool_in_tcp - tool_in_tcp[0]).max() < 1e-12
+    # what the calibration does not know is kept: links, limits, meshes, other tags
+    kept = URDF.from_xml_string(text.encode())
+    original = URDF.from_xml_string(nominal_file.read_bytes())
+    assert set(original.link_map) <= set(kept.link_map)
+    assert [(j.name, j.limit.lower, j.limit.upper) for j in kept.joints if j.limit] == [
+        (j.name, j.limit.lower, j.limit.upper) for j in original.joints if j.limit
+    ]
+    assert text.count("<mesh ") == nominal_file.read_text().count("<mesh ") > 0
+    assert "<ros2_control" in text and "no effects beyond the geometry" in text
+
+
+def test_a_xacro_or_another_robots_urdf_is_refused_as_nominal(tmp_path: Path) -> None:
+    from robot_calib.export.urdf_nominal import render_on_nominal
+
+    cal = calibration("ur5")
+    xacro = tmp_path / "ur.urdf.xacro"
+    xacro.write_text((DATA / "ur5.urdf").read_text().replace(
+        '<robot name="ur5">',
+        '<robot name="ur5" xmlns:xacro="http://www.ros.org/wiki/xacro"><xacro:property '
+        'name="d1" value="0.1"/>',
+    ))  # fmt: skip
+    with pytest.raises(InputError, match="a xacro file, not a URDF: expand it first"):
+        render_on_nominal(cal, "p.json", xacro)
+    with pytest.raises(InputError, match=r"not robot ur5's nominal kinematics: .* mm"):
+        render_on_nominal(cal, "p.json", DATA / "ur10.urdf")

@@ -15,6 +15,8 @@ from robot_calib.kinematics.frames import Array
 
 if TYPE_CHECKING:
     from robot_calib.identify.calibrate import Calibration
+    from robot_calib.kinematics.parameters import ParameterVector
+    from robot_calib.model import KinematicModel
 
 _GIMBAL_COS = 1e-9  # |cos(pitch)| below this: roll and yaw turn about one axis, roll := 0
 
@@ -39,7 +41,12 @@ def constant_rows(cal: Calibration) -> Array:
     ``Rz(theta_j + offset_j) Tz(d_j) Tx(a_j) Rx(alpha_j) Ry(beta_j)`` at joint variables
     M q = 0 (offset_j: the robot's `reading_to_joint` offset [rad]), geometric values only
     (no effects). Frame j = frame j-1 Rz((M q)_j) row_j."""
-    model, params = cal.model, cal.parameters
+    return model_rows(cal.model, cal.parameters)
+
+
+def model_rows(model: KinematicModel, params: ParameterVector) -> Array:
+    """`constant_rows` of any model and parameters (J, 4, 4): the nominal geometry when
+    `params` are the description's nominal values."""
     zero = np.zeros((1, model.robot.n_joints))
     return link_transforms(model.dh_table(params, zero))[0]
 

@@ -41,7 +41,8 @@ def target_link(name: str) -> str:
     return "tcp" if name == PRIMARY_TARGET else f"tcp_{name}"
 
 
-def _comment(text: str) -> str:
+def comment_text(text: str) -> str:
+    """`text` safe inside an XML comment."""
     return text.replace("--", "- -")  # '--' may not appear inside an XML comment
 
 
@@ -84,7 +85,7 @@ def render(cal: Calibration, source: str) -> str:
     lines = [
         '<?xml version="1.0"?>',
         "<!--",
-        *(f"  {_comment(h)}" for h in header),
+        *(f"  {comment_text(h)}" for h in header),
         "-->",
         f"<robot name={quoteattr(robot.name)}>",
     ]

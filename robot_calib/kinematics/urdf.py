@@ -154,19 +154,27 @@ def read_urdf(path: str | Path) -> UrdfModel:
     path = Path(path)
     if not path.is_file():
         raise RobotDescriptionError(f"{path}: no such robot description file")
+    try:
+        text = path.read_bytes()
+    except OSError as exc:
+        raise RobotDescriptionError(f"{path}: cannot read ({exc.strerror})") from None
+    return parse_urdf(text, str(path))
+
+
+def parse_urdf(text: bytes | str, source: str) -> UrdfModel:
+    """Parse URDF text (named `source` in errors) into a `UrdfModel`."""
     from urdf_parser_py.urdf import URDF
 
     try:
-        text = path.read_bytes()
         with _quiet_parser() as messages:
             urdf = URDF.from_xml_string(text)
     except Exception as exc:  # noqa: BLE001 - the parser raises bare Exception and others
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise RobotDescriptionError(f"{path}: not a valid URDF ({first})") from None
+        raise RobotDescriptionError(f"{source}: not a valid URDF ({first})") from None
     typos = [m for m in messages if "/joint[" in m or "/link[" in m]
     if typos:
-        raise RobotDescriptionError(f"{path}: {typos[0]} (a typo? the parser would ignore it)")
-    return _model(urdf, str(path))
+        raise RobotDescriptionError(f"{source}: {typos[0]} (a typo? the parser would ignore it)")
+    return _model(urdf, source)
 
 
 def _pose(origin: Any) -> Array:  # noqa: ANN401 - urdf_parser_py's Pose (untyped)
@@ -202,7 +210,7 @@ def _model(urdf: Any, source: str) -> UrdfModel:  # noqa: ANN401 - urdf_parser_p
     return UrdfModel(str(urdf.name or Path(source).stem), tuple(joints), links, inertials)
 
 
-def _zero_frames(model: UrdfModel, source: str) -> tuple[str, dict[str, Array]]:
+def zero_frames(model: UrdfModel, source: str) -> tuple[str, dict[str, Array]]:
     """The root link and every link's frame in the root frame at the zero configuration."""
     children = {j.child for j in model.joints}
     roots = [name for name in model.links if name not in children]
@@ -222,7 +230,7 @@ def _zero_frames(model: UrdfModel, source: str) -> tuple[str, dict[str, Array]]:
     return roots[0], frames
 
 
-def _up(model: UrdfModel, link: str) -> list[UrdfJoint]:
+def joints_up(model: UrdfModel, link: str) -> list[UrdfJoint]:
     """The joints from `link` up to the root, nearest first."""
     parent = {j.child: j for j in model.joints}
     out = []
@@ -232,26 +240,26 @@ def _up(model: UrdfModel, link: str) -> list[UrdfJoint]:
     return out
 
 
-def _default_tip(model: UrdfModel) -> str:
+def default_tip(model: UrdfModel) -> str:
     for name in DEFAULT_TIPS:
         if name in model.links:
             return name
     parents = {j.parent for j in model.joints}
     leaves = [name for name in model.links if name not in parents]
-    return max(leaves, key=lambda n: sum(j.type in MOVING for j in _up(model, n)))
+    return max(leaves, key=lambda n: sum(j.type in MOVING for j in joints_up(model, n)))
 
 
 def urdf_to_description(
     model: UrdfModel, base_link: str | None, tip_link: str | None, source: str
 ) -> UrdfRobot:
     """Convert the chain base_link -> tip_link of a parsed URDF (module docstring)."""
-    root, zero = _zero_frames(model, source)
+    root, zero = zero_frames(model, source)
     base = base_link or root
-    tip = tip_link or _default_tip(model)
+    tip = tip_link or default_tip(model)
     for role, name in (("base", base), ("tip", tip)):
         if name not in zero:
             raise RobotDescriptionError(f"{source}: no {role} link {name!r} in the URDF")
-    up_tip, up_base = _up(model, tip), _up(model, base)
+    up_tip, up_base = joints_up(model, tip), joints_up(model, base)
     common = {j.name for j in up_tip} & {j.name for j in up_base}
     moving_above_base = [j.name for j in up_base if j.name not in common and j.type != "fixed"]
     if moving_above_base:
@@ -353,7 +361,7 @@ def _mass_model(
     n = len(moving)
     mass, moment = np.zeros(n), np.zeros((n, 3))
     for link, (m, com_in_link) in model.inertials.items():
-        owner = next((index[j.name] for j in _up(model, link) if j.name in index), None)
+        owner = next((index[j.name] for j in joints_up(model, link) if j.name in index), None)
         if owner is None:
             continue  # on the base side of joint 1
         mass[owner] += m
