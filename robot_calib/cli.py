@@ -677,12 +677,22 @@ def _add_joint_names(
         "--joint-names",
         metavar="NAME1,...,NAMEJ",
         help=f"{what}, in joint order, where they are not the robot's own "
-        "(e.g. j1,j2,j3,j4,j5,j6)",
+        "(e.g. j1,j2,j3,j4,j5,j6; default: the robot's names)",
     )
 
 
 # predict and score: the robot is PARAMS.json's; --robot, when given, must name it
 CALIBRATION_ROBOT = "PARAMS.json's robot; when given, it must be that robot"
+
+
+class _RequiredHelpFormatter(argparse.HelpFormatter):
+    """Every required option says so in --help (the others state their default)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if action.required and action.option_strings and "required" not in text:
+            text += " (required)"
+        return text
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -701,7 +711,8 @@ def build_parser() -> argparse.ArgumentParser:
     def add(
         name: str, func: Callable[[argparse.Namespace], int], help_: str, robot: str | None = None
     ) -> argparse.ArgumentParser:
-        p = sub.add_parser(name, help=help_, description=help_, epilog=OVERWRITE_POLICY)
+        p = sub.add_parser(name, help=help_, description=help_, epilog=OVERWRITE_POLICY,
+                           formatter_class=_RequiredHelpFormatter)  # fmt: skip
         p.add_argument(
             "--robot",
             default=DEFAULT_ROBOT if robot is None else None,
@@ -738,9 +749,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="effects to switch on, e.g. backlash:4 eccentricity:1,2 "
         "thermal_drift compliance:2=2e-5 (default magnitudes unless =VALUE)",
     )
-    sim.add_argument("--seed", type=_count, help="random seed of noise and plan (>= 0)")
     sim.add_argument(
-        "--n-random", type=_positive, default=N_RANDOM_POSES, help="poses of the random plan"
+        "--seed", type=_count, help="random seed of noise and plan (>= 0; default: the world's)"
+    )
+    sim.add_argument(
+        "--n-random",
+        type=_positive,
+        default=N_RANDOM_POSES,
+        help=f"poses of the random plan (default {N_RANDOM_POSES})",
     )
     sim.add_argument(
         "-o", "--output", required=True, help="bag to write (BAG.mcap; + BAG.world.yaml)"
@@ -759,7 +775,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--ecc-order",
         type=_positive,
         default=DEFAULT_ECC_ORDER,
-        help=f"eccentricity Fourier order ({DEFAULT_ECC_ORDER})",
+        help=f"eccentricity Fourier order (default {DEFAULT_ECC_ORDER})",
     )
     cal.add_argument(
         "--objective",
@@ -776,7 +792,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     diag = add("diagnose", cmd_diagnose, "sim-to-real gap diagnosis -> DIAGNOSIS.json + report")
     diag.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
-    diag.add_argument("--holdout", nargs="*", metavar="BAG", help="hold-out bag(s): scored only")
+    diag.add_argument(
+        "--holdout", nargs="*", metavar="BAG",
+        help="hold-out bag(s): scored only (default: none; the calibration bags' k-fold)",
+    )  # fmt: skip
     _add_pair_tolerance(diag)
     _add_joint_names(diag)
     _add_payload(diag)
@@ -840,7 +859,7 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument(
         "--orientation-rpy", action="append", metavar="[NAME:]R,P,Y",
         help="as --orientation, as roll, pitch, yaw columns: R = Rz(yaw) Ry(pitch) Rx(roll), "
-        "in --orientation-unit",
+        "in --orientation-unit (default: none)",
     )  # fmt: skip
     imp.add_argument(
         "--orientation-unit", choices=("deg", "rad"),
@@ -939,7 +958,9 @@ def build_parser() -> argparse.ArgumentParser:
               robot=CALIBRATION_ROBOT)  # fmt: skip
     sco.add_argument("params", metavar="PARAMS.json")
     sco.add_argument("bags", nargs="+", metavar="BAG", help="bag(s) to score on (.mcap)")
-    sco.add_argument("--points-csv", help="also write a per-point table (CSV, m)")
+    sco.add_argument(
+        "--points-csv", help="also write a per-point table (CSV, m; default: not written)"
+    )
     _add_joint_names(sco)
     _add_pair_tolerance(sco)
     _add_force(sco)
@@ -973,13 +994,13 @@ def build_parser() -> argparse.ArgumentParser:
         default="out",
         help="output folder (default out/); every run writes a new run-<time> folder in it",
     )
-    run.add_argument("--plan", default=RUN_PLAN, help=f"calibration plan ({RUN_PLAN})")
+    run.add_argument("--plan", default=RUN_PLAN, help=f"calibration plan (default {RUN_PLAN})")
     run.add_argument(
         "--effects",
         nargs="*",
         help="effects of the simulated robot, as for simulate (default: joint-4 backlash)",
     )
-    run.add_argument("--seed", type=_count, default=0, help="random seed (>= 0)")
+    run.add_argument("--seed", type=_count, default=0, help="random seed (>= 0; default 0)")
     run.add_argument(
         "--holdout",
         type=_positive,

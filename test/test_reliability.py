@@ -448,3 +448,31 @@ def test_the_overwrite_policy_is_in_every_help() -> None:
     for verb in ("simulate", "calibrate", "diagnose", "predict", "import"):
         text = " ".join(verbs[verb].format_help().split())
         assert "--force" in text and " ".join(OVERWRITE_POLICY.split()) in text, verb
+
+
+def test_every_option_of_every_verb_states_its_default_or_that_it_is_required() -> None:
+    import argparse
+
+    from robot_calib.cli import build_parser
+
+    parser = build_parser()
+    verbs = parser._subparsers._group_actions[0].choices  # noqa: SLF001 - argparse internals
+    silent = []
+    for verb, sub in verbs.items():
+        text = sub.format_help()
+        for action in sub._actions:  # noqa: SLF001 - argparse internals
+            if not action.option_strings or isinstance(
+                action,
+                argparse._HelpAction | argparse._StoreTrueAction,  # noqa: SLF001
+            ):
+                continue
+            shown = " ".join((sub._get_formatter()._expand_help(action) or "").split())  # noqa: SLF001
+            assert shown.split(" (")[0] in " ".join(text.split()), (verb, action.dest)
+            said = (
+                "default" in shown
+                or "required" in shown
+                or (action.default is not None and f"({action.default}" in shown)
+            )
+            if not said:
+                silent.append(f"{verb} {action.option_strings[-1]}")
+    assert not silent, silent
