@@ -111,6 +111,9 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
     for line in outlier_lines(diagnosis.outliers):
         print(line)
     print(f"{output}, {report} in {seconds:.1f} s")
+    from robot_calib.pipeline import html_report_path
+
+    print(f"HTML report (self-contained, open in a browser): {html_report_path(output)}")
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -198,13 +201,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
-    """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots."""
+    """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots + a
+    self-contained HTML report."""
     from robot_calib import pipeline
 
     robot = _robot(args)
     inputs = [*args.bags, *(args.holdout or ())]
     output = pipeline.output_path(args.output, "DIAGNOSIS.json", inputs, args.force)
     pipeline.output_path(pipeline.report_path(output), "the report", inputs, args.force)
+    pipeline.output_path(pipeline.html_report_path(output), "the HTML report", inputs, args.force)
     best = pipeline.output_path(pipeline.best_params_path(output), "the best model's PARAMS.json",
                                 inputs, args.force)  # fmt: skip
     started = time.perf_counter()
@@ -811,8 +816,8 @@ def build_parser() -> argparse.ArgumentParser:
         "-o",
         "--output",
         required=True,
-        help="DIAGNOSIS.json to write; the report goes beside it as <name>.md (+ "
-        "<name>_*.png), so -o may not end in .md",
+        help="DIAGNOSIS.json to write; the reports go beside it as <name>.md (+ "
+        "<name>_*.png) and <name>.html (self-contained), so -o may not end in .md or .html",
     )
     _add_force(diag)
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
@@ -403,38 +403,72 @@ def report_path(output: str | Path) -> Path:
     return output.with_suffix(".md")
 
 
+def html_report_path(output: str | Path) -> Path:
+    """The self-contained HTML report of DIAGNOSIS.json `output`: beside it, suffix
+    '.html' (msgs_doc/report.md). `output` itself may not end in '.html'.
+
+    Returns
+    -------
+    report : Path
+        `output` with the suffix '.html'.
+    """
+    output = Path(output)
+    if output.suffix.lower() in (".html", ".htm"):
+        raise InputError(
+            f"-o {output}: names DIAGNOSIS.json, and its HTML report goes beside it as "
+            f"<name>.html; give e.g. -o {output.with_suffix('.json')}"
+        )
+    return output.with_suffix(".html")
+
+
 def write_diagnosis(
     diagnosis: Diagnosis,
     ladder: Ladder,
     recording: Recording,
     output: str | Path,
     force: bool = False,
+    calibrations: Mapping[str, Calibration] | None = None,
+    best: tuple[Calibration, Path] | None = None,
+    warnings: Sequence[str] = (),
 ) -> Path:
-    """Write DIAGNOSIS.json at `output` and the Markdown report (+ plots) beside it, all
-    together (staged, then moved in; an existing file is replaced only with `force`).
+    """Write DIAGNOSIS.json at `output`, the Markdown report (+ plots) and the HTML report
+    beside it, and the ladder's chosen rung as `best_params_path(output)`, all together
+    (staged, then moved in; an existing file is replaced only with `force`).
+    `calibrations`: nominal / cpa models already identified from `recording` (else the HTML
+    report identifies them); `best`: the model the HTML report recommends and the PARAMS.json
+    it goes to (default: the ladder's chosen rung and `best_params_path(output)`);
+    `warnings`: the caller's own warnings, listed in the HTML report.
 
     Returns
     -------
     report : Path
-        The report: `report_path(output)`.
+        The Markdown report: `report_path(output)` (the HTML one: `html_report_path`).
     """
     from robot_calib.atomic import staged_outputs
+    from robot_calib.diagnose.html_report import compare_models, html_report
     from robot_calib.diagnose.report import write_report
     from robot_calib.identify.params_file import write_json_atomic
 
     output = Path(output)
     report = report_path(output)
-    best = best_params_path(output)
+    page = html_report_path(output)
+    best_file = best_params_path(output)
+    chosen = ladder.rungs[-1]
+    recommended, recommended_file = best or (chosen.calibration, best_file)
     with staged_outputs(output.parent, force) as stage:
         write_json_atomic(diagnosis.to_dict(), stage / output.name)
         fitted = ladder.recording if ladder.recording is not None else recording  # no outliers
         write_report(diagnosis, ladder, fitted, stage / report.name)
+        compared = compare_models(ladder, calibrations)
+        (stage / page.name).write_text(
+            html_report(diagnosis, ladder, fitted, compared, recommended,
+                        recommended_file.name, warnings)
+        )  # fmt: skip
         scores = {r.model: r.heldout.absolute_rms_mm for r in ladder.rungs}
-        chosen = ladder.rungs[-1]
         write_json_atomic(
             selected_document(chosen.calibration, fitted, "the diagnosis ladder's chosen rung",
                               diagnosis.scored_on, scores),
-            stage / best.name,
+            stage / best_file.name,
         )  # fmt: skip
     return report
 
@@ -483,6 +517,7 @@ class RunResult:
     report: Path
     best: str = ""  # the model written as params_best.json (lowest held-out error)
     warnings: tuple[str, ...] = ()  # richer models that generalise worse than simpler ones
+    html: Path | None = None  # the self-contained HTML report (diagnosis.html)
 
 
 def run(
@@ -520,6 +555,10 @@ def run(
             diagnosis.json).
         report : Path
             The Markdown report beside it (diagnosis.md).
+        best, warnings : str, tuple of str
+            The model written as params_best.json; richer models that generalise worse.
+        html : Path
+            The self-contained HTML report beside it (diagnosis.html).
     """
     from robot_calib.accuracy import accuracy
     from robot_calib.effects import MAIN_JOB_EFFECTS
@@ -555,8 +594,12 @@ def run(
         models[name] = ModelScore(cal, accuracy(held.points, cal.predict(held.poses)))
     say(f"[4/{steps}] diagnose the sim-to-real gap (hold-out: {holdout.name})")
     diagnosis, ladder = diagnose_recordings(recording, description, held, log)
-    report = write_diagnosis(diagnosis, ladder, recording, folder / "diagnosis.json")
     best, warnings = _best_model(models, ladder)
+    report = write_diagnosis(
+        diagnosis, ladder, recording, folder / "diagnosis.json",
+        calibrations={n: m.calibration for n, m in models.items()},
+        best=(best, folder / "params_best.json"), warnings=warnings,
+    )  # fmt: skip
     scores = {n: m.holdout.absolute_rms_mm for n, m in models.items()}
     scores.update({r.model: r.heldout.absolute_rms_mm for r in ladder.rungs})
     write_json_atomic(
@@ -565,7 +608,7 @@ def run(
         folder / "params_best.json",
     )  # fmt: skip
     return RunResult(folder, first, second, recording, models, diagnosis, report, best.name,
-                     tuple(warnings))  # fmt: skip
+                     tuple(warnings), html_report_path(folder / "diagnosis.json"))  # fmt: skip
 
 
 def _best_model(models: dict[str, ModelScore], ladder: Ladder) -> tuple[Calibration, list[str]]:

@@ -81,6 +81,10 @@ def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:
     assert "null (geometric reaches the noise level): no dominant unmodelled effect" in report
     for suffix in ("_ladder.png", "_angle.png", "_time.png", "_map.png"):
         assert (tmp_path / f"diagnosis{suffix}").stat().st_size > 1000
+    # the self-contained HTML report beside it (issue 15; test_html_report.py reads one)
+    page = tmp_path / "diagnosis.html"
+    assert f"HTML report (self-contained, open in a browser): {page}" in proc.stdout
+    assert "null (geometric reaches the noise level)" in page.read_text()
     # the chosen rung's PARAMS.json beside it (issue 15): loadable, saying how it was chosen
     best = tmp_path / "diagnosis.params_best.json"
     assert f"best model (the ladder's chosen rung): geometric -> {best}" in proc.stdout

@@ -4,127 +4,56 @@ joint angle split by approach direction, residual against time), readable withou
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
-
-import numpy as np
 
 from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport
+from robot_calib.diagnose.figures import (
+    angle_figure,
+    ladder_figure,
+    pyplot,
+    residual_map_figure,
+    time_figure,
+)
 from robot_calib.diagnose.ladder import Ladder
 from robot_calib.diagnose.noise import noise_basis
-from robot_calib.diagnose.signatures import ArcSignature, JointTerms, arc_angle_errors
+from robot_calib.diagnose.signatures import ArcSignature, JointTerms
 from robot_calib.measurements import Recording
 
 
 def _plots(
     ladder: Ladder, recording: Recording, stem: Path, floor_mm: float | None
 ) -> list[tuple[str, str]]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """The figures (figures.py) saved as PNGs `<stem>_*.png`: (title, file name) each."""
+    plt = pyplot()
+    drawn = [
+        ("ladder", "The ladder: held-out error of each model",
+         ladder_figure(ladder, floor_mm), 110),
+        ("angle", "Residual against each joint angle, by approach direction",
+         angle_figure(ladder, recording, "urad"), 110),
+        ("map", "Residual maps: against reach, height and every joint's reading",
+         residual_map_figure(ladder, recording), 100),
+        ("time", "Residual against time (in-sample)", time_figure(ladder, recording), 110),
+    ]  # fmt: skip
     out = []
-    names = [r.model for r in ladder.rungs]
-    fig, ax = plt.subplots(figsize=(7, 3.2))
-    bars = ax.bar(
-        range(len(names)), [r.heldout.absolute_rms_mm for r in ladder.rungs], color="#4878a8"
-    )
-    ax.bar_label(bars, fmt="%.4f mm", fontsize=8)
-    if floor_mm is not None:
-        ax.axhline(floor_mm, color="k", ls="--", label="noise floor")
-    if ladder.learnable is not None:
-        ax.axhline(ladder.learnable.holdout_abs_rms_mm, color="#c44e52", ls=":",
-                   label="learnable bound (residual model)")  # fmt: skip
-    ax.set_xticks(range(len(names)), names, rotation=15, ha="right", fontsize=8)
-    ax.set_ylabel("held-out rms error [mm]")
-    ax.set_title(f"the ladder (scored on {ladder.scored_on})")
-    ax.legend()
-    fig.tight_layout()
-    path = stem.with_name(stem.name + "_ladder.png")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    out.append(("The ladder: held-out error of each model", path.name))
-
-    geo = ladder.rungs[0].calibration
-    arcs = arc_angle_errors(geo.model, geo.parameters, recording, geo.residuals)
-    if arcs:
-        fig, axes = plt.subplots(2, 3, figsize=(10, 5.5), sharey=False)
-        for ax, (j, (idx, err, _)) in zip(axes.ravel(), arcs.items()):
-            q = np.degrees(recording.poses.q[idx, j - 1])
-            forth = recording.poses.direction[idx, j - 1] > 0
-            ax.plot(q[forth], err[forth] * 1e6, ".", ms=3, label="approached +")
-            ax.plot(q[~forth], err[~forth] * 1e6, ".", ms=3, label="approached -")
-            ax.set_title(f"joint {j}", fontsize=9)
-            ax.set_xlabel("reading [deg]", fontsize=8)
-            ax.set_ylabel("arc error [urad]", fontsize=8)
-        axes.ravel()[0].legend(fontsize=7)
-        fig.suptitle("geometric model: residual along each sweep's arc vs the joint angle")
-        fig.tight_layout()
-        path = stem.with_name(stem.name + "_angle.png")
-        fig.savefig(path, dpi=110)
+    for suffix, title, fig, dpi in drawn:
+        if fig is None:
+            continue
+        path = stem.with_name(f"{stem.name}_{suffix}.png")
+        fig.savefig(path, dpi=dpi)
         plt.close(fig)
-        out.append(("Residual against each joint angle, by approach direction", path.name))
-
-    path = stem.with_name(stem.name + "_map.png")
-    _residual_map(plt, ladder, recording, path)
-    out.append(("Residual maps: against reach, height and every joint's reading", path.name))
-
-    fig, ax = plt.subplots(figsize=(7, 3.2))
-    for rung in (ladder.rungs[0], ladder.rungs[-1])[: len(ladder.rungs)]:
-        norm = np.linalg.norm(rung.calibration.residuals, axis=1) * 1e3
-        ax.plot(recording.poses.time, norm, ".", ms=3, label=rung.model)
-    ax.set_xlabel("time since the first measurement [s]")
-    ax.set_ylabel("|residual| [mm]")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    path = stem.with_name(stem.name + "_time.png")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    out.append(("Residual against time (in-sample)", path.name))
+        out.append((title, path.name))
     return out
-
-
-def _residual_map(plt: Any, ladder: Ladder, recording: Recording, path: Path) -> None:
-    """|residual| of the geometric model and of the best rung (in-sample) against the
-    measured point's reach (distance from joint 1's axis) and height in the robot base
-    frame, and against every joint's reading: where in the workspace the error lives."""
-    geo = ladder.rungs[0].calibration
-    base2tracker = geo.model.base2tracker(geo.parameters)
-    in_base = (recording.points - base2tracker[:3, 3]) @ base2tracker[:3, :3]
-    axes_x = {
-        "reach [mm]": np.hypot(in_base[:, 0], in_base[:, 1]) * 1e3,
-        "height [mm]": in_base[:, 2] * 1e3,
-    }
-    for j in range(recording.poses.q.shape[1]):
-        axes_x[f"joint {j + 1} reading [deg]"] = np.degrees(recording.poses.q[:, j])
-    n_cols = 4
-    n_rows = -(-len(axes_x) // n_cols)
-    fig, axes = plt.subplots(n_rows, n_cols, figsize=(12, 2.6 * n_rows), sharey=True)
-    rungs = (ladder.rungs[0], ladder.rungs[-1])[: len(ladder.rungs)]
-    for ax, (label, x) in zip(np.ravel(axes), axes_x.items()):
-        for rung in rungs:
-            norm = np.linalg.norm(rung.calibration.residuals, axis=1) * 1e3
-            ax.plot(x, norm, ".", ms=2, label=rung.model)
-        ax.set_xlabel(label, fontsize=8)
-    for ax in np.ravel(axes)[len(axes_x) :]:
-        ax.set_visible(False)
-    np.ravel(axes)[0].set_ylabel("|residual| [mm]", fontsize=8)
-    np.ravel(axes)[0].legend(fontsize=7)
-    fig.suptitle("in-sample |residual| against reach, height (robot base frame) and readings")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 def _harmonics(entry: ArcSignature | JointTerms) -> str:
     """'a1 (s1x), a2 (s2x), ...': harmonic amplitudes [urad] with their significance."""
     if entry.harmonics_urad is None or entry.harmonics_significance is None:
-        return _unobservable(entry)
+        return unobservable(entry)
     pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
     return ", ".join(f"{a:.1f} ({s:.0f}x)" for a, s in pairs)
 
 
-def _unobservable(entry: ArcSignature | JointTerms) -> str:
+def unobservable(entry: ArcSignature | JointTerms) -> str:
+    """'not observable (target X mm from the axis)': a joint its targets cannot show."""
     lever = "" if entry.lever_mm is None else f" {entry.lever_mm:.2f} mm"
     return f"not observable (target{lever} from the axis)"
 

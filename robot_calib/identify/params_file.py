@@ -291,6 +291,20 @@ def probe_lines(cal: Calibration) -> list[str]:
     return out
 
 
+def fixed_reasons(parameters: ParameterVector) -> dict[str, list[str]]:
+    """The fixed parameters' names by the reason they are fixed, in vector order; the
+    per-term reasons of the identifiability analysis ('...: moves the points like ...')
+    grouped under their common head."""
+    reasons: dict[str, list[str]] = {}
+    for p in parameters.parameters:
+        if p.free:
+            continue
+        many = "moves the points like" in p.fixed_reason  # one per term: group them
+        key = p.fixed_reason.split(":")[0] if many else p.fixed_reason
+        reasons.setdefault(key, []).append(p.name)
+    return reasons
+
+
 def summary(cal: Calibration, recording: Recording) -> str:
     """Human summary: measurements, parameters (mm/deg) with 1-sigma, fixed, residuals."""
     lines = [recording.summary(), f"model: {cal.name}"]
@@ -313,17 +327,9 @@ def summary(cal: Calibration, recording: Recording) -> str:
         deviation = f"{'-':>12}" if p.group == "frames" else f"{v - n:12.5f}"
         nominal = f"{'-':>14}" if p.group == "frames" else f"{n:14.5f}"
         lines.append(f"{p.name + ' [' + unit + ']':<22}{v:14.5f}{nominal}{deviation}{sigma}")
-    fixed = [p for p in cal.parameters.parameters if not p.free]
-    if fixed:
-        reasons: dict[str, list[str]] = {}
-        for p in fixed:
-            reason = p.fixed_reason
-            many = "moves the points like" in reason  # one per term: group them
-            key = reason.split(":")[0] if many else reason
-            reasons.setdefault(key, []).append(p.name)
-        for reason, names in reasons.items():
-            shown = ", ".join(names[:8]) + (f" (+{len(names) - 8} more)" if len(names) > 8 else "")
-            lines.append(f"fixed ({reason}): {shown}")
+    for reason, names in fixed_reasons(cal.parameters).items():
+        shown = ", ".join(names[:8]) + (f" (+{len(names) - 8} more)" if len(names) > 8 else "")
+        lines.append(f"fixed ({reason}): {shown}")
     lines += probe_lines(cal)
     lines.append(f"residuals (in-sample): {cal.accuracy.line()}")
     if cal.orientation_residuals is not None:

@@ -1,0 +1,205 @@
+"""The figures of a diagnosis, shared by its two reports (the Markdown one with PNGs beside
+it, report.py, and the self-contained HTML one, html_report.py): each function draws one
+matplotlib Figure from the typed results (Ladder, Recording) and returns it, the caller
+saves it as a file or embeds it. Lengths in mm; angles in the unit asked for (`ANGLE_UNITS`).
+Matplotlib is imported inside `pyplot()`, with the Agg backend (no display)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from robot_calib.diagnose.ladder import Ladder, Rung
+from robot_calib.diagnose.signatures import arc_angle_errors
+from robot_calib.kinematics.frames import Array
+from robot_calib.measurements import Recording
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+#: angle unit -> factor from rad
+ANGLE_UNITS = {"urad": 1e6, "deg": float(np.degrees(1.0))}
+COLOURS = ("#4878a8", "#c44e52", "#55a868", "#8172b2", "#ccb974", "#64b5cd")
+
+
+def pyplot() -> Any:  # noqa: ANN401 - the matplotlib.pyplot module
+    """matplotlib.pyplot on the Agg backend (files only, no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def compared_rungs(ladder: Ladder) -> tuple[Rung, ...]:
+    """The rungs a before/after figure compares: geometric and the best (one if equal)."""
+    return (ladder.rungs[0], ladder.rungs[-1])[: len(ladder.rungs)]
+
+
+def ladder_figure(ladder: Ladder, floor_mm: float | None) -> Figure:
+    """Held-out rms [mm] of every rung as bars, the noise floor and the learnable bound."""
+    plt = pyplot()
+    names = [r.model for r in ladder.rungs]
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    bars = ax.bar(range(len(names)), [r.heldout.absolute_rms_mm for r in ladder.rungs],
+                  color=COLOURS[0])  # fmt: skip
+    ax.bar_label(bars, fmt="%.4f mm", fontsize=8)
+    if floor_mm is not None:
+        ax.axhline(floor_mm, color="k", ls="--", label="noise floor")
+    if ladder.learnable is not None:
+        ax.axhline(ladder.learnable.holdout_abs_rms_mm, color=COLOURS[1], ls=":",
+                   label="learnable bound (residual model)")  # fmt: skip
+    ax.set_xticks(range(len(names)), names, rotation=15, ha="right", fontsize=8)
+    ax.set_ylabel("held-out rms error [mm]")
+    ax.set_title(f"the ladder (scored on {ladder.scored_on})")
+    if floor_mm is not None or ladder.learnable is not None:
+        ax.legend()
+    fig.tight_layout()
+    return fig
+
+
+def angle_figure(ladder: Ladder, recording: Recording, unit: str = "urad") -> Figure | None:
+    """The geometric model's residual along each sweep's arc, as a joint-angle error in
+    `unit` (a key of ANGLE_UNITS), against the joint's reading [deg], split by approach
+    direction; None without circle sweeps."""
+    geo = ladder.rungs[0].calibration
+    arcs = arc_angle_errors(geo.model, geo.parameters, recording, geo.residuals)
+    if not arcs:
+        return None
+    plt = pyplot()
+    fig, axes = plt.subplots(2, 3, figsize=(10, 5.5), sharey=False)
+    for ax, (j, (idx, err, _)) in zip(axes.ravel(), arcs.items()):
+        q = np.degrees(recording.poses.q[idx, j - 1])
+        forth = recording.poses.direction[idx, j - 1] > 0
+        ax.plot(q[forth], err[forth] * ANGLE_UNITS[unit], ".", ms=3, label="approached +")
+        ax.plot(q[~forth], err[~forth] * ANGLE_UNITS[unit], ".", ms=3, label="approached -")
+        ax.set_title(f"joint {j}", fontsize=9)
+        ax.set_xlabel("reading [deg]", fontsize=8)
+        ax.set_ylabel(f"arc error [{unit}]", fontsize=8)
+    for ax in axes.ravel()[len(arcs) :]:
+        ax.set_visible(False)
+    axes.ravel()[0].legend(fontsize=7)
+    fig.suptitle("geometric model: residual along each sweep's arc vs the joint angle")
+    fig.tight_layout()
+    return fig
+
+
+def points_in_base(ladder: Ladder, points: Array) -> tuple[Array, Array]:
+    """Points (n, 3) [m] of the tracker frame in the robot base frame [m] (the geometric
+    calibration's tracker pose), and the rotation (3, 3) base -> tracker (a vector v in the
+    tracker frame is `v @ rotation` in the base frame)."""
+    geo = ladder.rungs[0].calibration
+    base2tracker = geo.model.base2tracker(geo.parameters)
+    return (points - base2tracker[:3, 3]) @ base2tracker[:3, :3], base2tracker[:3, :3]
+
+
+def residual_map_figure(ladder: Ladder, recording: Recording) -> Figure:
+    """|residual| [mm] of the geometric model and of the best rung (in-sample) against the
+    measured point's reach (distance from joint 1's axis) and height in the robot base
+    frame, and against every joint's reading: where in the workspace the error lives."""
+    plt = pyplot()
+    in_base, _ = points_in_base(ladder, recording.points)
+    axes_x = {
+        "reach [mm]": np.hypot(in_base[:, 0], in_base[:, 1]) * 1e3,
+        "height [mm]": in_base[:, 2] * 1e3,
+    }
+    for j in range(recording.poses.q.shape[1]):
+        axes_x[f"joint {j + 1} reading [deg]"] = np.degrees(recording.poses.q[:, j])
+    n_cols = 4
+    n_rows = -(-len(axes_x) // n_cols)
+    fig, axes = plt.subplots(n_rows, n_cols, figsize=(12, 2.6 * n_rows), sharey=True)
+    for ax, (label, x) in zip(np.ravel(axes), axes_x.items()):
+        for rung in compared_rungs(ladder):
+            norm = np.linalg.norm(rung.calibration.residuals, axis=1) * 1e3
+            ax.plot(x, norm, ".", ms=2, label=rung.model)
+        ax.set_xlabel(label, fontsize=8)
+    for ax in np.ravel(axes)[len(axes_x) :]:
+        ax.set_visible(False)
+    np.ravel(axes)[0].set_ylabel("|residual| [mm]", fontsize=8)
+    np.ravel(axes)[0].legend(fontsize=7)
+    fig.suptitle("in-sample |residual| against reach, height (robot base frame) and readings")
+    fig.tight_layout()
+    return fig
+
+
+def time_figure(ladder: Ladder, recording: Recording) -> Figure:
+    """|residual| [mm] (in-sample) of geometric and the best rung against time [s]."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    for rung in compared_rungs(ladder):
+        norm = np.linalg.norm(rung.calibration.residuals, axis=1) * 1e3
+        ax.plot(recording.poses.time, norm, ".", ms=3, label=rung.model)
+    ax.set_xlabel("time since the first measurement [s]")
+    ax.set_ylabel("|residual| [mm]")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def error_histogram_figure(errors_mm: Sequence[tuple[str, Array]], scored_on: str) -> Figure:
+    """Histograms of the per-point error [mm] of each (model, errors (m,) [mm]) on
+    logarithmic bins (models differ by orders of magnitude), with each model's rms."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(7, 3.4))
+    every = np.concatenate([e for _, e in errors_mm])
+    low = max(float(every[every > 0].min()) if np.any(every > 0) else 1e-4, 1e-5)
+    high = max(float(every.max()), 2 * low)
+    bins = np.geomspace(low, high, 40)
+    for k, (model, errors) in enumerate(errors_mm):
+        rms = float(np.sqrt(np.mean(errors**2)))
+        colour = COLOURS[k % len(COLOURS)]
+        ax.hist(np.clip(errors, low, high), bins=bins, histtype="step", lw=1.6, color=colour,
+                label=f"{model} (rms {rms:.4f} mm)")  # fmt: skip
+        ax.axvline(rms, color=colour, ls=":", lw=1)
+    ax.set_xscale("log")
+    ax.set_xlabel("per-point error |predicted - measured| [mm] (log scale)")
+    ax.set_ylabel("points")
+    ax.set_title(f"per-point error, {scored_on}", fontsize=10)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def quiver_figure(ladder: Ladder, points: Array, residuals: Sequence[tuple[str, Array]],
+                  scored_on: str) -> Figure:  # fmt: skip
+    """3D residual vectors, one panel per (model, residuals (n, 3) [m], predicted -
+    measured, tracker frame) at the measured `points` (n, 3) [m, tracker frame], drawn in
+    the robot base frame [mm]; every panel at one scale (the largest arrow 0.3 of the
+    points' extent, rounded down to 1, 2 or 5 x 10^k), written in the title as
+    'arrows x K: 1 mm of error drawn as K mm'."""
+    plt = pyplot()
+    in_base, rotation = points_in_base(ladder, points)
+    xyz = in_base * 1e3
+    extent = float(np.ptp(xyz, axis=0).max()) or 1.0
+    largest = max(float(np.linalg.norm(r, axis=1).max()) for _, r in residuals) * 1e3
+    scale = _round_scale(0.3 * extent / largest) if largest > 0 else 1.0
+    fig = plt.figure(figsize=(5.2 * len(residuals), 5.0))
+    for k, (model, res) in enumerate(residuals):
+        arrows = (res @ rotation) * 1e3 * scale  # (n, 3) mm in the base frame, scaled
+        norm = np.linalg.norm(res, axis=1) * 1e3
+        ax = fig.add_subplot(1, len(residuals), k + 1, projection="3d")
+        ax.scatter(*xyz.T, s=3, color="0.6")
+        colours = plt.get_cmap("viridis")(norm / max(float(norm.max()), 1e-12))
+        ax.quiver(*xyz.T, *arrows.T, colors=colours, arrow_length_ratio=0.2, lw=1.3)
+        ax.set_title(f"{model}: rms {np.sqrt(np.mean(norm**2)):.4f} mm, max {norm.max():.4f} mm",
+                     fontsize=9)  # fmt: skip
+        ax.set_xlabel("x [mm]", fontsize=8)
+        ax.set_ylabel("y [mm]", fontsize=8)
+        ax.set_zlabel("z [mm]", fontsize=8)
+        ax.tick_params(labelsize=7)
+    fig.suptitle(
+        f"residual vectors at the measured points ({scored_on}, robot base frame); "
+        f"arrows x {scale:g}: 1 mm of error drawn as {scale:g} mm",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    return fig
+
+
+def _round_scale(scale: float) -> float:
+    """`scale` rounded down to 1, 2 or 5 times a power of ten (a scale people can read)."""
+    power = 10.0 ** np.floor(np.log10(scale))
+    return float(max(m for m in (1, 2, 5) if m * power <= scale) * power)

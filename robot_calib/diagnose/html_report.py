@@ -1,0 +1,512 @@
+"""The report an engineer reads in two minutes: one self-contained HTML file (figures embedded
+as base64 PNG, inline CSS, no script, nothing fetched) built from the typed results
+(Diagnosis, Ladder, Recording, Calibration). A verdict first, then accuracy before and
+after calibration, the ladder, where the residual lies, 3D residual vectors, ISO 9283,
+the parameters, warnings and outliers (msgs_doc/report.md).
+
+Units for people, one per quantity: positions and errors in mm, angles in deg, scale
+errors in ppm (1 ppm = 1 urad/rad); inside, SI as everywhere.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from robot_calib.accuracy import Accuracy, accuracy
+from robot_calib.diagnose.diagnosis import Diagnosis
+from robot_calib.diagnose.figures import (
+    ANGLE_UNITS,
+    angle_figure,
+    error_histogram_figure,
+    ladder_figure,
+    pyplot,
+    quiver_figure,
+    residual_map_figure,
+    time_figure,
+)
+from robot_calib.diagnose.ladder import Ladder
+from robot_calib.diagnose.noise import noise_basis
+from robot_calib.diagnose.report import unobservable
+from robot_calib.diagnose.signatures import FAMILIES, ORDINAL, ArcSignature, JointTerms
+from robot_calib.errors import InputError
+from robot_calib.identify.calibrate import Calibration, calibrate
+from robot_calib.identify.params_file import fixed_reasons
+from robot_calib.kinematics.frames import Array
+from robot_calib.measurements import Recording
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+DEG_PER_URAD = ANGLE_UNITS["deg"] * 1e-6
+#: SI unit -> (factor, the unit people read); a unit not listed is shown as it is
+HUMAN_UNITS = {
+    "m": (1e3, "mm"),
+    "rad": (ANGLE_UNITS["deg"], "deg"),
+    "1": (1e6, "ppm"),
+    "rad/m": (ANGLE_UNITS["deg"], "deg/m"),
+    "rad/(N m)": (ANGLE_UNITS["deg"], "deg/(N m)"),
+}
+
+
+@dataclass(frozen=True)
+class ModelErrors:
+    """One model of the before/after comparison and its error on the points it is scored
+    on: `residuals` (m, 3) predicted - measured [m] in the tracker frame, their accuracy
+    figures [mm] and what they are (`scored_on`: hold-out bags, k-fold CV or in-sample)."""
+
+    model: str
+    role: str  # why it is in the table: before calibration, CPA, geometric, the best
+    scored_on: str
+    residuals: Array
+    accuracy: Accuracy
+
+    @property
+    def errors_mm(self) -> Array:
+        """Per-point error |predicted - measured| (m,) [mm]."""
+        return np.asarray(np.linalg.norm(self.residuals, axis=1) * 1e3)
+
+
+def compare_models(
+    ladder: Ladder, calibrations: Mapping[str, Calibration] | None = None
+) -> list[ModelErrors]:
+    """Before and after: `nominal` (tracker pose and target fitted, geometry nominal),
+    `cpa` (circle point analysis; left out without the sweeps it needs), `geometric` and
+    the ladder's best rung. Each is scored on the ladder's hold-out bags (outliers left
+    out) when there are some; otherwise geometric and the best rung on the ladder's k-fold
+    CV and nominal and CPA in-sample (they fit no more than the tracker pose and target
+    besides what the circles give). `calibrations`: already identified nominal / cpa
+    models of the same recording (else identified here, each well under a second)."""
+    given = dict(calibrations or {})
+    recording = ladder.recording
+    holdout = ladder.holdout
+    geo = ladder.rungs[0].calibration
+    out = []
+    if recording is not None:
+        for name, role in (("nominal", "before calibration"), ("cpa", "circle point analysis")):
+            cal = given.get(name)
+            if cal is None:
+                try:
+                    cal = calibrate(recording, geo.model.robot, name, screen_outliers=False)
+                except InputError:
+                    continue  # no circle sweeps of every joint: CPA impossible, not shown
+            if holdout is not None:
+                residuals = cal.predict(holdout.poses) - holdout.points
+                out.append(_scored(cal.name, role, "hold-out bags", residuals, holdout.points))
+            else:
+                out.append(_scored(cal.name, role, "in-sample", cal.residuals, recording.points))
+    rungs = [(ladder.rungs[0], "geometric" if len(ladder.rungs) > 1 else "geometric = best rung")]
+    if len(ladder.rungs) > 1:
+        rungs.append((ladder.rungs[-1], "best rung of the ladder"))
+    for rung, role in rungs:
+        out.append(ModelErrors(rung.model, role, ladder.scored_on, rung.heldout_residuals,
+                               rung.heldout))  # fmt: skip
+    return out
+
+
+def _scored(model: str, role: str, scored_on: str, residuals: Array, points: Array) -> ModelErrors:
+    return ModelErrors(model, role, scored_on, residuals, accuracy(points, points + residuals))
+
+
+CSS = """
+body{font:15px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-serif;
+ color:#1d2733;background:#f4f6f8;margin:0}
+main{max-width:1120px;margin:0 auto;padding:24px 28px 48px;background:#fff}
+h1{font-size:24px;margin:0 0 4px}h2{font-size:19px;margin:32px 0 8px;padding-bottom:4px;
+ border-bottom:2px solid #dde3ea}h3{font-size:15px;margin:18px 0 6px}
+.sub{color:#5b6b7b;margin:0 0 16px}
+.verdict{border-left:6px solid #2f6fb0;background:#eef4fb;padding:12px 18px;margin:12px 0}
+.verdict.warn{border-left-color:#c0392b;background:#fbefed}
+.verdict.ok{border-left-color:#2e8b57;background:#edf7f1}
+.verdict dl{display:grid;grid-template-columns:max-content 1fr;gap:4px 16px;margin:0}
+.verdict dt{font-weight:600;color:#34495e}.verdict dd{margin:0}
+table{border-collapse:collapse;margin:8px 0 12px;font-size:13.5px;
+ font-variant-numeric:tabular-nums}
+th,td{border:1px solid #d5dce4;padding:4px 8px;text-align:right;vertical-align:top}
+th{background:#eef1f5;text-align:center}td:first-child,th:first-child{text-align:left}
+td.text{text-align:left;white-space:nowrap}tr.best td{background:#fff7d6;font-weight:600}
+td.fixed{color:#7a8794}
+figure{margin:10px 0 18px}figure img{max-width:100%;border:1px solid #e3e8ee}
+figcaption{color:#5b6b7b;font-size:13px}
+pre{background:#1d2733;color:#e8eef5;padding:10px 14px;border-radius:4px;overflow-x:auto}
+code{font-family:"DejaVu Sans Mono",monospace;font-size:13px}
+ul.tight li{margin:2px 0}.muted{color:#7a8794}
+"""
+
+
+def _e(text: object) -> str:
+    """`text` escaped for HTML (every text of the report goes through here)."""
+    return html.escape(str(text), quote=True)
+
+
+def _img(fig: Figure | None, caption: str, dpi: int = 100) -> str:
+    """The figure as an embedded PNG (a data: URI) with its caption; '' for None."""
+    if fig is None:
+        return ""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi)
+    pyplot().close(fig)
+    data = base64.b64encode(buffer.getvalue()).decode("ascii")
+    return (f'<figure><img alt="{_e(caption)}" src="data:image/png;base64,{data}">'
+            f"<figcaption>{_e(caption)}</figcaption></figure>")  # fmt: skip
+
+
+def _table(head: Sequence[str], rows: Sequence[Sequence[object]],
+           classes: Sequence[str] = (), text_columns: int = 1) -> str:  # fmt: skip
+    """An HTML table of escaped cells; `classes`: a class per row ('' none); the first
+    `text_columns` columns are text (left-aligned), the others figures."""
+    out = ["<table><thead><tr>", *(f"<th>{_e(h)}</th>" for h in head), "</tr></thead><tbody>"]
+    for k, row in enumerate(rows):
+        cls = classes[k] if k < len(classes) and classes[k] else ""
+        out.append(f'<tr class="{cls}">' if cls else "<tr>")
+        out += [f'<td class="text">{_e(c)}</td>' if i < text_columns else f"<td>{_e(c)}</td>"
+                for i, c in enumerate(row)]  # fmt: skip
+        out.append("</tr>")
+    out.append("</tbody></table>")
+    return "".join(out)
+
+
+def _mm(value: float | None, digits: int = 4) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def _deg(urad: float | None, significance: float | None = None) -> str:
+    """An angle given in urad, shown in deg (with its significance, x noise)."""
+    if urad is None:
+        return "-"
+    sig = "" if significance is None else f" ({significance:.0f}x)"
+    return f"{urad * DEG_PER_URAD:.5f}{sig}"
+
+
+def _harmonics_deg(entry: ArcSignature | JointTerms) -> str:
+    if entry.harmonics_urad is None or entry.harmonics_significance is None:
+        return unobservable(entry)
+    pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
+    return ", ".join(_deg(a, s) for a, s in pairs)
+
+
+def _strongest(diagnosis: Diagnosis) -> str:
+    """The strongest residual signature as a sentence in this report's units (deg, ppm)."""
+    sig = diagnosis.where.strongest_signature
+    if sig is None:
+        return "none (no joint observable from every pose)"
+    noise = f"{sig.significance:.0f} x its noise"
+    if sig.harmonic is not None:
+        return (f"{ORDINAL.get(sig.harmonic, f'{sig.harmonic}th')} harmonic of joint "
+                f"{sig.joint}: {_deg(sig.value)} deg of joint-angle error, {noise}")  # fmt: skip
+    terms = next(t for t in diagnosis.where.joints_from_all_poses if t.joint == sig.joint)
+    for key, sig_key, words, _ in FAMILIES:
+        if getattr(terms, sig_key) == sig.significance:
+            value = {"direction_urad": f"{_deg(sig.value)} deg",
+                     "scale_urad_per_rad": f"{sig.value:.1f} ppm"}.get(
+                key, f"{sig.value * DEG_PER_URAD:.3g} deg/(N m)")  # fmt: skip
+            return f"joint {sig.joint} error following its {words}: {value}, {noise}"
+    return f"joint {sig.joint}, {noise}"
+
+
+def _human(unit: str, value: float) -> float:
+    return value * HUMAN_UNITS.get(unit, (1.0, unit))[0]
+
+
+def _parameters(cal: Calibration) -> str:
+    """The parameter table of `cal` (values, nominal, deviation, 1-sigma in mm / deg / ppm)
+    and the fixed parameters by reason."""
+    rows, classes = [], []
+    for p, value, std in zip(cal.parameters.parameters, cal.parameters.values, cal.std):
+        if p.group not in ("geometric", "frames") and not p.free:
+            continue  # effect terms the data fixed: listed by reason below
+        unit = HUMAN_UNITS.get(p.unit, (1.0, p.unit))[1]
+        frame = p.group == "frames"  # the tracker pose and target offsets: no nominal
+        deviation = "-" if frame else f"{_human(p.unit, value - p.nominal):.5f}"
+        rows.append([
+            p.name, unit, f"{_human(p.unit, value):.5f}",
+            "-" if frame else f"{_human(p.unit, p.nominal):.5f}", deviation,
+            f"{_human(p.unit, std):.2g}" if p.free else "fixed",
+        ])  # fmt: skip
+        classes.append("" if p.free else "fixed")
+    out = [_table(["parameter", "unit", "value", "nominal", "deviation", "1-sigma"], rows,
+                  classes, text_columns=2)]  # fmt: skip
+    ident = cal.identifiability
+    if ident is not None:
+        out.append(
+            f"<p>Identifiability: {ident.n_free} free parameters, condition number "
+            f"{ident.condition_number:.1f}, observability index "
+            f"{ident.observability_index:.2e}; {len(ident.fixed)} fixed by the data.</p>"
+        )
+    reasons = fixed_reasons(cal.parameters)
+    if reasons:
+        out.append("<h3>Fixed parameters and why</h3><ul class='tight'>")
+        out += [f"<li><b>{_e(reason or 'fixed')}</b>: {_e(', '.join(names))}</li>"
+                for reason, names in reasons.items()]  # fmt: skip
+        out.append("</ul>")
+    return "".join(out)
+
+
+def _floor_text(diagnosis: Diagnosis) -> str:
+    noise = diagnosis.noise
+    if noise.sigma_mm is None or noise.floor_abs_rms_mm is None:
+        return ("unknown: no repeat poses, circle sweeps or stated accuracy "
+                "(diagnose --tracker-accuracy)")  # fmt: skip
+    return (f"{noise.floor_abs_rms_mm:.4f} mm rms ({noise.sigma_mm:.4f} mm per axis from "
+            f"{noise_basis(noise.source, noise.n)})")  # fmt: skip
+
+
+def _times_floor(value_mm: float, diagnosis: Diagnosis) -> str:
+    floor = diagnosis.noise.floor_abs_rms_mm
+    return "-" if floor is None else f"{value_mm / floor:.2f}"
+
+
+def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibration,
+             best_params: str, warnings: Sequence[str]) -> str:  # fmt: skip
+    """The two-minute summary: best model and its held-out error against the floor, the
+    named effect, what remains, warnings, and the commands to apply the result."""
+    row = next((m for m in compared if m.model == best.name), None)
+    error = ""
+    if row is not None:
+        rms = row.accuracy.absolute_rms_mm
+        error = (f"{rms:.4f} mm rms ({row.scored_on}), {_times_floor(rms, diagnosis)} x the "
+                 "noise floor")  # fmt: skip
+    before = next((m for m in compared if m.model == "nominal"), None)
+    if before is not None and row is not None:
+        error += f"; nominal: {before.accuracy.absolute_rms_mm:.4f} mm rms"
+    shares = ", ".join(f"{e} {100 * v:.0f} %" for e, v in diagnosis.effect_shares())
+    ratio = diagnosis.unexplained.ratio_to_noise_floor
+    tone = "warn" if warnings else ("ok" if ratio is not None and ratio <= 1.5 else "")
+    items = [
+        ("Best model", f"{best.name} ({best_params})"),
+        ("Held-out error", error or "-"),
+        ("Noise floor", _floor_text(diagnosis)),
+        ("Named effect", diagnosis.verdict + (f" (share of the learnable gap: {shares})"
+                                              if shares else "")),
+        ("What remains", diagnosis.unexplained.note),
+        ("Warnings", f"{len(warnings)} warning(s), {len(diagnosis.outliers)} flagged "
+                     "outlier(s): see below" if warnings or diagnosis.outliers else "none"),
+    ]  # fmt: skip
+    body = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in items)
+    commands = (
+        f"robot-calib export {best_params} --format urdf -o calibrated.urdf\n"
+        f"robot-calib export {best_params} --format dh -o dh_table.csv\n"
+        f"robot-calib compensate {best_params} --joints JOINTS.csv -o COMPENSATED.csv"
+    )
+    return (f'<section class="verdict {tone}"><dl>{body}</dl>'
+            "<p><b>Next</b>: export the best model for the controller, or correct joint "
+            "commands with it (msgs_doc/export.md, msgs_doc/compensate.md):</p>"
+            f"<pre><code>{_e(commands)}</code></pre></section>")  # fmt: skip
+
+
+def _accuracy(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: str) -> str:
+    rows = [
+        [m.model, m.role, m.scored_on, m.accuracy.n_points,
+         f"{m.accuracy.pairwise_mean_mm:.4f} / {m.accuracy.pairwise_max_mm:.4f}",
+         f"{m.accuracy.absolute_mean_mm:.4f}", f"{m.accuracy.absolute_rms_mm:.4f}",
+         f"{m.accuracy.absolute_max_mm:.4f}", _times_floor(m.accuracy.absolute_rms_mm, diagnosis)]
+        for m in compared
+    ]  # fmt: skip
+    classes = ["best" if m.model == best else "" for m in compared]
+    head = ["model", "", "scored on", "points", "seed criterion mean / max [mm]",
+            "abs mean [mm]", "abs rms [mm]", "abs max [mm]", "x noise floor"]  # fmt: skip
+    scored = sorted({m.scored_on for m in compared})
+    note = ("" if scored == ["hold-out bags"] else
+            "<p class='muted'>Not all rows are held out: in-sample rows are optimistic; "
+            "k-fold rows are each fold predicted by the model fitted without it.</p>")  # fmt: skip
+    hist = error_histogram_figure([(m.model, m.errors_mm) for m in compared],
+                                  " / ".join(scored))  # fmt: skip
+    return (_table(head, rows, classes, text_columns=3) + note
+            + _img(hist, "Per-point error of each model (absolute distance, tracker frame); "
+                   "dotted: each model's rms"))  # fmt: skip
+
+
+def _ladder(diagnosis: Diagnosis, ladder: Ladder) -> str:
+    rows = []
+    for rung in diagnosis.ladder:
+        share = rung.learnable_gap_share
+        rows.append([
+            rung.model, rung.free_parameters,
+            f"{rung.holdout_mean_mm:.4f} / {rung.holdout_max_mm:.4f}",
+            f"{rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f}",
+            _times_floor(rung.holdout_abs_rms_mm, diagnosis),
+            "-" if share is None else f"{100 * share:.0f} %",
+        ])  # fmt: skip
+    head = [
+        "model",
+        "free parameters",
+        "held-out seed criterion mean / max [mm]",
+        "held-out abs mean / rms [mm]",
+        "x noise floor",
+        "share of the learnable gap",
+    ]
+    out = [f"<p>Scored on {_e(diagnosis.scored_on)}; each rung chosen on "
+           f"{_e(diagnosis.selected_on)}.</p>", _table(head, rows)]  # fmt: skip
+    shares = diagnosis.effect_shares()
+    if shares:
+        out.append(
+            "<p>Share of the learnable gap each effect closed: "
+            + _e(", ".join(f"{e} {100 * v:.0f} %" for e, v in shares))
+            + ".</p>"
+        )
+    if diagnosis.learnable is not None:
+        out.append(f"<p>{_e(diagnosis.learnable.line())}. Method: "
+                   f"{_e(diagnosis.learnable.method)}.</p>")  # fmt: skip
+    out.append(
+        _img(
+            ladder_figure(ladder, diagnosis.noise.floor_abs_rms_mm),
+            "Held-out rms of each rung, the noise floor and the learnable bound",
+        )
+    )
+    return "".join(out)
+
+
+def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording) -> str:
+    where = diagnosis.where
+    out = []
+    if where.joints:
+        out.append("<h3>Per joint, from its circle sweeps (geometric model)</h3>"
+                   "<p>Angle-equivalent error along each sweep's arc; a joint is observable "
+                   "only through targets at least 5 mm from its axis.</p>")  # fmt: skip
+        rows = [[j.joint, _deg(j.arc_rms_urad), _harmonics_deg(j), _deg(j.direction_split_urad),
+                 _mm(j.slope_vs_angle_urad_per_rad, 1), _mm(j.gravity_torque_correlation, 2)]
+                for j in where.joints]  # fmt: skip
+        out.append(_table(["joint", "rms [deg]", "harmonics 1-4 [deg] (x noise)",
+                           "forth-back split [deg]", "slope vs angle [ppm]",
+                           "corr. with gravity torque"], rows))  # fmt: skip
+    else:
+        out.append("<p>No circle sweeps in the recording (no run of poses in which one "
+                   "joint moves alone): no per-joint arc figures.</p>")  # fmt: skip
+    out.append(
+        "<h3>Per joint, from every pose</h3><p>Joint-angle error terms, each tested "
+        "alone against what the geometry absorbs (in brackets: x their noise).</p>"
+    )
+    rows = [[t.joint, _harmonics_deg(t),
+             _deg(t.direction_urad, t.direction_significance) if t.observable
+             else unobservable(t),
+             "-" if t.scale_urad_per_rad is None
+             else f"{t.scale_urad_per_rad:.1f} ({t.scale_significance:.0f}x)",
+             "-" if t.gravity_urad_per_Nm is None
+             else f"{t.gravity_urad_per_Nm * DEG_PER_URAD:.3g} ({t.gravity_significance:.0f}x)"]
+            for t in where.joints_from_all_poses]  # fmt: skip
+    out.append(_table(["joint", "harmonics 1-4 [deg]", "direction (backlash) [deg]",
+                       "scale [ppm]", "gravity [deg/(N m)]"], rows))  # fmt: skip
+    quartiles = ", ".join(f"{v:.4f}" for v in where.time.rms_by_quartile_mm)
+    reach = ", ".join(f"{v:.4f}" for v in where.workspace.rms_by_reach_tertile_mm)
+    out.append(f"<p><b>Strongest structure</b>: {_e(_strongest(diagnosis))}. Against time: "
+               f"rms by quartile {quartiles} mm, trend {where.time.slope_mm_per_h:.3f} mm/h. "
+               f"By reach (near to far): {reach} mm.</p>")  # fmt: skip
+    out.append(_img(angle_figure(ladder, recording, "deg"),
+                    "Geometric model: arc error against each joint's reading, by approach "
+                    "direction"))  # fmt: skip
+    out.append(
+        _img(
+            residual_map_figure(ladder, recording),
+            "In-sample |residual| against reach, height and every joint's reading",
+        )
+    )
+    out.append(_img(time_figure(ladder, recording), "In-sample |residual| against time"))
+    return "".join(out)
+
+
+def _vectors(ladder: Ladder, recording: Recording) -> str:
+    """3D residual vectors of geometric and the best rung at the points they are scored on."""
+    held = ladder.holdout
+    points = held.points if held is not None else recording.points
+    rungs = (ladder.rungs[0], ladder.rungs[-1])[: len(ladder.rungs)]
+    fig = quiver_figure(ladder, points, [(r.model, r.heldout_residuals) for r in rungs],
+                        ladder.scored_on)  # fmt: skip
+    return _img(
+        fig,
+        "Residual vectors (predicted - measured) at the measured points, robot "
+        "base frame; one scale for all panels (in the title); colour: |residual|",
+    )
+
+
+def _iso(diagnosis: Diagnosis) -> str:
+    if not diagnosis.iso9283:
+        return ("<p class='muted'>No repeated poses (readings measured at least 3 times): no "
+                "ISO 9283 figures. The <code>iso9283</code> plan records them.</p>")  # fmt: skip
+    figures = diagnosis.iso9283
+    rows = [[f.model, len(f.poses), f"{f.ap_max_mm:.4f}", f"{f.rp_max_mm:.4f}"]
+            for f in figures]  # fmt: skip
+    out = [f"<p>Pose accuracy AP and repeatability RP (positions), {_e(figures[0].scored_on)}, "
+           "before (nominal) and after calibration.</p>",
+           _table(["model", "repeated poses", "AP max [mm]", "RP max [mm]"], rows)]  # fmt: skip
+    per_pose = [[k + 1, p.first_index, p.n] + [f"{f.poses[k].ap_mm:.4f}" for f in figures]
+                + [f"{p.rp_mm:.4f}"] for k, p in enumerate(figures[0].poses)]  # fmt: skip
+    out.append(
+        _table(
+            [
+                "pose",
+                "first measurement",
+                "n",
+                *(f"AP {f.model} [mm]" for f in figures),
+                "RP [mm]",
+            ],
+            per_pose,
+        )
+    )
+    return "".join(out)
+
+
+def _problems(diagnosis: Diagnosis, warnings: Sequence[str]) -> str:
+    out = ["<ul class='tight'>", *(f"<li>{_e(w)}</li>" for w in warnings), "</ul>"]
+    if not warnings:
+        out = ["<p>No warnings.</p>"]
+    if diagnosis.outliers:
+        rows = [[o.bag, o.index, "-" if o.stamp_ns is None else f"{o.stamp_ns * 1e-9:.3f}",
+                 f"{o.size_m * 1e3:.3f}", f"{o.sigmas:.0f}",
+                 ", ".join(f"{c:+.2f}" for c in o.direction)]
+                for o in diagnosis.outliers]  # fmt: skip
+        out.append("<h3>Flagged outliers (tracker blunders; never fitted, never explained as "
+                   "an effect of the robot)</h3>")  # fmt: skip
+        out.append(_table(["bag", "point", "stamp [s]", "size [mm]", "robust sigmas",
+                           "direction (tracker frame)"], rows))  # fmt: skip
+    else:
+        out.append("<p>No measurement flagged as an outlier.</p>")
+    return "".join(out)
+
+
+def html_report(
+    diagnosis: Diagnosis,
+    ladder: Ladder,
+    recording: Recording,
+    compared: Sequence[ModelErrors],
+    best: Calibration,
+    best_params: str,
+    warnings: Sequence[str] = (),
+) -> str:
+    """The report as one HTML document (str). `recording`: the calibration measurements
+    the ladder was fitted on (outliers left out); `compared`: `compare_models`; `best`: the
+    model chosen and `best_params` the PARAMS.json it is written to; `warnings`: every
+    warning of the run (the recording's and the diagnosis' are added here)."""
+    every = list(dict.fromkeys([*recording.warnings, *diagnosis.warnings, *warnings]))
+    held = f" ({', '.join(diagnosis.holdout)})" if diagnosis.holdout else ""
+    sections = [
+        ("accuracy", "Accuracy before and after calibration", _accuracy(diagnosis, compared,
+                                                                        best.name)),
+        ("ladder", "The ladder: which effects, and each one's share", _ladder(diagnosis, ladder)),
+        ("where", "Where the residual lies", _where(diagnosis, ladder, recording)),
+        ("vectors", "3D residual vectors", _vectors(ladder, recording)),
+        ("iso9283", "ISO 9283 pose accuracy and repeatability", _iso(diagnosis)),
+        ("parameters", f"Parameters of the best model ({best.name})", _parameters(best)),
+        ("warnings", "Warnings and flagged outliers", _problems(diagnosis, every)),
+    ]  # fmt: skip
+    nav = " · ".join(f'<a href="#{key}">{_e(title)}</a>' for key, title, _ in sections)
+    body = "".join(f'<section id="{key}"><h2>{_e(title)}</h2>{content}</section>'
+                   for key, title, content in sections)  # fmt: skip
+    return (
+        '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">'
+        f"<title>robot_calib report: {_e(best.name)}</title><style>{CSS}</style></head>"
+        f"<body><main><h1>Calibration report</h1><p class='sub'>Robot "
+        f"{_e(best.model.robot.name)}; recordings {_e(', '.join(diagnosis.recordings))}; "
+        f"scored on {_e(diagnosis.scored_on)}{_e(held)}. Units: positions and errors in mm, "
+        "angles in deg, scale errors in ppm.</p>"
+        + _verdict(diagnosis, compared, best, best_params, every)
+        + f"<p class='sub'>{nav}</p>"
+        + body
+        + "</main></body></html>\n"
+    )
