@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
 from cli_runner import robot_calib
+
 from robot_calib.cli import main
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate

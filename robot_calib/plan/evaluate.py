@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from robot_calib.accuracy import accuracy
+from robot_calib.export.base import labelled_size
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.identifiability import unit_covariance
 from robot_calib.kinematics.frames import Array
@@ -72,12 +73,9 @@ class Prediction:
 
 
 def human(value: float, unit: str) -> str:
-    """A value in SI `unit` labelled for people: m as mm, rad as urad (and deg)."""
-    if unit == "m":
-        return f"{value * 1e3:.5f} mm"
-    if unit == "rad":
-        return f"{value * 1e6:.2f} urad ({math.degrees(value):.6f} deg)"
-    return f"{value:.3g} {unit}"
+    """A 1-sigma in SI `unit` labelled for people: mm, urad (with deg), other units as is."""
+    text = labelled_size(unit, value, mm_digits=5, urad_digits=2)
+    return f"{text} ({math.degrees(value):.6f} deg)" if unit == "rad" else text
 
 
 def world_noise_m(world: World, problem: DesignProblem) -> float:
