@@ -179,6 +179,49 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_plan(args: argparse.Namespace) -> int:
+    """Plan N measurement poses for a model (D-optimal), print what they promise against
+    random poses at equal N, write PLAN.yaml."""
+    from robot_calib import pipeline
+    from robot_calib.atomic import write_text_atomic
+    from robot_calib.plan.campaign import campaign_yaml, plan_campaign
+    from robot_calib.plan.evaluate import human
+
+    noise = args.noise_mm
+    if noise is not None and not (math.isfinite(noise) and 0 < noise < 10):
+        raise InputError(f"--noise-mm {noise}: a 1-sigma per coordinate in mm, > 0 and < 10")
+    output = output_path(args.output, "PLAN.yaml", [], args.force)
+    world = pipeline.simulation_world(args.world, args.robot, (), args.seed)
+    c = plan_campaign(world, args.model, args.poses, args.candidates, args.seed, args.floor_z,
+                      None if noise is None else noise * 1e-3, args.ecc_order, args.trials,
+                      args.holdout, _log)  # fmt: skip
+    planned, rand = c.planned.prediction, c.random.prediction
+    print(f"{args.model} on {world.model.robot.name}: {args.poses} poses of "
+          f"{len(c.problem.candidates)} candidates in {c.design_seconds:.2f} s; noise "
+          f"{planned.noise_m * 1e3:.4f} mm per coordinate; predicted 1-sigma:")  # fmt: skip
+    print(f"{'parameter':<22}{'planned':>34}{'random (same N)':>34}")
+    for k, name in enumerate(planned.names):
+        unit = planned.units[k]
+        print(f"{name:<22}{human(float(planned.std[k]), unit):>34}"
+              f"{human(float(rand.std[k]), unit):>34}")  # fmt: skip
+    for name, reason in c.problem.fixed:
+        print(f"{name:<22} fixed: {reason}")
+    for label, fig in (("planned", c.planned), ("random", c.random)):
+        pred = fig.prediction
+        held = "not simulated" if fig.holdout is None else (
+            f"{fig.holdout.abs_rms_mm:.4f} mm abs rms, seed criterion mean "
+            f"{fig.holdout.pairwise_mean_mm:.4f} mm, model error (vs the true points) "
+            f"{fig.holdout.model_rms_mm:.4f} mm rms ({fig.holdout.trials} random true "
+            f"robot(s), {fig.holdout.n_poses} held-out poses)")  # fmt: skip
+        print(f"{label}: worst {pred.line(pred.worst)}; held-out {held}; campaign "
+              f"{fig.hours * 60:.1f} min")  # fmt: skip
+    ratio = rand.rms_m.max() / planned.rms_m.max()
+    print(f"worst predicted 1-sigma: {ratio:.2f} x smaller than random poses at equal N")
+    write_text_atomic(output, campaign_yaml(c, args.floor_z))
+    print(f"{output}: {args.poses} poses (msgs_doc/plan.md)")
+    return 0
+
+
 def _log(message: str) -> None:
     print(message, file=sys.stderr)
 
@@ -744,7 +787,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--plan",
         default=DEFAULT_PLAN,
-        help=f"paper-test1..6 (seed Table 2), random, iso9283 (default {DEFAULT_PLAN})",
+        help=f"paper-test1..6 (seed Table 2), random, iso9283, or a PLAN.yaml file "
+        f"(robot-calib plan) (default {DEFAULT_PLAN})",
     )
     sim.add_argument("--world", help="world YAML file (default: the built-in default world)")
     sim.add_argument(
@@ -767,6 +811,68 @@ def build_parser() -> argparse.ArgumentParser:
         "-o", "--output", required=True, help="bag to write (BAG.mcap; + BAG.world.yaml)"
     )
     _add_force(sim)
+
+    pla = add("plan", cmd_plan, "choose measurement poses for a model (D-optimal) -> PLAN.yaml",
+              robot=f"the world's; {DEFAULT_ROBOT} in the built-in world")  # fmt: skip
+    pla.add_argument(
+        "--model",
+        default=DEFAULT_MODEL,
+        help=f"geometric[+EFFECT[:joints]...] to plan for (default {DEFAULT_MODEL})",
+    )
+    pla.add_argument("--poses", type=_positive, required=True, help="N: poses to plan")
+    pla.add_argument(
+        "--candidates",
+        type=_positive,
+        default=2000,
+        help="M: random candidate poses to choose from (default 2000)",
+    )
+    pla.add_argument(
+        "--floor-z",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="flange and target stay at or above z = M [m] of the robot base frame "
+        "(default 0.0: the base's mounting plane; -inf: no floor)",
+    )
+    pla.add_argument(
+        "--noise-mm",
+        type=float,
+        metavar="MM",
+        help="tracker noise, 1-sigma per coordinate [mm] (default: the world's "
+        "tracker, target and repeatability noise)",
+    )
+    pla.add_argument(
+        "--world",
+        help="world YAML file: robot, tracker pose, target, noise "
+        "(default: the built-in default world)",
+    )
+    pla.add_argument(
+        "--seed",
+        type=_count,
+        default=0,
+        help="random seed of candidates and simulations (default 0)",
+    )
+    pla.add_argument(
+        "--trials",
+        type=_count,
+        default=1,
+        help="simulated calibrations (random true robots) per plan for the "
+        "held-out error (default 1; 0: none)",
+    )
+    pla.add_argument(
+        "--holdout",
+        type=_positive,
+        default=200,
+        help="random held-out poses per simulated calibration (default 200)",
+    )
+    pla.add_argument(
+        "--ecc-order",
+        type=_positive,
+        default=DEFAULT_ECC_ORDER,
+        help=f"eccentricity Fourier order (default {DEFAULT_ECC_ORDER})",
+    )
+    pla.add_argument("-o", "--output", required=True, help="PLAN.yaml to write")
+    _add_force(pla)
 
     cal = add("calibrate", cmd_calibrate, "identify a model from bags -> PARAMS.json")
     cal.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
@@ -999,7 +1105,9 @@ def build_parser() -> argparse.ArgumentParser:
         default="out",
         help="output folder (default out/); every run writes a new run-<time> folder in it",
     )
-    run.add_argument("--plan", default=RUN_PLAN, help=f"calibration plan (default {RUN_PLAN})")
+    run.add_argument(
+        "--plan", default=RUN_PLAN, help=f"calibration plan, as for simulate (default {RUN_PLAN})"
+    )
     run.add_argument(
         "--effects",
         nargs="*",

@@ -135,12 +135,11 @@ def simulate(
     from robot_calib.atomic import staged_outputs
     from robot_calib.messages import POINT_TOPIC
     from robot_calib.nodes.simulate import simulate_bag
-    from robot_calib.sim.plans import PLAN_NAMES
+    from robot_calib.sim.plans import check_plan
     from robot_calib.sim.world import save_world
 
-    if plan not in PLAN_NAMES:
-        raise InputError(f"--plan {plan}: unknown plan (known: {', '.join(PLAN_NAMES)})")
     world = world if world is not None else simulation_world(seed=seed)
+    check_plan(plan, world.model.robot)
     bag = output_path(output, "the bag", [world.source], force)
     world_file = output_path(
         bag.with_suffix(".world.yaml"), "the world file", [world.source], force
@@ -564,11 +563,10 @@ def run(
     from robot_calib.effects import MAIN_JOB_EFFECTS
     from robot_calib.identify.params_file import write_json_atomic
     from robot_calib.kinematics.description import load_robot
-    from robot_calib.sim.plans import PLAN_NAMES
+    from robot_calib.sim.plans import check_plan
 
     description = load_robot(robot)  # every input checked before anything is written
-    if plan not in PLAN_NAMES:
-        raise InputError(f"--plan {plan}: unknown plan (known: {', '.join(PLAN_NAMES)})")
+    check_plan(plan, description)
     if n_holdout < 1 or seed < 0:
         raise InputError(f"--holdout {n_holdout}, --seed {seed}: need >= 1 poses, seed >= 0")
     effects = MAIN_JOB_EFFECTS if effects is None else effects
@@ -586,9 +584,16 @@ def run(
     second = simulate(holdout, "random", truth, seed + 1, n_holdout, progress)
     recording = read_bags([bag], description, log=log)
     held = read_bags([holdout], description, log=log)
-    say(f"[3/{steps}] calibrate: {', '.join(RUN_MODELS)}")
+    # cpa needs a circle sweep of every joint: a plan of general poses (PLAN.yaml, random)
+    # calibrates the other models
+    swept = all(recording.sweeps_of(j) for j in range(1, description.n_joints + 1))
+    names = [n for n in RUN_MODELS if swept or n != "cpa"]
+    say(
+        f"[3/{steps}] calibrate: {', '.join(names)}"
+        + ("" if swept else " (no cpa: the plan has no circle sweep of every joint)")
+    )
     models = {}
-    for name in RUN_MODELS:
+    for name in names:
         cal = calibrate_recording(recording, description, name, log=log)
         write_json_atomic(cal.to_dict(recording), folder / f"params_{name}.json")
         models[name] = ModelScore(cal, accuracy(held.points, cal.predict(held.poses)))

@@ -82,11 +82,12 @@ def rpy(rotation: Array) -> tuple[float, float, float]:
     return roll, pitch, yaw
 
 
-def _size(unit: str, value: float) -> str:
+def labelled_size(unit: str, value: float, mm_digits: int = 4, urad_digits: int = 1) -> str:
+    """A value in SI `unit` for people: m as mm, rad as urad, other units as stored."""
     if unit == "m":
-        return f"{value * 1e3:.4f} mm"
+        return f"{value * 1e3:.{mm_digits}f} mm"
     if unit == "rad":
-        return f"{value * 1e6:.1f} urad"
+        return f"{value * 1e6:.{urad_digits}f} urad"
     return f"{value:.4g} {unit}"
 
 
@@ -102,7 +103,9 @@ def effect_lines(cal: Calibration) -> list[str]:
             continue
         largest = max(names, key=lambda n: abs(params[n]))
         unit = params.parameters[params.index(largest)].unit
-        lines.append(f"{effect.label}: largest |{largest}| = {_size(unit, abs(params[largest]))}")
+        lines.append(
+            f"{effect.label}: largest |{largest}| = {labelled_size(unit, abs(params[largest]))}"
+        )
     return lines
 
 

@@ -213,10 +213,18 @@ def covariance(jac_free: Array, residuals: Array, rows: int | None = None) -> Ar
     m, p = jac_free.shape
     m = m if rows is None else rows
     sigma2 = float(residuals @ residuals) / max(m - p, 1)
+    return sigma2 * unit_covariance(jac_free)
+
+
+def unit_covariance(jac_free: Array) -> Array:
+    """(J^T J)^-1 (p, p) [parameter units squared per residual unit squared]: the
+    covariance of the free parameters for residuals of unit variance, from a Jacobian
+    (m, p) (or any matrix with the same J^T J); directions with singular values below
+    1e-12 of the largest are left out (pseudo-inverse)."""
     _, s, vt = np.linalg.svd(r_factor(jac_free))
     keep = s > s[0] * 1e-12
     scaled = vt[keep].T / s[keep]
-    return sigma2 * scaled @ scaled.T
+    return scaled @ scaled.T
 
 
 def _std_bound(p: Parameter) -> float:

@@ -37,7 +37,10 @@ class SimRobotNode(Node):
     def __init__(self, **kwargs: Any) -> None:  # rclpy.node.Node's keyword arguments
         super().__init__("sim_robot", **kwargs)
         self.plan_name = declare(
-            self, "plan", "paper-test3", f"measurement plan: {', '.join(PLAN_NAMES)}"
+            self,
+            "plan",
+            "paper-test3",
+            f"measurement plan: {', '.join(PLAN_NAMES)}, or a PLAN.yaml file",
         )
         world_file = declare(self, "world", "", "world YAML file ('' = built-in default)")
         self.rate = declare(

@@ -37,11 +37,10 @@ from robot_calib.effects.thermal_warmup import ThermalWarmup
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.fit import fit_model
 from robot_calib.kinematics.description import RobotDescription, with_payload
-from robot_calib.measurements import Recording, recording_from_arrays
+from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
-from robot_calib.poses import Poses
-from robot_calib.sim.measure import physical_points
-from robot_calib.sim.plans import Plan, paper_test_plan, plan_times, random_plan
+from robot_calib.sim.measure import record_plan
+from robot_calib.sim.plans import paper_test_plan, random_plan
 from robot_calib.sim.world import TemperatureProfile, World, load_world, with_effect
 
 NONE = "none"  # the class of cases with no withheld effect (geometric only)
@@ -127,24 +126,14 @@ def _withheld(name: str, world: World, rng: np.random.Generator) -> Withheld:
     return world, effects, values
 
 
-def _record(world: World, plan: Plan, rng: np.random.Generator) -> Recording:
-    time = plan_times(plan, world.timing)
-    celsius = None if world.temperature is None else world.temperature.at(time)
-    poses = replace(Poses.from_readings(plan.q, time=time), temperature=celsius)
-    return recording_from_arrays(
-        plan.q, physical_points(world, poses, rng), time, robot=world.model.robot,
-        temperature=celsius,
-    )  # fmt: skip
-
-
 def make_case(effect: str, seed: int, n_holdout: int = 200) -> Case:
     """A world with the class `effect` withheld (random joints and magnitudes from `seed`)
     and its calibration (Test 2 sweeps) and hold-out (random general poses) recordings."""
     rng = np.random.default_rng(seed)
     world, withheld, values = _withheld(effect, load_world(), rng)
     holdout_plan = random_plan(world.model.robot, n_holdout, rng)
-    return Case(effect, tuple(withheld), values, _record(world, paper_test_plan(2), rng),
-                _record(world, holdout_plan, rng), world)  # fmt: skip
+    return Case(effect, tuple(withheld), values, record_plan(world, paper_test_plan(2), rng),
+                record_plan(world, holdout_plan, rng), world)  # fmt: skip
 
 
 def right_model_rms_mm(case: Case) -> float:

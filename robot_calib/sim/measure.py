@@ -11,7 +11,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from robot_calib.kinematics.frames import Array
+from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.poses import Poses, approach_directions, next_direction
+from robot_calib.sim.plans import Plan, plan_times
 from robot_calib.sim.world import NoiseModel, World
 
 
@@ -190,3 +192,16 @@ def measure_every_target(
     )
     points, rotation = measure_six_dof(world, poses, rng, noisy)
     return replace(poses, rotation=rotation), points
+
+
+def record_plan(world: World, plan: Plan, rng: np.random.Generator) -> Recording:
+    """A recording of `plan` in `world`, in memory (no bag, no ROS graph): the first
+    target's points (`physical_points`) at the plan's readings in order, at the plan's
+    times (`plan_times`), with the world's temperature profile where it has one."""
+    time = plan_times(plan, world.timing)
+    celsius = None if world.temperature is None else world.temperature.at(time)
+    poses = replace(Poses.from_readings(plan.q, time=time), temperature=celsius)
+    return recording_from_arrays(
+        plan.q, physical_points(world, poses, rng), time, robot=world.model.robot,
+        temperature=celsius,
+    )  # fmt: skip

@@ -8,6 +8,7 @@
 - `random`: general poses uniform within the joint limits.
 - `iso9283`: the ISO 9283 cube positions P1..P5 (centre and four points on the diagonal
   plane, 10 % of the diagonal in from the corners), visited in cycles.
+- a PLAN.yaml file (`robot-calib plan`, msgs_doc/plan.md): its poses in the order listed.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
+from robot_calib.plan.plan_file import is_plan_file, load_plan
 from robot_calib.poses import Poses
 from robot_calib.sim.world import Timing
 
@@ -155,6 +157,17 @@ def iso9283_plan(
     return Plan("iso9283", q, np.zeros(len(q), dtype=int), 0.1)
 
 
+def check_plan(name: str, robot: RobotDescription) -> None:
+    """InputError unless `name` is a built-in plan (PLAN_NAMES) or a PLAN.yaml file valid
+    for `robot` (read and checked whole: `load_plan`)."""
+    if is_plan_file(name):
+        load_plan(name, robot)
+    elif name not in PLAN_NAMES:
+        raise InputError(
+            f"--plan {name}: unknown plan (known: {', '.join(PLAN_NAMES)}, or a PLAN.yaml file)"
+        )
+
+
 def make_plan(
     name: str,
     model: KinematicModel,
@@ -162,7 +175,11 @@ def make_plan(
     rng: np.random.Generator,
     n_random: int = 200,
 ) -> Plan:
-    """A plan by name (PLAN_NAMES); `params` are the controller's (nominal) parameters."""
+    """A plan by name (PLAN_NAMES) or a PLAN.yaml file's (`load_plan`: its poses in the
+    order listed); `params` are the controller's (nominal) parameters."""
+    if is_plan_file(name):
+        planned = load_plan(name, model.robot)
+        return Plan(name, planned.q, np.zeros(len(planned.q), dtype=int), planned.speed_fraction)
     if name.startswith("paper-test") and name[10:].isdigit():
         plan = paper_test_plan(int(name[10:]))
         # Table 2's angles are joint variables: single-joint sweeps of the DH joints, which
@@ -172,13 +189,23 @@ def make_plan(
         return random_plan(model.robot, n_random, rng)
     if name == "iso9283":
         return iso9283_plan(model, params)
-    raise InputError(f"unknown plan {name!r} (known: {', '.join(PLAN_NAMES)})")
+    raise InputError(
+        f"unknown plan {name!r} (known: {', '.join(PLAN_NAMES)}, or a PLAN.yaml file)"
+    )
+
+
+def step_seconds(q_from: Array, q_to: Array, timing: Timing, speed_fraction: float) -> Array:
+    """Time from measuring at readings q_from to measuring at q_to [s], shape (n,), for
+    readings (n, J) or (J,) [rad] each (broadcast): a joint-interpolated move at
+    `speed_fraction` of each joint's max speed, plus acceleration, settling and measurement."""
+    q_from, q_to = np.atleast_2d(q_from), np.atleast_2d(q_to)
+    speed = np.asarray(timing.max_joint_speed_rad_s)[: q_to.shape[1]] * speed_fraction
+    move = np.max(np.abs(q_to - q_from) / speed, axis=1)
+    return move + timing.accel_overhead_s + timing.settle_s + timing.measure_s
 
 
 def plan_times(plan: Plan, timing: Timing) -> Array:
-    """Measurement time of every pose since the first [s], shape (n,): joint-interpolated
-    moves at the plan's speed fraction, plus acceleration, settling and measurement."""
-    speed = np.asarray(timing.max_joint_speed_rad_s)[: plan.q.shape[1]] * plan.speed_fraction
-    move = np.max(np.abs(np.diff(plan.q, axis=0)) / speed, axis=1)
-    step = move + timing.accel_overhead_s + timing.settle_s + timing.measure_s
+    """Measurement time of every pose since the first [s], shape (n,): `step_seconds` from
+    each pose to the next."""
+    step = step_seconds(plan.q[:-1], plan.q[1:], timing, plan.speed_fraction)
     return np.concatenate([[0.0], np.cumsum(step)])
