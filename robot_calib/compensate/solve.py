@@ -128,9 +128,11 @@ def _nominal_ik(
     if good.all() or not good.any():
         return first
     retry, done = np.flatnonzero(~good), np.flatnonzero(good)
+    from scipy.spatial import cKDTree  # nearest neighbours of thousands in milliseconds
+
     points = goal2base[:, :3, 3]
-    distance = np.linalg.norm(points[retry][:, None] - points[done][None], axis=2)
-    seeds = first.q[done[np.argmin(distance, axis=1)]]
+    _, nearest = cKDTree(points[done]).query(points[retry])
+    seeds = first.q[done[nearest]]
     again = solve(replace(start.subset(retry), q=seeds), goal2base[retry], oriented[retry])
     better = again.converged
     fields = {}
