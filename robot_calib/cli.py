@@ -474,36 +474,74 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
 
 def cmd_compensate(args: argparse.Namespace) -> int:
-    """Nominal joint commands -> compensated ones (msgs_doc/compensate.md)."""
-    from robot_calib.atomic import write_text_atomic
-    from robot_calib.compensate import compensate_commands
+    """Nominal joint commands, or targets, -> compensated commands (msgs_doc/compensate.md)."""
+    from robot_calib.compensate import compensate_commands, compensate_targets
     from robot_calib.compensate.solve import nominal_counterpart
+    from robot_calib.compensate.targets import goals_in_base, read_targets_csv
+    from robot_calib.compensate.write import write_compensated_csv
     from robot_calib.predict import read_joints_csv
 
     model, params, _ = _calibration(args)
-    poses = read_joints_csv(args.joints, model.robot.n_joints, model.robot.limits)
-    output = output_path(args.output, "JOINTS.csv", [args.params, args.joints], args.force)
+    n_joints, limits = model.robot.n_joints, model.robot.limits
+    source = args.joints or args.targets
+    inputs = [args.params, source] + ([args.seed_joints] if args.seed_joints else [])
     nominal, nominal_params = nominal_counterpart(model, params)
-    result = compensate_commands(model, params, nominal, nominal_params, poses)
-    n_joints = model.robot.n_joints
-    rows = [",".join([*(f"q{j + 1}" for j in range(n_joints)), "error_mm", "error_urad",
-                      "iterations"])]  # fmt: skip
-    for k in range(len(poses)):
-        rows.append(",".join([*(repr(float(v)) for v in result.q[k]),
-                              f"{result.error_m[k] * 1e3:.6f}", f"{result.error_rad[k] * 1e6:.3f}",
-                              str(int(result.iterations[k]))]))  # fmt: skip
-    write_text_atomic(output, "\n".join(rows) + "\n")
-    change = np.degrees(np.abs(result.q - poses.q)).max()
-    print(f"{output}: {len(poses)} compensated commands (rad); largest change {change:.4f} deg, "
-          f"model error max {result.error_m.max() * 1e3:.6f} mm / "
+    if args.joints:
+        for option in ("seed_joints", "frame", "unit"):
+            if getattr(args, option) is not None:
+                raise InputError(f"--{option.replace('_', '-')} goes with --targets, not --joints")
+        poses = read_joints_csv(args.joints, n_joints, limits)
+        output = output_path(args.output, "JOINTS.csv", inputs, args.force)
+        result = compensate_commands(model, params, nominal, nominal_params, poses)
+        write_compensated_csv(output, result, poses.direction)
+        change = np.degrees(np.abs(result.q - poses.q)).max()
+        what = f"compensated commands (rad); largest change {change:.4f} deg"
+        failed, beyond = ~result.converged, np.zeros(len(poses), dtype=bool)
+    else:
+        targets = read_targets_csv(args.targets, n_joints, limits, args.unit or "m")
+        if args.seed_joints:
+            if targets.seed is not None:
+                raise InputError(f"{args.targets}: has seed columns q1..q{n_joints}; give "
+                                 "them or --seed-joints, not both")  # fmt: skip
+            seeds = read_joints_csv(args.seed_joints, n_joints, limits).q
+            if len(seeds) != len(targets):
+                raise InputError(f"{args.seed_joints}: {len(seeds)} seed rows for "
+                                 f"{len(targets)} targets in {args.targets}")  # fmt: skip
+            targets = dataclasses.replace(targets, seed=seeds)
+        goals = goals_in_base(targets, args.frame or "base", model, params)
+        output = output_path(args.output, "JOINTS.csv", inputs, args.force)
+        found = compensate_targets(model, params, nominal, nominal_params, targets, goals)
+        result = found.compensated
+        write_compensated_csv(output, result, found.direction)
+        kind = "poses" if targets.rotation is not None else "positions"
+        seeded = "seed readings" if targets.seed is not None else "the home pose"
+        frame = args.frame or "base"
+        what = f"commands (rad) for target {kind} ({frame} frame; nominal IK from {seeded})"
+        failed, beyond = ~result.converged, result.converged & ~found.within_limits
+    n, reached = len(result.q), int((~failed & ~beyond).sum())
+    print(f"{output}: {n} {what}; model error max {result.error_m.max() * 1e3:.6f} mm / "
           f"{result.error_rad.max() * 1e6:.3f} urad, {int(result.iterations.max())} iterations "
-          "at most")  # fmt: skip
-    failed = int((~result.converged).sum())
-    if failed:
-        print(f"warning: {args.joints}: {failed} command(s) not reached by the calibrated "
-              "model (near a singularity or out of reach): see their error_mm",
+          f"at most; {reached}/{n} reached")  # fmt: skip
+    rows = _data_rows(failed, beyond)
+    if failed.any():
+        print(f"warning: {source}: {int(failed.sum())} row(s) not reached by the calibrated "
+              f"model (near a singularity or out of reach; see their error_mm): {rows[0]}",
               file=sys.stderr)  # fmt: skip
+    if beyond.any():
+        print(f"warning: {source}: {int(beyond.sum())} row(s) reached only beyond the joint "
+              f"limits: {rows[1]}", file=sys.stderr)  # fmt: skip
     return 0
+
+
+def _data_rows(*masks: np.ndarray) -> list[str]:
+    """'rows 1, 5, ...' (data rows, 1 = the first after the header) of each boolean mask,
+    at most 10 named."""
+    out = []
+    for mask in masks:
+        rows = [str(k + 1) for k in np.flatnonzero(mask)]
+        more = f" and {len(rows) - 10} more" if len(rows) > 10 else ""
+        out.append(f"data rows {', '.join(rows[:10])}{more}")
+    return out
 
 
 def cmd_split(args: argparse.Namespace) -> int:
@@ -1033,19 +1071,41 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     _add_force(pred)
 
-    comp = add("compensate", cmd_compensate, "nominal joint commands -> compensated ones "
-               "(JOINTS.csv)", robot=CALIBRATION_ROBOT)  # fmt: skip
+    comp = add("compensate", cmd_compensate, "nominal joint commands (JOINTS.csv) or targets "
+               "(TARGETS.csv) -> compensated commands", robot=CALIBRATION_ROBOT)  # fmt: skip
     comp.add_argument("params", metavar="PARAMS.json")
-    comp.add_argument(
-        "--joints", required=True,
+    given = comp.add_mutually_exclusive_group(required=True)
+    given.add_argument(
+        "--joints",
         help="JOINTS.csv of the nominal program, header q1..qJ [rad] (optional t [s], "
         "dir1..dirJ approach directions, temp_c): where the nominal model puts the tool is "
         "where the compensated commands make the calibrated robot go",
     )  # fmt: skip
+    given.add_argument(
+        "--targets",
+        help="TARGETS.csv: header x,y,z (the tool point, --unit), optional qx,qy,qz,qw (the "
+        "tool frame's orientation; without: positions only), optional q1..qJ [rad] seeds, t "
+        "[s], dir1..dirJ, temp_c (msgs_doc/compensate.md)",
+    )  # fmt: skip
+    comp.add_argument(
+        "--frame", choices=("base", "tracker"),
+        help="with --targets: the frame of the targets, the robot base or the laser tracker "
+        "(through the calibration's base2tracker) (default base)",
+    )  # fmt: skip
+    comp.add_argument(
+        "--unit", choices=("m", "mm"),
+        help="with --targets: unit of x,y,z (default m)",
+    )  # fmt: skip
+    comp.add_argument(
+        "--seed-joints", metavar="JOINTS.csv",
+        help="with --targets: readings q1..qJ [rad], one row per target, where the nominal "
+        "inverse kinematics starts (default: seed columns of TARGETS.csv, else the home pose)",
+    )  # fmt: skip
     comp.add_argument(
         "-o", "--output", required=True,
-        help="JOINTS.csv to write: q1..qJ [rad] compensated, error_mm and error_urad (the "
-        "calibrated model's remaining error), iterations",
+        help="JOINTS.csv to write: q1..qJ [rad] compensated, dir1..dirJ (the approach "
+        "directions assumed), error_mm and error_urad (the calibrated model's remaining "
+        "error), iterations",
     )  # fmt: skip
     _add_force(comp)
 

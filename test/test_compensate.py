@@ -5,19 +5,23 @@ model promised. Known answer: the simulated true robot commanded with them."""
 from __future__ import annotations
 
 import csv
+import functools
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 from cli_runner import robot_calib
 
-from robot_calib.compensate import compensate_commands
+from robot_calib.compensate import compensate_commands, compensate_targets
 from robot_calib.compensate.solve import nominal_counterpart
+from robot_calib.compensate.targets import Targets, goals_in_base
 from robot_calib.effects import parse_effect
 from robot_calib.identify.calibrate import Calibration, calibrate
 from robot_calib.identify.params_file import write_json_atomic
-from robot_calib.measurements import recording_from_arrays
-from robot_calib.poses import Poses
+from robot_calib.ik import first_tool2flange, tool2base
+from robot_calib.measurements import Recording, recording_from_arrays
+from robot_calib.poses import Poses, approach_directions
 from robot_calib.sim.measure import measure_every_target
 from robot_calib.sim.plans import paper_test_plan, plan_times, random_plan
 from robot_calib.sim.world import build_world, with_effect
@@ -26,7 +30,8 @@ WORLD = with_effect(build_world({"seed": 4}), parse_effect("backlash:4", 6), {"b
 ROBOT = WORLD.model.robot
 
 
-def calibrated() -> tuple[Calibration, object]:
+@functools.cache
+def calibrated() -> tuple[Calibration, Recording]:
     plan = paper_test_plan(2)
     poses, points = measure_every_target(WORLD, plan.q, plan_times(plan, WORLD.timing),
                                          np.random.default_rng(1))  # fmt: skip
@@ -63,6 +68,7 @@ def test_the_compensate_command(tmp_path: Path) -> None:
     with (tmp_path / "out.csv").open() as handle:
         rows = list(csv.DictReader(handle))
     assert len(rows) == 20 and float(rows[0]["error_mm"]) < 1e-5
+    assert [r["dir1"] for r in rows[:2]] == ["1", "1" if q[1, 0] > q[0, 0] else "-1"]
     corrected = np.array([[float(r[f"q{j}"]) for j in range(1, 7)] for r in rows])
     change = np.abs(corrected - q).max(axis=1)  # per command [rad]
     assert change.min() > 0 and np.median(change) < 0.01  # mrad, more only near the wrist
@@ -75,3 +81,127 @@ def test_the_compensate_command(tmp_path: Path) -> None:
                           cwd=tmp_path)  # fmt: skip
     assert degrees.returncode == 2 and "degrees?" in degrees.stderr
     assert not (tmp_path / "d.csv").exists()
+
+
+NOISE_FLOOR_M = 9e-6  # the simulated tracker's noise, rms distance (~9 um)
+
+
+def target_poses(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Readings (n, J) [rad] of random poses within the limits and the tool frames
+    (n, 4, 4) the nominal model (with the calibration's frames) puts there, base frame."""
+    cal, _ = calibrated()
+    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
+    q = random_plan(ROBOT, n, np.random.default_rng(seed)).q
+    tool = first_tool2flange(cal.model, cal.parameters)
+    return q, tool2base(nominal, nominal_params, Poses.from_readings(q), tool)
+
+
+def in_tracker(goal2base: np.ndarray) -> np.ndarray:
+    """The tool points (n, 3) [m] of goals in the calibration's tracker frame."""
+    cal, _ = calibrated()
+    b2t = cal.model.base2tracker(cal.parameters)
+    return goal2base[:, :3, 3] @ b2t[:3, :3].T + b2t[:3, 3]
+
+
+def targets_of(goal2base: np.ndarray, oriented: bool, seed: np.ndarray | None) -> Targets:
+    n = len(goal2base)
+    rotation = goal2base[:, :3, :3] if oriented else None
+    return Targets(goal2base[:, :3, 3], rotation, seed, None, np.zeros(n), None, tuple(range(n)))
+
+
+@pytest.mark.parametrize("oriented", [True, False])
+def test_the_true_robot_reaches_the_targets(oriented: bool) -> None:
+    """Targets (poses, or positions only) with taught seed readings 0.05 rad off: commanded
+    with the nominal model's inverse kinematics the simulated true robot misses them by
+    tenths of a millimetre; with the compensated commands it reaches them within 1.5 x the
+    noise floor (the calibration's own error)."""
+    cal, _ = calibrated()
+    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
+    q, goal = target_poses(150, 7)
+    seed = q + np.random.default_rng(8).uniform(-0.05, 0.05, q.shape)
+    found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params,
+                               targets_of(goal, oriented, seed), goal)  # fmt: skip
+    assert found.reached.all() and found.compensated.error_m.max() < 1e-8
+    assert found.nominal.converged.all()
+    if oriented:  # the solution near the seed: the pose the targets came from (but near a
+        # singularity, where the same pose is reached by readings mrad apart)
+        assert np.mean(np.abs(found.nominal.q - q).max(axis=1) < 1e-6) > 0.95
+        assert found.compensated.error_rad.max() < 1e-7
+    else:  # three equations: the orientation stays near the seed's
+        assert np.abs(found.nominal.q - q).max() > 1e-3
+    # the directions assumed are those of the commands in row order (the robot's)
+    np.testing.assert_array_equal(found.direction, approach_directions(found.compensated.q))
+    wanted = in_tracker(goal)
+    as_nominal = WORLD.model.target_points(WORLD.truth, Poses.from_readings(found.nominal.q))
+    compensated = WORLD.model.target_points(
+        WORLD.truth, Poses.from_readings(found.compensated.q, found.direction)
+    )
+    miss = np.linalg.norm(as_nominal - wanted, axis=1)
+    reach = np.linalg.norm(compensated - wanted, axis=1)
+    assert miss.mean() > 0.3e-3
+    assert reach.mean() < 1.5 * NOISE_FLOOR_M and reach.max() < 0.03e-3
+
+
+def test_targets_from_the_home_pose_in_either_frame() -> None:
+    """Without seeds the nominal inverse kinematics starts at the home pose (joint 1 facing
+    the target): position targets are reached (within the joint limits) nearly all; the
+    same targets given in the tracker frame give the same commands."""
+    cal, _ = calibrated()
+    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
+    _, goal = target_poses(100, 9)
+    targets = targets_of(goal, False, None)
+    found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params, targets, goal)
+    assert found.reached.mean() >= 0.9
+    compensated = WORLD.model.target_points(
+        WORLD.truth, Poses.from_readings(found.compensated.q, found.direction)
+    )
+    reach = np.linalg.norm(compensated - in_tracker(goal), axis=1)[found.reached]
+    assert reach.mean() < 1.5 * NOISE_FLOOR_M
+    tracker = replace(targets, position=in_tracker(goal))
+    again = goals_in_base(tracker, "tracker", cal.model, cal.parameters)
+    np.testing.assert_allclose(again[:, :3, 3], goal[:, :3, 3], atol=1e-12)
+
+
+def test_the_compensate_command_with_targets(tmp_path: Path) -> None:
+    from scipy.spatial.transform import Rotation
+
+    cal, recording = calibrated()
+    params = tmp_path / "p.json"
+    write_json_atomic(cal.to_dict(recording), params)
+    q, goal = target_poses(12, 10)
+    b2t = cal.model.base2tracker(cal.parameters)
+    in_t = b2t @ goal
+    quat = Rotation.from_matrix(in_t[:, :3, :3]).as_quat()
+    table = np.hstack([in_t[:, :3, 3] * 1e3, quat])
+    table[-1, :3] = [5000.0, 0.0, 0.0]  # 5 m away: out of reach
+    targets = tmp_path / "t.csv"
+    np.savetxt(targets, table, delimiter=",", comments="", header="x,y,z,qx,qy,qz,qw")
+    seeds = tmp_path / "s.csv"
+    np.savetxt(seeds, q + 0.02, delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
+    proc = robot_calib("compensate", str(params), "--targets", str(targets), "--frame",
+                       "tracker", "--unit", "mm", "--seed-joints", str(seeds), "-o", "out.csv",
+                       cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "12 commands (rad) for target poses (tracker frame" in proc.stdout
+    assert "11/12 reached" in proc.stdout
+    assert "1 row(s) not reached" in proc.stderr and "data rows 12" in proc.stderr
+    with (tmp_path / "out.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 12 and int(rows[0]["iterations"]) >= 1
+    assert max(float(r["error_mm"]) for r in rows[:-1]) < 1e-5
+    assert float(rows[-1]["error_mm"]) > 1000.0  # 5 m out, ~4 m beyond the arm's reach
+    corrected = np.array([[float(r[f"q{j}"]) for j in range(1, 7)] for r in rows[:-1]])
+    assert np.abs(corrected - q[:-1]).max(axis=1).min() > 1e-5  # corrected, by mrad:
+    assert np.median(np.abs(corrected - q[:-1])) < 0.01  # the seeds' IK is the source pose
+
+    def refused(*extra: str) -> str:
+        out = robot_calib("compensate", str(params), *extra, "-o", "bad.csv", cwd=tmp_path)
+        assert out.returncode == 2 and not (tmp_path / "bad.csv").exists()
+        return out.stderr
+
+    table[0, 3:] *= 2.0
+    np.savetxt(targets, table, delimiter=",", comments="", header="x,y,z,qx,qy,qz,qw")
+    assert "t.csv:2: quaternion" in refused("--targets", str(targets))
+    assert "--frame goes with --targets" in refused("--joints", str(seeds), "--frame", "base")
+    np.savetxt(targets, table[:, :2], delimiter=",", comments="", header="x,y")
+    assert "header lacks ['z']" in refused("--targets", str(targets))

@@ -1,6 +1,11 @@
 """Compensation: joint commands that make the calibrated robot reach what the nominal
-model promised (issue 15)."""
+model promised, or given targets (issue 15)."""
 
-from robot_calib.compensate.solve import Compensation, compensate_commands
+from robot_calib.compensate.solve import (
+    Compensation,
+    TargetCompensation,
+    compensate_commands,
+    compensate_targets,
+)
 
-__all__ = ["Compensation", "compensate_commands"]
+__all__ = ["Compensation", "TargetCompensation", "compensate_commands", "compensate_targets"]

@@ -1,16 +1,22 @@
-"""Nominal joint commands -> compensated ones, batched damped least squares.
+"""Compensated joint commands: for nominal commands, and for targets (positions or poses).
 
-A program taught or planned on the nominal model commands readings q_cmd (n, J) and
-expects the tool (the calibration's first target) where the nominal model puts it: at
-T_nominal(q_cmd) in the robot base frame. The calibrated model, effects included (backlash
-with the commands' approach directions, compliance, transmission error, thermal terms at
-the commands' times), says where the robot really goes. The compensated commands q solve
+The calibrated model, effects included (backlash with the commands' approach directions,
+compliance, transmission error, thermal terms at the commands' times and temperatures),
+says where the robot really goes. Compensation finds the readings q at which it puts the
+tool (the calibration's first target: its point, and its probe frame's orientation where it
+has one, else the flange's) at a goal pose in the robot base frame:
 
-    base2tracker * flange2base_calibrated(q) * tool  =  base2tracker * T_nominal(q_cmd)
+    flange2base_calibrated(q) * tool2flange  =  goal2base
 
-for the tool's position and the flange's orientation (6 equations, J unknowns), by
-Levenberg-Marquardt-style damped Gauss-Newton steps from q_cmd, every pose at once: the
-Jacobian (n, 6, J) comes from J + 1 batched evaluations of the model per iteration.
+Both kinds of goal go through one solver (`ik.solve_ik`: batched damped least squares):
+
+- `compensate_commands`: a program taught or planned on the nominal model commands q_cmd
+  (n, J) and expects the tool where the nominal model puts it: goal2base =
+  T_nominal(q_cmd) * tool2flange, seeded at q_cmd (6 equations).
+- `compensate_targets`: goal poses (or positions: 3 equations, the orientation left where
+  the seed has it up to the smallest correction) given in the base or tracker frame; seeded
+  at the nominal model's inverse kinematics, itself started from the given seed readings
+  or the home pose.
 """
 
 from __future__ import annotations
@@ -18,55 +24,22 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import NDArray
 
-from robot_calib.kinematics.frames import Array, IntArray
+from robot_calib.compensate.targets import Targets
+from robot_calib.ik import IKSolution, first_tool2flange, solve_ik, tool2base
+from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
-from robot_calib.model import KinematicModel, target_parameters
-from robot_calib.poses import Poses
+from robot_calib.model import KinematicModel
+from robot_calib.poses import Poses, approach_directions
+from robot_calib.sim.plans import HOME_DEG
 
-MAX_ITERATIONS = 20
-TOLERANCE_M = 1e-9  # stop when every pose's error is below this (position [m] and
-# orientation [rad] times ORIENTATION_LEVER_M)
-ORIENTATION_LEVER_M = 0.1  # an orientation error of 1 rad counts as 0.1 m of position
-DAMPING = 1e-9  # least damping of the normal equations: raised x10 per rejected step
-STEP_RAD = 1e-7  # finite-difference step of the readings
+#: Compensated readings of nominal commands: `ik.IKSolution` (q, error_m, error_rad,
+#: iterations, converged) of the calibrated model.
+Compensation = IKSolution
 
-
-@dataclass(frozen=True)
-class Compensation:
-    """q : (n, J) compensated readings [rad]; error_m : (n,) the model's remaining
-    position error at them [m]; error_rad : (n,) its orientation error [rad];
-    iterations : (n,) the steps each pose took; converged : (n,) error below TOLERANCE_M."""
-
-    q: Array
-    error_m: Array
-    error_rad: Array
-    iterations: IntArray
-    converged: np.ndarray
-
-
-def _tool_poses(model: KinematicModel, params: ParameterVector, poses: Poses) -> Array:
-    """(n, 4, 4): the flange's orientation and the first target's position, robot base."""
-    frames = model.flange2base(params, poses)
-    tool = np.array([params[k] for k in target_parameters(model.targets[0])])
-    out = frames.copy()
-    out[:, :3, 3] = np.einsum("nab,b->na", frames[:, :3, :3], tool) + frames[:, :3, 3]
-    return out
-
-
-def _error(actual: Array, goal: Array) -> Array:
-    """(n, 6): position error [m] and orientation error (small-angle vector of
-    goal^T actual) [rad] times ORIENTATION_LEVER_M."""
-    turn = np.einsum("nba,nbc->nac", goal[:, :3, :3], actual[:, :3, :3])
-    vee = 0.5 * np.stack(
-        [
-            turn[:, 2, 1] - turn[:, 1, 2],
-            turn[:, 0, 2] - turn[:, 2, 0],
-            turn[:, 1, 0] - turn[:, 0, 1],
-        ],
-        axis=1,
-    )
-    return np.hstack([actual[:, :3, 3] - goal[:, :3, 3], ORIENTATION_LEVER_M * vee])
+NOMINAL_ITERATIONS = 100  # the nominal inverse kinematics may start far (the home pose)
+DIRECTION_ROUNDS = 3  # re-solves at most when compensating flips an approach direction
 
 
 def compensate_commands(
@@ -76,39 +49,145 @@ def compensate_commands(
     nominal_params: ParameterVector,
     commands: Poses,
 ) -> Compensation:
-    """The compensated readings of `commands` (readings, approach directions and times of
-    the nominal program; see the module docstring). The nominal model's tool is the
-    calibrated first target's nominal offset; both models in the robot base frame."""
-    goal = _tool_poses(nominal, nominal_params, replace(commands, rotation=None))
-    q = commands.q.copy()
-    n, n_joints = q.shape
-    iterations = np.zeros(n, dtype=np.int64)
-    damping = np.full(n, DAMPING)  # per pose, Levenberg-Marquardt style
-    error = _error(_tool_poses(calibrated, params, replace(commands, q=q)), goal)
-    for _ in range(MAX_ITERATIONS):
-        active = np.linalg.norm(error, axis=1) >= TOLERANCE_M
-        if not active.any():
+    """The compensated readings of `commands` (readings (n, J) [rad], approach directions
+    and times of the nominal program; see the module docstring). The nominal model's tool
+    is the calibrated first target's; both models in the robot base frame."""
+    tool = first_tool2flange(calibrated, params)
+    goal = tool2base(nominal, nominal_params, replace(commands, rotation=None), tool)
+    return solve_ik(calibrated, params, commands, goal, tool)
+
+
+@dataclass(frozen=True)
+class TargetCompensation:
+    """Commands for targets.
+
+    nominal : the nominal model's inverse kinematics (the seeds of the compensation):
+        readings (n, J) [rad] and its errors
+    compensated : the calibrated model's: readings (n, J) [rad], errors, iterations
+    direction : shape (n, J), the approach directions (+1/-1) the compensation assumed:
+        the given ones, or those of the compensated commands in row order
+    within_limits : shape (n,) bool, the compensated readings inside the robot's limits
+    """
+
+    nominal: IKSolution
+    compensated: IKSolution
+    direction: Array
+    within_limits: NDArray[np.bool_]
+
+    @property
+    def reached(self) -> NDArray[np.bool_]:
+        """(n,) targets the calibrated model reaches within the joint limits."""
+        return self.compensated.converged & self.within_limits
+
+
+def home_readings(
+    model: KinematicModel, params: ParameterVector, goal2base: Array, tool2flange: Array
+) -> Array:
+    """(n, J) readings [rad] of the home pose (sim.plans.HOME_DEG as joint variables; 0 for
+    joints beyond its length) with joint 1 turned to face each goal (n, 4, 4) (base frame):
+    the default seed of the nominal inverse kinematics. Joint 1's axis is the base z axis."""
+    variables = np.zeros(model.robot.n_joints)
+    k = min(len(HOME_DEG), len(variables))
+    variables[:k] = np.radians(HOME_DEG[:k])
+    home = model.robot.readings(variables[None, :])
+    tool = tool2base(model, params, Poses.from_readings(home), tool2flange)[0, :3, 3]
+    turn = np.arctan2(goal2base[:, 1, 3], goal2base[:, 0, 3]) - np.arctan2(tool[1], tool[0])
+    out = np.tile(variables, (len(goal2base), 1))
+    out[:, 0] += np.angle(np.exp(1j * turn))  # wrapped to (-pi, pi]
+    return model.robot.readings(out)
+
+
+def wrap_into_limits(q: Array, limits: Array) -> Array:
+    """(n, J) readings [rad] shifted by whole turns into the joint limits (J, 2) [rad] where a
+    shift gets them there (the same pose: the joint variables change by whole turns for
+    identity and integer couplings); others unchanged."""
+    low = q - 2 * np.pi * np.floor((q - limits[:, 0]) / (2 * np.pi))  # lowest turn >= min
+    return np.where((low <= limits[:, 1]) & ((q < limits[:, 0]) | (q > limits[:, 1])), low, q)
+
+
+def _nominal_ik(
+    nominal: KinematicModel,
+    nominal_params: ParameterVector,
+    start: Poses,
+    goal2base: Array,
+    tool: Array,
+    oriented: NDArray[np.bool_],
+) -> IKSolution:
+    """The nominal inverse kinematics from `start`'s readings, shifted into the joint limits
+    by whole turns; targets it does not reach (or only beyond the limits) are tried once more
+    from the solution of the nearest target (tool point) it reached within them."""
+    limits = nominal.robot.limits
+
+    def solve(poses: Poses, goal: Array, which: NDArray[np.bool_]) -> IKSolution:
+        found = solve_ik(nominal, nominal_params, poses, goal, tool, which,
+                         max_iterations=NOMINAL_ITERATIONS)  # fmt: skip
+        return replace(found, q=wrap_into_limits(found.q, limits))
+
+    first = solve(start, goal2base, oriented)
+    good = first.converged & np.all((first.q >= limits[:, 0]) & (first.q <= limits[:, 1]), axis=1)
+    if good.all() or not good.any():
+        return first
+    retry, done = np.flatnonzero(~good), np.flatnonzero(good)
+    from scipy.spatial import cKDTree  # nearest neighbours of thousands in milliseconds
+
+    points = goal2base[:, :3, 3]
+    _, nearest = cKDTree(points[done]).query(points[retry])
+    seeds = first.q[done[nearest]]
+    again = solve(replace(start.subset(retry), q=seeds), goal2base[retry], oriented[retry])
+    better = again.converged
+    fields = {}
+    for name in ("q", "error_m", "error_rad", "iterations", "converged"):
+        merged = getattr(first, name).copy()
+        merged[retry[better]] = getattr(again, name)[better]
+        if name == "iterations":
+            merged[retry] += np.where(better, getattr(first, name)[retry], 0)
+        fields[name] = merged
+    return IKSolution(**fields)
+
+
+def compensate_targets(
+    calibrated: KinematicModel,
+    params: ParameterVector,
+    nominal: KinematicModel,
+    nominal_params: ParameterVector,
+    targets: Targets,
+    goal2base: Array,
+) -> TargetCompensation:
+    """Commands at which the calibrated model reaches the goals.
+
+    targets : the rows of a TARGETS.csv (seeds, directions, times, temperatures)
+    goal2base : shape (n, 4, 4), the goal tool frames in the robot base frame [m]
+        (`targets.goals_in_base`); only the position where `targets.rotation` is None
+
+    The nominal model's inverse kinematics from the seeds (or the home pose) gives the start;
+    the calibrated model's from there the commands. Without given directions, those of the
+    commands found in row order are used, re-solving (at most DIRECTION_ROUNDS times) where
+    compensating flips one.
+    """
+    n = len(targets)
+    oriented = np.full(n, targets.rotation is not None)
+    tool = first_tool2flange(calibrated, params)
+    seed = (
+        targets.seed
+        if targets.seed is not None
+        else home_readings(nominal, nominal_params, goal2base, tool)
+    )
+    ones = np.ones_like(seed)
+    start = Poses(seed, ones, targets.time, temperature=targets.temperature)
+    first = _nominal_ik(nominal, nominal_params, start, goal2base, tool, oriented)
+    direction = approach_directions(first.q) if targets.direction is None else targets.direction
+    poses = replace(start, q=first.q, direction=direction)
+    result = solve_ik(calibrated, params, poses, goal2base, tool, oriented)
+    for _ in range(DIRECTION_ROUNDS if targets.direction is None else 0):
+        found = approach_directions(result.q)
+        if np.array_equal(found, direction):
             break
-        jac = np.empty((n, 6, n_joints))
-        for k in range(n_joints):
-            moved = q.copy()
-            moved[:, k] += STEP_RAD
-            shifted = _error(_tool_poses(calibrated, params, replace(commands, q=moved)), goal)
-            jac[:, :, k] = (shifted - error) / STEP_RAD
-        normal = np.einsum("nak,nal->nkl", jac, jac)
-        normal += damping[:, None, None] * (np.eye(n_joints) + np.eye(n_joints) * normal)
-        step = np.linalg.solve(normal, np.einsum("nak,na->nk", jac, error)[..., None])[..., 0]
-        trial = q - step
-        trial_error = _error(_tool_poses(calibrated, params, replace(commands, q=trial)), goal)
-        better = active & (np.linalg.norm(trial_error, axis=1) < np.linalg.norm(error, axis=1))
-        q[better], error[better] = trial[better], trial_error[better]
-        damping = np.where(better, np.maximum(damping / 10.0, DAMPING), damping * 10.0)
-        iterations[active] += 1
-    final = _error(_tool_poses(calibrated, params, replace(commands, q=q)), goal)
-    error_m = np.linalg.norm(final[:, :3], axis=1)
-    error_rad = np.linalg.norm(final[:, 3:], axis=1) / ORIENTATION_LEVER_M
-    converged = np.linalg.norm(final, axis=1) < max(TOLERANCE_M, 1e-8)
-    return Compensation(q, error_m, error_rad, iterations, converged)
+        direction = found
+        poses = replace(poses, q=result.q, direction=direction)
+        result = solve_ik(calibrated, params, poses, goal2base, tool, oriented)
+    limits = calibrated.robot.limits
+    within = np.all((result.q >= limits[:, 0]) & (result.q <= limits[:, 1]), axis=1)
+    return TargetCompensation(first, result, direction, within)
 
 
 def nominal_counterpart(

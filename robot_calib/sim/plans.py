@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from robot_calib.errors import InputError
+from robot_calib.ik import solve_ik
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
@@ -102,33 +103,15 @@ def inverse_kinematics(
     q_seed: Array,
     iterations: int = 50,
 ) -> Array:
-    """Readings (J,) [rad] that put the flange at `goal2base` (4, 4), by damped Gauss-Newton
-    on position and orientation error from `q_seed`; raises InputError if it fails."""
-    q = np.array(q_seed, dtype=float)
-    for _ in range(iterations):
-        error = _pose_error(model, params, q, goal2base)
-        if np.linalg.norm(error) < 1e-12:
-            return q
-        jac = np.empty((6, q.size))
-        for k in range(q.size):
-            step = np.zeros(q.size)
-            step[k] = 1e-7
-            jac[:, k] = (_pose_error(model, params, q + step, goal2base) - error) / 1e-7
-        q -= np.linalg.solve(jac.T @ jac + 1e-9 * np.eye(q.size), jac.T @ error)
-    if np.linalg.norm(_pose_error(model, params, q, goal2base)) > 1e-9:
+    """Readings (J,) [rad] that put the flange at `goal2base` (4, 4), position and
+    orientation, from `q_seed` (J,) (`ik.solve_ik`, one pose); raises InputError if it
+    fails."""
+    found = solve_ik(model, params, Poses.from_readings(np.asarray(q_seed, dtype=float)[None]),
+                     goal2base[None], np.eye(4), tolerance_m=1e-12,
+                     max_iterations=iterations)  # fmt: skip
+    if not found.converged[0]:
         raise InputError("inverse kinematics did not converge (goal out of reach?)")
-    return q
-
-
-def _pose_error(model: KinematicModel, params: ParameterVector, q: Array, goal: Array) -> Array:
-    flange = model.flange2base(params, Poses.from_readings(q[None, :]))[0]
-    rot = goal[:3, :3].T @ flange[:3, :3]
-    return np.concatenate(
-        [
-            flange[:3, 3] - goal[:3, 3],
-            0.5 * np.array([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]]),
-        ]
-    )
+    return found.q[0]
 
 
 def iso9283_plan(

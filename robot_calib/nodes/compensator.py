@@ -1,0 +1,180 @@
+"""compensator: joint trajectories planned on the nominal model, corrected for the calibrated
+robot (msgs_doc/compensator.md).
+
+Subscribes a trajectory_msgs/JointTrajectory (parameter `input_topic`), maps its
+joint_names to the calibration's joints by name (any order; parameter `joint_names` renames
+the model's joints to the controller's), compensates every point's positions with
+`compensate.compensate_commands` (approach directions from the motion between consecutive
+points, the first point's +1; time from time_from_start), and republishes the trajectory
+(parameter `output_topic`) with the same header, joint_names, times, velocities,
+accelerations and efforts, only the positions corrected. A message with unknown, missing or
+repeated joints, or positions that are not finite, is logged as one error line and dropped.
+
+Standalone: `ros2 run robot_calib compensator --ros-args -p params:=params_best.json`.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from robot_calib.compensate import Compensation, compensate_commands
+from robot_calib.compensate.solve import nominal_counterpart
+from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.identify.params_file import load_params
+from robot_calib.kinematics.description import with_joint_names
+from robot_calib.kinematics.frames import Array
+from robot_calib.nodes._common import declare, run_node
+from robot_calib.poses import Poses
+
+INPUT_TOPIC = "~/joint_trajectory_in"
+OUTPUT_TOPIC = "/joint_trajectory_controller/joint_trajectory"  # ros2_control's JTC listens here
+
+
+def trajectory_readings(msg: Any, joint_names: tuple[str, ...], where: str) -> tuple[Array, Array]:
+    """The positions of a JointTrajectory as readings (n, J) [rad] in the model's joint order
+    (matched by name) and time_from_start (n,) [s]; InputError naming `where` for unknown,
+    missing or repeated names, points of the wrong length, non-finite positions, no points."""
+    names = list(msg.joint_names)
+    unknown = [n for n in names if n not in joint_names]
+    missing = [n for n in joint_names if n not in names]
+    if unknown or missing or len(set(names)) != len(names):
+        raise InputError(
+            f"{where}: joint_names {names} are not the calibration's joints "
+            f"{list(joint_names)} (unknown {unknown}, missing {missing}); map them with the "
+            "parameter joint_names"
+        )
+    if not msg.points:
+        raise InputError(f"{where}: a trajectory without points")
+    order = [names.index(n) for n in joint_names]
+    rows, times = [], []
+    for k, point in enumerate(msg.points):
+        if len(point.positions) != len(names):
+            raise InputError(
+                f"{where}: point {k} has {len(point.positions)} positions for "
+                f"{len(names)} joint_names"
+            )
+        rows.append([point.positions[i] for i in order])
+        times.append(point.time_from_start.sec + 1e-9 * point.time_from_start.nanosec)
+    q = np.array(rows, dtype=float)
+    if not np.all(np.isfinite(q)):
+        raise InputError(f"{where}: positions not finite")
+    return q, np.array(times)
+
+
+def corrected_trajectory(msg: Any, q: Array, joint_names: tuple[str, ...]) -> JointTrajectory:
+    """A copy of JointTrajectory `msg` with every point's positions replaced by readings
+    q (n, J) [rad] (model joint order; written back in the message's order)."""
+    column = [joint_names.index(n) for n in msg.joint_names]
+    out = JointTrajectory(header=msg.header, joint_names=list(msg.joint_names))
+    for point, row in zip(msg.points, q):
+        out.points.append(
+            JointTrajectoryPoint(
+                positions=[float(row[j]) for j in column],
+                velocities=list(point.velocities),
+                accelerations=list(point.accelerations),
+                effort=list(point.effort),
+                time_from_start=point.time_from_start,
+            )
+        )
+    return out
+
+
+class CompensatorNode(Node):
+    """JointTrajectory in, compensated JointTrajectory out (module docstring); counts in
+    `received`, `published`, `dropped`; `last` is the last Compensation."""
+
+    def __init__(self, **kwargs: Any) -> None:  # rclpy.node.Node's keyword arguments
+        super().__init__("compensator", **kwargs)
+        params_file: str = declare(self, "params", "", "PARAMS.json of the calibration (required)")
+        input_topic: str = declare(
+            self, "input_topic", INPUT_TOPIC, "JointTrajectory to correct (nominal model's)"
+        )
+        output_topic: str = declare(
+            self, "output_topic", OUTPUT_TOPIC, "corrected JointTrajectory (to the controller)"
+        )
+        joint_names: list[str] = declare(
+            self, "joint_names", [],
+            "the trajectory's names of the calibration's joints 1..J, in order (default: the "
+            "robot description's names)",
+        )  # fmt: skip
+        temperature: float = declare(
+            self, "temperature_c", float("nan"),
+            "the robot's temperature [deg C], for a model that follows it (default: none)",
+        )  # fmt: skip
+        depth: int = declare(self, "qos_depth", 10, "queue depth of both topics")
+        if not params_file:
+            raise InputError(f"{self.get_name()}: parameter 'params' (PARAMS.json) is required")
+        self.model, self.params, _ = load_params(params_file)
+        if joint_names:
+            robot = with_joint_names(self.model.robot, joint_names)
+            self.model = replace(self.model, robot=robot)
+        self.nominal, self.nominal_params = nominal_counterpart(self.model, self.params)
+        self.temperature = temperature
+        # reliable and volatile, as ros2_control's joint_trajectory_controller subscribes
+        qos = QoSProfile(
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.VOLATILE,
+            history=HistoryPolicy.KEEP_LAST,
+            depth=depth,
+        )
+        self.publisher = self.create_publisher(JointTrajectory, output_topic, qos)
+        self.subscription = self.create_subscription(
+            JointTrajectory, input_topic, self.on_trajectory, qos
+        )
+        self.received = self.published = self.dropped = 0
+        self.last: Compensation | None = None
+        self.get_logger().info(
+            f"compensating {self.subscription.topic_name} -> {self.publisher.topic_name} "
+            f"with {params_file} ({self.model.robot.name}, joints "
+            f"{list(self.model.robot.joint_names)})"
+        )
+
+    def commands(self, q: Array, time: Array) -> Poses:
+        """The trajectory's points as commands: readings (n, J) [rad], directions from the
+        motion between consecutive points, times (n,) [s], the temperature parameter."""
+        poses = Poses.from_readings(q, None, time)
+        if np.isfinite(self.temperature):
+            poses = replace(poses, temperature=np.full(len(poses), self.temperature))
+        return poses
+
+    def on_trajectory(self, msg: JointTrajectory) -> None:
+        self.received += 1
+        names = self.model.robot.joint_names
+        try:
+            q, time = trajectory_readings(msg, names, self.subscription.topic_name)
+            result = compensate_commands(self.model, self.params, self.nominal,
+                                         self.nominal_params, self.commands(q, time))  # fmt: skip
+        except RobotCalibError as exc:
+            self.dropped += 1
+            self.get_logger().error(f"dropped a trajectory: {exc}")
+            return
+        self.publisher.publish(corrected_trajectory(msg, result.q, names))
+        self.published += 1
+        self.last = result
+        change = np.abs(result.q - q)
+        k, j = np.unravel_index(int(np.argmax(change)), change.shape)
+        self.get_logger().info(
+            f"{len(q)} points compensated; largest correction {change[k, j] * 1e3:.3f} mrad "
+            f"({names[j]}, point {k}); model error max {result.error_m.max() * 1e6:.3f} um"
+        )
+        if not result.converged.all():
+            bad = np.flatnonzero(~result.converged).tolist()
+            self.get_logger().warning(
+                f"points {bad[:10]} not reached by the calibrated model (near a singularity "
+                f"or out of reach): largest error {result.error_m.max() * 1e3:.3f} mm"
+            )
+
+
+def main(args: list[str] | None = None) -> None:
+    sys.exit(run_node(CompensatorNode, args))
+
+
+if __name__ == "__main__":
+    main()
