@@ -5,7 +5,7 @@ from glob import glob
 from setuptools import find_packages, setup
 
 PACKAGE = "robot_calib"
-NODES = ["sim_robot", "sim_tracker", "recorder", "replay", "calibrator", "compensator"]
+NODES = ["sim_robot", "sim_tracker", "recorder", "replay", "calibrator", "compensator", "capture"]
 
 setup(
     name=PACKAGE,

@@ -1,9 +1,19 @@
-"""sim_robot: a simulated robot controller publishing its joint readings per plan.
+"""sim_robot: a simulated robot controller publishing its joint readings.
 
-Publishes sensor_msgs/JointState on /joint_states (names joint_a1..a6, position [rad]),
-one message per measurement pose, header.stamp = the pose's measurement time. Waits until
-`wait_for_subscribers` readers are matched, so no first pose is lost. With `publish_clock`
-it also drives /clock (rosgraph_msgs/Clock), so nodes with use_sim_time run on plan time.
+Two modes (parameter `mode`):
+
+- `plan` (default): publishes sensor_msgs/JointState on /joint_states (the robot's joint
+  names, position [rad]), one message per measurement pose of a plan, header.stamp = the
+  pose's measurement time. Waits until `wait_for_subscribers` readers are matched, so no
+  first pose is lost. With `publish_clock` it also drives /clock (rosgraph_msgs/Clock), so
+  nodes with use_sim_time run on plan time.
+- `controller`: behaves like a ros2_control joint_trajectory_controller: takes
+  trajectory_msgs/JointTrajectory commands on /<controller>/joint_trajectory (joints by
+  name, in any order; waypoints at time_from_start, never faster than `speed_fraction` of
+  the world's joint speeds), moves there smoothly (sim/controller.py) and publishes
+  /joint_states at `state_rate` while moving and while holding. A command naming unknown
+  joints, missing one, or leaving the joint limits is rejected whole (logged), as the
+  controller does; an empty command stops the robot where it is.
 """
 
 from __future__ import annotations
@@ -20,15 +30,23 @@ from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
+from robot_calib.errors import InputError
 from robot_calib.messages import JOINT_STATES_TOPIC, ns_to_sec_nanosec
 from robot_calib.nodes._common import declare, run_node
-from robot_calib.sim.plans import PLAN_NAMES, Plan, make_plan, plan_times
+from robot_calib.sim.controller import Motion, follow, hold, state_at
+from robot_calib.sim.plans import HOME_DEG, PLAN_NAMES, Plan, make_plan, plan_times
 from robot_calib.sim.world import load_world
 
 SYSTEM_CLOCK = RosClock(clock_type=ClockType.SYSTEM_TIME)
 QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1000
 )
+MODES = ("plan", "controller")
+
+
+def trajectory_topic(controller: str) -> str:
+    """The command topic of a joint_trajectory_controller named `controller`."""
+    return f"/{controller.strip('/')}/joint_trajectory"
 
 
 class SimRobotNode(Node):
@@ -36,6 +54,11 @@ class SimRobotNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:  # rclpy.node.Node's keyword arguments
         super().__init__("sim_robot", **kwargs)
+        self.mode = declare(self, "mode", "plan", f"what drives the robot: {' or '.join(MODES)}")
+        if self.mode not in MODES:
+            raise InputError(
+                f"sim_robot: parameter 'mode' must be one of {MODES}, not {self.mode!r}"
+            )
         self.plan_name = declare(
             self,
             "plan",
@@ -69,6 +92,9 @@ class SimRobotNode(Node):
             "publish_pose(), as robot-calib simulate does)",
         )
         self.world = load_world(world_file or None)
+        if self.mode == "controller":
+            self._start_controller()
+            return
         rng = np.random.default_rng(self.world.seed if seed < 0 else seed)
         nominal = self.world.model.parameters()
         self.plan: Plan = make_plan(self.plan_name, self.world.model, nominal, rng, n_random)
@@ -87,6 +113,86 @@ class SimRobotNode(Node):
             f"plan {self.plan_name}: {len(self.plan)} poses over {self.times_s[-1] / 60:.1f} min "
             f"of robot time; waiting for {self.wait_for} subscriber(s) on {JOINT_STATES_TOPIC}"
         )
+
+    def _start_controller(self) -> None:
+        """Controller mode (module docstring): hold the home pose, publish at state_rate."""
+        from trajectory_msgs.msg import JointTrajectory
+
+        controller = declare(
+            self, "controller", "joint_trajectory_controller",
+            "controller name: commands on /<controller>/joint_trajectory",
+        )  # fmt: skip
+        state_rate = declare(self, "state_rate", 50.0, "joint states per second [Hz]")
+        self.speed_fraction = declare(
+            self, "speed_fraction", 0.25,
+            "top speed as a fraction of the world's max joint speeds (> 1: faster than real)",
+        )  # fmt: skip
+        if not state_rate > 0 or not self.speed_fraction > 0:
+            raise InputError("sim_robot: parameters 'state_rate' and 'speed_fraction' must be > 0")
+        robot = self.world.model.robot
+        home = np.zeros(robot.n_joints)
+        home[: min(len(HOME_DEG), robot.n_joints)] = np.radians(HOME_DEG[: robot.n_joints])
+        self.motion: Motion = hold(np.clip(home, *robot.limits.T), self._now_s())
+        self.commands = 0
+        self.publisher = self.create_publisher(JointState, JOINT_STATES_TOPIC, QOS)
+        self.topic = trajectory_topic(controller)
+        self.create_subscription(JointTrajectory, self.topic, self._on_command, 10)
+        self._timer = self.create_timer(1.0 / state_rate, self._publish_state)
+        self.get_logger().info(
+            f"controller mode: commands on {self.topic}, joint states at {state_rate:g} Hz"
+        )
+
+    def _now_s(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _publish_state(self) -> None:
+        now = self.get_clock().now().nanoseconds
+        q, velocity = state_at(self.motion, now * 1e-9)
+        msg = JointState()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(now)
+        msg.name = list(self.world.model.robot.joint_names)
+        msg.position = q.tolist()
+        msg.velocity = velocity.tolist()
+        self.publisher.publish(msg)
+
+    def _on_command(self, msg: Any) -> None:  # noqa: ANN401 - trajectory_msgs JointTrajectory
+        """A JointTrajectory: the new motion from where the robot is now, or rejected."""
+        robot = self.world.model.robot
+        now = self._now_s()
+        q_now, _ = state_at(self.motion, now)
+        if not msg.points:
+            self.motion = hold(q_now, now)
+            return
+        names = list(msg.joint_names)
+        unknown = [n for n in names if n not in robot.joint_names]
+        missing = [n for n in robot.joint_names if n not in names]
+        if unknown or missing or len(set(names)) != len(names):
+            self.get_logger().error(
+                f"{self.topic}: rejected: joints {names} are not {list(robot.joint_names)} "
+                f"(unknown {unknown}, missing {missing})"
+            )
+            return
+        order = [names.index(n) for n in robot.joint_names]
+        try:
+            waypoints = np.array([[p.positions[k] for k in order] for p in msg.points], float)
+        except IndexError:
+            self.get_logger().error(f"{self.topic}: rejected: a point has too few positions")
+            return
+        times = np.array(
+            [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points]
+        )
+        lo, hi = robot.limits.T
+        outside = ~np.isfinite(waypoints) | (waypoints < lo - 1e-9) | (waypoints > hi + 1e-9)
+        if outside.any():
+            k, j = np.argwhere(outside)[0]
+            self.get_logger().error(
+                f"{self.topic}: rejected: point {k} joint {robot.joint_names[j]} = "
+                f"{waypoints[k, j]:.6g} rad outside its limits [{lo[j]:.4f}, {hi[j]:.4f}]"
+            )
+            return
+        speed = np.asarray(self.world.timing.max_joint_speed_rad_s)[: robot.n_joints]
+        self.motion = follow(now, q_now, waypoints, times, self.speed_fraction * speed)
+        self.commands += 1
 
     @property
     def done(self) -> bool:
@@ -153,7 +259,7 @@ class SimRobotNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(SimRobotNode, args, done=lambda node: node.finished))
+    sys.exit(run_node(SimRobotNode, args, done=lambda node: node.mode == "plan" and node.finished))
 
 
 if __name__ == "__main__":

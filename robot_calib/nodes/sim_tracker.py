@@ -37,7 +37,7 @@ from robot_calib.messages import (
 )
 from robot_calib.nodes._common import declare, run_node
 from robot_calib.nodes.sim_robot import QOS
-from robot_calib.sim.measure import StreamingTracker
+from robot_calib.sim.measure import StreamingTracker, TrackerReading
 from robot_calib.sim.world import load_world
 
 
@@ -74,6 +74,16 @@ class SimTrackerNode(Node):
             for t in model.oriented
         }
         self.all_publishers = [*self.point_publishers, *self.pose_publishers.values()]
+        self.triggered = declare(
+            self, "triggered", False,
+            "measure only on a std_srvs/Trigger call of ~/measure (the latest joint state), "
+            "as a tracker driver with a trigger service; false: one measurement per reading",
+        )  # fmt: skip
+        self._latest: tuple[int, TrackerReading | None] | None = None
+        if self.triggered:
+            from std_srvs.srv import Trigger
+
+            self.create_service(Trigger, "~/measure", self._on_trigger)
         self.topics = [p.topic_name for p in self.all_publishers]
         self.subscription: Subscription | None = None
         self.received = 0
@@ -100,7 +110,28 @@ class SimTrackerNode(Node):
             self.get_logger().error(str(exc))
             return
         stamp = stamp_to_ns(msg.header.stamp)
-        reading = self.tracker.measure_all(q, stamp * 1e-9)
+        reading = self.tracker.measure_all(q, stamp * 1e-9)  # every reading: the history
+        if self.triggered:
+            self._latest = (stamp, reading)
+            return
+        self._publish(stamp, reading)
+
+    def _on_trigger(self, request: Any, response: Any) -> Any:  # noqa: ANN401 - std_srvs
+        """Trigger: publish the measurement at the latest joint state (success false when
+        there is none yet or the line of sight is lost)."""
+        del request
+        if self._latest is None:
+            response.success, response.message = False, "no joint state received yet"
+            return response
+        stamp, reading = self._latest
+        published = self.published
+        self._publish(stamp, reading)
+        response.success = self.published > published
+        response.message = "measured" if response.success else "line of sight lost (dropped)"
+        return response
+
+    def _publish(self, stamp: int, reading: TrackerReading | None) -> None:
+        """Publish one measurement stamped by its joint state `stamp` [ns] minus latency."""
         if reading is None:
             self.dropped += 1
             return

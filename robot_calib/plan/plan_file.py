@@ -49,6 +49,29 @@ def is_plan_file(name: str | Path) -> bool:
     return Path(name).suffix.lower() in (".yaml", ".yml")
 
 
+def _document(path: str | Path) -> dict[str, Any]:
+    """The PLAN.yaml mapping, its keys checked; InputError (one line) otherwise."""
+    where = str(path)
+    if not Path(path).is_file():
+        raise InputError(f"{where}: no such plan file")
+    try:
+        doc = yaml.safe_load(Path(path).read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise InputError(f"{where}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(doc, dict):
+        raise InputError(f"{where}: a plan file is a mapping (msgs_doc/plan.md)")
+    missing = [k for k in REQUIRED_KEYS if k not in doc]
+    if missing:
+        raise InputError(f"{where}: missing key(s) {', '.join(missing)} (msgs_doc/plan.md)")
+    check_keys(doc, KNOWN_KEYS, where)
+    return doc
+
+
+def planned_robot(path: str | Path) -> str:
+    """The robot reference PLAN.yaml `path` was planned for (its `robot`)."""
+    return str(_document(path)["robot"])
+
+
 def load_plan(path: str | Path, robot: RobotDescription) -> PlanFile:
     """The plan of PLAN.yaml `path` for `robot`, checked whole.
 
@@ -67,18 +90,7 @@ def load_plan(path: str | Path, robot: RobotDescription) -> PlanFile:
     Raises InputError (one line naming `path`) on any problem.
     """
     where = str(path)
-    if not Path(path).is_file():
-        raise InputError(f"{where}: no such plan file")
-    try:
-        doc = yaml.safe_load(Path(path).read_text())
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise InputError(f"{where}: not valid YAML ({str(exc).splitlines()[0]})") from None
-    if not isinstance(doc, dict):
-        raise InputError(f"{where}: a plan file is a mapping (msgs_doc/plan.md)")
-    missing = [k for k in REQUIRED_KEYS if k not in doc]
-    if missing:
-        raise InputError(f"{where}: missing key(s) {', '.join(missing)} (msgs_doc/plan.md)")
-    check_keys(doc, KNOWN_KEYS, where)
+    doc = _document(path)
     if doc["format"] != FORMAT:
         raise InputError(f"{where}: format {doc['format']!r}, expected {FORMAT!r}")
     if str(doc["robot"]) != robot.reference():

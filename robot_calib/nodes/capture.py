@@ -1,0 +1,409 @@
+"""capture: drive a robot through a measurement plan, settle, measure, record.
+
+For each pose of the plan (a built-in name or a PLAN.yaml of `robot-calib plan`):
+
+1. sends the move (capture/moves.py: limits, step limit, approach side) as one
+   trajectory_msgs/JointTrajectory on /<controller>/joint_trajectory (ros2_control's
+   joint_trajectory_controller topic interface);
+2. waits until /joint_states stay within `position_tolerance` of the pose for
+   `settle_time` (capture/settle.py); after `move_timeout` the pose is skipped and named;
+3. measures: the first /laser_tracker/point (and each further target's point) stamped
+   after the robot had settled, or, with `trigger_service`, calls that std_srvs/Trigger
+   service first and takes the points that follow it; after `measure_timeout`: skipped;
+4. records the pair (the joint state nearest the point's stamp and the points) into the
+   campaign bag with the recorder's writer (the MCAP contract: /joint_states,
+   /laser_tracker/point, /laser_tracker/NAME/point), one pair per pose. The joint state's
+   `velocity` holds each joint's approach direction as its sign (+-1e-9 rad/s: the robot
+   stands still), the direction of that joint's last move into the pose, which the
+   contract reads from a non-empty velocity: with an approach side, the pose-to-pose
+   change would give the wrong one.
+
+Progress ("pose k of N, ~m:ss left") is logged per pose. An existing bag resumes the
+campaign: its poses (and those of its .partK bags) are skipped, the rest go into the next
+part (capture/resume.py). `dry_run` logs every move and exits without moving or writing.
+Parameters and topics: msgs_doc/capture.md.
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import PointStamped
+from rclpy.node import Node
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import JointState
+
+from robot_calib.bag import BagWriter
+from robot_calib.capture.moves import Move, MoveRules, describe, parse_approach, plan_moves
+from robot_calib.capture.resume import existing_parts, measured, part_path
+from robot_calib.capture.settle import Settler
+from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.frames import Array
+from robot_calib.messages import (
+    JOINT_STATE_TYPE,
+    JOINT_STATES_TOPIC,
+    POINT_TYPE,
+    joint_positions,
+    stamp_to_ns,
+    target_topic,
+)
+from robot_calib.model import KinematicModel
+from robot_calib.nodes._common import declare, run_node
+from robot_calib.nodes.sim_robot import QOS, trajectory_topic
+from robot_calib.pipeline import DEFAULT_ROBOT
+from robot_calib.plan.plan_file import is_plan_file, planned_robot
+from robot_calib.poses import next_direction
+from robot_calib.sim.plans import HOME_DEG, make_plan
+
+DIRECTION_SPEED_RAD_S = 1e-9  # |velocity| recorded with a settled pose: only its sign counts
+STATE_BUFFER = 400  # joint states kept to pair a point with (a few seconds at 100 Hz)
+RESUME_MATCH_RAD = 1e-3  # a recorded pose within this of a plan pose counts as measured
+
+
+@dataclass(frozen=True)
+class Skipped:
+    """A pose not measured: its plan index and why."""
+
+    pose: int
+    reason: str
+
+
+class CaptureNode(Node):
+    """The capture state machine (module docstring), stepped by a timer; `finished` once
+    every pose is measured or skipped (then the bag is closed: `close()`)."""
+
+    def __init__(self, **kwargs: Any) -> None:  # rclpy.node.Node's keyword arguments
+        super().__init__("capture", **kwargs)
+        self._writer: BagWriter | None = None
+        try:
+            self._setup()
+        except RobotCalibError:
+            super().destroy_node()
+            raise
+
+    def _setup(self) -> None:
+        plan_name = declare(self, "plan", "paper-test3", "built-in plan name or PLAN.yaml path")
+        robot_ref = declare(
+            self,
+            "robot",
+            "",
+            "robot: built-in name, YAML or URDF (default: "
+            f"a PLAN.yaml's robot, else {DEFAULT_ROBOT})",
+        )
+        names = declare(
+            self,
+            "joint_names",
+            [],
+            "the controller's joint names in joint "
+            "order, where they are not the robot's own (default: the robot's)",
+        )
+        self.output = Path(declare(self, "output", "", "campaign bag (.mcap; required)"))
+        controller = declare(
+            self,
+            "controller",
+            "joint_trajectory_controller",
+            "controller name: commands on /<controller>/joint_trajectory",
+        )
+        self.tolerance = declare(
+            self, "position_tolerance", 1e-4, "settled: every joint this close to the pose [rad]"
+        )
+        self.settle_s = declare(self, "settle_time", 0.5, "settled for this long [s]")
+        self.move_timeout = declare(
+            self, "move_timeout", 60.0, "a move not settled after this is skipped [s]"
+        )
+        self.measure_timeout = declare(
+            self,
+            "measure_timeout",
+            5.0,
+            "no point this long after settling: the pose is skipped [s]",
+        )
+        trigger = declare(
+            self,
+            "trigger_service",
+            "",
+            "std_srvs/Trigger service that makes the tracker measure ('' = take the next point)",
+        )
+        targets: list[str] = declare(
+            self,
+            "targets",
+            [],
+            "further targets' names (/laser_tracker/NAME/point; default: none)",
+        )
+        max_step = declare(self, "max_step", 90.0, "largest joint step of one move [deg]")
+        approach = declare(
+            self,
+            "approach",
+            "0",
+            "approach side per joint: +, - or 0, one for all or comma-separated per joint",
+        )
+        overshoot = declare(
+            self, "approach_overshoot", 1.0, "approach start before the pose [deg]"
+        )
+        self.move_time = declare(
+            self,
+            "move_time",
+            0.0,
+            "time_from_start of each move's last point [s] (0: the controller's speed limits)",
+        )
+        self.dry_run = declare(self, "dry_run", False, "log the moves; do not move or write")
+        seed = declare(self, "seed", 0, "seed of the random plan")
+        if not str(self.output) or self.output.suffix != ".mcap":
+            raise InputError("capture: parameter 'output' must name a .mcap bag")
+        for name, value in (("position_tolerance", self.tolerance), ("settle_time", self.settle_s),
+                            ("move_timeout", self.move_timeout),
+                            ("measure_timeout", self.measure_timeout)):  # fmt: skip
+            if not value > 0:
+                raise InputError(f"capture: parameter {name!r} must be > 0, not {value}")
+        if not robot_ref:
+            robot_ref = planned_robot(plan_name) if is_plan_file(plan_name) else DEFAULT_ROBOT
+        robot = load_robot(robot_ref)
+        self.robot = robot
+        self.joint_names = tuple(names) if names else robot.joint_names
+        if len(self.joint_names) != robot.n_joints:
+            raise InputError(f"capture: parameter 'joint_names' needs {robot.n_joints} names")
+        model = KinematicModel(robot, ())
+        plan = make_plan(plan_name, model, model.parameters(), np.random.default_rng(seed))
+        rules = MoveRules(
+            np.radians(max_step), parse_approach(approach, robot.n_joints), np.radians(overshoot)
+        )
+        self.plan_q: Array = plan.q
+        self.parts = [] if self.dry_run else existing_parts(self.output)
+        done = measured(plan.q, self.parts, robot, RESUME_MATCH_RAD)
+        home = np.zeros(robot.n_joints)
+        home[: min(6, robot.n_joints)] = np.radians(HOME_DEG[: robot.n_joints])
+        todo = np.flatnonzero(np.logical_not(done))
+        moves, refused = plan_moves(plan.q[todo], home, robot.limits, self.joint_names, rules)
+        self.moves = [Move(int(todo[m.pose]), m.waypoints) for m in moves]
+        self.skipped = [Skipped(int(todo[r.pose]), r.reason.replace(
+            f"pose {r.pose}:", f"pose {todo[r.pose]}:", 1)) for r in refused]  # fmt: skip
+        for skip in self.skipped:
+            self.get_logger().warning(f"refused {skip.reason}")
+        self.n_already = int(done.sum())
+        log = self.get_logger()
+        log.info(
+            f"plan {plan_name}: {len(plan.q)} poses; {self.n_already} already in "
+            f"{', '.join(map(str, self.parts)) or 'no bag'}; {len(self.moves)} to measure, "
+            f"{len(self.skipped)} refused"
+        )
+        self.finished = False
+        self.measured = 0
+        self._index = 0
+        self._state = "send"
+        self._settler: Settler | None = None
+        self._since = 0.0
+        self._settled_wall = 0.0
+        self._triggered = False
+        self._trigger_future: Any = None
+        self._durations: deque[float] = deque(maxlen=20)
+        self._pose_started = time.monotonic()
+        self._states: deque[tuple[int, Array, Any]] = deque(maxlen=STATE_BUFFER)
+        self._point_topics = [target_topic(t) for t in ("", *targets)]
+        self._points: dict[str, list[Any]] = {t: [] for t in self._point_topics}
+        self._direction = np.ones(robot.n_joints)  # the contract's first direction: +1
+        self._last_end: Array = home
+        if self.dry_run:
+            for line in describe(self.moves, self.joint_names):
+                log.info(f"dry run: {line}")
+            log.info("dry run: nothing moved, nothing written")
+            self.finished = True
+            return
+        if not self.moves:
+            log.info("nothing to measure")
+            self.finished = True
+            return
+        from trajectory_msgs.msg import JointTrajectory
+
+        self.bag_path = part_path(self.output, len(self.parts) + 1)
+        self._writer = BagWriter(self.bag_path)
+        self._writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
+        for topic in self._point_topics:
+            self._writer.add_topic(topic, POINT_TYPE)
+        self.command = self.create_publisher(JointTrajectory, trajectory_topic(controller), 10)
+        self.create_subscription(JointState, JOINT_STATES_TOPIC, self._on_state, QOS)
+        for topic in self._point_topics:
+            self.create_subscription(PointStamped, topic, partial(self._on_point, topic), QOS)
+        self.trigger = None
+        if trigger:
+            from std_srvs.srv import Trigger
+
+            self.trigger = self.create_client(Trigger, trigger)
+        self._timer = self.create_timer(0.01, self._step)
+        log.info(f"writing {self.bag_path}; commands on {trajectory_topic(controller)}")
+
+    # --- callbacks ------------------------------------------------------------------------
+
+    def _on_state(self, msg: JointState) -> None:
+        try:
+            q = joint_positions(msg, self.joint_names)
+        except InputError as exc:
+            self.get_logger().error(str(exc), throttle_duration_sec=5.0)
+            return
+        stamp = stamp_to_ns(msg.header.stamp)
+        self._states.append((stamp, q, msg))
+        if self._settler is not None:
+            self._settler.add(stamp * 1e-9, q)
+
+    def _on_point(self, topic: str, msg: PointStamped) -> None:
+        self._points[topic].append(msg)
+
+    # --- the state machine ----------------------------------------------------------------
+
+    def _step(self) -> None:
+        if self.finished:
+            return
+        try:
+            getattr(self, f"_{self._state}")()
+        except RobotCalibError as exc:
+            self.get_logger().error(str(exc))
+            self.close()
+
+    def _send(self) -> None:
+        """Wait for the controller to listen, then send the next move."""
+        if self.command.get_subscription_count() < 1:
+            return
+        from builtin_interfaces.msg import Duration
+        from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+        move = self.moves[self._index]
+        msg = JointTrajectory()
+        msg.joint_names = list(self.joint_names)
+        n = len(move.waypoints)
+        for k, q in enumerate(move.waypoints):
+            point = JointTrajectoryPoint()
+            point.positions = q.tolist()
+            at = self.move_time * (k + 1) / n
+            point.time_from_start = Duration(sec=int(at), nanosec=int((at % 1) * 1e9))
+            msg.points.append(point)
+        path = np.vstack([self._last_end[None, :], move.waypoints])
+        self._direction = next_direction(self._direction, path[-2], path[-1])
+        self._last_end = move.waypoints[-1]
+        self._settler = Settler(move.waypoints[-1], self.tolerance, self.settle_s)
+        self._since = time.monotonic()
+        self._pose_started = self._since
+        self.command.publish(msg)
+        self._state = "settle"
+
+    def _settle(self) -> None:
+        assert self._settler is not None
+        if self._settler.settled:
+            for points in self._points.values():
+                points.clear()
+            self._settled_wall = time.monotonic()
+            self._triggered = False
+            self._state = "measure"
+        elif time.monotonic() - self._since > self.move_timeout:
+            self._skip(
+                f"not settled within {self.move_timeout:g} s (largest joint error "
+                f"{np.degrees(self._settler.largest_error_rad):.4f} deg)"
+            )
+
+    def _measure(self) -> None:
+        assert self._settler is not None and self._settler.settled_since is not None
+        if self.trigger is not None and not self._triggered:
+            if not self.trigger.service_is_ready():
+                if time.monotonic() - self._settled_wall > self.measure_timeout:
+                    self._skip(f"trigger service {self.trigger.srv_name} not available")
+                return
+            from std_srvs.srv import Trigger
+
+            for points in self._points.values():
+                points.clear()
+            self._trigger_future = self.trigger.call_async(Trigger.Request())
+            self._triggered = True
+            return
+        since_ns = int(self._settler.settled_since * 1e9)
+        fresh = {}
+        for topic, points in self._points.items():
+            after = [p for p in points if stamp_to_ns(p.header.stamp) >= since_ns]
+            if after:
+                fresh[topic] = after[0]
+        if len(fresh) == len(self._points):
+            self._record(fresh)
+        elif time.monotonic() - self._settled_wall > self.measure_timeout:
+            missing = [t for t in self._points if t not in fresh]
+            self._skip(
+                f"no point on {', '.join(missing)} within {self.measure_timeout:g} s "
+                "after settling"
+            )
+
+    def _record(self, points: dict[str, Any]) -> None:
+        """Write the pose's joint state (nearest the first point's stamp) and its points."""
+        assert self._writer is not None
+        stamp = stamp_to_ns(points[self._point_topics[0]].header.stamp)
+        state = copy.deepcopy(min(self._states, key=lambda s: abs(s[0] - stamp))[2])
+        names = list(state.name)
+        velocity = np.zeros(len(names))
+        for j, name in enumerate(self.joint_names):
+            velocity[names.index(name)] = self._direction[j] * DIRECTION_SPEED_RAD_S
+        state.velocity = velocity.tolist()
+        now = time.time_ns()
+        self._writer.write(JOINT_STATES_TOPIC, serialize_message(state), now)
+        for topic, msg in points.items():
+            self._writer.write(topic, serialize_message(msg), now)
+        self.measured += 1
+        self._durations.append(time.monotonic() - self._pose_started)
+        left = len(self.moves) - self._index - 1
+        eta = left * float(np.mean(self._durations))
+        move = self.moves[self._index]
+        self.get_logger().info(
+            f"pose {self._index + 1} of {len(self.moves)} (plan pose {move.pose}) measured; "
+            f"~{int(eta // 60)}:{int(eta % 60):02d} left"
+        )
+        self._next()
+
+    def _skip(self, reason: str) -> None:
+        move = self.moves[self._index]
+        self.skipped.append(Skipped(move.pose, f"pose {move.pose}: {reason}"))
+        self.get_logger().warning(f"skipped pose {move.pose}: {reason}")
+        self._next()
+
+    def _next(self) -> None:
+        self._settler = None
+        self._index += 1
+        if self._index >= len(self.moves):
+            self.close()
+        else:
+            self._state = "send"
+
+    def close(self) -> None:
+        """Finish: close the bag and log the summary. Idempotent."""
+        if self.finished and self._writer is None:
+            return
+        self.finished = True
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+            self.get_logger().info(self.summary())
+
+    def summary(self) -> str:
+        """'N poses measured -> BAG; K skipped: pose i: why; ...'."""
+        text = f"{self.measured} poses measured -> {self.bag_path}"
+        if self.n_already:
+            text += f" ({self.n_already} earlier, in {', '.join(map(str, self.parts))})"
+        if self.skipped:
+            text += f"; {len(self.skipped)} skipped: " + "; ".join(s.reason for s in self.skipped)
+        return text
+
+    def destroy_node(self) -> None:
+        """Close the bag (what was measured stays), then destroy the node."""
+        try:
+            self.close()
+        finally:
+            super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> None:
+    sys.exit(run_node(CaptureNode, args, done=lambda node: node.finished))
+
+
+if __name__ == "__main__":
+    main()
