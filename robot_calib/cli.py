@@ -122,8 +122,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     Every run writes a new folder under --output."""
     from robot_calib import pipeline
     from robot_calib.identify.params_file import summary
+    from robot_calib.sim.plans import check_plan
 
-    print(_robot_table(load_robot(args.robot)))
+    robot = load_robot(args.robot)
+    check_plan(args.plan, robot)  # a bad plan: its error before any output
+    print(_robot_table(robot))
     started = time.perf_counter()
     result = pipeline.run(
         args.output, args.robot, args.plan, args.effects, args.seed, args.holdout,
@@ -190,8 +193,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     noise = args.noise_mm
     if noise is not None and not (math.isfinite(noise) and 0 < noise < 10):
         raise InputError(f"--noise-mm {noise}: a 1-sigma per coordinate in mm, > 0 and < 10")
-    output = output_path(args.output, "PLAN.yaml", [], args.force)
     world = pipeline.simulation_world(args.world, args.robot, (), args.seed)
+    output = output_path(args.output, "PLAN.yaml", pipeline.simulation_inputs(world), args.force)
     c = plan_campaign(world, args.model, args.poses, args.candidates, args.seed, args.floor_z,
                       None if noise is None else noise * 1e-3, args.ecc_order, args.trials,
                       args.holdout, _log)  # fmt: skip
@@ -482,8 +485,8 @@ def cmd_compensate(args: argparse.Namespace) -> int:
     """Nominal joint commands, or targets, -> compensated commands (msgs_doc/compensate.md)."""
     from robot_calib.compensate import compensate_commands, compensate_targets
     from robot_calib.compensate.solve import nominal_counterpart
-    from robot_calib.compensate.targets import goals_in_base, read_targets_csv
-    from robot_calib.compensate.write import write_compensated_csv
+    from robot_calib.compensate.targets import check_reach, goals_in_base, read_targets_csv
+    from robot_calib.compensate.write import LARGE_CHANGE_DEG, row_status, write_compensated_csv
     from robot_calib.predict import read_joints_csv
 
     model, params, _ = _calibration(args)
@@ -498,10 +501,10 @@ def cmd_compensate(args: argparse.Namespace) -> int:
         poses = read_joints_csv(args.joints, n_joints, limits)
         output = output_path(args.output, "JOINTS.csv", inputs, args.force)
         result = compensate_commands(model, params, nominal, nominal_params, poses)
-        write_compensated_csv(output, result, poses.direction)
+        status = row_status(result, poses.q)
+        write_compensated_csv(output, result, poses.direction, status)
         change = np.degrees(np.abs(result.q - poses.q)).max()
         what = f"compensated commands (rad); largest change {change:.4f} deg"
-        failed, beyond = ~result.converged, np.zeros(len(poses), dtype=bool)
     else:
         targets = read_targets_csv(args.targets, n_joints, limits, args.unit or "m")
         if args.seed_joints:
@@ -514,27 +517,34 @@ def cmd_compensate(args: argparse.Namespace) -> int:
                                  f"{len(targets)} targets in {args.targets}")  # fmt: skip
             targets = dataclasses.replace(targets, seed=seeds)
         goals = goals_in_base(targets, args.frame or "base", model, params)
+        check_reach(goals, model, args.targets)
         output = output_path(args.output, "JOINTS.csv", inputs, args.force)
         found = compensate_targets(model, params, nominal, nominal_params, targets, goals)
         result = found.compensated
-        write_compensated_csv(output, result, found.direction)
+        status = row_status(result, found.nominal.q, found.within_limits)
+        write_compensated_csv(output, result, found.direction, status)
         kind = "poses" if targets.rotation is not None else "positions"
         seeded = "seed readings" if targets.seed is not None else "the home pose"
         frame = args.frame or "base"
         what = f"commands (rad) for target {kind} ({frame} frame; nominal IK from {seeded})"
-        failed, beyond = ~result.converged, result.converged & ~found.within_limits
-    n, reached = len(result.q), int((~failed & ~beyond).sum())
+    flags = np.array(status)
+    n, reached = len(result.q), int(np.isin(flags, ("ok", "large_change", "position_only")).sum())
     print(f"{output}: {n} {what}; model error max {result.error_m.max() * 1e3:.6f} mm / "
           f"{result.error_rad.max() * 1e6:.3f} urad, {int(result.iterations.max())} iterations "
           f"at most; {reached}/{n} reached")  # fmt: skip
-    rows = _data_rows(failed, beyond)
-    if failed.any():
-        print(f"warning: {source}: {int(failed.sum())} row(s) not reached by the calibrated "
-              f"model (near a singularity or out of reach; see their error_mm): {rows[0]}",
-              file=sys.stderr)  # fmt: skip
-    if beyond.any():
-        print(f"warning: {source}: {int(beyond.sum())} row(s) reached only beyond the joint "
-              f"limits: {rows[1]}", file=sys.stderr)  # fmt: skip
+    for flag, text in (
+        ("not_reached", "not reached by the calibrated model (near a singularity or out of "
+                        "reach; their q are nan)"),
+        ("beyond_limits", "reached only beyond the joint limits"),
+        ("large_change", f"moved by more than {LARGE_CHANGE_DEG:g} deg (near a singularity?): "
+                         "check them before sending"),
+        ("position_only", f"near a singularity (the exact pose would swing a joint by more "
+                          f"than {LARGE_CHANGE_DEG:g} deg): solved for the tool position alone, "
+                          "orientation off by their error_urad"),
+    ):  # fmt: skip
+        if (flags == flag).any():
+            print(f"warning: {source}: {int((flags == flag).sum())} row(s) {text}: "
+                  f"{_data_rows(flags == flag)[0]} (column status)", file=sys.stderr)  # fmt: skip
     return 0
 
 
@@ -761,6 +771,21 @@ def _add_payload(p: argparse.ArgumentParser) -> None:
     )
 
 
+MAX_CANDIDATES = 100_000  # plan --candidates: ~1.5 GB of Jacobian rows for geometric
+
+
+def _bounded_count(most: int) -> Callable[[str], int]:
+    """An argparse type: an integer in 1..most."""
+
+    def parse(text: str) -> int:
+        value = _positive(text)
+        if value > most:
+            raise argparse.ArgumentTypeError(f"{value} > {most} (the most this accepts)")
+        return value
+
+    return parse
+
+
 def _add_joint_names(
     p: argparse.ArgumentParser, what: str = "the bags' JointState names of joints 1..J"
 ) -> None:
@@ -865,9 +890,9 @@ def build_parser() -> argparse.ArgumentParser:
     pla.add_argument("--poses", type=_positive, required=True, help="N: poses to plan")
     pla.add_argument(
         "--candidates",
-        type=_positive,
+        type=_bounded_count(MAX_CANDIDATES),
         default=2000,
-        help="M: random candidate poses to choose from (default 2000)",
+        help=f"M: random candidate poses to choose from (default 2000, at most {MAX_CANDIDATES})",
     )
     pla.add_argument(
         "--floor-z",

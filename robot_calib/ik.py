@@ -49,6 +49,9 @@ class IKSolution:
     iterations : shape (n,), the Levenberg-Marquardt steps each pose took (accepted or not)
     converged : shape (n,) bool, error (position + lever x orientation) below
         max(tolerance, CONVERGED_M)
+    position_only : shape (n,) bool, rows solved for the tool position alone although an
+        orientation was asked (compensate: near a singularity; error_rad is then the
+        orientation left), None: none
     """
 
     q: Array
@@ -56,6 +59,7 @@ class IKSolution:
     error_rad: Array
     iterations: IntArray
     converged: NDArray[np.bool_]
+    position_only: NDArray[np.bool_] | None = None
 
 
 def first_tool2flange(model: KinematicModel, params: ParameterVector) -> Array:

@@ -141,10 +141,9 @@ def simulate(
 
     world = world if world is not None else simulation_world(seed=seed)
     check_plan(plan, world.model.robot)
-    bag = output_path(output, "the bag", [world.source], force)
-    world_file = output_path(
-        bag.with_suffix(".world.yaml"), "the world file", [world.source], force
-    )
+    inputs = simulation_inputs(world, plan)
+    bag = output_path(output, "the bag", inputs, force)
+    world_file = output_path(bag.with_suffix(".world.yaml"), "the world file", inputs, force)
     started = time.monotonic()
     with staged_outputs(bag.parent, force) as stage:
         save_world(world, stage / world_file.name)
@@ -159,6 +158,17 @@ def simulate(
             )
     labels = tuple(e.label for e in world.effects)
     return Simulation(bag, world_file, counts, labels, time.monotonic() - started)
+
+
+def simulation_inputs(world: World, plan: str | None = None) -> list[str]:
+    """The files a simulation or a plan reads, which it may never overwrite: the world file,
+    the robot's description file (YAML or URDF) and a PLAN.yaml."""
+    from robot_calib.plan.plan_file import is_plan_file
+
+    files = [world.source, world.model.robot.path.split("#", 1)[0]]
+    if plan is not None and is_plan_file(plan):
+        files.append(plan)
+    return [f for f in files if f]
 
 
 def output_path(

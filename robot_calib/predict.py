@@ -63,11 +63,22 @@ def read_csv_table(path: str | Path, what: str, expected: str) -> CsvTable:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such {what} file")
-    with path.open(newline="", encoding="utf-8-sig") as handle:  # -sig: Excel's BOM
-        rows = list(csv.reader(handle))
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as handle:  # -sig: Excel's BOM
+            rows = list(csv.reader(handle))
+    except UnicodeDecodeError:
+        raise InputError(
+            f"{path}: not a text CSV file (not UTF-8; a bag or a spreadsheet? expected "
+            f"header {expected})"
+        ) from None
+    except (OSError, csv.Error) as exc:
+        raise InputError(f"{path}: cannot read as CSV ({exc})") from None
     if not rows:
         raise InputError(f"{path}: empty file (expected header {expected})")
     header = [h.strip() for h in rows[0]]
+    if len(header) == 1 and ";" in header[0]:
+        raise InputError(f"{path}: one column {header[0]!r}: separated by ';'? use ',' "
+                         f"(expected header {expected})")  # fmt: skip
     repeated = sorted({h for h in header if header.count(h) > 1})
     if repeated:
         raise InputError(f"{path}: columns {repeated} given more than once (header {header})")

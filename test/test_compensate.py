@@ -54,6 +54,24 @@ def test_the_true_robot_reaches_what_the_nominal_model_promised() -> None:
     assert reach.mean() < 0.0135e-3  # within 1.5 x the simulated noise floor (~9 um)
 
 
+def test_at_the_wrist_singularity_only_the_position_is_compensated() -> None:
+    """Joint 5 at 0: the exact pose would swing joints 4 and 6 by tens of degrees for a few
+    urad of orientation (the new user's 67.9 deg); the row is solved for the position alone
+    with a small joint change and flagged, its orientation error reported."""
+    from robot_calib.compensate.write import row_status
+
+    cal, _ = calibrated()
+    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
+    q = np.radians([[0, -90, 90, 0, 0, 0], [0, -90, 90, 0, 45, 0], [30, -60, 100, 20, 0.001, 5]])
+    commands = Poses.from_readings(q)
+    result = compensate_commands(cal.model, cal.parameters, nominal, nominal_params, commands)
+    assert result.position_only is not None
+    assert result.position_only.tolist() == [True, False, True]
+    assert np.degrees(np.abs(result.q - q)).max() < 0.5 and result.error_m.max() < 1e-8
+    assert 0 < result.error_rad[0] < 1e-2 and result.error_rad[1] < 1e-8
+    assert row_status(result, q) == ["position_only", "ok", "position_only"]
+
+
 def test_the_compensate_command(tmp_path: Path) -> None:
     cal, recording = calibrated()
     params = tmp_path / "p.json"
@@ -193,6 +211,11 @@ def test_the_compensate_command_with_targets(tmp_path: Path) -> None:
     assert len(rows) == 12 and int(rows[0]["iterations"]) >= 1
     assert max(float(r["error_mm"]) for r in rows[:-1]) < 1e-5
     assert float(rows[-1]["error_mm"]) > 1000.0  # 5 m out, ~4 m beyond the arm's reach
+    assert rows[-1]["status"] == "not_reached" and rows[-1]["q1"] == "nan"  # never sendable
+    status = [r["status"] for r in rows[:-1]]
+    assert status.count("ok") >= 10 and set(status) <= {"ok", "large_change"}
+    if "large_change" in status:  # near the elbow singularity a pose needs degrees: flagged
+        assert "moved by more than 2 deg" in proc.stderr
     corrected = np.array([[float(r[f"q{j}"]) for j in range(1, 7)] for r in rows[:-1]])
     assert np.abs(corrected - q[:-1]).max(axis=1).min() > 1e-5  # corrected, by mrad:
     assert np.median(np.abs(corrected - q[:-1])) < 0.01  # the seeds' IK is the source pose
@@ -208,3 +231,6 @@ def test_the_compensate_command_with_targets(tmp_path: Path) -> None:
     assert "--frame goes with --targets" in refused("--joints", str(seeds), "--frame", "base")
     np.savetxt(targets, table[:, :2], delimiter=",", comments="", header="x,y")
     assert "header lacks ['z']" in refused("--targets", str(targets))
+    np.savetxt(targets, table[:, :3], delimiter=",", comments="", header="x,y,z")  # mm as m
+    assert "every target is out of robot" in refused("--targets", str(targets))
+    assert "(--unit mm)" in refused("--targets", str(targets))

@@ -139,3 +139,38 @@ def test_a_trajectory_comes_back_compensated(context: Context, params_file: Path
 def test_a_compensator_without_params_is_refused(context: Context) -> None:
     with pytest.raises(InputError, match="parameter 'params'"):
         CompensatorNode(context=context)
+
+
+def test_a_trajectory_corrected_beyond_max_correction_is_not_sent(
+    context: Context, params_file: Path
+) -> None:
+    """A correction larger than `max_correction` (a wrist flip near the singularity; here a
+    bound below the 2 mrad backlash's) drops the trajectory: nothing reaches the robot."""
+    compensator = CompensatorNode(
+        context=context,
+        parameter_overrides=[
+            Parameter("params", value=str(params_file)),
+            Parameter("input_topic", value=IN),
+            Parameter("output_topic", value=OUT),
+            Parameter("max_correction", value=0.01),  # deg
+        ],
+    )
+    client = Node("trajectory_client", context=context)
+    publisher = client.create_publisher(JointTrajectory, IN, 10)
+    received: list[JointTrajectory] = []
+    client.create_subscription(JointTrajectory, OUT, received.append, 10)
+    executor = SingleThreadedExecutor(context=context)
+    for node in (compensator, client):
+        executor.add_node(node)
+    try:
+        spin_until(executor, lambda: publisher.get_subscription_count() > 0
+                   and compensator.publisher.get_subscription_count() > 0)  # fmt: skip
+        q = random_plan(ROBOT, 5, np.random.default_rng(2)).q
+        publisher.publish(trajectory(q, [ROBOT.joint_names[j] for j in ORDER]))
+        spin_until(executor, lambda: compensator.received == 1)
+        executor.spin_once(timeout_sec=0.2)
+    finally:
+        executor.shutdown()
+        for node in (compensator, client):
+            node.destroy_node()
+    assert (compensator.published, compensator.dropped, received) == (0, 1, [])

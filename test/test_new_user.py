@@ -251,3 +251,45 @@ def test_the_docs_list_every_column_of_the_score_table(work: Path) -> None:
     assert header[-4:] == ["rx_rad", "ry_rad", "rz_rad", "angle_rad"]
     doc = (ROOT / "msgs_doc" / "split_score.md").read_text()
     assert [c for c in header if f"`{c}`" not in doc] == []
+
+
+def test_no_file_a_simulation_or_plan_reads_is_ever_overwritten(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The issue-15 new user replaced a PLAN.yaml, a world file and a URDF with
+    `-o SAME --force`: every file read is an input, never overwritten."""
+    from robot_calib.cli import main
+
+    data = Path(__file__).parent / "data"
+    (tmp_path / "ur.urdf").write_bytes((data / "ur10.urdf").read_bytes())
+    plan = ["plan", "--model", "geometric", "--poses", "12", "--candidates", "200",
+            "--trials", "1"]  # fmt: skip
+    assert main([*plan, "--robot", str(tmp_path / "ur.urdf"), "-o", str(tmp_path / "p.yaml")]) == 0
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    urdf, yaml_plan = str(tmp_path / "ur.urdf"), str(tmp_path / "p.yaml")
+    for args in (
+        ["simulate", "--robot", urdf, "--plan", yaml_plan, "-o", yaml_plan],
+        ["simulate", "--robot", urdf, "--plan", "random", "-o", urdf],
+        [*plan, "--robot", urdf, "-o", urdf],
+    ):
+        assert main([*args, "--force"]) == 2
+        assert "is an input of this command; will not overwrite it" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (b"\x89MCAP0\r\n\xff\xfe\x00", "not a text CSV file (not UTF-8; a bag or a spreadsheet?"),
+        (b"q1;q2;q3;q4;q5;q6\n0;0;0;0;0;0\n", "separated by ';'? use ','"),
+    ],
+)
+def test_a_joints_file_that_is_no_csv_is_one_line(
+    tmp_path: Path, content: bytes, message: str
+) -> None:
+    from robot_calib.predict import read_csv_table
+
+    path = tmp_path / "joints.csv"
+    path.write_bytes(content)
+    with pytest.raises(InputError, match=message.replace("?", r"\?").replace("(", r"\(")):
+        read_csv_table(path, "joints", "q1..q6")

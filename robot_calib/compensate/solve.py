@@ -12,7 +12,10 @@ Both kinds of goal go through one solver (`ik.solve_ik`: batched damped least sq
 
 - `compensate_commands`: a program taught or planned on the nominal model commands q_cmd
   (n, J) and expects the tool where the nominal model puts it: goal2base =
-  T_nominal(q_cmd) * tool2flange, seeded at q_cmd (6 equations).
+  T_nominal(q_cmd) * tool2flange, seeded at q_cmd (6 equations). Where that swings a joint
+  by more than SINGULAR_CHANGE_DEG (near the wrist singularity a few urad of orientation
+  cost joints 4 and 6 degrees), the row is solved for the tool position alone (3
+  equations, the smallest joint change): `position_only`, its orientation error reported.
 - `compensate_targets`: goal poses (or positions: 3 equations, the orientation left where
   the seed has it up to the smallest correction) given in the base or tracker frame; seeded
   at the nominal model's inverse kinematics, itself started from the given seed readings
@@ -27,7 +30,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot_calib.compensate.targets import Targets
-from robot_calib.ik import IKSolution, first_tool2flange, solve_ik, tool2base
+from robot_calib.ik import (
+    ORIENTATION_LEVER_M,
+    IKSolution,
+    first_tool2flange,
+    pose_error,
+    solve_ik,
+    tool2base,
+)
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
@@ -37,6 +47,7 @@ from robot_calib.sim.plans import HOME_DEG
 #: Compensated readings of nominal commands: `ik.IKSolution` (q, error_m, error_rad,
 #: iterations, converged) of the calibrated model.
 Compensation = IKSolution
+SINGULAR_CHANGE_DEG = 2.0  # a calibration corrects by mrad: a larger swing is a singularity
 
 NOMINAL_ITERATIONS = 100  # the nominal inverse kinematics may start far (the home pose)
 DIRECTION_ROUNDS = 3  # re-solves at most when compensating flips an approach direction
@@ -54,7 +65,27 @@ def compensate_commands(
     is the calibrated first target's; both models in the robot base frame."""
     tool = first_tool2flange(calibrated, params)
     goal = tool2base(nominal, nominal_params, replace(commands, rotation=None), tool)
-    return solve_ik(calibrated, params, commands, goal, tool)
+    full = solve_ik(calibrated, params, commands, goal, tool)
+    swing = np.abs(full.q - commands.q).max(axis=1)
+    rows = np.flatnonzero(swing > np.radians(SINGULAR_CHANGE_DEG))
+    if not rows.size:
+        return full
+    # near a singularity the exact pose swings joints 4 and 6 by degrees for a few urad of
+    # orientation: solve the tool position alone there (the smallest joint change)
+    part = commands.subset(rows)
+    point = solve_ik(calibrated, params, part, goal[rows], tool, np.zeros(rows.size, bool))
+    better = np.abs(point.q - part.q).max(axis=1) < swing[rows]
+    rows, q = rows[better], point.q[better]
+    at = tool2base(calibrated, params, replace(commands.subset(rows), q=q), tool)
+    left = np.linalg.norm(pose_error(at, goal[rows])[:, 3:], axis=1) / ORIENTATION_LEVER_M
+    fields = ("q", "error_m", "error_rad", "iterations", "converged")
+    merged = {name: getattr(full, name).copy() for name in fields}
+    merged["q"][rows], merged["error_rad"][rows] = q, left
+    for name in ("error_m", "iterations", "converged"):
+        merged[name][rows] = getattr(point, name)[better]
+    position_only = np.zeros(len(commands), dtype=bool)
+    position_only[rows] = True
+    return IKSolution(**merged, position_only=position_only)
 
 
 @dataclass(frozen=True)

@@ -108,3 +108,21 @@ def goals_in_base(
     if frame == "tracker":
         goal = np.linalg.inv(model.base2tracker(params)) @ goal
     return goal
+
+
+REACH_MARGIN = 1.5  # targets beyond this x the robot's longest possible reach: units?
+
+
+def check_reach(goal2base: Array, model: KinematicModel, source: str | Path) -> None:
+    """InputError naming `source` when every goal (n, 4, 4) [m] lies beyond REACH_MARGIN x
+    the robot's reach (the sum of its link lengths |a| + |d| and the first target's
+    offset): targets in mm read as m, or in the tracker frame read as base, never reach."""
+    robot = model.robot
+    reach = float(np.sum(np.abs(robot.a)) + np.sum(np.abs(robot.d)))
+    distance = np.linalg.norm(goal2base[:, :3, 3], axis=1)
+    if len(distance) and np.all(distance > REACH_MARGIN * reach + 0.5):
+        raise InputError(
+            f"{source}: every target is out of robot {robot.name}'s reach (median "
+            f"{np.median(distance):.4g} m from its base, reach about {reach:.2f} m): targets in "
+            "mm (--unit mm) or in the tracker frame (--frame tracker)?"
+        )

@@ -28,6 +28,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from robot_calib.compensate import Compensation, compensate_commands
 from robot_calib.compensate.solve import nominal_counterpart
+from robot_calib.compensate.write import LARGE_CHANGE_DEG
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify.params_file import load_params
 from robot_calib.kinematics.description import with_joint_names
@@ -112,6 +113,11 @@ class CompensatorNode(Node):
             "the robot's temperature [deg C], for a model that follows it (default: none)",
         )  # fmt: skip
         depth: int = declare(self, "qos_depth", 10, "queue depth of both topics")
+        self.max_correction = declare(
+            self, "max_correction", LARGE_CHANGE_DEG,
+            "a trajectory with a point corrected by more than this [deg] (near a singularity) "
+            "or not reached is dropped, not sent",
+        )  # fmt: skip
         states_topic: str = declare(
             self, "joint_states_topic", JOINT_STATES_TOPIC,
             "the robot's joint states: where a trajectory starts and each joint's last "
@@ -191,21 +197,26 @@ class CompensatorNode(Node):
             self.dropped += 1
             self.get_logger().error(f"dropped a trajectory: {exc}")
             return
+        change = np.abs(result.q - q)
+        k, j = np.unravel_index(int(np.argmax(change)), change.shape)
+        if not result.converged.all() or np.degrees(change[k, j]) > self.max_correction:
+            self.dropped += 1
+            bad = np.flatnonzero(~result.converged).tolist()
+            self.get_logger().error(
+                f"dropped a trajectory, not sent: points {bad[:10]} not reached by the "
+                f"calibrated model (singularity or out of reach)" if bad else
+                f"dropped a trajectory, not sent: point {k} {names[j]} would be corrected by "
+                f"{np.degrees(change[k, j]):.3f} deg > max_correction {self.max_correction:g} "
+                "deg (near a singularity?)"
+            )  # fmt: skip
+            return
         self.publisher.publish(corrected_trajectory(msg, result.q, names))
         self.published += 1
         self.last = result
-        change = np.abs(result.q - q)
-        k, j = np.unravel_index(int(np.argmax(change)), change.shape)
         self.get_logger().info(
             f"{len(q)} points compensated; largest correction {change[k, j] * 1e3:.3f} mrad "
             f"({names[j]}, point {k}); model error max {result.error_m.max() * 1e6:.3f} um"
         )
-        if not result.converged.all():
-            bad = np.flatnonzero(~result.converged).tolist()
-            self.get_logger().warning(
-                f"points {bad[:10]} not reached by the calibrated model (near a singularity "
-                f"or out of reach): largest error {result.error_m.max() * 1e3:.3f} mm"
-            )
 
 
 def main(args: list[str] | None = None) -> None:
