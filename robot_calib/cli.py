@@ -263,8 +263,13 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         args.bags, robot, args.holdout or (), args.pair_tolerance, _log,
         None if accuracy is None else accuracy * 1e-3,
     )  # fmt: skip
-    report = pipeline.write_diagnosis(diagnosis, ladder, recording, output, args.force)
+    compared, warnings = pipeline.compare_before_after(ladder)
+    diagnosis = dataclasses.replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
+    report = pipeline.write_diagnosis(diagnosis, ladder, recording, output, args.force,
+                                      warnings=warnings, compared=compared)  # fmt: skip
     _print_diagnosis(diagnosis, output, report, time.perf_counter() - started)
+    for warning in warnings:
+        print(warning)
     print(f"best model (the ladder's chosen rung): {diagnosis.ladder[-1].model} -> {best}")
     return 0
 
@@ -1079,13 +1084,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--joints",
         help="JOINTS.csv of the nominal program, header q1..qJ [rad] (optional t [s], "
         "dir1..dirJ approach directions, temp_c): where the nominal model puts the tool is "
-        "where the compensated commands make the calibrated robot go",
+        "where the compensated commands make the calibrated robot go (this or --targets is "
+        "required)",
     )  # fmt: skip
     given.add_argument(
         "--targets",
         help="TARGETS.csv: header x,y,z (the tool point, --unit), optional qx,qy,qz,qw (the "
         "tool frame's orientation; without: positions only), optional q1..qJ [rad] seeds, t "
-        "[s], dir1..dirJ, temp_c (msgs_doc/compensate.md)",
+        "[s], dir1..dirJ, temp_c (msgs_doc/compensate.md; this or --joints is required)",
     )  # fmt: skip
     comp.add_argument(
         "--frame", choices=("base", "tracker"),

@@ -26,6 +26,7 @@ from robot_calib.measurements import PAIR_TOLERANCE_S
 if TYPE_CHECKING:
     from robot_calib.accuracy import Accuracy
     from robot_calib.diagnose.diagnosis import Diagnosis
+    from robot_calib.diagnose.html_report import ModelErrors
     from robot_calib.diagnose.ladder import Ladder
     from robot_calib.identify.calibrate import Calibration
     from robot_calib.measurements import Recording
@@ -429,6 +430,7 @@ def write_diagnosis(
     calibrations: Mapping[str, Calibration] | None = None,
     best: tuple[Calibration, Path] | None = None,
     warnings: Sequence[str] = (),
+    compared: list[ModelErrors] | None = None,
 ) -> Path:
     """Write DIAGNOSIS.json at `output`, the Markdown report (+ plots) and the HTML report
     beside it, and the ladder's chosen rung as `best_params_path(output)`, all together
@@ -436,7 +438,8 @@ def write_diagnosis(
     `calibrations`: nominal / cpa models already identified from `recording` (else the HTML
     report identifies them); `best`: the model the HTML report recommends and the PARAMS.json
     it goes to (default: the ladder's chosen rung and `best_params_path(output)`);
-    `warnings`: the caller's own warnings, listed in the HTML report.
+    `warnings`: the caller's own warnings, listed in the HTML report; `compared`: the
+    before/after comparison if the caller has it (`compare_before_after`).
 
     Returns
     -------
@@ -458,7 +461,8 @@ def write_diagnosis(
         write_json_atomic(diagnosis.to_dict(), stage / output.name)
         fitted = ladder.recording if ladder.recording is not None else recording  # no outliers
         write_report(diagnosis, ladder, fitted, stage / report.name)
-        compared = compare_models(ladder, calibrations)
+        if compared is None:
+            compared = compare_models(ladder, calibrations)
         (stage / page.name).write_text(
             html_report(diagnosis, ladder, fitted, compared, recommended,
                         recommended_file.name, warnings)
@@ -600,6 +604,7 @@ def run(
     say(f"[4/{steps}] diagnose the sim-to-real gap (hold-out: {holdout.name})")
     diagnosis, ladder = diagnose_recordings(recording, description, held, log)
     best, warnings = _best_model(models, ladder)
+    diagnosis = replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
     report = write_diagnosis(
         diagnosis, ladder, recording, folder / "diagnosis.json",
         calibrations={n: m.calibration for n, m in models.items()},
@@ -616,21 +621,43 @@ def run(
                      tuple(warnings), html_report_path(folder / "diagnosis.json"))  # fmt: skip
 
 
-def _best_model(models: dict[str, ModelScore], ladder: Ladder) -> tuple[Calibration, list[str]]:
-    """The calibration with the lowest held-out rms among `models` and the ladder's rungs,
-    and a warning for every richer model that generalises worse than a simpler one
-    (geometric behind cpa: its extra parameters fit the sweeps, not the robot)."""
-    candidates = [(m.holdout.absolute_rms_mm, n, m.calibration) for n, m in models.items()]
-    candidates += [(r.heldout.absolute_rms_mm, r.model, r.calibration) for r in ladder.rungs]
+def generalisation_warnings(scores: Sequence[tuple[str, float]]) -> list[str]:
+    """A warning for every model of `scores` ((name, held-out abs rms [mm]), simplest first)
+    that scores worse than the one before it: a richer model that generalises worse."""
     warnings = []
-    order = [n for n in RUN_MODELS if n in models]
-    for simple, rich in zip(order, order[1:]):
-        a, b = models[simple].holdout.absolute_rms_mm, models[rich].holdout.absolute_rms_mm
+    for (simple, a), (rich, b) in zip(scores, scores[1:]):
         if b > a:
             warnings.append(
                 f"warning: {rich} generalises worse than {simple} ({b:.4f} vs {a:.4f} mm "
                 f"held-out abs rms): its extra parameters fit the calibration poses, not the "
                 "robot; the best model is chosen by held-out error"
             )
+    return warnings
+
+
+def compare_before_after(
+    ladder: Ladder, calibrations: Mapping[str, Calibration] | None = None
+) -> tuple[list[ModelErrors], list[str]]:
+    """The HTML report's before/after models (`compare_models`: nominal, cpa, geometric,
+    the best rung) and, when they are all scored on hold-out bags, a warning for each that
+    generalises worse than the simpler one before it (what `diagnose` says, as `run` does)."""
+    from robot_calib.diagnose.html_report import compare_models
+
+    compared = compare_models(ladder, calibrations)
+    if ladder.holdout is None:  # nominal/cpa in-sample, the rungs k-fold: not comparable
+        return compared, []
+    return compared, generalisation_warnings(
+        [(m.model, m.accuracy.absolute_rms_mm) for m in compared]
+    )
+
+
+def _best_model(models: dict[str, ModelScore], ladder: Ladder) -> tuple[Calibration, list[str]]:
+    """The calibration with the lowest held-out rms among `models` and the ladder's rungs,
+    and a warning for every richer model that generalises worse than a simpler one
+    (geometric behind cpa: its extra parameters fit the sweeps, not the robot)."""
+    candidates = [(m.holdout.absolute_rms_mm, n, m.calibration) for n, m in models.items()]
+    candidates += [(r.heldout.absolute_rms_mm, r.model, r.calibration) for r in ladder.rungs]
+    order = [n for n in RUN_MODELS if n in models]
+    warnings = generalisation_warnings([(n, models[n].holdout.absolute_rms_mm) for n in order])
     best = min(candidates, key=lambda c: c[0])
     return best[2], warnings

@@ -56,14 +56,23 @@ def next_direction(
     return np.where(np.abs(step) > tolerance, np.sign(step), previous_direction)
 
 
-def approach_directions(q: Array, tolerance: float = JOINT_CHANGE_TOLERANCE) -> Array:
+def approach_directions(
+    q: Array,
+    tolerance: float = JOINT_CHANGE_TOLERANCE,
+    start: tuple[Array, Array] | None = None,
+) -> Array:
     """Approach direction of every joint at every pose.
 
     q : shape (n_poses, n_joints), readings in visiting order [rad].
-    Returns shape (n_poses, n_joints), values +1.0 / -1.0 (+1 at the first pose).
+    start : the robot's readings (J,) [rad] and directions (J,) before the first pose, when
+        known (a trajectory sent to a robot that stands somewhere): the first pose's
+        directions then follow from them; None: +1 at the first pose (the contract's rule).
+    Returns shape (n_poses, n_joints), values +1.0 / -1.0.
     """
     q = np.asarray(q, dtype=float)
     direction = np.ones(q.shape)
+    if start is not None and len(q):
+        direction[0] = next_direction(np.asarray(start[1], float), start[0], q[0], tolerance)
     for k in range(1, q.shape[0]):
         direction[k] = next_direction(direction[k - 1], q[k - 1], q[k], tolerance)
     return direction

@@ -152,6 +152,9 @@ def test_targets_from_the_home_pose_in_either_frame() -> None:
     targets = targets_of(goal, False, None)
     found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params, targets, goal)
     assert found.reached.mean() >= 0.9
+    # every target moved from the nominal solution took steps to get there (all rounds)
+    moved = np.abs(found.compensated.q - found.nominal.q).max(axis=1) > 1e-9
+    assert moved.any() and np.all(found.compensated.iterations[moved] >= 1)
     compensated = WORLD.model.target_points(
         WORLD.truth, Poses.from_readings(found.compensated.q, found.direction)
     )

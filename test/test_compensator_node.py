@@ -17,6 +17,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
 from test_compensate import NOISE_FLOOR_M, ROBOT, WORLD, calibrated
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -78,14 +79,23 @@ def test_a_trajectory_comes_back_compensated(context: Context, params_file: Path
     publisher = client.create_publisher(JointTrajectory, IN, 10)
     received: list[JointTrajectory] = []
     client.create_subscription(JointTrajectory, OUT, received.append, 10)
+    states = client.create_publisher(JointState, "/joint_states", 10)
     executor = SingleThreadedExecutor(context=context)
     for node in (compensator, client):
         executor.add_node(node)
     names = [ROBOT.joint_names[j] for j in ORDER]
     q = random_plan(ROBOT, 40, np.random.default_rng(11)).q
+    # the robot stands at the first point, joint 4 having come down to it (backlash side -1):
+    # a joint that keeps still keeps that side, which the node must take from /joint_states
+    start = (q[0], np.array([1.0, 1.0, 1.0, -1.0, 1.0, 1.0]))
+    standing = JointState(name=list(ROBOT.joint_names), position=start[0].tolist(),
+                          velocity=(start[1] * 1e-9).tolist())  # fmt: skip
     try:
         spin_until(executor, lambda: publisher.get_subscription_count() > 0
-                   and compensator.publisher.get_subscription_count() > 0)  # fmt: skip
+                   and compensator.publisher.get_subscription_count() > 0
+                   and states.get_subscription_count() > 0)  # fmt: skip
+        states.publish(standing)
+        spin_until(executor, lambda: compensator.robot_state is not None)
         publisher.publish(trajectory(q, names))
         spin_until(executor, lambda: len(received) == 1)
         bad = trajectory(q[:3], [*names[:-1], "joint_x"])  # an unknown joint: dropped
@@ -110,13 +120,16 @@ def test_a_trajectory_comes_back_compensated(context: Context, params_file: Path
 
     cal, _ = calibrated()
     nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
-    commands = Poses.from_readings(q, None, seconds)
+    commands = Poses.from_readings(q, approach_directions(q, start=start), seconds)
+    assert commands.direction[0, 3] == -1.0
     expected = compensate_commands(cal.model, cal.parameters, nominal, nominal_params, commands)
     np.testing.assert_allclose(corrected, expected.q, rtol=0, atol=1e-12)
     assert np.abs(corrected - q).max() > 1e-4  # corrected (backlash 2 mrad), not passed on
 
     promised = nominal.target_points(nominal_params, commands)  # tracker frame
-    moved = Poses.from_readings(corrected, approach_directions(corrected))  # as the robot moves
+    moved = Poses.from_readings(  # as the robot moves, from where it stood
+        corrected, approach_directions(corrected, start=start)
+    )
     as_planned = WORLD.model.target_points(WORLD.truth, commands)
     compensated = WORLD.model.target_points(WORLD.truth, moved)
     assert np.linalg.norm(as_planned - promised, axis=1).mean() > 0.3e-3

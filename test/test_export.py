@@ -141,7 +141,10 @@ def test_the_urdf_header_lists_the_effects_it_cannot_hold_and_their_size() -> No
     cal = replace(cal, parameters=cal.parameters.with_values({name: 2e-4}))
     text = FORMATS["urdf"].render(cal, "p.json")
     header = text.split("-->")[0]
-    assert f"backlash[4]: largest |{name}| = 200.0 urad" in header
+    assert f"(largest parameter |{name}| = 200.0 urad)" in header
+    # what it adds at the tool: 200 urad of play on joint 4, about a 0.1-0.4 m lever
+    size = float(header.split("backlash[4]: moves the tool by ")[1].split(" mm rms")[0])
+    assert 0.01 < size < 0.1
     assert "p.json" in header and "kr5_sixx_r650" in header
     # The geometry is still the model's without its effects.
     q = random_plan(cal.model.robot, 5, np.random.default_rng(2)).q

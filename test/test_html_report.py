@@ -6,6 +6,8 @@ in a real headless browser (Debian's Chromium) to a screenshot that must not be 
 from __future__ import annotations
 
 import base64
+import dataclasses
+import html
 import shutil
 import subprocess
 from html.parser import HTMLParser
@@ -15,6 +17,8 @@ import numpy as np
 import pytest
 
 from robot_calib import pipeline
+from robot_calib.diagnose.diagnosis import Diagnosis
+from robot_calib.diagnose.ladder import Ladder
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points
@@ -36,17 +40,44 @@ def recorded(plan: Plan, seed: int, blunder: int | None = None) -> Recording:
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def diagnosed() -> tuple[Diagnosis, Ladder, Recording]:
     calibration = recorded(paper_test_plan(2), 1, BLUNDER)
     rnd = random_plan(ROBOT, 60, np.random.default_rng(5))
     cube = iso9283_plan(WORLD.model, WORLD.truth, cycles=3)
     held = recorded(Plan("holdout", np.vstack([rnd.q, cube.q]),
                          np.concatenate([rnd.sweep, cube.sweep]), 0.1), 2)  # fmt: skip
     diagnosis, ladder = pipeline.diagnose_recordings(calibration, ROBOT, held)
+    return diagnosis, ladder, calibration
+
+
+@pytest.fixture(scope="module")
+def report(
+    tmp_path_factory: pytest.TempPathFactory, diagnosed: tuple[Diagnosis, Ladder, Recording]
+) -> Path:
+    diagnosis, ladder, calibration = diagnosed
+    compared, warnings = pipeline.compare_before_after(ladder)
     out = tmp_path_factory.mktemp("html") / "diagnosis.json"
-    pipeline.write_diagnosis(diagnosis, ladder, calibration, out,
-                             warnings=["warning: <script>alert(1)</script> & co"])  # fmt: skip
+    extra = ["warning: <script>alert(1)</script> & co", *warnings]
+    pipeline.write_diagnosis(
+        diagnosis, ladder, calibration, out, compared=compared, warnings=extra
+    )
     return pipeline.html_report_path(out)
+
+
+def test_diagnose_says_when_a_richer_model_generalises_worse(
+    diagnosed: tuple[Diagnosis, Ladder, Recording], report: Path
+) -> None:
+    """Scored on hold-out bags, each model that does worse than the simpler one before it
+    (nominal, cpa, geometric, the best rung) gets a warning, which the report lists."""
+    compared, warnings = pipeline.compare_before_after(diagnosed[1])
+    scores = [(m.model, m.accuracy.absolute_rms_mm) for m in compared]
+    assert [m for m, _ in scores][:3] == ["nominal", "cpa", "geometric"]
+    worse = [rich for (_, a), (rich, b) in zip(scores, scores[1:]) if b > a]
+    assert [w.split(" generalises worse")[0].removeprefix("warning: ") for w in warnings] == worse
+    page = report.read_text()
+    assert all(html.escape(w, quote=True) in page for w in warnings)
+    no_holdout = dataclasses.replace(diagnosed[1], holdout=None)
+    assert pipeline.compare_before_after(no_holdout)[1] == []  # not comparable: silent
 
 
 class Links(HTMLParser):

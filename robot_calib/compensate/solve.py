@@ -178,6 +178,7 @@ def compensate_targets(
     direction = approach_directions(first.q) if targets.direction is None else targets.direction
     poses = replace(start, q=first.q, direction=direction)
     result = solve_ik(calibrated, params, poses, goal2base, tool, oriented)
+    steps = result.iterations.copy()  # every round's steps count: the target's iterations
     for _ in range(DIRECTION_ROUNDS if targets.direction is None else 0):
         found = approach_directions(result.q)
         if np.array_equal(found, direction):
@@ -185,6 +186,8 @@ def compensate_targets(
         direction = found
         poses = replace(poses, q=result.q, direction=direction)
         result = solve_ik(calibrated, params, poses, goal2base, tool, oriented)
+        steps += result.iterations
+    result = replace(result, iterations=steps)
     limits = calibrated.robot.limits
     within = np.all((result.q >= limits[:, 0]) & (result.q <= limits[:, 1]), axis=1)
     return TargetCompensation(first, result, direction, within)

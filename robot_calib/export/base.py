@@ -4,7 +4,7 @@ part of each DH/Hayati row, roll-pitch-yaw of a rotation, the effects no geometr
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -15,8 +15,6 @@ from robot_calib.kinematics.frames import Array
 
 if TYPE_CHECKING:
     from robot_calib.identify.calibrate import Calibration
-    from robot_calib.kinematics.parameters import ParameterVector
-    from robot_calib.model import KinematicModel
 
 _GIMBAL_COS = 1e-9  # |cos(pitch)| below this: roll and yaw turn about one axis, roll := 0
 
@@ -41,12 +39,7 @@ def constant_rows(cal: Calibration) -> Array:
     ``Rz(theta_j + offset_j) Tz(d_j) Tx(a_j) Rx(alpha_j) Ry(beta_j)`` at joint variables
     M q = 0 (offset_j: the robot's `reading_to_joint` offset [rad]), geometric values only
     (no effects). Frame j = frame j-1 Rz((M q)_j) row_j."""
-    return model_rows(cal.model, cal.parameters)
-
-
-def model_rows(model: KinematicModel, params: ParameterVector) -> Array:
-    """`constant_rows` of any model and parameters (J, 4, 4): the nominal geometry when
-    `params` are the description's nominal values."""
+    model, params = cal.model, cal.parameters
     zero = np.zeros((1, model.robot.n_joints))
     return link_transforms(model.dh_table(params, zero))[0]
 
@@ -91,20 +84,59 @@ def labelled_size(unit: str, value: float, mm_digits: int = 4, urad_digits: int 
     return f"{value:.4g} {unit}"
 
 
+# What an effect adds at the tool is measured at random poses over an hour of work between
+# 15 and 35 deg C: enough to show backlash (both approach directions), drift and warm-up.
+SIZE_POSES = 200
+SIZE_HOURS = 1.0
+SIZE_TEMPERATURE_C = (15.0, 35.0)
+
+
+def effect_sizes(cal: Calibration) -> dict[str, tuple[float, float]]:
+    """What each effect of the model moves the first target by [m], as (rms, max) over
+    SIZE_POSES random poses (directions as visited, times over SIZE_HOURS, temperatures in
+    SIZE_TEMPERATURE_C): the model's points with the effect against the same model with its
+    parameters at 0 (no effect). By effect label."""
+    from robot_calib.poses import Poses
+    from robot_calib.sim.plans import random_plan
+
+    model, params = cal.model, cal.parameters
+    rng = np.random.default_rng(0)
+    q = random_plan(model.robot, SIZE_POSES, rng).q
+    time = np.sort(rng.uniform(0.0, SIZE_HOURS * 3600.0, SIZE_POSES))
+    visited = Poses.from_readings(q, None, time)
+    poses = replace(visited, temperature=rng.uniform(*SIZE_TEMPERATURE_C, SIZE_POSES))
+    full = model.target_points(params, poses)
+    out = {}
+    for effect in model.effects:
+        off = params.with_values(dict.fromkeys(effect.parameter_names(model.robot), 0.0))
+        moved = np.linalg.norm(full - model.target_points(off, poses), axis=1)
+        out[effect.label] = (float(np.sqrt(np.mean(moved**2))), float(moved.max()))
+    return out
+
+
 def effect_lines(cal: Calibration) -> list[str]:
-    """One line per effect of the calibration's model (none: an empty list): its label and
-    its largest parameter by magnitude, in mm / urad (other units as stored)."""
+    """One line per effect of the calibration's model (none: an empty list): what it moves
+    the tool by (`effect_sizes`, mm) and its largest parameter (mm / urad / as stored),
+    then a line saying where the sizes were taken."""
     lines = []
     params, robot = cal.parameters, cal.model.robot
+    sizes = effect_sizes(cal) if cal.model.effects else {}
     for effect in cal.model.effects:
         names = effect.parameter_names(robot)
         if not names:
             lines.append(f"{effect.label}: no parameters")
             continue
+        rms, peak = sizes[effect.label]
         largest = max(names, key=lambda n: abs(params[n]))
         unit = params.parameters[params.index(largest)].unit
         lines.append(
-            f"{effect.label}: largest |{largest}| = {labelled_size(unit, abs(params[largest]))}"
+            f"{effect.label}: moves the tool by {rms * 1e3:.4f} mm rms, {peak * 1e3:.4f} mm max "
+            f"(largest parameter |{largest}| = {labelled_size(unit, abs(params[largest]))})"
+        )
+    if lines:
+        lines.append(
+            f"(tool sizes at {SIZE_POSES} random poses over {SIZE_HOURS:g} h at "
+            f"{SIZE_TEMPERATURE_C[0]:g}-{SIZE_TEMPERATURE_C[1]:g} deg C)"
         )
     return lines
 

@@ -45,15 +45,13 @@ import numpy as np
 from robot_calib.errors import RobotDescriptionError
 from robot_calib.export.base import (
     ExportError,
-    constant_rows,
     effect_lines,
     joint_signs,
-    model_rows,
     number,
     rpy,
 )
 from robot_calib.export.urdf import TRACKER, comment_text, target_link
-from robot_calib.kinematics.dh import link_transforms
+from robot_calib.kinematics.dh import chain
 from robot_calib.kinematics.frames import Array, homogeneous
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.kinematics.urdf import (
@@ -133,16 +131,6 @@ def chain_frames(chain: FileChain, q: Array) -> Array:
     return out
 
 
-def dh_joint_frames(model: KinematicModel, rows: Array) -> Array:
-    """E_1..E_{J+1} (J + 1, 4, 4) in the base frame from the DH rows (J, 4, 4) at some
-    readings: E_1 = I (DH frame 0), E_{j+1} = E_j row_j; E_{J+1} is the flange."""
-    out = np.empty((model.robot.n_joints + 1, 4, 4))
-    out[0] = np.eye(4)
-    for j in range(model.robot.n_joints):
-        out[j + 1] = out[j] @ rows[j]
-    return out
-
-
 def _lines(frames: Array, axes: Array) -> tuple[Array, Array]:
     """Axis lines: points (..., 3) and unit directions (..., 3) of frames (..., 4, 4) with
     axes (..., 3) in their own frame."""
@@ -153,9 +141,13 @@ def fit_base(points: Array, directions: Array, dh_points: Array, dh_dirs: Array)
     """B (4, 4), the root frame <- the model's base frame, that puts the model's axis lines
     (J, 3) each onto the file's: rotation by the directions, translation by least squares
     of the points' distances from the file's lines."""
+    import warnings
+
     from scipy.spatial.transform import Rotation
 
-    rotation = Rotation.align_vectors(directions, dh_dirs)[0].as_matrix()
+    with warnings.catch_warnings():  # degenerate directions: the tolerance check reports it
+        warnings.simplefilter("ignore", UserWarning)
+        rotation = Rotation.align_vectors(directions, dh_dirs)[0].as_matrix()
     projectors = np.eye(3) - np.einsum("ja,jb->jab", directions, directions)  # (J, 3, 3)
     lhs = projectors.reshape(-1, 3)
     rhs = np.einsum("jab,jb->ja", projectors, points - dh_points @ rotation.T).reshape(-1)
@@ -186,9 +178,9 @@ def _attach(joint_frame: Array, dh_frame: Array, axis: Array, sign: float) -> Ar
 
 
 def _at(model: KinematicModel, params: ParameterVector, q: Array) -> Array:
-    """E_1..E_{J+1} (n, J + 1, 4, 4) of the model's geometry at readings q (n, J)."""
-    rows = link_transforms(model.dh_table(params, q))
-    return np.stack([dh_joint_frames(model, r) for r in rows])
+    """E_1..E_{J+1} (n, J + 1, 4, 4) of the model's geometry (no effects) at readings q
+    (n, J): DH frames 0..J in the base frame, E_j = DH frame j-1, E_{J+1} the flange."""
+    return chain(model.dh_table(params, q))
 
 
 @dataclass(frozen=True)
@@ -208,7 +200,7 @@ def fit_nominal(cal: Calibration, chain: FileChain, source: str) -> NominalFit:
     model = KinematicModel(cal.model.robot, (), cal.model.targets, cal.model.oriented)
     nominal = model.parameters()
     signs = joint_signs(cal, "a URDF")
-    dh = dh_joint_frames(model, model_rows(model, nominal))
+    dh = _at(model, nominal, np.zeros((1, model.robot.n_joints)))[0]
     zero_q = np.zeros((1, len(chain.moving)))
     file0 = chain_frames(chain, zero_q)[0]
     axes = np.array([j.axis for j in chain.moving])
@@ -280,9 +272,10 @@ def render_on_nominal(cal: Calibration, source: str, nominal_path: str | Path) -
     robot = model.robot
     chain = file_chain(urdf, robot.joint_names, name)
     fit = fit_nominal(cal, chain, name)
-    dh = dh_joint_frames(model, constant_rows(cal))  # calibrated E'_1..E'_{J+1}
+    zero = np.zeros((1, model.robot.n_joints))
+    dh = _at(model, params, zero)[0]  # calibrated E'_1..E'_{J+1}
     nominal_model = KinematicModel(robot, (), model.targets, model.oriented)
-    dh_nominal = dh_joint_frames(nominal_model, model_rows(nominal_model, model.parameters()))
+    dh_nominal = _at(nominal_model, nominal_model.parameters(), zero)[0]
     n = len(chain.moving)
     new_joint = np.stack([fit.base @ dh[j] @ fit.attach[j] for j in range(n)])  # J'_j
     old_joint = np.stack([chain.zero[j.child] for j in chain.moving])  # J_j
@@ -351,6 +344,7 @@ def render_on_nominal(cal: Calibration, source: str, nominal_path: str | Path) -
     root_element.text = "\n  "
     root_element.insert(0, comment)
     out = etree.tostring(tree, xml_declaration=True, encoding="utf-8")
+    out = out.replace(b"--><robot", b"-->\n<robot", 1)  # lxml drops the prolog's line breaks
     _verify(cal, out, fit, name)
     return out.decode() + "\n"
 

@@ -5,7 +5,8 @@ Subscribes a trajectory_msgs/JointTrajectory (parameter `input_topic`), maps its
 joint_names to the calibration's joints by name (any order; parameter `joint_names` renames
 the model's joints to the controller's), compensates every point's positions with
 `compensate.compensate_commands` (approach directions from the motion between consecutive
-points, the first point's +1; time from time_from_start), and republishes the trajectory
+points, the first point's from where the robot stands and how it got there, as
+/joint_states last showed it; time from time_from_start), and republishes the trajectory
 (parameter `output_topic`) with the same header, joint_names, times, velocities,
 accelerations and efforts, only the positions corrected. A message with unknown, missing or
 repeated joints, or positions that are not finite, is logged as one error line and dropped.
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from robot_calib.compensate import Compensation, compensate_commands
@@ -30,8 +32,9 @@ from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify.params_file import load_params
 from robot_calib.kinematics.description import with_joint_names
 from robot_calib.kinematics.frames import Array
+from robot_calib.messages import JOINT_STATES_TOPIC, joint_positions, velocity_signs
 from robot_calib.nodes._common import declare, run_node
-from robot_calib.poses import Poses
+from robot_calib.poses import Poses, approach_directions, next_direction
 
 INPUT_TOPIC = "~/joint_trajectory_in"
 OUTPUT_TOPIC = "/joint_trajectory_controller/joint_trajectory"  # ros2_control's JTC listens here
@@ -109,6 +112,11 @@ class CompensatorNode(Node):
             "the robot's temperature [deg C], for a model that follows it (default: none)",
         )  # fmt: skip
         depth: int = declare(self, "qos_depth", 10, "queue depth of both topics")
+        states_topic: str = declare(
+            self, "joint_states_topic", JOINT_STATES_TOPIC,
+            "the robot's joint states: where a trajectory starts and each joint's last "
+            "approach direction (backlash); '' = not read, the first point's directions +1",
+        )  # fmt: skip
         if not params_file:
             raise InputError(f"{self.get_name()}: parameter 'params' (PARAMS.json) is required")
         self.model, self.params, _ = load_params(params_file)
@@ -128,6 +136,10 @@ class CompensatorNode(Node):
         self.subscription = self.create_subscription(
             JointTrajectory, input_topic, self.on_trajectory, qos
         )
+        self.robot_state: tuple[Array, Array] | None = None  # readings, directions (J,)
+        if states_topic:
+            self.create_subscription(JointState, states_topic, self.on_joint_state, 100)
+        self._warned_no_state = False
         self.received = self.published = self.dropped = 0
         self.last: Compensation | None = None
         self.get_logger().info(
@@ -136,10 +148,34 @@ class CompensatorNode(Node):
             f"{list(self.model.robot.joint_names)})"
         )
 
+    def on_joint_state(self, msg: JointState) -> None:
+        """Track where the robot stands and each joint's last approach direction (the
+        velocity's sign where it has one, else the change since the last reading)."""
+        try:
+            q = joint_positions(msg, self.model.robot.joint_names)
+        except InputError as exc:
+            self.get_logger().error(str(exc), throttle_duration_sec=10.0)
+            return
+        signs = velocity_signs(msg, self.model.robot.joint_names)
+        if self.robot_state is None:
+            direction = np.where(signs != 0, signs, 1.0)
+        else:
+            moved = next_direction(self.robot_state[1], self.robot_state[0], q)
+            direction = np.where(signs != 0, signs, moved)
+        self.robot_state = (q, direction)
+
     def commands(self, q: Array, time: Array) -> Poses:
         """The trajectory's points as commands: readings (n, J) [rad], directions from the
-        motion between consecutive points, times (n,) [s], the temperature parameter."""
-        poses = Poses.from_readings(q, None, time)
+        motion since the robot's last joint state and between consecutive points, times
+        (n,) [s], the temperature parameter."""
+        if self.robot_state is None and not self._warned_no_state:
+            self._warned_no_state = True
+            self.get_logger().warning(
+                "no joint state yet: the first point's approach directions are assumed +1 "
+                "(backlash compensation may be off for joints that keep still)"
+            )
+        direction = approach_directions(q, start=self.robot_state)
+        poses = Poses.from_readings(q, direction, time)
         if np.isfinite(self.temperature):
             poses = replace(poses, temperature=np.full(len(poses), self.temperature))
         return poses

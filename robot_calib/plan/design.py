@@ -8,10 +8,12 @@ scaled to unit rms over the candidates (metres and radians compare; the D choice
 depend on the scaling, its numerics do).
 
 - Candidates: readings uniform within the joint limits (shrunk by 5 % of each range, as
-  the `random` plan) whose flange and target lie at or above the floor plane z = floor_z
-  of the robot base frame (z up). The floor keeps the tool out of the table or floor the
-  robot stands on: 0.0 m (the default) is the base's mounting plane; a robot on a pedestal
-  or a wall may pass a negative value, `-inf` disables it.
+  the `random` plan) whose joint centres (the DH frame origins 1..J-1: elbow, wrist),
+  flange and target lie at or above the floor plane z = floor_z of the robot base frame
+  (z up; link surfaces are not modelled: keep a margin for the links' radius). The floor
+  keeps the arm out of the table or floor the robot stands on: 0.0 m (the default) is the
+  base's mounting plane; a robot on a pedestal or a wall may pass a negative value, `-inf`
+  disables it.
 - Which parameters: the model's free parameters, less those that no subset of the
   candidates can identify, found by `identify.identifiability.fix_unidentifiable` on the
   Jacobian of all the candidates, exactly as `calibrate` fixes them.
@@ -43,6 +45,7 @@ from numpy.typing import NDArray
 
 from robot_calib.errors import InputError
 from robot_calib.identify.identifiability import fix_unidentifiable
+from robot_calib.kinematics.dh import chain
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
@@ -56,6 +59,7 @@ DEFAULT_FLOOR_Z_M = 0.0
 RIDGE = 1e-6  # start of the greedy choice: information of unit-rms columns, far below a pose's
 #: the worst-variance exchange minimises sum(var^WORST_POWER): close to the max, yet smooth
 WORST_POWER = 32
+FLOOR_SLACK_M = 1e-9  # a point exactly on the floor (rounding) is above it
 MAX_DRAW_ROUNDS = 50  # batches of candidates drawn before giving up on the floor
 Progress = Callable[[str], None]
 
@@ -106,12 +110,14 @@ class DesignProblem:
         return self.model.jacobian(self.params, poses)[1][:, :, self.params.free]
 
 
-def flange_and_target_z(model: KinematicModel, params: ParameterVector, q: Array) -> Array:
-    """Height of the flange origin and of the first target in the robot base frame [m],
-    shape (n, 2), for readings q (n, J) [rad]."""
+def clearance_z(model: KinematicModel, params: ParameterVector, q: Array) -> Array:
+    """Height in the robot base frame [m] of the joint centres (DH frame origins 1..J-1,
+    geometry only), the flange origin and the first target, shape (n, J + 1), for readings
+    q (n, J) [rad]."""
+    centres = chain(model.dh_table(params, q))[:, 1:-1, 2, 3]  # (n, J - 1)
     flange2base = model.flange2base(params, Poses.from_readings(q))
     target = flange2base[:, :3, :3] @ model.target_offsets(params)[0] + flange2base[:, :3, 3]
-    return np.column_stack([flange2base[:, 2, 3], target[:, 2]])
+    return np.column_stack([centres, flange2base[:, 2, 3], target[:, 2]])
 
 
 def draw_candidates(
@@ -122,20 +128,22 @@ def draw_candidates(
     floor_z_m: float = DEFAULT_FLOOR_Z_M,
 ) -> Array:
     """`n` readings (n, J) [rad] uniform within the joint limits (as the `random` plan)
-    whose flange and target are at or above `floor_z_m` (robot base frame, z up)."""
+    whose joint centres, flange and target are at or above `floor_z_m` (robot base frame,
+    z up)."""
     kept: list[Array] = []
     found = drawn = 0
     for _ in range(MAX_DRAW_ROUNDS):
         q = random_plan(model.robot, max(n, 100), rng).q
         drawn += len(q)
-        q = q[np.all(flange_and_target_z(model, params, q) >= floor_z_m, axis=1)]
+        q = q[np.all(clearance_z(model, params, q) >= floor_z_m - FLOOR_SLACK_M, axis=1)]
         kept.append(q)
         found += len(q)
         if found >= n:
             return np.concatenate(kept)[:n]
     raise InputError(
-        f"--floor-z {floor_z_m}: only {found} of {drawn} random poses put the flange and "
-        f"target above z = {floor_z_m} m of the robot base; lower the floor"
+        f"--floor-z {floor_z_m}: only {found} of {drawn} random poses keep the joint "
+        f"centres, flange and target above z = {floor_z_m} m of the robot base; lower the "
+        "floor"
     )
 
 
