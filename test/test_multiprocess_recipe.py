@@ -49,7 +49,6 @@ def test_recipe_as_separate_processes_records_every_pose(tmp_path: Path) -> None
     tracker = node("sim_tracker", tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     recorder = node("recorder", tmp_path, "-p", f"output:={bag}",
                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT)  # fmt: skip
-    started = time.monotonic()
     try:
         robot_out, _ = robot.communicate(timeout=30)
         assert robot.returncode == 0, robot_out[-2000:]
@@ -63,7 +62,6 @@ def test_recipe_as_separate_processes_records_every_pose(tmp_path: Path) -> None
         if robot.poll() is None:
             robot.kill()
             robot.wait()
-    elapsed = time.monotonic() - started
     assert recorder.returncode == 0 and tracker.returncode == 0, recorder_out
     assert "waiting for 2 subscriber(s) on /joint_states" in robot_out
     plan = paper_test_plan(1)
@@ -78,4 +76,3 @@ def test_recipe_as_separate_processes_records_every_pose(tmp_path: Path) -> None
             [joint_positions(m.decode(), names) for m in reader.messages([JOINT_STATES_TOPIC])]
         )
     np.testing.assert_array_equal(q, plan.q)  # every pose, in the plan's order
-    assert elapsed < 15.0
