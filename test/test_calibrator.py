@@ -24,6 +24,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Empty, Float64MultiArray, String
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from robot_calib.bag import BagReader
@@ -176,7 +177,7 @@ def test_live_mode_identifies_the_world_truth(context: Context, trigger: str) ->
     js_pub = source.create_publisher(JointState, JOINT_STATES_TOPIC, deep)
     pt_pub = source.create_publisher(PointStamped, POINT_TOPIC, deep)
     solve_pub = source.create_publisher(Empty, "/calibrator/solve", 10)
-    client = source.create_client(SelfTest, "/calibrator/calibrate")
+    client = source.create_client(Trigger, "/calibrator/solve")
     executor = SingleThreadedExecutor(context=context)
     for node in (calibrator, listener, source):
         executor.add_node(node)
@@ -208,12 +209,13 @@ def test_live_mode_identifies_the_world_truth(context: Context, trigger: str) ->
             solve_pub.publish(Empty())
         if trigger == "service":
             spin_until(executor, client.service_is_ready)
-            future = client.call_async(SelfTest.Request())
+            future = client.call_async(Trigger.Request())
             spin_until(executor, future.done)
             answer = future.result()
-            assert answer.passed == b"\x01" and answer.id == "geometric"
-            values = {kv.key: kv.value for kv in answer.status[0].values}
-            assert values["points"] == "290" and float(values["absolute_mean_mm"]) < 1e-3
+            # the outcome in one line: model, in-sample accuracy (exact points: ~0 mm), points
+            assert answer.success, answer.message
+            assert answer.message.startswith("geometric: in-sample seed criterion mean 0.0000")
+            assert answer.message.endswith("(290 points)")
         spin_until(executor, lambda: "parameters" in listener.last)
         if trigger == "idle":  # no new point since: no second solve
             deadline = time.monotonic() + 2 * idle_s
@@ -239,13 +241,65 @@ def test_live_mode_identifies_the_world_truth(context: Context, trigger: str) ->
 
 def test_live_solve_without_data_logs_an_error_and_keeps_running(context: Context) -> None:
     calibrator = CalibratorNode(context=context)
+    caller = Node("caller", context=context)
+    client = caller.create_client(Trigger, "/calibrator/solve")
+    executor = SingleThreadedExecutor(context=context)
+    for node in (calibrator, caller):
+        executor.add_node(node)
     try:
-        assert calibrator.solve() is None
+        spin_until(executor, client.service_is_ready)
+        future = client.call_async(Trigger.Request())
+        spin_until(executor, future.done)
         assert isinstance(calibrator.error, InputError)
         assert "none of 0 tracker points" in str(calibrator.error)
         assert not calibrator.failed  # live mode: the node stays up
+        assert calibrator.solve() is None
     finally:
-        calibrator.destroy_node()
+        executor.shutdown()
+        for node in (calibrator, caller):
+            node.destroy_node()
+    answer = future.result()
+    assert not answer.success and answer.message == str(calibrator.error)
+
+
+def test_deprecated_selftest_service_still_answers_and_warns_once(
+    context: Context, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """~/calibrate (diagnostic_msgs/srv/SelfTest) works for a release more beside ~/solve
+    (std_srvs/srv/Trigger); its first call logs one warning naming the replacement. Both
+    services also answer in bag mode, with the bags' calibration (no second solve)."""
+    calibrator = CalibratorNode(bags=[SAMPLE], context=context)
+    caller = Node("caller", context=context)
+    old = caller.create_client(SelfTest, "/calibrator/calibrate")
+    new = caller.create_client(Trigger, "/calibrator/solve")
+    executor = SingleThreadedExecutor(context=context)
+    for node in (calibrator, caller):
+        executor.add_node(node)
+    answers = []
+    try:
+        spin_until(executor, lambda: calibrator.calibration is not None)
+        spin_until(executor, lambda: old.service_is_ready() and new.service_is_ready())
+        for client, request in ((old, SelfTest.Request()), (old, SelfTest.Request()),
+                                (new, Trigger.Request())):  # fmt: skip
+            future = client.call_async(request)
+            spin_until(executor, future.done)
+            answers.append(future.result())
+    finally:
+        executor.shutdown()
+        for node in (calibrator, caller):
+            node.destroy_node()
+    assert calibrator.solves == 1
+    line = calibrator.calibration.accuracy.line()
+    for answer in answers[:2]:
+        assert answer.passed == b"\x01" and answer.id == "geometric"
+        assert answer.status[0].message == line
+        values = {kv.key: kv.value for kv in answer.status[0].values}
+        assert values["points"] == "290" and float(values["absolute_mean_mm"]) < 0.05
+    assert answers[2].success and answers[2].message == f"geometric: in-sample {line}"
+    warnings = [x for x in capfd.readouterr().err.splitlines() if "deprecated" in x]
+    assert len(warnings) == 1, warnings
+    assert "/calibrator/calibrate" in warnings[0] and "/calibrator/solve" in warnings[0]
+    assert "std_srvs/srv/Trigger" in warnings[0]
 
 
 def test_bad_bag_exits_with_status_2_and_one_error_line() -> None:

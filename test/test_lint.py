@@ -12,7 +12,7 @@ RUFF = Path(sys.executable).with_name("ruff")
 
 def test_ruff_check() -> None:
     result = subprocess.run(
-        [str(RUFF), "check", "robot_calib", "test", "scripts", "benchmarks"],
+        [str(RUFF), "check", "robot_calib", "test", "scripts", "benchmarks", "launch"],
         cwd=REPO,
         capture_output=True,
         text=True,
@@ -23,7 +23,7 @@ def test_ruff_check() -> None:
 
 def test_ruff_format() -> None:
     result = subprocess.run(
-        [str(RUFF), "format", "--check", "robot_calib", "test", "scripts", "benchmarks"],
+        [str(RUFF), "format", "--check", "robot_calib", "test", "scripts", "benchmarks", "launch"],
         cwd=REPO,
         capture_output=True,
         text=True,

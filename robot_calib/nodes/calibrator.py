@@ -4,10 +4,11 @@ Bag mode (parameter `bags` set): once at start, read and pair the bags (CONTRACT
 section 1), calibrate, publish. Live mode (`bags` empty): buffer /joint_states and
 /laser_tracker/point (with parameter `targets` also further targets' /laser_tracker/NAME/point,
 with `six_dof_targets` 6-DoF probes' /laser_tracker/(NAME/)pose); on a call of the service
-`~/calibrate` (diagnostic_msgs/srv/SelfTest: empty request, the outcome as a
-DiagnosticStatus; std_srvs is not a dependency), a std_msgs/Empty on `~/solve`, or after
-`solve_after_idle_s` without a new point ("the plan has ended"), pair everything received
-so far exactly as a bag is paired and calibrate. Results go out on latched (transient
+`~/solve` (std_srvs/srv/Trigger: the outcome as success + one line), a std_msgs/Empty on
+the topic `~/solve`, or after `solve_after_idle_s` without a new point ("the plan has
+ended"), pair everything received so far exactly as a bag is paired and calibrate. The
+service `~/calibrate` (diagnostic_msgs/srv/SelfTest) does the same for a release more,
+deprecated: its first call logs a warning naming `~/solve`. Results go out on latched (transient
 local) topics: `~/parameters` (the PARAMS.json document), `~/summary`, `~/residuals` and
 `~/markers` (RViz / Foxglove). Topics, layouts and parameters: msgs_doc/calibrator.md.
 
@@ -40,6 +41,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Empty, Float64MultiArray, MultiArrayDimension, String
+from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from robot_calib.diagnose.diagnosis import Diagnosis
@@ -152,6 +154,11 @@ class CalibratorNode(Node):
         self._lock = threading.Lock()  # the live buffers, shared with the solving thread
         self.busy = False  # a solve is running
         self.stopping = False  # destroy_node was called: a running solve publishes nothing
+        self._warned_calibrate = False  # the deprecated ~/calibrate warns once
+        group = self._solver_group
+        self.create_service(Trigger, "~/solve", self._on_solve_service, callback_group=group)
+        # deprecated (issue 16): SelfTest on ~/calibrate, kept for one release beside ~/solve
+        self.create_service(SelfTest, "~/calibrate", self._on_calibrate, callback_group=group)
         if self.bags:
             self._once = self.create_timer(
                 0.0, self._solve_bags, clock=steady, callback_group=self._solver_group
@@ -188,9 +195,7 @@ class CalibratorNode(Node):
                 DISCOVERY_PERIOD_S, self._discover_poses, clock=steady
             )
             self._discover_poses()
-        group = self._solver_group
         self.create_subscription(Empty, "~/solve", self._on_solve, 10, callback_group=group)
-        self.create_service(SelfTest, "~/calibrate", self._on_calibrate, callback_group=group)
         if self.solve_after_idle_s > 0:
             period = min(self.solve_after_idle_s / 4, 0.5)
             self._idle_timer = self.create_timer(
@@ -204,17 +209,41 @@ class CalibratorNode(Node):
         topics = [JOINT_STATES_TOPIC, *self.live_topics]
         self.get_logger().info(
             f"collecting {', '.join(topics[:-1])} and {topics[-1]}; solving {self.model_spec} "
-            f"on {self.resolve_topic_name('~/solve')}{idle}"
+            f"on {self.resolve_topic_name('~/solve')} (topic std_msgs/msg/Empty or service "
+            f"std_srvs/srv/Trigger){idle}"
         )
 
+    def _solve_on_request(self) -> tuple[Calibration | None, str]:
+        """A service's solve: live mode solves now, bag mode answers with the bags' result.
+        Returns the calibration (None on failure) and one line: the model and its in-sample
+        accuracy (seed criterion and absolute, mm, points fitted), or the error."""
+        cal = self.calibration if self.bags else self.solve()
+        if cal is None:
+            return None, str(self.error) if self.error else "no calibration"
+        return cal, f"{cal.name}: in-sample {cal.accuracy.line()}"
+
+    def _on_solve_service(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
+        """Service ~/solve (std_srvs/srv/Trigger): solve now; `success` and one line."""
+        cal, response.message = self._solve_on_request()
+        response.success = cal is not None
+        return response
+
     def _on_calibrate(self, _request: SelfTest.Request, response: SelfTest.Response) -> Any:
-        """Service ~/calibrate (diagnostic_msgs/srv/SelfTest: empty request): solve now and
-        answer with the outcome as one DiagnosticStatus (message = accuracy or the error)."""
-        cal = self.calibration if self.bags else self.solve()  # bag mode: the bags' result
+        """Deprecated service ~/calibrate (diagnostic_msgs/srv/SelfTest: empty request): as
+        ~/solve, the outcome as one DiagnosticStatus (message = accuracy or the error). The
+        first call logs a deprecation warning naming ~/solve."""
+        if not self._warned_calibrate:
+            self._warned_calibrate = True
+            self.get_logger().warning(
+                f"service {self.resolve_service_name('~/calibrate')} "
+                "(diagnostic_msgs/srv/SelfTest) is deprecated and goes in the next release: "
+                f"call {self.resolve_service_name('~/solve')} (std_srvs/srv/Trigger) instead"
+            )
+        cal, message = self._solve_on_request()
         status = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="")
         if cal is None:
             status.level = DiagnosticStatus.ERROR
-            status.message = str(self.error) if self.error else "no calibration"
+            status.message = message
         else:
             status.level = DiagnosticStatus.OK
             status.message = cal.accuracy.line()

@@ -42,6 +42,9 @@ QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1000
 )
 MODES = ("plan", "controller")
+# /joint_states readers plan mode waits for: the README's recipe runs a recorder and
+# sim_tracker; starting on the first one lost the poses the other one missed (issue 16)
+DEFAULT_WAIT_FOR = 2
 
 
 def trajectory_topic(controller: str) -> str:
@@ -78,8 +81,9 @@ class SimRobotNode(Node):
         self.wait_for = declare(
             self,
             "wait_for_subscribers",
-            1,
-            "start once this many /joint_states readers are matched",
+            DEFAULT_WAIT_FOR,
+            "start once this many /joint_states readers are matched (2: a recorder and "
+            "sim_tracker, as in the README's recipe)",
         )
         publish_clock = declare(
             self, "publish_clock", False, "also publish /clock = measurement time (simulated time)"

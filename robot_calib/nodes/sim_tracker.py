@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import Point, PointStamped, PoseWithCovarianceStamped
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
@@ -40,6 +41,9 @@ from robot_calib.nodes.sim_robot import QOS
 from robot_calib.sim.measure import StreamingTracker, TrackerReading
 from robot_calib.sim.world import load_world
 
+# readers of each published topic to wait for: the recorder (README recipe, issue 16)
+DEFAULT_WAIT_FOR = 1
+
 
 class SimTrackerNode(Node):
     """Per received JointState (unless dropped) one point per target and one pose per 6-DoF
@@ -56,10 +60,10 @@ class SimTrackerNode(Node):
         self.wait_for = declare(
             self,
             "wait_for_subscribers",
-            0,
+            DEFAULT_WAIT_FOR,
             "subscribe to /joint_states only once this many readers of each topic published "
             "are matched (so a robot that waits for its own readers starts only when no "
-            "point or pose is lost)",
+            "point or pose is lost; 1: the recorder of the README's recipe; 0: at once)",
         )
         model = self.world.model
         # one topic per target of the world (msgs_doc/targets.md); the first is POINT_TOPIC
@@ -89,8 +93,16 @@ class SimTrackerNode(Node):
         self.received = 0
         self.published = 0
         self.dropped = 0
-        self._wait_timer = self.create_timer(0.01, self._subscribe_when_ready)
+        # on the steady clock: under use_sim_time /clock stands still until the robot starts
+        self._wait_timer = self.create_timer(
+            0.01, self._subscribe_when_ready, clock=Clock(clock_type=ClockType.STEADY_TIME)
+        )
         self._subscribe_when_ready()
+        if self.subscription is None:
+            self.get_logger().info(
+                f"waiting for {self.wait_for} reader(s) of each of {', '.join(self.topics)} "
+                f"before subscribing to {JOINT_STATES_TOPIC}"
+            )
 
     def _subscribe_when_ready(self) -> None:
         if self.subscription is not None:
