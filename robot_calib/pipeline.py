@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from robot_calib.diagnose.diagnosis import Diagnosis
     from robot_calib.diagnose.ladder import Ladder
     from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.latency import StreamCalibration
     from robot_calib.measurements import Recording
     from robot_calib.sim.world import World
 
@@ -331,6 +332,48 @@ def calibrate_bags(
     recording = read_bags(bags, robot, pair_tolerance, log)
     cal = calibrate_recording(recording, robot, model, ecc_order, objective, log)
     return cal, recording
+
+
+def calibrate_stream_bag(
+    bags: Sequence[str | Path],
+    robot: RobotDescription,
+    model: str = DEFAULT_MODEL,
+    ecc_order: int = DEFAULT_ECC_ORDER,
+    latency_s: float | None = None,
+    max_points: int | None = None,
+    max_gap_s: float | None = None,
+    log: Log | None = None,
+) -> StreamCalibration:
+    """Identify `model` from one stream bag (continuous tracking, msgs_doc/stream.md): the
+    joint readings interpolated to the point stamps + `latency_s` [s] (None: identified);
+    at most `max_points` points fitted (None: STREAM_MAX_POINTS), points in joint-state gaps
+    longer than `max_gap_s` [s] (None: STREAM_MAX_GAP_S) dropped. A bad model name fails
+    before the bag is read; more than one bag is an InputError (one latency per bag).
+
+    Returns
+    -------
+    stream_calibration : StreamCalibration
+        As `robot_calib.identify.latency.calibrate_stream`: the calibration, the paired
+        points it was fitted on, the pairing, the latency used and how it was found.
+    """
+    from robot_calib.bag.read import read_stream
+    from robot_calib.identify.calibrate import parse_model
+    from robot_calib.identify.latency import calibrate_stream
+    from robot_calib.measurements.stream import STREAM_MAX_GAP_S, STREAM_MAX_POINTS
+
+    parse_model(model, robot, ecc_order)
+    if len(bags) != 1:
+        raise InputError(f"--stream calibrates one bag (its own latency); got {len(bags)}")
+    if model.split("+")[0] == "cpa":
+        raise InputError(f"--stream --model {model}: a stream has no circle sweeps; use an "
+                         "LM model (nominal, geometric, geometric+EFFECT)")  # fmt: skip
+    stream = read_stream(Path(bags[0]), robot)
+    return calibrate_stream(
+        stream, robot, model, latency_s,
+        max_points=STREAM_MAX_POINTS if max_points is None else max_points,
+        max_gap_s=STREAM_MAX_GAP_S if max_gap_s is None else max_gap_s,
+        ecc_order=ecc_order, log=log,
+    )  # fmt: skip
 
 
 def diagnose_recordings(

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -64,6 +65,24 @@ class StreamCalibration:
     rounds: int
     tried_s: Array
     rms_m: Array
+
+    def document(self) -> dict[str, Any]:
+        """The PARAMS.json document of the calibration (msgs_doc/parameters.md) with a
+        `stream` section: latency_s, identified, rounds, every, points, points_kept,
+        dropped_outside_span, dropped_in_gaps (msgs_doc/stream.md)."""
+        doc = self.calibration.to_dict(self.recording)
+        p = self.pairing
+        doc["stream"] = {
+            "latency_s": self.latency_s,
+            "identified": self.rounds > 0,
+            "rounds": self.rounds,
+            "every": p.every,
+            "points": p.n_points,
+            "points_kept": p.n_kept,
+            "dropped_outside_span": p.n_outside,
+            "dropped_in_gaps": p.n_in_gaps,
+        }
+        return doc
 
     def line(self) -> str:
         """One human line on the latency."""

@@ -2,8 +2,8 @@
 
 The contract's pairing (nearest joint state within PAIR_TOLERANCE_S) assumes the robot
 stands still at each measurement. When it moves, a point is paired here with the joint
-readings *interpolated* to its stamp instead: a shape-preserving cubic (PCHIP) through the
-joint-state stream, only inside its span (no extrapolation), and only where the two joint
+readings *interpolated* to its stamp instead: a cubic spline through the joint-state
+stream (see INTERPOLATION), only inside its span (no extrapolation), and only where the two joint
 states around the point are at most `max_gap_s` apart (points in longer gaps are dropped
 and counted). The tracker's and the controller's clocks differ by a constant latency: a
 point stamped t (tracker clock) was measured when the joints were at the readings stamped
@@ -36,6 +36,11 @@ STREAM_MAX_GAP_S = 0.05  # joint states further apart than this: the points betw
 STREAM_MAX_POINTS = 3000  # points kept for the fit (every k-th point, k chosen to fit)
 STREAM_RATIO = 3.0  # points per joint state above which a bag looks like a stream
 MOVING_FRACTION = 0.5  # ... when the robot moves at more than this fraction of its points
+# The interpolation, chosen on the simulated controller's motion (smooth steps between
+# waypoints, accelerations up to ~10 rad/s^2) sampled at 200 Hz, max error over 20000
+# instants: linear 29 urad, PCHIP 21 urad, modified Akima 9.6 urad, cubic spline 4.5 urad
+# (below the 5 urad repeatability). A cubic spline's overshoot at a stop is of that size.
+INTERPOLATION = "cubic spline (scipy CubicSpline, not-a-knot)"
 REST_SPEED_RAD_S = 1e-6  # a joint slower than this is at rest (keeps its direction)
 
 
@@ -133,7 +138,8 @@ class StreamPairing:
 def joints_at(
     stream: JointStream, at_ns: Array, max_gap_s: float = STREAM_MAX_GAP_S
 ) -> tuple[Array, Array, NDArray[np.bool_], NDArray[np.bool_]]:
-    """The joint readings interpolated at controller-clock times at_ns (n,) [ns] (PCHIP).
+    """The joint readings interpolated at controller-clock times at_ns (n,) [ns] (a cubic
+    spline, not-a-knot: `INTERPOLATION`).
 
     Returns
     -------
@@ -146,7 +152,7 @@ def joints_at(
     in_gap : ndarray of bool, shape (n,)
         Inside, but between two joint states more than `max_gap_s` apart.
     """
-    from scipy.interpolate import PchipInterpolator
+    from scipy.interpolate import CubicSpline
 
     at_ns = np.asarray(at_ns, dtype=float)
     t0 = stream.js_ns[0]
@@ -155,7 +161,7 @@ def joints_at(
     inside = (at_s >= 0.0) & (at_s <= knots_s[-1])
     k = np.clip(np.searchsorted(knots_s, at_s, side="right") - 1, 0, len(knots_s) - 2)
     in_gap = inside & ((knots_s[k + 1] - knots_s[k]) > max_gap_s)
-    spline = PchipInterpolator(knots_s, stream.q, axis=0, extrapolate=False)
+    spline = CubicSpline(knots_s, stream.q, axis=0, extrapolate=False)
     q, velocity = spline(at_s), spline.derivative()(at_s)
     bad = ~inside | in_gap
     q[bad], velocity[bad] = np.nan, np.nan
