@@ -168,12 +168,23 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from robot_calib import pipeline
 
     world = pipeline.simulation_world(args.world, args.robot, args.effects or (), args.seed)
-    sim = pipeline.simulate(
-        args.output, args.plan, world, args.seed, args.n_random, _progress(), args.force
-    )
+    plan = args.plan
+    if args.stream:
+        from robot_calib.sim.stream import StreamOptions
+
+        options = StreamOptions(args.joint_rate, args.point_rate, args.sim_latency)
+        plan = "random" if plan == DEFAULT_PLAN else plan
+        sim = pipeline.simulate_stream(
+            args.output, plan, world, args.seed, args.n_random, options, args.force
+        )
+    else:
+        sim = pipeline.simulate(
+            args.output, args.plan, world, args.seed, args.n_random, _progress(), args.force
+        )
     print(
         f"{sim.bag}: {', '.join(f'{t}={n}' for t, n in sim.counts.items())} messages "
-        f"({args.plan}, effects: {', '.join(sim.effects) or 'none'}) in {sim.seconds:.1f} s; "
+        f"({plan}{', stream' if args.stream else ''}, effects: "
+        f"{', '.join(sim.effects) or 'none'}) in {sim.seconds:.1f} s; "
         f"truth in {sim.world_file}"
     )
     return 0
@@ -762,6 +773,17 @@ def _add_pair_tolerance(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _rate(text: str) -> float:
+    """An argparse type: a finite rate > 0 [Hz]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text} Hz: need a finite number > 0")
+    return value
+
+
 def _latency(text: str) -> str:
     """An argparse type: 'auto' or a finite number of seconds (else a usage error)."""
     if text == "auto":
@@ -782,7 +804,7 @@ def _add_stream(p: argparse.ArgumentParser) -> None:
         "--stream",
         action="store_true",
         help="continuous tracking (msgs_doc/stream.md): one bag of points streamed while the "
-        "robot moves; joint readings interpolated (PCHIP) to each point's stamp + latency "
+        "robot moves; joint readings interpolated (cubic spline) to each point's stamp + latency "
         "instead of the nearest-stamp pairing (default: off, the contract's pairing)",
     )
     p.add_argument(
@@ -910,6 +932,24 @@ def build_parser() -> argparse.ArgumentParser:
         default=N_RANDOM_POSES,
         help=f"poses of the random plan (default {N_RANDOM_POSES})",
     )
+    sim.add_argument(
+        "--stream",
+        action="store_true",
+        help="continuous tracking (msgs_doc/stream.md): move smoothly through the plan's poses "
+        "(default plan then: random) while joint states and points stream at their rates, "
+        "no ROS graph (default: off, stop-and-go through the simulated graph)",
+    )
+    for flag, what, default in (("--joint-rate", "joint states", 200.0),
+                                ("--point-rate", "tracker points", 1000.0)):  # fmt: skip
+        sim.add_argument(
+            flag, type=_rate, default=default,
+            help=f"with --stream: {what} per second [Hz] (default {default:g})",
+        )  # fmt: skip
+    sim.add_argument(
+        "--latency", dest="sim_latency", type=float, default=0.002, metavar="SECONDS",
+        help="with --stream: the controller's stamps minus the tracker's for one instant [s] "
+        "(default 0.002)",
+    )  # fmt: skip
     sim.add_argument(
         "-o", "--output", required=True, help="bag to write (BAG.mcap; + BAG.world.yaml)"
     )

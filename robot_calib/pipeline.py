@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     from robot_calib.identify.calibrate import Calibration
     from robot_calib.identify.latency import StreamCalibration
     from robot_calib.measurements import Recording
+    from robot_calib.sim.stream import StreamOptions
     from robot_calib.sim.world import World
 
 Log = Callable[[str], None]
@@ -157,6 +158,53 @@ def simulate(
                 f"{bag}: the simulation recorded no tracker point (dropout probability "
                 f"{world.tracker.dropout_probability}); nothing written"
             )
+    labels = tuple(e.label for e in world.effects)
+    return Simulation(bag, world_file, counts, labels, time.monotonic() - started)
+
+
+def simulate_stream(
+    output: str | Path,
+    plan: str = "random",
+    world: World | None = None,
+    seed: int | None = None,
+    n_random: int = 20,
+    options: StreamOptions | None = None,
+    force: bool = False,
+) -> Simulation:
+    """A stream recording (continuous tracking, msgs_doc/stream.md) of a smooth move through
+    the poses of `plan` in `world` (`sim.stream.simulate_stream`, no ROS graph), written as
+    the bag `output` with its world file beside it (staged as `simulate`'s). The world file
+    holds the truth of the robot; the stream's own truth (latency, rates) is `options`.
+
+    Returns
+    -------
+    simulation : Simulation
+        As `simulate`'s.
+    """
+    from robot_calib.atomic import staged_outputs
+    from robot_calib.bag.csv_import import write_stream_bag
+    from robot_calib.sim.plans import check_plan, make_plan
+    from robot_calib.sim.stream import StreamOptions, simulate_stream
+    from robot_calib.sim.world import save_world
+
+    world = world if world is not None else simulation_world(seed=seed)
+    check_plan(plan, world.model.robot)
+    bag = output_path(output, "the bag", [world.source], force)
+    world_file = output_path(
+        bag.with_suffix(".world.yaml"), "the world file", [world.source], force
+    )
+    started = time.monotonic()
+    rng = np.random.default_rng(world.seed if seed is None else seed)
+    model = world.model
+    waypoints = make_plan(plan, model, model.parameters(), rng, n_random).q
+    sim = simulate_stream(world, waypoints, options or StreamOptions(), rng)
+    with staged_outputs(bag.parent, force) as stage:
+        save_world(world, stage / world_file.name)
+        s = sim.stream
+        counts = write_stream_bag(
+            stage / bag.name, s.js_ns, s.q, sim.velocity, s.point_ns, s.points,
+            model.robot.joint_names, force=True,
+        )  # fmt: skip
     labels = tuple(e.label for e in world.effects)
     return Simulation(bag, world_file, counts, labels, time.monotonic() - started)
 
