@@ -137,15 +137,10 @@ def simulate(
     from robot_calib.atomic import staged_outputs
     from robot_calib.messages import POINT_TOPIC
     from robot_calib.nodes.simulate import simulate_bag
-    from robot_calib.sim.plans import check_plan
     from robot_calib.sim.world import save_world
 
     world = world if world is not None else simulation_world(seed=seed)
-    check_plan(plan, world.model.robot)
-    bag = output_path(output, "the bag", [world.source], force)
-    world_file = output_path(
-        bag.with_suffix(".world.yaml"), "the world file", [world.source], force
-    )
+    bag, world_file = _simulation_outputs(output, plan, world, force)
     started = time.monotonic()
     with staged_outputs(bag.parent, force) as stage:
         save_world(world, stage / world_file.name)
@@ -183,16 +178,12 @@ def simulate_stream(
     """
     from robot_calib.atomic import staged_outputs
     from robot_calib.bag.csv_import import write_stream_bag
-    from robot_calib.sim.plans import check_plan, make_plan
+    from robot_calib.sim.plans import make_plan
     from robot_calib.sim.stream import StreamOptions, simulate_stream
     from robot_calib.sim.world import save_world
 
     world = world if world is not None else simulation_world(seed=seed)
-    check_plan(plan, world.model.robot)
-    bag = output_path(output, "the bag", [world.source], force)
-    world_file = output_path(
-        bag.with_suffix(".world.yaml"), "the world file", [world.source], force
-    )
+    bag, world_file = _simulation_outputs(output, plan, world, force)
     started = time.monotonic()
     rng = np.random.default_rng(world.seed if seed is None else seed)
     model = world.model
@@ -207,6 +198,21 @@ def simulate_stream(
         )  # fmt: skip
     labels = tuple(e.label for e in world.effects)
     return Simulation(bag, world_file, counts, labels, time.monotonic() - started)
+
+
+def _simulation_outputs(
+    output: str | Path, plan: str, world: World, force: bool
+) -> tuple[Path, Path]:
+    """The bag and world file paths of a simulation (`output_path`'s policy), after
+    checking `plan` against the world's robot."""
+    from robot_calib.sim.plans import check_plan
+
+    check_plan(plan, world.model.robot)
+    bag = output_path(output, "the bag", [world.source], force)
+    world_file = output_path(
+        bag.with_suffix(".world.yaml"), "the world file", [world.source], force
+    )
+    return bag, world_file
 
 
 def output_path(
