@@ -171,12 +171,23 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from robot_calib import pipeline
 
     world = pipeline.simulation_world(args.world, args.robot, args.effects or (), args.seed)
-    sim = pipeline.simulate(
-        args.output, args.plan, world, args.seed, args.n_random, _progress(), args.force
-    )
+    plan = args.plan
+    if args.stream:
+        from robot_calib.sim.stream import StreamOptions
+
+        options = StreamOptions(args.joint_rate, args.point_rate, args.sim_latency)
+        plan = "random" if plan == DEFAULT_PLAN else plan
+        sim = pipeline.simulate_stream(
+            args.output, plan, world, args.seed, args.n_random, options, args.force
+        )
+    else:
+        sim = pipeline.simulate(
+            args.output, args.plan, world, args.seed, args.n_random, _progress(), args.force
+        )
     print(
         f"{sim.bag}: {', '.join(f'{t}={n}' for t, n in sim.counts.items())} messages "
-        f"({args.plan}, effects: {', '.join(sim.effects) or 'none'}) in {sim.seconds:.1f} s; "
+        f"({plan}{', stream' if args.stream else ''}, effects: "
+        f"{', '.join(sim.effects) or 'none'}) in {sim.seconds:.1f} s; "
         f"truth in {sim.world_file}"
     )
     return 0
@@ -237,11 +248,27 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     robot = _robot(args)
     output = pipeline.output_path(args.output, "PARAMS.json", args.bags, args.force)
     started = time.perf_counter()
-    cal, recording = pipeline.calibrate_bags(
-        args.bags, robot, args.model, args.ecc_order, args.objective, args.pair_tolerance, _log
-    )
-    print(summary(cal, recording))
-    write_json_atomic(cal.to_dict(recording), output)
+    if args.stream:
+        if args.objective != "absolute":
+            raise InputError("--stream: only --objective absolute")
+        fit = pipeline.calibrate_stream_bag(
+            args.bags, robot, args.model, args.ecc_order,
+            None if args.latency == "auto" else float(args.latency),
+            args.stream_max_points, args.max_gap, _log,
+        )  # fmt: skip
+        cal, recording = fit.calibration, fit.recording
+        print(fit.line())
+        print(summary(cal, recording))
+        write_json_atomic(fit.document(), output)
+    else:
+        if args.latency != "auto":
+            raise InputError("--latency applies with --stream only")
+        cal, recording = pipeline.calibrate_bags(
+            args.bags, robot, args.model, args.ecc_order, args.objective, args.pair_tolerance,
+            _log,
+        )  # fmt: skip
+        print(summary(cal, recording))
+        write_json_atomic(cal.to_dict(recording), output)
     print(f"{output}: {cal.name} in {time.perf_counter() - started:.2f} s")
     return 0
 
@@ -761,6 +788,66 @@ def _add_pair_tolerance(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _rate(text: str) -> float:
+    """An argparse type: a finite rate > 0 [Hz]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text} Hz: need a finite number > 0")
+    return value
+
+
+def _latency(text: str) -> str:
+    """An argparse type: 'auto' or a finite number of seconds (else a usage error)."""
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: 'auto' or a number of seconds") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text}: a finite number of seconds")
+    return text
+
+
+def _add_stream(p: argparse.ArgumentParser) -> None:
+    from robot_calib.measurements.stream import STREAM_MAX_GAP_S, STREAM_MAX_POINTS
+
+    p.add_argument(
+        "--stream",
+        action="store_true",
+        help="continuous tracking (msgs_doc/stream.md): one bag of points streamed while the "
+        "robot moves; joint readings interpolated (cubic spline) to each point's stamp + latency "
+        "instead of the nearest-stamp pairing (default: off, the contract's pairing)",
+    )
+    p.add_argument(
+        "--latency",
+        type=_latency,
+        default="auto",
+        metavar="auto|SECONDS",
+        help="with --stream: the controller's stamps minus the tracker's for one instant [s], "
+        "or auto: identified (default auto)",
+    )
+    p.add_argument(
+        "--stream-max-points",
+        type=_positive,
+        default=STREAM_MAX_POINTS,
+        metavar="N",
+        help=f"with --stream: fit every k-th point, k chosen so that at most N remain "
+        f"(default {STREAM_MAX_POINTS})",
+    )
+    p.add_argument(
+        "--max-gap",
+        type=_tolerance,
+        default=STREAM_MAX_GAP_S,
+        metavar="SECONDS",
+        help="with --stream: points between two joint states further apart than this are "
+        f"dropped and counted [s] (default {STREAM_MAX_GAP_S})",
+    )
+
+
 def _add_payload(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--payload",
@@ -876,6 +963,24 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"poses of the random plan (default {N_RANDOM_POSES})",
     )
     sim.add_argument(
+        "--stream",
+        action="store_true",
+        help="continuous tracking (msgs_doc/stream.md): move smoothly through the plan's poses "
+        "(default plan then: random) while joint states and points stream at their rates, "
+        "no ROS graph (default: off, stop-and-go through the simulated graph)",
+    )
+    for flag, what, default in (("--joint-rate", "joint states", 200.0),
+                                ("--point-rate", "tracker points", 1000.0)):  # fmt: skip
+        sim.add_argument(
+            flag, type=_rate, default=default,
+            help=f"with --stream: {what} per second [Hz] (default {default:g})",
+        )  # fmt: skip
+    sim.add_argument(
+        "--latency", dest="sim_latency", type=float, default=0.002, metavar="SECONDS",
+        help="with --stream: the controller's stamps minus the tracker's for one instant [s] "
+        "(default 0.002)",
+    )  # fmt: skip
+    sim.add_argument(
         "-o", "--output", required=True, help="bag to write (BAG.mcap; + BAG.world.yaml)"
     )
     _add_force(sim)
@@ -964,6 +1069,7 @@ def build_parser() -> argparse.ArgumentParser:
         "distances anchored on the CPA centres of circles 1, 3, 5 (O(N^2))",
     )
     _add_pair_tolerance(cal)
+    _add_stream(cal)
     _add_joint_names(cal)
     _add_payload(cal)
     cal.add_argument("-o", "--output", required=True, help="PARAMS.json to write")

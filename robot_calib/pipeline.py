@@ -29,7 +29,9 @@ if TYPE_CHECKING:
     from robot_calib.diagnose.html_report import ModelErrors
     from robot_calib.diagnose.ladder import Ladder
     from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.latency import StreamCalibration
     from robot_calib.measurements import Recording
+    from robot_calib.sim.stream import StreamOptions
     from robot_calib.sim.world import World
 
 Log = Callable[[str], None]
@@ -136,14 +138,10 @@ def simulate(
     from robot_calib.atomic import staged_outputs
     from robot_calib.messages import POINT_TOPIC
     from robot_calib.nodes.simulate import simulate_bag
-    from robot_calib.sim.plans import check_plan
     from robot_calib.sim.world import save_world
 
     world = world if world is not None else simulation_world(seed=seed)
-    check_plan(plan, world.model.robot)
-    inputs = simulation_inputs(world, plan)
-    bag = output_path(output, "the bag", inputs, force)
-    world_file = output_path(bag.with_suffix(".world.yaml"), "the world file", inputs, force)
+    bag, world_file = _simulation_outputs(output, plan, world, force)
     started = time.monotonic()
     with staged_outputs(bag.parent, force) as stage:
         save_world(world, stage / world_file.name)
@@ -169,6 +167,63 @@ def simulation_inputs(world: World, plan: str | None = None) -> list[str]:
     if plan is not None and is_plan_file(plan):
         files.append(plan)
     return [f for f in files if f]
+
+
+def simulate_stream(
+    output: str | Path,
+    plan: str = "random",
+    world: World | None = None,
+    seed: int | None = None,
+    n_random: int = 20,
+    options: StreamOptions | None = None,
+    force: bool = False,
+) -> Simulation:
+    """A stream recording (continuous tracking, msgs_doc/stream.md) of a smooth move through
+    the poses of `plan` in `world` (`sim.stream.simulate_stream`, no ROS graph), written as
+    the bag `output` with its world file beside it (staged as `simulate`'s). The world file
+    holds the truth of the robot; the stream's own truth (latency, rates) is `options`.
+
+    Returns
+    -------
+    simulation : Simulation
+        As `simulate`'s.
+    """
+    from robot_calib.atomic import staged_outputs
+    from robot_calib.bag.csv_import import write_stream_bag
+    from robot_calib.sim.plans import make_plan
+    from robot_calib.sim.stream import StreamOptions, simulate_stream
+    from robot_calib.sim.world import save_world
+
+    world = world if world is not None else simulation_world(seed=seed)
+    bag, world_file = _simulation_outputs(output, plan, world, force)
+    started = time.monotonic()
+    rng = np.random.default_rng(world.seed if seed is None else seed)
+    model = world.model
+    waypoints = make_plan(plan, model, model.parameters(), rng, n_random).q
+    sim = simulate_stream(world, waypoints, options or StreamOptions(), rng)
+    with staged_outputs(bag.parent, force) as stage:
+        save_world(world, stage / world_file.name)
+        s = sim.stream
+        counts = write_stream_bag(
+            stage / bag.name, s.js_ns, s.q, sim.velocity, s.point_ns, s.points,
+            model.robot.joint_names, force=True,
+        )  # fmt: skip
+    labels = tuple(e.label for e in world.effects)
+    return Simulation(bag, world_file, counts, labels, time.monotonic() - started)
+
+
+def _simulation_outputs(
+    output: str | Path, plan: str, world: World, force: bool
+) -> tuple[Path, Path]:
+    """The bag and world file paths of a simulation (`output_path`'s policy), after
+    checking `plan` against the world's robot."""
+    from robot_calib.sim.plans import check_plan
+
+    check_plan(plan, world.model.robot)
+    inputs = simulation_inputs(world, plan)
+    bag = output_path(output, "the bag", inputs, force)
+    world_file = output_path(bag.with_suffix(".world.yaml"), "the world file", inputs, force)
+    return bag, world_file
 
 
 def output_path(
@@ -342,6 +397,48 @@ def calibrate_bags(
     recording = read_bags(bags, robot, pair_tolerance, log)
     cal = calibrate_recording(recording, robot, model, ecc_order, objective, log)
     return cal, recording
+
+
+def calibrate_stream_bag(
+    bags: Sequence[str | Path],
+    robot: RobotDescription,
+    model: str = DEFAULT_MODEL,
+    ecc_order: int = DEFAULT_ECC_ORDER,
+    latency_s: float | None = None,
+    max_points: int | None = None,
+    max_gap_s: float | None = None,
+    log: Log | None = None,
+) -> StreamCalibration:
+    """Identify `model` from one stream bag (continuous tracking, msgs_doc/stream.md): the
+    joint readings interpolated to the point stamps + `latency_s` [s] (None: identified);
+    at most `max_points` points fitted (None: STREAM_MAX_POINTS), points in joint-state gaps
+    longer than `max_gap_s` [s] (None: STREAM_MAX_GAP_S) dropped. A bad model name fails
+    before the bag is read; more than one bag is an InputError (one latency per bag).
+
+    Returns
+    -------
+    stream_calibration : StreamCalibration
+        As `robot_calib.identify.latency.calibrate_stream`: the calibration, the paired
+        points it was fitted on, the pairing, the latency used and how it was found.
+    """
+    from robot_calib.bag.read import read_stream
+    from robot_calib.identify.calibrate import parse_model
+    from robot_calib.identify.latency import calibrate_stream
+    from robot_calib.measurements.stream import STREAM_MAX_GAP_S, STREAM_MAX_POINTS
+
+    parse_model(model, robot, ecc_order)
+    if len(bags) != 1:
+        raise InputError(f"--stream calibrates one bag (its own latency); got {len(bags)}")
+    if model.split("+")[0] == "cpa":
+        raise InputError(f"--stream --model {model}: a stream has no circle sweeps; use an "
+                         "LM model (nominal, geometric, geometric+EFFECT)")  # fmt: skip
+    stream = read_stream(Path(bags[0]), robot)
+    return calibrate_stream(
+        stream, robot, model, latency_s,
+        max_points=STREAM_MAX_POINTS if max_points is None else max_points,
+        max_gap_s=STREAM_MAX_GAP_S if max_gap_s is None else max_gap_s,
+        ecc_order=ecc_order, log=log,
+    )  # fmt: skip
 
 
 def diagnose_recordings(

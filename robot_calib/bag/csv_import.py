@@ -707,21 +707,12 @@ def write_measurements(
         velocities = np.zeros((len(q), 0)) if direction is None else np.asarray(direction)
         for k, (qi, pi, stamp_ns, vi) in enumerate(zip(q, points, stamps_ns, velocities)):
             stamp = types["builtin_interfaces/msg/Time"](*ns_to_sec_nanosec(int(stamp_ns)))
-            js = types[JOINT_STATE_TYPE](
-                header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
-                name=list(joint_names), position=qi, velocity=np.asarray(vi, dtype=float),
-                effort=np.empty(0),
-            )  # fmt: skip
-            serialized = store.serialize_cdr(js, JOINT_STATE_TYPE)
+            serialized = joint_state_cdr(store, int(stamp_ns), joint_names, qi, vi)
             writer.write(JOINT_STATES_TOPIC, serialized, int(stamp_ns))
             for topic, xyz in ((POINT_TOPIC, pi), *((t, v[k]) for t, v in extra.items())):
                 if not np.all(np.isfinite(xyz)):
                     continue  # this target not measured at this pose
-                pt = types[POINT_TYPE](
-                    header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=TRACKER_FRAME),
-                    point=types["geometry_msgs/msg/Point"](*map(float, xyz)),
-                )
-                writer.write(topic, store.serialize_cdr(pt, POINT_TYPE), int(stamp_ns) + 1)
+                writer.write(topic, point_cdr(store, int(stamp_ns), xyz), int(stamp_ns) + 1)
             for pose in poses:
                 xyz = points[k] if not pose.name else extra_points_of(extra_points, pose.name, k)
                 pose_cdr = pose.serialize(k, xyz, stamp)
@@ -732,8 +723,63 @@ def write_measurements(
                     header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
                     temperature=float(temperature[k]), variance=0.0,
                 )  # fmt: skip
-                serialized = store.serialize_cdr(msg, TEMPERATURE_TYPE)
-                writer.write(TEMPERATURE_TOPIC, serialized, int(stamp_ns) + 2)
+                temperature_cdr = store.serialize_cdr(msg, TEMPERATURE_TYPE)
+                writer.write(TEMPERATURE_TOPIC, temperature_cdr, int(stamp_ns) + 2)
+        writer.close()
+        return writer.counts
+
+
+def joint_state_cdr(
+    store: Any, stamp_ns: int, joint_names: tuple[str, ...], q: Array, velocity: Array
+) -> bytes:
+    """A sensor_msgs/JointState as CDR bytes: readings q (J,) [rad] of `joint_names`,
+    `velocity` (J,) [rad/s] (or its signs; empty: none), stamped stamp_ns [ns]."""
+    types = store.types
+    stamp = types["builtin_interfaces/msg/Time"](*ns_to_sec_nanosec(stamp_ns))
+    js = types[JOINT_STATE_TYPE](
+        header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
+        name=list(joint_names), position=np.asarray(q, dtype=float),
+        velocity=np.asarray(velocity, dtype=float), effort=np.empty(0),
+    )  # fmt: skip
+    return bytes(store.serialize_cdr(js, JOINT_STATE_TYPE))
+
+
+def point_cdr(store: Any, stamp_ns: int, xyz: Array) -> bytes:
+    """A geometry_msgs/PointStamped in the tracker frame as CDR bytes: xyz (3,) [m],
+    stamped stamp_ns [ns]."""
+    types = store.types
+    stamp = types["builtin_interfaces/msg/Time"](*ns_to_sec_nanosec(stamp_ns))
+    pt = types[POINT_TYPE](
+        header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=TRACKER_FRAME),
+        point=types["geometry_msgs/msg/Point"](*map(float, xyz)),
+    )
+    return bytes(store.serialize_cdr(pt, POINT_TYPE))
+
+
+def write_stream_bag(
+    output: str | Path, js_ns: IntArray, q: Array, velocity: Array, point_ns: IntArray,
+    points: Array, joint_names: tuple[str, ...], force: bool = False,
+) -> dict[str, int]:  # fmt: skip
+    """A contract bag of a stream (msgs_doc/stream.md): a JointState per js_ns (m,) [ns]
+    (readings q (m, J) [rad], velocity (m, J) [rad/s]) and a PointStamped per point_ns
+    (n,) [ns] (points (n, 3) [m], tracker frame), in stamp order, log time = stamp.
+    Staged: nothing is left on failure (an existing `output` replaced only with `force`).
+    Returns messages per topic."""
+    output = Path(output)
+    store = typestore(JOINT_STATE_TYPE, POINT_TYPE)
+    messages = sorted(
+        [(int(t), 0, k) for k, t in enumerate(js_ns)]
+        + [(int(t), 1, k) for k, t in enumerate(point_ns)]
+    )
+    with staged_outputs(output.parent, force) as stage, BagWriter(stage / output.name) as writer:
+        writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
+        writer.add_topic(POINT_TOPIC, POINT_TYPE)
+        for stamp_ns, kind, k in messages:
+            if kind == 0:
+                cdr = joint_state_cdr(store, stamp_ns, joint_names, q[k], velocity[k])
+                writer.write(JOINT_STATES_TOPIC, cdr, stamp_ns)
+            else:
+                writer.write(POINT_TOPIC, point_cdr(store, stamp_ns, points[k]), stamp_ns)
         writer.close()
         return writer.counts
 

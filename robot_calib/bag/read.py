@@ -10,6 +10,7 @@ import shlex
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -22,7 +23,8 @@ from robot_calib.measurements.recording import (
     Recording,
     recording_from_stream,
 )
-from robot_calib.measurements.six_dof import PoseReading, join_poses
+from robot_calib.measurements.six_dof import PoseReading, StampedMeasurements, join_poses
+from robot_calib.measurements.stream import JointStream, stream_hint
 from robot_calib.messages import (
     JOINT_STATE_TYPE,
     JOINT_STATES_TOPIC,
@@ -100,10 +102,22 @@ def _target_topics(
     return point_topics, pose_topics, names
 
 
-def read_bag(
-    path: Path, robot: RobotDescription, pair_tolerance: float = PAIR_TOLERANCE_S
-) -> Recording:
-    """The paired measurements of one bag (its own time origin and direction history)."""
+class _BagMessages(NamedTuple):
+    """The measurement messages of one bag, as read: joint-state stamps [ns], readings
+    (m, J) [rad] and velocity signs (m, J); the points joined with their 6-DoF poses
+    (`join_poses`); the target names; the side topic's (stamp [ns], deg C); warnings."""
+
+    js_ns: IntArray
+    q: Array
+    velocity_sign: Array
+    stamped: StampedMeasurements
+    names: list[str]
+    celsius: list[tuple[int, float]]
+    warnings: list[str]
+
+
+def _bag_messages(path: Path, robot: RobotDescription) -> _BagMessages:
+    """Read the measurement topics of the bag `path` (BagError on unusable input)."""
     if not path.is_file():
         raise BagError(f"{path}: no such bag file")
     warnings: list[str] = []
@@ -173,10 +187,30 @@ def read_bag(
         str(path), names, pt_t, pts, pt_target, poses, set(target_topics.values()), BagError
     )
     n_joints = robot.n_joints
-    rec = recording_from_stream(
+    return _BagMessages(
         np.array(js_t, dtype=np.int64),
         np.array(js_q).reshape(-1, n_joints),
         np.array(js_v).reshape(-1, n_joints),
+        stamped,
+        names,
+        celsius,
+        warnings,
+    )
+
+
+def read_bag(
+    path: Path, robot: RobotDescription, pair_tolerance: float = PAIR_TOLERANCE_S
+) -> Recording:
+    """The paired measurements of one bag (its own time origin and direction history),
+    with a warning suggesting `--stream` when the bag looks like a stream (`stream_hint`)."""
+    js_ns, q, velocity_sign, stamped, names, celsius, warnings = _bag_messages(path, robot)
+    order = np.argsort(js_ns, kind="stable")
+    hint = stream_hint(js_ns[order], q[order], len(stamped.point_ns), str(path))
+    warnings = warnings + ([hint] if hint else [])
+    rec = recording_from_stream(
+        js_ns,
+        q,
+        velocity_sign,
         stamped.point_ns,
         stamped.points,
         pair_tolerance,
@@ -190,6 +224,26 @@ def read_bag(
         temperature=_temperature_at(path, celsius, stamped.point_ns),
     )
     return replace(rec, warnings=tuple(warnings) + rec.warnings)
+
+
+def read_stream(path: Path, robot: RobotDescription) -> JointStream:
+    """The raw stream of one bag for continuous tracking (msgs_doc/stream.md): joint
+    states and the points of the contract's single target, unpaired (`stream_recording`
+    pairs them at a latency), with the side topic's temperature at each point. BagError
+    for a bag with further targets or 6-DoF poses (not supported in stream mode)."""
+    js_ns, q, velocity_sign, stamped, names, celsius, _ = _bag_messages(path, robot)
+    if len(names) > 1 or stamped.rotation is not None:
+        raise BagError(
+            f"{path}: --stream reads the single target of {POINT_TOPIC}; this bag has "
+            f"further targets or 6-DoF poses ({len(names)} target(s))"
+        )
+    try:
+        return JointStream.from_messages(
+            js_ns, q, velocity_sign, stamped.point_ns, stamped.points, str(path),
+            _temperature_at(path, celsius, stamped.point_ns),
+        )  # fmt: skip
+    except InputError as exc:
+        raise BagError(str(exc)) from None
 
 
 def _temperature_at(

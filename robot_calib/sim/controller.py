@@ -59,16 +59,25 @@ def follow(
 
 def state_at(motion: Motion, t_s: float) -> tuple[Array, Array]:
     """Readings (J,) [rad] and velocities (J,) [rad/s] of `motion` at time t_s [s]."""
-    since = t_s - motion.start_s
+    q, velocity = states_at(motion, np.array([t_s], dtype=float))
+    return q[0], velocity[0]
+
+
+def states_at(motion: Motion, t_s: Array) -> tuple[Array, Array]:
+    """Readings (n, J) [rad] and velocities (n, J) [rad/s] of `motion` at times t_s (n,)
+    [s] (the node's clock): before the start the first knot, after the end the last, both
+    at rest."""
+    since = np.asarray(t_s, dtype=float) - motion.start_s
     times = motion.times_s
-    if since >= times[-1] or len(times) == 1:
-        return motion.q[-1].copy(), np.zeros(motion.q.shape[1])
-    if since <= 0.0:
-        return motion.q[0].copy(), np.zeros(motion.q.shape[1])
-    k = int(np.searchsorted(times, since, side="right")) - 1
-    span = times[k + 1] - times[k]
-    u = (since - times[k]) / span if span > 0 else 1.0
+    k = np.clip(np.searchsorted(times, since, side="right") - 1, 0, max(len(times) - 2, 0))
+    if len(times) == 1:
+        n = len(since)
+        return np.repeat(motion.q[:1], n, axis=0), np.zeros((n, motion.q.shape[1]))
+    span = (times[k + 1] - times[k])[:, None]
+    moving = span > 0
+    u = np.where(moving, (since[:, None] - times[k][:, None]) / np.where(moving, span, 1.0), 1.0)
+    u = np.clip(u, 0.0, 1.0)
     delta = motion.q[k + 1] - motion.q[k]
     q = motion.q[k] + delta * (3 * u**2 - 2 * u**3)
-    velocity = delta * (6 * u - 6 * u**2) / span if span > 0 else np.zeros_like(delta)
+    velocity = np.where(moving, delta * (6 * u - 6 * u**2) / np.where(moving, span, 1.0), 0.0)
     return q, velocity
