@@ -101,6 +101,9 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
         print(f"geometric held-out: {geometric:.2f} x the noise floor")
     if diagnosis.learnable is not None:
         print(diagnosis.learnable.line())
+        note = diagnosis.bound_note()
+        if note is not None:
+            print(note)
         shares = [f"{effect} {100 * share:.0f} %" for effect, share in diagnosis.effect_shares()]
         if shares:
             print("share of the learnable gap each effect closed: " + ", ".join(shares))

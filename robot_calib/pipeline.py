@@ -540,7 +540,8 @@ def write_diagnosis(
     compared: list[ModelErrors] | None = None,
 ) -> Path:
     """Write DIAGNOSIS.json at `output`, the Markdown report (+ plots) and the HTML report
-    beside it, and the ladder's chosen rung as `best_params_path(output)`, all together
+    beside it, and (without `best`) the ladder's chosen rung as `best_params_path(output)`,
+    all together
     (staged, then moved in; an existing file is replaced only with `force`).
     `calibrations`: nominal / cpa models already identified from `recording` (else the HTML
     report identifies them); `best`: the model the HTML report recommends and the PARAMS.json
@@ -574,12 +575,13 @@ def write_diagnosis(
             html_report(diagnosis, ladder, fitted, compared, recommended,
                         recommended_file.name, warnings)
         )  # fmt: skip
-        scores = {r.model: r.heldout.absolute_rms_mm for r in ladder.rungs}
-        write_json_atomic(
-            selected_document(chosen.calibration, fitted, "the diagnosis ladder's chosen rung",
-                              diagnosis.scored_on, scores),
-            stage / best_file.name,
-        )  # fmt: skip
+        if best is None:  # run writes its own params_best.json: one best model per folder
+            scores = {r.model: r.heldout.absolute_rms_mm for r in ladder.rungs}
+            write_json_atomic(
+                selected_document(chosen.calibration, fitted, "the diagnosis ladder's chosen "
+                                  "rung", diagnosis.scored_on, scores),
+                stage / best_file.name,
+            )  # fmt: skip
     return report
 
 

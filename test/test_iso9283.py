@@ -28,7 +28,8 @@ def test_ap_falls_with_calibration_and_rp_is_the_repeatability() -> None:
     cal = recorded(WORLD, paper_test_plan(2), 1)
     cube = iso9283_plan(WORLD.model, WORLD.truth, cycles=10)
     held = recorded(WORLD, cube, 2)
-    assert [len(g) for g in repeat_groups(held)] == [10] * 5
+    # P5's first visit comes from the other side of a joint (the cycle start): not a repeat
+    assert [len(g) for g in repeat_groups(held)] == [10, 10, 10, 10, 9]
     diagnosis, _ = diagnose(cal, ROBOT, held)
     before, after = diagnosis.iso9283
     assert before.model == "nominal" and before.scored_on == "hold-out bags"

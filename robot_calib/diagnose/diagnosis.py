@@ -147,6 +147,20 @@ class Diagnosis(Record):
             out.append((added, rung.learnable_gap_share - before.learnable_gap_share))
         return out
 
+    def bound_note(self) -> str | None:
+        """Where the learnable bound of the shares comes from when it is not the kernel
+        ridge's (`learnable_gap`: the lower of the two): the best rung's, else None."""
+        if self.learnable is None or not self.ladder:
+            return None
+        best = min(r.holdout_abs_rms_mm for r in self.ladder)
+        if best >= self.learnable.holdout_abs_rms_mm:
+            return None
+        return (
+            f"the shares' bound is the best rung's {best:.4f} mm, below the kernel ridge's "
+            f"{self.learnable.holdout_abs_rms_mm:.4f} mm: a physical model learned more than "
+            "the residual model"
+        )
+
     @property
     def verdict(self) -> str:
         """One phrase: the dominant effect and its joints, or null."""

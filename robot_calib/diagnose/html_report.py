@@ -351,7 +351,9 @@ def _ladder(diagnosis: Diagnosis, ladder: Ladder) -> str:
             + ".</p>"
         )
     if diagnosis.learnable is not None:
-        out.append(f"<p>{_e(diagnosis.learnable.line())}. Method: "
+        note = diagnosis.bound_note()
+        out.append(f"<p>{_e(diagnosis.learnable.line())}"
+                   f"{'; ' + _e(note) if note else ''}. Method: "
                    f"{_e(diagnosis.learnable.method)}.</p>")  # fmt: skip
     out.append(
         _img(

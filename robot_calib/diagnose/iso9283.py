@@ -55,9 +55,13 @@ class Iso9283(Record):
 
 def repeat_groups(recording: Recording, min_repeats: int = MIN_REPEATS) -> list[IntArray]:
     """Indices of the measurements of every pose measured at least `min_repeats` times
-    (equal readings within JOINT_CHANGE_TOLERANCE, same target), in order of first visit."""
+    (equal readings within JOINT_CHANGE_TOLERANCE, same target, and the same approach
+    direction of every joint: ISO 9283 approaches a pose the same way each cycle, and a
+    visit from the other side differs by the backlash, which is no repeatability), in
+    order of first visit."""
+    poses = recording.poses
     key = np.column_stack(
-        [np.round(recording.poses.q / JOINT_CHANGE_TOLERANCE), recording.poses.target_index]
+        [np.round(poses.q / JOINT_CHANGE_TOLERANCE), poses.direction, poses.target_index]
     )
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
     groups = [np.flatnonzero(inverse.reshape(-1) == g) for g in np.argsort(first)]

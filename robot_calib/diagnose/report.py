@@ -121,7 +121,8 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
         bound = diagnosis.learnable
         lines += [
             "",
-            f"Learnable bound: {bound.line().removeprefix('learnable bound: ')}. "
+            f"Learnable bound: {bound.line().removeprefix('learnable bound: ')}"
+            f"{'; ' + note if (note := diagnosis.bound_note()) else ''}. "
             f"Method: {bound.method}. The last column: the share of that learnable gap "
             "(geometric's held-out rms minus the bound) each rung closes"
             + (": by effect " + ", ".join(f"{e} {100 * v:.0f} %"
