@@ -9,6 +9,8 @@ caller pays only for what it runs.
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -672,9 +674,7 @@ def run(
         html : Path
             The self-contained HTML report beside it (diagnosis.html).
     """
-    from robot_calib.accuracy import accuracy
     from robot_calib.effects import MAIN_JOB_EFFECTS
-    from robot_calib.identify.params_file import write_json_atomic
     from robot_calib.kinematics.description import load_robot
     from robot_calib.sim.plans import check_plan
 
@@ -686,13 +686,60 @@ def run(
     world = simulation_world(None, robot, effects, seed)
     if Path(output_dir).exists() and not Path(output_dir).is_dir():
         raise InputError(f"{output_dir}: exists and is not a folder")
-    folder = Path(output_dir) / time.strftime("run-%Y%m%d-%H%M%S")
-    folder.mkdir(parents=True, exist_ok=False)
+    final = Path(output_dir) / time.strftime("run-%Y%m%d-%H%M%S")
+    if final.exists():
+        raise InputError(f"{final}: exists (a run started the same second); run again")
+    final.parent.mkdir(parents=True, exist_ok=True)
+    # built in a hidden folder beside it and renamed when complete: an interrupted or failed
+    # run leaves nothing (msgs_doc: the overwrite and partial-output policy)
+    folder = Path(tempfile.mkdtemp(prefix=".run-", suffix=".partial", dir=final.parent))
+    try:
+        result = _run_in(folder, final, description, plan, world, seed, n_holdout,
+                         robot, say, log, progress)  # fmt: skip
+        os.rename(folder, final)
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+
+    def moved(path: Path) -> Path:
+        return final / path.relative_to(folder)
+
+    return replace(
+        result,
+        folder=final,
+        calibration_bag=replace(result.calibration_bag, bag=moved(result.calibration_bag.bag),
+                                world_file=moved(result.calibration_bag.world_file)),
+        holdout_bag=replace(result.holdout_bag, bag=moved(result.holdout_bag.bag),
+                            world_file=moved(result.holdout_bag.world_file)),
+        report=moved(result.report),
+        html=None if result.html is None else moved(result.html),
+    )  # fmt: skip
+
+
+def _run_in(
+    folder: Path,
+    final: Path,
+    description: RobotDescription,
+    plan: str,
+    world: World,
+    seed: int,
+    n_holdout: int,
+    robot: str,
+    say: Callable[[str], None],
+    log: Log | None,
+    progress: Callable[[str, int, int], None] | None,
+) -> RunResult:
+    """`run`'s work, written into `folder` (renamed to `final` by `run` when complete;
+    messages name the final paths)."""
+    from robot_calib.accuracy import accuracy
+    from robot_calib.identify.params_file import write_json_atomic
+
     bag, holdout = folder / "calibration.mcap", folder / "holdout.mcap"
     steps = 4
-    say(f"[1/{steps}] simulate + record: {plan} in the default world -> {bag}")
+    say(f"[1/{steps}] simulate + record: {plan} in the default world -> {final / bag.name}")
     first = simulate(bag, plan, world, seed, n_holdout, progress)
-    say(f"[2/{steps}] simulate + record: {n_holdout} random hold-out poses -> {holdout}")
+    say(f"[2/{steps}] simulate + record: {n_holdout} random hold-out poses -> "
+        f"{final / holdout.name}")  # fmt: skip
     truth = simulation_world(first.world_file, robot, (), seed + 1)
     second = simulate(holdout, "random", truth, seed + 1, n_holdout, progress)
     recording = read_bags([bag], description, log=log)

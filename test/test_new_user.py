@@ -293,3 +293,21 @@ def test_a_joints_file_that_is_no_csv_is_one_line(
     path.write_bytes(content)
     with pytest.raises(InputError, match=message.replace("?", r"\?").replace("(", r"\(")):
         read_csv_table(path, "joints", "q1..q6")
+
+
+def test_an_interrupted_run_leaves_no_half_folder(tmp_path: Path) -> None:
+    """The new user's Ctrl-C during `run` left a half-filled run folder: the run is built in
+    a hidden folder and renamed when complete; interrupted, nothing of it stays."""
+    from robot_calib import pipeline
+
+    calls = []
+
+    def interrupt(plan: str, done: int, total: int) -> None:
+        calls.append(plan)
+        if plan == "random":  # the hold-out simulation: the calibration bag is written
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        pipeline.run(tmp_path / "o", plan="paper-test1", n_holdout=20, progress=interrupt,
+                     say=lambda text: None)  # fmt: skip
+    assert "random" in calls and list((tmp_path / "o").iterdir()) == []
