@@ -130,7 +130,7 @@ table{border-collapse:collapse;margin:8px 0 12px;font-size:13.5px;
  font-variant-numeric:tabular-nums}
 th,td{border:1px solid #d5dce4;padding:4px 8px;text-align:right;vertical-align:top}
 th{background:#eef1f5;text-align:center}td:first-child,th:first-child{text-align:left}
-td.text{text-align:left;white-space:nowrap}tr.best td{background:#fff7d6;font-weight:600}
+td.text{text-align:left;overflow-wrap:anywhere;max-width:320px}tr.best td{background:#fff7d6;font-weight:600}
 td.fixed{color:#7a8794}
 figure{margin:10px 0 18px}figure img{max-width:100%;border:1px solid #e3e8ee}
 figcaption{color:#5b6b7b;font-size:13px}
@@ -277,7 +277,10 @@ def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibr
         error += f"; nominal: {before.accuracy.absolute_rms_mm:.4f} mm rms"
     shares = ", ".join(f"{e} {100 * v:.0f} %" for e, v in diagnosis.effect_shares())
     ratio = diagnosis.unexplained.ratio_to_noise_floor
-    tone = "warn" if warnings else ("ok" if ratio is not None and ratio <= 1.5 else "")
+    # green when the best model is at the noise floor (warnings are listed either way), red
+    # when it is not, or when there are warnings and no floor to judge by
+    at_floor = ratio is not None and ratio <= 1.5
+    tone = "ok" if at_floor else ("warn" if warnings or ratio is not None else "")
     items = [
         ("Best model", f"{best.name} ({best_params})"),
         ("Held-out error", error or "-"),
