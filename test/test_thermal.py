@@ -75,7 +75,7 @@ def test_points_a_thermal_effect_explains_are_no_blunders() -> None:
     coldest points as tracker blunders; the best rung (thermal_temperature) explains them,
     so they are re-admitted and the ladder climbed again: no outlier left, the effect
     named."""
-    from robot_calib.sim.blind import _record
+    from robot_calib.sim.measure import record_plan
     from robot_calib.sim.world import build_world
 
     world = build_world({
@@ -87,7 +87,7 @@ def test_points_a_thermal_effect_explains_are_no_blunders() -> None:
     })  # fmt: skip
     robot = world.model.robot
     rng = np.random.default_rng(1)
-    recording = _record(world, random_plan(robot, 600, rng), rng)
+    recording = record_plan(world, random_plan(robot, 600, rng), rng)
     held = np.zeros(len(recording), dtype=bool)
     held[rng.permutation(len(recording))[:180]] = True
     cal, hold = recording.subset(~held), recording.subset(held)
