@@ -130,7 +130,8 @@ table{border-collapse:collapse;margin:8px 0 12px;font-size:13.5px;
  font-variant-numeric:tabular-nums}
 th,td{border:1px solid #d5dce4;padding:4px 8px;text-align:right;vertical-align:top}
 th{background:#eef1f5;text-align:center}td:first-child,th:first-child{text-align:left}
-td.text{text-align:left;overflow-wrap:anywhere;max-width:320px}tr.best td{background:#fff7d6;font-weight:600}
+td.text{text-align:left;overflow-wrap:anywhere;max-width:320px}
+tr.best td{background:#fff7d6;font-weight:600}
 td.fixed{color:#7a8794}
 figure{margin:10px 0 18px}figure img{max-width:100%;border:1px solid #e3e8ee}
 figcaption{color:#5b6b7b;font-size:13px}
