@@ -97,7 +97,11 @@ def run_graph(
     tracker = SimTrackerNode(context=context, parameter_overrides=tracker_parameters or [])
     capture = CaptureNode(
         context=context,
-        parameter_overrides=[Parameter("settle_time", value=0.03), *capture_parameters],
+        parameter_overrides=[
+            Parameter("settle_time", value=0.03),
+            Parameter("speed", value=600.0),  # deg/s: the moves' times (the robot is fast)
+            *capture_parameters,
+        ],
     )
     executor = SingleThreadedExecutor(context=context)
     for node in (robot, tracker, capture):
@@ -181,19 +185,54 @@ def test_trigger_service_approach_side_and_skipped_poses(context: Context, tmp_p
     assert np.all(recording.poses.direction == 1)
     assert np.any(np.diff(recording.poses.q, axis=0) < -1e-3)  # the plan goes both ways
 
-    # a controller with other joint names rejects every command: skipped after the timeout
-    skipped = run_graph(
-        context,
-        [
+    # a controller with other joint names: refused at the first joint state, nothing written
+    with pytest.raises(InputError, match="lack the robot's joints|are not the robot's joints"):
+        run_graph(
+            context,
+            [
+                Parameter("plan", value="paper-test1"),
+                Parameter("output", value=str(tmp_path / "s.mcap")),
+                Parameter("joint_names", value=[f"j{k}" for k in range(1, 7)]),
+            ],
+        )
+    assert not (tmp_path / "s.mcap").exists()
+
+
+def test_no_controller_or_no_tracker_stops_with_one_line_and_no_bag(
+    context: Context, tmp_path: Path
+) -> None:
+    """Nothing listening on the command topic: an error after connect_timeout; a tracker
+    that never measures: the first poses fail and the campaign stops, no empty bag."""
+    capture = CaptureNode(
+        context=context,
+        parameter_overrides=[
             Parameter("plan", value="paper-test1"),
-            Parameter("output", value=str(tmp_path / "s.mcap")),
-            Parameter("joint_names", value=[f"j{k}" for k in range(1, 7)]),
-            Parameter("move_timeout", value=0.3),
+            Parameter("output", value=str(tmp_path / "n.mcap")),
+            Parameter("connect_timeout", value=0.3),
         ],
-        stop=lambda c: len(c.skipped) == 2,
     )
-    assert skipped.measured == 0 and [s.pose for s in skipped.skipped] == [0, 1]
-    assert "not settled within 0.3 s" in skipped.skipped[0].reason
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(capture)
+    try:
+        with pytest.raises(InputError, match="no controller subscribes .*joint_trajectory"):
+            deadline = time.monotonic() + TIMEOUT_S
+            while time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.01)
+    finally:
+        executor.remove_node(capture)
+        capture.destroy_node()
+        executor.shutdown()
+    with pytest.raises(InputError, match="the first 3 poses all failed"):
+        run_graph(
+            context,
+            [
+                Parameter("plan", value="paper-test1"),
+                Parameter("output", value=str(tmp_path / "t.mcap")),
+                Parameter("measure_timeout", value=0.2),
+            ],
+            [Parameter("triggered", value=True)],  # measures only when asked: never
+        )
+    assert not (tmp_path / "n.mcap").exists() and not (tmp_path / "t.mcap").exists()
 
 
 def test_dry_run_moves_nothing_and_bad_parameters_are_refused(
@@ -218,3 +257,24 @@ def test_dry_run_moves_nothing_and_bad_parameters_are_refused(
     ):  # fmt: skip
         with pytest.raises(InputError, match=message):
             CaptureNode(context=context, parameter_overrides=overrides)
+
+
+def test_moves_are_timed_for_a_real_controller_and_directions_follow_the_stream() -> None:
+    """A joint_trajectory_controller rejects times that do not increase and has no speed
+    limit: the times are strictly increasing and set by the speed; the approach direction
+    is the last motion beyond the tolerance, a slow one included, jitter not."""
+    from robot_calib.capture.moves import PEAK_OVER_MEAN, waypoint_times
+    from robot_calib.capture.settle import DirectionTracker
+
+    start = np.zeros(6)
+    waypoints = np.radians([[30, 0, 0, 0, 0, 0], [30, -10, 0, 0, 0, 0], [30, -10, 0, 0, 0, 0.01]])
+    times = waypoint_times(start, waypoints, np.radians(20.0))
+    assert np.all(np.diff(np.concatenate([[0.0], times])) > 0)
+    assert times[0] == pytest.approx(PEAK_OVER_MEAN * 30 / 20)  # 30 deg at 20 deg/s mean x 1.5
+    assert times[2] - times[1] == pytest.approx(0.1)  # a tiny step still takes 0.1 s
+    assert waypoint_times(start, waypoints, np.radians(20.0), least_s=10.0)[-1] == 10.0
+    tracker = DirectionTracker(1e-4)
+    for q in np.linspace(0.0, -1e-3, 50):  # slow: 2e-5 rad per sample, below the tolerance
+        tracker.add(np.full(6, q))
+    tracker.add(np.full(6, -1e-3 + 5e-5))  # jitter back, below the tolerance
+    assert np.all(tracker.direction == -1)

@@ -135,3 +135,25 @@ def describe(moves: list[Move], names: tuple[str, ...]) -> list[str]:
         )
         here = move.waypoints[-1]
     return lines
+
+
+MIN_SEGMENT_S = 0.1  # no waypoint sooner than this after the one before [s]
+PEAK_OVER_MEAN = 1.5  # a smooth segment's peak speed over its mean
+
+
+def waypoint_times(
+    start: Array, waypoints: Array, speed_rad_s: float, least_s: float = 0.0
+) -> Array:
+    """time_from_start (m,) [s] of `waypoints` (m, J) [rad] from readings `start` (J,):
+    strictly increasing, each segment long enough that no joint's mean speed exceeds
+    speed_rad_s / PEAK_OVER_MEAN (so its peak stays near speed_rad_s), at least
+    MIN_SEGMENT_S, stretched to at least `least_s` in all. A joint_trajectory_controller
+    takes the times as given and rejects times that do not increase; it has no speed limit
+    of its own, so these times are the move's speed."""
+    path = np.vstack([np.asarray(start, dtype=float)[None, :], waypoints])
+    step = np.max(np.abs(np.diff(path, axis=0)), axis=1)  # (m,) [rad]
+    segment = np.maximum(PEAK_OVER_MEAN * step / speed_rad_s, MIN_SEGMENT_S)
+    times = np.cumsum(segment)
+    if least_s > times[-1]:
+        times *= least_s / times[-1]
+    return times

@@ -42,9 +42,16 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
 from robot_calib.bag import BagWriter
-from robot_calib.capture.moves import Move, MoveRules, describe, parse_approach, plan_moves
+from robot_calib.capture.moves import (
+    Move,
+    MoveRules,
+    describe,
+    parse_approach,
+    plan_moves,
+    waypoint_times,
+)
 from robot_calib.capture.resume import existing_parts, measured, part_path
-from robot_calib.capture.settle import Settler
+from robot_calib.capture.settle import DirectionTracker, Settler
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.frames import Array
@@ -61,11 +68,12 @@ from robot_calib.nodes._common import declare, run_node
 from robot_calib.nodes.sim_robot import QOS, trajectory_topic
 from robot_calib.pipeline import DEFAULT_ROBOT
 from robot_calib.plan.plan_file import is_plan_file, planned_robot
-from robot_calib.poses import next_direction
+from robot_calib.poses import JOINT_CHANGE_TOLERANCE
 from robot_calib.sim.plans import HOME_DEG, make_plan
 
 DIRECTION_SPEED_RAD_S = 1e-9  # |velocity| recorded with a settled pose: only its sign counts
 STATE_BUFFER = 400  # joint states kept to pair a point with (a few seconds at 100 Hz)
+FAIL_FAST = 3  # the first this many poses all failing: stop, the setup is wrong
 RESUME_MATCH_RAD = 1e-3  # a recorded pose within this of a plan pose counts as measured
 
 
@@ -148,21 +156,32 @@ class CaptureNode(Node):
         overshoot = declare(
             self, "approach_overshoot", 1.0, "approach start before the pose [deg]"
         )
-        self.move_time = declare(
-            self,
-            "move_time",
-            0.0,
-            "time_from_start of each move's last point [s] (0: the controller's speed limits)",
+        speed = declare(
+            self, "speed", 20.0,
+            "joint speed of the moves [deg/s]: the trajectories' times (a joint_trajectory_"
+            "controller follows the times it is given and has no speed limit of its own)",
+        )  # fmt: skip
+        self.move_time = declare(self, "move_time", 0.0, "every move takes at least this [s]")
+        self.connect_timeout = declare(
+            self, "connect_timeout", 10.0,
+            "no controller subscriber or no joint state this long at the start: error [s]",
+        )  # fmt: skip
+        self.trigger_retries = declare(
+            self, "trigger_retries", 3, "trigger calls per pose while the tracker says no"
         )
         self.dry_run = declare(self, "dry_run", False, "log the moves; do not move or write")
         seed = declare(self, "seed", 0, "seed of the random plan")
         if not str(self.output) or self.output.suffix != ".mcap":
             raise InputError("capture: parameter 'output' must name a .mcap bag")
         for name, value in (("position_tolerance", self.tolerance), ("settle_time", self.settle_s),
-                            ("move_timeout", self.move_timeout),
-                            ("measure_timeout", self.measure_timeout)):  # fmt: skip
+                            ("move_timeout", self.move_timeout), ("speed", speed),
+                            ("measure_timeout", self.measure_timeout),
+                            ("connect_timeout", self.connect_timeout)):  # fmt: skip
             if not value > 0:
                 raise InputError(f"capture: parameter {name!r} must be > 0, not {value}")
+        if not self.move_time >= 0 or self.trigger_retries < 1:
+            raise InputError("capture: parameters 'move_time' >= 0 and 'trigger_retries' >= 1")
+        self.speed_rad_s = float(np.radians(speed))
         if not robot_ref:
             robot_ref = planned_robot(plan_name) if is_plan_file(plan_name) else DEFAULT_ROBOT
         robot = load_robot(robot_ref)
@@ -177,10 +196,13 @@ class CaptureNode(Node):
         )
         self.plan_q: Array = plan.q
         self.parts = [] if self.dry_run else existing_parts(self.output)
-        done = measured(plan.q, self.parts, robot, RESUME_MATCH_RAD)
+        done = measured(plan.q, self.parts, robot, max(RESUME_MATCH_RAD, 2 * self.tolerance))
         home = np.zeros(robot.n_joints)
         home[: min(6, robot.n_joints)] = np.radians(HOME_DEG[: robot.n_joints])
         todo = np.flatnonzero(np.logical_not(done))
+        # refusals do not depend on where a move starts; the waypoints are planned again from
+        # the robot's latest joint state when each move is sent (`_send`)
+        self.rules = rules
         moves, refused = plan_moves(plan.q[todo], home, robot.limits, self.joint_names, rules)
         self.moves = [Move(int(todo[m.pose]), m.waypoints) for m in moves]
         self.skipped = [Skipped(int(todo[r.pose]), r.reason.replace(
@@ -208,9 +230,17 @@ class CaptureNode(Node):
         self._states: deque[tuple[int, Array, Any]] = deque(maxlen=STATE_BUFFER)
         self._point_topics = [target_topic(t) for t in ("", *targets)]
         self._points: dict[str, list[Any]] = {t: [] for t in self._point_topics}
-        self._direction = np.ones(robot.n_joints)  # the contract's first direction: +1
-        self._last_end: Array = home
+        self._directions = DirectionTracker(JOINT_CHANGE_TOLERANCE)
+        self.error: str | None = None
+        self.interrupted = False
+        self._attempts = 0
+        self._failed = 0  # poses skipped while running (not refused up front)
+        self._started = time.monotonic()
+        self.bag_path = part_path(self.output, len(self.parts) + 1)
         if self.dry_run:
+            start = "; ".join(f"{n}={v:.1f}" for n, v in zip(self.joint_names, np.degrees(home)))
+            log.info(f"dry run: from the home pose ({start} deg); a real run plans each move "
+                     "from where the robot stands")  # fmt: skip
             for line in describe(self.moves, self.joint_names):
                 log.info(f"dry run: {line}")
             log.info("dry run: nothing moved, nothing written")
@@ -222,11 +252,6 @@ class CaptureNode(Node):
             return
         from trajectory_msgs.msg import JointTrajectory
 
-        self.bag_path = part_path(self.output, len(self.parts) + 1)
-        self._writer = BagWriter(self.bag_path)
-        self._writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
-        for topic in self._point_topics:
-            self._writer.add_topic(topic, POINT_TYPE)
         self.command = self.create_publisher(JointTrajectory, trajectory_topic(controller), 10)
         self.create_subscription(JointState, JOINT_STATES_TOPIC, self._on_state, QOS)
         for topic in self._point_topics:
@@ -236,8 +261,10 @@ class CaptureNode(Node):
             from std_srvs.srv import Trigger
 
             self.trigger = self.create_client(Trigger, trigger)
+        self._state = "connect"
         self._timer = self.create_timer(0.01, self._step)
-        log.info(f"writing {self.bag_path}; commands on {trajectory_topic(controller)}")
+        log.info(f"commands on {trajectory_topic(controller)}; the bag {self.bag_path} is "
+                 "written from the first pose measured")  # fmt: skip
 
     # --- callbacks ------------------------------------------------------------------------
 
@@ -245,10 +272,11 @@ class CaptureNode(Node):
         try:
             q = joint_positions(msg, self.joint_names)
         except InputError as exc:
-            self.get_logger().error(str(exc), throttle_duration_sec=5.0)
+            self.error = f"{JOINT_STATES_TOPIC}: {exc}"
             return
         stamp = stamp_to_ns(msg.header.stamp)
         self._states.append((stamp, q, msg))
+        self._directions.add(q)
         if self._settler is not None:
             self._settler.add(stamp * 1e-9, q)
 
@@ -258,37 +286,52 @@ class CaptureNode(Node):
     # --- the state machine ----------------------------------------------------------------
 
     def _step(self) -> None:
+        """One step of the state machine; a fatal problem closes the bag and raises (the
+        standalone node then exits 2 with that one line)."""
         if self.finished:
             return
         try:
+            if self.error is not None:
+                raise InputError(self.error)
             getattr(self, f"_{self._state}")()
         except RobotCalibError as exc:
-            self.get_logger().error(str(exc))
+            self.error = str(exc)
             self.close()
+            raise
+
+    def _connect(self) -> None:
+        """Wait for the controller's subscription and a first joint state."""
+        if self.command.get_subscription_count() >= 1 and self._states:
+            self._state = "send"
+            return
+        if time.monotonic() - self._started > self.connect_timeout:
+            missing = (f"no controller subscribes {self.command.topic_name} (parameter "
+                       "controller: is it running?)" if self.command.get_subscription_count()
+                       < 1 else f"no joint state on {JOINT_STATES_TOPIC}")  # fmt: skip
+            raise InputError(f"capture: {missing} after {self.connect_timeout:g} s")
 
     def _send(self) -> None:
-        """Wait for the controller to listen, then send the next move."""
-        if self.command.get_subscription_count() < 1:
-            return
+        """Plan the next move from where the robot stands and send it, timed."""
         from builtin_interfaces.msg import Duration
         from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-        move = self.moves[self._index]
+        pose = self.moves[self._index]
+        here = self._states[-1][1]
+        planned, _ = plan_moves(self.plan_q[[pose.pose]], here, self.robot.limits,
+                                self.joint_names, self.rules)  # fmt: skip
+        waypoints = planned[0].waypoints
+        times = waypoint_times(here, waypoints, self.speed_rad_s, self.move_time)
         msg = JointTrajectory()
         msg.joint_names = list(self.joint_names)
-        n = len(move.waypoints)
-        for k, q in enumerate(move.waypoints):
+        for q, at in zip(waypoints, times):
             point = JointTrajectoryPoint()
             point.positions = q.tolist()
-            at = self.move_time * (k + 1) / n
-            point.time_from_start = Duration(sec=int(at), nanosec=int((at % 1) * 1e9))
+            point.time_from_start = Duration(sec=int(at), nanosec=int(round((at % 1) * 1e9)))
             msg.points.append(point)
-        path = np.vstack([self._last_end[None, :], move.waypoints])
-        self._direction = next_direction(self._direction, path[-2], path[-1])
-        self._last_end = move.waypoints[-1]
-        self._settler = Settler(move.waypoints[-1], self.tolerance, self.settle_s)
+        self._settler = Settler(waypoints[-1], self.tolerance, self.settle_s)
         self._since = time.monotonic()
         self._pose_started = self._since
+        self._move_s = float(times[-1])
         self.command.publish(msg)
         self._state = "settle"
 
@@ -300,10 +343,11 @@ class CaptureNode(Node):
             self._settled_wall = time.monotonic()
             self._triggered = False
             self._state = "measure"
-        elif time.monotonic() - self._since > self.move_timeout:
+        elif time.monotonic() - self._since > self.move_timeout + self._move_s:
             self._skip(
-                f"not settled within {self.move_timeout:g} s (largest joint error "
-                f"{np.degrees(self._settler.largest_error_rad):.4f} deg)"
+                f"not settled within {self.move_timeout:g} s after its {self._move_s:.1f} s "
+                f"move (largest joint error {np.degrees(self._settler.largest_error_rad):.4f} "
+                "deg)"
             )
 
     def _measure(self) -> None:
@@ -319,7 +363,18 @@ class CaptureNode(Node):
                 points.clear()
             self._trigger_future = self.trigger.call_async(Trigger.Request())
             self._triggered = True
+            self._attempts += 1
             return
+        future = self._trigger_future
+        if future is not None and future.done():
+            answer = future.result()
+            self._trigger_future = None
+            if answer is not None and not answer.success:
+                if self._attempts < self.trigger_retries:
+                    self._triggered = False  # call again
+                    return
+                self._skip(f"the tracker said no {self._attempts} times: {answer.message}")
+                return
         since_ns = int(self._settler.settled_since * 1e9)
         fresh = {}
         for topic, points in self._points.items():
@@ -336,14 +391,21 @@ class CaptureNode(Node):
             )
 
     def _record(self, points: dict[str, Any]) -> None:
-        """Write the pose's joint state (nearest the first point's stamp) and its points."""
-        assert self._writer is not None
+        """Write the pose's joint state (nearest the first point's stamp) and its points;
+        the bag is created with the first pose measured (a campaign that measures nothing
+        leaves no file)."""
+        if self._writer is None:
+            self._writer = BagWriter(self.bag_path)
+            self._writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
+            for topic in self._point_topics:
+                self._writer.add_topic(topic, POINT_TYPE)
+        assert self._directions.direction is not None
         stamp = stamp_to_ns(points[self._point_topics[0]].header.stamp)
         state = copy.deepcopy(min(self._states, key=lambda s: abs(s[0] - stamp))[2])
         names = list(state.name)
         velocity = np.zeros(len(names))
         for j, name in enumerate(self.joint_names):
-            velocity[names.index(name)] = self._direction[j] * DIRECTION_SPEED_RAD_S
+            velocity[names.index(name)] = self._directions.direction[j] * DIRECTION_SPEED_RAD_S
         state.velocity = velocity.tolist()
         now = time.time_ns()
         self._writer.write(JOINT_STATES_TOPIC, serialize_message(state), now)
@@ -364,10 +426,18 @@ class CaptureNode(Node):
         move = self.moves[self._index]
         self.skipped.append(Skipped(move.pose, f"pose {move.pose}: {reason}"))
         self.get_logger().warning(f"skipped pose {move.pose}: {reason}")
+        self._failed += 1
+        if self.measured == 0 and self._failed >= FAIL_FAST:
+            raise InputError(
+                f"capture: the first {FAIL_FAST} poses all failed, stopping (last: {reason}); "
+                "check the controller, the tracker and their topics"
+            )
         self._next()
 
     def _next(self) -> None:
         self._settler = None
+        self._trigger_future = None
+        self._attempts = 0
         self._index += 1
         if self._index >= len(self.moves):
             self.close()
@@ -375,22 +445,36 @@ class CaptureNode(Node):
             self._state = "send"
 
     def close(self) -> None:
-        """Finish: close the bag and log the summary. Idempotent."""
-        if self.finished and self._writer is None:
+        """Finish: stop the robot if a move may still run (interrupted, or a fatal error),
+        close the bag and log the summary. Idempotent."""
+        if self.finished:
             return
         self.finished = True
+        incomplete = self._index < len(self.moves)
+        if incomplete and self._state != "connect" and hasattr(self, "command"):
+            from trajectory_msgs.msg import JointTrajectory
+
+            stop = JointTrajectory()  # no points: the controller holds where it is
+            stop.joint_names = list(self.joint_names)
+            self.command.publish(stop)
+            self.interrupted = self.error is None
         if self._writer is not None:
             self._writer.close()
             self._writer = None
-            self.get_logger().info(self.summary())
+        self.get_logger().info(self.summary())
 
     def summary(self) -> str:
-        """'N poses measured -> BAG; K skipped: pose i: why; ...'."""
-        text = f"{self.measured} poses measured -> {self.bag_path}"
+        """'N poses measured -> BAG; K skipped: pose i: why; ...' (and what is left)."""
+        where = self.bag_path if self.measured else "no bag written"
+        text = f"{self.measured} poses measured -> {where}"
         if self.n_already:
             text += f" ({self.n_already} earlier, in {', '.join(map(str, self.parts))})"
         if self.skipped:
             text += f"; {len(self.skipped)} skipped: " + "; ".join(s.reason for s in self.skipped)
+        left = len(self.moves) - self._index
+        if left > 0:
+            text += (f"; stopped with {left} pose(s) to go (robot told to hold): run again "
+                     "with the same plan and output to resume")  # fmt: skip
         return text
 
     def destroy_node(self) -> None:
@@ -401,8 +485,15 @@ class CaptureNode(Node):
             super().destroy_node()
 
 
+def _done(node: CaptureNode) -> bool:
+    """Finished; a campaign that measured nothing is an error (exit 2), not a success."""
+    if node.finished and node.measured == 0 and node.moves and not node.dry_run:
+        raise InputError(f"capture: no pose measured ({node.summary()})")
+    return node.finished
+
+
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(CaptureNode, args, done=lambda node: node.finished))
+    sys.exit(run_node(CaptureNode, args, done=_done, name="capture"))
 
 
 if __name__ == "__main__":

@@ -185,6 +185,18 @@ class SimRobotNode(Node):
         times = np.array(
             [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points]
         )
+        if len(times) > 1 and np.any(np.diff(times) <= 0):
+            self.get_logger().error(
+                f"{self.topic}: rejected: time_from_start not strictly increasing "
+                f"({times.round(3).tolist()} s), as a joint_trajectory_controller rejects it"
+            )
+            return
+        if times[0] <= 0:
+            self.get_logger().warning(
+                f"{self.topic}: a first point at time 0: a real controller jumps there; this "
+                "simulation moves at its speed limit",
+                throttle_duration_sec=10.0,
+            )
         lo, hi = robot.limits.T
         outside = ~np.isfinite(waypoints) | (waypoints < lo - 1e-9) | (waypoints > hi + 1e-9)
         if outside.any():
