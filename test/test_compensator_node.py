@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -66,19 +67,28 @@ def params_file(tmp_path: Path) -> Path:
     return path
 
 
-def test_a_trajectory_comes_back_compensated(context: Context, params_file: Path) -> None:
+def nodes(
+    context: Context, params_file: Path, *extra: Parameter
+) -> tuple[CompensatorNode, Node, Any, list[JointTrajectory]]:
+    """The compensator (IN -> OUT) and a client publishing on IN and collecting OUT."""
     compensator = CompensatorNode(
         context=context,
         parameter_overrides=[
             Parameter("params", value=str(params_file)),
             Parameter("input_topic", value=IN),
             Parameter("output_topic", value=OUT),
+            *extra,
         ],
     )
     client = Node("trajectory_client", context=context)
     publisher = client.create_publisher(JointTrajectory, IN, 10)
     received: list[JointTrajectory] = []
     client.create_subscription(JointTrajectory, OUT, received.append, 10)
+    return compensator, client, publisher, received
+
+
+def test_a_trajectory_comes_back_compensated(context: Context, params_file: Path) -> None:
+    compensator, client, publisher, received = nodes(context, params_file)
     states = client.create_publisher(JointState, "/joint_states", 10)
     executor = SingleThreadedExecutor(context=context)
     for node in (compensator, client):
@@ -146,19 +156,11 @@ def test_a_trajectory_corrected_beyond_max_correction_is_not_sent(
 ) -> None:
     """A correction larger than `max_correction` (a wrist flip near the singularity; here a
     bound below the 2 mrad backlash's) drops the trajectory: nothing reaches the robot."""
-    compensator = CompensatorNode(
-        context=context,
-        parameter_overrides=[
-            Parameter("params", value=str(params_file)),
-            Parameter("input_topic", value=IN),
-            Parameter("output_topic", value=OUT),
-            Parameter("max_correction", value=0.01),  # deg
-        ],
+    compensator, client, publisher, received = nodes(
+        context,
+        params_file,
+        Parameter("max_correction", value=0.01),  # deg
     )
-    client = Node("trajectory_client", context=context)
-    publisher = client.create_publisher(JointTrajectory, IN, 10)
-    received: list[JointTrajectory] = []
-    client.create_subscription(JointTrajectory, OUT, received.append, 10)
     executor = SingleThreadedExecutor(context=context)
     for node in (compensator, client):
         executor.add_node(node)
