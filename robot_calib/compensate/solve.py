@@ -42,7 +42,7 @@ from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses, approach_directions
-from robot_calib.sim.plans import HOME_DEG
+from robot_calib.sim.plans import home_variables
 
 #: Compensated readings of nominal commands: `ik.IKSolution` (q, error_m, error_rad,
 #: iterations, converged) of the calibrated model.
@@ -114,12 +114,10 @@ class TargetCompensation:
 def home_readings(
     model: KinematicModel, params: ParameterVector, goal2base: Array, tool2flange: Array
 ) -> Array:
-    """(n, J) readings [rad] of the home pose (sim.plans.HOME_DEG as joint variables; 0 for
-    joints beyond its length) with joint 1 turned to face each goal (n, 4, 4) (base frame):
-    the default seed of the nominal inverse kinematics. Joint 1's axis is the base z axis."""
-    variables = np.zeros(model.robot.n_joints)
-    k = min(len(HOME_DEG), len(variables))
-    variables[:k] = np.radians(HOME_DEG[:k])
+    """(n, J) readings [rad] of the home pose (sim.plans.home_variables) with joint 1 turned
+    to face each goal (n, 4, 4) (base frame): the default seed of the nominal inverse
+    kinematics. Joint 1's axis is the base z axis."""
+    variables = home_variables(model.robot.n_joints)
     home = model.robot.readings(variables[None, :])
     tool = tool2base(model, params, Poses.from_readings(home), tool2flange)[0, :3, 3]
     turn = np.arctan2(goal2base[:, 1, 3], goal2base[:, 0, 3]) - np.arctan2(tool[1], tool[0])

@@ -186,10 +186,12 @@ def _at(model: KinematicModel, params: ParameterVector, q: Array) -> Array:
 @dataclass(frozen=True)
 class NominalFit:
     """How the file sits on the model: B (4, 4) root <- base, C (J, 4, 4) each joint frame
-    in its DH frame, and the largest nominal disagreement: metres and radians."""
+    in its DH frame, the nominal flange (4, 4) at the zero pose in the base frame, and the
+    largest nominal disagreement: metres and radians."""
 
     base: Array
     attach: Array
+    nominal_flange: Array
     distance_m: float
     angle_rad: float
 
@@ -199,18 +201,19 @@ def fit_nominal(cal: Calibration, chain: FileChain, source: str) -> NominalFit:
     they disagree by more than the tolerances at random poses."""
     model = KinematicModel(cal.model.robot, (), cal.model.targets, cal.model.oriented)
     nominal = model.parameters()
+    from robot_calib.sim.plans import random_plan
+
     signs = joint_signs(cal, "a URDF")
-    dh = _at(model, nominal, np.zeros((1, model.robot.n_joints)))[0]
     zero_q = np.zeros((1, len(chain.moving)))
-    file0 = chain_frames(chain, zero_q)[0]
+    q = np.vstack([zero_q, random_plan(model.robot, CHECK_POSES, np.random.default_rng(0)).q])
+    frames = _at(model, nominal, q)  # the zero pose first
+    dh = frames[0]
+    file_frames = chain_frames(chain, q)
+    file0 = file_frames[0]
     axes = np.array([j.axis for j in chain.moving])
     points, dirs = _lines(file0, axes)
     base = fit_base(points, dirs, dh[:-1, :3, 3], dh[:-1, :3, 2] * signs[:, None])
-    from robot_calib.sim.plans import random_plan
-
-    q = np.vstack([zero_q, random_plan(model.robot, CHECK_POSES, np.random.default_rng(0)).q])
-    in_root = base @ _at(model, nominal, q)[:, :-1]
-    distance, angle = _mismatch(chain_frames(chain, q), axes, in_root, signs)
+    distance, angle = _mismatch(file_frames, axes, base @ frames[:, :-1], signs)
     if distance > NOMINAL_TOLERANCE_M or angle > NOMINAL_TOLERANCE_RAD:
         raise ExportError(
             f"{source}: not robot {model.robot.name}'s nominal kinematics: its joint axes are "
@@ -222,7 +225,7 @@ def fit_nominal(cal: Calibration, chain: FileChain, source: str) -> NominalFit:
     attach = np.stack(
         [_attach(file0[j], base @ dh[j], axes[j], signs[j]) for j in range(len(axes))]
     )
-    return NominalFit(base, attach, float(distance), float(angle))
+    return NominalFit(base, attach, dh[-1], float(distance), float(angle))
 
 
 def _xml(text: bytes, source: str):  # type: ignore[no-untyped-def] # lxml's element
@@ -274,8 +277,6 @@ def render_on_nominal(cal: Calibration, source: str, nominal_path: str | Path) -
     fit = fit_nominal(cal, chain, name)
     zero = np.zeros((1, model.robot.n_joints))
     dh = _at(model, params, zero)[0]  # calibrated E'_1..E'_{J+1}
-    nominal_model = KinematicModel(robot, (), model.targets, model.oriented)
-    dh_nominal = _at(nominal_model, nominal_model.parameters(), zero)[0]
     n = len(chain.moving)
     new_joint = np.stack([fit.base @ dh[j] @ fit.attach[j] for j in range(n)])  # J'_j
     old_joint = np.stack([chain.zero[j.child] for j in chain.moving])  # J_j
@@ -290,7 +291,7 @@ def render_on_nominal(cal: Calibration, source: str, nominal_path: str | Path) -
     move = (
         np.linalg.inv(new_joint[-1])
         @ flange
-        @ np.linalg.inv(fit.base @ dh_nominal[n])
+        @ np.linalg.inv(fit.base @ fit.nominal_flange)
         @ old_joint[-1]
     )
     for joint in urdf.joints:

@@ -69,7 +69,7 @@ from robot_calib.nodes.sim_robot import QOS, trajectory_topic
 from robot_calib.pipeline import DEFAULT_ROBOT
 from robot_calib.plan.plan_file import is_plan_file, planned_robot
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE
-from robot_calib.sim.plans import HOME_DEG, make_plan
+from robot_calib.sim.plans import home_pose, make_plan
 
 DIRECTION_SPEED_RAD_S = 1e-9  # |velocity| recorded with a settled pose: only its sign counts
 STATE_BUFFER = 400  # joint states kept to pair a point with (a few seconds at 100 Hz)
@@ -197,8 +197,7 @@ class CaptureNode(Node):
         self.plan_q: Array = plan.q
         self.parts = [] if self.dry_run else existing_parts(self.output)
         done = measured(plan.q, self.parts, robot, max(RESUME_MATCH_RAD, 2 * self.tolerance))
-        home = np.zeros(robot.n_joints)
-        home[: min(6, robot.n_joints)] = np.radians(HOME_DEG[: robot.n_joints])
+        home = home_pose(robot)
         todo = np.flatnonzero(np.logical_not(done))
         # refusals do not depend on where a move starts; the waypoints are planned again from
         # the robot's latest joint state when each move is sent (`_send`)
@@ -219,7 +218,7 @@ class CaptureNode(Node):
         self.finished = False
         self.measured = 0
         self._index = 0
-        self._state = "send"
+        self._state = "connect"  # then send -> settle -> measure per pose
         self._settler: Settler | None = None
         self._since = 0.0
         self._settled_wall = 0.0
@@ -232,7 +231,6 @@ class CaptureNode(Node):
         self._points: dict[str, list[Any]] = {t: [] for t in self._point_topics}
         self._directions = DirectionTracker(JOINT_CHANGE_TOLERANCE)
         self.error: str | None = None
-        self.interrupted = False
         self._attempts = 0
         self._failed = 0  # poses skipped while running (not refused up front)
         self._started = time.monotonic()
@@ -261,7 +259,6 @@ class CaptureNode(Node):
             from std_srvs.srv import Trigger
 
             self.trigger = self.create_client(Trigger, trigger)
-        self._state = "connect"
         self._timer = self.create_timer(0.01, self._step)
         log.info(f"commands on {trajectory_topic(controller)}; the bag {self.bag_path} is "
                  "written from the first pose measured")  # fmt: skip
@@ -457,7 +454,6 @@ class CaptureNode(Node):
             stop = JointTrajectory()  # no points: the controller holds where it is
             stop.joint_names = list(self.joint_names)
             self.command.publish(stop)
-            self.interrupted = self.error is None
         if self._writer is not None:
             self._writer.close()
             self._writer = None

@@ -34,7 +34,7 @@ from robot_calib.errors import InputError
 from robot_calib.messages import JOINT_STATES_TOPIC, ns_to_sec_nanosec
 from robot_calib.nodes._common import declare, run_node
 from robot_calib.sim.controller import Motion, follow, hold, state_at
-from robot_calib.sim.plans import HOME_DEG, PLAN_NAMES, Plan, make_plan, plan_times
+from robot_calib.sim.plans import PLAN_NAMES, Plan, home_pose, make_plan, plan_times
 from robot_calib.sim.world import load_world
 
 SYSTEM_CLOCK = RosClock(clock_type=ClockType.SYSTEM_TIME)
@@ -134,9 +134,7 @@ class SimRobotNode(Node):
         if not state_rate > 0 or not self.speed_fraction > 0:
             raise InputError("sim_robot: parameters 'state_rate' and 'speed_fraction' must be > 0")
         robot = self.world.model.robot
-        home = np.zeros(robot.n_joints)
-        home[: min(len(HOME_DEG), robot.n_joints)] = np.radians(HOME_DEG[: robot.n_joints])
-        self.motion: Motion = hold(np.clip(home, *robot.limits.T), self._now_s())
+        self.motion: Motion = hold(np.clip(home_pose(robot), *robot.limits.T), self._now_s())
         self.commands = 0
         self.publisher = self.create_publisher(JointState, JOINT_STATES_TOPIC, QOS)
         self.topic = trajectory_topic(controller)

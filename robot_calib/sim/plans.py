@@ -46,6 +46,22 @@ PAPER_TESTS: dict[int, tuple[list[tuple[float, float, int]], float]] = {
 # Pose of the joints that do not sweep [deg]: wrist bent so that every joint's circle has
 # a radius of several cm at the target.
 HOME_DEG = (0.0, -90.0, 90.0, 0.0, 45.0, 0.0)
+
+
+def home_variables(n_joints: int) -> Array:
+    """(J,) joint variables [rad] of the home pose: HOME_DEG, 0 for joints beyond it."""
+    out = np.zeros(n_joints)
+    k = min(len(HOME_DEG), n_joints)
+    out[:k] = np.radians(HOME_DEG[:k])
+    return out
+
+
+def home_pose(robot: RobotDescription) -> Array:
+    """(J,) readings [rad] of the home pose (`home_variables`, through the robot's
+    reading-to-joint mapping): where a simulated controller starts and a dry run plans from."""
+    return np.asarray(robot.readings(home_variables(robot.n_joints)[None, :])[0], dtype=float)
+
+
 PLAN_NAMES = (*(f"paper-test{k}" for k in PAPER_TESTS), "random", "iso9283")
 
 
