@@ -78,6 +78,36 @@ def approach_directions(
     return direction
 
 
+@dataclass
+class DirectionTracker:
+    """Each joint's approach direction from a stream of joint states: the sign of its last
+    motion of more than `tolerance_rad` since the reading where the direction last changed
+    or was confirmed (an anchor per joint, so that a slow move whose samples each change by
+    less than the tolerance still counts; encoder jitter below it does not), or the sign of
+    a reported velocity where the message has one. Starts at +1 (the contract's first
+    direction).
+
+    direction : (J,) +1/-1; anchor : (J,) [rad], None before the first reading."""
+
+    tolerance_rad: float = JOINT_CHANGE_TOLERANCE
+    direction: Array | None = None
+    anchor: Array | None = None
+
+    def add(self, q: Array, signs: Array | None = None) -> None:
+        """One joint reading q (J,) [rad], with its velocities' signs (J,) (0: unknown)."""
+        q = np.asarray(q, dtype=float)
+        if self.anchor is None or self.direction is None:
+            self.anchor, self.direction = q.copy(), np.ones_like(q)
+        change = q - self.anchor
+        moved = np.abs(change) > self.tolerance_rad
+        self.direction[moved] = np.sign(change[moved])
+        self.anchor[moved] = q[moved]
+        if signs is not None:
+            told = np.asarray(signs) != 0
+            self.direction[told] = np.sign(np.asarray(signs)[told])
+            self.anchor[told] = q[told]
+
+
 @dataclass(frozen=True)
 class Poses:
     """A batch of measurement poses.

@@ -264,7 +264,7 @@ def test_moves_are_timed_for_a_real_controller_and_directions_follow_the_stream(
     limit: the times are strictly increasing and set by the speed; the approach direction
     is the last motion beyond the tolerance, a slow one included, jitter not."""
     from robot_calib.capture.moves import PEAK_OVER_MEAN, waypoint_times
-    from robot_calib.capture.settle import DirectionTracker
+    from robot_calib.poses import DirectionTracker
 
     start = np.zeros(6)
     waypoints = np.radians([[30, 0, 0, 0, 0, 0], [30, -10, 0, 0, 0, 0], [30, -10, 0, 0, 0, 0.01]])

@@ -44,29 +44,3 @@ class Settler:
             and self.last_stamp_s is not None
             and self.last_stamp_s - self.settled_since >= self.settle_s
         )
-
-
-@dataclass
-class DirectionTracker:
-    """Each joint's approach direction from the joint-state stream: the sign of its last
-    motion of more than `tolerance_rad` since the reading where the direction last changed
-    or was confirmed (an anchor per joint, so that a slow move whose samples each change by
-    less than the tolerance still counts; encoder jitter below it does not). Starts at +1
-    (the contract's first direction).
-
-    direction : (J,) +1/-1; anchor : (J,) [rad], None before the first reading."""
-
-    tolerance_rad: float
-    direction: Array | None = None
-    anchor: Array | None = None
-
-    def add(self, q: Array) -> None:
-        """One joint reading (J,) [rad]."""
-        q = np.asarray(q, dtype=float)
-        if self.anchor is None or self.direction is None:
-            self.anchor, self.direction = q.copy(), np.ones_like(q)
-            return
-        change = q - self.anchor
-        moved = np.abs(change) > self.tolerance_rad
-        self.direction[moved] = np.sign(change[moved])
-        self.anchor[moved] = q[moved]

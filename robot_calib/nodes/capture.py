@@ -51,7 +51,7 @@ from robot_calib.capture.moves import (
     waypoint_times,
 )
 from robot_calib.capture.resume import existing_parts, measured, part_path
-from robot_calib.capture.settle import DirectionTracker, Settler
+from robot_calib.capture.settle import Settler
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.frames import Array
@@ -68,7 +68,7 @@ from robot_calib.nodes._common import declare, run_node
 from robot_calib.nodes.sim_robot import QOS, trajectory_topic
 from robot_calib.pipeline import DEFAULT_ROBOT
 from robot_calib.plan.plan_file import is_plan_file, planned_robot
-from robot_calib.poses import JOINT_CHANGE_TOLERANCE
+from robot_calib.poses import DirectionTracker
 from robot_calib.sim.plans import home_pose, make_plan
 
 DIRECTION_SPEED_RAD_S = 1e-9  # |velocity| recorded with a settled pose: only its sign counts
@@ -229,7 +229,7 @@ class CaptureNode(Node):
         self._states: deque[tuple[int, Array, Any]] = deque(maxlen=STATE_BUFFER)
         self._point_topics = [target_topic(t) for t in ("", *targets)]
         self._points: dict[str, list[Any]] = {t: [] for t in self._point_topics}
-        self._directions = DirectionTracker(JOINT_CHANGE_TOLERANCE)
+        self._directions = DirectionTracker()
         self.error: str | None = None
         self._attempts = 0
         self._failed = 0  # poses skipped while running (not refused up front)

@@ -35,7 +35,7 @@ from robot_calib.kinematics.description import with_joint_names
 from robot_calib.kinematics.frames import Array
 from robot_calib.messages import JOINT_STATES_TOPIC, joint_positions, velocity_signs
 from robot_calib.nodes._common import declare, run_node
-from robot_calib.poses import Poses, approach_directions, next_direction
+from robot_calib.poses import DirectionTracker, Poses, approach_directions
 
 INPUT_TOPIC = "~/joint_trajectory_in"
 OUTPUT_TOPIC = "/joint_trajectory_controller/joint_trajectory"  # ros2_control's JTC listens here
@@ -143,6 +143,7 @@ class CompensatorNode(Node):
             JointTrajectory, input_topic, self.on_trajectory, qos
         )
         self.robot_state: tuple[Array, Array] | None = None  # readings, directions (J,)
+        self._directions = DirectionTracker()
         if states_topic:
             self.create_subscription(JointState, states_topic, self.on_joint_state, 100)
         self._warned_no_state = False
@@ -156,19 +157,16 @@ class CompensatorNode(Node):
 
     def on_joint_state(self, msg: JointState) -> None:
         """Track where the robot stands and each joint's last approach direction (the
-        velocity's sign where it has one, else the change since the last reading)."""
+        velocity's sign where it has one, else its last motion beyond the tolerance:
+        `poses.DirectionTracker`)."""
         try:
             q = joint_positions(msg, self.model.robot.joint_names)
         except InputError as exc:
             self.get_logger().error(str(exc), throttle_duration_sec=10.0)
             return
-        signs = velocity_signs(msg, self.model.robot.joint_names)
-        if self.robot_state is None:
-            direction = np.where(signs != 0, signs, 1.0)
-        else:
-            moved = next_direction(self.robot_state[1], self.robot_state[0], q)
-            direction = np.where(signs != 0, signs, moved)
-        self.robot_state = (q, direction)
+        self._directions.add(q, velocity_signs(msg, self.model.robot.joint_names))
+        assert self._directions.direction is not None
+        self.robot_state = (q, self._directions.direction.copy())
 
     def commands(self, q: Array, time: Array) -> Poses:
         """The trajectory's points as commands: readings (n, J) [rad], directions from the
