@@ -172,15 +172,15 @@ class CaptureNode(Node):
         self.dry_run = declare(self, "dry_run", False, "log the moves; do not move or write")
         seed = declare(self, "seed", 0, "seed of the random plan")
         if not str(self.output) or self.output.suffix != ".mcap":
-            raise InputError("capture: parameter 'output' must name a .mcap bag")
+            raise InputError("parameter 'output' must name a .mcap bag")
         for name, value in (("position_tolerance", self.tolerance), ("settle_time", self.settle_s),
                             ("move_timeout", self.move_timeout), ("speed", speed),
                             ("measure_timeout", self.measure_timeout),
                             ("connect_timeout", self.connect_timeout)):  # fmt: skip
             if not value > 0:
-                raise InputError(f"capture: parameter {name!r} must be > 0, not {value}")
+                raise InputError(f"parameter {name!r} must be > 0, not {value}")
         if not self.move_time >= 0 or self.trigger_retries < 1:
-            raise InputError("capture: parameters 'move_time' >= 0 and 'trigger_retries' >= 1")
+            raise InputError("parameters 'move_time' >= 0 and 'trigger_retries' >= 1")
         self.speed_rad_s = float(np.radians(speed))
         if not robot_ref:
             robot_ref = planned_robot(plan_name) if is_plan_file(plan_name) else DEFAULT_ROBOT
@@ -188,7 +188,7 @@ class CaptureNode(Node):
         self.robot = robot
         self.joint_names = tuple(names) if names else robot.joint_names
         if len(self.joint_names) != robot.n_joints:
-            raise InputError(f"capture: parameter 'joint_names' needs {robot.n_joints} names")
+            raise InputError(f"parameter 'joint_names' needs {robot.n_joints} names")
         model = KinematicModel(robot, ())
         plan = make_plan(plan_name, model, model.parameters(), np.random.default_rng(seed))
         rules = MoveRules(
@@ -305,7 +305,7 @@ class CaptureNode(Node):
             missing = (f"no controller subscribes {self.command.topic_name} (parameter "
                        "controller: is it running?)" if self.command.get_subscription_count()
                        < 1 else f"no joint state on {JOINT_STATES_TOPIC}")  # fmt: skip
-            raise InputError(f"capture: {missing} after {self.connect_timeout:g} s")
+            raise InputError(f"{missing} after {self.connect_timeout:g} s")
 
     def _send(self) -> None:
         """Plan the next move from where the robot stands and send it, timed."""
@@ -426,7 +426,7 @@ class CaptureNode(Node):
         self._failed += 1
         if self.measured == 0 and self._failed >= FAIL_FAST:
             raise InputError(
-                f"capture: the first {FAIL_FAST} poses all failed, stopping (last: {reason}); "
+                f"the first {FAIL_FAST} poses all failed, stopping (last: {reason}); "
                 "check the controller, the tracker and their topics"
             )
         self._next()
@@ -484,7 +484,7 @@ class CaptureNode(Node):
 def _done(node: CaptureNode) -> bool:
     """Finished; a campaign that measured nothing is an error (exit 2), not a success."""
     if node.finished and node.measured == 0 and node.moves and not node.dry_run:
-        raise InputError(f"capture: no pose measured ({node.summary()})")
+        raise InputError(f"no pose measured ({node.summary()})")
     return node.finished
 
 
