@@ -14,7 +14,7 @@ import pkgutil
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import fields
-from typing import Any, get_type_hints
+from typing import Any, get_origin, get_type_hints
 
 from robot_calib.effects.base import EFFECTS, Contribution, Effect, register_effect
 from robot_calib.errors import InputError, check_keys
@@ -66,6 +66,14 @@ def option_types(cls: type[Effect]) -> dict[str, type]:
     return {f.name: hints[f.name] for f in fields(cls) if f.name != "joints"}
 
 
+def _option_value(kind: Any, raw: str) -> Any:  # noqa: ANN401 - an option's type
+    """An option's value from its text: a tuple option (joint_harmonics' orders) from
+    '11,27', anything else by its type."""
+    if get_origin(kind) is tuple:
+        return tuple(int(v) for v in raw.split(",") if v)
+    return kind(raw)
+
+
 def make_effect(name: str, joints: tuple[int, ...] | list[int] = (), **options: Any) -> Effect:
     """The effect called `name` (contract vocabulary or simulator-only) on `joints` (1-based).
 
@@ -105,7 +113,7 @@ def parse_effect(text: str, n_joints: int, **defaults: Any) -> Effect:
             if "=" in part:
                 key, raw = part.split("=", 1)
                 check_keys([key], tuple(types), text, what="option")
-                options[key] = types[key](raw)
+                options[key] = _option_value(types[key], raw)
             else:
                 joints += [int(j) for j in part.split(",") if j]
     except ValueError:

@@ -67,6 +67,11 @@ def register_effect(cls: type[E]) -> type[E]:
     return cls
 
 
+def _text(value: Any) -> str:  # noqa: ANN401 - an option's value
+    """An option's value in the text form: a tuple of orders as '11,27'."""
+    return ",".join(map(str, value)) if isinstance(value, tuple | list) else str(value)
+
+
 def signed_uniform(rng: np.random.Generator, low: float, high: float) -> float:
     """A random value of random sign whose magnitude is uniform in [low, high)."""
     return float(rng.choice([-1.0, 1.0]) * rng.uniform(low, high))
@@ -130,13 +135,14 @@ class Effect(ABC):
         parts = [self.name]
         if self.joints:
             parts.append(",".join(str(j) for j in self.joints))
-        parts += [f"{k}={v}" for k, v in self.options().items()]
+        parts += [f"{k}={_text(v)}" for k, v in self.options().items()]
         return ":".join(parts)
 
     def to_dict(self) -> dict[str, Any]:
         """The PARAMS.json / world-file record: name, joints and options
         (read back by `robot_calib.effects.effect_from_dict`)."""
-        return {"name": self.name, "joints": list(self.joints), **self.options()}
+        options = {k: list(v) if isinstance(v, tuple) else v for k, v in self.options().items()}
+        return {"name": self.name, "joints": list(self.joints), **options}
 
     def covers(self, other: Effect, robot: RobotDescription) -> bool:
         """True when this effect's parameters include all of `other`'s (e.g. eccentricity

@@ -111,3 +111,58 @@ def wrist_288_subset(recording: Recording) -> Recording:
         for k in (1, 3):
             keep[pose == 6 * (joint - 1) + k] = False
     return recording.subset(keep)
+
+
+UR10_ROBOT = "ur10"
+# A UR10's random-pose campaign as a real one looks [deg, DH joint variables]: joint 2
+# (shoulder lift) spans 140 deg above the table, the others wide.
+UR10_RANGES_DEG = ((-170, 170), (-160, -20), (-150, 150), (-180, 180), (-180, 180), (-180, 180))
+# True deviations from the nominal table, of a calibrated UR10's size [m, rad].
+UR10_DEVIATIONS = {
+    "a2": 6.0e-4, "a3": -4.0e-4, "d1": 3.0e-4, "d4": -2.5e-4, "d5": 2.0e-4, "d6": -1.5e-4,
+    "theta1": 4.0e-4, "theta2": -1.1e-3, "theta3": 9.0e-4, "theta4": 1.3e-3, "theta5": -7.0e-4,
+    "alpha1": 6.0e-4, "alpha4": -4.0e-4, "alpha5": 5.0e-4, "beta2": 3.0e-4, "beta3": -2.0e-4,
+}  # fmt: skip
+# What the real arm hides (issue 22): joint-angle harmonics of gear stages [rad]
+UR10_HARMONICS = (
+    {"name": "joint_harmonics", "joints": [1], "orders": [17],
+     "values": {"jh1_c17": 1.2e-4, "jh1_s17": -0.8e-4}},
+    {"name": "joint_harmonics", "joints": [2], "orders": [11, 27],
+     "values": {"jh2_c11": 2.0e-4, "jh2_s11": 1.5e-4, "jh2_c27": -0.6e-4, "jh2_s27": 0.9e-4}},
+)  # fmt: skip
+
+
+def ur10_world(seed: int = 0, effects: tuple[dict, ...] = UR10_HARMONICS) -> World:  # type: ignore[type-arg]
+    """A UR10 as issue 22's real one: nominal geometry plus UR10_DEVIATIONS, one SMR 0.1 m
+    off the flange, the tracker 3 m from the base, `effects` (world-file entries)."""
+    return build_world(
+        {
+            "robot": UR10_ROBOT,
+            "seed": seed,
+            "geometry": "nominal",
+            "deviations": UR10_DEVIATIONS,
+            "target_in_flange_m": [0.05, -0.03, 0.10],
+            "base2tracker": {"xyz_m": [2.6, 1.4, -0.2], "rpy_deg": [0.0, 0.0, 205.0]},
+            "effects": [dict(e) for e in effects],
+        }
+    )
+
+
+def ur10_random_plan(n: int, rng: np.random.Generator) -> Plan:
+    """`n` random poses uniform in UR10_RANGES_DEG."""
+    lo, hi = np.radians(np.array(UR10_RANGES_DEG, dtype=float)).T
+    return Plan("random", rng.uniform(lo, hi, (n, len(lo))), np.zeros(n, dtype=int), 0.1)
+
+
+def ur10_random(seed: int = 0, n: int = 2773, holdout_share: float = 0.3,
+                effects: tuple[dict, ...] = UR10_HARMONICS) -> Scenario:  # type: ignore[type-arg]  # fmt: skip
+    """Issue 22's UR10 campaign: `n` random poses (UR10_RANGES_DEG) measured in
+    `ur10_world(seed, effects)`, split at random into calibration and hold-out
+    (`holdout_share` of the poses), as a user splits a real data set."""
+    world = ur10_world(seed, effects)
+    rng = np.random.default_rng(seed + 2000)
+    plan = ur10_random_plan(n, rng)
+    every = _recording(world, plan.q, plan_times(plan, world.timing), seed, "random")
+    held = np.zeros(n, dtype=bool)
+    held[rng.choice(n, int(round(holdout_share * n)), replace=False)] = True
+    return Scenario(world, every.subset(~held), every.subset(held))
