@@ -91,6 +91,9 @@ class Effect(ABC):
     in_vocabulary: ClassVar[bool] = True
     #: False for effects that belong to no joint (their `joints` must be empty).
     per_joint: ClassVar[bool] = True
+    #: True for effects whose ladder candidates come from the residuals (a frequency scan
+    #: picks joint_harmonics' orders), not from the poses alone (`ladder_candidates`)
+    candidates_from_residuals: ClassVar[bool] = False
     joints: tuple[int, ...] = field(default=())
 
     def __post_init__(self) -> None:

@@ -57,6 +57,7 @@ def meaning(order: int) -> str:
 @dataclass(frozen=True)
 class JointHarmonics(Effect):
     name = "joint_harmonics"
+    candidates_from_residuals = True
     orders: tuple[int, ...] = (2,)
 
     def __post_init__(self) -> None:
@@ -71,9 +72,7 @@ class JointHarmonics(Effect):
         if not orders or any(isinstance(k, bool) for k in raw):
             raise InputError(f"joint_harmonics: orders must be integers >= 1, got {raw!r}")
         if orders[0] < 1 or orders[-1] > MAX_ORDER:
-            raise InputError(
-                f"joint_harmonics: orders {list(orders)} outside 1..{MAX_ORDER}"
-            )
+            raise InputError(f"joint_harmonics: orders {list(orders)} outside 1..{MAX_ORDER}")
         object.__setattr__(self, "orders", orders)
 
     @staticmethod

@@ -27,6 +27,7 @@ from robot_calib.identify.identifiability import (
     fix_unidentifiable,
 )
 from robot_calib.identify.objectives import AbsoluteObjective, Objective
+from robot_calib.identify.prior import prior_sigmas
 from robot_calib.identify.weights import orientation_errors, row_weights
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
@@ -118,7 +119,7 @@ def _solve(
         residual = problem.evaluate(x)[0]
         if progress and time.monotonic() - last_report[0] > 1.0:
             last_report[0] = time.monotonic()
-            rms = np.sqrt(np.mean(residual**2)) * 1e3
+            rms = np.sqrt(np.mean(residual[: problem.n_data] ** 2)) * 1e3
             progress(f"  LM: {problem.evaluations} evaluations, rms {rms:.4f} mm")
         return residual
 
@@ -128,7 +129,8 @@ def _solve(
     if robust_scale is None:
         tol = ROUGH_TOLERANCE if rough else 1e-12
         solution = least_squares(fun, x0, jac=jac, method="lm", x_scale="jac", xtol=tol,
-                                 ftol=tol, gtol=tol, max_nfev=100 * (len(x0) + 1))  # fmt: skip
+                                 ftol=tol, gtol=tol,
+                                 max_nfev=min(100 * (len(x0) + 1), MAX_EVALUATIONS))  # fmt: skip
     else:
         solution = least_squares(fun, x0, jac=jac, method="trf", loss="soft_l1",
                                  f_scale=robust_scale, x_scale="jac", xtol=1e-10, ftol=1e-10,
@@ -143,6 +145,10 @@ def _solve(
     )
 
 
+#: model evaluations a Levenberg-Marquardt solve may make: a well-posed fit converges in a
+#: few tens; one that needs hundreds is crawling along a flat valley (then the prior and the
+#: never-worse-than-the-start guard decide, not more evaluations)
+MAX_EVALUATIONS = 200
 ROUGH_TOLERANCE = 1e-6  # relative cost/step change: enough to judge identifiability at
 BLOCK_POSES = 5000  # Jacobian evaluated in blocks: its temporaries stay in cache (linear time)
 
@@ -205,6 +211,7 @@ class _Problem:
         points: Array,
         objective: Objective,
         fallback: tuple[float, float] | None = None,
+        prior_reference: float | None = None,
     ) -> None:
         self.model, self.start, self.poses, self.points = model, start, poses, points
         self.objective, self.fallback = objective, fallback
@@ -216,24 +223,40 @@ class _Problem:
         self.weights = row_weights(poses, fitted_orientations(model, poses), fallback)
         self.rows6 = np.zeros(0, dtype=np.int64)  # measurements with an orientation row
         self.orientation_error = np.zeros((0, 3))  # (m, 3) [rad] at the last x
+        # the weak prior (`identify.prior`): one row per free parameter that has one
+        sigma = prior_sigmas(start)[start.free]
+        self.prior_cols = np.flatnonzero(np.isfinite(sigma))
+        stated = float(np.median(self.weights.sigma[:, 0])) if len(poses) else 1e-5
+        self.prior_reference = max(stated, prior_reference or 0.0)
+        self.prior_weight = self.prior_reference / sigma[self.prior_cols]
+        self.prior_nominal = start.nominal[start.free][self.prior_cols]
+        self.n_data = objective.n_rows(len(points))
         if type(objective) is AbsoluteObjective:  # not a subclass with other residuals
             self.rows6 = np.flatnonzero(self.weights.oriented)
-            n_rows = 3 * (len(poses) + len(self.rows6))
-            self._jac = np.empty((n_rows, int(start.free.sum())))
+            self.n_data = 3 * (len(poses) + len(self.rows6))
+            self._jac = np.zeros((self.n_data + len(self.prior_cols), int(start.free.sum())))
 
     def evaluate(self, x: Array) -> tuple[Array, Array]:
-        """Objective residuals (m,) [m] and their Jacobian (m, n_free) at free values x.
-        The Jacobian array is reused: valid until evaluate is called at another x."""
+        """Objective residuals (m,) [m] and their Jacobian (m, n_free) at free values x,
+        the prior's rows last (the data's are the first `n_data`). The Jacobian array is
+        reused: valid until evaluate is called at another x."""
         if self._x is None or not np.array_equal(x, self._x):
             params = self.start.unpack(x)
+            prior = self.prior_weight * (x[self.prior_cols] - self.prior_nominal)
             if self._jac is None:
                 predicted, jac = blocked_jacobian(self.model, params, self.poses)
-                self._cache = self.objective.residuals(
+                residual, data_jac = self.objective.residuals(
                     predicted, jac[:, :, params.free], self.points
                 )
+                prior_jac = np.zeros((len(prior), len(x)))
+                prior_jac[np.arange(len(prior)), self.prior_cols] = self.prior_weight
+                self._cache = (np.concatenate([residual, prior]),
+                               np.vstack([data_jac, prior_jac]))  # fmt: skip
             else:
-                predicted, residual = self._weighted(params, self._jac)
-                self._cache = (residual, self._jac)
+                predicted, residual = self._weighted(params, self._jac[: self.n_data])
+                rows = self.n_data + np.arange(len(prior))
+                self._jac[rows, self.prior_cols] = self.prior_weight  # the rest stays 0
+                self._cache = (np.concatenate([residual, prior]), self._jac)
             self.predicted = predicted
             self._x = x.copy()
             self.evaluations += 1
@@ -280,7 +303,7 @@ class _Problem:
         """The same problem (from `start`, default the same) with accuracies not stated
         taken as `fallback` (position [m], orientation [rad]); evaluations carried on."""
         out = _Problem(self.model, start or self.start, self.poses, self.points,
-                       self.objective, fallback)  # fmt: skip
+                       self.objective, fallback, self.prior_reference)  # fmt: skip
         out.evaluations = self.evaluations
         return out
 
@@ -320,7 +343,7 @@ def weighted_jacobian(
     every = params.freed(params.names)
     problem = _Problem(model, every, poses, points, objective or AbsoluteObjective())
     residual, jac = problem.evaluate(every.pack())
-    return residual, jac.copy()
+    return residual[: problem.n_data], jac[: problem.n_data].copy()  # the data's rows
 
 
 def _structurally_identifiable(
@@ -406,6 +429,10 @@ def fit_model(
     if check_identifiability:
         params, fixed = _structurally_identifiable(model, start, poses, points, goal)
     problem = _Problem(model, params, poses, points, goal)
+    if len(problem.prior_cols):  # the prior's unit: what the start leaves per residual
+        start_residual = problem.evaluate(params.pack())[0][: problem.n_data]
+        at_start = float(np.sqrt(np.mean(start_residual**2))) if len(start_residual) else 0.0
+        problem = _Problem(model, params, poses, points, goal, prior_reference=at_start)
     # Where a parameter is poorly determined, LM crawls along its flat valley: a coarse
     # solve (ROUGH_TOLERANCE) gets near enough to judge it, then the exact solve runs.
     rough = check_identifiability and robust_scale is None
@@ -417,11 +444,12 @@ def fit_model(
         problem = problem.reweighted(fallback)
     if check_identifiability and len(solved.x):
         residual, jac_free = problem.evaluate(solved.x)
+        data = slice(0, problem.n_data)
         at_solution = params.unpack(solved.x)
-        _, weak = fix_poorly_determined(at_solution, jac_free, residual, columns_are_free=True)
-        if weak:  # held at their start values, the rest refitted from the solution
-            names = [name for name, _ in weak]
-            params = at_solution.with_values({n: start[n] for n in names})
+        _, weak = fix_poorly_determined(at_solution, jac_free[data], residual[data],
+                                        columns_are_free=True)  # fmt: skip
+        if weak:  # held at their start values, the rest refitted FROM THE START: at the
+            # rough solution the weak ones may have traded radians with the rest
             for name, reason in weak:
                 params = params.fixed([name], reason)
             fixed = fixed + tuple(weak)
@@ -430,20 +458,31 @@ def fit_model(
             solved = _solve(problem, params.pack() if weak else solved.x, progress, robust_scale)
     elif fallback is not None:
         solved = _solve(problem, solved.x, progress, robust_scale)
+    # Never worse than the start (the simpler model's solution, with the new terms at 0):
+    # a solve that ends above the cost it started from is discarded.
     x = solved.x
     status, message, nfev, njev, optimality = (
         solved.status, solved.message, solved.nfev, solved.njev, solved.optimality
     )  # fmt: skip
+    x0 = params.pack()
+    if len(x) and robust_scale is None:
+        start_residual = problem.evaluate(x0)[0]
+        start_cost = float(start_residual @ start_residual)
+        end_residual = problem.evaluate(x)[0]
+        if float(end_residual @ end_residual) > start_cost:
+            x, status, success_note = x0, 0, "ended above its start: the start kept"
+            message = f"{message} ({success_note})"
     residual, jac_free = problem.evaluate(x)
+    data_residual, data_jac = residual[: problem.n_data], jac_free[: problem.n_data]
     fitted = params.unpack(x)
     std = np.zeros(len(fitted))
     if len(x):
-        std[fitted.free] = np.sqrt(np.diag(covariance(jac_free, residual)))
+        std[fitted.free] = np.sqrt(np.diag(covariance(data_jac, data_residual)))
     return FitResult(
         fitted,
         std,
         problem.predicted - points,
-        describe(jac_free, fixed),
+        describe(data_jac, fixed),
         SolverReport(
             method=(
                 "levenberg-marquardt (scipy least_squares, MINPACK lmder)"
@@ -457,7 +496,7 @@ def fit_model(
             nfev=nfev,
             njev=njev,
             optimality=optimality,
-            cost_m2=float(0.5 * residual @ residual),
+            cost_m2=float(0.5 * data_residual @ data_residual),
             evaluations=problem.evaluations,
             time_s=time.perf_counter() - started,
         ),
