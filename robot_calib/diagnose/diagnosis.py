@@ -8,7 +8,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from robot_calib.diagnose.iso9283 import Iso9283, iso9283, repeat_groups
-from robot_calib.diagnose.ladder import AT_FLOOR, N_FOLDS, Ladder, Rung, run_ladder
+from robot_calib.diagnose.ladder import (
+    AT_FLOOR,
+    N_FOLDS,
+    Ladder,
+    RefitOutcome,
+    Rung,
+    run_ladder,
+)
 from robot_calib.diagnose.learnable import MIN_LEARNABLE_SHARE, LearnableBound
 from robot_calib.diagnose.noise import NoiseLevel, refine_with_model
 from robot_calib.diagnose.signatures import WhereItLies, where_it_lies
@@ -122,6 +129,8 @@ class Diagnosis(Record):
     learnable: LearnableBound | None = None  # what a residual model reaches held out
     # ISO 9283 AP/RP of the repeated poses: before (nominal) and after (the best rung)
     iso9283: list[Iso9283] = field(default_factory=list)
+    # every candidate the ladder refitted: its scores and why it was or was not a rung
+    refits: list[RefitOutcome] = field(default_factory=list)
     format: str = FORMAT
 
     def to_dict(self) -> dict[str, Any]:
@@ -172,6 +181,8 @@ class Diagnosis(Record):
                 "null (noise floor unknown; the kernel ridge learns nothing held out and no "
                 "joint signature stands out)"
             )
+        if dom.effect == UNKNOWN:
+            return f"{UNKNOWN} (outside the vocabulary) on joints {dom.joints}"
         return f"{dom.effect} on joints {dom.joints}"
 
     def summary(self) -> str:
@@ -194,6 +205,10 @@ class Diagnosis(Record):
             f"{self.scored_on}): {rungs}. Noise floor {floor_text}.{bound} "
             f"{self.unexplained.note}.{blunders}"
         )
+
+
+def _joint_text(joint: int) -> str:
+    return f", on joint {joint}"
 
 
 def learnable_gap(ladder: Ladder) -> tuple[float, float] | None:
@@ -311,7 +326,9 @@ def diagnose(
     else:
         note = (
             f"held-out rms {ratio:.2f} x the noise floor remains; no effect of the vocabulary "
-            "reduces it further" + structure
+            "reduces it further"
+            + structure
+            + (f" (outside the vocabulary{_joint_text(sig.joint)})" if structure and sig else "")
         )
     diagnosis = Diagnosis(
         dominant_effect=dominant_effect(ladder, where, noise),
@@ -346,6 +363,7 @@ def diagnose(
         warnings=list(geo.warnings),
         learnable=learnable,
         iso9283=_iso9283(ladder, recording, robot),
+        refits=list(ladder.refits),
     )
     return diagnosis, ladder
 

@@ -34,7 +34,7 @@ from robot_calib.diagnose.figures import (
 from robot_calib.diagnose.ladder import Ladder
 from robot_calib.diagnose.noise import noise_basis
 from robot_calib.diagnose.report import unobservable
-from robot_calib.diagnose.signatures import FAMILIES, ORDINAL, ArcSignature, JointTerms
+from robot_calib.diagnose.signatures import FAMILIES, ArcSignature, JointTerms, ordinal
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import Calibration, calibrate
 from robot_calib.identify.params_file import fixed_reasons
@@ -199,7 +199,7 @@ def _strongest(diagnosis: Diagnosis) -> str:
         return "none (no joint observable from every pose)"
     noise = f"{sig.significance:.0f} x its noise"
     if sig.harmonic is not None:
-        return (f"{ORDINAL.get(sig.harmonic, f'{sig.harmonic}th')} harmonic of joint "
+        return (f"{ordinal(sig.harmonic)} harmonic of joint "
                 f"{sig.joint}: {_deg(sig.value)} deg of joint-angle error, {noise}")  # fmt: skip
     terms = next(t for t in diagnosis.where.joints_from_all_poses if t.joint == sig.joint)
     for key, sig_key, words, _ in FAMILIES:

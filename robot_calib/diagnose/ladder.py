@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot_calib.accuracy import Accuracy, accuracy
+from robot_calib.diagnose.frequency import JointSpectrum, harmonic_candidates, joint_spectra
 from robot_calib.diagnose.learnable import LearnableBound, learnable_bound
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
@@ -34,9 +35,10 @@ from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
+from robot_calib.records import Record
 
 N_FOLDS = 5
-MAX_RUNGS = 4
+MAX_RUNGS = 6
 MIN_GAIN = 0.05  # a candidate must cut the held-out rms by 5 % ...
 AT_FLOOR = 1.2  # ... and the ladder stops once held-out rms <= 1.2 x the noise floor
 HOLDOUT_K = 12.0  # hold-out blunders: scored only, never refitted, so a higher bar
@@ -58,6 +60,20 @@ class Rung:
 
 
 @dataclass(frozen=True)
+class RefitOutcome(Record):
+    """One candidate the ladder refitted (DIAGNOSIS.json `refits`): its linearised
+    held-out estimate, in-sample rms after the refit, held-out score (None: rejected
+    before k-fold) [mm], whether it became a rung, and why not."""
+
+    model: str
+    linearised_mm: float
+    insample_rms_mm: float
+    heldout_mm: float | None
+    accepted: bool
+    reason: str
+
+
+@dataclass(frozen=True)
 class Ladder:
     """The rungs in the order added, the noise level, the candidates of every round, the
     recordings it was climbed and scored on (without the outliers) and the outliers."""
@@ -70,17 +86,20 @@ class Ladder:
     holdout: Recording | None = None
     outliers: tuple[Outlier, ...] = ()
     learnable: LearnableBound | None = None  # what a residual model reaches (learnable.py)
+    refits: list[RefitOutcome] = field(default_factory=list)  # every candidate refitted
+    spectra: list[JointSpectrum] = field(default_factory=list)  # the last round's scan
 
 
-def candidates(robot: RobotDescription, recording: Recording,
-               present: tuple[Effect, ...]) -> list[Effect]:  # fmt: skip
+def candidates(robot: RobotDescription, recording: Recording, present: tuple[Effect, ...],
+               spectra: list[JointSpectrum] | None = None) -> list[Effect]:  # fmt: skip
     """Every effect x joint (x option, e.g. eccentricity order) of the vocabulary able to
-    move a measured point (`Effect.ladder_candidates`) that adds parameters to the model
-    (not already present, nor covered by a present effect, e.g. a lower order)."""
-    return [
-        e for e in ladder_candidates(robot, recording.poses)
-        if not any(p.supersedes(e, robot) for p in present)
-    ]  # fmt: skip
+    move a measured point (`Effect.ladder_candidates`), and the joint_harmonics the
+    frequency scan `spectra` picked (`frequency.harmonic_candidates`), that add parameters
+    to the model (not already present, nor covered by a present effect, e.g. a lower
+    order)."""
+    pool = ladder_candidates(robot, recording.poses)
+    pool += harmonic_candidates(spectra or [], present)
+    return [e for e in pool if not any(p.supersedes(e, robot) for p in present)]
 
 
 def folds(n: int, k: int = N_FOLDS, seed: int = 0) -> IntArray:
@@ -213,8 +232,8 @@ def kfold_parameters(
     for f in np.unique(fold):
         train = fold != f
         fitted[int(f)] = fit_model(cal.model, cal.parameters, recording.poses.subset(train),
-                                   recording.points[train],
-                                   check_identifiability=False).parameters  # fmt: skip
+                                   recording.points[train], check_identifiability=False,
+                                   statistics=False).parameters  # fmt: skip
     return fold, fitted
 
 
@@ -251,11 +270,11 @@ def run_ladder(
     if geo.inliers is not None:
         recording = recording.subset(geo.inliers)
     climb = partial(_climb, robot=robot, say=say, tracker_sigma_m=tracker_sigma_m)
-    rungs, noise, scored_on, rounds = climb(recording, geo=geo, holdout=holdout)
-    if geo.inliers is not None and len(rungs) > 1:
+    found = climb(recording, geo=geo, holdout=holdout)
+    if geo.inliers is not None and len(found.rungs) > 1:
         # Judged again against the best rung: what an effect explains (the coldest points
         # of a strong thermal effect, the far ends of a compliance) is no blunder.
-        best = rungs[-1].calibration
+        best = found.rungs[-1].calibration
         residual = best.predict(full.poses) - full.points
         sigma = robust_sigma(residual[geo.inliers])
         still = ~geo.inliers & outlier_mask(residual, sigma)
@@ -266,9 +285,9 @@ def run_ladder(
             recording = full.subset(~still)
             geo = calibrate(recording, robot, "geometric", log=None, screen_outliers=False)
             outliers = describe_outliers(full, still, residual, sigma)
-            rungs, noise, scored_on, rounds = climb(recording, geo=geo, holdout=holdout)
+            found = climb(recording, geo=geo, holdout=holdout)
     if holdout is not None:  # judged against the best model: an effect's structure is not
-        best = rungs[-1].calibration  # a blunder; no refit possible, so a higher bar
+        best = found.rungs[-1].calibration  # a blunder; no refit possible, so a higher bar
         h_res = best.predict(holdout.poses) - holdout.points
         sigma = robust_sigma(h_res)
         flagged = outlier_mask(h_res, sigma, HOLDOUT_K)
@@ -279,7 +298,8 @@ def run_ladder(
                 f"outliers: {int(flagged.sum())} hold-out points beyond {HOLDOUT_K:g} robust "
                 f"sigmas ({sigma * 1e3:.4f} mm) of {best.name}: not scored; climbing again"
             )
-            rungs, noise, scored_on, rounds = climb(recording, geo=geo, holdout=holdout)
+            found = climb(recording, geo=geo, holdout=holdout)
+    rungs, noise, scored_on = found.rungs, found.noise, found.scored_on
     geometric = rungs[0].calibration
     if holdout is None:  # the folds' geometry refitted, for the bound's own k-fold
         fold, fitted = kfold_parameters(geometric, recording)
@@ -287,7 +307,25 @@ def run_ladder(
         fold, fitted = pose_folds(recording), {}
     bound = learnable_bound(geometric, recording, holdout, fold, fitted, scored_on)
     say(bound.line())
-    return Ladder(rungs, noise, scored_on, rounds, recording, holdout, outliers, bound)
+    return Ladder(rungs, noise, scored_on, found.rounds, recording, holdout, outliers, bound,
+                  found.refits, found.spectra)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class _Climb:
+    """What one climb of the ladder found (`_climb`)."""
+
+    rungs: list[Rung]
+    noise: NoiseLevel
+    scored_on: str
+    rounds: list[list[tuple[str, float]]]
+    refits: list[RefitOutcome]
+    spectra: list[JointSpectrum]
+
+
+#: a refit whose in-sample rms exceeds its own linearised held-out estimate by this factor
+#: disappointed the screening: rejected before its k-fold refits
+SCREEN_SLACK = 1.1
 
 
 def _climb(
@@ -297,9 +335,10 @@ def _climb(
     geo: Calibration,
     say: Log,
     tracker_sigma_m: float | None = None,
-) -> tuple[list[Rung], NoiseLevel, str, list[list[tuple[str, float]]]]:
+) -> _Climb:
     """The rungs from `geo` (the geometric calibration of `recording`) up, the noise level,
-    what they are scored on and the candidates of every round."""
+    what they are scored on, the candidates of every round, every refit's outcome and the
+    last round's frequency scan."""
     noise = estimate_noise(recording, geo.residuals, int(geo.parameters.free.sum()),
                            tracker_sigma_m)  # fmt: skip
     scored_on = "hold-out bags" if holdout is not None else f"{N_FOLDS}-fold CV over poses"
@@ -310,6 +349,8 @@ def _climb(
     acc, res, score = score_rung(geo, recording, holdout)
     rungs = [Rung("geometric", (), geo, acc, res, score)]
     rounds: list[list[tuple[str, float]]] = []
+    refits: list[RefitOutcome] = []
+    spectra: list[JointSpectrum] = []
     say(f"  geometric: held-out rms {acc.absolute_rms_mm:.4f} mm"
         + (f" (floor {noise.floor_rms_m * 1e3:.4f})" if noise.independent else ""))  # fmt: skip
     while len(rungs) <= MAX_RUNGS:
@@ -317,7 +358,9 @@ def _climb(
         at_floor = current.heldout.absolute_rms_mm <= AT_FLOOR * noise.floor_rms_m * 1e3
         if at_floor and noise.independent:
             break
-        pool = candidates(robot, recording, current.effects)
+        fitted = current.calibration
+        spectra = joint_spectra(fitted.model, fitted.parameters, recording, fitted.residuals)
+        pool = candidates(robot, recording, current.effects, spectra)
         if not pool:
             break
         base, scores = _screen(current.calibration, pool, recording, holdout)
@@ -333,10 +376,21 @@ def _climb(
             name = model_name(effects)
             cal = calibrate(recording, robot, name, log=None, start=current.calibration,
                             screen_outliers=False)  # fmt: skip
+            insample = cal.accuracy.absolute_rms_mm
+            reason = _rejected_before_kfold(cal, current, lin_score)
+            if reason:
+                refits.append(RefitOutcome(name, lin_score * 1e3, insample, None, False, reason))
+                say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, rejected: {reason}")
+                continue
             acc, res, score = score_rung(cal, recording, holdout)
             say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, refitted "
                 f"{score * 1e3:.4f} mm (current {current.score_m * 1e3:.4f})")  # fmt: skip
             good = score <= (1.0 - MIN_GAIN) * current.score_m
+            refits.append(RefitOutcome(
+                name, lin_score * 1e3, insample, score * 1e3, good,
+                "" if good else f"held-out {score * 1e3:.4f} mm is not {MIN_GAIN:.0%} below "
+                f"{current.model}'s {current.score_m * 1e3:.4f} mm",
+            ))  # fmt: skip
             if good and (accepted is None or score < accepted.score_m):
                 accepted = Rung(name, effects, cal, acc, res, score)
             if good and score <= AT_FLOOR * noise.floor_rms_m and noise.independent:
@@ -344,4 +398,21 @@ def _climb(
         if accepted is None:
             break
         rungs.append(accepted)
-    return rungs, noise, scored_on, rounds
+    return _Climb(rungs, noise, scored_on, rounds, refits, spectra)
+
+
+def _rejected_before_kfold(cal: Calibration, current: Rung, lin_score_m: float) -> str:
+    """Why a refitted candidate is rejected without its k-fold refits (empty: it is not):
+    in-sample worse than the model it extends (the never-worse guard), or in-sample worse
+    than its own linearised held-out estimate (the refit disappointed the screening)."""
+    insample = cal.accuracy.absolute_rms_mm
+    before = current.calibration.accuracy.absolute_rms_mm
+    if insample > before * (1.0 + 1e-6):
+        return (f"in-sample {insample:.4f} mm is worse than {current.model}'s {before:.4f} mm "
+                "that it extends")  # fmt: skip
+    if insample > SCREEN_SLACK * lin_score_m * 1e3:
+        return (
+            f"in-sample {insample:.4f} mm after the refit is above its linearised held-out "
+            f"estimate {lin_score_m * 1e3:.4f} mm: the refit did not find the screened gain"
+        )
+    return ""

@@ -83,6 +83,34 @@ def _times_floor(value_mm: float, floor_mm: float | None) -> str:
     return "unknown" if floor_mm is None else f"{value_mm / floor_mm:.2f}"
 
 
+def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
+    """The frequency scan of the geometric and the best model's residuals, with what the
+    orders usually mean, and the refits the ladder made."""
+    out: list[str] = []
+    for title, where in (("geometric", diagnosis.where),
+                         (diagnosis.ladder[-1].model, diagnosis.unexplained.where)):  # fmt: skip
+        found = [s for s in where.harmonic_orders if s.dominant_orders]
+        if not found or (title != "geometric" and where is diagnosis.where):
+            continue
+        out += ["", f"Joint-angle harmonics in the residuals of {title} (frequency scan of "
+                "orders 1-64, beyond what the model absorbs; amplitude, x the residual's "
+                "scatter):", ""]  # fmt: skip
+        for spectrum in found:
+            out.append(f"- {spectrum.line()}")
+            out += [f"  - order {k}: {why}"
+                    for k, why in zip(spectrum.dominant_orders, spectrum.meaning)]  # fmt: skip
+    if diagnosis.refits:
+        out += ["", "Candidates refitted by the ladder:", "",
+                "| model | linearised [mm] | in-sample rms [mm] | held-out [mm] | outcome |",
+                "|---|---|---|---|---|"]  # fmt: skip
+        for r in diagnosis.refits:
+            held = "-" if r.heldout_mm is None else f"{r.heldout_mm:.4f}"
+            outcome = "rung" if r.accepted else f"rejected: {r.reason}"
+            out.append(f"| {r.model} | {r.linearised_mm:.4f} | {r.insample_rms_mm:.4f} "
+                       f"| {held} | {outcome} |")  # fmt: skip
+    return out
+
+
 def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
                  path: Path) -> None:  # fmt: skip
     """Markdown report `path` (+ PNGs beside it named after it)."""
@@ -192,6 +220,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
         )
     if where.strongest_signature:
         lines += ["", f"Strongest structure: {where.strongest_signature.text}."]
+    lines += _harmonic_lines(diagnosis)
     quartiles = ", ".join(f"{v:.4f}" for v in where.time.rms_by_quartile_mm)
     lines += [
         "",

@@ -10,10 +10,11 @@ signatures of the joint effects.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from robot_calib.diagnose.frequency import JointSpectrum, joint_spectra
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.effects.eccentricity import fourier_basis
 from robot_calib.identify.fit import blocked_jacobian
@@ -29,6 +30,9 @@ HARMONICS = 4
 #: target 0.2 mm from the axis would turn noise into 25 mrad of "harmonics")
 MIN_LEVER_M = 5e-3
 MIN_OBSERVABLE_POSES = 3
+#: a signature column keeping less than this of its norm after the model's own columns are
+#: projected off is collinear with the model: skipped (issue 22: 3.6e15 urad "harmonics")
+MIN_LEFT = 1e-3
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,8 @@ class WhereItLies(Record):
     time: TimeTrend
     workspace: Workspace
     noise_sigma_mm: float
+    # the frequency scan (diagnose/frequency.py): dominant joint-angle harmonic orders
+    harmonic_orders: list[JointSpectrum] = field(default_factory=list)
 
 
 def arc_angle_errors(model: KinematicModel, params: ParameterVector, recording: Recording,
@@ -152,10 +158,15 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
     tau = gravity_torques(model.robot, poses.q)
 
     def explain(signals: list[Array], j: int) -> tuple[Array, float]:
-        """Coefficients [rad per unit signal] and sqrt(chi^2 explained) of one family."""
+        """Coefficients [rad per unit signal] and sqrt(chi^2 explained) of one family;
+        zeros where a column keeps less than MIN_LEFT of its norm once the model's own
+        columns are projected off (collinear with the model: any value would be noise)."""
         cols = np.stack([(motion[:, j, :] * s[:, None]).reshape(-1) for s in signals], 1)
         cols = cols / noise_sigma_m
+        norms = np.linalg.norm(cols, axis=0)
         cols = cols - basis @ (basis.T @ cols)
+        if np.any(np.linalg.norm(cols, axis=0) < MIN_LEFT * np.maximum(norms, 1e-300)):
+            return np.zeros(len(signals)), 0.0
         coef = np.linalg.lstsq(cols, r, rcond=1e-10)[0].astype(np.float64, copy=False)
         return coef, float(np.linalg.norm(cols @ coef))
 
@@ -201,7 +212,13 @@ FAMILIES = (  # (field of the value, field of the significance, words, unit)
     ("gravity_urad_per_Nm", "gravity_significance", "gravity torque (compliance-like)",
      "urad/(N m)"),
 )  # fmt: skip
-ORDINAL = {1: "1st", 2: "2nd", 3: "3rd"}
+
+
+def ordinal(k: int) -> str:
+    """'1st', '2nd', '11th', '21st', ..."""
+    if k % 100 in (11, 12, 13):
+        return f"{k}th"
+    return f"{k}{ {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th') }"
 
 
 def strongest_signature(terms: list[JointTerms]) -> Signature | None:
@@ -213,7 +230,7 @@ def strongest_signature(terms: list[JointTerms]) -> Signature | None:
             continue
         pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
         for k, (amp, sig) in enumerate(pairs, start=1):
-            text = (f"{ORDINAL.get(k, f'{k}th')} harmonic of joint {j} ({amp:.1f} urad of "
+            text = (f"{ordinal(k)} harmonic of joint {j} ({amp:.1f} urad of "
                     f"joint-angle error, {sig:.0f} x its noise)")  # fmt: skip
             if best is None or sig > best[0]:
                 best = (sig, j, k, amp, text)
@@ -229,9 +246,28 @@ def strongest_signature(terms: list[JointTerms]) -> Signature | None:
     return Signature(j, harmonic, value, sig, text)
 
 
+def _strongest(signature: Signature | None, spectra: list[JointSpectrum]) -> Signature | None:
+    """The stronger of the families' strongest `signature` and the frequency scan's most
+    significant picked order (its significance is in units of the residual's scatter,
+    never above the noise units of the families for the same structure)."""
+    best = signature
+    for spectrum in spectra:
+        for k, amp, z, why in zip(spectrum.dominant_orders, spectrum.dominant_urad,
+                                  spectrum.dominant_significance, spectrum.meaning):  # fmt: skip
+            if best is None or z > best.significance:
+                text = (
+                    f"{ordinal(k)} harmonic of joint {spectrum.joint} "
+                    f"({amp:.1f} urad of joint-angle error, {z:.0f} x its noise; {why})"
+                )
+                best = Signature(spectrum.joint, k, amp, z, text)
+    return best
+
+
 def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Recording,
-                  residuals: Array, noise_sigma_m: float) -> WhereItLies:  # fmt: skip
-    """Where the residual lies (units in the field names)."""
+                  residuals: Array, noise_sigma_m: float,
+                  spectra: list[JointSpectrum] | None = None) -> WhereItLies:  # fmt: skip
+    """Where the residual lies (units in the field names); `spectra`: the frequency scan
+    of these residuals when already made (else it is made here)."""
     q, direction = recording.poses.q, recording.poses.direction
     joints = []
     tau = gravity_torques(model.robot, q)
@@ -272,14 +308,17 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
     reach = np.linalg.norm((recording.points - recording.points.mean(axis=0))[:, :2], axis=1)
     tertiles = np.array_split(np.argsort(reach, kind="stable"), 3)
     all_poses = joint_terms(model, params, recording, residuals, noise_sigma_m)
+    if spectra is None:
+        spectra = joint_spectra(model, params, recording, residuals)
     return WhereItLies(
         joints,
         all_poses,
-        strongest_signature(all_poses),
+        _strongest(strongest_signature(all_poses), spectra),
         TimeTrend(
             [float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in quartiles],
             float(np.polyfit(time, norm, 1)[0] * 3.6e6) if np.ptp(time) > 0 else 0.0,
         ),
         Workspace([float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in tertiles]),
         noise_sigma_m * 1e3,
+        spectra,
     )

@@ -385,6 +385,7 @@ def fit_model(
     check_identifiability: bool = True,
     objective: Objective | None = None,
     robust_scale: float | None = None,
+    statistics: bool = True,
 ) -> FitResult:
     """Fit the free parameters of `start` so the model's targets at `poses` match `points`
     (n, 3) [m] in the sense of `objective` (default: absolute residuals). Parameters the
@@ -396,6 +397,9 @@ def fit_model(
     robust_scale : None for least squares (Levenberg-Marquardt); else a soft-L1 loss of
         that scale [m] per residual component (trust-region reflective), which blunders
         barely pull: used to screen outliers (`identify.outliers`), not for the result.
+    statistics : False to skip the 1-sigma and the identifiability figures (std all 0,
+        condition number and observability NaN): refits whose parameters alone are used
+        (k-fold scoring).
 
     Returns
     -------
@@ -476,13 +480,15 @@ def fit_model(
     data_residual, data_jac = residual[: problem.n_data], jac_free[: problem.n_data]
     fitted = params.unpack(x)
     std = np.zeros(len(fitted))
-    if len(x):
+    if len(x) and statistics:
         std[fitted.free] = np.sqrt(np.diag(covariance(data_jac, data_residual)))
+    figures = (describe(data_jac, fixed) if statistics
+               else Identifiability(np.nan, np.nan, len(x), fixed))  # fmt: skip
     return FitResult(
         fitted,
         std,
         problem.predicted - points,
-        describe(data_jac, fixed),
+        figures,
         SolverReport(
             method=(
                 "levenberg-marquardt (scipy least_squares, MINPACK lmder)"

@@ -1,0 +1,202 @@
+"""The frequency scan: which orders of joint-angle harmonics the residuals hold, per joint.
+
+A joint-angle error e_j(q_j) moves each measured point along the joint's motion direction
+m_j = axis_j x (point - origin_j) [m/rad]. For every joint j and order k = 1..max_order
+the pair of columns m_j cos(k q_j), m_j sin(k q_j) (3n each) is projected off the columns
+the model's free parameters already span (what a refit would absorb), and the share of
+the residual it explains is its significance: sqrt(chi^2 explained) in units of the
+residual's scatter per component (pure noise gives about 1.4, the largest of 64 orders x
+6 joints about 3.5). That is the periodogram of the joint-angle projection of the
+residuals, corrected for the geometry.
+
+Orders are then picked greedily per joint: the most significant, then the most
+significant of the rest once it is explained, and so on while the significance stays at
+PICK_SIGNIFICANCE or more (a picked order's side lobes vanish with it: over a partial
+turn neighbouring orders are nearly collinear). A pair whose columns keep less than
+MIN_LEFT of their norm after the projection is collinear with the model and is skipped,
+never reported with a meaningless amplitude. The picked orders become the ladder's
+`joint_harmonics` candidates and the report's dominant orders (`effects.joint_harmonics`
+says what an order usually means).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from robot_calib.effects import Effect
+from robot_calib.effects.joint_harmonics import JointHarmonics, meaning
+from robot_calib.effects.transmission_error import TransmissionError
+from robot_calib.identify.fit import blocked_jacobian
+from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.measurements import Recording
+from robot_calib.model import KinematicModel
+from robot_calib.records import Record
+
+MAX_SCAN_ORDER = 64
+MAX_PICKS = 6  # orders picked per joint and round
+PICK_SIGNIFICANCE = 6.0  # sqrt(chi^2 explained) / scatter an order needs to be picked
+MIN_LEFT = 1e-3  # of a column's norm left after projecting the model's columns off
+SCAN_POSES = 4000  # measurements scanned (a seeded random subset above)
+MIN_LEVER_M = 5e-3  # a joint whose measured points sit nearer its axis is not scanned
+
+
+@dataclass(frozen=True)
+class JointSpectrum(Record):
+    """The scan of one joint: significance of every order 1..max_order (0 for orders the
+    model already has or that are collinear with it), and the orders picked, with their
+    amplitudes [urad] (fitted together) and their significance when picked, and what each
+    usually means. Not `observable` (nothing scanned) when the measured points sit within
+    MIN_LEVER_M of the axis (`lever_mm` their median distance)."""
+
+    joint: int
+    observable: bool
+    lever_mm: float
+    significance: list[float]
+    dominant_orders: list[int]
+    dominant_urad: list[float]
+    dominant_significance: list[float]
+    meaning: list[str]
+
+    def line(self) -> str:
+        """One human line, e.g. 'joint 2: orders 11 (212 urad, 40 x), 27 (...)'."""
+        if not self.dominant_orders:
+            return f"joint {self.joint}: no harmonic stands out"
+        parts = [
+            f"{k} ({a:.0f} urad, {s:.0f} x)"
+            for k, a, s in zip(
+                self.dominant_orders, self.dominant_urad, self.dominant_significance
+            )  # fmt: skip
+        ]
+        return f"joint {self.joint}: orders " + ", ".join(parts)
+
+
+def modelled_orders(effects: tuple[Effect, ...], joint: int) -> set[int]:
+    """The orders of joint-angle harmonics of `joint` that `effects` already have."""
+    out: set[int] = set()
+    for e in effects:
+        if joint not in e.joints:
+            continue
+        if isinstance(e, JointHarmonics):
+            out |= set(e.orders)
+        elif isinstance(e, TransmissionError):
+            out |= set(range(1, e.order + 1))
+    return out
+
+
+def _pair_explained(cols: Array, r: Array) -> tuple[Array, Array]:
+    """For pairs of columns cols (m, K, 2): the chi^2 each pair explains of r (m,) on its
+    own (K,), and its least-squares coefficients (K, 2)."""
+    gram = np.einsum("mka,mkb->kab", cols, cols)
+    rhs = np.einsum("mka,m->ka", cols, r)
+    det = gram[:, 0, 0] * gram[:, 1, 1] - gram[:, 0, 1] ** 2
+    safe = np.where(det > 0, det, 1.0)
+    coef = np.stack([gram[:, 1, 1] * rhs[:, 0] - gram[:, 0, 1] * rhs[:, 1],
+                     gram[:, 0, 0] * rhs[:, 1] - gram[:, 0, 1] * rhs[:, 0]], 1)  # fmt: skip
+    coef = np.where((det > 0)[:, None], coef / safe[:, None], 0.0)
+    return np.einsum("ka,ka->k", coef, rhs), coef
+
+
+def joint_spectra(
+    model: KinematicModel,
+    params: ParameterVector,
+    recording: Recording,
+    residuals: Array,
+    max_order: int = MAX_SCAN_ORDER,
+    seed: int = 0,
+) -> list[JointSpectrum]:
+    """The scan of every joint (module docstring) of the residuals (n, 3) [m] (predicted -
+    measured, tracker frame) of `model` at `params` on `recording`; the model's free
+    parameters' columns are projected off first."""
+    n = len(recording)
+    rows = np.arange(n)
+    if n > SCAN_POSES:
+        rows = np.sort(np.random.default_rng(seed).choice(n, SCAN_POSES, replace=False))
+    poses = recording.poses.subset(rows)
+    res = residuals[rows]
+    predicted = recording.points[rows] + res
+    origins, axes = model.joint_axes(params, poses)
+    motion = np.cross(axes, predicted[:, None, :] - origins)  # (n, J, 3) [m/rad]
+    _, jac = blocked_jacobian(model, params, poses)
+    nuisance = jac[:, :, params.free].reshape(-1, int(params.free.sum()))
+    del jac
+    basis = np.linalg.qr(nuisance)[0] if nuisance.shape[1] else np.zeros((len(res) * 3, 0))
+    r = res.reshape(-1) - basis @ (basis.T @ res.reshape(-1))
+    scatter = float(np.sqrt(np.mean(r**2))) or 1.0
+    orders = np.arange(1, max_order + 1)
+    out = []
+    for j in range(model.robot.n_joints):
+        lever = float(np.median(np.linalg.norm(motion[:, j, :], axis=1)))
+        if lever < MIN_LEVER_M:
+            out.append(JointSpectrum(j + 1, False, lever * 1e3, [0.0] * max_order, [], [], [],
+                                     []))  # fmt: skip
+            continue
+        angle = poses.q[:, j, None] * orders  # (n, K)
+        trig = np.stack([np.cos(angle), np.sin(angle)], axis=-1)  # (n, K, 2)
+        cols = (motion[:, j, :, None, None] * trig[:, None]).reshape(-1, max_order, 2)
+        norms = np.linalg.norm(cols, axis=0)  # (K, 2)
+        flat = cols.reshape(len(cols), -1)
+        flat -= basis @ (basis.T @ flat)
+        left = np.linalg.norm(cols, axis=0) / np.where(norms > 0, norms, 1.0)
+        usable = np.all(left >= MIN_LEFT, axis=1)
+        usable[[k - 1 for k in modelled_orders(model.effects, j + 1) if k <= max_order]] = False
+        chi2, _ = _pair_explained(cols, r)
+        significance = np.where(usable, np.sqrt(np.maximum(chi2, 0.0)) / scatter, 0.0)
+        picked, picked_z = _pick(cols, r, usable, scatter)
+        amps: list[float] = []
+        if picked:
+            design = cols[:, [k - 1 for k in picked], :].reshape(len(cols), -1)
+            coef = np.linalg.lstsq(design, r, rcond=None)[0].reshape(-1, 2)
+            amps = [float(np.hypot(*c) * 1e6) for c in coef]
+        values = [float(s) for s in significance]
+        why = [meaning(k) for k in picked]
+        out.append(JointSpectrum(j + 1, True, lever * 1e3, values, picked, amps, picked_z, why))
+    return out
+
+
+def _pick(cols: Array, r: Array, usable: Array, scatter: float) -> tuple[list[int], list[float]]:
+    """Greedy orders (1-based) of the pairs cols (m, K, 2): the most significant usable
+    pair, explained away, then the next, while significance >= PICK_SIGNIFICANCE."""
+    cols = cols.copy()
+    r = r.copy()
+    norms = np.linalg.norm(cols, axis=0)
+    usable = usable.copy()
+    picked: list[int] = []
+    z_picked: list[float] = []
+    for _ in range(MAX_PICKS):
+        left = np.linalg.norm(cols, axis=0) / np.where(norms > 0, norms, 1.0)
+        ok = usable & np.all(left >= MIN_LEFT, axis=1)
+        if not ok.any():
+            break
+        chi2, _ = _pair_explained(cols, r)
+        z = np.where(ok, np.sqrt(np.maximum(chi2, 0.0)) / scatter, 0.0)
+        best = int(np.argmax(z))
+        if z[best] < PICK_SIGNIFICANCE:
+            break
+        picked.append(best + 1)
+        z_picked.append(float(z[best]))
+        usable[best] = False
+        q, _ = np.linalg.qr(cols[:, best, :])  # the picked pair, orthonormal (m, 2)
+        r -= q @ (q.T @ r)
+        flat = cols.reshape(len(cols), -1)
+        flat -= q @ (q.T @ flat)
+    return picked, z_picked
+
+
+def harmonic_candidates(spectra: list[JointSpectrum], present: tuple[Effect, ...]) -> list[Effect]:
+    """The ladder's joint_harmonics candidates: per joint with dominant orders, the joint's
+    present harmonics plus the first 1, 2, ... of them (nested, the screening picks how
+    many)."""
+    out: list[Effect] = []
+    for spectrum in spectra:
+        new = spectrum.dominant_orders
+        if not new:
+            continue
+        j = spectrum.joint
+        have = next((e for e in present if isinstance(e, JointHarmonics) and j in e.joints), None)
+        base = set(have.orders) if have is not None else set()
+        for m in range(1, len(new) + 1):
+            out.append(JointHarmonics(joints=(j,), orders=tuple(sorted(base | set(new[:m])))))
+    return out
