@@ -110,6 +110,9 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
     for figures in diagnosis.iso9283:
         print(figures.line())
     print(f"dominant effect: {diagnosis.verdict}")
+    for spectrum in diagnosis.where.harmonic_orders:
+        if spectrum.dominant_orders:
+            print(f"joint-angle harmonics (geometric residuals): {spectrum.line()}")
     print(f"unexplained: {diagnosis.unexplained.note}")
     for line in outlier_lines(diagnosis.outliers):
         print(line)

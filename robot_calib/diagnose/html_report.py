@@ -398,6 +398,21 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording) -> str:
             for t in where.joints_from_all_poses]  # fmt: skip
     out.append(_table(["joint", "harmonics 1-4 [deg]", "direction (backlash) [deg]",
                        "scale [ppm]", "gravity [deg/(N m)]"], rows))  # fmt: skip
+    found = [s for s in where.harmonic_orders if s.dominant_orders]
+    if found:
+        out.append(
+            "<h3>Joint-angle harmonics (frequency scan, geometric model)</h3><p>Orders "
+            "1-64 of each joint's reading, beyond what the geometry absorbs.</p>"
+        )
+        rows = [
+            [s.joint, k, f"{a * DEG_PER_URAD:.5f}", f"{z:.0f}", why]
+            for s in found
+            for k, a, z, why in zip(
+                s.dominant_orders, s.dominant_urad, s.dominant_significance, s.meaning
+            )
+        ]
+        out.append(_table(["joint", "order [per turn]", "amplitude [deg]",
+                           "x the residual's scatter", "usually"], rows))  # fmt: skip
     quartiles = ", ".join(f"{v:.4f}" for v in where.time.rms_by_quartile_mm)
     reach = ", ".join(f"{v:.4f}" for v in where.workspace.rms_by_reach_tertile_mm)
     out.append(f"<p><b>Strongest structure</b>: {_e(_strongest(diagnosis))}. Against time: "

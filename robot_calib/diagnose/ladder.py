@@ -23,13 +23,14 @@ from robot_calib.diagnose.learnable import LearnableBound, learnable_bound
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.identify.calibrate import Calibration, calibrate, model_name
-from robot_calib.identify.fit import blocked_jacobian, fit_model
+from robot_calib.identify.fit import blocked_jacobian, weighted_rows
 from robot_calib.identify.outliers import (
     Outlier,
     describe_outliers,
     outlier_mask,
     robust_sigma,
 )
+from robot_calib.identify.prior import prior_sigmas
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
@@ -226,14 +227,31 @@ def kfold_parameters(
     cal: Calibration, recording: Recording
 ) -> tuple[IntArray, dict[int, ParameterVector]]:
     """The folds (n,) of `recording` (`pose_folds`) and, per fold, the parameters of `cal`'s
-    model refitted (from its solution) without that fold's measurements."""
+    model refitted without that fold's measurements: one Gauss-Newton step from the full
+    solution on the other folds' rows (weighted as the fit weighs them, the weak prior
+    included, columns scaled to unit norm, damped by SCREEN_DAMPING). At a converged
+    least-squares solution that step is the refit to first order (exact for a model
+    linear in its parameters); it costs one Jacobian instead of five Levenberg-Marquardt
+    solves (issue 22: 105 s of a 138 s diagnosis were k-fold refits)."""
     fold = pose_folds(recording)
+    params = cal.parameters
+    residual, jac, owner = weighted_rows(cal.model, params, recording.poses, recording.points)
+    x = params.pack()
+    sigma = prior_sigmas(params)[params.free]
+    reference = float(np.sqrt(np.mean(residual**2))) if len(residual) else 0.0
+    prior_weight = np.where(np.isfinite(sigma), reference / sigma, 0.0)
+    prior_residual = prior_weight * (x - params.nominal[params.free])
+    norms = np.linalg.norm(jac, axis=0)
+    scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
+    scaled = jac * scale
     fitted = {}
     for f in np.unique(fold):
-        train = fold != f
-        fitted[int(f)] = fit_model(cal.model, cal.parameters, recording.poses.subset(train),
-                                   recording.points[train], check_identifiability=False,
-                                   statistics=False).parameters  # fmt: skip
+        train = fold[owner] != f
+        a = scaled[train]
+        gram = a.T @ a + np.diag((prior_weight * scale) ** 2) + SCREEN_DAMPING * np.eye(len(x))
+        rhs = a.T @ residual[train] + prior_weight * scale * prior_residual
+        step = -np.linalg.solve(gram, rhs) * scale
+        fitted[int(f)] = params.unpack(x + step)
     return fold, fitted
 
 

@@ -346,6 +346,19 @@ def weighted_jacobian(
     return residual[: problem.n_data], jac[: problem.n_data].copy()  # the data's rows
 
 
+def weighted_rows(
+    model: KinematicModel, params: ParameterVector, poses: Poses, points: Array
+) -> tuple[Array, Array, Array]:
+    """The data's rows as the absolute fit sees them at `params` (stated accuracies'
+    weights and 6-DoF orientation rows included; no prior rows): residuals (m,) [m],
+    their Jacobian (m, n_free) with respect to the free parameters, and the measurement
+    each row belongs to (m,) (index into `poses`)."""
+    problem = _Problem(model, params, poses, points, AbsoluteObjective())
+    residual, jac = problem.evaluate(params.pack())
+    owner = np.concatenate([np.repeat(np.arange(len(poses)), 3), np.repeat(problem.rows6, 3)])
+    return residual[: problem.n_data], jac[: problem.n_data].copy(), owner
+
+
 def _structurally_identifiable(
     model: KinematicModel,
     start: ParameterVector,
