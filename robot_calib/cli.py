@@ -1,6 +1,8 @@
 """`robot-calib` command line: parse, call the core, print, map errors to exit codes.
 
-Every bad input ends in one line on stderr naming the file/value and exit status 2.
+Every bad input ends in one line on stderr naming the file/value and exit status 2; a
+calibration that ran to its end with a nonsense result (PARAMS.json `plausible: false`,
+written for inspection) in "fitted, implausible: REASON" and exit status 3.
 """
 
 from __future__ import annotations
@@ -11,13 +13,13 @@ import math
 import signal
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 
-from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.errors import ImplausibleError, InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.kinematics.description import (
     RobotDescription,
@@ -276,6 +278,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         print(summary(cal, recording))
         write_json_atomic(cal.to_dict(recording), output)
     print(f"{output}: {cal.name} in {time.perf_counter() - started:.2f} s")
+    if not cal.plausible:  # written for inspection; predict, compensate, export refuse it
+        raise ImplausibleError(f"{'; '.join(cal.implausible)} ({output}: plausible false)")
     return 0
 
 
@@ -487,12 +491,26 @@ def _calibration(
     return model, params, doc
 
 
+def _plausible_or_forced(
+    doc: Mapping[str, Any] | tuple[str, ...], args: argparse.Namespace
+) -> None:
+    """Exit 2 naming args.params and its reasons when it is marked `plausible: false`
+    (`doc`: the PARAMS.json document, or its reasons), unless --force: then a warning."""
+    from robot_calib.identify.params_file import check_plausible, implausible_of
+
+    reasons = doc if isinstance(doc, tuple) else implausible_of(doc, args.params)
+    warning = check_plausible(reasons, args.params, args.force)
+    if warning is not None:
+        _log(warning)
+
+
 def cmd_predict(args: argparse.Namespace) -> int:
     """Target positions (tracker frame, m) for the joint angles of JOINTS.csv."""
     from robot_calib.messages import target_topic
     from robot_calib.predict import read_joints_csv, write_points_csv
 
-    model, params, _ = _calibration(args)
+    model, params, doc = _calibration(args)
+    _plausible_or_forced(doc, args)
     args.target = model.targets[0] if args.target is None else args.target
     if args.target not in model.targets:
         known = ", ".join(repr(t) for t in model.targets)
@@ -522,7 +540,8 @@ def cmd_compensate(args: argparse.Namespace) -> int:
     from robot_calib.compensate.write import LARGE_CHANGE_DEG, row_status, write_compensated_csv
     from robot_calib.predict import read_joints_csv
 
-    model, params, _ = _calibration(args)
+    model, params, doc = _calibration(args)
+    _plausible_or_forced(doc, args)
     n_joints, limits = model.robot.n_joints, model.robot.limits
     source = args.joints or args.targets
     inputs = [args.params, source] + ([args.seed_joints] if args.seed_joints else [])
@@ -694,6 +713,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from robot_calib.identify.params_file import load_calibration
 
     cal = load_calibration(args.params)
+    _plausible_or_forced(cal.implausible, args)
     robot = cal.model.robot
     if args.robot is not None and load_robot(args.robot).name != robot.name:
         raise InputError(
@@ -777,11 +797,13 @@ OVERWRITE_POLICY = (
 )
 
 
-def _add_force(p: argparse.ArgumentParser) -> None:
+def _add_force(p: argparse.ArgumentParser, implausible: bool = False) -> None:
+    """--force; `implausible`: it also lets a PARAMS.json marked plausible false be used."""
+    also = "; use a PARAMS.json marked plausible: false (exit 3)" if implausible else ""
     p.add_argument(
         "--force",
         action="store_true",
-        help="replace existing outputs (never an input of the command)",
+        help=f"replace existing outputs (never an input of the command){also}",
     )
 
 
@@ -1211,7 +1233,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="which target of a several-target calibration (msgs_doc/targets.md; default: "
         "the first, /laser_tracker/point)",
     )  # fmt: skip
-    _add_force(pred)
+    _add_force(pred, implausible=True)
 
     comp = add("compensate", cmd_compensate, "nominal joint commands (JOINTS.csv) or targets "
                "(TARGETS.csv) -> compensated commands", robot=CALIBRATION_ROBOT)  # fmt: skip
@@ -1250,7 +1272,7 @@ def build_parser() -> argparse.ArgumentParser:
         "directions assumed), error_mm and error_urad (the calibrated model's remaining "
         "error), iterations",
     )  # fmt: skip
-    _add_force(comp)
+    _add_force(comp, implausible=True)
 
     spl = add("split", cmd_split, "one bag -> a calibration bag and a hold-out bag")
     spl.add_argument("bag", metavar="BAG", help="the bag to split (.mcap)")
@@ -1295,7 +1317,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="--format urdf: write the calibrated joint origins into this nominal URDF of the "
         "robot, keeping its link names, limits, meshes and other tags (default: a bare chain)",
     )  # fmt: skip
-    _add_force(exp)
+    _add_force(exp, implausible=True)
 
     rep = add("repair", cmd_repair, "recover the messages of a crashed recording -> a new bag")
     rep.add_argument("bag", metavar="BAG", help="bag whose writer was killed (.mcap)")
@@ -1356,7 +1378,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"robot-calib {args.command}: interrupted", file=sys.stderr)
             return 130
         if isinstance(exc, RobotCalibError):
-            print(f"robot-calib {args.command}: error: {exc}", file=sys.stderr)
+            print(f"robot-calib {args.command}: {exc.kind}: {exc}", file=sys.stderr)
             return exc.exit_status
         raise
 

@@ -1,6 +1,7 @@
 """The package's exception types. Messages name the offending file, topic or value.
 
-The CLI turns every `RobotCalibError` into a one-line message and exit status 2.
+The CLI turns every `RobotCalibError` into a one-line message and its exit status: 2 for
+bad input, 3 for a fit that ran to its end with a nonsense result (`ImplausibleError`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,17 @@ class RobotCalibError(Exception):
     """Base class: bad input a user can fix (exit status 2 at the CLI)."""
 
     exit_status = 2
+    kind = "error"  # the CLI's line: 'robot-calib VERB: KIND: message'
+
+
+class ImplausibleError(RobotCalibError):
+    """A fit that ran to its end but whose result is nonsense (PARAMS.json `plausible:
+    false`: readings in degrees, a residual far beyond the noise, parameters beyond physics,
+    worse than the simpler model it extends): exit status 3; the file is written for
+    inspection, and `predict`, `compensate`, `export` refuse it without --force."""
+
+    exit_status = 3
+    kind = "fitted, implausible"
 
 
 class RobotDescriptionError(RobotCalibError):

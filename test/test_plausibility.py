@@ -1,9 +1,15 @@
 """A fit that converges can still be wrong: plausibility warnings against known answers
 (issue 12). Clean data of the right robot warn nothing; a wrong robot, swapped joints,
 readings in degrees, a stuck joint and a residual far above the noise each warn, naming
-what is wrong."""
+what is wrong. Nonsense (issue 22: readings in degrees, parameters beyond physics, a
+residual > 1000 x the noise, worse than the simpler model) is more than a warning: the
+calibration is `implausible`, PARAMS.json `plausible: false`, `calibrate` exits 3 and
+`predict`, `compensate`, `export` refuse the file without --force."""
 
 from __future__ import annotations
+
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,12 +31,16 @@ POINTS = physical_points(WORLD, Poses.from_readings(Q), np.random.default_rng(0)
 
 
 def warnings_of(q: np.ndarray, robot_name: str = "kr5_sixx_r650", points=POINTS) -> str:  # noqa: ANN001
+    """The warnings of a calibration (one per line), and after them its implausible
+    reasons, each as 'implausible: REASON'."""
     recording = recording_from_arrays(q, points)
     cal = calibrate(recording, load_robot(robot_name))
     text = "\n".join(cal.warnings)
     assert all(w in summary(cal, recording) for w in cal.warnings)  # stdout shows them
-    assert all(w in cal.to_dict(recording)["warnings"] for w in cal.warnings)  # PARAMS.json
-    return text
+    doc = cal.to_dict(recording)
+    assert all(w in doc["warnings"] for w in cal.warnings)  # PARAMS.json
+    assert doc["plausible"] == cal.plausible and doc["implausible"] == list(cal.implausible)
+    return "\n".join([text, *(f"implausible: {r}" for r in cal.implausible)]).strip()
 
 
 def test_clean_data_of_the_right_robot_warn_nothing() -> None:
@@ -44,9 +54,11 @@ def test_clean_data_of_the_right_robot_warn_nothing() -> None:
     ("case", "expected"),
     [
         ("ur10", "parameters far from nominal (ur10): a1 +7"),
+        ("ur10", "implausible: geometric parameters beyond physics (ur10; more than 500 mm"),
         ("swapped 2/3", "a3 -2"),
         ("swapped 2/3", "joint 2 (joint_a2): 536 of 580 readings outside its limits"),
         ("degrees", "readings reach 177.0 rad"),
+        ("degrees", "implausible: readings of joint(s) 1 (167.0 rad), 2 (162.0 rad)"),
         ("stuck 4", "joint 4 (joint_a4) never moves while others do"),
         ("20 mrad backlash on joint 2", "x the noise"),
     ],
@@ -65,6 +77,72 @@ def test_implausible_results_warn(case: str, expected: str) -> None:
         world = with_effect(WORLD, make_effect("backlash", [2]), {"backlash2": 0.02})
         points = physical_points(world, Poses.from_readings(q), np.random.default_rng(3))
     assert expected in warnings_of(q, robot, points)
+
+
+@pytest.mark.parametrize("case", ["swapped 2/3", "20 mrad backlash on joint 2"])
+def test_unusual_is_a_warning_not_nonsense(case: str) -> None:
+    """A parameter 270 mm from nominal, a residual far above the noise: warned, still
+    plausible (the thresholds of nonsense are 500 mm / 30 deg, 1000 x the noise; a joint
+    stuck at one reading while it moved leaves 24 mm per axis, 2400 x: nonsense)."""
+    q, points = Q.copy(), POINTS
+    if case == "swapped 2/3":
+        q[:, [1, 2]] = q[:, [2, 1]]
+    else:
+        world = with_effect(WORLD, make_effect("backlash", [2]), {"backlash2": 0.02})
+        points = physical_points(world, Poses.from_readings(q), np.random.default_rng(3))
+    text = warnings_of(q, points=points)
+    assert "warning: " in text and "implausible" not in text, text
+
+
+def test_worse_than_the_simpler_model_is_implausible() -> None:
+    """A richer model that ends in-sample above the geometric fit it extends (on the same
+    measurements) diverged; calibrate records the geometric fit's rms to compare with."""
+    from robot_calib.identify.plausibility import WORSE_TOLERANCE, implausible_reasons
+
+    recording = recording_from_arrays(Q, POINTS)
+    cal = calibrate(recording, ROBOT, "geometric+backlash:4")
+    assert cal.simpler is not None and cal.simpler[0] == "geometric" and cal.plausible
+    rms = float(np.sqrt(np.mean(cal.residuals**2)))
+    assert rms <= cal.simpler[1] * (1 + WORSE_TOLERANCE)
+    assert implausible_reasons(cal, recording, True, ("geometric", rms)) == []
+    (reason,) = implausible_reasons(cal, recording, True, ("geometric", 0.9 * rms))
+    assert reason.startswith(f"in-sample {rms * 1e3:.4f} mm per axis, worse than the geometric")
+    assert calibrate(recording, ROBOT, "geometric").simpler is None  # nothing simpler fitted
+
+
+def test_calibrate_of_readings_in_degrees_exits_3_and_the_file_is_refused(tmp_path: Path) -> None:
+    """The CLI: calibrate writes PARAMS.json marked plausible false and exits 3 with one
+    'fitted, implausible' line; predict and export refuse that file (exit 2, naming it and
+    the reason) unless --force, which warns instead."""
+    from cli_runner import robot_calib
+
+    from robot_calib.bag.csv_import import write_measurement_bag
+
+    q = np.degrees(paper_test_plan(3).q)
+    points = physical_points(WORLD, Poses.from_readings(np.radians(q)), np.random.default_rng(5))
+    write_measurement_bag(tmp_path / "deg.mcap", q, points, ROBOT.joint_names)
+    proc = robot_calib("calibrate", "deg.mcap", "-o", "p.json", cwd=tmp_path)
+    assert proc.returncode == 3, proc.stderr
+    said = [line for line in proc.stderr.splitlines() if line.startswith("robot-calib")]
+    assert len(said) == 1 and said[0].startswith(
+        "robot-calib calibrate: fitted, implausible: readings of joint(s) 1 ("
+    ), proc.stderr
+    assert said[0].endswith("(p.json: plausible false)")
+    doc = json.loads((tmp_path / "p.json").read_text())
+    assert doc["plausible"] is False and "look like degrees" in doc["implausible"][0]
+    (tmp_path / "j.csv").write_text("q1,q2,q3,q4,q5,q6\n0.1,-1.2,1.1,0.2,0.3,0.4\n")
+    for verb in (
+        ["predict", "p.json", "--joints", "j.csv"],
+        ["export", "p.json", "--format", "dh"],
+    ):
+        proc = robot_calib(*verb, "-o", "out", cwd=tmp_path)
+        assert proc.returncode == 2 and not (tmp_path / "out").exists(), proc.stderr
+        assert "p.json: fitted, implausible (readings of joint(s) 1 (" in proc.stderr
+        assert "--force to use it anyway" in proc.stderr
+    proc = robot_calib("predict", "p.json", "--joints", "j.csv", "--force", "-o", "out.csv",
+                       cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 0 and (tmp_path / "out.csv").exists(), proc.stderr
+    assert "warning: p.json: fitted, implausible (" in proc.stderr
 
 
 def test_readings_within_a_joints_own_limits_beyond_2pi_are_not_degrees() -> None:

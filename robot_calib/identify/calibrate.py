@@ -26,6 +26,7 @@ from robot_calib.effects import Effect, parse_effect, vocabulary
 from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
+from robot_calib.identify.canonical import canonical_form
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
 from robot_calib.identify.fit import (
     FitResult,
@@ -51,6 +52,7 @@ from robot_calib.identify.outliers import (
 )
 from robot_calib.identify.plausibility import (
     calibration_warnings,
+    implausible_reasons,
     inconsistent_orientations,
     recording_warnings,
     stated_accuracy_warnings,
@@ -129,6 +131,18 @@ class Calibration:
     # (n, 3) rotation vectors of predicted * measured 6-DoF orientation [rad], tracker
     # frame, NaN where none was fitted; None without 6-DoF measurements
     orientation_residuals: Array | None = None
+    # why the result is nonsense rather than a calibration (`plausibility.implausible_reasons`:
+    # readings in degrees, residual > 1000 x noise, parameters beyond physics, worse than the
+    # simpler model it extends), one line each; empty: plausible (PARAMS.json `plausible`)
+    implausible: tuple[str, ...] = ()
+    # the simpler model this one extends, fitted first on the same measurements: its name
+    # and in-sample rms per axis [m]; None when none was fitted here (a base model, a start)
+    simpler: tuple[str, float] | None = None
+
+    @property
+    def plausible(self) -> bool:
+        """False when `implausible` names a reason (PARAMS.json `plausible`)."""
+        return not self.implausible
 
     def predict(self, poses: Poses) -> Array:
         """Target points (n, 3) [m] in the tracker frame."""
@@ -147,7 +161,7 @@ class Calibration:
         accuracy, identifiability (its figures; the parameters it fixed are those fixed in
         the file but free in the model) and solver report. The per-point residuals and the
         CPA circles are not in the file: residuals is empty (0, 3), cpa None."""
-        from robot_calib.identify.params_file import params_from_dict
+        from robot_calib.identify.params_file import implausible_of, params_from_dict
 
         model, params = params_from_dict(doc, where)
         try:
@@ -176,7 +190,8 @@ class Calibration:
         except (TypeError, RobotCalibError) as exc:
             raise InputError(f"{where}: malformed outliers ({exc})") from None
         return cls(str(doc.get("model", "")), model, params, std, acc, np.empty((0, 3)),
-                   ident, solver, outliers=outliers)  # fmt: skip
+                   ident, solver, outliers=outliers,
+                   implausible=implausible_of(doc, where))  # fmt: skip
 
 
 def _from_fit(name: str, model: KinematicModel, fit: FitResult, points: Array,
@@ -295,7 +310,10 @@ def calibrate(
             + "); identifiable only with the further targets: "
             + (", ".join(extra) if extra else "none")
         )
-    return replace(cal, warnings=warnings, by_extra_targets=extra)
+    implausible = tuple(implausible_reasons(cal, recording, geometry_fitted, cal.simpler))
+    for reason in implausible:
+        say(f"implausible: {reason}")
+    return replace(cal, warnings=warnings, by_extra_targets=extra, implausible=implausible)
 
 
 def _by_extra_targets(cal: Calibration, recording: Recording) -> tuple[str, ...]:
@@ -450,10 +468,16 @@ def _calibrate_once(
         say("geometric: no sweep of every joint, starting from the nominal model")
         initial = fit_frames(geometric, geometric.parameters(), poses, points).parameters
     initial = initial_tool_rotations(geometric, _seeded(geometric, initial), poses)
+    # a start pi and a sign away (CPA's axis lines, a given start) starts where it ends
+    initial = canonical_form(geometric, initial, poses).parameters
+    simpler = None
     if effects and start is None:  # the geometry first; the effects start from it
         say(f"geometric: Levenberg-Marquardt on {len(points)} points, before the effects")
-        geo = fit_model(geometric, initial, poses, points, progress=say)
+        geo = _canonical(geometric, fit_model(geometric, initial, poses, points, progress=say),
+                         poses, say)  # fmt: skip
         initial = geo.parameters
+        if objective == "absolute":  # what the full model must not end worse than
+            simpler = ("geometric", float(np.sqrt(np.mean(geo.residuals**2))))
     model = KinematicModel(robot, tuple(effects), recording.target_names, geometric.oriented)
     fits = []
     new = [e for e in model.effects if not set(e.parameter_names(robot)) <= set(initial.names)]
@@ -465,7 +489,17 @@ def _calibrate_once(
         fits.append(fit_model(model, params, poses, points, progress=say,
                               objective=_objective(objective, cpa)))  # fmt: skip
     fit = min(fits, key=lambda f: f.solver.cost_m2 or 0.0)  # several starts: the best
-    return _from_fit(model_spec, model, fit, points, cpa)
+    fit = _canonical(model, fit, poses, say)
+    return replace(_from_fit(model_spec, model, fit, points, cpa), simpler=simpler)
+
+
+def _canonical(model: KinematicModel, fit: FitResult, poses: Poses, say: Log) -> FitResult:
+    """`fit` with its parameters in the canonical form nearest nominal
+    (`identify.canonical`: the predictions unchanged, so residuals and 1-sigma too)."""
+    found = canonical_form(model, fit.parameters, poses)
+    for line in found.applied:
+        say(f"canonical form: {line}")
+    return replace(fit, parameters=found.parameters) if found.applied else fit
 
 
 def _seeded(

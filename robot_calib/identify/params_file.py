@@ -84,6 +84,8 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
             "general_poses": int(recording.general.sum()),
         },
         "warnings": list(recording.warnings) + list(cal.warnings),
+        "plausible": cal.plausible,
+        "implausible": list(cal.implausible),
         "outliers": [o.to_dict() for o in cal.outliers],
         "targets": [
             {
@@ -234,6 +236,34 @@ def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict
     doc = _read_document(path)
     model, params = params_from_dict(doc, str(path))
     return model, params, doc
+
+
+def implausible_of(doc: Mapping[str, Any], where: str | Path) -> tuple[str, ...]:
+    """Why the calibration of a PARAMS.json document is nonsense (`plausible: false`, its
+    `implausible` reasons), empty when it is plausible (a file without the fields is: it
+    predates them); InputError naming `where` when they are malformed or disagree."""
+    plausible, reasons = doc.get("plausible", True), doc.get("implausible", [])
+    if not isinstance(plausible, bool) or not (
+        isinstance(reasons, list) and all(isinstance(r, str) for r in reasons)
+    ):
+        raise InputError(f"{where}: 'plausible' must be true or false, 'implausible' a list "
+                         "of reasons")  # fmt: skip
+    if plausible and reasons:
+        raise InputError(f"{where}: 'plausible' is true but 'implausible' gives reasons")
+    return () if plausible else tuple(reasons) or ("marked plausible: false",)
+
+
+def check_plausible(reasons: Sequence[str], where: str | Path, force: bool) -> str | None:
+    """None for a plausible calibration (no `reasons`, `implausible_of`); for one marked
+    `plausible: false` (file `where`), InputError (exit 2) naming the file and its reasons,
+    or with `force` the warning line to print: predicting, compensating or exporting from
+    nonsense must be asked for."""
+    if not reasons:
+        return None
+    why = "; ".join(reasons)
+    if not force:
+        raise InputError(f"{where}: fitted, implausible ({why}); --force to use it anyway")
+    return f"warning: {where}: fitted, implausible ({why}); used because of --force"
 
 
 def in_sample_accuracy(doc: Mapping[str, Any], where: str | Path) -> Accuracy | None:

@@ -53,9 +53,10 @@ def recording_warnings(recording: Recording, robot: RobotDescription) -> list[st
                 f"(reading {q[0, j]:.6f} rad throughout): a stuck encoder? its parameters "
                 "cannot be identified"
             )
+    in_degrees = dict(degree_like_joints(recording, robot))
     for j in range(robot.n_joints):
-        peak = float(np.max(np.abs(q[:, j])))
-        if peak > max(2 * np.pi, *np.abs(robot.limits[j])) + LIMIT_MARGIN_RAD:
+        if j + 1 in in_degrees:
+            peak = in_degrees[j + 1]
             out.append(
                 f"warning: joint {j + 1} ({names[j]}) readings reach {peak:.1f} rad "
                 f"({np.degrees(peak):.0f} deg): they look like degrees; the contract wants rad"
@@ -72,6 +73,21 @@ def recording_warnings(recording: Recording, robot: RobotDescription) -> list[st
                 "another robot?"
             )
     return out
+
+
+def degree_like_joints(recording: Recording, robot: RobotDescription) -> list[tuple[int, float]]:
+    """The joints (1-based) whose readings look like degrees, each with its largest |reading|
+    [rad as read]: beyond 2 pi and beyond the joint's own limits (a Yaskawa GP25's T axis
+    turns +-455 deg), by more than LIMIT_MARGIN_RAD."""
+    q = recording.poses.q
+    if not len(q):
+        return []
+    peaks = np.max(np.abs(q), axis=0)
+    return [
+        (j + 1, float(peaks[j]))
+        for j in range(robot.n_joints)
+        if peaks[j] > max(2 * np.pi, *np.abs(robot.limits[j])) + LIMIT_MARGIN_RAD
+    ]
 
 
 def noise_per_axis(cal: Calibration) -> tuple[float, str]:
@@ -116,6 +132,73 @@ def calibration_warnings(cal: Calibration, geometry_fitted: bool = True) -> list
                 f"{per_axis / noise:.0f} x the noise ({noise * 1e3:.4f} mm, {source}): "
                 "the model misses something large: an unmodelled effect (see `robot-calib "
                 f"diagnose`), {HINT}"
+            )
+    return out
+
+
+#: Beyond these a result is no robot of this table at all, but nonsense (PARAMS.json
+#: `plausible: false`, `calibrate` exit 3): a geometric parameter this far from nominal
+#: after the canonical form (`identify.canonical`: angles within pi of nominal, DH flips
+#: undone) ...
+PHYSICAL_LENGTH_M = 0.5
+PHYSICAL_ANGLE_RAD = np.radians(30.0)
+#: ... an in-sample residual per axis this many times the noise (`noise_per_axis`) ...
+IMPLAUSIBLE_RESIDUAL_FACTOR = 1000.0
+#: ... an in-sample rms per axis above that of the simpler model it extends (fitted on the
+#: same measurements) by more than this fraction: the weak prior (`identify.prior`) may
+#: cost the data a little, a fit that diverged costs far more
+WORSE_TOLERANCE = 1e-3
+
+
+def implausible_reasons(
+    cal: Calibration,
+    recording: Recording,
+    geometry_fitted: bool = True,
+    simpler: tuple[str, float] | None = None,
+) -> list[str]:
+    """One line per sign that `cal` is nonsense rather than a calibration, empty when none:
+    readings that look like degrees; an in-sample residual beyond IMPLAUSIBLE_RESIDUAL_FACTOR
+    times the noise (when the geometry was fitted); a geometric parameter beyond
+    PHYSICAL_LENGTH_M or PHYSICAL_ANGLE_RAD of nominal; an in-sample rms per axis worse than
+    that of `simpler` (its model name and in-sample rms per axis [m] on the same
+    measurements) by more than WORSE_TOLERANCE. The lines carry no 'warning:' label:
+    `calibrate`'s exit 3 says "fitted, implausible: LINE"."""
+    out: list[str] = []
+    robot = cal.model.robot
+    degrees = degree_like_joints(recording, robot)
+    if degrees:
+        joints = ", ".join(f"{j} ({peak:.1f} rad)" for j, peak in degrees)
+        out.append(f"readings of joint(s) {joints} look like degrees; the contract wants rad")
+    per_axis = float(np.sqrt(np.mean(cal.residuals**2))) if len(cal.residuals) else 0.0
+    if geometry_fitted and len(cal.residuals):
+        noise, source = noise_per_axis(cal)
+        if per_axis > IMPLAUSIBLE_RESIDUAL_FACTOR * noise:
+            out.append(
+                f"in-sample residual {per_axis * 1e3:.4g} mm per axis is {per_axis / noise:.0f}"
+                f" x the noise ({noise * 1e3:.4f} mm, {source}): {HINT}"
+            )
+    beyond = []
+    for p, value in zip(cal.parameters.parameters, cal.parameters.values):
+        if p.group != "geometric":
+            continue
+        deviation = value - p.nominal
+        if p.unit == "m" and abs(deviation) > PHYSICAL_LENGTH_M:
+            beyond.append(f"{p.name} {deviation * 1e3:+.1f} mm")
+        elif p.unit == "rad" and abs(deviation) > PHYSICAL_ANGLE_RAD:
+            beyond.append(f"{p.name} {np.degrees(deviation):+.1f} deg")
+    if beyond:
+        out.append(
+            f"geometric parameters beyond physics ({robot.name}; more than "
+            f"{PHYSICAL_LENGTH_M * 1e3:.0f} mm or {np.degrees(PHYSICAL_ANGLE_RAD):.0f} deg from "
+            f"nominal): {', '.join(beyond)}"
+        )
+    if simpler is not None and len(cal.residuals):
+        name, simpler_rms = simpler
+        if per_axis > simpler_rms * (1.0 + WORSE_TOLERANCE):
+            out.append(
+                f"in-sample {per_axis * 1e3:.4f} mm per axis, worse than the {name} model it "
+                f"extends ({simpler_rms * 1e3:.4f} mm on the same measurements): the fit "
+                "diverged"
             )
     return out
 
