@@ -166,6 +166,11 @@ class Effect(ABC):
         relation an effect declares (thermal_warmup's start is thermal_drift's line)."""
         return self.covers(other, robot)
 
+    def diagnosed_joints(self) -> tuple[int, ...]:
+        """The joints a diagnosis may name for this effect (it names joints, not links):
+        its own; an effect acting between two joints (link_bending) adds the other."""
+        return self.joints
+
     # -- simulator ------------------------------------------------------------------------
     @abstractmethod
     def default_values(self, robot: RobotDescription) -> dict[str, float]:
