@@ -6,10 +6,12 @@ classes: single effects, combinations, other forms).
     .venv/bin/python scripts/blind_harness.py [--cases 20] [--classes backlash ...]
 
 A hit: the diagnosis names the withheld effect and its joints (null for `none`; several
-effects: each in the chosen rung; out of the vocabulary: the dominant effect on the right
-joint) and its chosen rung brings the held-out error to within 1.5 x the noise floor (not
-required out of the vocabulary). ratio to right: the chosen rung's held-out rms over that
-of the right model (the withheld effects fitted on the same data), median and worst.
+effects: each in the chosen rung; joint harmonics: their joints and orders in the chosen
+rung; out of the vocabulary: the dominant effect, any name, on the right joints, e.g. a
+bending link's J or J + 1) and its chosen rung brings the held-out error to within 1.5 x
+the noise floor (not required out of the vocabulary). ratio to right: the chosen rung's
+held-out rms over that of the right model (the withheld effects fitted on the same
+data), median and worst.
 """
 
 from __future__ import annotations
