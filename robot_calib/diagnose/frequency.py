@@ -89,12 +89,12 @@ def modelled_orders(effects: tuple[Effect, ...], joint: int) -> set[int]:
 def _pair_explained(cols: Array, r: Array) -> tuple[Array, Array]:
     """For pairs of columns cols (m, K, 2): the chi^2 each pair explains of r (m,) on its
     own (K,), and its least-squares coefficients (K, 2)."""
-    gram = np.einsum("mka,mkb->kab", cols, cols)
-    rhs = np.einsum("mka,m->ka", cols, r)
-    det = gram[:, 0, 0] * gram[:, 1, 1] - gram[:, 0, 1] ** 2
+    c, s = cols[:, :, 0], cols[:, :, 1]
+    cc, ss, cs = np.sum(c * c, axis=0), np.sum(s * s, axis=0), np.sum(c * s, axis=0)
+    rhs = np.stack([r @ c, r @ s], axis=1)  # (K, 2)
+    det = cc * ss - cs**2
     safe = np.where(det > 0, det, 1.0)
-    coef = np.stack([gram[:, 1, 1] * rhs[:, 0] - gram[:, 0, 1] * rhs[:, 1],
-                     gram[:, 0, 0] * rhs[:, 1] - gram[:, 0, 1] * rhs[:, 0]], 1)  # fmt: skip
+    coef = np.stack([ss * rhs[:, 0] - cs * rhs[:, 1], cc * rhs[:, 1] - cs * rhs[:, 0]], 1)
     coef = np.where((det > 0)[:, None], coef / safe[:, None], 0.0)
     return np.einsum("ka,ka->k", coef, rhs), coef
 

@@ -44,6 +44,7 @@ MIN_GAIN = 0.05  # a candidate must cut the held-out rms by 5 % ...
 AT_FLOOR = 1.2  # ... and the ladder stops once held-out rms <= 1.2 x the noise floor
 HOLDOUT_K = 12.0  # hold-out blunders: scored only, never refitted, so a higher bar
 TRY_TOP = 3  # candidates refitted per round when the best one's refit disappoints
+CONFIRMED = 0.05  # a refit within this share of its linearised score confirms the screening
 SCREEN_DAMPING = 1e-6  # of the screening step, relative to unit-norm Jacobian columns
 Log = Callable[[str], None]
 
@@ -176,17 +177,23 @@ class LinearScreen:
         norms = np.linalg.norm(jac.reshape(-1, jac.shape[-1]), axis=0)
         self.keep = norms > 0
         scale = np.where(self.keep, 1.0 / np.where(self.keep, norms, 1.0), 0.0)
-        self.jac, self.residual, self.fold = jac * scale, residual, fold
+        self.residual, self.fold = residual, fold
         self.h_res = h_res
         self.h_jac = None if h_jac is None else h_jac * scale
-        self.normal: dict[int, tuple[Array, Array]] = {}
+        # each fold's own rows once: its test Jacobian, and its share of the normal
+        # equations (the training set's are the total minus the fold's own)
+        self.tests: dict[int, tuple[NDArray[np.bool_], Array]] = {}
+        own: dict[int, tuple[Array, Array]] = {}
         for f in np.unique(fold):
-            self.normal[int(f)] = self._normal(fold != f)
-        self.normal_all = self._normal(np.ones(len(fold), dtype=bool))
-
-    def _normal(self, rows: NDArray[np.bool_]) -> tuple[Array, Array]:
-        a = self.jac[rows].reshape(-1, self.jac.shape[-1])
-        return a.T @ a, a.T @ self.residual[rows].reshape(-1)
+            test = fold == f
+            block = jac[test] * scale  # (n_f, 3, P)
+            self.tests[int(f)] = (test, block)
+            a = block.reshape(-1, jac.shape[-1])
+            own[int(f)] = (a.T @ a, a.T @ residual[test].reshape(-1))
+        gram = sum((g for g, _ in own.values()), np.zeros((jac.shape[-1],) * 2))
+        rhs = sum((b for _, b in own.values()), np.zeros(jac.shape[-1]))
+        self.normal = {f: (gram - g, rhs - b) for f, (g, b) in own.items()}
+        self.normal_all = (gram, rhs)
 
     @staticmethod
     def _step(normal: tuple[Array, Array], cols: list[int]) -> Array:
@@ -202,8 +209,8 @@ class LinearScreen:
         cols = [c for c in cols if self.keep[c]]
         out = np.empty_like(self.residual)
         for f, normal in self.normal.items():
-            test = self.fold == f
-            out[test] = self.residual[test] + self.jac[test][:, :, cols] @ self._step(normal, cols)
+            test, block = self.tests[f]
+            out[test] = self.residual[test] + block[:, :, cols] @ self._step(normal, cols)
         h_out = None
         if self.h_res is not None and self.h_jac is not None:
             h_out = self.h_res + self.h_jac[:, :, cols] @ self._step(self.normal_all, cols)
@@ -413,6 +420,8 @@ def _climb(
                 accepted = Rung(name, effects, cal, acc, res, score)
             if good and score <= AT_FLOOR * noise.floor_rms_m and noise.independent:
                 break  # at the noise floor already: nothing left to win
+            if good and score <= (1.0 + CONFIRMED) * lin_score:
+                break  # the refit confirms the screening: the rest screened worse
         if accepted is None:
             break
         rungs.append(accepted)
