@@ -302,10 +302,10 @@ def diagnose(
     best = ladder.rungs[-1]
     geo = ladder.rungs[0].calibration
     where = where_it_lies(geo.model, geo.parameters, recording, geo.residuals,
-                          ladder.noise.sigma_m)  # fmt: skip
+                          ladder.noise.sigma_m, ladder.spectra.get("geometric"))  # fmt: skip
     after = where if len(ladder.rungs) == 1 else where_it_lies(
         best.calibration.model, best.calibration.parameters, recording,
-        best.calibration.residuals, ladder.noise.sigma_m,
+        best.calibration.residuals, ladder.noise.sigma_m, ladder.spectra.get(best.model),
     )  # fmt: skip
     noise = refine_with_model(ladder.noise, best.calibration.residuals,
                               int(best.calibration.parameters.free.sum()))  # fmt: skip

@@ -89,7 +89,8 @@ class Ladder:
     outliers: tuple[Outlier, ...] = ()
     learnable: LearnableBound | None = None  # what a residual model reaches (learnable.py)
     refits: list[RefitOutcome] = field(default_factory=list)  # every candidate refitted
-    spectra: list[JointSpectrum] = field(default_factory=list)  # the last round's scan
+    # the frequency scan of each rung the ladder scanned, by its model name
+    spectra: dict[str, list[JointSpectrum]] = field(default_factory=dict)
 
 
 def candidates(robot: RobotDescription, recording: Recording, present: tuple[Effect, ...],
@@ -345,7 +346,7 @@ class _Climb:
     scored_on: str
     rounds: list[list[tuple[str, float]]]
     refits: list[RefitOutcome]
-    spectra: list[JointSpectrum]
+    spectra: dict[str, list[JointSpectrum]]
 
 
 #: a refit whose in-sample rms exceeds its own linearised held-out estimate by this factor
@@ -375,7 +376,7 @@ def _climb(
     rungs = [Rung("geometric", (), geo, acc, res, score)]
     rounds: list[list[tuple[str, float]]] = []
     refits: list[RefitOutcome] = []
-    spectra: list[JointSpectrum] = []
+    spectra: dict[str, list[JointSpectrum]] = {}
     say(f"  geometric: held-out rms {acc.absolute_rms_mm:.4f} mm"
         + (f" (floor {noise.floor_rms_m * 1e3:.4f})" if noise.independent else ""))  # fmt: skip
     while len(rungs) <= MAX_RUNGS:
@@ -384,8 +385,9 @@ def _climb(
         if at_floor and noise.independent:
             break
         fitted = current.calibration
-        spectra = joint_spectra(fitted.model, fitted.parameters, recording, fitted.residuals)
-        pool = candidates(robot, recording, current.effects, spectra)
+        scan = joint_spectra(fitted.model, fitted.parameters, recording, fitted.residuals)
+        spectra[current.model] = scan
+        pool = candidates(robot, recording, current.effects, scan)
         if not pool:
             break
         base, scores = _screen(current.calibration, pool, recording, holdout)
