@@ -8,113 +8,51 @@ noise, and structure the data do not sample, are not. The ladder then reports wh
 of that learnable gap (geometric's held-out error minus the bound) each physical effect
 explains.
 
-The model: kernel ridge regression (scikit-learn's `KernelRidge`, RBF kernel) of the three
-residual components [mm] on (sin q_j, cos q_j) of every joint's reading (periodic, so a
-joint's +-180 deg meet), plus the target's one-hot code with several targets. Its two
-hyperparameters (ridge alpha, RBF gamma) are chosen by 5-fold cross-validation over whole
-calibration poses (`GridSearchCV`), on at most MAX_SEARCH poses (a random subset above:
-the search is O(n^3) per fit). scikit-learn earns its place: a maintained, tested kernel
-ridge and cross-validated search instead of hand-written linear algebra. An isotropic
-kernel on all readings learns smooth pose-dependent structure (gravity, a joint's low
-harmonics) better than sharp structure in one joint (a high harmonic of a wrist joint):
-the bound is what this model learns, a lower bound of what is learnable.
+The model: the Gaussian process of `identify.correction` (squared-exponential kernel on
+(sin q_j, cos q_j) of every joint's reading, periodic so a joint's +-180 deg meet, one
+length scale per joint, white noise, the target's code with several targets), its
+hyperparameters by marginal likelihood on the calibration poses only: on hold-out bags
+from all calibration residuals, in the k-fold case per fold from that fold's training
+poses (nested: the fold scored never chooses them; the first fold's hyperparameters start
+the others' search). Every calibration pose is fitted (exact up to MAX_POINTS, a subset of
+regressors on MAX_POINTS inducing poses above). A length scale per joint learns smooth
+pose-dependent structure (gravity, compliance, a joint's low harmonics) and ignores the
+joints it does not depend on; structure faster than its shortest length scale (a high
+harmonic of a gear) it learns poorly, and says so when a length scale ends there: the
+bound is what this model learns, a lower bound of what is learnable. The same correction,
+fitted on every calibration residual, is the learned part of the hybrid model
+(`corrected_heldout`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from robot_calib.identify.calibrate import Calibration
+from robot_calib.identify.correction import (
+    MAX_LEARN,
+    MAX_POINTS,
+    Hyperparameters,
+    ResidualCorrection,
+    fit_correction,
+)
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
-from robot_calib.poses import Poses
 from robot_calib.records import Record
 
 METHOD = (
-    "kernel ridge regression (scikit-learn KernelRidge, RBF kernel on sin/cos of the joint "
-    "readings) of the geometric residuals; alpha, gamma by 5-fold CV over calibration poses"
+    "Gaussian process of the geometric residuals (squared-exponential kernel on sin/cos of "
+    "the joint readings, one length scale per joint, white noise; hyperparameters by "
+    f"marginal likelihood on at most {MAX_LEARN} calibration poses, per fold from its "
+    f"training poses in k-fold; exact on up to {MAX_POINTS} poses, else a subset of "
+    f"regressors on {MAX_POINTS})"
 )
-ALPHAS = (1e-2, 1e-1, 1.0)
-GAMMAS = (0.05, 0.2, 1.0)
-MAX_SEARCH = 800  # poses in the hyperparameter search (a random subset above)
-MAX_FIT = 2000  # measurements the model is fitted on (a random subset above: the kernel
-# matrix is O(n^2) in memory, 32 MB here, 80 GB at 100k poses)
 
 #: the bound must beat geometric by this share of its held-out rms to count as structure
 MIN_LEARNABLE_SHARE = 0.05
-
-
-def features(poses: Poses, n_targets: int) -> Array:
-    """(n, 2J [+ T]) inputs: sin and cos of every reading, and the target's one-hot code
-    when there are several targets."""
-    columns = [np.sin(poses.q), np.cos(poses.q)]
-    if n_targets > 1:
-        columns.append(np.eye(n_targets)[poses.target_index])
-    return np.hstack(columns)
-
-
-@dataclass(frozen=True)
-class ResidualModel:
-    """A fitted kernel ridge model of residuals: `predict` gives (n, 3) [m]."""
-
-    regressor: Any  # sklearn.kernel_ridge.KernelRidge, fitted on residuals in mm
-    n_targets: int
-    alpha: float
-    gamma: float
-
-    def predict(self, poses: Poses) -> Array:
-        """Predicted residuals (predicted - measured) at `poses`, shape (n, 3) [m]."""
-        if not len(poses):
-            return np.zeros((0, 3))
-        return np.asarray(self.regressor.predict(features(poses, self.n_targets))) * 1e-3
-
-
-def _subset(n: int, size: int, seed: int) -> IntArray:
-    """Sorted indices of at most `size` of n rows (all when n <= size), reproducibly."""
-    if n <= size:
-        return np.arange(n)
-    return np.sort(np.random.default_rng(seed).choice(n, size, replace=False))
-
-
-def search_hyperparameters(
-    poses: Poses, residuals: Array, fold: IntArray, n_targets: int, seed: int = 0
-) -> tuple[float, float]:
-    """(alpha, gamma) of the kernel ridge of `residuals` (n, 3) [m] at `poses` by
-    cross-validation over the folds `fold` (n,) (whole poses), on at most MAX_SEARCH
-    measurements (a random subset above)."""
-    from sklearn.kernel_ridge import KernelRidge
-    from sklearn.model_selection import GridSearchCV
-
-    rows = _subset(len(poses), MAX_SEARCH, seed)
-    x, y = features(poses, n_targets)[rows], residuals[rows] * 1e3
-    folds = fold[rows]
-    splits = [(np.flatnonzero(folds != f), np.flatnonzero(folds == f)) for f in np.unique(folds)]
-    search = GridSearchCV(KernelRidge(kernel="rbf"),
-                          {"alpha": list(ALPHAS), "gamma": list(GAMMAS)},
-                          cv=splits, scoring="neg_mean_squared_error")  # fmt: skip
-    search.fit(x, y)
-    return float(search.best_params_["alpha"]), float(search.best_params_["gamma"])
-
-
-def fit_residual_model(
-    poses: Poses,
-    residuals: Array,
-    n_targets: int,
-    hyper: tuple[float, float],
-    seed: int = 0,
-) -> ResidualModel:
-    """Kernel ridge (alpha, gamma = `hyper`) of `residuals` (n, 3) [m] at `poses`, on at
-    most MAX_FIT measurements (a random subset above)."""
-    from sklearn.kernel_ridge import KernelRidge
-
-    rows = _subset(len(poses), MAX_FIT, seed)
-    x, y = features(poses, n_targets)[rows], residuals[rows] * 1e3
-    regressor = KernelRidge(kernel="rbf", alpha=hyper[0], gamma=hyper[1]).fit(x, y)
-    return ResidualModel(regressor, n_targets, hyper[0], hyper[1])
 
 
 @dataclass(frozen=True)
@@ -122,8 +60,12 @@ class LearnableBound(Record):
     """DIAGNOSIS.json `learnable` (msgs_doc/diagnosis.md): geometric's held-out error and
     that of geometric corrected by the residual model, on the same held-out data [mm];
     learnable_share = 1 - corrected / geometric (rms): the part of geometric's held-out
-    error that is systematic and learnable from these data; alpha, gamma the chosen
-    hyperparameters (residuals in mm, inputs sin/cos)."""
+    error that is systematic and learnable from these data.
+
+    The correction fitted on every calibration pose: length_scales_deg (J,) each joint's
+    length scale [deg] (null: the residuals do not depend on the joint), noise_mm the
+    white noise it attributes to the residuals (1-sigma per axis) [mm], fitted_poses;
+    warnings: hyperparameters at an edge of their range (all folds'), one line each."""
 
     method: str
     scored_on: str
@@ -132,8 +74,10 @@ class LearnableBound(Record):
     holdout_abs_rms_mm: float
     holdout_abs_mean_mm: float
     learnable_share: float
-    alpha: float
-    gamma: float
+    length_scales_deg: list[float | None] = field(default_factory=list)
+    noise_mm: float | None = None
+    fitted_poses: int = 0
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def structure_left(self) -> bool:
@@ -143,16 +87,76 @@ class LearnableBound(Record):
     def line(self) -> str:
         share = (f"{100 * self.learnable_share:.0f} % of geometric's error is learnable"
                  if self.learnable_share > 0 else "it learns nothing")  # fmt: skip
+        edge = f"; {len(self.warnings)} warning(s)" if self.warnings else ""
         return (
             f"learnable bound: geometric {self.geometric_abs_rms_mm:.4f} mm -> "
-            f"{self.holdout_abs_rms_mm:.4f} mm rms held-out with a kernel ridge of its "
-            f"residuals ({share}; {self.scored_on})"
+            f"{self.holdout_abs_rms_mm:.4f} mm rms held-out with a Gaussian process of its "
+            f"residuals ({share}; {self.scored_on}{edge})"
         )
 
 
 def _figures(residuals: Array) -> tuple[float, float]:
+    if not len(residuals):
+        return 0.0, 0.0
     norm = np.linalg.norm(residuals, axis=1) * 1e3
     return float(np.sqrt(np.mean(norm**2))), float(np.mean(norm))
+
+
+def corrected_heldout(
+    cal: Calibration,
+    recording: Recording,
+    holdout: Recording | None,
+    fold: IntArray,
+    fold_parameters: dict[int, ParameterVector],
+    rng: np.random.Generator | None = None,
+) -> tuple[Array, Array, ResidualCorrection]:
+    """The residuals of `cal`'s physical model (its own correction, if any, left out) on
+    held-out data before and after a learned correction (`identify.correction`), and the
+    correction fitted on every calibration residual of `cal` (the hybrid model's).
+
+    cal : a calibration of `recording` (its measurements, tracker blunders left out)
+    holdout : hold-out measurements: scored there, the correction fitted on every
+        calibration residual; None: over the folds
+    fold : shape (n,), the fold of each measurement of `recording` (whole poses)
+    fold_parameters : per fold, `cal`'s parameters refitted without it; fold f is scored
+        with them and a correction fitted on their residuals at the other folds' poses
+        (its hyperparameters from those poses only, the first fold's starting the search)
+    rng : draws the learning subsets and inducing poses (default: seed 0)
+
+    Returns
+    -------
+    before : shape (m, 3), predicted - measured on the held-out data [m, tracker frame]:
+        every hold-out measurement, else those of the folds in `fold_parameters` in
+        recording order
+    after : shape (m, 3), the same minus the correction's predicted residual [m]
+    correction : the correction of all calibration residuals of `cal`, its `warnings`
+        those of every fold too
+    """
+    rng = np.random.default_rng(0) if rng is None else rng
+    n_targets = len(cal.model.targets)
+    poses, points = recording.poses, recording.points
+    residuals = cal.model.target_points(cal.parameters, poses) - points
+    if holdout is not None:
+        correction = fit_correction(poses, residuals, n_targets, rng)
+        before = cal.model.target_points(cal.parameters, holdout.poses) - holdout.points
+        return before, before - correction.predict(holdout.poses), correction
+    before, after = np.zeros_like(points), np.zeros_like(points)
+    start: Hyperparameters | None = None
+    warnings: list[str] = []
+    for f, params in fold_parameters.items():
+        train, test = fold != f, fold == f
+        fitted = cal.model.target_points(params, poses) - points
+        local = fit_correction(poses.subset(train), fitted[train], n_targets, rng,
+                               start=start)  # fmt: skip
+        if start is None:  # the first fold's hyperparameters start the others' search
+            start = local.hyper
+        warnings += [f"{w} (fold {f})" for w in local.warnings]
+        before[test] = fitted[test]
+        after[test] = fitted[test] - local.predict(poses.subset(test))
+    correction = fit_correction(poses, residuals, n_targets, rng, start=start)
+    correction = replace(correction, warnings=correction.warnings + tuple(warnings))
+    scored = np.isin(fold, list(fold_parameters))
+    return before[scored], after[scored], correction
 
 
 def learnable_bound(
@@ -163,29 +167,14 @@ def learnable_bound(
     fold_parameters: dict[int, ParameterVector],
     scored_on: str,
 ) -> LearnableBound:
-    """The bound of `geo` (the geometric calibration of `recording`): on `holdout` (the
-    residual model fitted on all calibration residuals), else over the folds `fold` (n,)
-    with `fold_parameters` the geometry refitted without each fold (the residual model
-    fitted on that fold's training residuals). The hyperparameters come from the
-    calibration residuals (in the k-fold case including the fold scored: two numbers,
-    a mild optimism of the bound)."""
-    n_targets = len(recording.target_names)
-    poses, points, model = recording.poses, recording.points, geo.model
-    residuals = geo.predict(poses) - points
-    hyper = search_hyperparameters(poses, residuals, fold, n_targets)
-    if holdout is not None:
-        learned = fit_residual_model(poses, residuals, n_targets, hyper)
-        before = geo.predict(holdout.poses) - holdout.points
-        after = before - learned.predict(holdout.poses)
-    else:
-        before, after = np.empty_like(points), np.empty_like(points)
-        for f, params in fold_parameters.items():
-            train, test = fold != f, fold == f
-            fitted = model.target_points(params, poses) - points
-            local = fit_residual_model(poses.subset(train), fitted[train], n_targets, hyper)
-            before[test] = fitted[test]
-            after[test] = fitted[test] - local.predict(poses.subset(test))
+    """The bound of `geo` (the geometric calibration of `recording`) from
+    `corrected_heldout`: on `holdout`, else over the folds `fold` (n,) with
+    `fold_parameters` the geometry refitted without each fold; `scored_on` says which."""
+    before, after, correction = corrected_heldout(geo, recording, holdout, fold,
+                                                  fold_parameters)  # fmt: skip
     geo_rms, geo_mean = _figures(before)
     rms, mean = _figures(after)
     share = 1.0 - rms / geo_rms if geo_rms > 0 else 0.0
-    return LearnableBound(METHOD, scored_on, geo_rms, geo_mean, rms, mean, share, *hyper)
+    return LearnableBound(METHOD, scored_on, geo_rms, geo_mean, rms, mean, share,
+                          correction.length_scales_deg, correction.noise_mm,
+                          correction.n_fitted, list(correction.warnings))  # fmt: skip

@@ -27,6 +27,7 @@ from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.canonical import canonical_form
+from robot_calib.identify.correction import ResidualCorrection
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
 from robot_calib.identify.fit import (
     FitResult,
@@ -131,6 +132,9 @@ class Calibration:
     # (n, 3) rotation vectors of predicted * measured 6-DoF orientation [rad], tracker
     # frame, NaN where none was fitted; None without 6-DoF measurements
     orientation_residuals: Array | None = None
+    # a learned correction of what the model leaves (`identify.correction`: the hybrid
+    # model); `predict` subtracts its predicted residual; None: the physical model alone
+    correction: ResidualCorrection | None = None
     # why the result is nonsense rather than a calibration (`plausibility.implausible_reasons`:
     # readings in degrees, residual > 1000 x noise, parameters beyond physics, worse than the
     # simpler model it extends), one line each; empty: plausible (PARAMS.json `plausible`)
@@ -145,8 +149,12 @@ class Calibration:
         return not self.implausible
 
     def predict(self, poses: Poses) -> Array:
-        """Target points (n, 3) [m] in the tracker frame."""
-        return self.model.target_points(self.parameters, poses)
+        """Target points (n, 3) [m] in the tracker frame: the model's, minus the learned
+        correction's predicted residual when the calibration has one."""
+        points = self.model.target_points(self.parameters, poses)
+        if self.correction is not None:
+            points = points - self.correction.predict(poses)
+        return points
 
     def to_dict(self, recording: Recording) -> dict[str, Any]:
         """The PARAMS.json document (msgs_doc/parameters.md) of this calibration from
@@ -161,9 +169,14 @@ class Calibration:
         accuracy, identifiability (its figures; the parameters it fixed are those fixed in
         the file but free in the model) and solver report. The per-point residuals and the
         CPA circles are not in the file: residuals is empty (0, 3), cpa None."""
-        from robot_calib.identify.params_file import implausible_of, params_from_dict
+        from robot_calib.identify.params_file import (
+            correction_of,
+            implausible_of,
+            params_from_dict,
+        )
 
         model, params = params_from_dict(doc, where)
+        correction = correction_of(doc, model, where)  # None: the physical model alone
         try:
             std = np.array([float(r.get("std", 0.0)) for r in doc["parameters"]])
             acc = Accuracy.from_dict(doc["residuals"])
@@ -190,7 +203,7 @@ class Calibration:
         except (TypeError, RobotCalibError) as exc:
             raise InputError(f"{where}: malformed outliers ({exc})") from None
         return cls(str(doc.get("model", "")), model, params, std, acc, np.empty((0, 3)),
-                   ident, solver, outliers=outliers,
+                   ident, solver, outliers=outliers, correction=correction,
                    implausible=implausible_of(doc, where))  # fmt: skip
 
 

@@ -17,6 +17,7 @@ from robot_calib.accuracy import Accuracy, orientation_accuracy
 from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
+from robot_calib.identify.correction import ResidualCorrection
 from robot_calib.kinematics.description import load_robot, with_payload
 from robot_calib.kinematics.frames import matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
@@ -111,6 +112,8 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
         figures = orientation_accuracy(cal.orientation_residuals)
         if figures is not None:
             doc["orientation_residuals"] = figures.to_dict()
+    if cal.correction is not None:  # the hybrid model's learned part
+        doc["correction"] = cal.correction.to_dict()
     if len(cal.model.targets) > 1:
         doc["identifiable_only_with_extra_targets"] = list(cal.by_extra_targets)
     if cal.identifiability is not None:
@@ -281,6 +284,25 @@ def in_sample_accuracy(doc: Mapping[str, Any], where: str | Path) -> Accuracy | 
         if not math.isfinite(value):
             raise InputError(f"{where}: residuals: {name} {value!r} is not finite")
     return figures
+
+
+def correction_of(
+    doc: Mapping[str, Any], model: KinematicModel, where: str | Path
+) -> ResidualCorrection | None:
+    """The learned correction of a PARAMS.json document (its `correction` section,
+    msgs_doc/parameters.md), None when it has none (the physical model alone); InputError
+    naming `where` when the section is malformed or was fitted on another number of joints
+    or targets than `model` has."""
+    if doc.get("correction") is None:
+        return None
+    section = f"{where}: correction"
+    correction = ResidualCorrection.from_dict(doc["correction"], section)
+    if correction.n_joints != model.robot.n_joints or correction.n_targets != len(model.targets):
+        raise InputError(
+            f"{section}: fitted on {correction.n_joints} joints and {correction.n_targets} "
+            f"target(s), the model has {model.robot.n_joints} and {len(model.targets)}"
+        )
+    return correction
 
 
 def load_calibration(path: str | Path) -> Calibration:

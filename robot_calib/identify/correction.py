@@ -1,0 +1,518 @@
+"""A learned correction of what a physical model leaves: a Gaussian process of its residuals.
+
+The residual r = predicted - measured [m] of a calibration is modelled as a function of
+the joint readings (and of which target is measured, with several targets): a Gaussian
+process with a squared-exponential kernel on (sin q_j, cos q_j) of every joint, one length
+scale per joint (ARD: a joint the residuals do not depend on gets an infinite length
+scale), a signal variance and white noise; the three components of r share the kernel.
+
+    k(a, b) = s^2 exp(-1/2 sum_j (2 - 2 cos(q_aj - q_bj)) / l_j^2 - u_T^2 [t_a != t_b])
+
+2 - 2 cos(dq) is the squared distance of the points (cos q, sin q): periodic, so a joint's
++-180 deg meet, and ~dq^2 for small dq (l_j is about a length scale in rad). The target
+term (several targets only) lets the targets' corrections differ (u_T = 0: one function).
+
+Hyperparameters maximise the marginal likelihood (scipy L-BFGS-B, analytic gradient) on
+at most MAX_LEARN poses (a random subset: each step is O(n^3)); the model is then fitted
+on every pose up to MAX_POINTS exactly, above that as a subset of regressors (Nystrom) on
+m = MAX_POINTS inducing poses drawn at random: O(n m^2) time, O(m^2) memory (the poses
+streamed in blocks), so 100k poses fit. Parametrised by inverse length scales u_j = 1 / l_j >= 0:
+u_j = 0 (the joint does not matter) is a natural end, not a bound (in u the search takes
+a third of the steps it takes in 1 / l^2, and fewer than in log l). The one artificial
+edge of each joint is its shortest length scale (MIN_LENGTH_SCALE_RAD); ending there, or
+at an edge of the signal or noise variance, gives a warning kept on the result (the data
+want structure the model may not resolve).
+
+Why our own few lines and not scikit-learn's GaussianProcessRegressor: one length scale
+per joint ties the sin and cos features of a joint (sklearn's RBF has one per feature),
+the multi-output likelihood shares one Cholesky factor, and the fitted state must be plain
+arrays for PARAMS.json; `predict` is pure numpy (reading a parameter file needs no scipy).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from robot_calib.errors import InputError
+from robot_calib.kinematics.frames import Array, IntArray
+from robot_calib.poses import Poses
+from robot_calib.records import Record
+
+FORMAT = "robot_calib.correction/1"
+MAX_LEARN = 600  # poses the hyperparameters are learned on (a random subset above)
+MAX_POINTS = 2000  # poses fitted exactly; above, inducing poses of a subset of regressors
+MIN_LENGTH_SCALE_RAD = math.radians(1.0)  # a joint's shortest length scale (an edge)
+# the target code's largest inverse length scale: targets uncorrelated to e^-50 there (a
+# saturation, not an edge that changes predictions)
+MAX_TARGET_INVERSE = 5.0
+# signal and noise variance of the residuals scaled to unit rms: outside these the model
+# explains nothing or everything; ending at one is said
+SIGNAL_BOUNDS = (1e-4, 1e3)
+NOISE_BOUNDS = (1e-6, 10.0)
+# The marginal likelihood has local optima (from long length scales a sharp structure is
+# invisible: the search ends with everything noise). Each start, every joint's inverse
+# length scale [1/rad] (l = 57 and 10 deg), is searched on COARSE poses (cheap); the best
+# is refined on all MAX_LEARN.
+STARTS_INVERSE = (1.0, 5.7)
+START_SIGNAL, START_NOISE = 1.0, 0.1
+COARSE = 200
+# u_j = 0 is stationary (dK/du_j = 0 there): a joint dropped on the coarse poses (or in a
+# warm start) re-enters the refinement at this inverse length scale (l = 190 deg), so the
+# refinement can bring it back (measured: 4 simulated UR10 cases reach the best optimum
+# found by any start this way, 1 of 4 without)
+REVIVE_INVERSE = 0.3
+MAX_ITERATIONS = 100  # L-BFGS-B steps of the hyperparameter search
+WARM_ITERATIONS = 30  # from a warm start (the first fold's hyperparameters)
+CHUNK_ELEMENTS = 1 << 22  # kernel entries per block (32 MB): predict and fit stream rows
+JITTER = 1e-10  # relative diagonal added where a Cholesky factor needs it
+EDGE = 1e-3  # relative distance to an edge that counts as "at" it
+
+
+def features(poses: Poses, n_targets: int) -> Array:
+    """The inputs of residual models of `poses`: shape (n, 2J [+ T]), sin q_j of every
+    joint reading, then cos q_j, then the target's one-hot code when there are several
+    targets (n_targets > 1)."""
+    return _features(poses.q, poses.target_index, n_targets)
+
+
+def _features(q: Array, target: IntArray, n_targets: int) -> Array:
+    columns = [np.sin(q), np.cos(q)]
+    if n_targets > 1:
+        columns.append(np.eye(n_targets)[target])
+    return np.hstack(columns)
+
+
+@dataclass(frozen=True)
+class Hyperparameters:
+    """The kernel's hyperparameters, for residuals scaled to unit rms.
+
+    inverse : shape (J [+ 1],), u_j = 1 / l_j [1/rad] of every joint (0: the joint does
+        not matter), then u_T of the target code with several targets [1]
+    signal_variance : s^2 [1]
+    noise_variance : sigma^2 of the white noise [1]
+    """
+
+    inverse: Array
+    signal_variance: float
+    noise_variance: float
+
+    def vector(self) -> Array:
+        """(J [+ 1] + 2,) the optimiser's vector: u, log s^2, log sigma^2."""
+        return np.concatenate(
+            [self.inverse, [np.log(self.signal_variance), np.log(self.noise_variance)]]
+        )
+
+    @classmethod
+    def of_vector(cls, theta: Array) -> Hyperparameters:
+        return cls(np.array(theta[:-2], dtype=float), float(np.exp(theta[-2])),
+                   float(np.exp(theta[-1])))  # fmt: skip
+
+
+def _phi(q: Array, target: IntArray, hyper: Hyperparameters, n_targets: int) -> Array:
+    """(n, 2J [+ T]) features (`features`) scaled by the inverse length scales:
+    k(a, b) = s^2 exp(phi_a . phi_b - c), c = sum_j u_j^2 + u_T^2 (`_offset`)."""
+    n_joints = q.shape[1]
+    u = hyper.inverse
+    scale = np.concatenate([u[:n_joints], u[:n_joints], np.full(n_targets, u[-1])
+                            if n_targets > 1 else np.zeros(0)])  # fmt: skip
+    return _features(q, target, n_targets) * scale
+
+
+def _offset(hyper: Hyperparameters) -> float:
+    return float(np.sum(hyper.inverse**2))
+
+
+def _kernel(phi_a: Array, phi_b: Array, hyper: Hyperparameters) -> Array:
+    """(n_a, n_b) signal kernel of scaled features (`_phi`)."""
+    return hyper.signal_variance * np.exp(phi_a @ phi_b.T - _offset(hyper))
+
+
+def _squared_distances(q: Array, target: IntArray, n_targets: int) -> Array:
+    """(G, n, n): 2 - 2 cos(q_aj - q_bj) of every joint, then 2 [t_a != t_b] with several
+    targets (the kernel is s^2 exp(-1/2 sum_g u_g^2 dist_g))."""
+    out = [2.0 - 2.0 * np.cos(q[:, None, j] - q[None, :, j]) for j in range(q.shape[1])]
+    if n_targets > 1:
+        out.append((target[:, None] != target[None, :]).astype(float) * 2.0)
+    return np.stack(out)
+
+
+def _negative_log_likelihood(theta: Array, dist: Array, y: Array) -> tuple[float, Array]:
+    """-log p(y | theta) (constant dropped) of the (n, C) outputs `y` sharing the kernel,
+    and its gradient in theta = (u (G,), log s^2, log sigma^2); dist (G, n, n)."""
+    from scipy.linalg import lapack
+
+    n, n_outputs = y.shape
+    u, signal, noise = theta[:-2], np.exp(theta[-2]), np.exp(theta[-1])
+    k_signal = signal * np.exp(-0.5 * np.tensordot(u**2, dist, 1))
+    k = k_signal.copy()
+    k.flat[:: n + 1] += noise
+    factor, info = lapack.dpotrf(k, lower=1)  # clean: the upper triangle zero
+    if info:  # not positive definite at these values: a wall the search backs off from
+        return 1e25, np.zeros_like(theta)
+    alpha, _ = lapack.dpotrs(factor, y, lower=1)
+    inverse, _ = lapack.dpotri(factor, lower=1)  # lower triangle of K^-1, upper zero
+    trace_inverse = float(np.trace(inverse))
+    value = 0.5 * float(np.sum(y * alpha)) + n_outputs * float(np.sum(np.log(np.diag(factor))))
+    # dNLL/dtheta = -1/2 sum(W * dK/dtheta), W = alpha alpha^T - C K^-1, both symmetric:
+    # against a symmetric matrix, K^-1 counts as its lower triangle doubled off the diagonal
+    inverse *= -2.0 * n_outputs
+    inverse.flat[:: n + 1] *= 0.5
+    weight = alpha @ alpha.T
+    weight += inverse
+    weight *= k_signal  # W * K_signal
+    grad = np.empty_like(theta)
+    grad[:-2] = 0.5 * u * (dist.reshape(len(u), -1) @ weight.ravel())  # dK/du = -u D K_s
+    grad[-2] = -0.5 * float(np.sum(weight))
+    grad[-1] = -0.5 * noise * (float(np.sum(alpha * alpha)) - n_outputs * trace_inverse)
+    return value, grad
+
+
+def _bounds(
+    n_joints: int, n_targets: int, min_length_scale_rad: float
+) -> list[tuple[float, float]]:
+    joints = [(0.0, 1.0 / min_length_scale_rad)] * n_joints
+    target = [(0.0, MAX_TARGET_INVERSE)] if n_targets > 1 else []
+    return joints + target + [tuple(np.log(SIGNAL_BOUNDS)), tuple(np.log(NOISE_BOUNDS))]  # type: ignore[list-item]
+
+
+def _edge_warnings(hyper: Hyperparameters, n_joints: int, min_length_scale_rad: float,
+                   scale_m: float) -> tuple[str, ...]:  # fmt: skip
+    """'warning: learned correction: ...' for every hyperparameter at an edge of its range."""
+    out = []
+    top = 1.0 / min_length_scale_rad
+    for j, u in enumerate(hyper.inverse[:n_joints]):
+        if u >= top * (1 - EDGE):
+            out.append(
+                f"warning: learned correction: joint {j + 1}'s length scale ends at its "
+                f"lower bound {math.degrees(min_length_scale_rad):.3g} deg: the residuals "
+                "vary faster with this joint than the model resolves (high-order joint "
+                "harmonics?); the correction smooths them"
+            )
+    for name, value, (low, high), meaning in (
+        ("signal variance", hyper.signal_variance, SIGNAL_BOUNDS,
+         "the structure's size is not determined by the data"),
+        ("noise variance", hyper.noise_variance, NOISE_BOUNDS,
+         "the residuals are nearly noise-free or all noise at this scale"),
+    ):  # fmt: skip
+        if value <= low * (1 + EDGE) or value >= high * (1 - EDGE):
+            size = math.sqrt(value) * scale_m * 1e3
+            out.append(
+                f"warning: learned correction: {name} ends at an edge of its range "
+                f"({value:.3g} of the residuals' variance, {size:.3g} mm): {meaning}"
+            )
+    return tuple(out)
+
+
+def _subset(n: int, size: int, rng: np.random.Generator) -> IntArray:
+    """Sorted indices of at most `size` of n rows (all when n <= size)."""
+    if n <= size:
+        return np.arange(n)
+    return np.sort(rng.choice(n, size, replace=False))
+
+
+def _shuffled_subset(n: int, size: int, rng: np.random.Generator) -> IntArray:
+    """At most `size` of n rows in random order (all when n <= size)."""
+    return rng.permutation(n)[:size]
+
+
+def learn_hyperparameters(
+    poses: Poses,
+    residuals: Array,
+    n_targets: int,
+    rng: np.random.Generator | None = None,
+    start: Hyperparameters | None = None,
+    min_length_scale_rad: float = MIN_LENGTH_SCALE_RAD,
+) -> tuple[Hyperparameters, tuple[str, ...]]:
+    """The kernel's hyperparameters by maximum marginal likelihood of `residuals` (n, 3)
+    [m, tracker frame, predicted - measured] at `poses` (n poses, readings [rad]), on at
+    most MAX_LEARN poses (a random subset drawn with `rng`, default seed 0).
+
+    start : hyperparameters to start from (a warm start: WARM_ITERATIONS steps at most),
+        else the best of STARTS_INVERSE (s^2 = 1, sigma^2 = 0.1) on COARSE of the poses
+    min_length_scale_rad : every joint's shortest length scale [rad]
+
+    Returns
+    -------
+    hyper : Hyperparameters, for the residuals scaled to unit rms (`_scaling`)
+    warnings : 'warning: learned correction: ...' for every edge reached (`_edge_warnings`)
+        and a search that failed
+    """
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(0) if rng is None else rng
+    rows = _shuffled_subset(len(poses), MAX_LEARN, rng)
+    mean, scale = _scaling(residuals)
+    y = (residuals[rows] - mean) / scale
+    n_joints = poses.q.shape[1]
+    dist = _squared_distances(poses.q[rows], poses.target_index[rows], n_targets)
+    bounds = _bounds(n_joints, n_targets, min_length_scale_rad)
+    low, high = np.array(bounds).T
+
+    def search(theta: Array, block: slice, iterations: int) -> Any:
+        # L-BFGS-B: a smooth objective with an analytic gradient and box bounds (u >= 0)
+        return minimize(_negative_log_likelihood, np.clip(theta, low, high),
+                        args=(dist[:, block, block], y[block]), jac=True, method="L-BFGS-B",
+                        bounds=bounds, options={"maxiter": iterations})  # fmt: skip
+
+    def revived(theta: Array) -> Array:
+        theta = theta.copy()
+        theta[:-2] = np.maximum(theta[:-2], REVIVE_INVERSE)
+        return theta
+
+    if start is not None:
+        found = search(revived(start.vector()), slice(None), WARM_ITERATIONS)
+    else:  # the rows are in random order: the first COARSE are a random subset too
+        n_inverse = n_joints + (n_targets > 1)
+        coarse = slice(0, min(COARSE, len(rows)))
+        found = min(
+            (search(np.r_[np.full(n_inverse, u), np.log([START_SIGNAL, START_NOISE])],
+                    coarse, MAX_ITERATIONS) for u in STARTS_INVERSE),
+            key=lambda f: float(f.fun),
+        )  # fmt: skip
+        if len(rows) > COARSE:
+            found = search(revived(found.x), slice(None), MAX_ITERATIONS)
+    hyper = Hyperparameters.of_vector(found.x)
+    warnings = _edge_warnings(hyper, n_joints, min_length_scale_rad, scale)
+    if not found.success and "ITERATIONS" not in str(found.message).upper():
+        warnings += (f"warning: learned correction: the hyperparameter search stopped: "
+                     f"{found.message}",)  # fmt: skip
+    return hyper, warnings
+
+
+def _scaling(residuals: Array) -> tuple[Array, float]:
+    """The residuals' mean (3,) [m] and rms about it over all components [m] (> 0): the
+    model works on (residuals - mean) / scale, one scale for the three components so that
+    isotropic tracker noise stays isotropic."""
+    mean = residuals.mean(axis=0) if len(residuals) else np.zeros(3)
+    scale = float(np.sqrt(np.mean((residuals - mean) ** 2))) if len(residuals) else 0.0
+    return mean, max(scale, 1e-12)
+
+
+def _blocks(n: int, width: int) -> list[slice]:
+    """Row blocks of an (n, width) kernel of at most CHUNK_ELEMENTS entries each."""
+    step = max(1, CHUNK_ELEMENTS // max(width, 1))
+    return [slice(s, min(s + step, n)) for s in range(0, n, step)]
+
+
+@dataclass(frozen=True)
+class ResidualCorrection(Record):
+    """A fitted residual correction: what it predicts needs only these arrays.
+
+    inducing_q : shape (m, J), the joint readings of the poses the prediction is built on
+        [rad] (every fitted pose up to MAX_POINTS, else a random MAX_POINTS of them)
+    inducing_target : shape (m,), their targets (indices into the calibration's targets)
+    dual : shape (m, 3), the dual coefficients of the scaled residuals [1]
+    hyper : the kernel's hyperparameters (for residuals scaled to unit rms)
+    mean_m : shape (3,), the fitted residuals' mean [m, tracker frame]
+    scale_m : their rms about it [m]: the model's unit
+    n_targets : the calibration's number of targets (the target code's length)
+    n_fitted : poses the correction was fitted on
+    rms_m : rms norm of the correction at the fitted poses [m]: its size
+    method : how it was learned, for people
+    warnings : 'warning: learned correction: ...' lines (hyperparameters at an edge)
+    """
+
+    inducing_q: Array
+    inducing_target: IntArray
+    dual: Array
+    hyper: Hyperparameters
+    mean_m: Array
+    scale_m: float
+    n_targets: int
+    n_fitted: int
+    rms_m: float
+    method: str
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def n_joints(self) -> int:
+        return int(self.inducing_q.shape[1])
+
+    @property
+    def length_scales_deg(self) -> list[float | None]:
+        """Every joint's length scale l_j [deg] (about the change of its reading over
+        which the residuals change); None where the residuals do not depend on it."""
+        u = self.hyper.inverse[: self.n_joints]
+        return [math.degrees(1.0 / v) if v > 0 else None for v in u]
+
+    @property
+    def noise_mm(self) -> float:
+        """The white noise the model attributes to the residuals, 1-sigma per axis [mm]."""
+        return math.sqrt(self.hyper.noise_variance) * self.scale_m * 1e3
+
+    def predict(self, poses: Poses) -> Array:
+        """The predicted residual (predicted - measured) of the calibration at `poses`:
+        shape (n, 3) [m, tracker frame]; subtract it from the model's points. Computed in
+        blocks of CHUNK_ELEMENTS kernel entries (bounded memory for any n). InputError when
+        the poses have another number of joints or a target beyond the calibration's."""
+        n = len(poses)
+        if poses.q.shape[1] != self.n_joints:
+            raise InputError(f"learned correction: poses of {poses.q.shape[1]} joints, the "
+                             f"correction was fitted on {self.n_joints}")  # fmt: skip
+        target = poses.target_index
+        if n and int(target.max()) >= self.n_targets:
+            raise InputError(f"learned correction: target index {int(target.max())} beyond "
+                             f"the calibration's {self.n_targets} target(s)")  # fmt: skip
+        phi_z = _phi(self.inducing_q, self.inducing_target, self.hyper, self.n_targets)
+        out = np.empty((n, 3))
+        for rows in _blocks(n, len(phi_z)):
+            phi = _phi(poses.q[rows], target[rows], self.hyper, self.n_targets)
+            out[rows] = _kernel(phi, phi_z, self.hyper) @ self.dual
+        return out * self.scale_m + self.mean_m
+
+    def line(self) -> str:
+        """One human line: size, length scales, noise, poses."""
+        scales = ", ".join("-" if v is None else f"{v:.0f}" for v in self.length_scales_deg)
+        return (
+            f"learned correction: {self.rms_m * 1e3:.4f} mm rms at its {self.n_fitted} "
+            f"calibration poses; length scales per joint [deg] {scales} (-: no influence); "
+            f"noise {self.noise_mm:.4f} mm per axis"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """PARAMS.json `correction` (msgs_doc/parameters.md): plain numbers, SI units; the
+        readings rounded to 1e-12 rad (far below any encoder; predictions change by less
+        than 1e-12 m), the other numbers kept exact."""
+        return {
+            "format": FORMAT,
+            "method": self.method,
+            "n_targets": self.n_targets,
+            "fitted_poses": self.n_fitted,
+            "rms_m": self.rms_m,
+            "length_scales_deg": self.length_scales_deg,  # for people; not read back
+            "noise_mm": self.noise_mm,  # for people; not read back
+            "inverse_length_scales": [float(v) for v in self.hyper.inverse],
+            "signal_variance": self.hyper.signal_variance,
+            "noise_variance": self.hyper.noise_variance,
+            "mean_m": [float(v) for v in self.mean_m],
+            "scale_m": self.scale_m,
+            "inducing_q_rad": np.round(self.inducing_q, 12).tolist(),
+            "inducing_target": [int(t) for t in self.inducing_target],
+            "dual": self.dual.tolist(),
+            "warnings": list(self.warnings),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], where: str = "correction") -> ResidualCorrection:
+        """The correction of a `to_dict` mapping; InputError naming `where` when it is of
+        another format, lacks a field, or has arrays of inconsistent shapes or values that
+        are not finite."""
+        if not isinstance(data, Mapping) or data.get("format") != FORMAT:
+            found = data.get("format") if isinstance(data, Mapping) else type(data).__name__
+            raise InputError(f"{where}: not a learned correction of format {FORMAT} "
+                             f"(format {found!r})")  # fmt: skip
+        try:
+            q = np.array(data["inducing_q_rad"], dtype=float)
+            target = np.array(data["inducing_target"], dtype=np.int64)
+            dual = np.array(data["dual"], dtype=float)
+            w = np.array(data["inverse_length_scales"], dtype=float)
+            mean = np.array(data["mean_m"], dtype=float)
+            scalars = {k: float(data[k]) for k in
+                       ("signal_variance", "noise_variance", "scale_m", "rms_m")}  # fmt: skip
+            n_targets, n_fitted = int(data["n_targets"]), int(data["fitted_poses"])
+            warnings = tuple(str(v) for v in data.get("warnings", []))
+            method = str(data["method"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"{where}: malformed learned correction ({exc!r})") from None
+        m = len(q)
+        problems = [
+            (q.ndim != 2 or m == 0, "inducing_q_rad must be an (m, J) table, m >= 1"),
+            (target.shape != (m,) or (m and (target.min() < 0 or target.max() >= n_targets)),
+             "inducing_target must hold m target indices below n_targets"),
+            (dual.shape != (m, 3), "dual must be an (m, 3) table"),
+            (q.ndim == 2 and w.shape != (q.shape[1] + (n_targets > 1),),
+             "inverse_length_scales must have one value per joint (+ 1 with "
+             "several targets)"),
+            (mean.shape != (3,), "mean_m must have 3 values"),
+            (n_targets < 1, "n_targets must be >= 1"),
+            (not all(np.isfinite(a).all() for a in (q, dual, w, mean)), "values not finite"),
+            (bool((w < 0).any()), "inverse_length_scales must be >= 0"),
+            (not all(math.isfinite(v) for v in scalars.values()), "values not finite"),
+            (min(scalars["signal_variance"], scalars["noise_variance"], scalars["scale_m"]) <= 0,
+             "signal_variance, noise_variance and scale_m must be > 0"),
+        ]  # fmt: skip
+        for bad, what in problems:
+            if bad:
+                raise InputError(f"{where}: malformed learned correction: {what}")
+        hyper = Hyperparameters(w, scalars["signal_variance"], scalars["noise_variance"])
+        return cls(q, target, dual, hyper, mean, scalars["scale_m"], n_targets, n_fitted,
+                   scalars["rms_m"], method, warnings)  # fmt: skip
+
+
+def fit_correction(
+    poses: Poses,
+    residuals: Array,
+    n_targets: int,
+    rng: np.random.Generator | None = None,
+    hyper: Hyperparameters | None = None,
+    start: Hyperparameters | None = None,
+    min_length_scale_rad: float = MIN_LENGTH_SCALE_RAD,
+    max_points: int = MAX_POINTS,
+) -> ResidualCorrection:
+    """The correction of `residuals` (n, 3) [m, tracker frame, predicted - measured] at
+    `poses` (readings (n, J) [rad], targets below `n_targets`).
+
+    hyper : the kernel's hyperparameters, else learned (`learn_hyperparameters`, from
+        `start` if given, with `min_length_scale_rad`)
+    rng : draws the learning subset and the inducing poses (default: seed 0)
+
+    Every pose is fitted exactly up to `max_points` (the kernel matrix's Cholesky factor);
+    above, by a subset of regressors on `max_points` inducing poses drawn with `rng`: the
+    dual coefficients (sigma^2 K_zz + K_zn K_nz)^-1 K_zn y, accumulated over blocks of
+    poses (memory O(max_points^2 + block), time O(n max_points^2)).
+
+    Returns
+    -------
+    correction : ResidualCorrection; `predict` gives the predicted residual (n, 3) [m]
+    """
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve, solve
+
+    rng = np.random.default_rng(0) if rng is None else rng
+    n = len(poses)
+    if residuals.shape != (n, 3) or n == 0:
+        raise InputError(f"learned correction: residuals of shape {residuals.shape} for "
+                         f"{n} poses (expected ({n}, 3), n >= 1)")  # fmt: skip
+    warnings: tuple[str, ...] = ()
+    if hyper is None:
+        hyper, warnings = learn_hyperparameters(poses, residuals, n_targets, rng, start,
+                                                min_length_scale_rad)  # fmt: skip
+    mean, scale = _scaling(residuals)
+    y = (residuals - mean) / scale
+    q, target = poses.q, poses.target_index
+    learned = f"hyperparameters by marginal likelihood on {min(n, MAX_LEARN)} poses"
+    if n <= max_points:
+        inducing: IntArray = np.arange(n)
+        phi = _phi(q, target, hyper, n_targets)
+        k = _kernel(phi, phi, hyper)
+        k.flat[:: n + 1] += hyper.noise_variance
+        dual = cho_solve(cho_factor(k, lower=True), y)
+        how = f"exact on all {n} poses"
+    else:
+        inducing = _subset(n, max_points, rng)
+        phi_z = _phi(q[inducing], target[inducing], hyper, n_targets)
+        m = len(inducing)
+        gram, rhs = hyper.noise_variance * _kernel(phi_z, phi_z, hyper), np.zeros((m, 3))
+        for rows in _blocks(n, m):
+            k_zn = _kernel(phi_z, _phi(q[rows], target[rows], hyper, n_targets), hyper)
+            gram += k_zn @ k_zn.T
+            rhs += k_zn @ y[rows]
+        gram.flat[:: m + 1] += JITTER * float(np.trace(gram)) / m
+        try:
+            dual = solve(gram, rhs, assume_a="pos")
+        except LinAlgError:  # numerically singular: the least-squares solution
+            dual = np.linalg.lstsq(gram, rhs, rcond=None)[0]
+        how = f"subset of regressors on {m} of {n} poses"
+    method = (
+        "Gaussian process of the residuals (squared-exponential kernel on sin/cos of the "
+        "joint readings, one length scale per joint, white noise; "
+        f"{learned}; {how})"
+    )
+    correction = ResidualCorrection(q[inducing].copy(), target[inducing].copy(), dual, hyper,
+                                    mean, scale, n_targets, n, 0.0, method, warnings)  # fmt: skip
+    size = np.linalg.norm(correction.predict(poses), axis=1)
+    return replace(correction, rms_m=float(np.sqrt(np.mean(size**2))))

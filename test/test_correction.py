@@ -1,0 +1,180 @@
+"""The learned residual correction (issue 22: a learnable bound that learns, the hybrid
+model). Known answers: smooth structure of known joints is recovered and the joints it
+does not depend on are found irrelevant; a simulated UR10 whose compliance the geometric
+model lacks is mostly learnable; an edge of a hyperparameter's range is said; a correction
+survives PARAMS.json exactly."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from robot_calib.diagnose.ladder import kfold_parameters
+from robot_calib.diagnose.learnable import corrected_heldout, learnable_bound
+from robot_calib.errors import InputError
+from robot_calib.identify.calibrate import Calibration, calibrate
+from robot_calib.identify.correction import ResidualCorrection, fit_correction
+from robot_calib.kinematics.frames import Array
+from robot_calib.poses import Poses
+from robot_calib.sim.scenarios import Scenario, ur10_random
+
+# compliance of joints 2 and 3 (gravity bends them): smooth in the readings, not in the
+# geometric model: about 0.9 mm rms of geometric's held-out error
+COMPLIANCE = ({"name": "compliance", "joints": [2, 3],
+               "values": {"compliance2": 2e-5, "compliance3": 2e-5}},)  # fmt: skip
+
+
+def rms_mm(residuals: Array) -> float:
+    return float(np.sqrt(np.mean(np.sum(residuals**2, axis=1))) * 1e3)
+
+
+@pytest.fixture(scope="module")
+def compliant() -> tuple[Scenario, Calibration]:
+    """A UR10 random-pose campaign (700 calibration, 300 hold-out poses) with compliance
+    the geometric calibration does not model."""
+    scenario = ur10_random(seed=1, n=1000, effects=COMPLIANCE)
+    geo = calibrate(scenario.calibration, scenario.world.model.robot, "geometric")
+    return scenario, geo
+
+
+def smooth(q: Array) -> Array:
+    """(n, 3) [m]: a residual of joints 2 and 3 only."""
+    return np.column_stack([1e-4 * np.sin(q[:, 1]), 5e-5 * np.cos(q[:, 1] + q[:, 2]),
+                            2e-5 * np.sin(2 * q[:, 2])])  # fmt: skip
+
+
+def test_smooth_structure_is_recovered_and_the_other_joints_found_irrelevant() -> None:
+    rng = np.random.default_rng(3)
+    q = rng.uniform(-np.pi, np.pi, (300, 6))
+    noise = 1e-6  # m per axis
+    residual = smooth(q) + rng.normal(0.0, noise, q.shape[:1] + (3,))
+    correction = fit_correction(Poses.from_readings(q), residual, 1)
+    new = rng.uniform(-np.pi, np.pi, (300, 6))
+    error = correction.predict(Poses.from_readings(new)) - smooth(new)
+    assert rms_mm(error) < 3e-3  # 3 um of a 0.1 mm structure
+    scales = correction.length_scales_deg
+    assert scales[1] is not None and scales[2] is not None  # the joints it depends on
+    assert all(s is None or s > 300 for k, s in enumerate(scales) if k not in (1, 2)), scales
+    assert correction.noise_mm == pytest.approx(noise * 1e3, rel=0.3)
+    assert not [w for w in correction.warnings if "length scale" in w]
+    assert "exact on all 300 poses" in correction.method
+
+
+def test_subset_of_regressors_above_max_points_predicts_like_the_exact_fit() -> None:
+    """Above `max_points` the model is built on that many inducing poses; every pose still
+    counts, and the prediction is close to the exact fit's."""
+    rng = np.random.default_rng(4)
+    q = rng.uniform(-np.pi, np.pi, (500, 6))
+    poses = Poses.from_readings(q)
+    residual = smooth(q) + rng.normal(0.0, 1e-6, (500, 3))
+    exact = fit_correction(poses, residual, 1)
+    sparse = fit_correction(poses, residual, 1, hyper=exact.hyper, max_points=200)
+    assert sparse.inducing_q.shape == (200, 6) and sparse.n_fitted == 500
+    assert "subset of regressors on 200 of 500 poses" in sparse.method
+    new = Poses.from_readings(rng.uniform(-np.pi, np.pi, (500, 6)))
+    assert rms_mm(sparse.predict(new) - exact.predict(new)) < 0.02 * rms_mm(smooth(new.q))
+
+
+def test_a_length_scale_at_its_bound_is_said() -> None:
+    """A 6th harmonic of joint 1 (period 60 deg) wants a length scale of about 30 deg:
+    with 40 deg the shortest allowed, joint 1 ends at that bound, and says so."""
+    rng = np.random.default_rng(0)
+    q = np.column_stack([rng.uniform(-np.pi, np.pi, 400), rng.uniform(-0.3, 0.3, (400, 5))])
+    residual = np.zeros((400, 3))
+    residual[:, 0] = 1e-4 * np.sin(6 * q[:, 0])
+    residual += rng.normal(0.0, 1e-6, residual.shape)
+    poses = Poses.from_readings(q)
+    free = fit_correction(poses, residual, 1)  # the default bound, 1 deg: not reached
+    assert free.length_scales_deg[0] == pytest.approx(30.0, abs=6.0)
+    assert not [w for w in free.warnings if "length scale" in w]
+    capped = fit_correction(poses, residual, 1, min_length_scale_rad=math.radians(40.0))
+    assert capped.length_scales_deg[0] == pytest.approx(40.0, rel=1e-3)
+    said = [w for w in capped.warnings if "length scale" in w]
+    assert len(said) == 1 and "joint 1" in said[0] and "lower bound 40 deg" in said[0], said
+
+
+def test_compliance_the_geometry_lacks_is_learnable(
+    compliant: tuple[Scenario, Calibration],
+) -> None:
+    scenario, geo = compliant
+    no_folds = np.zeros(len(scenario.calibration), int)
+    bound = learnable_bound(geo, scenario.calibration, scenario.holdout, no_folds, {},
+                            "hold-out bags")  # fmt: skip
+    assert bound.learnable_share > 0.65, bound.line()
+    assert bound.holdout_abs_rms_mm < 0.35 * bound.geometric_abs_rms_mm
+    assert not [w for w in bound.warnings if "length scale" in w], bound.warnings
+    # joints 2 and 3 carry gravity's torque: they matter, over tens of degrees
+    assert all(s is not None and 10 < s < 200 for s in bound.length_scales_deg[1:3])
+    assert "Gaussian process" in bound.line() and bound.fitted_poses == 700
+
+
+def test_k_fold_hyperparameters_come_from_each_folds_training_poses(
+    compliant: tuple[Scenario, Calibration],
+) -> None:
+    """Without hold-out bags: per fold the geometry refitted and a correction learned on
+    the other folds only; every calibration pose is scored once."""
+    scenario, geo = compliant
+    recording = scenario.calibration.subset(np.arange(700) < 400)  # 400 poses: fast
+    geo400 = calibrate(recording, scenario.world.model.robot, "geometric")
+    fold, fitted = kfold_parameters(geo400, recording)
+    before, after, correction = corrected_heldout(geo400, recording, None, fold, fitted)
+    assert before.shape == after.shape == (400, 3)
+    assert rms_mm(after) < 0.5 * rms_mm(before)
+    assert correction.n_fitted == 400
+
+
+def test_a_correction_survives_json_exactly() -> None:
+    """Two targets (the target code is an input); to_dict -> JSON -> from_dict predicts
+    the same, and a malformed section names where it is."""
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-np.pi, np.pi, (250, 6))
+    target = rng.integers(0, 2, 250)
+    poses = replace(Poses.from_readings(q), target=target)
+    residual = smooth(q) + 3e-5 * target[:, None] + rng.normal(0.0, 1e-6, (250, 3))
+    correction = fit_correction(poses, residual, 2)
+    text = json.dumps(correction.to_dict())
+    back = ResidualCorrection.from_dict(json.loads(text), "PARAMS.json: correction")
+    new = replace(Poses.from_readings(rng.uniform(-np.pi, np.pi, (200, 6))),
+                  target=rng.integers(0, 2, 200))  # fmt: skip
+    assert np.allclose(back.predict(new), correction.predict(new), rtol=0, atol=1e-12)
+    assert back.length_scales_deg == correction.length_scales_deg
+    doc = json.loads(text)
+    doc["dual"] = doc["dual"][:-1]
+    with pytest.raises(InputError, match=r"^x.json: correction: malformed .*dual"):
+        ResidualCorrection.from_dict(doc, "x.json: correction")
+    with pytest.raises(InputError, match="x.json: correction: not a learned correction"):
+        ResidualCorrection.from_dict({**doc, "format": "robot_calib.correction/99"},
+                                     "x.json: correction")  # fmt: skip
+
+
+def test_the_hybrid_model_round_trips_through_params_json(
+    compliant: tuple[Scenario, Calibration],
+) -> None:
+    scenario, geo = compliant
+    recording, held = scenario.calibration, scenario.holdout
+    before, after, correction = corrected_heldout(geo, recording, held, np.zeros(0, int), {})
+    hybrid = replace(geo, correction=correction)  # geometric + the learned correction
+    assert np.allclose(hybrid.predict(held.poses) - held.points, after, rtol=0, atol=1e-12)
+    assert np.allclose(geo.predict(held.poses) - held.points, before, rtol=0, atol=1e-12)
+    doc = json.loads(json.dumps(hybrid.to_dict(recording)))
+    assert doc["correction"]["format"] == "robot_calib.correction/1"
+    assert len(json.dumps(doc, indent=2)) < 1_000_000
+    back = Calibration.from_dict(doc, "hybrid.json")
+    assert back.correction is not None
+    assert np.allclose(back.predict(held.poses), hybrid.predict(held.poses), rtol=0,
+                       atol=1e-12)  # fmt: skip
+    assert rms_mm(back.predict(held.poses) - held.points) < 0.5 * rms_mm(
+        geo.predict(held.poses) - held.points
+    )
+    # a file without the section is the physical model alone, as before
+    plain = Calibration.from_dict(json.loads(json.dumps(geo.to_dict(recording))))
+    assert plain.correction is None and "correction" not in geo.to_dict(recording)
+    assert np.allclose(plain.predict(held.poses), geo.predict(held.poses), rtol=0, atol=1e-12)
+    # a correction of another robot's joints or targets is refused, naming the file
+    doc["correction"]["n_targets"] = 2
+    with pytest.raises(InputError, match="hybrid.json: correction"):
+        Calibration.from_dict(doc, "hybrid.json")
