@@ -436,6 +436,8 @@ def _rejected_before_kfold(cal: Calibration, current: Rung, lin_score_m: float) 
     than its own linearised held-out estimate (the refit disappointed the screening)."""
     insample = cal.accuracy.absolute_rms_mm
     before = current.calibration.accuracy.absolute_rms_mm
+    if cal.implausible:
+        return "implausible: " + "; ".join(cal.implausible)
     if insample > before * (1.0 + 1e-6):
         return (f"in-sample {insample:.4f} mm is worse than {current.model}'s {before:.4f} mm "
                 "that it extends")  # fmt: skip
