@@ -41,6 +41,7 @@ from robot_calib.pipeline import (
 if TYPE_CHECKING:
     from robot_calib.bag.csv_import import OrientationColumns, SigmaColumns
     from robot_calib.diagnose.diagnosis import Diagnosis
+    from robot_calib.identify.correction import ResidualCorrection
     from robot_calib.kinematics.parameters import ParameterVector
     from robot_calib.model import KinematicModel
 
@@ -504,6 +505,16 @@ def _plausible_or_forced(
         _log(warning)
 
 
+def _correction(
+    doc: Mapping[str, Any], model: KinematicModel, args: argparse.Namespace
+) -> ResidualCorrection | None:
+    """The learned correction of args.params (PARAMS.json `correction`, the hybrid model),
+    None when it has none."""
+    from robot_calib.identify.params_file import correction_of
+
+    return correction_of(doc, model, args.params)
+
+
 def cmd_predict(args: argparse.Namespace) -> int:
     """Target positions (tracker frame, m) for the joint angles of JOINTS.csv."""
     from robot_calib.messages import target_topic
@@ -511,6 +522,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
     model, params, doc = _calibration(args)
     _plausible_or_forced(doc, args)
+    correction = _correction(doc, model, args)
     args.target = model.targets[0] if args.target is None else args.target
     if args.target not in model.targets:
         known = ", ".join(repr(t) for t in model.targets)
@@ -525,10 +537,14 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
         frames = model.probe_orientations(params, poses)
         quaternions = Rotation.from_matrix(frames).as_quat()
-    write_points_csv(model.target_points(params, poses), output, quaternions)
+    points = model.target_points(params, poses)
+    if correction is not None:  # the hybrid model: minus the learned residual
+        points = points - correction.predict(poses)
+    write_points_csv(points, output, quaternions)
     which = "" if len(model.targets) == 1 else f", target {target_topic(args.target)}"
     frames_too = "" if quaternions is None else " with the probe frame as qx,qy,qz,qw"
-    print(f"{output}: {len(poses)} points (m, laser_tracker frame{which}){frames_too}")
+    learned = "" if correction is None else "; the learned correction applied"
+    print(f"{output}: {len(poses)} points (m, laser_tracker frame{which}){frames_too}{learned}")
     return 0
 
 
@@ -542,6 +558,7 @@ def cmd_compensate(args: argparse.Namespace) -> int:
 
     model, params, doc = _calibration(args)
     _plausible_or_forced(doc, args)
+    correction = _correction(doc, model, args)
     n_joints, limits = model.robot.n_joints, model.robot.limits
     source = args.joints or args.targets
     inputs = [args.params, source] + ([args.seed_joints] if args.seed_joints else [])
@@ -552,7 +569,7 @@ def cmd_compensate(args: argparse.Namespace) -> int:
                 raise InputError(f"--{option.replace('_', '-')} goes with --targets, not --joints")
         poses = read_joints_csv(args.joints, n_joints, limits)
         output = output_path(args.output, "JOINTS.csv", inputs, args.force)
-        result = compensate_commands(model, params, nominal, nominal_params, poses)
+        result = compensate_commands(model, params, nominal, nominal_params, poses, correction)
         status = row_status(result, poses.q)
         write_compensated_csv(output, result, poses.direction, status)
         change = np.degrees(np.abs(result.q - poses.q)).max()
@@ -571,7 +588,8 @@ def cmd_compensate(args: argparse.Namespace) -> int:
         goals = goals_in_base(targets, args.frame or "base", model, params)
         check_reach(goals, model, args.targets)
         output = output_path(args.output, "JOINTS.csv", inputs, args.force)
-        found = compensate_targets(model, params, nominal, nominal_params, targets, goals)
+        found = compensate_targets(model, params, nominal, nominal_params, targets, goals,
+                                   correction)  # fmt: skip
         result = found.compensated
         status = row_status(result, found.nominal.q, found.within_limits)
         write_compensated_csv(output, result, found.direction, status)
@@ -695,7 +713,7 @@ def cmd_score(args: argparse.Namespace) -> int:
         table = output_path(args.points_csv, "the per-point table",
                             [args.params, *args.bags], args.force)  # fmt: skip
     recording = pipeline.read_bags(args.bags, robot, args.pair_tolerance, _log)
-    result = score(model, params, recording, in_sample, fitted)
+    result = score(model, params, recording, in_sample, fitted, _correction(doc, model, args))
     for warning in result.warnings:  # also in stdout and the per-point table
         _log(warning)
     for line in result.lines(", ".join(args.bags)):
@@ -710,6 +728,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     """A calibration (PARAMS.json) in a format robots and their software read."""
     from robot_calib.atomic import write_text_atomic
     from robot_calib.export import FORMATS
+    from robot_calib.export.base import correction_lines
     from robot_calib.identify.params_file import load_calibration
 
     cal = load_calibration(args.params)
@@ -734,6 +753,8 @@ def cmd_export(args: argparse.Namespace) -> int:
     effects = len(cal.model.effects) if args.format in ("urdf", "ur") else 0
     left = f"; {effects} effect(s) it cannot hold, listed in its header" if effects else ""
     print(f"{output}: {exporter.description}, robot {robot.name}, model {cal.name}{left}")
+    for line in correction_lines(cal):  # also in the file's header where it has one
+        _log(f"warning: {output}: {line}")
     return 0
 
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from robot_calib.accuracy import Accuracy, OrientationAccuracy, accuracy, orientation_accuracy
 from robot_calib.atomic import write_text_atomic
+from robot_calib.identify.correction import ResidualCorrection
 from robot_calib.identify.fit import orientation_residuals
 from robot_calib.identify.outliers import OUTLIER_K, outlier_mask, robust_sigma
 from robot_calib.kinematics.frames import Array
@@ -68,14 +69,19 @@ def score(
     recording: Recording,
     in_sample: Accuracy | None = None,
     fitted: Sequence[str | Path] = (),
+    correction: ResidualCorrection | None = None,
 ) -> Score:
     """The calibration `model` at `params` scored on every measurement of `recording`
     (of the model's targets; InputError naming a target the model has not identified).
     in_sample, fitted: the calibration's own figures and recordings (PARAMS.json
     `residuals`, `recordings`), to flag a score far above them, or of a bag it was fitted
-    on (`score_warnings`)."""
+    on (`score_warnings`). correction: the calibration's learned correction (PARAMS.json
+    `correction`, the hybrid model), subtracted from the model's points; orientations
+    have none."""
     recording = recording.with_targets(model.targets)
     predicted = model.target_points(params, recording.poses)
+    if correction is not None:
+        predicted = predicted - correction.predict(recording.poses)
     residuals = predicted - recording.points
     n_suspect = int(outlier_mask(residuals, robust_sigma(residuals)).sum())
     rotation = orientation_residuals(model, params, recording.poses)

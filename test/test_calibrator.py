@@ -30,6 +30,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from robot_calib.bag import BagReader
 from robot_calib.bag.read import read_recording
 from robot_calib.errors import InputError
+from robot_calib.identify.calibrate import Calibration
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import recording_from_stream
 from robot_calib.messages import (
@@ -157,6 +158,35 @@ def test_bag_mode_results_are_latched_for_late_subscribers(context: Context) -> 
     np.testing.assert_allclose(ends[:, 0], measured)
     np.testing.assert_allclose(ends[:, 1], measured + 100.0 * calibrator.calibration.residuals)
     assert len(shown["measured"][0].points) == 290
+
+
+def test_bag_mode_with_a_learned_correction_publishes_the_hybrid_model(
+    context: Context,
+) -> None:
+    """Parameter learned_correction: ~/parameters holds the correction (PARAMS.json
+    `correction`), which reads back into the hybrid model; ~/summary gives its size."""
+    learned = [Parameter("learned_correction", value=True)]
+    calibrator = CalibratorNode(bags=[SAMPLE], context=context, parameter_overrides=learned)
+    listener = Listener(context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(calibrator)
+    executor.add_node(listener)
+    try:
+        spin_until(executor, lambda: listener.has_all() or calibrator.error is not None)
+    finally:
+        executor.shutdown()
+        calibrator.destroy_node()
+        listener.destroy_node()
+    assert calibrator.error is None
+    doc = json.loads(listener.last["parameters"].data)
+    assert doc["correction"]["format"] == "robot_calib.correction/1"
+    assert doc["correction"]["fitted_poses"] == 290
+    assert "learned correction:" in listener.last["summary"].data
+    cal = calibrator.calibration
+    assert cal is not None and cal.correction is not None
+    back = Calibration.from_dict(doc)
+    poses = calibrator.recording.poses
+    np.testing.assert_allclose(back.predict(poses), cal.predict(poses), rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("trigger", ["solve_topic", "service", "idle"])

@@ -9,17 +9,23 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from robot_calib.cli import main
+from robot_calib.compensate import compensate_commands
+from robot_calib.compensate.solve import nominal_counterpart
 from robot_calib.diagnose.ladder import kfold_parameters
 from robot_calib.diagnose.learnable import corrected_heldout, learnable_bound
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import Calibration, calibrate
 from robot_calib.identify.correction import ResidualCorrection, fit_correction
+from robot_calib.ik import first_tool2flange, tool2base
 from robot_calib.kinematics.frames import Array
 from robot_calib.poses import Poses
+from robot_calib.score import score
 from robot_calib.sim.scenarios import Scenario, ur10_random
 
 # compliance of joints 2 and 3 (gravity bends them): smooth in the readings, not in the
@@ -178,3 +184,67 @@ def test_the_hybrid_model_round_trips_through_params_json(
     doc["correction"]["n_targets"] = 2
     with pytest.raises(InputError, match="hybrid.json: correction"):
         Calibration.from_dict(doc, "hybrid.json")
+
+
+@pytest.fixture(scope="module")
+def hybrid(compliant: tuple[Scenario, Calibration]) -> Calibration:
+    """The geometric calibration with a correction learned from its residuals."""
+    scenario, geo = compliant
+    return geo.with_learned_correction(scenario.calibration)
+
+
+def test_compensating_with_the_hybrid_model_puts_the_true_tool_nearer(
+    compliant: tuple[Scenario, Calibration], hybrid: Calibration
+) -> None:
+    """Nominal commands compensated with the geometric model alone and with the hybrid
+    model: the hybrid's commands put the simulated robot's true tool (compliance and all)
+    nearer the nominal promise; its own fixed point (model - correction = goal) holds."""
+    scenario, _ = compliant
+    model, params = hybrid.model, hybrid.parameters
+    nominal, nominal_params = nominal_counterpart(model, params)
+    commands = Poses.from_readings(scenario.holdout.poses.q[:60])
+    goal = tool2base(nominal, nominal_params, commands, first_tool2flange(model, params))
+    base2tracker = model.base2tracker(params)
+    goal_in_tracker = goal[:, :3, 3] @ base2tracker[:3, :3].T + base2tracker[:3, 3]
+    world = scenario.world
+    errors = {}
+    for name, correction in (("physical", None), ("hybrid", hybrid.correction)):
+        found = compensate_commands(model, params, nominal, nominal_params, commands,
+                                    correction)  # fmt: skip
+        at = replace(commands, q=found.q)
+        errors[name] = rms_mm(world.model.target_points(world.truth, at) - goal_in_tracker)
+    assert np.abs(hybrid.predict(at) - goal_in_tracker).max() < 1e-7  # the fixed point
+    assert errors["hybrid"] < 0.5 * errors["physical"], errors
+
+
+def test_predict_score_and_export_use_or_name_the_correction(
+    compliant: tuple[Scenario, Calibration],
+    hybrid: Calibration,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    scenario, _ = compliant
+    held = scenario.holdout
+    params_file = tmp_path / "hybrid.json"
+    params_file.write_text(json.dumps(hybrid.to_dict(scenario.calibration), indent=2))
+    # predict: the hybrid model's points
+    q = held.poses.q[:20]
+    joints = tmp_path / "joints.csv"
+    joints.write_text(
+        "q1,q2,q3,q4,q5,q6\n" + "".join(",".join(map(repr, r.tolist())) + "\n" for r in q)
+    )
+    points = tmp_path / "points.csv"
+    assert main(["predict", str(params_file), "--joints", str(joints), "-o", str(points)]) == 0
+    assert "the learned correction applied" in capsys.readouterr().out
+    written = np.loadtxt(points, delimiter=",", skiprows=1)
+    assert np.allclose(written, hybrid.predict(Poses.from_readings(q)), rtol=0, atol=1e-12)
+    # score: the hybrid's residuals
+    scored = score(hybrid.model, hybrid.parameters, held, correction=hybrid.correction)
+    assert scored.accuracy.absolute_rms_mm == pytest.approx(
+        rms_mm(hybrid.predict(held.poses) - held.points), rel=1e-9
+    )
+    # export: the URDF's header and stderr say the correction is not in the file
+    urdf = tmp_path / "hybrid.urdf"
+    assert main(["export", str(params_file), "--format", "urdf", "-o", str(urdf)]) == 0
+    said = "The learned correction of this calibration is not in this file"
+    assert said in urdf.read_text() and said in capsys.readouterr().err

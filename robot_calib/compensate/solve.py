@@ -20,6 +20,12 @@ Both kinds of goal go through one solver (`ik.solve_ik`: batched damped least sq
   the seed has it up to the smallest correction) given in the base or tracker frame; seeded
   at the nominal model's inverse kinematics, itself started from the given seed readings
   or the home pose.
+
+A hybrid calibration (PARAMS.json `correction`: a learned residual r(q), predicted -
+measured) puts the tool at model(q) - r(q). Both solve for that (`solve_corrected`): the
+model is aimed at the goal + r(q) of the current solution, CORRECTION_ROUNDS fixed-point
+rounds (r changes by about r / its length scale per radian: the rounds contract by ~1e-3).
+The correction is of the target point: orientations are the model's.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot_calib.compensate.targets import Targets
+from robot_calib.identify.correction import ResidualCorrection
 from robot_calib.ik import (
     ORIENTATION_LEVER_M,
     IKSolution,
@@ -50,7 +57,37 @@ Compensation = IKSolution
 SINGULAR_CHANGE_DEG = 2.0  # a calibration corrects by mrad: a larger swing is a singularity
 
 NOMINAL_ITERATIONS = 100  # the nominal inverse kinematics may start far (the home pose)
+CORRECTION_ROUNDS = 3  # fixed-point rounds of a learned correction (module docstring)
 DIRECTION_ROUNDS = 3  # re-solves at most when compensating flips an approach direction
+
+
+def solve_corrected(
+    model: KinematicModel,
+    params: ParameterVector,
+    poses: Poses,
+    goal2base: Array,
+    tool2flange: Array,
+    oriented: NDArray[np.bool_] | None = None,
+    correction: ResidualCorrection | None = None,
+) -> IKSolution:
+    """`ik.solve_ik` for a model whose first target really sits at its point minus the
+    learned `correction`'s predicted residual (tracker frame): the model aimed at
+    goal + R r(q) (R: tracker to base) at the current solution, CORRECTION_ROUNDS times,
+    each seeded at the last; `iterations` counts every round's steps, the errors are the
+    model's against the last shifted goal. Without a correction: `solve_ik`."""
+    found = solve_ik(model, params, poses, goal2base, tool2flange, oriented)
+    if correction is None:
+        return found
+    base2tracker = model.base2tracker(params)[:3, :3]
+    steps = found.iterations.copy()
+    for _ in range(CORRECTION_ROUNDS):
+        reached = np.isfinite(found.q).all(axis=1, keepdims=True)  # others: at their seed
+        at = replace(poses, q=np.where(reached, found.q, poses.q), target=None)
+        shifted = goal2base.copy()
+        shifted[:, :3, 3] += correction.predict(at) @ base2tracker  # R^T r, row-wise
+        found = solve_ik(model, params, at, shifted, tool2flange, oriented)
+        steps += found.iterations
+    return replace(found, iterations=steps)
 
 
 def compensate_commands(
@@ -59,13 +96,15 @@ def compensate_commands(
     nominal: KinematicModel,
     nominal_params: ParameterVector,
     commands: Poses,
+    correction: ResidualCorrection | None = None,
 ) -> Compensation:
     """The compensated readings of `commands` (readings (n, J) [rad], approach directions
     and times of the nominal program; see the module docstring). The nominal model's tool
-    is the calibrated first target's; both models in the robot base frame."""
+    is the calibrated first target's; both models in the robot base frame. correction:
+    the calibration's learned correction (the hybrid model), None: the model alone."""
     tool = first_tool2flange(calibrated, params)
     goal = tool2base(nominal, nominal_params, replace(commands, rotation=None), tool)
-    full = solve_ik(calibrated, params, commands, goal, tool)
+    full = solve_corrected(calibrated, params, commands, goal, tool, correction=correction)
     swing = np.abs(full.q - commands.q).max(axis=1)
     rows = np.flatnonzero(swing > np.radians(SINGULAR_CHANGE_DEG))
     if not rows.size:
@@ -73,7 +112,8 @@ def compensate_commands(
     # near a singularity the exact pose swings joints 4 and 6 by degrees for a few urad of
     # orientation: solve the tool position alone there (the smallest joint change)
     part = commands.subset(rows)
-    point = solve_ik(calibrated, params, part, goal[rows], tool, np.zeros(rows.size, bool))
+    point = solve_corrected(calibrated, params, part, goal[rows], tool,
+                            np.zeros(rows.size, bool), correction)  # fmt: skip
     better = np.abs(point.q - part.q).max(axis=1) < swing[rows]
     rows, q = rows[better], point.q[better]
     at = tool2base(calibrated, params, replace(commands.subset(rows), q=q), tool)
@@ -181,12 +221,15 @@ def compensate_targets(
     nominal_params: ParameterVector,
     targets: Targets,
     goal2base: Array,
+    correction: ResidualCorrection | None = None,
 ) -> TargetCompensation:
     """Commands at which the calibrated model reaches the goals.
 
     targets : the rows of a TARGETS.csv (seeds, directions, times, temperatures)
     goal2base : shape (n, 4, 4), the goal tool frames in the robot base frame [m]
         (`targets.goals_in_base`); only the position where `targets.rotation` is None
+    correction : the calibration's learned correction (the hybrid model: the model aimed
+        at goal + the predicted residual, `solve_corrected`); None: the model alone
 
     The nominal model's inverse kinematics from the seeds (or the home pose) gives the start;
     the calibrated model's from there the commands. Without given directions, those of the
@@ -206,7 +249,7 @@ def compensate_targets(
     first = _nominal_ik(nominal, nominal_params, start, goal2base, tool, oriented)
     direction = approach_directions(first.q) if targets.direction is None else targets.direction
     poses = replace(start, q=first.q, direction=direction)
-    result = solve_ik(calibrated, params, poses, goal2base, tool, oriented)
+    result = solve_corrected(calibrated, params, poses, goal2base, tool, oriented, correction)
     steps = result.iterations.copy()  # every round's steps count: the target's iterations
     for _ in range(DIRECTION_ROUNDS if targets.direction is None else 0):
         found = approach_directions(result.q)
@@ -214,7 +257,8 @@ def compensate_targets(
             break
         direction = found
         poses = replace(poses, q=result.q, direction=direction)
-        result = solve_ik(calibrated, params, poses, goal2base, tool, oriented)
+        result = solve_corrected(calibrated, params, poses, goal2base, tool, oriented,
+                                 correction)  # fmt: skip
         steps += result.iterations
     result = replace(result, iterations=steps)
     limits = calibrated.robot.limits

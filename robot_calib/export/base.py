@@ -114,6 +114,18 @@ def effect_sizes(cal: Calibration) -> dict[str, tuple[float, float]]:
     return out
 
 
+def correction_lines(cal: Calibration) -> list[str]:
+    """The line every export format that cannot hold a learned correction (PARAMS.json
+    `correction`, the hybrid model) writes into its header; none without one."""
+    if cal.correction is None:
+        return []
+    return [
+        "The learned correction of this calibration is not in this file: "
+        f"{cal.correction.rms_m * 1e3:.4f} mm rms at the calibration poses (PARAMS.json "
+        "`correction`; robot-calib predict, score and compensate apply it)"
+    ]
+
+
 def effect_lines(cal: Calibration) -> list[str]:
     """One line per effect of the calibration's model (none: an empty list): what it moves
     the tool by (`effect_sizes`, mm) and its largest parameter (mm / urad / as stored),

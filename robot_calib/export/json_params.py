@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING, Any
 
-from robot_calib.export.base import Exporter
+from robot_calib.export.base import Exporter, correction_lines
 
 if TYPE_CHECKING:
     from robot_calib.identify.calibrate import Calibration
@@ -36,6 +36,8 @@ def render(cal: Calibration, source: str) -> str:
             for p, value, std, free in zip(params.parameters, params.values, cal.std, params.free)
         },
     }
+    if cal.correction is not None:  # not a parameter: only PARAMS.json holds it
+        doc["warnings"] = correction_lines(cal)
     return json.dumps(doc, indent=2) + "\n"
 
 

@@ -23,7 +23,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 import yaml
 
-from robot_calib.export.base import Exporter, ExportError, effect_lines, joint_signs, rpy
+from robot_calib.export.base import (
+    Exporter,
+    ExportError,
+    correction_lines,
+    effect_lines,
+    joint_signs,
+    rpy,
+)
 from robot_calib.kinematics.frames import Array, rot_x, rot_y, rot_z
 
 if TYPE_CHECKING:
@@ -98,6 +105,7 @@ def render(cal: Calibration, source: str) -> str:
     if effects:
         comments.append("Effects identified that this file cannot hold:")
         comments += [f"  {line}" for line in effects]
+    comments += correction_lines(cal)
     body = yaml.safe_dump({"kinematics": kinematics}, sort_keys=False)
     return "".join(f"# {c}\n" for c in comments) + body
 

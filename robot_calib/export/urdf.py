@@ -23,7 +23,15 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from robot_calib.export.base import Exporter, constant_rows, effect_lines, joint_signs, number, rpy
+from robot_calib.export.base import (
+    Exporter,
+    constant_rows,
+    correction_lines,
+    effect_lines,
+    joint_signs,
+    number,
+    rpy,
+)
 from robot_calib.kinematics.frames import Array, homogeneous
 from robot_calib.model import target_parameters
 from robot_calib.poses import PRIMARY_TARGET
@@ -80,8 +88,9 @@ def render(cal: Calibration, source: str) -> str:
     if effects:
         header.append("Effects identified that no URDF can hold (compensate them separately):")
         header += [f"  {line}" for line in effects]
-    else:
+    elif cal.correction is None:
         header.append("The model has no effects beyond the geometry: the URDF holds it whole.")
+    header += correction_lines(cal)
     lines = [
         '<?xml version="1.0"?>',
         "<!--",

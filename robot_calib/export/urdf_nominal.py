@@ -45,6 +45,7 @@ import numpy as np
 from robot_calib.errors import RobotDescriptionError
 from robot_calib.export.base import (
     ExportError,
+    correction_lines,
     effect_lines,
     joint_signs,
     number,
@@ -338,8 +339,9 @@ def render_on_nominal(cal: Calibration, source: str, nominal_path: str | Path) -
     if effects:
         header.append("Effects identified that no URDF can hold (compensate them separately):")
         header += [f"  {line}" for line in effects]
-    else:
+    elif cal.correction is None:
         header.append("The model has no effects beyond the geometry: the URDF holds it whole.")
+    header += correction_lines(cal)
     comment = etree.Comment("\n" + "".join(f"  {comment_text(h)}\n" for h in header))
     comment.tail = root_element.text  # first inside <robot>, the file's indentation kept
     root_element.text = "\n  "

@@ -27,7 +27,7 @@ from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.canonical import canonical_form
-from robot_calib.identify.correction import ResidualCorrection
+from robot_calib.identify.correction import ResidualCorrection, fit_correction
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
 from robot_calib.identify.fit import (
     FitResult,
@@ -155,6 +155,15 @@ class Calibration:
         if self.correction is not None:
             points = points - self.correction.predict(poses)
         return points
+
+    def with_learned_correction(self, recording: Recording) -> Calibration:
+        """This calibration with a correction learned from its residuals at the measurements
+        of `recording` (its calibration recording) it fitted (`identify.correction`: the
+        hybrid model); `accuracy` and `residuals` stay the physical model's."""
+        fitted = recording if self.inliers is None else recording.subset(self.inliers)
+        residuals = self.model.target_points(self.parameters, fitted.poses) - fitted.points
+        learned = fit_correction(fitted.poses, residuals, len(self.model.targets))
+        return replace(self, correction=learned)
 
     def to_dict(self, recording: Recording) -> dict[str, Any]:
         """The PARAMS.json document (msgs_doc/parameters.md) of this calibration from

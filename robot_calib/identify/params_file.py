@@ -389,6 +389,8 @@ def summary(cal: Calibration, recording: Recording) -> str:
         if figures is not None:
             lines.append(f"residuals (in-sample): {figures.line()}")
     lines += outlier_lines(cal.outliers)
+    if cal.correction is not None:  # the hybrid model's learned part
+        lines += [cal.correction.line(), *cal.correction.warnings]
     lines += list(cal.warnings)
     if cal.solver.time_s is not None:
         lines.append(cal.solver.line())

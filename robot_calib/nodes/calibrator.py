@@ -308,6 +308,13 @@ class CalibratorNode(Node):
             100.0,
             "residual lines in ~/markers are drawn this many times their length [1]",
         )
+        self.learned_correction: bool = declare(
+            self,
+            "learned_correction",
+            False,
+            "also learn a correction of the model's residuals (a Gaussian process: the hybrid "
+            "model, PARAMS.json correction), which predict, score and compensate apply",
+        )
         self.diagnose: bool = declare(
             self,
             "diagnose",
@@ -457,6 +464,11 @@ class CalibratorNode(Node):
         cal = calibrate_recording(
             recording, self.robot, self.model_spec, self.ecc_order, log=self._log
         )
+        if self.learned_correction:  # the hybrid model (`Calibration.with_learned_correction`)
+            cal = cal.with_learned_correction(recording)
+            correction = cal.correction
+            for line in [] if correction is None else [correction.line(), *correction.warnings]:
+                self._log(line)
         doc = cal.to_dict(recording)
         if self.stopping:  # destroyed while solving (Ctrl-C): nothing to publish to
             return cal

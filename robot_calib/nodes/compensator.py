@@ -8,7 +8,8 @@ the model's joints to the controller's), compensates every point's positions wit
 points, the first point's from where the robot stands and how it got there, as
 /joint_states last showed it; time from time_from_start), and republishes the trajectory
 (parameter `output_topic`) with the same header, joint_names, times, velocities,
-accelerations and efforts, only the positions corrected. A message with unknown, missing or
+accelerations and efforts, only the positions corrected (a hybrid calibration's learned
+correction, PARAMS.json `correction`, included). A message with unknown, missing or
 repeated joints, or positions that are not finite, is logged as one error line and dropped.
 
 Standalone: `ros2 run robot_calib compensator --ros-args -p params:=params_best.json`.
@@ -30,7 +31,7 @@ from robot_calib.compensate import Compensation, compensate_commands
 from robot_calib.compensate.solve import nominal_counterpart
 from robot_calib.compensate.write import LARGE_CHANGE_DEG
 from robot_calib.errors import InputError, RobotCalibError
-from robot_calib.identify.params_file import load_params
+from robot_calib.identify.params_file import correction_of, load_params
 from robot_calib.kinematics.description import with_joint_names
 from robot_calib.kinematics.frames import Array
 from robot_calib.messages import JOINT_STATES_TOPIC, joint_positions, velocity_signs
@@ -125,7 +126,9 @@ class CompensatorNode(Node):
         )  # fmt: skip
         if not params_file:
             raise InputError(f"{self.get_name()}: parameter 'params' (PARAMS.json) is required")
-        self.model, self.params, _ = load_params(params_file)
+        self.model, self.params, doc = load_params(params_file)
+        # a hybrid calibration's learned correction, applied by the compensation (None: none)
+        self.correction = correction_of(doc, self.model, params_file)
         if joint_names:
             robot = with_joint_names(self.model.robot, joint_names)
             self.model = replace(self.model, robot=robot)
@@ -190,7 +193,8 @@ class CompensatorNode(Node):
         try:
             q, time = trajectory_readings(msg, names, self.subscription.topic_name)
             result = compensate_commands(self.model, self.params, self.nominal,
-                                         self.nominal_params, self.commands(q, time))  # fmt: skip
+                                         self.nominal_params, self.commands(q, time),
+                                         self.correction)  # fmt: skip
         except RobotCalibError as exc:
             self.dropped += 1
             self.get_logger().error(f"dropped a trajectory: {exc}")
