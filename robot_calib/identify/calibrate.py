@@ -176,8 +176,9 @@ class Calibration:
     def from_dict(cls, doc: Mapping[str, Any], where: str = "PARAMS.json") -> Calibration:
         """The calibration of a PARAMS.json document: model, parameters, 1-sigma, in-sample
         accuracy, identifiability (its figures; the parameters it fixed are those fixed in
-        the file but free in the model) and solver report. The per-point residuals and the
-        CPA circles are not in the file: residuals is empty (0, 3), cpa None."""
+        the file but free in the model), solver report and learned correction (None without
+        a `correction` section). The per-point residuals and the CPA circles are not in the
+        file: residuals is empty (0, 3), cpa None."""
         from robot_calib.identify.params_file import (
             correction_of,
             implausible_of,
