@@ -47,7 +47,7 @@ FORMAT = "robot_calib.correction/1"
 MAX_LEARN = 600  # poses the hyperparameters are learned on (a random subset above)
 MAX_POINTS = 2000  # poses fitted exactly; above, inducing poses of a subset of regressors
 MIN_LENGTH_SCALE_RAD = math.radians(1.0)  # a joint's shortest length scale (an edge)
-# the target code's largest inverse length scale: targets uncorrelated to e^-50 there (a
+# the target code's largest inverse length scale: targets uncorrelated to e^-25 there (a
 # saturation, not an edge that changes predictions)
 MAX_TARGET_INVERSE = 5.0
 # signal and noise variance of the residuals scaled to unit rms: outside these the model
