@@ -557,6 +557,7 @@ def write_diagnosis(
         The Markdown report: `report_path(output)` (the HTML one: `html_report_path`).
     """
     from robot_calib.atomic import staged_outputs
+    from robot_calib.diagnose.figures import FigureCache
     from robot_calib.diagnose.html_report import compare_models, html_report
     from robot_calib.diagnose.report import write_report
     from robot_calib.identify.params_file import write_json_atomic
@@ -570,12 +571,13 @@ def write_diagnosis(
     with staged_outputs(output.parent, force) as stage:
         write_json_atomic(diagnosis.to_dict(), stage / output.name)
         fitted = ladder.recording if ladder.recording is not None else recording  # no outliers
-        write_report(diagnosis, ladder, fitted, stage / report.name)
+        figures = FigureCache()  # each figure drawn once for both reports
+        write_report(diagnosis, ladder, fitted, stage / report.name, figures)
         if compared is None:
             compared = compare_models(ladder, calibrations)
         (stage / page.name).write_text(
             html_report(diagnosis, ladder, fitted, compared, recommended,
-                        recommended_file.name, warnings)
+                        recommended_file.name, warnings, figures)
         )  # fmt: skip
         if best is None:  # run writes its own params_best.json: one best model per folder
             scores = {r.model: r.heldout.absolute_rms_mm for r in ladder.rungs}

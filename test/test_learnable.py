@@ -87,7 +87,8 @@ def test_structure_no_effect_explains_is_unknown_not_null_without_a_floor() -> N
 def test_each_rung_reports_its_share_of_the_learnable_gap() -> None:
     """A harmonic-drive ripple (2nd harmonic of joint 2, 200 urad): a joint-angle harmonic
     of joint 2 (transmission_error, or joint_harmonics at order 2: the same term) is found
-    and closes the whole gap (its rung is the bound)."""
+    and closes the whole gap to within 1 % (the bound: that rung plus a learned correction,
+    which finds nothing left)."""
     effect = parse_effect("transmission_error:2:order=2", ROBOT.n_joints)
     world = with_effect(WORLD, effect, {"te2_s2": 2e-4})
     cal, held = random_poses(world, 150, 5), random_poses(world, 100, 6)
@@ -97,8 +98,9 @@ def test_each_rung_reports_its_share_of_the_learnable_gap() -> None:
     assert dom.effect in ("transmission_error", "joint_harmonics")
     shares = [r.learnable_gap_share for r in diagnosis.ladder]
     assert shares[0] == pytest.approx(0.0, abs=1e-12)
-    assert shares[-1] == pytest.approx(1.0, abs=1e-12)
+    assert shares[-1] == pytest.approx(1.0, abs=0.01)
     effects = dict(diagnosis.effect_shares())  # each effect's own share: here the one
-    assert effects == pytest.approx({diagnosis.ladder[1].model.removeprefix("geometric+"): 1.0})
+    added = diagnosis.ladder[1].model.removeprefix("geometric+")
+    assert effects == pytest.approx({added: 1.0}, abs=0.01)
     ratio = diagnosis.unexplained.ratio_to_noise_floor
     assert ratio is not None and ratio < 1.5

@@ -225,6 +225,12 @@ def learnable_gap(ladder: Ladder) -> tuple[float, float] | None:
     return geometric, lowest
 
 
+def physical_rungs(ladder: Ladder) -> list[Rung]:
+    """The ladder's rungs without the hybrid one (a physical rung plus a learned
+    correction: `ladder._learn_the_rest`)."""
+    return [r for r in ladder.rungs if r.calibration.correction is None]
+
+
 def dominant_effect(
     ladder: Ladder, where: WhereItLies, noise: NoiseLevel
 ) -> DominantEffect | None:
@@ -234,7 +240,7 @@ def dominant_effect(
     signature reaches SIGNATURE_STRUCTURE: never because geometric fits itself; 'unknown'
     with the joints of the strongest residual signature when structure remains that no
     candidate explains."""
-    rungs = ladder.rungs
+    rungs = physical_rungs(ladder)  # a learned correction is no effect
     floor_mm = noise.floor_rms_m * 1e3
     gains: dict[str, float] = {}
     joints: dict[str, set[int]] = {}
@@ -299,16 +305,18 @@ def diagnose(
     ladder = run_ladder(recording, robot, holdout, log, tracker_sigma_m)
     sources, holdout_sources = list(recording.sources), holdout
     recording = ladder.recording if ladder.recording is not None else recording  # no outliers
-    best = ladder.rungs[-1]
+    best = ladder.rungs[-1]  # the chosen model: the hybrid when it won
+    physical = physical_rungs(ladder)
     geo = ladder.rungs[0].calibration
     where = where_it_lies(geo.model, geo.parameters, recording, geo.residuals,
                           ladder.noise.sigma_m, ladder.spectra.get("geometric"))  # fmt: skip
-    after = where if len(ladder.rungs) == 1 else where_it_lies(
-        best.calibration.model, best.calibration.parameters, recording,
-        best.calibration.residuals, ladder.noise.sigma_m, ladder.spectra.get(best.model),
+    last = physical[-1]  # where its residual lies: the physical model's
+    after = where if len(physical) == 1 else where_it_lies(
+        last.calibration.model, last.calibration.parameters, recording,
+        last.calibration.residuals, ladder.noise.sigma_m, ladder.spectra.get(last.model),
     )  # fmt: skip
-    noise = refine_with_model(ladder.noise, best.calibration.residuals,
-                              int(best.calibration.parameters.free.sum()))  # fmt: skip
+    noise = refine_with_model(ladder.noise, last.calibration.residuals,
+                              int(last.calibration.parameters.free.sum()))  # fmt: skip
     floor_mm = noise.floor_rms_m * 1e3 if noise.independent else None
     ratio = None if floor_mm is None else best.heldout.absolute_rms_mm / floor_mm
     sig = after.strongest_signature

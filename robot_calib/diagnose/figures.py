@@ -6,14 +6,15 @@ Matplotlib is imported inside `pyplot()`, with the Agg backend (no display)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import io
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from robot_calib.diagnose.ladder import Ladder, Rung
 from robot_calib.diagnose.signatures import arc_angle_errors
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording
 
 if TYPE_CHECKING:
@@ -32,6 +33,50 @@ def pyplot() -> Any:  # noqa: ANN401 - the matplotlib.pyplot module
     import matplotlib.pyplot as plt
 
     return plt
+
+
+#: points a figure draws at most (a seeded random subset above; statistics use all):
+#: a screen shows no more, and matplotlib's cost grows with every marker (issue 23)
+MAX_DRAWN = 3000
+MAX_ARROWS = 800  # 3D arrows of the residual-vector figure
+
+
+def drawn(n: int, limit: int = MAX_DRAWN) -> IntArray:
+    """Indices (sorted) of at most `limit` of n points to draw, the same every time."""
+    if n <= limit:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(0).choice(n, limit, replace=False))
+
+
+def insample_residuals(rung: Rung, recording: Recording) -> Array:
+    """A rung's in-sample residuals (n, 3) [m] on `recording`: its calibration's, less its
+    learned correction's prediction for the hybrid rung."""
+    cal = rung.calibration
+    if cal.correction is None:
+        return cal.residuals
+    return cal.residuals - cal.correction.predict(recording.poses)
+
+
+class FigureCache:
+    """PNG bytes of the figures of one report set, each drawn once: the Markdown report
+    and the HTML page show the same figures (drawing them twice cost seconds)."""
+
+    def __init__(self, dpi: int = 100) -> None:
+        self.dpi = dpi
+        self._png: dict[str, bytes | None] = {}
+
+    def png(self, key: str, draw: Callable[[], Figure | None]) -> bytes | None:
+        """The PNG of figure `key`, drawn by `draw` the first time (None: no figure)."""
+        if key not in self._png:
+            fig = draw()
+            if fig is None:
+                self._png[key] = None
+            else:
+                buffer = io.BytesIO()
+                fig.savefig(buffer, format="png", dpi=self.dpi)
+                pyplot().close(fig)
+                self._png[key] = buffer.getvalue()
+        return self._png[key]
 
 
 def compared_rungs(ladder: Ladder) -> tuple[Rung, ...]:
@@ -111,10 +156,12 @@ def residual_map_figure(ladder: Ladder, recording: Recording) -> Figure:
     n_cols = 4
     n_rows = -(-len(axes_x) // n_cols)
     fig, axes = plt.subplots(n_rows, n_cols, figsize=(12, 2.6 * n_rows), sharey=True)
+    rows = drawn(len(recording))
+    norms = [(rung.model, np.linalg.norm(insample_residuals(rung, recording), axis=1) * 1e3)
+             for rung in compared_rungs(ladder)]  # fmt: skip
     for ax, (label, x) in zip(np.ravel(axes), axes_x.items()):
-        for rung in compared_rungs(ladder):
-            norm = np.linalg.norm(rung.calibration.residuals, axis=1) * 1e3
-            ax.plot(x, norm, ".", ms=2, label=rung.model)
+        for model, norm in norms:
+            ax.plot(x[rows], norm[rows], ".", ms=2, label=model)
         ax.set_xlabel(label, fontsize=8)
     for ax in np.ravel(axes)[len(axes_x) :]:
         ax.set_visible(False)
@@ -129,9 +176,10 @@ def time_figure(ladder: Ladder, recording: Recording) -> Figure:
     """|residual| [mm] (in-sample) of geometric and the best rung against time [s]."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 3.2))
+    rows = drawn(len(recording))
     for rung in compared_rungs(ladder):
-        norm = np.linalg.norm(rung.calibration.residuals, axis=1) * 1e3
-        ax.plot(recording.poses.time, norm, ".", ms=3, label=rung.model)
+        norm = np.linalg.norm(insample_residuals(rung, recording), axis=1) * 1e3
+        ax.plot(recording.poses.time[rows], norm[rows], ".", ms=3, label=rung.model)
     ax.set_xlabel("time since the first measurement [s]")
     ax.set_ylabel("|residual| [mm]")
     ax.legend(fontsize=8)
@@ -171,6 +219,7 @@ def quiver_figure(ladder: Ladder, points: Array, residuals: Sequence[tuple[str, 
     points' extent, rounded down to 1, 2 or 5 x 10^k), written in the title as
     'arrows x K: 1 mm of error drawn as K mm'."""
     plt = pyplot()
+    rows = drawn(len(points), MAX_ARROWS)  # the scale and the figures in titles from all
     in_base, rotation = points_in_base(ladder, points)
     xyz = in_base * 1e3
     extent = float(np.ptp(xyz, axis=0).max()) or 1.0
@@ -181,9 +230,10 @@ def quiver_figure(ladder: Ladder, points: Array, residuals: Sequence[tuple[str, 
         arrows = (res @ rotation) * 1e3 * scale  # (n, 3) mm in the base frame, scaled
         norm = np.linalg.norm(res, axis=1) * 1e3
         ax = fig.add_subplot(1, len(residuals), k + 1, projection="3d")
-        ax.scatter(*xyz.T, s=3, color="0.6")
-        colours = plt.get_cmap("viridis")(norm / max(float(norm.max()), 1e-12))
-        ax.quiver(*xyz.T, *arrows.T, colors=colours, arrow_length_ratio=0.2, lw=1.3)
+        ax.scatter(*xyz[rows].T, s=3, color="0.6")
+        colours = plt.get_cmap("viridis")(norm[rows] / max(float(norm.max()), 1e-12))
+        ax.quiver(*xyz[rows].T, *arrows[rows].T, colors=colours, arrow_length_ratio=0.2,
+                  lw=1.3)  # fmt: skip
         ax.set_title(f"{model}: rms {np.sqrt(np.mean(norm**2)):.4f} mm, max {norm.max():.4f} mm",
                      fontsize=9)  # fmt: skip
         ax.set_xlabel("x [mm]", fontsize=8)

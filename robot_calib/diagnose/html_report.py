@@ -23,6 +23,7 @@ from robot_calib.accuracy import Accuracy, accuracy
 from robot_calib.diagnose.diagnosis import Diagnosis
 from robot_calib.diagnose.figures import (
     ANGLE_UNITS,
+    FigureCache,
     angle_figure,
     error_histogram_figure,
     ladder_figure,
@@ -146,14 +147,19 @@ def _e(text: object) -> str:
     return html.escape(str(text), quote=True)
 
 
-def _img(fig: Figure | None, caption: str, dpi: int = 100) -> str:
-    """The figure as an embedded PNG (a data: URI) with its caption; '' for None."""
+def _img(fig: Figure | bytes | None, caption: str, dpi: int = 100) -> str:
+    """The figure (or its PNG bytes, `FigureCache.png`) as an embedded PNG (a data: URI)
+    with its caption; '' for None."""
     if fig is None:
         return ""
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi)
-    pyplot().close(fig)
-    data = base64.b64encode(buffer.getvalue()).decode("ascii")
+    if isinstance(fig, bytes):
+        png = fig
+    else:
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format="png", dpi=dpi)
+        pyplot().close(fig)
+        png = buffer.getvalue()
+    data = base64.b64encode(png).decode("ascii")
     return (f'<figure><img alt="{_e(caption)}" src="data:image/png;base64,{data}">'
             f"<figcaption>{_e(caption)}</figcaption></figure>")  # fmt: skip
 
@@ -326,7 +332,7 @@ def _accuracy(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: str) 
                    "dotted: each model's rms"))  # fmt: skip
 
 
-def _ladder(diagnosis: Diagnosis, ladder: Ladder) -> str:
+def _ladder(diagnosis: Diagnosis, ladder: Ladder, figures: FigureCache) -> str:
     rows = []
     for rung in diagnosis.ladder:
         share = rung.learnable_gap_share
@@ -361,14 +367,15 @@ def _ladder(diagnosis: Diagnosis, ladder: Ladder) -> str:
                    f"{_e(diagnosis.learnable.method)}.</p>")  # fmt: skip
     out.append(
         _img(
-            ladder_figure(ladder, diagnosis.noise.floor_abs_rms_mm),
+            figures.png("ladder", lambda: ladder_figure(ladder, diagnosis.noise.floor_abs_rms_mm)),
             "Held-out rms of each rung, the noise floor and the learnable bound",
         )
     )
     return "".join(out)
 
 
-def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording) -> str:
+def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
+           figures: FigureCache) -> str:  # fmt: skip
     where = diagnosis.where
     out = []
     if where.joints:
@@ -423,11 +430,12 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording) -> str:
                     "direction"))  # fmt: skip
     out.append(
         _img(
-            residual_map_figure(ladder, recording),
+            figures.png("map", lambda: residual_map_figure(ladder, recording)),
             "In-sample |residual| against reach, height and every joint's reading",
         )
     )
-    out.append(_img(time_figure(ladder, recording), "In-sample |residual| against time"))
+    out.append(_img(figures.png("time", lambda: time_figure(ladder, recording)),
+                    "In-sample |residual| against time"))  # fmt: skip
     return "".join(out)
 
 
@@ -498,18 +506,22 @@ def html_report(
     best: Calibration,
     best_params: str,
     warnings: Sequence[str] = (),
+    figures: FigureCache | None = None,
 ) -> str:
     """The report as one HTML document (str). `recording`: the calibration measurements
     the ladder was fitted on (outliers left out); `compared`: `compare_models`; `best`: the
     model chosen and `best_params` the PARAMS.json it is written to; `warnings`: every
-    warning of the run (the recording's and the diagnosis' are added here)."""
+    warning of the run (the recording's and the diagnosis' are added here); `figures`:
+    the figures already drawn for the Markdown report (default: none yet)."""
+    figures = FigureCache() if figures is None else figures
     every = list(dict.fromkeys([*recording.warnings, *diagnosis.warnings, *warnings]))
     held = f" ({', '.join(diagnosis.holdout)})" if diagnosis.holdout else ""
     sections = [
         ("accuracy", "Accuracy before and after calibration", _accuracy(diagnosis, compared,
                                                                         best.name)),
-        ("ladder", "The ladder: which effects, and each one's share", _ladder(diagnosis, ladder)),
-        ("where", "Where the residual lies", _where(diagnosis, ladder, recording)),
+        ("ladder", "The ladder: which effects, and each one's share",
+         _ladder(diagnosis, ladder, figures)),
+        ("where", "Where the residual lies", _where(diagnosis, ladder, recording, figures)),
         ("vectors", "3D residual vectors", _vectors(ladder, recording)),
         ("iso9283", "ISO 9283 pose accuracy and repeatability", _iso(diagnosis)),
         ("parameters", f"Parameters of the best model ({best.name})", _parameters(best)),

@@ -11,7 +11,7 @@ fitted in full (Levenberg-Marquardt) and its rung scored with real refits per fo
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from robot_calib.accuracy import Accuracy, accuracy
 from robot_calib.diagnose.frequency import JointSpectrum, harmonic_candidates, joint_spectra
-from robot_calib.diagnose.learnable import LearnableBound, learnable_bound
+from robot_calib.diagnose.learnable import LearnableBound, bound_of, corrected_heldout
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.identify.calibrate import Calibration, calibrate, model_name
@@ -326,15 +326,49 @@ def run_ladder(
             )
             found = climb(recording, geo=geo, holdout=holdout)
     rungs, noise, scored_on = found.rungs, found.noise, found.scored_on
-    geometric = rungs[0].calibration
-    if holdout is None:  # the folds' geometry refitted, for the bound's own k-fold
-        fold, fitted = kfold_parameters(geometric, recording)
-    else:
-        fold, fitted = pose_folds(recording), {}
-    bound = learnable_bound(geometric, recording, holdout, fold, fitted, scored_on)
+    bound, hybrid = _learn_the_rest(rungs, recording, holdout, scored_on)
     say(bound.line())
+    if hybrid is not None:
+        say(f"  hybrid {hybrid.model}: held-out rms {hybrid.heldout.absolute_rms_mm:.4f} mm "
+            f"(physical {rungs[-1].heldout.absolute_rms_mm:.4f} mm)")  # fmt: skip
+        rungs = [*rungs, hybrid]
     return Ladder(rungs, noise, scored_on, found.rounds, recording, holdout, outliers, bound,
                   found.refits, found.spectra)  # fmt: skip
+
+
+#: the hybrid rung's name: the best physical rung's, plus this
+LEARNED = "learned"
+
+
+def _learn_the_rest(
+    rungs: list[Rung], recording: Recording, holdout: Recording | None, scored_on: str
+) -> tuple[LearnableBound, Rung | None]:
+    """The learnable bound and the hybrid rung: a Gaussian process of what the best
+    physical rung leaves (`learnable.corrected_heldout`), scored on the held-out data of
+    the rungs (hold-out bags, else the same k-fold, nested); the hybrid rung (the best
+    rung plus the correction fitted on all its calibration residuals) when it beats the
+    best rung by MIN_GAIN on those data, else None. The bound: geometric's held-out error
+    and the hybrid's, on the same data."""
+    physical = rungs[-1]
+    if holdout is None:  # the folds' parameters refitted, for the correction's own k-fold
+        fold, fitted = kfold_parameters(physical.calibration, recording)
+    else:
+        fold, fitted = pose_folds(recording), {}
+    before, after, correction = corrected_heldout(physical.calibration, recording, holdout,
+                                                  fold, fitted)  # fmt: skip
+    gain = np.sqrt(np.mean(np.sum(after**2, axis=1))) <= (1.0 - MIN_GAIN) * np.sqrt(
+        np.mean(np.sum(before**2, axis=1))
+    )
+    assert correction is not None
+    bound = bound_of(rungs[0].heldout_residuals, after, correction, scored_on,
+                     physical.model)  # fmt: skip
+    if not gain:
+        return bound, None
+    measured = holdout.points if holdout is not None else recording.points  # as `after`
+    cal = replace(physical.calibration, correction=correction)
+    acc = accuracy(measured, measured + after)
+    score = float(np.sqrt(np.mean(np.sum(after**2, axis=1))))
+    return bound, Rung(f"{physical.model}+{LEARNED}", physical.effects, cal, acc, after, score)
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,9 @@ METHOD = (
     f"regressors on {MAX_POINTS})"
 )
 
+#: poses a fold after the first learns its hyperparameters on, warm-started from the first
+#: fold's (the search only refines them: 300 poses cost a quarter of MAX_LEARN's)
+WARM_LEARN = 300
 #: the bound must beat geometric by this share of its held-out rms to count as structure
 MIN_LEARNABLE_SHARE = 0.05
 
@@ -78,6 +81,9 @@ class LearnableBound(Record):
     noise_mm: float | None = None
     fitted_poses: int = 0
     warnings: list[str] = field(default_factory=list)
+    # the model whose residuals the process learned: geometric, or the ladder's best
+    # physical rung (the hybrid model's physical part)
+    learned_on: str = "geometric"
 
     @property
     def structure_left(self) -> bool:
@@ -88,9 +94,10 @@ class LearnableBound(Record):
         share = (f"{100 * self.learnable_share:.0f} % of geometric's error is learnable"
                  if self.learnable_share > 0 else "it learns nothing")  # fmt: skip
         edge = f"; {len(self.warnings)} warning(s)" if self.warnings else ""
+        whose = "its" if self.learned_on == "geometric" else f"{self.learned_on}'s"
         return (
             f"learnable bound: geometric {self.geometric_abs_rms_mm:.4f} mm -> "
-            f"{self.holdout_abs_rms_mm:.4f} mm rms held-out with a Gaussian process of its "
+            f"{self.holdout_abs_rms_mm:.4f} mm rms held-out with a Gaussian process of {whose} "
             f"residuals ({share}; {self.scored_on}{edge})"
         )
 
@@ -109,7 +116,8 @@ def corrected_heldout(
     fold: IntArray,
     fold_parameters: dict[int, ParameterVector],
     rng: np.random.Generator | None = None,
-) -> tuple[Array, Array, ResidualCorrection]:
+    final: bool = True,
+) -> tuple[Array, Array, ResidualCorrection | None]:
     """The residuals of `cal`'s physical model (its own correction, if any, left out) on
     held-out data before and after a learned correction (`identify.correction`), and the
     correction fitted on every calibration residual of `cal` (the hybrid model's).
@@ -122,6 +130,8 @@ def corrected_heldout(
         with them and a correction fitted on their residuals at the other folds' poses
         (its hyperparameters from those poses only, the first fold's starting the search)
     rng : draws the learning subsets and inducing poses (default: seed 0)
+    final : False to skip the correction of all calibration residuals in the k-fold case
+        (returned as None): a caller that may not use it fits it later (`fit_correction`)
 
     Returns
     -------
@@ -147,15 +157,20 @@ def corrected_heldout(
         train, test = fold != f, fold == f
         fitted = cal.model.target_points(params, poses) - points
         local = fit_correction(poses.subset(train), fitted[train], n_targets, rng,
-                               start=start)  # fmt: skip
+                               start=start, max_learn=MAX_LEARN if start is None
+                               else WARM_LEARN)  # fmt: skip
         if start is None:  # the first fold's hyperparameters start the others' search
             start = local.hyper
         warnings += [f"{w} (fold {f})" for w in local.warnings]
         before[test] = fitted[test]
         after[test] = fitted[test] - local.predict(poses.subset(test))
-    correction = fit_correction(poses, residuals, n_targets, rng, start=start)
-    correction = replace(correction, warnings=correction.warnings + tuple(warnings))
     scored = np.isin(fold, list(fold_parameters))
+    if not final:
+        return before[scored], after[scored], None
+    # all calibration residuals, with the first fold's hyperparameters (learned on most of
+    # the same calibration poses: a search again would change them by its noise)
+    correction = fit_correction(poses, residuals, n_targets, rng, hyper=start)
+    correction = replace(correction, warnings=correction.warnings + tuple(warnings))
     return before[scored], after[scored], correction
 
 
@@ -172,9 +187,20 @@ def learnable_bound(
     `fold_parameters` the geometry refitted without each fold; `scored_on` says which."""
     before, after, correction = corrected_heldout(geo, recording, holdout, fold,
                                                   fold_parameters)  # fmt: skip
-    geo_rms, geo_mean = _figures(before)
+    assert correction is not None
+    return bound_of(before, after, correction, scored_on)
+
+
+def bound_of(geometric_residuals: Array, after: Array, correction: ResidualCorrection,
+             scored_on: str, learned_on: str = "geometric") -> LearnableBound:  # fmt: skip
+    """The bound from geometric's held-out residuals (m, 3) [m] and those (m, 3) [m] of
+    the model `learned_on` corrected by a learned correction, on the same held-out data
+    (`corrected_heldout`), and the `correction` fitted on all calibration residuals."""
+    geo_rms, geo_mean = _figures(geometric_residuals)
     rms, mean = _figures(after)
     share = 1.0 - rms / geo_rms if geo_rms > 0 else 0.0
-    return LearnableBound(METHOD, scored_on, geo_rms, geo_mean, rms, mean, share,
+    method = METHOD if learned_on == "geometric" else METHOD.replace(
+        "of the geometric residuals", f"of the residuals of {learned_on}")  # fmt: skip
+    return LearnableBound(method, scored_on, geo_rms, geo_mean, rms, mean, share,
                           correction.length_scales_deg, correction.noise_mm,
-                          correction.n_fitted, list(correction.warnings))  # fmt: skip
+                          correction.n_fitted, list(correction.warnings), learned_on)  # fmt: skip

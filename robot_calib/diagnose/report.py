@@ -7,9 +7,9 @@ from pathlib import Path
 
 from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport
 from robot_calib.diagnose.figures import (
+    FigureCache,
     angle_figure,
     ladder_figure,
-    pyplot,
     residual_map_figure,
     time_figure,
 )
@@ -19,27 +19,26 @@ from robot_calib.diagnose.signatures import ArcSignature, JointTerms
 from robot_calib.measurements import Recording
 
 
-def _plots(
-    ladder: Ladder, recording: Recording, stem: Path, floor_mm: float | None
-) -> list[tuple[str, str]]:
-    """The figures (figures.py) saved as PNGs `<stem>_*.png`: (title, file name) each."""
-    plt = pyplot()
+def _plots(ladder: Ladder, recording: Recording, stem: Path, floor_mm: float | None,
+           figures: FigureCache) -> list[tuple[str, str]]:  # fmt: skip
+    """The figures (figures.py) saved as PNGs `<stem>_*.png`: (title, file name) each;
+    drawn once in `figures` (the HTML page shows them too)."""
     drawn = [
         ("ladder", "The ladder: held-out error of each model",
-         ladder_figure(ladder, floor_mm), 110),
+         lambda: ladder_figure(ladder, floor_mm)),
         ("angle", "Residual against each joint angle, by approach direction",
-         angle_figure(ladder, recording, "urad"), 110),
+         lambda: angle_figure(ladder, recording, "urad")),
         ("map", "Residual maps: against reach, height and every joint's reading",
-         residual_map_figure(ladder, recording), 100),
-        ("time", "Residual against time (in-sample)", time_figure(ladder, recording), 110),
+         lambda: residual_map_figure(ladder, recording)),
+        ("time", "Residual against time (in-sample)", lambda: time_figure(ladder, recording)),
     ]  # fmt: skip
     out = []
-    for suffix, title, fig, dpi in drawn:
-        if fig is None:
+    for suffix, title, draw in drawn:
+        png = figures.png(suffix if suffix != "angle" else "angle_urad", draw)
+        if png is None:
             continue
         path = stem.with_name(f"{stem.name}_{suffix}.png")
-        fig.savefig(path, dpi=dpi)
-        plt.close(fig)
+        path.write_bytes(png)
         out.append((title, path.name))
     return out
 
@@ -111,11 +110,13 @@ def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
     return out
 
 
-def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
-                 path: Path) -> None:  # fmt: skip
-    """Markdown report `path` (+ PNGs beside it named after it)."""
+def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, path: Path,
+                 figures: FigureCache | None = None) -> None:  # fmt: skip
+    """Markdown report `path` (+ PNGs beside it named after it); `figures`: where the
+    figures are drawn once for both reports (default: a new one)."""
     noise, where = diagnosis.noise, diagnosis.where
-    plots = _plots(ladder, recording, path.with_suffix(""), noise.floor_abs_rms_mm)
+    figures = FigureCache() if figures is None else figures
+    plots = _plots(ladder, recording, path.with_suffix(""), noise.floor_abs_rms_mm, figures)
     dom = diagnosis.dominant_effect
     verdict = (
         f"{diagnosis.verdict}: no dominant unmodelled effect"

@@ -247,6 +247,7 @@ def learn_hyperparameters(
     rng: np.random.Generator | None = None,
     start: Hyperparameters | None = None,
     min_length_scale_rad: float = MIN_LENGTH_SCALE_RAD,
+    max_learn: int = MAX_LEARN,
 ) -> tuple[Hyperparameters, tuple[str, ...]]:
     """The kernel's hyperparameters by maximum marginal likelihood of `residuals` (n, 3)
     [m, tracker frame, predicted - measured] at `poses` (n poses, readings [rad]), on at
@@ -255,6 +256,7 @@ def learn_hyperparameters(
     start : hyperparameters to start from (a warm start: WARM_ITERATIONS steps at most),
         else the best of STARTS_INVERSE (s^2 = 1, sigma^2 = 0.1) on COARSE of the poses
     min_length_scale_rad : every joint's shortest length scale [rad]
+    max_learn : poses learned on (default MAX_LEARN; fewer for a warm start's refinement)
 
     Returns
     -------
@@ -265,7 +267,7 @@ def learn_hyperparameters(
     from scipy.optimize import minimize
 
     rng = np.random.default_rng(0) if rng is None else rng
-    rows = _shuffled_subset(len(poses), MAX_LEARN, rng)
+    rows = _shuffled_subset(len(poses), max_learn, rng)
     mean, scale = _scaling(residuals)
     y = (residuals[rows] - mean) / scale
     n_joints = poses.q.shape[1]
@@ -473,6 +475,7 @@ def fit_correction(
     start: Hyperparameters | None = None,
     min_length_scale_rad: float = MIN_LENGTH_SCALE_RAD,
     max_points: int = MAX_POINTS,
+    max_learn: int = MAX_LEARN,
 ) -> ResidualCorrection:
     """The correction of `residuals` (n, 3) [m, tracker frame, predicted - measured] at
     `poses` (readings (n, J) [rad], targets below `n_targets`).
@@ -500,11 +503,11 @@ def fit_correction(
     warnings: tuple[str, ...] = ()
     if hyper is None:
         hyper, warnings = learn_hyperparameters(poses, residuals, n_targets, rng, start,
-                                                min_length_scale_rad)  # fmt: skip
+                                                min_length_scale_rad, max_learn)  # fmt: skip
     mean, scale = _scaling(residuals)
     y = (residuals - mean) / scale
     q, target = poses.q, poses.target_index
-    learned = f"hyperparameters by marginal likelihood on {min(n, MAX_LEARN)} poses"
+    learned = f"hyperparameters by marginal likelihood on {min(n, max_learn)} poses"
     if n <= max_points:
         inducing: IntArray = np.arange(n)
         phi = _phi(q, target, hyper, n_targets)
