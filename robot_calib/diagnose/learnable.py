@@ -26,6 +26,7 @@ fitted on every calibration residual, is the learned part of the hybrid model
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -54,6 +55,8 @@ METHOD = (
 #: poses a fold after the first learns its hyperparameters on, warm-started from the first
 #: fold's (the search only refines them: 300 poses cost a quarter of MAX_LEARN's)
 WARM_LEARN = 300
+#: threads fitting the folds after the first (the machine's two cores)
+FOLD_THREADS = 2
 #: the bound must beat geometric by this share of its held-out rms to count as structure
 MIN_LEARNABLE_SHARE = 0.05
 
@@ -151,20 +154,34 @@ def corrected_heldout(
         before = cal.model.target_points(cal.parameters, holdout.poses) - holdout.points
         return before, before - correction.predict(holdout.poses), correction
     before, after = np.zeros_like(points), np.zeros_like(points)
+    folds = list(fold_parameters)
+    seeds = rng.integers(0, 2**63, size=len(folds))  # each fold its own stream: any order
     start: Hyperparameters | None = None
-    warnings: list[str] = []
-    for f, params in fold_parameters.items():
+
+    def one(k: int) -> tuple[str, ...]:
+        """Fold folds[k]: its correction learned on its training poses, `after` filled."""
+        f = folds[k]
         train, test = fold != f, fold == f
-        fitted = cal.model.target_points(params, poses) - points
-        local = fit_correction(poses.subset(train), fitted[train], n_targets, rng,
-                               start=start, max_learn=MAX_LEARN if start is None
-                               else WARM_LEARN)  # fmt: skip
-        if start is None:  # the first fold's hyperparameters start the others' search
-            start = local.hyper
-        warnings += [f"{w} (fold {f})" for w in local.warnings]
+        fitted = cal.model.target_points(fold_parameters[f], poses) - points
+        local = fit_correction(poses.subset(train), fitted[train], n_targets,
+                               np.random.default_rng(seeds[k]), start=start,
+                               max_learn=MAX_LEARN if start is None else WARM_LEARN)  # fmt: skip
         before[test] = fitted[test]
         after[test] = fitted[test] - local.predict(poses.subset(test))
-    scored = np.isin(fold, list(fold_parameters))
+        nonlocal_hyper[k] = local.hyper
+        return tuple(f"{w} (fold {f})" for w in local.warnings)
+
+    nonlocal_hyper: dict[int, Hyperparameters] = {}
+    warnings: list[str] = []
+    if folds:  # the first fold's hyperparameters start the others' search
+        warnings += one(0)
+        start = nonlocal_hyper[0]
+        # the other folds are independent: both cores (numpy's linear algebra releases
+        # the GIL; each fold writes only its own rows)
+        with ThreadPoolExecutor(max_workers=FOLD_THREADS) as pool:
+            for lines in pool.map(one, range(1, len(folds))):
+                warnings += lines
+    scored = np.isin(fold, folds)
     if not final:
         return before[scored], after[scored], None
     # all calibration residuals, with the first fold's hyperparameters (learned on most of

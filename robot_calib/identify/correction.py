@@ -44,7 +44,7 @@ from robot_calib.poses import Poses
 from robot_calib.records import Record
 
 FORMAT = "robot_calib.correction/1"
-MAX_LEARN = 600  # poses the hyperparameters are learned on (a random subset above)
+MAX_LEARN = 400  # poses the hyperparameters are learned on (a random subset above)
 MAX_POINTS = 2000  # poses fitted exactly; above, inducing poses of a subset of regressors
 MIN_LENGTH_SCALE_RAD = math.radians(1.0)  # a joint's shortest length scale (an edge)
 # the target code's largest inverse length scale: targets uncorrelated to e^-25 there (a
