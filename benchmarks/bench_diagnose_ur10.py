@@ -46,18 +46,23 @@ def _bag(path: Path, recording: Recording, names: tuple[str, ...], first: int = 
 
 
 def _run(args: list[str]) -> tuple[float, float, float]:
-    """Wall [s], CPU [s] and peak RSS [MiB] of `robot-calib diagnose ARGS` in a child."""
+    """Wall [s], CPU [s] and peak RSS [MiB] of `robot-calib diagnose ARGS` in a child
+    (the child reports its own peak: RUSAGE_CHILDREN would give the largest child's)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.perf_counter()
-    code = [sys.executable, "-c", "import sys; from robot_calib.cli import main; "
-            "sys.exit(main(sys.argv[1:]))", "diagnose", *args]  # fmt: skip
+    code = [sys.executable, "-c", "import resource, sys; from robot_calib.cli import main; "
+            "code = main(sys.argv[1:]); print('PEAK_KIB', resource.getrusage("
+            "resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); sys.exit(code)",
+            "diagnose", *args]  # fmt: skip
     done = subprocess.run(code, capture_output=True, text=True, check=False)
     wall = time.perf_counter() - started
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if done.returncode != 0:
         raise SystemExit(f"diagnose failed ({done.returncode}): {done.stderr.strip()}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return wall, cpu, after.ru_maxrss / 1024.0
+    peak = next(int(line.split()[1]) for line in done.stderr.splitlines()
+                if line.startswith("PEAK_KIB"))  # fmt: skip
+    return wall, cpu, peak / 1024.0
 
 
 def main() -> int:

@@ -312,6 +312,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
     for warning in warnings:
         print(warning)
     print(f"best model (the ladder's chosen rung): {diagnosis.ladder[-1].model} -> {best}")
+    if diagnosis.implausible:  # written (to be read), but no exit 0 with nonsense
+        raise ImplausibleError(f"{'; '.join(diagnosis.implausible)} ({output}: the geometric "
+                               "calibration the diagnosis rests on is implausible)")  # fmt: skip
     return 0
 
 

@@ -603,7 +603,7 @@ def selected_document(
     section: how it was chosen, on what, and every candidate's held-out rms [mm]."""
     doc = cal.to_dict(recording)
     doc["selected"] = {
-        "model": cal.name,
+        "model": cal.label,
         "chosen_as": how,
         "scored_on": scored_on,
         "holdout_abs_rms_mm": scores,
@@ -775,7 +775,7 @@ def _run_in(
                           "the diagnosis ladder's rungs", "hold-out bag", scores),
         folder / "params_best.json",
     )  # fmt: skip
-    return RunResult(folder, first, second, recording, models, diagnosis, report, best.name,
+    return RunResult(folder, first, second, recording, models, diagnosis, report, best.label,
                      tuple(warnings), html_report_path(folder / "diagnosis.json"))  # fmt: skip
 
 

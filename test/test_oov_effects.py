@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from robot_calib.accuracy import accuracy
-from robot_calib.diagnose.diagnosis import Diagnosis, DominantEffect
+from robot_calib.diagnose.diagnosis import Diagnosis, DominantEffect, diagnose
 from robot_calib.effects import EFFECTS, make_effect, vocabulary
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.effects.gravity_backlash import TAU0_NM, GravityBacklash
@@ -286,7 +286,7 @@ def test_make_case_builds_the_new_classes(effect: str) -> None:
 def diagnosis(joints: list[int] | None, model: str, effect: str = "unknown") -> Diagnosis:
     """A stand-in with what `judge` reads: the dominant effect, the chosen rung, the ratio."""
     dominant = None if joints is None else DominantEffect(effect, joints)
-    rung = SimpleNamespace(model=model, holdout_abs_rms_mm=0.01)
+    rung = SimpleNamespace(model=model, holdout_abs_rms_mm=0.01, learned=False)
     return cast(Diagnosis, SimpleNamespace(
         dominant_effect=dominant, ladder=[rung], outliers=[],
         unexplained=SimpleNamespace(ratio_to_noise_floor=1.2),
@@ -330,3 +330,16 @@ def test_params_of_a_case_world_name_its_effects() -> None:
     truth = cast(ParameterVector, case.world.truth)
     for name, value in case.values.items():
         assert truth[name] == value
+
+
+def test_judge_a_real_diagnosis_whose_hybrid_rung_won() -> None:
+    """A link twisting out of the arm plane: the diagnosis ends with the hybrid rung (a
+    learned correction on the best physical rung); the judge reads the physical rung's
+    effects (it once parsed '+learned' as an effect and crashed) and scores the hybrid."""
+    case = make_case("link_bending", 0)
+    diagnosis, _ = diagnose(case.calibration, case.world.model.robot, case.holdout)
+    hybrid, physical = diagnosis.ladder[-1], diagnosis.ladder[-2]
+    assert hybrid.learned and not physical.learned, [r.model for r in diagnosis.ladder]
+    assert hybrid.holdout_abs_rms_mm <= 0.95 * physical.holdout_abs_rms_mm  # it won
+    verdict = judge(case, diagnosis)
+    assert verdict["chosen_model"] == hybrid.model and verdict["chosen_rms_mm"] > 0

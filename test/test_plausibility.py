@@ -158,3 +158,26 @@ def test_readings_within_a_joints_own_limits_beyond_2pi_are_not_degrees() -> Non
     q[2, 5] = 30.0
     warnings = recording_warnings(recording_from_arrays(q, np.zeros((3, 3))), robot)
     assert any("joint 6 (joint_6_t) readings reach 30.0 rad" in w for w in warnings), warnings
+
+
+def test_diagnose_of_readings_in_degrees_exits_3_without_a_traceback(tmp_path: Path) -> None:
+    """The diagnosis of a UR10 bag whose readings are in degrees (the geometric fit then
+    has almost nothing free: the frequency scan once crashed reshaping an empty Jacobian)
+    writes DIAGNOSIS.json with the reasons and exits 3 with one line."""
+    from cli_runner import robot_calib
+
+    from robot_calib.bag.csv_import import write_measurement_bag
+    from robot_calib.sim.scenarios import ur10_random
+
+    scenario = ur10_random(seed=4, n=150, holdout_share=0.0)
+    rec = scenario.calibration
+    robot = scenario.world.model.robot
+    write_measurement_bag(tmp_path / "deg.mcap", np.degrees(rec.poses.q), rec.points,
+                          robot.joint_names)  # fmt: skip
+    proc = robot_calib("diagnose", "deg.mcap", "--robot", "ur10", "-o", "d.json", cwd=tmp_path)
+    assert proc.returncode == 3, proc.stderr
+    assert "Traceback" not in proc.stderr
+    said = [line for line in proc.stderr.splitlines() if line.startswith("robot-calib")]
+    assert len(said) == 1 and "look like degrees" in said[0], proc.stderr
+    doc = json.loads((tmp_path / "d.json").read_text())
+    assert doc["implausible"] and "look like degrees" in doc["implausible"][0]

@@ -31,7 +31,7 @@ FORMAT = "robot_calib.diagnosis/1"
 NULL_FACTOR = 1.5
 UNKNOWN = "unknown"  # the verdict for structure no effect of the vocabulary explains
 #: a joint signature this significant (sqrt(chi^2) it explains, in units of the residual)
-#: is structure even where the floor is unknown and the kernel ridge learns nothing (a
+#: is structure even where the floor is unknown and the learned correction learns nothing (a
 #: clean recording's strongest signature stays near 3)
 SIGNATURE_STRUCTURE = 5.0
 
@@ -61,11 +61,14 @@ class RungScore(Record):
     # held-out rms, the bound the lower of the residual model's and the best rung's; None
     # where there is no learnable gap
     learnable_gap_share: float | None = None
+    # the hybrid rung (a physical rung plus a learned correction): no effect of its own
+    learned: bool = False
 
     @classmethod
     def of(cls, rung: Rung, gap: tuple[float, float] | None = None) -> RungScore:
         """The rung's figures; gap: (geometric's held-out rms, the bound's) [mm]."""
-        held, fit = rung.heldout, rung.calibration.accuracy
+        held = rung.heldout
+        fit = rung.insample if rung.insample is not None else rung.calibration.accuracy
         share = None
         if gap is not None and gap[0] > gap[1]:
             share = (gap[0] - held.absolute_rms_mm) / (gap[0] - gap[1])
@@ -73,6 +76,7 @@ class RungScore(Record):
             rung.model, held.pairwise_mean_mm, held.pairwise_max_mm, held.absolute_mean_mm,
             held.absolute_max_mm, held.absolute_rms_mm, fit.pairwise_mean_mm,
             fit.absolute_rms_mm, int(rung.calibration.parameters.free.sum()), share,
+            rung.learned,
         )  # fmt: skip
 
 
@@ -131,6 +135,9 @@ class Diagnosis(Record):
     iso9283: list[Iso9283] = field(default_factory=list)
     # every candidate the ladder refitted: its scores and why it was or was not a rung
     refits: list[RefitOutcome] = field(default_factory=list)
+    # the geometric calibration's implausibility reasons (identify.plausibility): readings
+    # in degrees, a residual 1000 x the noise, ...; empty: plausible
+    implausible: list[str] = field(default_factory=list)
     format: str = FORMAT
 
     def to_dict(self) -> dict[str, Any]:
@@ -165,7 +172,7 @@ class Diagnosis(Record):
         if best >= self.learnable.holdout_abs_rms_mm:
             return None
         return (
-            f"the shares' bound is the best rung's {best:.4f} mm, below the kernel ridge's "
+            f"the shares' bound is the best rung's {best:.4f} mm, below the learned correction's "
             f"{self.learnable.holdout_abs_rms_mm:.4f} mm: a physical model learned more than "
             "the residual model"
         )
@@ -178,7 +185,7 @@ class Diagnosis(Record):
             if self.noise.floor_known:
                 return "null (geometric reaches the noise level)"
             return (
-                "null (noise floor unknown; the kernel ridge learns nothing held out and no "
+                "null (noise floor unknown; the learned correction learns nothing held out and no "
                 "joint signature stands out)"
             )
         if dom.effect == UNKNOWN:
@@ -207,10 +214,6 @@ class Diagnosis(Record):
         )
 
 
-def _joint_text(joint: int) -> str:
-    return f", on joint {joint}"
-
-
 def learnable_gap(ladder: Ladder) -> tuple[float, float] | None:
     """(geometric's held-out rms, the bound's) [mm]: the bound is the lower of the residual
     model's and the best rung's (a physical model that beats the residual model shows more
@@ -228,7 +231,7 @@ def learnable_gap(ladder: Ladder) -> tuple[float, float] | None:
 def physical_rungs(ladder: Ladder) -> list[Rung]:
     """The ladder's rungs without the hybrid one (a physical rung plus a learned
     correction: `ladder._learn_the_rest`)."""
-    return [r for r in ladder.rungs if r.calibration.correction is None]
+    return [r for r in ladder.rungs if not r.learned]
 
 
 def dominant_effect(
@@ -333,11 +336,11 @@ def diagnose(
         note = f"at the noise level: held-out rms {ratio:.2f} x the noise floor"
     else:
         note = (
-            f"held-out rms {ratio:.2f} x the noise floor remains; no effect of the vocabulary "
-            "reduces it further"
-            + structure
-            + (f" (outside the vocabulary{_joint_text(sig.joint)})" if structure and sig else "")
-        )
+            f"held-out rms {ratio:.2f} x the noise floor remains"
+            + ("; it lies outside the vocabulary: no effect of it reduces it further"
+               if structure else "; no effect of the vocabulary reduces it further")
+            + structure.replace("strongest structure", "strongest remaining structure")
+        )  # fmt: skip
     diagnosis = Diagnosis(
         dominant_effect=dominant_effect(ladder, where, noise),
         ladder=[RungScore.of(r, learnable_gap(ladder)) for r in ladder.rungs],
@@ -372,6 +375,7 @@ def diagnose(
         learnable=learnable,
         iso9283=_iso9283(ladder, recording, robot),
         refits=list(ladder.refits),
+        implausible=list(geo.implausible),
     )
     return diagnosis, ladder
 

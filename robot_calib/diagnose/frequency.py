@@ -120,7 +120,7 @@ def joint_spectra(
     origins, axes = model.joint_axes(params, poses)
     motion = np.cross(axes, predicted[:, None, :] - origins)  # (n, J, 3) [m/rad]
     _, jac = blocked_jacobian(model, params, poses)
-    nuisance = jac[:, :, params.free].reshape(-1, int(params.free.sum()))
+    nuisance = jac[:, :, params.free].reshape(3 * len(jac), -1)
     del jac
     basis = np.linalg.qr(nuisance)[0] if nuisance.shape[1] else np.zeros((len(res) * 3, 0))
     r = res.reshape(-1) - basis @ (basis.T @ res.reshape(-1))

@@ -273,7 +273,7 @@ def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibr
              best_params: str, warnings: Sequence[str]) -> str:  # fmt: skip
     """The two-minute summary: best model and its held-out error against the floor, the
     named effect, what remains, warnings, and the commands to apply the result."""
-    row = next((m for m in compared if m.model == best.name), None)
+    row = next((m for m in compared if m.model == best.label), None)
     error = ""
     if row is not None:
         rms = row.accuracy.absolute_rms_mm
@@ -289,7 +289,7 @@ def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibr
     at_floor = ratio is not None and ratio <= 1.5
     tone = "ok" if at_floor else ("warn" if warnings or ratio is not None else "")
     items = [
-        ("Best model", f"{best.name} ({best_params})"),
+        ("Best model", f"{best.label} ({best_params})"),
         ("Held-out error", error or "-"),
         ("Noise floor", _floor_text(diagnosis)),
         ("Named effect", diagnosis.verdict + (f" (share of the learnable gap: {shares})"
@@ -518,13 +518,13 @@ def html_report(
     held = f" ({', '.join(diagnosis.holdout)})" if diagnosis.holdout else ""
     sections = [
         ("accuracy", "Accuracy before and after calibration", _accuracy(diagnosis, compared,
-                                                                        best.name)),
+                                                                        best.label)),
         ("ladder", "The ladder: which effects, and each one's share",
          _ladder(diagnosis, ladder, figures)),
         ("where", "Where the residual lies", _where(diagnosis, ladder, recording, figures)),
         ("vectors", "3D residual vectors", _vectors(ladder, recording)),
         ("iso9283", "ISO 9283 pose accuracy and repeatability", _iso(diagnosis)),
-        ("parameters", f"Parameters of the best model ({best.name})", _parameters(best)),
+        ("parameters", f"Parameters of the best model ({best.label})", _parameters(best)),
         ("warnings", "Warnings and flagged outliers", _problems(diagnosis, every)),
     ]  # fmt: skip
     nav = " · ".join(f'<a href="#{key}">{_e(title)}</a>' for key, title, _ in sections)
@@ -533,7 +533,7 @@ def html_report(
     return (
         '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
         '<meta name="viewport" content="width=device-width, initial-scale=1">'
-        f"<title>robot_calib report: {_e(best.name)}</title><style>{CSS}</style></head>"
+        f"<title>robot_calib report: {_e(best.label)}</title><style>{CSS}</style></head>"
         f"<body><main><h1>Calibration report</h1><p class='sub'>Robot "
         f"{_e(best.model.robot.name)}; recordings {_e(', '.join(diagnosis.recordings))}; "
         f"scored on {_e(diagnosis.scored_on)}{_e(held)}. Units: positions and errors in mm, "

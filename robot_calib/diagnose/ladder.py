@@ -22,7 +22,7 @@ from robot_calib.diagnose.frequency import JointSpectrum, harmonic_candidates, j
 from robot_calib.diagnose.learnable import LearnableBound, bound_of, corrected_heldout
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
-from robot_calib.identify.calibrate import Calibration, calibrate, model_name
+from robot_calib.identify.calibrate import LEARNED_SUFFIX, Calibration, calibrate, model_name
 from robot_calib.identify.fit import blocked_jacobian, weighted_rows
 from robot_calib.identify.outliers import (
     Outlier,
@@ -59,6 +59,10 @@ class Rung:
     heldout: Accuracy
     heldout_residuals: Array  # (m, 3) predicted - measured [m] of the scored points
     score_m: float  # selection score: combined k-fold + hold-out rms [m] after refits
+    # the hybrid rung: `calibration` carries a learned correction; `insample` its in-sample
+    # accuracy with it (the calibration's own `accuracy` is the physical model's)
+    learned: bool = False
+    insample: Accuracy | None = None
 
 
 @dataclass(frozen=True)
@@ -123,9 +127,13 @@ def _replace(present: tuple[Effect, ...], new: Effect,
     return tuple(e for e in present if not new.supersedes(e, robot)) + (new,)
 
 
+Screened = tuple[Effect, float, float]  # candidate, linearised held-out, in-sample rms [m]
+
+
 def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
-            holdout: Recording | None) -> tuple[float, list[tuple[Effect, float]]]:  # fmt: skip
-    """Linearised held-out rms [m] of the current model, and of each candidate added."""
+            holdout: Recording | None) -> tuple[float, list[Screened]]:  # fmt: skip
+    """Linearised held-out rms [m] of the current model, and of each candidate added with
+    its linearised in-sample rms [m] (one step on all calibration points)."""
     robot = cal.model.robot
     every = cal.model.effects + tuple(pool)
     widest: list[Effect] = []  # every effect that no other covers (e.g. the highest order)
@@ -152,7 +160,7 @@ def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
     for effect in pool:
         cols = base_cols + [params.index(name) for name in effect.parameter_names(robot)
                             if params.index(name) not in base_cols]  # fmt: skip
-        scores.append((effect, screen.score(cols)))
+        scores.append((effect, screen.score(cols), screen.insample(cols)))
     return base, scores
 
 
@@ -205,6 +213,16 @@ class LinearScreen:
         gram, rhs = normal
         damped = gram[np.ix_(cols, cols)] + SCREEN_DAMPING * np.eye(len(cols))
         return np.asarray(np.linalg.lstsq(damped, -rhs[cols], rcond=None)[0], dtype=float)
+
+    def insample(self, cols: list[int]) -> float:
+        """rms |r + J dx| [m] over every calibration point, dx the step from all of them:
+        the linearised in-sample figure a refit of these columns should reach."""
+        cols = [c for c in cols if self.keep[c]]
+        step = self._step(self.normal_all, cols)
+        total = 0.0
+        for test, block in self.tests.values():
+            total += float(np.sum((self.residual[test] + block[:, :, cols] @ step) ** 2))
+        return float(np.sqrt(total / max(len(self.residual), 1)))
 
     def score(self, cols: list[int]) -> float:
         cols = [c for c in cols if self.keep[c]]
@@ -336,10 +354,6 @@ def run_ladder(
                   found.refits, found.spectra)  # fmt: skip
 
 
-#: the hybrid rung's name: the best physical rung's, plus this
-LEARNED = "learned"
-
-
 def _learn_the_rest(
     rungs: list[Rung], recording: Recording, holdout: Recording | None, scored_on: str
 ) -> tuple[LearnableBound, Rung | None]:
@@ -368,7 +382,9 @@ def _learn_the_rest(
     cal = replace(physical.calibration, correction=correction)
     acc = accuracy(measured, measured + after)
     score = float(np.sqrt(np.mean(np.sum(after**2, axis=1))))
-    return bound, Rung(f"{physical.model}+{LEARNED}", physical.effects, cal, acc, after, score)
+    insample = accuracy(recording.points, cal.predict(recording.poses))
+    return bound, Rung(physical.model + LEARNED_SUFFIX, physical.effects, cal, acc, after,
+                       score, learned=True, insample=insample)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -427,10 +443,10 @@ def _climb(
         base, scores = _screen(current.calibration, pool, recording, holdout)
         ranked = sorted(scores, key=lambda s: s[1])
         rounds.append(
-            [(model_name(_replace(current.effects, e, robot)), s) for e, s in ranked[:8]]
+            [(model_name(_replace(current.effects, e, robot)), s) for e, s, _ in ranked[:8]]
         )
         accepted: Rung | None = None
-        for effect, lin_score in ranked[:TRY_TOP]:  # refits confirm the screening; best wins
+        for effect, lin_score, lin_insample in ranked[:TRY_TOP]:  # refits confirm the screen
             if lin_score > (1.0 - MIN_GAIN) * base:
                 break
             effects = _replace(current.effects, effect, robot)
@@ -438,7 +454,7 @@ def _climb(
             cal = calibrate(recording, robot, name, log=None, start=current.calibration,
                             screen_outliers=False)  # fmt: skip
             insample = cal.accuracy.absolute_rms_mm
-            reason = _rejected_before_kfold(cal, current, lin_score)
+            reason = _rejected_before_kfold(cal, current, lin_insample)
             if reason:
                 refits.append(RefitOutcome(name, lin_score * 1e3, insample, None, False, reason))
                 say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, rejected: {reason}")
@@ -464,10 +480,11 @@ def _climb(
     return _Climb(rungs, noise, scored_on, rounds, refits, spectra)
 
 
-def _rejected_before_kfold(cal: Calibration, current: Rung, lin_score_m: float) -> str:
+def _rejected_before_kfold(cal: Calibration, current: Rung, lin_insample_m: float) -> str:
     """Why a refitted candidate is rejected without its k-fold refits (empty: it is not):
-    in-sample worse than the model it extends (the never-worse guard), or in-sample worse
-    than its own linearised held-out estimate (the refit disappointed the screening)."""
+    in-sample worse than the model it extends (the never-worse guard), or in-sample more
+    than SCREEN_SLACK above the screening's linearised in-sample figure (the refit did not
+    find the gain the screening saw; like with like, whatever the hold-out bags hold)."""
     insample = cal.accuracy.absolute_rms_mm
     before = current.calibration.accuracy.absolute_rms_mm
     if cal.implausible:
@@ -475,9 +492,9 @@ def _rejected_before_kfold(cal: Calibration, current: Rung, lin_score_m: float) 
     if insample > before * (1.0 + 1e-6):
         return (f"in-sample {insample:.4f} mm is worse than {current.model}'s {before:.4f} mm "
                 "that it extends")  # fmt: skip
-    if insample > SCREEN_SLACK * lin_score_m * 1e3:
+    if insample > SCREEN_SLACK * lin_insample_m * 1e3:
         return (
-            f"in-sample {insample:.4f} mm after the refit is above its linearised held-out "
-            f"estimate {lin_score_m * 1e3:.4f} mm: the refit did not find the screened gain"
+            f"in-sample {insample:.4f} mm after the refit is above its linearised in-sample "
+            f"estimate {lin_insample_m * 1e3:.4f} mm: the refit did not find the screened gain"
         )
     return ""

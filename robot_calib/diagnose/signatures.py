@@ -151,7 +151,7 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
     predicted = recording.points + residuals
     motion = np.cross(axes, predicted[:, None, :] - origins)  # (n, J, 3) [m/rad]
     _, jac = blocked_jacobian(model, params, poses)
-    nuisance = jac[:, :, params.free].reshape(-1, int(params.free.sum())) / noise_sigma_m
+    nuisance = jac[:, :, params.free].reshape(3 * len(jac), -1) / noise_sigma_m
     basis = np.linalg.qr(nuisance)[0] if nuisance.shape[1] else np.zeros((nuisance.shape[0], 0))
     r = residuals.reshape(-1) / noise_sigma_m
     r = r - basis @ (basis.T @ r)

@@ -68,6 +68,8 @@ from robot_calib.model import KinematicModel, target_parameters
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE, Poses
 
 BASE_MODELS = ("nominal", "cpa", "geometric")
+#: what the hybrid model's label adds to its physical model's name (`Calibration.label`)
+LEARNED_SUFFIX = "+learned"
 OBJECTIVES = ("absolute", "seed")
 SEED_ANCHORS = (1, 3, 5)  # the seed fixes the cloud on the centres of circles 1, 3 and 5
 MAX_OUTLIER_ROUNDS = 4  # refits without the flagged points until the set is stable
@@ -155,6 +157,13 @@ class Calibration:
         if self.correction is not None:
             points = points - self.correction.predict(poses)
         return points
+
+    @property
+    def label(self) -> str:
+        """The model's name for people: `name` (the physical model, what `--model` and
+        PARAMS.json `model` parse), plus LEARNED_SUFFIX when a learned correction completes
+        it (the hybrid model)."""
+        return self.name + (LEARNED_SUFFIX if self.correction is not None else "")
 
     def with_learned_correction(self, recording: Recording) -> Calibration:
         """This calibration with a correction learned from its residuals at the measurements

@@ -359,7 +359,9 @@ def fixed_reasons(parameters: ParameterVector) -> dict[str, list[str]]:
 
 def summary(cal: Calibration, recording: Recording) -> str:
     """Human summary: measurements, parameters (mm/deg) with 1-sigma, fixed, residuals."""
-    lines = [recording.summary(), f"model: {cal.name}"]
+    lines = [recording.summary(), f"model: {cal.label}"]
+    if cal.implausible:
+        lines.append("IMPLAUSIBLE (plausible: false): " + "; ".join(cal.implausible))
     if cal.identifiability is not None:
         ident = cal.identifiability
         lines.append(

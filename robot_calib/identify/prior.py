@@ -33,8 +33,9 @@ from robot_calib.kinematics.parameters import Parameter, ParameterVector
 #: prior 1-sigma of a geometric parameter by unit: far beyond any manufacturing tolerance
 #: (20 mm, 1.1 deg), so a wrong --robot still shows as parameters far from nominal
 GEOMETRIC_PRIOR = {"m": 0.02, "rad": 0.02}
-#: prior 1-sigma of an effect's parameter by unit: ten times the largest effect a real arm
-#: shows (10 mrad of joint-angle error or housing tilt, 10 mm of housing offset ...)
+#: prior 1-sigma of an effect's parameter by unit: of the size of the largest effects real
+#: arms show (2 mrad of joint-angle error: a worn gear's backlash; 10 mm of housing
+#: offset, ...); weak all the same: one pseudo-measurement per sigma
 EFFECT_PRIOR = {
     "rad": 2e-3,
     "m": 1e-2,

@@ -31,7 +31,12 @@ from robot_calib.compensate import Compensation, compensate_commands
 from robot_calib.compensate.solve import nominal_counterpart
 from robot_calib.compensate.write import LARGE_CHANGE_DEG
 from robot_calib.errors import InputError, RobotCalibError
-from robot_calib.identify.params_file import correction_of, load_params
+from robot_calib.identify.params_file import (
+    check_plausible,
+    correction_of,
+    implausible_of,
+    load_params,
+)
 from robot_calib.kinematics.description import with_joint_names
 from robot_calib.kinematics.frames import Array
 from robot_calib.messages import JOINT_STATES_TOPIC, joint_positions, velocity_signs
@@ -119,6 +124,10 @@ class CompensatorNode(Node):
             "a trajectory with a point corrected by more than this [deg] (near a singularity) "
             "or not reached is dropped, not sent",
         )  # fmt: skip
+        use_anyway: bool = declare(
+            self, "force", False,
+            "use a PARAMS.json marked plausible: false (a fit that ended in nonsense) anyway",
+        )  # fmt: skip
         states_topic: str = declare(
             self, "joint_states_topic", JOINT_STATES_TOPIC,
             "the robot's joint states: where a trajectory starts and each joint's last "
@@ -127,6 +136,11 @@ class CompensatorNode(Node):
         if not params_file:
             raise InputError(f"{self.get_name()}: parameter 'params' (PARAMS.json) is required")
         self.model, self.params, doc = load_params(params_file)
+        # a calibration marked implausible never steers a robot unless asked for (`force`),
+        # as compensate, predict and export refuse it
+        warning = check_plausible(implausible_of(doc, params_file), params_file, use_anyway)
+        if warning is not None:
+            self.get_logger().warning(warning)
         # a hybrid calibration's learned correction, applied by the compensation (None: none)
         self.correction = correction_of(doc, self.model, params_file)
         if joint_names:
