@@ -25,10 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from robot_calib.diagnose.projection import MIN_LEFT, MIN_LEVER_M, model_span
 from robot_calib.effects import Effect
 from robot_calib.effects.joint_harmonics import JointHarmonics, meaning
-from robot_calib.effects.transmission_error import TransmissionError
-from robot_calib.identify.fit import blocked_jacobian
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
@@ -38,9 +37,7 @@ from robot_calib.records import Record
 MAX_SCAN_ORDER = 64
 MAX_PICKS = 6  # orders picked per joint and round
 PICK_SIGNIFICANCE = 6.0  # sqrt(chi^2 explained) / scatter an order needs to be picked
-MIN_LEFT = 1e-3  # of a column's norm left after projecting the model's columns off
 SCAN_POSES = 4000  # measurements scanned (a seeded random subset above)
-MIN_LEVER_M = 5e-3  # a joint whose measured points sit nearer its axis is not scanned
 
 
 @dataclass(frozen=True)
@@ -75,15 +72,7 @@ class JointSpectrum(Record):
 
 def modelled_orders(effects: tuple[Effect, ...], joint: int) -> set[int]:
     """The orders of joint-angle harmonics of `joint` that `effects` already have."""
-    out: set[int] = set()
-    for e in effects:
-        if joint not in e.joints:
-            continue
-        if isinstance(e, JointHarmonics):
-            out |= set(e.orders)
-        elif isinstance(e, TransmissionError):
-            out |= set(range(1, e.order + 1))
-    return out
+    return set().union(*(e.harmonic_orders(joint) for e in effects))
 
 
 def _pair_explained(cols: Array, r: Array) -> tuple[Array, Array]:
@@ -116,19 +105,14 @@ def joint_spectra(
         rows = np.sort(np.random.default_rng(seed).choice(n, SCAN_POSES, replace=False))
     poses = recording.poses.subset(rows)
     res = residuals[rows]
-    predicted = recording.points[rows] + res
-    origins, axes = model.joint_axes(params, poses)
-    motion = np.cross(axes, predicted[:, None, :] - origins)  # (n, J, 3) [m/rad]
-    _, jac = blocked_jacobian(model, params, poses)
-    nuisance = jac[:, :, params.free].reshape(3 * len(jac), -1)
-    del jac
-    basis = np.linalg.qr(nuisance)[0] if nuisance.shape[1] else np.zeros((len(res) * 3, 0))
-    r = res.reshape(-1) - basis @ (basis.T @ res.reshape(-1))
+    span = model_span(model, params, poses, recording.points[rows] + res)
+    motion, basis = span.motion, span.basis
+    r = span.project_off(res.reshape(-1))
     scatter = float(np.sqrt(np.mean(r**2))) or 1.0
     orders = np.arange(1, max_order + 1)
     out = []
     for j in range(model.robot.n_joints):
-        lever = float(np.median(np.linalg.norm(motion[:, j, :], axis=1)))
+        lever = float(span.lever_m[j])
         if lever < MIN_LEVER_M:
             out.append(JointSpectrum(j + 1, False, lever * 1e3, [0.0] * max_order, [], [], [],
                                      []))  # fmt: skip

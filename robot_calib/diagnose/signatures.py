@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from robot_calib.diagnose.frequency import JointSpectrum, joint_spectra
+from robot_calib.diagnose.projection import MIN_LEFT, MIN_LEVER_M, model_span
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.effects.eccentricity import fourier_basis
-from robot_calib.identify.fit import blocked_jacobian
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
@@ -25,14 +25,7 @@ from robot_calib.model import KinematicModel
 from robot_calib.records import Record
 
 HARMONICS = 4
-#: a joint-angle error is observable only through a target at least this far from the
-#: joint's axis: at 5 um of tracker noise, 5 mm of lever leaves 1 mrad of angle noise (a
-#: target 0.2 mm from the axis would turn noise into 25 mrad of "harmonics")
-MIN_LEVER_M = 5e-3
 MIN_OBSERVABLE_POSES = 3
-#: a signature column keeping less than this of its norm after the model's own columns are
-#: projected off is collinear with the model: skipped (issue 22: 3.6e15 urad "harmonics")
-MIN_LEFT = 1e-3
 
 
 @dataclass(frozen=True)
@@ -147,14 +140,9 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
     against the geometry (so families do not trade huge opposite coefficients): its value,
     and its significance sqrt(chi^2 explained) in units of the noise."""
     poses, n_joints = recording.poses, model.robot.n_joints
-    origins, axes = model.joint_axes(params, poses)
-    predicted = recording.points + residuals
-    motion = np.cross(axes, predicted[:, None, :] - origins)  # (n, J, 3) [m/rad]
-    _, jac = blocked_jacobian(model, params, poses)
-    nuisance = jac[:, :, params.free].reshape(3 * len(jac), -1) / noise_sigma_m
-    basis = np.linalg.qr(nuisance)[0] if nuisance.shape[1] else np.zeros((nuisance.shape[0], 0))
-    r = residuals.reshape(-1) / noise_sigma_m
-    r = r - basis @ (basis.T @ r)
+    span = model_span(model, params, poses, recording.points + residuals, noise_sigma_m)
+    motion = span.motion
+    r = span.project_off(residuals.reshape(-1) / noise_sigma_m)
     tau = gravity_torques(model.robot, poses.q)
 
     def explain(signals: list[Array], j: int) -> tuple[Array, float]:
@@ -164,7 +152,7 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
         cols = np.stack([(motion[:, j, :] * s[:, None]).reshape(-1) for s in signals], 1)
         cols = cols / noise_sigma_m
         norms = np.linalg.norm(cols, axis=0)
-        cols = cols - basis @ (basis.T @ cols)
+        cols = span.project_off(cols)
         if np.any(np.linalg.norm(cols, axis=0) < MIN_LEFT * np.maximum(norms, 1e-300)):
             return np.zeros(len(signals)), 0.0
         coef = np.linalg.lstsq(cols, r, rcond=1e-10)[0].astype(np.float64, copy=False)
@@ -179,7 +167,7 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
 
     out = []
     for j in range(n_joints):
-        lever = float(np.median(np.linalg.norm(motion[:, j, :], axis=1)))
+        lever = float(span.lever_m[j])
         if lever < MIN_LEVER_M:
             zeros = [0.0] * HARMONICS
             out.append(JointTerms(j + 1, None, zeros, None, 0.0, None, 0.0, None, 0.0,

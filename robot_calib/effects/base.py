@@ -160,6 +160,11 @@ class Effect(ABC):
         a fit from one time constant can slide off to another) gives several."""
         return [{}]
 
+    def harmonic_orders(self, joint: int) -> frozenset[int]:
+        """The orders k of joint-angle errors C cos(k q_j) + S sin(k q_j) of `joint` this
+        effect already models (the frequency scan skips them): none by default."""
+        return frozenset()
+
     def supersedes(self, other: Effect, robot: RobotDescription) -> bool:
         """True when a model with this effect needs no `other` besides (the ladder replaces
         `other` by it, and offers no `other` next to it): `covers`, or a physical

@@ -107,6 +107,9 @@ class JointHarmonics(Effect):
             block[:, 1::2] = np.sin(angle)
         return Contribution(joint_offset=jac @ self.values(robot, params), joint_offset_jac=jac)
 
+    def harmonic_orders(self, joint: int) -> frozenset[int]:
+        return frozenset(self.orders) if joint in self.joints else frozenset()
+
     def default_values(self, robot: RobotDescription) -> dict[str, float]:
         """DEFAULT_AMPLITUDE on the sine of every order of every joint."""
         return {self.term(j, "s", k): DEFAULT_AMPLITUDE for j in self.joints for k in self.orders}

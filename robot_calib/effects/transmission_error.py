@@ -74,6 +74,9 @@ class TransmissionError(Effect):
             )[:, 1:]
         return Contribution(joint_offset=jac @ self.values(robot, params), joint_offset_jac=jac)
 
+    def harmonic_orders(self, joint: int) -> frozenset[int]:
+        return frozenset(range(1, self.order + 1)) if joint in self.joints else frozenset()
+
     def default_values(self, robot: RobotDescription) -> dict[str, float]:
         """A harmonic drive's 2nd harmonic on every joint of the effect."""
         return {self.term(j, "s", 2): DEFAULT_AMPLITUDE for j in self.joints if self.order >= 2}

@@ -104,20 +104,28 @@ def noise_per_axis(cal: Calibration) -> tuple[float, str]:
     return DEFAULT_NOISE_M, "assumed tracker noise"
 
 
+def far_from_nominal(cal: Calibration, length_m: float, angle_rad: float,
+                     free_only: bool = False, deg_digits: int = 1) -> list[str]:  # fmt: skip
+    """'a2 +882.0 mm', 'theta4 +64.6 deg', ...: the geometric parameters of `cal` (free
+    ones only with `free_only`) more than `length_m` [m] or `angle_rad` [rad] from nominal."""
+    out = []
+    for p, value in zip(cal.parameters.parameters, cal.parameters.values):
+        if p.group != "geometric" or (free_only and not p.free):
+            continue
+        deviation = value - p.nominal
+        if p.unit == "m" and abs(deviation) > length_m:
+            out.append(f"{p.name} {deviation * 1e3:+.1f} mm")
+        elif p.unit == "rad" and abs(deviation) > angle_rad:
+            out.append(f"{p.name} {np.degrees(deviation):+.{deg_digits}f} deg")
+    return out
+
+
 def calibration_warnings(cal: Calibration, geometry_fitted: bool = True) -> list[str]:
     """Geometric parameters far from nominal, and (when the geometry was fitted: not for
     the nominal model or CPA, whose residual is the gap calibration closes) an in-sample
     residual far above the noise, each with what usually causes it."""
     out: list[str] = []
-    far = []
-    for p, value in zip(cal.parameters.parameters, cal.parameters.values):
-        if p.group != "geometric" or not p.free:
-            continue
-        deviation = value - p.nominal
-        if p.unit == "m" and abs(deviation) > FAR_LENGTH_M:
-            far.append(f"{p.name} {deviation * 1e3:+.1f} mm")
-        elif p.unit == "rad" and abs(deviation) > FAR_ANGLE_RAD:
-            far.append(f"{p.name} {np.degrees(deviation):+.2f} deg")
+    far = far_from_nominal(cal, FAR_LENGTH_M, FAR_ANGLE_RAD, free_only=True, deg_digits=2)
     if far:
         out.append(
             f"warning: parameters far from nominal ({cal.model.robot.name}): "
@@ -177,15 +185,7 @@ def implausible_reasons(
                 f"in-sample residual {per_axis * 1e3:.4g} mm per axis is {per_axis / noise:.0f}"
                 f" x the noise ({noise * 1e3:.4f} mm, {source}): {HINT}"
             )
-    beyond = []
-    for p, value in zip(cal.parameters.parameters, cal.parameters.values):
-        if p.group != "geometric":
-            continue
-        deviation = value - p.nominal
-        if p.unit == "m" and abs(deviation) > PHYSICAL_LENGTH_M:
-            beyond.append(f"{p.name} {deviation * 1e3:+.1f} mm")
-        elif p.unit == "rad" and abs(deviation) > PHYSICAL_ANGLE_RAD:
-            beyond.append(f"{p.name} {np.degrees(deviation):+.1f} deg")
+    beyond = far_from_nominal(cal, PHYSICAL_LENGTH_M, PHYSICAL_ANGLE_RAD)
     if beyond:
         out.append(
             f"geometric parameters beyond physics ({robot.name}; more than "
