@@ -14,7 +14,10 @@ significant of the rest once it is explained, and so on while the significance s
 PICK_SIGNIFICANCE or more (a picked order's side lobes vanish with it: over a partial
 turn neighbouring orders are nearly collinear). A pair whose columns keep less than
 MIN_LEFT of their norm after the projection is collinear with the model and is skipped,
-never reported with a meaningless amplitude. The picked orders become the ladder's
+never reported with a meaningless amplitude; so is an order above what the joint's
+distinct readings resolve (`resolvable_order`: single-joint sweeps of a few steps alias
+every high order onto anything), and one whose amplitude alone would exceed
+MAX_AMPLITUDE_RAD (no gear error is that large). The picked orders become the ladder's
 `joint_harmonics` candidates and the report's dominant orders (`effects.joint_harmonics`
 says what an order usually means).
 """
@@ -38,6 +41,18 @@ MAX_SCAN_ORDER = 64
 MAX_PICKS = 6  # orders picked per joint and round
 PICK_SIGNIFICANCE = 6.0  # sqrt(chi^2 explained) / scatter an order needs to be picked
 SCAN_POSES = 4000  # measurements scanned (a seeded random subset above)
+#: a harmonic whose amplitude alone would exceed this is no gear error [rad] (the weak
+#: prior's sigma of a joint-angle term): a column the model nearly absorbs, or an alias
+MAX_AMPLITUDE_RAD = 2e-3
+READING_RESOLUTION_RAD = 1e-4  # readings closer than this count as one (joint at rest)
+
+
+def resolvable_order(q: Array) -> int:
+    """The highest order a harmonic of readings q (n,) [rad] can be told apart at: half the
+    number of distinct readings less one (a sweep of 10 steps resolves order 4; above, an
+    order is aliased on the readings it was sampled at and fits anything)."""
+    distinct = len(np.unique(np.round(q / READING_RESOLUTION_RAD)))
+    return max((distinct - 1) // 2, 0)
 
 
 @dataclass(frozen=True)
@@ -126,7 +141,9 @@ def joint_spectra(
         left = np.linalg.norm(cols, axis=0) / np.where(norms > 0, norms, 1.0)
         usable = np.all(left >= MIN_LEFT, axis=1)
         usable[[k - 1 for k in modelled_orders(model.effects, j + 1) if k <= max_order]] = False
-        chi2, _ = _pair_explained(cols, r)
+        usable[orders > resolvable_order(poses.q[:, j])] = False  # aliased on these readings
+        chi2, coef = _pair_explained(cols, r)
+        usable &= np.hypot(coef[:, 0], coef[:, 1]) <= MAX_AMPLITUDE_RAD  # beyond physics
         significance = np.where(usable, np.sqrt(np.maximum(chi2, 0.0)) / scatter, 0.0)
         picked, picked_z = _pick(cols, r, usable, scatter)
         amps: list[float] = []
@@ -154,7 +171,8 @@ def _pick(cols: Array, r: Array, usable: Array, scatter: float) -> tuple[list[in
         ok = usable & np.all(left >= MIN_LEFT, axis=1)
         if not ok.any():
             break
-        chi2, _ = _pair_explained(cols, r)
+        chi2, coef = _pair_explained(cols, r)
+        ok &= np.hypot(coef[:, 0], coef[:, 1]) <= MAX_AMPLITUDE_RAD
         z = np.where(ok, np.sqrt(np.maximum(chi2, 0.0)) / scatter, 0.0)
         best = int(np.argmax(z))
         if z[best] < PICK_SIGNIFICANCE:
