@@ -97,3 +97,13 @@ def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:
         capture_output=True, text=True, check=False,
     )  # fmt: skip
     assert again.returncode == 2
+
+
+@pytest.mark.parametrize("effect", ["harmonics_high", "joint_harmonics"])
+def test_issue_22_gear_harmonics_of_the_blind_harness(effect: str) -> None:
+    """Joint-angle harmonics at gear orders (harmonics_high: 11 and 27 on joint 2, 17 on
+    joint 1; joint_harmonics: two random orders 7-59 on a random joint), 50-300 urad: the
+    diagnosis, told nothing, names the joints and the orders and reaches the floor."""
+    verdict = run_case(effect, 1000)
+    assert verdict["hit"], verdict
+    assert verdict["ratio_to_right"] < 1.2, verdict

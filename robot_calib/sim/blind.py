@@ -100,6 +100,11 @@ FORM_ANSWERS = {
 }
 
 
+#: effects another vocabulary effect expresses term for term: a transmission error's k-th
+#: harmonic is joint_harmonics at order k (the ladder, scanning orders, may name either)
+SAME_TERMS = {"transmission_error": ("transmission_error", "joint_harmonics")}
+
+
 def classes() -> tuple[str, ...]:
     """The case classes: none, every registered effect, the combinations and the forms."""
     return (NONE, *EFFECTS, *COMBINATIONS, *FORMS)
@@ -245,7 +250,7 @@ def _answers(case: Case) -> list[tuple[tuple[str, ...], tuple[int, ...]]]:
     """What naming each withheld effect means: (acceptable effect names, its joints)."""
     if case.effect in FORM_ANSWERS:
         return [(FORM_ANSWERS[case.effect], case.joints)]
-    return [((e.name,), e.joints) for e in case.withheld]
+    return [(SAME_TERMS.get(e.name, (e.name,)), e.joints) for e in case.withheld]
 
 
 def judge(case: Case, diagnosis: Diagnosis, right_rms_mm: float | None = None) -> dict[str, Any]:
