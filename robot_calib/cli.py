@@ -299,8 +299,9 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
                                 inputs, args.force)  # fmt: skip
     started = time.perf_counter()
     accuracy = args.tracker_accuracy
-    if accuracy is not None and not (math.isfinite(accuracy) and 0 < accuracy < 10):
-        raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, > 0 and < 10")
+    if accuracy is not None and not (math.isfinite(accuracy) and 1e-4 <= accuracy < 10):
+        raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, 0.0001 (0.1 um) "
+                         "to 10")  # fmt: skip
     diagnosis, ladder, recording = pipeline.diagnose_bags(
         args.bags, robot, args.holdout or (), args.pair_tolerance, _log,
         None if accuracy is None else accuracy * 1e-3,
@@ -314,8 +315,8 @@ def cmd_diagnose(args: argparse.Namespace) -> int:
         print(warning)
     print(f"best model (the ladder's chosen rung): {diagnosis.ladder[-1].model} -> {best}")
     if diagnosis.implausible:  # written (to be read), but no exit 0 with nonsense
-        raise ImplausibleError(f"{'; '.join(diagnosis.implausible)} ({output}: the geometric "
-                               "calibration the diagnosis rests on is implausible)")  # fmt: skip
+        raise ImplausibleError(f"{'; '.join(diagnosis.implausible)} ({output}: implausible, "
+                               "written to be read)")  # fmt: skip
     return 0
 
 

@@ -169,6 +169,17 @@ def test_a_correction_survives_json_exactly() -> None:
     with pytest.raises(InputError, match="x.json: correction: not a learned correction"):
         ResidualCorrection.from_dict({**doc, "format": "robot_calib.correction/99"},
                                      "x.json: correction")  # fmt: skip
+    # finite but absurd: a predicted correction of kilometres, or NaN, is never applied
+    good = json.loads(text)
+    for change, said in (
+        ({"signal_variance": 1e308}, "non-finite"),
+        ({"mean_m": [1000.0, 0.0, 0.0]}, "mean_m beyond 10 mm"),
+        ({"scale_m": 1e6}, "scale_m beyond 10 mm"),
+        ({"dual": [[1e3] * 3] * len(good["dual"])}, "predicts .* mm at its own poses"),
+        ({"bogus": 1}, "unknown key 'bogus'"),
+    ):
+        with pytest.raises(InputError, match=said):
+            ResidualCorrection.from_dict({**good, **change}, "x.json: correction")
 
 
 def test_the_hybrid_model_round_trips_through_params_json(

@@ -181,3 +181,27 @@ def test_diagnose_of_readings_in_degrees_exits_3_without_a_traceback(tmp_path: P
     assert len(said) == 1 and "look like degrees" in said[0], proc.stderr
     doc = json.loads((tmp_path / "d.json").read_text())
     assert doc["implausible"] and "look like degrees" in doc["implausible"][0]
+
+
+def test_diagnose_with_hold_out_readings_in_degrees_exits_3(tmp_path: Path) -> None:
+    """Calibration bag in rad, hold-out bag in degrees: every held-out figure is nonsense;
+    it once ended with exit 0 and a null verdict. Now DIAGNOSIS.json names the reason and
+    the verb exits 3."""
+    from cli_runner import robot_calib
+
+    from robot_calib.bag.csv_import import START_NS, STEP_NS, write_measurements
+    from robot_calib.sim.scenarios import ur10_random
+
+    scenario = ur10_random(seed=5, n=200, holdout_share=0.3)
+    robot, cal, held = scenario.world.model.robot, scenario.calibration, scenario.holdout
+    stamps = START_NS + np.arange(len(cal) + len(held)) * STEP_NS
+    write_measurements(tmp_path / "cal.mcap", cal.poses.q, cal.points, robot.joint_names,
+                       stamps[: len(cal)])  # fmt: skip
+    write_measurements(tmp_path / "deg.mcap", np.degrees(held.poses.q), held.points,
+                       robot.joint_names, stamps[len(cal) :])  # fmt: skip
+    proc = robot_calib("diagnose", "cal.mcap", "--holdout", "deg.mcap", "--robot", "ur10",
+                       "-o", "d.json", cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 3, proc.stderr
+    doc = json.loads((tmp_path / "d.json").read_text())
+    assert any("hold-out readings" in r and "degrees" in r for r in doc["implausible"])
+    assert "IMPLAUSIBLE" in (tmp_path / "d.html").read_text()

@@ -7,6 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from robot_calib.diagnose.frequency import MAX_SCAN_ORDER
 from robot_calib.diagnose.iso9283 import Iso9283, iso9283, repeat_groups
 from robot_calib.diagnose.ladder import (
     AT_FLOOR,
@@ -22,6 +23,7 @@ from robot_calib.diagnose.signatures import WhereItLies, where_it_lies
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.outliers import Outlier
+from robot_calib.identify.plausibility import degree_like_joints
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import Recording
 from robot_calib.records import Record
@@ -168,8 +170,8 @@ class Diagnosis(Record):
         ridge's (`learnable_gap`: the lower of the two): the best rung's, else None."""
         if self.learnable is None or not self.ladder:
             return None
-        best = min(r.holdout_abs_rms_mm for r in self.ladder)
-        if best >= self.learnable.holdout_abs_rms_mm:
+        best = min(r.holdout_abs_rms_mm for r in self.ladder if not r.learned)
+        if best >= self.learnable.holdout_abs_rms_mm * (1.0 - 1e-9):  # ties are no news
             return None
         return (
             f"the shares' bound is the best rung's {best:.4f} mm, below the learned correction's "
@@ -337,8 +339,10 @@ def diagnose(
     else:
         note = (
             f"held-out rms {ratio:.2f} x the noise floor remains"
-            + ("; it lies outside the vocabulary: no effect of it reduces it further"
-               if structure else "; no effect of the vocabulary reduces it further")
+            + ("; it lies outside the vocabulary: no effect of it reduces it further (joint-"
+               f"angle harmonics scanned up to order {MAX_SCAN_ORDER}, as far as the readings "
+               "resolve them)" if structure
+               else "; no effect of the vocabulary reduces it further")
             + structure.replace("strongest structure", "strongest remaining structure")
         )  # fmt: skip
     diagnosis = Diagnosis(
@@ -375,9 +379,22 @@ def diagnose(
         learnable=learnable,
         iso9283=_iso9283(ladder, recording, robot),
         refits=list(ladder.refits),
-        implausible=list(geo.implausible),
+        implausible=list(geo.implausible) + _holdout_in_degrees(holdout_sources, robot),
     )
     return diagnosis, ladder
+
+
+def _holdout_in_degrees(holdout: Recording | None, robot: RobotDescription) -> list[str]:
+    """Why hold-out bags whose readings look like degrees make every held-out figure
+    nonsense (a reason of `Diagnosis.implausible`); empty otherwise."""
+    if holdout is None:
+        return []
+    degrees = degree_like_joints(holdout, robot)
+    if not degrees:
+        return []
+    joints = ", ".join(f"{j} ({peak:.1f} rad)" for j, peak in degrees)
+    return [f"hold-out readings of joint(s) {joints} look like degrees; the contract wants "
+            "rad: every held-out figure is meaningless"]  # fmt: skip
 
 
 def _iso9283(ladder: Ladder, recording: Recording, robot: RobotDescription) -> list[Iso9283]:

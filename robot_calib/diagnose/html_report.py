@@ -298,6 +298,12 @@ def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibr
         ("Warnings", f"{len(warnings)} warning(s), {len(diagnosis.outliers)} flagged "
                      "outlier(s): see below" if warnings or diagnosis.outliers else "none"),
     ]  # fmt: skip
+    if diagnosis.implausible:  # nonsense: say so first, and never advise using it
+        items.insert(0, ("IMPLAUSIBLE", "; ".join(diagnosis.implausible)))
+        body = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in items)
+        return (f'<section class="verdict warn"><dl>{body}</dl><p><b>Next</b>: fix the data '
+                "(units, --robot, joint order) and diagnose again; export, compensate and "
+                "predict refuse this result.</p></section>")  # fmt: skip
     body = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in items)
     commands = (
         f"robot-calib export {best_params} --format urdf -o calibrated.urdf\n"

@@ -438,6 +438,11 @@ def _climb(
         scan = joint_spectra(fitted.model, fitted.parameters, recording, fitted.residuals)
         spectra[current.model] = scan
         pool = candidates(robot, recording, current.effects, scan)
+        pool, left_out = _affordable(pool, current.calibration, len(recording))
+        if left_out:
+            say(f"  {left_out} candidate(s) left out: more free parameters than "
+                f"{len(recording)} measurements can pin ({RESIDUALS_PER_PARAMETER} residuals "
+                "per parameter)")  # fmt: skip
         if not pool:
             break
         base, scores = _screen(current.calibration, pool, recording, holdout)
@@ -478,6 +483,25 @@ def _climb(
             break
         rungs.append(accepted)
     return _Climb(rungs, noise, scored_on, rounds, refits, spectra)
+
+
+#: residuals a candidate rung needs per free parameter: below, 5-fold CV of a few poses
+#: per fold picks effects that are not there (30 poses of a robot with no effect named
+#: eccentricity, which then generalised 58 % worse than geometric)
+RESIDUALS_PER_PARAMETER = 4
+
+
+def _affordable(
+    pool: list[Effect], current: Calibration, n_points: int
+) -> tuple[list[Effect], int]:
+    """The candidates of `pool` whose model keeps RESIDUALS_PER_PARAMETER residuals (3 per
+    measured point) per free parameter, and how many were left out."""
+    robot, have = current.model.robot, set(current.parameters.names)
+    n_free = int(current.parameters.free.sum())
+    budget = 3 * n_points / RESIDUALS_PER_PARAMETER
+    kept = [e for e in pool
+            if n_free + len(set(e.parameter_names(robot)) - have) <= budget]  # fmt: skip
+    return kept, len(pool) - len(kept)
 
 
 def _rejected_before_kfold(cal: Calibration, current: Rung, lin_insample_m: float) -> str:

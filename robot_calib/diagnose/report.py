@@ -133,6 +133,15 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         "",
         f"**Verdict** — {verdict}.",
         "",
+        *(
+            [
+                f"**IMPLAUSIBLE** — {'; '.join(diagnosis.implausible)}: fix the data (units, "
+                "--robot, joint order) and diagnose again.",
+                "",
+            ]
+            if diagnosis.implausible
+            else []
+        ),
         _floor_sentence(noise),
         "",
         "| model | held-out seed criterion mean / max [mm] "

@@ -70,7 +70,7 @@ def _option_value(kind: Any, raw: str) -> Any:  # noqa: ANN401 - an option's typ
     """An option's value from its text: a tuple option (joint_harmonics' orders) from
     '11,27', anything else by its type."""
     if get_origin(kind) is tuple:
-        return tuple(int(v) for v in raw.split(",") if v)
+        return tuple(int(v) for v in raw.split(","))  # '11,,27' fails here: no silent gap
     return kind(raw)
 
 
@@ -108,11 +108,15 @@ def parse_effect(text: str, n_joints: int, **defaults: Any) -> Effect:
     types = option_types(cls)
     options = {k: v for k, v in defaults.items() if k in types}
     joints: list[int] = []
+    given: set[str] = set()
     try:
         for part in parts:
             if "=" in part:
                 key, raw = part.split("=", 1)
                 check_keys([key], tuple(types), text, what="option")
+                if key in given:
+                    raise InputError(f"{text}: option {key!r} given twice")
+                given.add(key)
                 options[key] = _option_value(types[key], raw)
             else:
                 joints += [int(j) for j in part.split(",") if j]

@@ -66,9 +66,12 @@ class JointHarmonics(Effect):
         if isinstance(raw, int | str):
             raw = (raw,)
         try:
-            orders = tuple(sorted({int(k) for k in raw}))
+            listed = [int(k) for k in raw]
         except (TypeError, ValueError):
             raise InputError(f"joint_harmonics: orders must be integers, got {raw!r}") from None
+        orders = tuple(sorted(set(listed)))
+        if len(orders) != len(listed):
+            raise InputError(f"joint_harmonics: orders {listed} repeat an order")
         if not orders or any(isinstance(k, bool) for k in raw):
             raise InputError(f"joint_harmonics: orders must be integers >= 1, got {raw!r}")
         if orders[0] < 1 or orders[-1] > MAX_ORDER:

@@ -38,12 +38,20 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, check_keys
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.poses import Poses
 from robot_calib.records import Record
 
 FORMAT = "robot_calib.correction/1"
+CORRECTION_KEYS = (
+    "format", "method", "n_targets", "fitted_poses", "rms_m", "length_scales_deg", "noise_mm",
+    "inverse_length_scales", "signal_variance", "noise_variance", "mean_m", "scale_m",
+    "inducing_q_rad", "inducing_target", "dual", "warnings",
+)  # fmt: skip
+#: a learned correction larger than this is no correction of a calibrated robot [m]: a file
+#: that says so (or predicts so at its own poses) is refused
+MAX_CORRECTION_M = 0.010
 MAX_LEARN = 400  # poses the hyperparameters are learned on (a random subset above)
 MAX_POINTS = 2000  # poses fitted exactly; above, inducing poses of a subset of regressors
 MIN_LENGTH_SCALE_RAD = math.radians(1.0)  # a joint's shortest length scale (an edge)
@@ -428,6 +436,9 @@ class ResidualCorrection(Record):
             found = data.get("format") if isinstance(data, Mapping) else type(data).__name__
             raise InputError(f"{where}: not a learned correction of format {FORMAT} "
                              f"(format {found!r})")  # fmt: skip
+        check_keys(data, CORRECTION_KEYS, where)
+        if not isinstance(data.get("warnings", []), list):
+            raise InputError(f"{where}: malformed learned correction: warnings must be a list")
         try:
             q = np.array(data["inducing_q_rad"], dtype=float)
             target = np.array(data["inducing_target"], dtype=np.int64)
@@ -439,8 +450,10 @@ class ResidualCorrection(Record):
             n_targets, n_fitted = int(data["n_targets"]), int(data["fitted_poses"])
             warnings = tuple(str(v) for v in data.get("warnings", []))
             method = str(data["method"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(f"{where}: malformed learned correction ({exc!r})") from None
+        except KeyError as exc:
+            raise InputError(f"{where}: malformed learned correction (no field {exc})") from None
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{where}: malformed learned correction ({exc})") from None
         m = len(q)
         problems = [
             (q.ndim != 2 or m == 0, "inducing_q_rad must be an (m, J) table, m >= 1"),
@@ -461,9 +474,31 @@ class ResidualCorrection(Record):
         for bad, what in problems:
             if bad:
                 raise InputError(f"{where}: malformed learned correction: {what}")
+        physical = [
+            (not 0 <= scalars["rms_m"] <= MAX_CORRECTION_M, "rms_m beyond 0..10 mm"),
+            (float(np.max(np.abs(mean))) > MAX_CORRECTION_M, "mean_m beyond 10 mm"),
+            (scalars["scale_m"] > MAX_CORRECTION_M, "scale_m beyond 10 mm"),
+            (n_fitted < m, "fitted_poses below the inducing poses"),
+            (float(np.max(np.abs(q))) > 4 * np.pi, "inducing_q_rad beyond 4 pi (degrees?)"),
+        ]  # fmt: skip
+        for bad, what in physical:
+            if bad:
+                raise InputError(f"{where}: implausible learned correction: {what}")
         hyper = Hyperparameters(w, scalars["signal_variance"], scalars["noise_variance"])
-        return cls(q, target, dual, hyper, mean, scalars["scale_m"], n_targets, n_fitted,
-                   scalars["rms_m"], method, warnings)  # fmt: skip
+        out = cls(q, target, dual, hyper, mean, scalars["scale_m"], n_targets, n_fitted,
+                  scalars["rms_m"], method, warnings)  # fmt: skip
+        # what it predicts where it was fitted: finite, and of a correction's size
+        with np.errstate(all="ignore"):
+            at_fit = out.predict(replace(Poses.from_readings(q), target=target))
+        size = float(np.max(np.linalg.norm(at_fit, axis=1))) if len(at_fit) else 0.0
+        if not np.isfinite(at_fit).all():
+            raise InputError(f"{where}: implausible learned correction: it predicts "
+                             "non-finite values at its own poses")  # fmt: skip
+        if size > MAX_CORRECTION_M:
+            raise InputError(f"{where}: implausible learned correction: it predicts "
+                             f"{size * 1e3:.3g} mm at its own poses (at most "
+                             f"{MAX_CORRECTION_M * 1e3:.0f} mm)")  # fmt: skip
+        return out
 
 
 def fit_correction(

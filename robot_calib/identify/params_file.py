@@ -293,9 +293,11 @@ def correction_of(
     msgs_doc/parameters.md), None when it has none (the physical model alone); InputError
     naming `where` when the section is malformed or was fitted on another number of joints
     or targets than `model` has."""
-    if doc.get("correction") is None:
+    if "correction" not in doc:
         return None
     section = f"{where}: correction"
+    if doc["correction"] is None:
+        raise InputError(f"{section}: null (leave the section out for no correction)")
     correction = ResidualCorrection.from_dict(doc["correction"], section)
     if correction.n_joints != model.robot.n_joints or correction.n_targets != len(model.targets):
         raise InputError(
