@@ -428,6 +428,11 @@ class KinematicModel:
             if c.housing_jac is not None:
                 assert d_housing is not None
                 d_eff += np.einsum("najk,njkp->nap", d_housing, c.housing_jac)
+            if c.housing_blocks is not None:  # (n, 3, 5, T) per joint, in parameter order
+                assert d_housing is not None
+                d_eff += np.concatenate(
+                    [(d_housing[:, :, j, :, None] * basis[:, None, None, :]).reshape(n, 3, -1)
+                     for j, basis in c.housing_blocks], axis=2)  # fmt: skip
             jac[:, :, cols] = np.einsum("ab,nbp->nap", rot, d_eff)
         return points, jac
 

@@ -45,6 +45,12 @@ class Contribution:
     length_strain : (n,) [1], length_strain_jac : (n, P_e)
     housing : (n, J, 5) [m, m, m, rad, rad], housing_jac : (n, J, 5, P_e)
     A channel the effect does not use is None (both value and jac).
+
+    housing_blocks : instead of housing_jac, the same derivatives in block form, when every
+    housing error of a joint is one shared basis (n, T) times its own T coefficients: a list
+    of (joint index 0..J-1, basis (n, T)), the effect's parameters ordered block by block,
+    error by error (dx, dy, dz, ex, ey), term by term. The dense (n, J, 5, P_e) would be
+    mostly zeros (eccentricity of order 3 on six joints: 140 MB at 2773 poses).
     """
 
     joint_offset: Array | None = None
@@ -53,6 +59,7 @@ class Contribution:
     length_strain_jac: Array | None = None
     housing: Array | None = None
     housing_jac: Array | None = None
+    housing_blocks: list[tuple[int, Array]] | None = None
 
 
 #: The registry: effect name -> class, in the order the modules were imported (by name).

@@ -111,14 +111,14 @@ class Eccentricity(Effect):
     ) -> Contribution:
         n, n_joints = poses.q.shape
         n_terms = 1 + 2 * self.order
-        per_joint = len(HOUSING_ERRORS) * n_terms
-        jac = np.zeros((n, n_joints, len(HOUSING_ERRORS), per_joint * len(self.joints)))
-        for k, j in enumerate(self.joints):
-            basis = self.basis(poses.q[:, j - 1])
-            for e in range(len(HOUSING_ERRORS)):
-                start = k * per_joint + e * n_terms
-                jac[:, j - 1, e, start : start + n_terms] = basis
-        return Contribution(housing=jac @ self.values(robot, params), housing_jac=jac)
+        coef = self.values(robot, params).reshape(len(self.joints), len(HOUSING_ERRORS), n_terms)
+        housing = np.zeros((n, n_joints, len(HOUSING_ERRORS)))
+        blocks = []
+        for k, j in enumerate(self.joints):  # parameters: joint, error, term (`parameters`)
+            basis = self.basis(poses.q[:, j - 1])  # (n, T): shared by the joint's 5 errors
+            housing[:, j - 1, :] = basis @ coef[k].T
+            blocks.append((j - 1, basis))
+        return Contribution(housing=housing, housing_blocks=blocks)
 
     def default_values(self, robot: RobotDescription) -> dict[str, float]:
         """The seed's measured runout (Tables 5-6, order 1) of the KR5's joints."""
