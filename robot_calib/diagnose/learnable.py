@@ -15,7 +15,7 @@ hyperparameters by marginal likelihood on the calibration poses only: on hold-ou
 from all calibration residuals, in the k-fold case per fold from that fold's training
 poses (nested: the fold scored never chooses them; the first fold's hyperparameters start
 the others' search). Every calibration pose is fitted (exact up to MAX_POINTS, a subset of
-regressors on MAX_POINTS inducing poses above). A length scale per joint learns smooth
+regressors on INDUCING inducing poses above). A length scale per joint learns smooth
 pose-dependent structure (gravity, compliance, a joint's low harmonics) and ignores the
 joints it does not depend on; structure faster than its shortest length scale (a high
 harmonic of a gear) it learns poorly, and says so when a length scale ends there: the
@@ -33,6 +33,7 @@ import numpy as np
 
 from robot_calib.identify.calibrate import Calibration
 from robot_calib.identify.correction import (
+    INDUCING,
     MAX_LEARN,
     MAX_POINTS,
     Hyperparameters,
@@ -49,7 +50,7 @@ METHOD = (
     "the joint readings, one length scale per joint, white noise; hyperparameters by "
     f"marginal likelihood on at most {MAX_LEARN} calibration poses, per fold from its "
     f"training poses in k-fold; exact on up to {MAX_POINTS} poses, else a subset of "
-    f"regressors on {MAX_POINTS})"
+    f"regressors on {INDUCING})"
 )
 
 #: poses a fold after the first learns its hyperparameters on, warm-started from the first

@@ -15,7 +15,7 @@ term (several targets only) lets the targets' corrections differ (u_T = 0: one f
 Hyperparameters maximise the marginal likelihood (scipy L-BFGS-B, analytic gradient) on
 at most MAX_LEARN poses (a random subset: each step is O(n^3)); the model is then fitted
 on every pose up to MAX_POINTS exactly, above that as a subset of regressors (Nystrom) on
-m = MAX_POINTS inducing poses drawn at random: O(n m^2) time, O(m^2) memory (the poses
+m = INDUCING inducing poses drawn at random: O(n m^2) time, O(m^2) memory (the poses
 streamed in blocks), so 100k poses fit. Parametrised by inverse length scales u_j = 1 / l_j >= 0:
 u_j = 0 (the joint does not matter) is a natural end, not a bound (in u the search takes
 a third of the steps it takes in 1 / l^2, and fewer than in log l). The one artificial
@@ -53,7 +53,8 @@ CORRECTION_KEYS = (
 #: that says so (or predicts so at its own poses) is refused
 MAX_CORRECTION_M = 0.010
 MAX_LEARN = 400  # poses the hyperparameters are learned on (a random subset above)
-MAX_POINTS = 2000  # poses fitted exactly; above, inducing poses of a subset of regressors
+MAX_POINTS = 3000  # poses fitted exactly (one Cholesky, 0.4 s at 3000); above, a subset of
+INDUCING = 2000  # regressors on this many inducing poses: O(n INDUCING^2), 100k poses ~15 s
 MIN_LENGTH_SCALE_RAD = math.radians(1.0)  # a joint's shortest length scale (an edge)
 # the target code's largest inverse length scale: targets uncorrelated to e^-25 there (a
 # saturation, not an edge that changes predictions)
@@ -334,7 +335,7 @@ class ResidualCorrection(Record):
     """A fitted residual correction: what it predicts needs only these arrays.
 
     inducing_q : shape (m, J), the joint readings of the poses the prediction is built on
-        [rad] (every fitted pose up to MAX_POINTS, else a random MAX_POINTS of them)
+        [rad] (every fitted pose up to MAX_POINTS, else a random INDUCING of them)
     inducing_target : shape (m,), their targets (indices into the calibration's targets)
     dual : shape (m, 3), the dual coefficients of the scaled residuals [1]
     hyper : the kernel's hyperparameters (for residuals scaled to unit rms)
@@ -520,7 +521,8 @@ def fit_correction(
     rng : draws the learning subset and the inducing poses (default: seed 0)
 
     Every pose is fitted exactly up to `max_points` (the kernel matrix's Cholesky factor);
-    above, by a subset of regressors on `max_points` inducing poses drawn with `rng`: the
+    above, by a subset of regressors on INDUCING (at most `max_points`) inducing poses
+    drawn with `rng`: the
     dual coefficients (sigma^2 K_zz + K_zn K_nz)^-1 K_zn y, accumulated over blocks of
     poses (memory O(max_points^2 + block), time O(n max_points^2)).
 
@@ -551,7 +553,7 @@ def fit_correction(
         dual = cho_solve(cho_factor(k, lower=True), y)
         how = f"exact on all {n} poses"
     else:
-        inducing = _subset(n, max_points, rng)
+        inducing = _subset(n, min(max_points, INDUCING), rng)
         phi_z = _phi(q[inducing], target[inducing], hyper, n_targets)
         m = len(inducing)
         gram, rhs = hyper.noise_variance * _kernel(phi_z, phi_z, hyper), np.zeros((m, 3))
