@@ -23,6 +23,7 @@ from robot_calib.diagnose.learnable import LearnableBound, bound_of, corrected_h
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.identify.calibrate import LEARNED_SUFFIX, Calibration, calibrate, model_name
+from robot_calib.identify.correction import fit_correction
 from robot_calib.identify.fit import blocked_jacobian, weighted_rows
 from robot_calib.identify.outliers import (
     Outlier,
@@ -369,11 +370,16 @@ def _learn_the_rest(
     else:
         fold, fitted = pose_folds(recording), {}
     before, after, correction = corrected_heldout(physical.calibration, recording, holdout,
-                                                  fold, fitted)  # fmt: skip
+                                                  fold, fitted, final=False)  # fmt: skip
     gain = np.sqrt(np.mean(np.sum(after**2, axis=1))) <= (1.0 - MIN_GAIN) * np.sqrt(
         np.mean(np.sum(before**2, axis=1))
     )
-    assert correction is not None
+    if gain and holdout is None:  # k-fold: the first fold's correction stood in so far
+        cal = physical.calibration
+        residuals = cal.model.target_points(cal.parameters, recording.poses) - recording.points
+        final = fit_correction(recording.poses, residuals, len(cal.model.targets),
+                               np.random.default_rng(0), hyper=correction.hyper)  # fmt: skip
+        correction = replace(final, warnings=correction.warnings)
     bound = bound_of(rungs[0].heldout_residuals, after, correction, scored_on,
                      physical.model)  # fmt: skip
     if not gain:

@@ -121,7 +121,7 @@ def corrected_heldout(
     fold_parameters: dict[int, ParameterVector],
     rng: np.random.Generator | None = None,
     final: bool = True,
-) -> tuple[Array, Array, ResidualCorrection | None]:
+) -> tuple[Array, Array, ResidualCorrection]:
     """The residuals of `cal`'s physical model (its own correction, if any, left out) on
     held-out data before and after a learned correction (`identify.correction`), and the
     correction fitted on every calibration residual of `cal` (the hybrid model's).
@@ -134,8 +134,10 @@ def corrected_heldout(
         with them and a correction fitted on their residuals at the other folds' poses
         (its hyperparameters from those poses only, the first fold's starting the search)
     rng : draws the learning subsets and inducing poses (default: seed 0)
-    final : False to skip the correction of all calibration residuals in the k-fold case
-        (returned as None): a caller that may not use it fits it later (`fit_correction`)
+    final : False to skip the correction of all calibration residuals in the k-fold case:
+        the first fold's is returned instead (its hyperparameters, length scales and noise
+        are those the final one would reuse); a caller that may not apply it fits the
+        final one later (`fit_correction` with its `hyper`)
 
     Returns
     -------
@@ -170,9 +172,12 @@ def corrected_heldout(
         before[test] = fitted[test]
         after[test] = fitted[test] - local.predict(poses.subset(test))
         nonlocal_hyper[k] = local.hyper
+        if k == 0:
+            first.append(local)
         return tuple(f"{w} (fold {f})" for w in local.warnings)
 
     nonlocal_hyper: dict[int, Hyperparameters] = {}
+    first: list[ResidualCorrection] = []
     warnings: list[str] = []
     if folds:  # the first fold's hyperparameters start the others' search
         warnings += one(0)
@@ -183,8 +188,8 @@ def corrected_heldout(
             for lines in pool.map(one, range(1, len(folds))):
                 warnings += lines
     scored = np.isin(fold, folds)
-    if not final:
-        return before[scored], after[scored], None
+    if not final and first:
+        return before[scored], after[scored], replace(first[0], warnings=tuple(warnings))
     # all calibration residuals, with the first fold's hyperparameters (learned on most of
     # the same calibration poses: a search again would change them by its noise)
     correction = fit_correction(poses, residuals, n_targets, rng, hyper=start)
