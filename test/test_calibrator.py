@@ -98,6 +98,22 @@ def xyz(points: list) -> np.ndarray:  # noqa: ANN001 - geometry_msgs/Point list
     return np.array([[p.x, p.y, p.z] for p in points])
 
 
+def solve_in_bag_mode(calibrator: CalibratorNode, context: Context) -> Listener:
+    """Spin a bag-mode calibrator with a listener of its outputs until it has published
+    them all (or failed); both nodes destroyed after. Returns the listener."""
+    listener = Listener(context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(calibrator)
+    executor.add_node(listener)
+    try:
+        spin_until(executor, lambda: listener.has_all() or calibrator.error is not None)
+    finally:
+        executor.shutdown()
+        calibrator.destroy_node()
+        listener.destroy_node()
+    return listener
+
+
 def test_bag_mode_results_are_latched_for_late_subscribers(context: Context) -> None:
     calibrator = CalibratorNode(bags=[SAMPLE], context=context)
     executor = SingleThreadedExecutor(context=context)
@@ -167,16 +183,7 @@ def test_bag_mode_with_a_learned_correction_publishes_the_hybrid_model(
     `correction`), which reads back into the hybrid model; ~/summary gives its size."""
     learned = [Parameter("learned_correction", value=True)]
     calibrator = CalibratorNode(bags=[SAMPLE], context=context, parameter_overrides=learned)
-    listener = Listener(context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(calibrator)
-    executor.add_node(listener)
-    try:
-        spin_until(executor, lambda: listener.has_all() or calibrator.error is not None)
-    finally:
-        executor.shutdown()
-        calibrator.destroy_node()
-        listener.destroy_node()
+    listener = solve_in_bag_mode(calibrator, context)
     assert calibrator.error is None
     doc = json.loads(listener.last["parameters"].data)
     assert doc["correction"]["format"] == "robot_calib.correction/1"
@@ -505,16 +512,7 @@ def test_bag_with_a_blunder_is_calibrated_and_published_without_it(
     bag = tmp_path / "blunder.mcap"
     write_measurements(bag, rec.poses.q, points)
     calibrator = CalibratorNode(bags=[bag], context=context)
-    listener = Listener(context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(calibrator)
-    executor.add_node(listener)
-    try:
-        spin_until(executor, lambda: listener.has_all() or calibrator.error is not None)
-    finally:
-        executor.shutdown()
-        calibrator.destroy_node()
-        listener.destroy_node()
+    listener = solve_in_bag_mode(calibrator, context)
     assert calibrator.error is None and calibrator.solves == 1
     doc = json.loads(listener.last["parameters"].data)
     assert [o["index"] for o in doc["outliers"]] == [150]
