@@ -410,6 +410,39 @@ class _Climb:
 SCREEN_SLACK = 1.1
 
 
+def _try_rung(
+    current: Rung,
+    effect: Effect,
+    lin_score: float,
+    lin_insample: float,
+    recording: Recording,
+    holdout: Recording | None,
+    say: Log,
+) -> tuple[Rung | None, RefitOutcome]:
+    """`current` plus `effect` refitted and scored: the new rung when it cuts the score by
+    MIN_GAIN (else None), and the refit's outcome (`RefitOutcome`)."""
+    robot = current.calibration.model.robot
+    effects = _replace(current.effects, effect, robot)
+    name = model_name(effects)
+    cal = calibrate(recording, robot, name, log=None, start=current.calibration,
+                    screen_outliers=False)  # fmt: skip
+    insample = cal.accuracy.absolute_rms_mm
+    reason = _rejected_before_kfold(cal, current, lin_insample)
+    if reason:
+        say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, rejected: {reason}")
+        return None, RefitOutcome(name, lin_score * 1e3, insample, None, False, reason)
+    acc, res, score = score_rung(cal, recording, holdout)
+    say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, refitted "
+        f"{score * 1e3:.4f} mm (current {current.score_m * 1e3:.4f})")  # fmt: skip
+    good = score <= (1.0 - MIN_GAIN) * current.score_m
+    outcome = RefitOutcome(
+        name, lin_score * 1e3, insample, score * 1e3, good,
+        "" if good else f"held-out {score * 1e3:.4f} mm is not {MIN_GAIN:.0%} below "
+        f"{current.model}'s {current.score_m * 1e3:.4f} mm",
+    )  # fmt: skip
+    return (Rung(name, effects, cal, acc, res, score) if good else None), outcome
+
+
 def _climb(
     recording: Recording,
     robot: RobotDescription,
@@ -433,6 +466,7 @@ def _climb(
     rounds: list[list[tuple[str, float]]] = []
     refits: list[RefitOutcome] = []
     spectra: dict[str, list[JointSpectrum]] = {}
+    try_rung = partial(_try_rung, recording=recording, holdout=holdout, say=say)
     say(f"  geometric: held-out rms {acc.absolute_rms_mm:.4f} mm"
         + (f" (floor {noise.floor_rms_m * 1e3:.4f})" if noise.independent else ""))  # fmt: skip
     while len(rungs) <= MAX_RUNGS:
@@ -457,38 +491,53 @@ def _climb(
             [(model_name(_replace(current.effects, e, robot)), s) for e, s, _ in ranked[:8]]
         )
         accepted: Rung | None = None
+        at_floor_m = AT_FLOOR * noise.floor_rms_m if noise.independent else 0.0
         for effect, lin_score, lin_insample in ranked[:TRY_TOP]:  # refits confirm the screen
             if lin_score > (1.0 - MIN_GAIN) * base:
                 break
-            effects = _replace(current.effects, effect, robot)
-            name = model_name(effects)
-            cal = calibrate(recording, robot, name, log=None, start=current.calibration,
-                            screen_outliers=False)  # fmt: skip
-            insample = cal.accuracy.absolute_rms_mm
-            reason = _rejected_before_kfold(cal, current, lin_insample)
-            if reason:
-                refits.append(RefitOutcome(name, lin_score * 1e3, insample, None, False, reason))
-                say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, rejected: {reason}")
-                continue
-            acc, res, score = score_rung(cal, recording, holdout)
-            say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, refitted "
-                f"{score * 1e3:.4f} mm (current {current.score_m * 1e3:.4f})")  # fmt: skip
-            good = score <= (1.0 - MIN_GAIN) * current.score_m
-            refits.append(RefitOutcome(
-                name, lin_score * 1e3, insample, score * 1e3, good,
-                "" if good else f"held-out {score * 1e3:.4f} mm is not {MIN_GAIN:.0%} below "
-                f"{current.model}'s {current.score_m * 1e3:.4f} mm",
-            ))  # fmt: skip
-            if good and (accepted is None or score < accepted.score_m):
-                accepted = Rung(name, effects, cal, acc, res, score)
-            if good and score <= AT_FLOOR * noise.floor_rms_m and noise.independent:
+            rung, outcome = try_rung(current, effect, lin_score, lin_insample)
+            refits.append(outcome)
+            if rung is not None and (accepted is None or rung.score_m < accepted.score_m):
+                accepted = rung
+            if rung is not None and rung.score_m <= at_floor_m:
                 break  # at the noise floor already: nothing left to win
-            if good and score <= (1.0 + CONFIRMED) * lin_score:
+            if rung is not None and rung.score_m <= (1.0 + CONFIRMED) * lin_score:
                 break  # the refit confirms the screening: the rest screened worse
         if accepted is None:
             break
         rungs.append(accepted)
+        # Gear harmonics of other joints screened in the same round barely interact with the
+        # ones just added (other columns): tried as the next rungs straight away, without a
+        # new scan and screening each (a real arm has them on three joints or more).
+        for effect, lin_score, lin_insample in _other_joints_harmonics(ranked, accepted, base):
+            if len(rungs) > MAX_RUNGS or rungs[-1].score_m <= at_floor_m:
+                break
+            rung, outcome = try_rung(rungs[-1], effect, lin_score, lin_insample)
+            refits.append(outcome)
+            if rung is None:
+                break
+            rungs.append(rung)
     return _Climb(rungs, noise, scored_on, rounds, refits, spectra)
+
+
+def _other_joints_harmonics(ranked: list[Screened], accepted: Rung,
+                            base: float) -> list[Screened]:  # fmt: skip
+    """When `accepted` added joint harmonics: the best screened joint_harmonics candidate
+    of every other joint that screened MIN_GAIN below `base`, best first; else none."""
+    added = accepted.effects[-1]
+    if not added.candidates_from_residuals:
+        return []
+    seen = set(added.joints) | {j for e in accepted.effects[:-1]
+                               if e.candidates_from_residuals for j in e.joints}  # fmt: skip
+    out = []
+    for effect, lin_score, lin_insample in ranked:
+        if not effect.candidates_from_residuals or lin_score > (1.0 - MIN_GAIN) * base:
+            continue
+        if set(effect.joints) & seen:
+            continue
+        seen |= set(effect.joints)
+        out.append((effect, lin_score, lin_insample))
+    return out
 
 
 #: residuals a candidate rung needs per free parameter: below, 5-fold CV of a few poses
