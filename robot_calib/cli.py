@@ -606,7 +606,8 @@ def cmd_compensate(args: argparse.Namespace) -> int:
     n, reached = len(result.q), int(np.isin(flags, ("ok", "large_change", "position_only")).sum())
     print(f"{output}: {n} {what}; model error max {result.error_m.max() * 1e3:.6f} mm / "
           f"{result.error_rad.max() * 1e6:.3f} urad, {int(result.iterations.max())} iterations "
-          f"at most; {reached}/{n} reached")  # fmt: skip
+          f"at most; {reached}/{n} reached"
+          + ("; the learned correction applied" if correction is not None else ""))  # fmt: skip
     for flag, text in (
         ("not_reached", "not reached by the calibrated model (near a singularity or out of "
                         "reach; their q are nan)"),
@@ -718,11 +719,14 @@ def cmd_score(args: argparse.Namespace) -> int:
         table = output_path(args.points_csv, "the per-point table",
                             [args.params, *args.bags], args.force)  # fmt: skip
     recording = pipeline.read_bags(args.bags, robot, args.pair_tolerance, _log)
-    result = score(model, params, recording, in_sample, fitted, _correction(doc, model, args))
+    correction = _correction(doc, model, args)
+    result = score(model, params, recording, in_sample, fitted, correction)
     for warning in result.warnings:  # also in stdout and the per-point table
         _log(warning)
     for line in result.lines(", ".join(args.bags)):
         print(line)
+    if correction is not None:
+        print(f"the learned correction applied ({correction.line()})")
     if table is not None:
         write_points_table(result, recording, table)
         print(f"{table}: {len(recording)} points (bag, index, x/y/z, dx/dy/dz, error in m)")
@@ -825,7 +829,11 @@ OVERWRITE_POLICY = (
 
 def _add_force(p: argparse.ArgumentParser, implausible: bool = False) -> None:
     """--force; `implausible`: it also lets a PARAMS.json marked plausible false be used."""
-    also = "; use a PARAMS.json marked plausible: false (exit 3)" if implausible else ""
+    also = (
+        "; use a PARAMS.json marked plausible: false (a fit `calibrate` ended with exit 3)"
+        if implausible
+        else ""
+    )
     p.add_argument(
         "--force",
         action="store_true",
