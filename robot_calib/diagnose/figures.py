@@ -37,8 +37,8 @@ def pyplot() -> Any:  # noqa: ANN401 - the matplotlib.pyplot module
 
 #: points a figure draws at most (a seeded random subset above; statistics use all):
 #: a screen shows no more, and matplotlib's cost grows with every marker (issue 23)
-MAX_DRAWN = 3000
-MAX_ARROWS = 800  # 3D arrows of the residual-vector figure
+MAX_DRAWN = 1500
+MAX_ARROWS = 500  # 3D arrows of the residual-vector figure
 
 
 def drawn(n: int, limit: int = MAX_DRAWN) -> IntArray:
