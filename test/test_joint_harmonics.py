@@ -122,3 +122,12 @@ def test_refits_are_judged_like_with_like_when_the_holdout_is_easier(scenario) -
     diagnosis, ladder = diagnose(scenario.calibration, robot, scenario.holdout.subset(keep))
     physical = [r for r in ladder.rungs if not r.learned][-1]
     assert any(isinstance(e, JointHarmonics) for e in physical.effects), diagnosis.refits
+
+
+def test_orders_the_readings_cannot_resolve_are_never_picked() -> None:
+    """A sweep of 10 distinct readings resolves orders up to 4; random readings all 64."""
+    from robot_calib.diagnose.frequency import resolvable_order
+
+    assert resolvable_order(np.linspace(-1.0, 1.0, 10)) == 4
+    assert resolvable_order(np.repeat(np.linspace(-1.0, 1.0, 10), 3)) == 4  # repeats
+    assert resolvable_order(np.random.default_rng(0).uniform(-3, 3, 500)) >= 64

@@ -71,18 +71,27 @@ class JointSpectrum(Record):
     dominant_urad: list[float]
     dominant_significance: list[float]
     meaning: list[str]
+    # the highest order the joint's distinct readings resolve (`resolvable_order`): single-
+    # joint sweeps of a few dozen steps alias every order above it; None: not scanned
+    resolvable_order: int | None = None
 
     def line(self) -> str:
         """One human line, e.g. 'joint 2: orders 11 (212 urad, 40 x), 27 (...)'."""
+        limit = ""
+        if self.resolvable_order is not None and self.resolvable_order < len(self.significance):
+            limit = (
+                f" (its readings resolve orders up to {self.resolvable_order} only: "
+                "measure random poses for higher ones)"
+            )
         if not self.dominant_orders:
-            return f"joint {self.joint}: no harmonic stands out"
+            return f"joint {self.joint}: no harmonic stands out{limit}"
         parts = [
             f"{k} ({a:.0f} urad, {s:.0f} x)"
             for k, a, s in zip(
                 self.dominant_orders, self.dominant_urad, self.dominant_significance
             )  # fmt: skip
         ]
-        return f"joint {self.joint}: orders " + ", ".join(parts)
+        return f"joint {self.joint}: orders " + ", ".join(parts) + limit
 
 
 def modelled_orders(effects: tuple[Effect, ...], joint: int) -> set[int]:
@@ -141,7 +150,8 @@ def joint_spectra(
         left = np.linalg.norm(cols, axis=0) / np.where(norms > 0, norms, 1.0)
         usable = np.all(left >= MIN_LEFT, axis=1)
         usable[[k - 1 for k in modelled_orders(model.effects, j + 1) if k <= max_order]] = False
-        usable[orders > resolvable_order(poses.q[:, j])] = False  # aliased on these readings
+        resolvable = resolvable_order(poses.q[:, j])
+        usable[orders > resolvable] = False  # aliased on these readings
         chi2, coef = _pair_explained(cols, r)
         usable &= np.hypot(coef[:, 0], coef[:, 1]) <= MAX_AMPLITUDE_RAD  # beyond physics
         significance = np.where(usable, np.sqrt(np.maximum(chi2, 0.0)) / scatter, 0.0)
@@ -153,7 +163,8 @@ def joint_spectra(
             amps = [float(np.hypot(*c) * 1e6) for c in coef]
         values = [float(s) for s in significance]
         why = [meaning(k) for k in picked]
-        out.append(JointSpectrum(j + 1, True, lever * 1e3, values, picked, amps, picked_z, why))
+        out.append(JointSpectrum(j + 1, True, lever * 1e3, values, picked, amps, picked_z, why,
+                                 resolvable))  # fmt: skip
     return out
 
 
