@@ -13,9 +13,10 @@ from robot_calib.diagnose.figures import (
     residual_map_figure,
     time_figure,
 )
-from robot_calib.diagnose.ladder import Ladder
+from robot_calib.diagnose.ladder import HOLDOUT_K, Ladder
 from robot_calib.diagnose.noise import noise_basis
 from robot_calib.diagnose.signatures import ArcSignature, JointTerms
+from robot_calib.identify.outliers import OUTLIER_K
 from robot_calib.measurements import Recording
 
 
@@ -185,8 +186,10 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
     if diagnosis.outliers:
         lines += [
             "",
-            f"Left out as tracker blunders ({len(diagnosis.outliers)}, beyond 8 "
-            "robust sigmas; never explained as an effect of the robot):",
+            f"Left out as tracker blunders ({len(diagnosis.outliers)}, beyond {OUTLIER_K:g} "
+            f"robust sigmas of the calibration, {HOLDOUT_K:g} of the hold-out; never "
+            "explained as an effect of the robot; an effect outside the vocabulary can look "
+            "like one: check them):",
             "",
         ]
         lines += [f"- {o.line()}" for o in diagnosis.outliers]  # fmt: skip
