@@ -24,14 +24,13 @@ from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.identify.calibrate import LEARNED_SUFFIX, Calibration, calibrate, model_name
 from robot_calib.identify.correction import fit_correction
-from robot_calib.identify.fit import blocked_jacobian, weighted_rows
+from robot_calib.identify.fit import PRIOR_ROW, blocked_jacobian, weighted_rows
 from robot_calib.identify.outliers import (
     Outlier,
     describe_outliers,
     outlier_mask,
     robust_sigma,
 )
-from robot_calib.identify.prior import prior_sigmas
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
@@ -263,21 +262,19 @@ def kfold_parameters(
     fold = pose_folds(recording)
     params = cal.parameters
     residual, jac, owner = weighted_rows(cal.model, params, recording.poses, recording.points)
+    prior = owner == PRIOR_ROW
+    row_fold = np.full(len(owner), -1)  # the prior's rows are in no fold: every fold keeps them
+    row_fold[~prior] = fold[owner[~prior]]
     x = params.pack()
-    sigma = prior_sigmas(params)[params.free]
-    reference = float(np.sqrt(np.mean(residual**2))) if len(residual) else 0.0
-    prior_weight = np.where(np.isfinite(sigma), reference / sigma, 0.0)
-    prior_residual = prior_weight * (x - params.nominal[params.free])
-    norms = np.linalg.norm(jac, axis=0)
+    norms = np.linalg.norm(jac[~prior], axis=0)  # the data's columns set the scale
     scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
     scaled = jac * scale
     fitted = {}
     for f in np.unique(fold):
-        train = fold[owner] != f
+        train = row_fold != f
         a = scaled[train]
-        gram = a.T @ a + np.diag((prior_weight * scale) ** 2) + SCREEN_DAMPING * np.eye(len(x))
-        rhs = a.T @ residual[train] + prior_weight * scale * prior_residual
-        step = -np.linalg.solve(gram, rhs) * scale
+        gram = a.T @ a + SCREEN_DAMPING * np.eye(len(x))
+        step = -np.linalg.solve(gram, a.T @ residual[train]) * scale
         fitted[int(f)] = params.unpack(x + step)
     return fold, fitted
 
@@ -371,9 +368,8 @@ def _learn_the_rest(
         fold, fitted = pose_folds(recording), {}
     before, after, correction = corrected_heldout(physical.calibration, recording, holdout,
                                                   fold, fitted, final=False)  # fmt: skip
-    gain = np.sqrt(np.mean(np.sum(after**2, axis=1))) <= (1.0 - MIN_GAIN) * np.sqrt(
-        np.mean(np.sum(before**2, axis=1))
-    )
+    score = combined_rms(after, None)
+    gain = score <= (1.0 - MIN_GAIN) * combined_rms(before, None)
     if gain and holdout is None:  # k-fold: the first fold's correction stood in so far
         cal = physical.calibration
         residuals = cal.model.target_points(cal.parameters, recording.poses) - recording.points
@@ -387,7 +383,6 @@ def _learn_the_rest(
     measured = holdout.points if holdout is not None else recording.points  # as `after`
     cal = replace(physical.calibration, correction=correction)
     acc = accuracy(measured, measured + after)
-    score = float(np.sqrt(np.mean(np.sum(after**2, axis=1))))
     insample = accuracy(recording.points, cal.predict(recording.poses))
     return bound, Rung(physical.model + LEARNED_SUFFIX, physical.effects, cal, acc, after,
                        score, learned=True, insample=insample)  # fmt: skip
@@ -405,8 +400,8 @@ class _Climb:
     spectra: dict[str, list[JointSpectrum]]
 
 
-#: a refit whose in-sample rms exceeds its own linearised held-out estimate by this factor
-#: disappointed the screening: rejected before its k-fold refits
+#: a refit whose in-sample rms exceeds the screening's linearised in-sample figure by this
+#: factor disappointed the screening: rejected before its k-fold refits
 SCREEN_SLACK = 1.1
 
 
@@ -453,7 +448,7 @@ def _climb(
 ) -> _Climb:
     """The rungs from `geo` (the geometric calibration of `recording`) up, the noise level,
     what they are scored on, the candidates of every round, every refit's outcome and the
-    last round's frequency scan."""
+    frequency scan of every rung it scanned."""
     noise = estimate_noise(recording, geo.residuals, int(geo.parameters.free.sum()),
                            tracker_sigma_m)  # fmt: skip
     scored_on = "hold-out bags" if holdout is not None else f"{N_FOLDS}-fold CV over poses"

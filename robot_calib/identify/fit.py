@@ -230,6 +230,7 @@ class _Problem:
         self.prior_reference = max(stated, prior_reference or 0.0)
         self.prior_weight = self.prior_reference / sigma[self.prior_cols]
         self.prior_nominal = start.nominal[start.free][self.prior_cols]
+        self._costs: dict[bytes, float] = {}  # sum of squares at every x evaluated
         self.n_data = objective.n_rows(len(points))
         if type(objective) is AbsoluteObjective:  # not a subclass with other residuals
             self.rows6 = np.flatnonzero(self.weights.oriented)
@@ -260,7 +261,30 @@ class _Problem:
             self.predicted = predicted
             self._x = x.copy()
             self.evaluations += 1
+            self._costs[x.tobytes()] = float(self._cache[0] @ self._cache[0])
         return self._cache
+
+    def cost(self, x: Array) -> float:
+        """Sum of squared residuals (the prior's rows included) at free values x [m^2]: from
+        the evaluations already made at x when there is one (no new Jacobian)."""
+        if x.tobytes() not in self._costs:
+            self.evaluate(x)
+        return self._costs[x.tobytes()]
+
+    def set_prior_reference(self, reference: float) -> None:
+        """Take `reference` [m] as the prior's unit (`identify.prior`); the residuals and
+        Jacobian of the last evaluation are updated in place, not evaluated again (only
+        the prior's rows change)."""
+        self.prior_reference = reference
+        self.prior_weight = reference / prior_sigmas(self.start)[self.start.free][self.prior_cols]
+        self._costs.clear()
+        if self._x is None:
+            return
+        residual, jac = self._cache
+        rows = self.n_data + np.arange(len(self.prior_cols))
+        residual[rows] = self.prior_weight * (self._x[self.prior_cols] - self.prior_nominal)
+        jac[rows, self.prior_cols] = self.prior_weight
+        self._costs[self._x.tobytes()] = float(residual @ residual)
 
     def _weighted(self, params: ParameterVector, out: Array) -> tuple[Array, Array]:
         """Points (n, 3) [m] and the weighted residuals (3n + 3m,); their Jacobian written
@@ -346,17 +370,26 @@ def weighted_jacobian(
     return residual[: problem.n_data], jac[: problem.n_data].copy()  # the data's rows
 
 
+#: `weighted_rows`' owner of the weak prior's rows (they belong to no measurement)
+PRIOR_ROW = -1
+
+
 def weighted_rows(
     model: KinematicModel, params: ParameterVector, poses: Poses, points: Array
 ) -> tuple[Array, Array, Array]:
-    """The data's rows as the absolute fit sees them at `params` (stated accuracies'
-    weights and 6-DoF orientation rows included; no prior rows): residuals (m,) [m],
-    their Jacobian (m, n_free) with respect to the free parameters, and the measurement
-    each row belongs to (m,) (index into `poses`)."""
+    """The rows as the absolute fit sees them at `params` (stated accuracies' weights and
+    6-DoF orientation rows included), then the weak prior's rows, its unit the rms of the
+    data's rows here (the scatter the solution leaves): residuals (m,) [m], their
+    Jacobian (m, n_free) with respect to the free parameters, and the measurement each row
+    belongs to (m,) (index into `poses`; PRIOR_ROW for the prior's)."""
     problem = _Problem(model, params, poses, points, AbsoluteObjective())
-    residual, jac = problem.evaluate(params.pack())
-    owner = np.concatenate([np.repeat(np.arange(len(poses)), 3), np.repeat(problem.rows6, 3)])
-    return residual[: problem.n_data], jac[: problem.n_data].copy(), owner
+    x = params.pack()
+    data = problem.evaluate(x)[0][: problem.n_data]
+    problem.set_prior_reference(float(np.sqrt(np.mean(data**2))) if len(data) else 0.0)
+    residual, jac = problem.evaluate(x)
+    owner = np.concatenate([np.repeat(np.arange(len(poses)), 3), np.repeat(problem.rows6, 3),
+                            np.full(len(problem.prior_cols), PRIOR_ROW)])  # fmt: skip
+    return residual.copy(), jac.copy(), owner
 
 
 def _structurally_identifiable(
@@ -449,7 +482,7 @@ def fit_model(
     if len(problem.prior_cols):  # the prior's unit: what the start leaves per residual
         start_residual = problem.evaluate(params.pack())[0][: problem.n_data]
         at_start = float(np.sqrt(np.mean(start_residual**2))) if len(start_residual) else 0.0
-        problem = _Problem(model, params, poses, points, goal, prior_reference=at_start)
+        problem.set_prior_reference(max(problem.prior_reference, at_start))
     # Where a parameter is poorly determined, LM crawls along its flat valley: a coarse
     # solve (ROUGH_TOLERANCE) gets near enough to judge it, then the exact solve runs.
     rough = check_identifiability and robust_scale is None
@@ -482,13 +515,9 @@ def fit_model(
         solved.status, solved.message, solved.nfev, solved.njev, solved.optimality
     )  # fmt: skip
     x0 = params.pack()
-    if len(x) and robust_scale is None:
-        start_residual = problem.evaluate(x0)[0]
-        start_cost = float(start_residual @ start_residual)
-        end_residual = problem.evaluate(x)[0]
-        if float(end_residual @ end_residual) > start_cost:
-            x, status, success_note = x0, 0, "ended above its start: the start kept"
-            message = f"{message} ({success_note})"
+    if len(x) and robust_scale is None and problem.cost(x) > problem.cost(x0):
+        x, status, success_note = x0, 0, "ended above its start: the start kept"
+        message = f"{message} ({success_note})"
     residual, jac_free = problem.evaluate(x)
     data_residual, data_jac = residual[: problem.n_data], jac_free[: problem.n_data]
     fitted = params.unpack(x)
