@@ -130,7 +130,7 @@ def joint_spectra(
     poses = recording.poses.subset(rows)
     res = residuals[rows]
     span = model_span(model, params, poses, recording.points[rows] + res)
-    motion, basis = span.motion, span.basis
+    motion = span.motion
     r = span.project_off(res.reshape(-1))
     scatter = float(np.sqrt(np.mean(r**2))) or 1.0
     orders = np.arange(1, max_order + 1)
@@ -145,8 +145,7 @@ def joint_spectra(
         trig = np.stack([np.cos(angle), np.sin(angle)], axis=-1)  # (n, K, 2)
         cols = (motion[:, j, :, None, None] * trig[:, None]).reshape(-1, max_order, 2)
         norms = np.linalg.norm(cols, axis=0)  # (K, 2)
-        flat = cols.reshape(len(cols), -1)
-        flat -= basis @ (basis.T @ flat)
+        cols = span.project_off(cols)
         left = np.linalg.norm(cols, axis=0) / np.where(norms > 0, norms, 1.0)
         usable = np.all(left >= MIN_LEFT, axis=1)
         usable[[k - 1 for k in modelled_orders(model.effects, j + 1) if k <= max_order]] = False
@@ -159,8 +158,8 @@ def joint_spectra(
         amps: list[float] = []
         if picked:
             design = cols[:, [k - 1 for k in picked], :].reshape(len(cols), -1)
-            coef = np.linalg.lstsq(design, r, rcond=None)[0].reshape(-1, 2)
-            amps = [float(np.hypot(*c) * 1e6) for c in coef]
+            together = np.linalg.lstsq(design, r, rcond=None)[0].reshape(-1, 2)
+            amps = [float(np.hypot(*c) * 1e6) for c in together]
         values = [float(s) for s in significance]
         why = [meaning(k) for k in picked]
         out.append(JointSpectrum(j + 1, True, lever * 1e3, values, picked, amps, picked_z, why,

@@ -145,8 +145,8 @@ def corrected_heldout(
         every hold-out measurement, else those of the folds in `fold_parameters` in
         recording order
     after : shape (m, 3), the same minus the correction's predicted residual [m]
-    correction : the correction of all calibration residuals of `cal`, its `warnings`
-        those of every fold too
+    correction : the correction of all calibration residuals of `cal` (with `final`
+        False in the k-fold case: the first fold's), its `warnings` those of every fold
     """
     rng = np.random.default_rng(0) if rng is None else rng
     n_targets = len(cal.model.targets)
@@ -161,8 +161,8 @@ def corrected_heldout(
     seeds = rng.integers(0, 2**63, size=len(folds))  # each fold its own stream: any order
     start: Hyperparameters | None = None
 
-    def one(k: int) -> tuple[str, ...]:
-        """Fold folds[k]: its correction learned on its training poses, `after` filled."""
+    def one(k: int) -> ResidualCorrection:
+        """Fold folds[k]: its correction learned on its training poses; `after` filled."""
         f = folds[k]
         train, test = fold != f, fold == f
         fitted = cal.model.target_points(fold_parameters[f], poses) - points
@@ -171,25 +171,20 @@ def corrected_heldout(
                                max_learn=MAX_LEARN if start is None else WARM_LEARN)  # fmt: skip
         before[test] = fitted[test]
         after[test] = fitted[test] - local.predict(poses.subset(test))
-        nonlocal_hyper[k] = local.hyper
-        if k == 0:
-            first.append(local)
-        return tuple(f"{w} (fold {f})" for w in local.warnings)
+        return local
 
-    nonlocal_hyper: dict[int, Hyperparameters] = {}
-    first: list[ResidualCorrection] = []
-    warnings: list[str] = []
+    learned: list[ResidualCorrection] = []  # one per fold, in the order of `folds`
     if folds:  # the first fold's hyperparameters start the others' search
-        warnings += one(0)
-        start = nonlocal_hyper[0]
+        learned.append(one(0))
+        start = learned[0].hyper
         # the other folds are independent: both cores (numpy's linear algebra releases
         # the GIL; each fold writes only its own rows)
         with ThreadPoolExecutor(max_workers=FOLD_THREADS) as pool:
-            for lines in pool.map(one, range(1, len(folds))):
-                warnings += lines
+            learned += pool.map(one, range(1, len(folds)))
+    warnings = [f"{w} (fold {f})" for f, c in zip(folds, learned) for w in c.warnings]
     scored = np.isin(fold, folds)
-    if not final and first:
-        return before[scored], after[scored], replace(first[0], warnings=tuple(warnings))
+    if not final and learned:
+        return before[scored], after[scored], replace(learned[0], warnings=tuple(warnings))
     # all calibration residuals, with the first fold's hyperparameters (learned on most of
     # the same calibration poses: a search again would change them by its noise)
     correction = fit_correction(poses, residuals, n_targets, rng, hyper=start)
