@@ -113,10 +113,10 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
     for figures in diagnosis.iso9283:
         print(figures.line())
     print(f"dominant effect: {diagnosis.verdict}")
-    physical = [r.model for r in diagnosis.ladder if not r.learned][-1]
     for spectrum in diagnosis.unexplained.where.harmonic_orders:  # what the model leaves
         if spectrum.dominant_orders:
-            print(f"joint-angle harmonics left by {physical}: {spectrum.line()}")
+            print(f"joint-angle harmonics left by {diagnosis.physical_model}: "
+                  f"{spectrum.line()}")  # fmt: skip
     print(f"unexplained: {diagnosis.unexplained.note}")
     for line in outlier_lines(diagnosis.outliers):
         print(line)

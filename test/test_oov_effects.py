@@ -288,7 +288,7 @@ def diagnosis(joints: list[int] | None, model: str, effect: str = "unknown") -> 
     dominant = None if joints is None else DominantEffect(effect, joints)
     rung = SimpleNamespace(model=model, holdout_abs_rms_mm=0.01, learned=False)
     return cast(Diagnosis, SimpleNamespace(
-        dominant_effect=dominant, ladder=[rung], outliers=[],
+        dominant_effect=dominant, ladder=[rung], outliers=[], physical_model=model,
         unexplained=SimpleNamespace(ratio_to_noise_floor=1.2),
     ))  # fmt: skip
 

@@ -23,7 +23,7 @@ from robot_calib.diagnose.signatures import WhereItLies, where_it_lies
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.outliers import Outlier
-from robot_calib.identify.plausibility import degree_like_joints
+from robot_calib.identify.plausibility import degrees_reason
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import Recording
 from robot_calib.records import Record
@@ -151,6 +151,12 @@ class Diagnosis(Record):
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise InputError(f"not a robot_calib diagnosis (format {FORMAT})")
         return super().from_dict(data)
+
+    @property
+    def physical_model(self) -> str:
+        """The model name of the last physical rung (the hybrid rung's physical part when
+        it won: the effects the diagnosis names and where the rest lies)."""
+        return [r for r in self.ladder if not r.learned][-1].model
 
     def effect_shares(self) -> list[tuple[str, float]]:
         """(the effect each rung added, its own share of the learnable gap): the rung's
@@ -387,14 +393,8 @@ def diagnose(
 def _holdout_in_degrees(holdout: Recording | None, robot: RobotDescription) -> list[str]:
     """Why hold-out bags whose readings look like degrees make every held-out figure
     nonsense (a reason of `Diagnosis.implausible`); empty otherwise."""
-    if holdout is None:
-        return []
-    degrees = degree_like_joints(holdout, robot)
-    if not degrees:
-        return []
-    joints = ", ".join(f"{j} ({peak:.1f} rad)" for j, peak in degrees)
-    return [f"hold-out readings of joint(s) {joints} look like degrees; the contract wants "
-            "rad: every held-out figure is meaningless"]  # fmt: skip
+    reason = "" if holdout is None else degrees_reason(holdout, robot, "hold-out readings")
+    return [f"{reason}: every held-out figure is meaningless"] if reason else []
 
 
 def _iso9283(ladder: Ladder, recording: Recording, robot: RobotDescription) -> list[Iso9283]:

@@ -87,9 +87,8 @@ def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
     """The frequency scan of the geometric and the best model's residuals, with what the
     orders usually mean, and the refits the ladder made."""
     out: list[str] = []
-    physical = [r for r in diagnosis.ladder if not r.learned][-1].model  # its residuals
     for title, where in (("geometric", diagnosis.where),
-                         (physical, diagnosis.unexplained.where)):  # fmt: skip
+                         (diagnosis.physical_model, diagnosis.unexplained.where)):  # fmt: skip
         found = [s for s in where.harmonic_orders if s.dominant_orders]
         if not found or (title != "geometric" and where is diagnosis.where):
             continue

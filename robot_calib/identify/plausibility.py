@@ -90,6 +90,16 @@ def degree_like_joints(recording: Recording, robot: RobotDescription) -> list[tu
     ]
 
 
+def degrees_reason(recording: Recording, robot: RobotDescription, what: str = "readings") -> str:
+    """'`what` of joint(s) 1 (57.3 rad), ... look like degrees; the contract wants rad' for
+    the joints `degree_like_joints` finds, '' when none."""
+    degrees = degree_like_joints(recording, robot)
+    if not degrees:
+        return ""
+    joints = ", ".join(f"{j} ({peak:.1f} rad)" for j, peak in degrees)
+    return f"{what} of joint(s) {joints} look like degrees; the contract wants rad"
+
+
 def noise_per_axis(cal: Calibration) -> tuple[float, str]:
     """What the tracker alone leaves per axis [m], and where that figure comes from: the
     circle fits of the sweeps (pooled rms over 3 components) when CPA ran, else the
@@ -173,10 +183,9 @@ def implausible_reasons(
     `calibrate`'s exit 3 says "fitted, implausible: LINE"."""
     out: list[str] = []
     robot = cal.model.robot
-    degrees = degree_like_joints(recording, robot)
+    degrees = degrees_reason(recording, robot)
     if degrees:
-        joints = ", ".join(f"{j} ({peak:.1f} rad)" for j, peak in degrees)
-        out.append(f"readings of joint(s) {joints} look like degrees; the contract wants rad")
+        out.append(degrees)
     per_axis = float(np.sqrt(np.mean(cal.residuals**2))) if len(cal.residuals) else 0.0
     if geometry_fitted and len(cal.residuals):
         noise, source = noise_per_axis(cal)

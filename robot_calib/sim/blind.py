@@ -304,8 +304,7 @@ def judge(case: Case, diagnosis: Diagnosis, right_rms_mm: float | None = None) -
 def _rung_terms(diagnosis: Diagnosis, n_joints: int) -> list[Effect]:
     """The effects of the chosen physical rung's model name (its terms after the geometry;
     the hybrid rung, a learned correction on top of it, adds none)."""
-    physical = [r for r in diagnosis.ladder if not r.learned][-1]
-    return [parse_effect(t, n_joints) for t in physical.model.split("+")[1:]]
+    return [parse_effect(t, n_joints) for t in diagnosis.physical_model.split("+")[1:]]
 
 
 def _joints_named(withheld: tuple[Effect, ...], joints: list[int]) -> bool:
