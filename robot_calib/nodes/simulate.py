@@ -25,6 +25,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from robot_calib.errors import RobotCalibError
 from robot_calib.messages import JOINT_STATES_TOPIC
+from robot_calib.nodes.private_domain import private_domain
 from robot_calib.nodes.recorder import RecorderNode
 from robot_calib.nodes.sim_robot import SimRobotNode
 from robot_calib.nodes.sim_tracker import SimTrackerNode
@@ -91,13 +92,19 @@ def simulate_bag(
     """Simulate `plan` in `world` and record it to the MCAP file `output` (must not exist).
 
     Returns the recorder's message counts per topic. Owns rclpy init/shutdown unless a
-    context is already initialised (then it uses the default context and leaves it up).
+    context is already initialised (then it uses the default context and leaves it up);
+    an owned context runs on a private domain (`nodes.private_domain`), so that no other
+    ROS 2 graph on this machine (a robot, another simulation) reaches the offline one.
     An owned context installs no signal handlers of rclpy's: Ctrl-C (and SIGTERM where
     the caller maps it so) raises KeyboardInterrupt at the next step, the bag is closed
     and the caller discards it.
     """
     with _deferred_signals() as received:
-        return _simulate_bag(output, plan, world, seed, n_random, progress, received)
+        if rclpy.ok():  # the caller's graph: its domain
+            return _simulate_bag(output, plan, world, seed, n_random, progress, received)
+        with private_domain() as domain:  # an offline graph sees nobody else's topics
+            return _simulate_bag(output, plan, world, seed, n_random, progress, received,
+                                 domain)  # fmt: skip
 
 
 def _simulate_bag(
@@ -108,10 +115,11 @@ def _simulate_bag(
     n_random: int,
     progress: Callable[[int, int], None] | None,
     received: Sequence[int],
+    domain_id: int | None = None,
 ) -> dict[str, int]:
     owns_context = not rclpy.ok()
     if owns_context:
-        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO, domain_id=domain_id)
     sim_time = Parameter("use_sim_time", value=True)
     world_param = Parameter("world", value=str(world) if world else "")
     nodes: list[Node] = []
