@@ -15,7 +15,6 @@ from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
-from numpy.typing import NDArray
 
 from robot_calib.accuracy import Accuracy, accuracy
 from robot_calib.diagnose.frequency import JointSpectrum, harmonic_candidates, joint_spectra
@@ -174,66 +173,91 @@ def combined_rms(cv_residuals: Array, holdout_residuals: Array | None) -> float:
 class LinearScreen:
     """`combined_rms` of |r + J dx| [m] for any subset of a model's columns: k-fold (dx the
     least-squares step on the other folds) and on the hold-out points (dx from all
-    calibration points). The normal equations of every fold are formed once over all
-    columns (each scaled to unit norm), so a subset costs a (p, p) solve per fold instead
-    of a least squares over all rows: the ladder screens ~100 candidates per round.
+    calibration points). Every fold's sums over its own rows are formed once over all
+    columns (each scaled to unit norm): J^T J, J^T r and r^T r. A subset's fold then costs
+    a (p, p) solve and its sum of squares |r + J dx|^2 = r^T r + 2 dx^T J^T r +
+    dx^T J^T J dx, never a pass over the rows: the ladder screens ~100 candidates per
+    round, and memory beyond the Jacobian is O(P^2) per fold.
 
     residual (n, 3) [m], jac (n, 3, P), fold (n,); h_res (m, 3), h_jac (m, 3, P) or None.
     """
 
     def __init__(self, residual: Array, jac: Array, fold: IntArray, h_res: Array | None,
                  h_jac: Array | None) -> None:  # fmt: skip
-        norms = np.linalg.norm(jac.reshape(-1, jac.shape[-1]), axis=0)
+        n_cols = jac.shape[-1]
+        norms = np.sqrt(np.einsum("nij,nij->j", jac, jac))
         self.keep = norms > 0
         scale = np.where(self.keep, 1.0 / np.where(self.keep, norms, 1.0), 0.0)
-        self.residual, self.fold = residual, fold
-        self.h_res = h_res
-        self.h_jac = None if h_jac is None else h_jac * scale
-        # each fold's own rows once: its test Jacobian, and its share of the normal
-        # equations (the training set's are the total minus the fold's own)
-        self.tests: dict[int, tuple[NDArray[np.bool_], Array]] = {}
-        own: dict[int, tuple[Array, Array]] = {}
+        self.n_points = len(residual)
+        # each fold's own sums (its test set's) and the training set's: the total minus its own
+        self.own: dict[int, _Sums] = {}
         for f in np.unique(fold):
             test = fold == f
-            block = jac[test] * scale  # (n_f, 3, P)
-            self.tests[int(f)] = (test, block)
-            a = block.reshape(-1, jac.shape[-1])
-            own[int(f)] = (a.T @ a, a.T @ residual[test].reshape(-1))
-        gram = sum((g for g, _ in own.values()), np.zeros((jac.shape[-1],) * 2))
-        rhs = sum((b for _, b in own.values()), np.zeros(jac.shape[-1]))
-        self.normal = {f: (gram - g, rhs - b) for f, (g, b) in own.items()}
-        self.normal_all = (gram, rhs)
+            self.own[int(f)] = _Sums.of(jac[test].reshape(-1, n_cols) * scale,
+                                        residual[test].reshape(-1))  # fmt: skip
+        self.all = _Sums.total(list(self.own.values()), n_cols)
+        self.training = {f: self.all.minus(s) for f, s in self.own.items()}
+        self.holdout: _Sums | None = None
+        if h_res is not None and h_jac is not None:
+            self.holdout = _Sums.of(h_jac.reshape(-1, n_cols) * scale, h_res.reshape(-1))
+            self.n_holdout = len(h_res)
 
     @staticmethod
-    def _step(normal: tuple[Array, Array], cols: list[int]) -> Array:
+    def _step(normal: _Sums, cols: list[int]) -> Array:
         """The damped Gauss-Newton step (J^T J + SCREEN_DAMPING I) dx = -J^T r over `cols`
         (unit-norm columns): as one Levenberg-Marquardt step, directions the fold cannot
         determine do not take the prediction of the other fold anywhere (an undamped step
         sent a 10-term eccentricity candidate to 4x the error its refit reaches)."""
-        gram, rhs = normal
-        damped = gram[np.ix_(cols, cols)] + SCREEN_DAMPING * np.eye(len(cols))
-        return np.asarray(np.linalg.lstsq(damped, -rhs[cols], rcond=None)[0], dtype=float)
+        damped = normal.gram[np.ix_(cols, cols)] + SCREEN_DAMPING * np.eye(len(cols))
+        return np.asarray(np.linalg.solve(damped, -normal.rhs[cols]), dtype=float)  # SPD: damped
 
     def insample(self, cols: list[int]) -> float:
         """rms |r + J dx| [m] over every calibration point, dx the step from all of them:
         the linearised in-sample figure a refit of these columns should reach."""
         cols = [c for c in cols if self.keep[c]]
-        step = self._step(self.normal_all, cols)
-        total = 0.0
-        for test, block in self.tests.values():
-            total += float(np.sum((self.residual[test] + block[:, :, cols] @ step) ** 2))
-        return float(np.sqrt(total / max(len(self.residual), 1)))
+        total = self.all.after(self._step(self.all, cols), cols)
+        return float(np.sqrt(total / max(self.n_points, 1)))
 
     def score(self, cols: list[int]) -> float:
         cols = [c for c in cols if self.keep[c]]
-        out = np.empty_like(self.residual)
-        for f, normal in self.normal.items():
-            test, block = self.tests[f]
-            out[test] = self.residual[test] + block[:, :, cols] @ self._step(normal, cols)
-        h_out = None
-        if self.h_res is not None and self.h_jac is not None:
-            h_out = self.h_res + self.h_jac[:, :, cols] @ self._step(self.normal_all, cols)
-        return combined_rms(out, h_out)
+        total = sum(self.own[f].after(self._step(normal, cols), cols)
+                    for f, normal in self.training.items())  # fmt: skip
+        cv = total / max(self.n_points, 1)
+        if self.holdout is None:
+            return float(np.sqrt(cv))
+        held = self.holdout.after(self._step(self.all, cols), cols) / max(self.n_holdout, 1)
+        return float(np.sqrt(np.mean([cv, held])))  # as combined_rms: each source equally
+
+
+@dataclass(frozen=True)
+class _Sums:
+    """The sums of a set of rows (scaled Jacobian A (rows, P), residual r (rows,) [m]) that
+    every linear figure of them needs: gram = A^T A, rhs = A^T r, rr = r^T r [m^2]."""
+
+    gram: Array
+    rhs: Array
+    rr: float
+
+    @classmethod
+    def of(cls, a: Array, r: Array) -> _Sums:
+        return cls(a.T @ a, a.T @ r, float(r @ r))
+
+    @classmethod
+    def total(cls, parts: list[_Sums], n_cols: int) -> _Sums:
+        gram, rhs = np.zeros((n_cols, n_cols)), np.zeros(n_cols)
+        for p in parts:
+            gram += p.gram
+            rhs += p.rhs
+        return cls(gram, rhs, sum(p.rr for p in parts))
+
+    def minus(self, other: _Sums) -> _Sums:
+        return _Sums(self.gram - other.gram, self.rhs - other.rhs, self.rr - other.rr)
+
+    def after(self, step: Array, cols: list[int]) -> float:
+        """|r + A[:, cols] step|^2 [m^2] of these rows (never below 0: rounding)."""
+        value = self.rr + 2.0 * float(step @ self.rhs[cols])
+        value += float(step @ self.gram[np.ix_(cols, cols)] @ step)
+        return max(value, 0.0)
 
 
 def score_rung(cal: Calibration, recording: Recording,
