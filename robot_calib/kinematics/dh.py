@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robot_calib.kinematics.frames import Array, rot_x, rot_y, rot_z
+from robot_calib.kinematics.frames import Array
 
 
 @dataclass(frozen=True)
@@ -43,14 +43,27 @@ def link_transforms(dh: DHTable) -> Array:
     """Link transforms ``Rz(theta) Tz(d) Tx(a) Rx(alpha) Ry(beta)``, shape (n, J, 4, 4)."""
     t = dh.broadcast()
     n, j = t.theta.shape
-    flat = {k: getattr(t, k).reshape(-1) for k in ("theta", "d", "a", "alpha", "beta")}
-    rz = rot_z(flat["theta"])
-    out = np.zeros((n * j, 4, 4))
-    out[:, :3, :3] = rz @ rot_x(flat["alpha"]) @ rot_y(flat["beta"])
-    out[:, :3, 3] = rz[:, :, 0] * flat["a"][:, None]
-    out[:, 2, 3] += flat["d"]
-    out[:, 3, 3] = 1.0
-    return out.reshape(n, j, 4, 4)
+    ct, st = np.cos(t.theta), np.sin(t.theta)
+    ca, sa = np.cos(t.alpha), np.sin(t.alpha)
+    cb, sb = np.cos(t.beta), np.sin(t.beta)
+    # Rz(theta) Rx(alpha) Ry(beta) written out: no (n J, 3, 3) factors and no batched
+    # products of 3 x 3 matrices (the model's hottest function: every evaluation, per link)
+    out = np.zeros((n, j, 4, 4))
+    sa_sb, sa_cb = sa * sb, sa * cb
+    out[..., 0, 0] = ct * cb - st * sa_sb
+    out[..., 0, 1] = -st * ca
+    out[..., 0, 2] = ct * sb + st * sa_cb
+    out[..., 1, 0] = st * cb + ct * sa_sb
+    out[..., 1, 1] = ct * ca
+    out[..., 1, 2] = st * sb - ct * sa_cb
+    out[..., 2, 0] = -ca * sb
+    out[..., 2, 1] = sa
+    out[..., 2, 2] = ca * cb
+    out[..., 0, 3] = t.a * ct
+    out[..., 1, 3] = t.a * st
+    out[..., 2, 3] = t.d
+    out[..., 3, 3] = 1.0
+    return out
 
 
 def chain(dh: DHTable, housing_error: Array | None = None) -> Array:

@@ -13,34 +13,39 @@ Array = NDArray[np.float64]
 IntArray = NDArray[np.integer]  # indices, nanosecond stamps
 
 
+def _cos_sin(angle: ArrayLike) -> tuple[Array, Array]:
+    a = np.asarray(angle, dtype=float)
+    return np.cos(a), np.sin(a)
+
+
 def rot_x(angle: ArrayLike) -> Array:
     """Rotations about x, shape (n, 3, 3), for `angle` of shape (n,) [rad]."""
-    c, s = np.cos(angle), np.sin(angle)
-    one, zero = np.ones_like(c), np.zeros_like(c)
-    return np.stack(
-        [np.stack([one, zero, zero], -1), np.stack([zero, c, -s], -1), np.stack([zero, s, c], -1)],
-        -2,
-    )
+    c, s = _cos_sin(angle)
+    out = np.zeros((*c.shape, 3, 3))
+    out[..., 0, 0] = 1.0
+    out[..., 1, 1], out[..., 1, 2] = c, -s
+    out[..., 2, 1], out[..., 2, 2] = s, c
+    return out
 
 
 def rot_y(angle: ArrayLike) -> Array:
     """Rotations about y, shape (n, 3, 3), for `angle` of shape (n,) [rad]."""
-    c, s = np.cos(angle), np.sin(angle)
-    one, zero = np.ones_like(c), np.zeros_like(c)
-    return np.stack(
-        [np.stack([c, zero, s], -1), np.stack([zero, one, zero], -1), np.stack([-s, zero, c], -1)],
-        -2,
-    )
+    c, s = _cos_sin(angle)
+    out = np.zeros((*c.shape, 3, 3))
+    out[..., 1, 1] = 1.0
+    out[..., 0, 0], out[..., 0, 2] = c, s
+    out[..., 2, 0], out[..., 2, 2] = -s, c
+    return out
 
 
 def rot_z(angle: ArrayLike) -> Array:
     """Rotations about z, shape (n, 3, 3), for `angle` of shape (n,) [rad]."""
-    c, s = np.cos(angle), np.sin(angle)
-    one, zero = np.ones_like(c), np.zeros_like(c)
-    return np.stack(
-        [np.stack([c, -s, zero], -1), np.stack([s, c, zero], -1), np.stack([zero, zero, one], -1)],
-        -2,
-    )
+    c, s = _cos_sin(angle)
+    out = np.zeros((*c.shape, 3, 3))
+    out[..., 2, 2] = 1.0
+    out[..., 0, 0], out[..., 0, 1] = c, -s
+    out[..., 1, 0], out[..., 1, 1] = s, c
+    return out
 
 
 def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> Array:
