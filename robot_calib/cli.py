@@ -41,7 +41,7 @@ from robot_calib.pipeline import (
 if TYPE_CHECKING:
     from robot_calib.bag.csv_import import OrientationColumns, SigmaColumns
     from robot_calib.diagnose.diagnosis import Diagnosis
-    from robot_calib.identify.correction import ResidualCorrection
+    from robot_calib.identify.correction_structured import LearnedCorrection
     from robot_calib.kinematics.parameters import ParameterVector
     from robot_calib.model import KinematicModel
 
@@ -512,7 +512,7 @@ def _plausible_or_forced(
 
 def _correction(
     doc: Mapping[str, Any], model: KinematicModel, args: argparse.Namespace
-) -> ResidualCorrection | None:
+) -> LearnedCorrection | None:
     """The learned correction of args.params (PARAMS.json `correction`, the hybrid model),
     None when it has none."""
     from robot_calib.identify.params_file import correction_of

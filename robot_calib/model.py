@@ -304,6 +304,11 @@ class KinematicModel:
         """Flange (DH frame J) poses in the robot base frame, with effects, shape (n, 4, 4)."""
         return self._chain(params, poses).frames[:, -1]
 
+    def link_frames(self, params: ParameterVector, poses: Poses) -> Array:
+        """Every DH frame in the robot base, effects applied, shape (n, J + 1, 4, 4)
+        (0 = base, J = flange)."""
+        return self._chain(params, poses).frames
+
     def joint_axes(self, params: ParameterVector, poses: Poses) -> tuple[Array, Array]:
         """Axis lines of every joint at `poses` in the tracker frame: origins (n, J, 3) [m]
         and unit directions (n, J, 3) (z of frame j-1; housing errors included)."""

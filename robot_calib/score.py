@@ -16,7 +16,7 @@ import numpy as np
 
 from robot_calib.accuracy import Accuracy, OrientationAccuracy, accuracy, orientation_accuracy
 from robot_calib.atomic import write_text_atomic
-from robot_calib.identify.correction import ResidualCorrection
+from robot_calib.identify.correction_structured import LearnedCorrection
 from robot_calib.identify.fit import orientation_residuals
 from robot_calib.identify.outliers import OUTLIER_K, outlier_mask, robust_sigma
 from robot_calib.kinematics.frames import Array
@@ -69,7 +69,7 @@ def score(
     recording: Recording,
     in_sample: Accuracy | None = None,
     fitted: Sequence[str | Path] = (),
-    correction: ResidualCorrection | None = None,
+    correction: LearnedCorrection | None = None,
 ) -> Score:
     """The calibration `model` at `params` scored on every measurement of `recording`
     (of the model's targets; InputError naming a target the model has not identified).

@@ -22,6 +22,7 @@ from robot_calib.diagnose.learnable import corrected_heldout, learnable_bound
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import Calibration, calibrate
 from robot_calib.identify.correction import ResidualCorrection, fit_correction
+from robot_calib.identify.correction_structured import StructuredCorrection
 from robot_calib.ik import first_tool2flange, tool2base
 from robot_calib.kinematics.frames import Array
 from robot_calib.poses import Poses
@@ -112,9 +113,13 @@ def test_compliance_the_geometry_lacks_is_learnable(
                             "hold-out bags")  # fmt: skip
     assert bound.learnable_share > 0.65, bound.line()
     assert bound.holdout_abs_rms_mm < 0.35 * bound.geometric_abs_rms_mm
-    assert not [w for w in bound.warnings if "length scale" in w], bound.warnings
-    # joints 2 and 3 carry gravity's torque: they matter, over tens of degrees
-    assert all(s is not None and 10 < s < 200 for s in bound.length_scales_deg[1:3])
+    # compliance is linear in the gravity torque: the load-driven geometry learns it (joints
+    # 2 and 3 turning about their axes), the process of the rest learns nothing held out
+    correction = geo.with_learned_correction(scenario.calibration).correction
+    assert isinstance(correction, StructuredCorrection)
+    joints = {(s["joint"], s["motion"]) for s in correction.strongest(scenario.calibration.poses)}
+    assert {(2, "rz"), (3, "rz")} <= joints, joints
+    assert not np.any(correction.gp.dual), correction.line()
     assert "Gaussian process" in bound.line() and bound.fitted_poses == 700
 
 
@@ -192,7 +197,7 @@ def test_the_hybrid_model_round_trips_through_params_json(
     assert np.allclose(hybrid.predict(held.poses) - held.points, after, rtol=0, atol=1e-12)
     assert np.allclose(geo.predict(held.poses) - held.points, before, rtol=0, atol=1e-12)
     doc = json.loads(json.dumps(hybrid.to_dict(recording)))
-    assert doc["correction"]["format"] == "robot_calib.correction/1"
+    assert doc["correction"]["format"] == "robot_calib.correction/2"
     assert len(json.dumps(doc, indent=2)) < 1_000_000
     back = Calibration.from_dict(doc, "hybrid.json")
     assert back.correction is not None
@@ -238,7 +243,10 @@ def test_compensating_with_the_hybrid_model_puts_the_true_tool_nearer(
                                     correction)  # fmt: skip
         at = replace(commands, q=found.q)
         errors[name] = rms_mm(world.model.target_points(world.truth, at) - goal_in_tracker)
-    assert np.abs(hybrid.predict(at) - goal_in_tracker).max() < 1e-7  # the fixed point
+    # the fixed point: to 1e-7 m with the process alone; the load-driven geometry is
+    # steeper in the readings (up to 0.3 m/rad: its coefficients cancel each other) and
+    # the three rounds leave a few um
+    assert np.abs(hybrid.predict(at) - goal_in_tracker).max() < 1e-5
     assert errors["hybrid"] < 0.5 * errors["physical"], errors
 
 

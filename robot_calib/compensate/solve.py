@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot_calib.compensate.targets import Targets
-from robot_calib.identify.correction import ResidualCorrection
+from robot_calib.identify.correction_structured import LearnedCorrection
 from robot_calib.ik import (
     ORIENTATION_LEVER_M,
     IKSolution,
@@ -68,7 +68,7 @@ def solve_corrected(
     goal2base: Array,
     tool2flange: Array,
     oriented: NDArray[np.bool_] | None = None,
-    correction: ResidualCorrection | None = None,
+    correction: LearnedCorrection | None = None,
 ) -> IKSolution:
     """`ik.solve_ik` for a model whose first target really sits at its point minus the
     learned `correction`'s predicted residual (tracker frame): the model aimed at
@@ -96,7 +96,7 @@ def compensate_commands(
     nominal: KinematicModel,
     nominal_params: ParameterVector,
     commands: Poses,
-    correction: ResidualCorrection | None = None,
+    correction: LearnedCorrection | None = None,
 ) -> Compensation:
     """The compensated readings of `commands` (readings (n, J) [rad], approach directions
     and times of the nominal program; see the module docstring). The nominal model's tool
@@ -221,7 +221,7 @@ def compensate_targets(
     nominal_params: ParameterVector,
     targets: Targets,
     goal2base: Array,
-    correction: ResidualCorrection | None = None,
+    correction: LearnedCorrection | None = None,
 ) -> TargetCompensation:
     """Commands at which the calibrated model reaches the goals.
 

@@ -8,7 +8,12 @@ noise, and structure the data do not sample, are not. The ladder then reports wh
 of that learnable gap (geometric's held-out error minus the bound) each physical effect
 explains.
 
-The model: the Gaussian process of `identify.correction` (squared-exponential kernel on
+The model (`identify.correction_structured`, since issue 22's out-of-vocabulary item):
+load-driven geometry first, every link frame's small motion times the gravity moment it
+carries and steps of its joint's gravity torque (plus the model's own Jacobian columns),
+a ridge fit whose ridge is chosen by generalised cross-validation on the calibration
+residuals only; then, on what that leaves, the Gaussian process of `identify.correction`
+(squared-exponential kernel on
 (sin q_j, cos q_j) of every joint's reading, periodic so a joint's +-180 deg meet, one
 length scale per joint, white noise, the target's code with several targets), its
 hyperparameters by marginal likelihood on the calibration poses only: on hold-out bags
@@ -32,13 +37,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from robot_calib.identify.calibrate import Calibration
-from robot_calib.identify.correction import (
-    INDUCING,
-    MAX_LEARN,
-    MAX_POINTS,
-    Hyperparameters,
-    ResidualCorrection,
-    fit_correction,
+from robot_calib.identify.correction import INDUCING, MAX_LEARN, MAX_POINTS, Hyperparameters
+from robot_calib.identify.correction_structured import (
+    LearnedCorrection,
+    StructuredCorrection,
+    fit_structured,
 )
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
@@ -46,7 +49,10 @@ from robot_calib.measurements import Recording
 from robot_calib.records import Record
 
 METHOD = (
-    "Gaussian process of the geometric residuals (squared-exponential kernel on sin/cos of "
+    "load-driven geometry of the geometric residuals (link frames' motions times the "
+    "gravity loads they carry, ridge by generalised cross-validation on the calibration "
+    "poses, per fold on its training poses in k-fold), then a Gaussian process of what it "
+    "leaves (squared-exponential kernel on sin/cos of "
     "the joint readings, one length scale per joint, white noise; hyperparameters by "
     f"marginal likelihood on at most {MAX_LEARN} calibration poses, per fold from its "
     f"training poses in k-fold; exact on up to {MAX_POINTS} poses, else a subset of "
@@ -101,8 +107,8 @@ class LearnableBound(Record):
         whose = "its" if self.learned_on == "geometric" else f"{self.learned_on}'s"
         return (
             f"learnable bound: geometric {self.geometric_abs_rms_mm:.4f} mm -> "
-            f"{self.holdout_abs_rms_mm:.4f} mm rms held-out with a Gaussian process of {whose} "
-            f"residuals ({share}; {self.scored_on}{edge})"
+            f"{self.holdout_abs_rms_mm:.4f} mm rms held-out with load-driven geometry and a "
+            f"Gaussian process of {whose} residuals ({share}; {self.scored_on}{edge})"
         )
 
 
@@ -121,9 +127,10 @@ def corrected_heldout(
     fold_parameters: dict[int, ParameterVector],
     rng: np.random.Generator | None = None,
     final: bool = True,
-) -> tuple[Array, Array, ResidualCorrection]:
+) -> tuple[Array, Array, LearnedCorrection]:
     """The residuals of `cal`'s physical model (its own correction, if any, left out) on
-    held-out data before and after a learned correction (`identify.correction`), and the
+    held-out data before and after a learned correction (`identify.correction_structured`:
+    load-driven geometry, then a Gaussian process of the rest), and the
     correction fitted on every calibration residual of `cal` (the hybrid model's).
 
     cal : a calibration of `recording` (its measurements, tracker blunders left out)
@@ -137,7 +144,7 @@ def corrected_heldout(
     final : False to skip the correction of all calibration residuals in the k-fold case:
         the first fold's is returned instead (its hyperparameters, length scales and noise
         are those the final one would reuse); a caller that may not apply it fits the
-        final one later (`fit_correction` with its `hyper`)
+        final one later (`final_correction`)
 
     Returns
     -------
@@ -149,11 +156,10 @@ def corrected_heldout(
         False in the k-fold case: the first fold's), its `warnings` those of every fold
     """
     rng = np.random.default_rng(0) if rng is None else rng
-    n_targets = len(cal.model.targets)
     poses, points = recording.poses, recording.points
     residuals = cal.model.target_points(cal.parameters, poses) - points
     if holdout is not None:
-        correction = fit_correction(poses, residuals, n_targets, rng)
+        correction = fit_structured(cal.model, cal.parameters, poses, residuals, rng)
         before = cal.model.target_points(cal.parameters, holdout.poses) - holdout.points
         return before, before - correction.predict(holdout.poses), correction
     before, after = np.zeros_like(points), np.zeros_like(points)
@@ -161,19 +167,19 @@ def corrected_heldout(
     seeds = rng.integers(0, 2**63, size=len(folds))  # each fold its own stream: any order
     start: Hyperparameters | None = None
 
-    def one(k: int) -> ResidualCorrection:
+    def one(k: int) -> StructuredCorrection:
         """Fold folds[k]: its correction learned on its training poses; `after` filled."""
         f = folds[k]
         train, test = fold != f, fold == f
         fitted = cal.model.target_points(fold_parameters[f], poses) - points
-        local = fit_correction(poses.subset(train), fitted[train], n_targets,
-                               np.random.default_rng(seeds[k]), start=start,
+        local = fit_structured(cal.model, fold_parameters[f], poses.subset(train),
+                               fitted[train], np.random.default_rng(seeds[k]), start=start,
                                max_learn=MAX_LEARN if start is None else WARM_LEARN)  # fmt: skip
         before[test] = fitted[test]
         after[test] = fitted[test] - local.predict(poses.subset(test))
         return local
 
-    learned: list[ResidualCorrection] = []  # one per fold, in the order of `folds`
+    learned: list[StructuredCorrection] = []  # one per fold, in the order of `folds`
     if folds:  # the first fold's hyperparameters start the others' search
         learned.append(one(0))
         start = learned[0].hyper
@@ -187,9 +193,21 @@ def corrected_heldout(
         return before[scored], after[scored], replace(learned[0], warnings=tuple(warnings))
     # all calibration residuals, with the first fold's hyperparameters (learned on most of
     # the same calibration poses: a search again would change them by its noise)
-    correction = fit_correction(poses, residuals, n_targets, rng, hyper=start)
+    correction = fit_structured(cal.model, cal.parameters, poses, residuals, rng, hyper=start)
     correction = replace(correction, warnings=correction.warnings + tuple(warnings))
     return before[scored], after[scored], correction
+
+
+def final_correction(
+    cal: Calibration, recording: Recording, first: LearnedCorrection
+) -> StructuredCorrection:
+    """The correction of every calibration residual of `cal` (of `recording`), its
+    process's hyperparameters those of `first` (the first fold's, from `corrected_heldout`
+    with `final` False) and its warnings `first`'s (every fold's)."""
+    residuals = cal.model.target_points(cal.parameters, recording.poses) - recording.points
+    out = fit_structured(cal.model, cal.parameters, recording.poses, residuals,
+                         np.random.default_rng(0), hyper=first.hyper)  # fmt: skip
+    return replace(out, warnings=first.warnings)
 
 
 def learnable_bound(
@@ -209,7 +227,7 @@ def learnable_bound(
     return bound_of(before, after, correction, scored_on)
 
 
-def bound_of(geometric_residuals: Array, after: Array, correction: ResidualCorrection,
+def bound_of(geometric_residuals: Array, after: Array, correction: LearnedCorrection,
              scored_on: str, learned_on: str = "geometric") -> LearnableBound:  # fmt: skip
     """The bound from geometric's held-out residuals (m, 3) [m] and those (m, 3) [m] of
     the model `learned_on` corrected by a learned correction, on the same held-out data

@@ -27,7 +27,7 @@ from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.canonical import canonical_form
-from robot_calib.identify.correction import ResidualCorrection, fit_correction
+from robot_calib.identify.correction_structured import LearnedCorrection, fit_structured
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
 from robot_calib.identify.fit import (
     FitResult,
@@ -134,9 +134,10 @@ class Calibration:
     # (n, 3) rotation vectors of predicted * measured 6-DoF orientation [rad], tracker
     # frame, NaN where none was fitted; None without 6-DoF measurements
     orientation_residuals: Array | None = None
-    # a learned correction of what the model leaves (`identify.correction`: the hybrid
-    # model); `predict` subtracts its predicted residual; None: the physical model alone
-    correction: ResidualCorrection | None = None
+    # a learned correction of what the model leaves (`identify.correction_structured`,
+    # `identify.correction` in files of format 1: the hybrid model); `predict` subtracts
+    # its predicted residual; None: the physical model alone
+    correction: LearnedCorrection | None = None
     # why the result is nonsense rather than a calibration (`plausibility.implausible_reasons`:
     # readings in degrees, residual > 1000 x noise, parameters beyond physics, worse than the
     # simpler model it extends), one line each; empty: plausible (PARAMS.json `plausible`)
@@ -167,11 +168,12 @@ class Calibration:
 
     def with_learned_correction(self, recording: Recording) -> Calibration:
         """This calibration with a correction learned from its residuals at the measurements
-        of `recording` (its calibration recording) it fitted (`identify.correction`: the
-        hybrid model); `accuracy` and `residuals` stay the physical model's."""
+        of `recording` (its calibration recording) it fitted (load-driven geometry, then a
+        Gaussian process: `identify.correction_structured`, the hybrid model); `accuracy`
+        and `residuals` stay the physical model's."""
         fitted = recording if self.inliers is None else recording.subset(self.inliers)
         residuals = self.model.target_points(self.parameters, fitted.poses) - fitted.points
-        learned = fit_correction(fitted.poses, residuals, len(self.model.targets))
+        learned = fit_structured(self.model, self.parameters, fitted.poses, residuals)
         return replace(self, correction=learned)
 
     def to_dict(self, recording: Recording) -> dict[str, Any]:

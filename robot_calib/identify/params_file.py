@@ -17,7 +17,7 @@ from robot_calib.accuracy import Accuracy, orientation_accuracy
 from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
-from robot_calib.identify.correction import ResidualCorrection
+from robot_calib.identify.correction_structured import LearnedCorrection, correction_from_dict
 from robot_calib.kinematics.description import load_robot, with_payload
 from robot_calib.kinematics.frames import matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
@@ -288,17 +288,18 @@ def in_sample_accuracy(doc: Mapping[str, Any], where: str | Path) -> Accuracy | 
 
 def correction_of(
     doc: Mapping[str, Any], model: KinematicModel, where: str | Path
-) -> ResidualCorrection | None:
+) -> LearnedCorrection | None:
     """The learned correction of a PARAMS.json document (its `correction` section,
-    msgs_doc/parameters.md), None when it has none (the physical model alone); InputError
-    naming `where` when the section is malformed or was fitted on another number of joints
-    or targets than `model` has."""
+    msgs_doc/parameters.md; format 2, structured, or 1, the Gaussian process alone), None
+    when it has none (the physical model alone); InputError naming `where` when the
+    section is malformed or was fitted on another number of joints or targets than `model`
+    has."""
     if "correction" not in doc:
         return None
     section = f"{where}: correction"
     if doc["correction"] is None:
         raise InputError(f"{section}: null (leave the section out for no correction)")
-    correction = ResidualCorrection.from_dict(doc["correction"], section)
+    correction = correction_from_dict(doc["correction"], model, section)
     if correction.n_joints != model.robot.n_joints or correction.n_targets != len(model.targets):
         raise InputError(
             f"{section}: fitted on {correction.n_joints} joints and {correction.n_targets} "

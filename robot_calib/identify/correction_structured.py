@@ -1,0 +1,507 @@
+"""The hybrid model's learned correction: load-driven geometry, then a Gaussian process.
+
+What a physical model leaves of effects outside its vocabulary (a joint's play whose side
+gravity chooses, a link twisting under the weight it carries) is mostly geometry that
+changes with the load: a small motion of some link frame, proportional to or stepping with
+the gravity load that frame carries. So the residual r = predicted - measured [m] at
+readings q is first modelled as pose-dependent geometry, linear in its coefficients:
+
+    r(q) = sum_j sum_a D_ja(q) sum_f c_jaf g_jf(q) + sum_p J_p(q) b_p
+
+D_ja (3,) the displacement of the measured point per unit motion a of DH frame j (j = 0..J-1,
+the housing of joint j + 1; a = translation along and rotation about its x, y, z axes, in
+frame j: rotation about z is an error of joint j + 1's angle, about x and y a tilt of its
+axis), on the calibrated model at its parameters; g_jf the load features of frame j:
+
+    1, M_x, M_y, M_z, tanh(M_z / tau_k)   (k = 1..len(STEP_SHARES))
+
+M (3,) [N m] the gravity moment about frame j's origin of every link beyond it, in frame j
+(nominal kinematics and the robot's mass model, a payload included; M_z is joint j + 1's
+gravity torque): M makes a compliance of frame j in every direction, the tanh of M_z a
+step where the joint's torque changes sign (play whose side the load chooses; tau_k =
+STEP_SHARES x the largest rms of a joint's M_z over the fitted poses: the steps' widths,
+the same for every joint); the constant
+feature and the calibrated model's own Jacobian columns J_p (its free parameters) let the
+fit redo what the physical fit absorbed of the structure. The coefficients are a ridge
+least-squares fit, the columns scaled to unit rms and the ridge chosen by generalised
+cross-validation on the fitted residuals only (the normal equations accumulated in blocks
+of poses: memory O(P^2) for any number of poses); with fewer than MIN_ROWS_PER_COLUMN rows
+per column the structured part is left out (said in `method`).
+
+What the structure leaves, the Gaussian process of `identify.correction` learns (its
+kernel, hyperparameters and limits). The total is capped at MAX_CORRECTION_M per pose.
+
+Measured (simulated UR10, 700 calibration / 300 hold-out poses, held-out rms / noise
+floor; `test/test_correction_structured.py`): a 2 mrad gravity-side backlash of joint 2
+from 65 x (geometric) to 1.3 x (the process alone: 27 x); link 3 twisting out of the arm
+plane from 20.5 x to 1.1 x (the process alone: 9.2 x); gear harmonics the physical rung
+already models (1.00 x): unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from robot_calib.effects.compliance import GRAVITY
+from robot_calib.errors import InputError, check_keys
+from robot_calib.identify.correction import (
+    MAX_CORRECTION_M,
+    MAX_LEARN,
+    Hyperparameters,
+    ResidualCorrection,
+    fit_correction,
+)
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.dh import DHTable, chain
+from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.model import KinematicModel
+from robot_calib.poses import Poses
+
+FORMAT = "robot_calib.correction/2"
+CORRECTION_KEYS = (
+    "format", "method", "n_targets", "fitted_poses", "rms_m", "structured",
+    "gaussian_process", "warnings",
+)  # fmt: skip
+STRUCTURED_KEYS = (
+    "rms_m", "parameters", "jacobian_columns", "step_tau_nm", "coefficients", "ridge",
+    "degrees_of_freedom", "strongest",
+)  # fmt: skip
+#: the steps' widths tau_k: shares of the largest rms gravity torque of a joint over the
+#: fitted poses, the same for every joint (a UR10: about 1, 3 and 10 N m)
+STEP_SHARES = (0.01, 0.03, 0.1)
+#: a frame whose torque rms is below this [N m] gets steps of this width (a vertical axis:
+#: M_z = 0 everywhere, the steps are zero columns)
+MIN_TAU_NM = 1e-6
+FEATURES = ("1", "M_x", "M_y", "M_z", *(f"step{k + 1}" for k in range(len(STEP_SHARES))))
+MOTIONS = ("x", "y", "z", "rx", "ry", "rz")
+#: the ridge's grid, relative to the largest eigenvalue of the scaled normal equations (and
+#: no structure at all: the ridge's other end); ending at the smallest is said
+RIDGE_GRID = tuple(float(v) for v in np.logspace(-12, 0, 49))
+#: rows (3 per pose) per column below which the structured part is not fitted
+MIN_ROWS_PER_COLUMN = 2.0
+#: a candidate ridge may spend at most this share of the rows as degrees of freedom
+MAX_DOF_SHARE = 0.5
+#: the process of what the structure leaves is kept when, fitted on half the poses, it
+#: brings the other half's rms down by this share (`_process_generalises`)
+MIN_PROCESS_GAIN = 0.02
+CHECK_MIN_POSES = 50  # per half; with fewer poses the process is kept unchecked
+BLOCK_POSES = 2000  # poses per block of the design matrix (a block: 3 x 2000 x ~300 x 8 B)
+EIGEN_FLOOR = 1e-13  # eigenvalues below this share of the largest: a null direction
+
+
+def frame_loads(robot: RobotDescription, q: Array) -> Array:
+    """(n, J, 3) [N m]: M of every frame j = 0..J-1 (the housing of joint j + 1), the
+    gravity moment about its origin of the links beyond it (links j + 1..J), in frame j;
+    nominal kinematics of readings q (n, J) [rad] and the robot's mass model."""
+    dh = DHTable(robot.theta + robot.joint_variables(q), robot.d, robot.a, robot.alpha, robot.beta)
+    frames = chain(dh)
+    com = np.einsum("njab,jb->nja", frames[:, 1:, :3, :3], robot.link_com) + frames[:, 1:, :3, 3]
+    force = robot.link_mass[:, None] * GRAVITY  # (J, 3) base frame
+    n, n_joints = q.shape
+    out = np.zeros((n, n_joints, 3))
+    for j in range(n_joints):
+        moment = np.cross(com[:, j:] - frames[:, j, None, :3, 3], force[j:]).sum(axis=1)
+        out[:, j] = np.einsum("nab,na->nb", frames[:, j, :3, :3], moment)
+    return out
+
+
+def _features(loads: Array, step_tau: Array) -> Array:
+    """(n, J, F) load features (`FEATURES`) of loads (n, J, 3) [N m], steps tau (J, K)."""
+    n, n_joints, _ = loads.shape
+    steps = np.tanh(loads[:, :, 2:3] / step_tau[None])  # (n, J, K)
+    return np.concatenate([np.ones((n, n_joints, 1)), loads, steps], axis=2)
+
+
+def _motions(model: KinematicModel, params: ParameterVector, poses: Poses) -> Array:
+    """(n, 3, J, 6): the tracker-frame displacement of each measured point per unit motion
+    (MOTIONS: [m] translations, [rad] rotations) of each frame j = 0..J-1, in frame j."""
+    frames = model.link_frames(params, poses)
+    b2t = model.base2tracker(params)
+    rot = b2t[:3, :3]
+    point = (model.target_points(params, poses) - b2t[:3, 3]) @ rot  # base frame
+    n, n_joints = poses.q.shape
+    out = np.empty((n, 3, n_joints, 6))
+    for j in range(n_joints):
+        axes = frames[:, j, :3, :3]
+        lever = point - frames[:, j, :3, 3]
+        for a in range(3):
+            out[:, :, j, a] = axes[:, :, a] @ rot.T
+            out[:, :, j, 3 + a] = np.cross(axes[:, :, a], lever) @ rot.T
+    return out
+
+
+def _design(model: KinematicModel, params: ParameterVector, columns: tuple[str, ...],
+            step_tau: Array, poses: Poses) -> Array:  # fmt: skip
+    """(n, 3, P) the structured columns at `poses`: J x 6 x F load-driven motions, then the
+    model's Jacobian columns `columns`."""
+    n = len(poses)
+    features = _features(frame_loads(model.robot, poses.q), step_tau)  # (n, J, F)
+    motions = _motions(model, params, poses)  # (n, 3, J, 6)
+    loaded = np.einsum("najm,njf->najmf", motions, features).reshape(n, 3, -1)
+    if not columns:
+        return loaded
+    _, jac = model.jacobian(params, poses)
+    return np.concatenate([loaded, jac[:, :, [params.index(c) for c in columns]]], axis=2)
+
+
+def _blocks(n: int) -> list[slice]:
+    return [slice(s, min(s + BLOCK_POSES, n)) for s in range(0, n, BLOCK_POSES)]
+
+
+@dataclass(frozen=True)
+class Ridge:
+    """The structured part's fit: coefficients (P,) in the columns' units, the ridge
+    relative to the largest eigenvalue of the scaled normal equations (inf: no structure),
+    its degrees of freedom, and whether it ended at the grid's smallest ridge."""
+
+    coefficients: Array
+    ridge: float
+    dof: float
+    at_edge: bool
+
+
+def _ridge(gram: Array, rhs: Array, total: float, rows: int) -> Ridge:
+    """The ridge solution of the normal equations (gram (P, P), rhs (P,), y.y `total`, of
+    `rows` rows) with the ridge of least generalised cross-validation
+    RSS / (rows - dof)^2 over RIDGE_GRID and no structure at all."""
+    scale = np.sqrt(np.diag(gram) / max(rows, 1))
+    scale[~(scale > 0)] = 1.0
+    values, vectors = np.linalg.eigh(gram / np.outer(scale, scale))
+    keep = values > EIGEN_FLOOR * max(float(values[-1]), 0.0)
+    values, vectors = values[keep], vectors[:, keep]
+    projected = vectors.T @ (rhs / scale)  # V^T A^T y
+    u_y = projected / np.sqrt(values)  # U^T y
+    explained = float(np.sum(u_y**2))
+    best = (total / rows**2, math.inf, 0.0)  # no structure: RSS = y.y, dof 0
+    top = float(values[-1]) if len(values) else 0.0
+    for relative in RIDGE_GRID:
+        shrink = values / (values + relative * top)
+        dof = float(np.sum(shrink))
+        if dof > MAX_DOF_SHARE * rows:
+            continue
+        rss = max(total - explained, 0.0) + float(np.sum(((1.0 - shrink) * u_y) ** 2))
+        gcv = rss / (rows - dof) ** 2
+        if gcv < best[0]:
+            best = (gcv, relative, dof)
+    _, relative, dof = best
+    if not math.isfinite(relative):
+        return Ridge(np.zeros(len(rhs)), math.inf, 0.0, False)
+    coefficients = vectors @ (projected / (values + relative * top)) / scale
+    return Ridge(coefficients, relative, dof, relative == RIDGE_GRID[0])
+
+
+@dataclass(frozen=True)
+class StructuredCorrection:
+    """A fitted hybrid correction: load-driven geometry, then a Gaussian process of the rest.
+
+    model, parameters : the calibrated physical model and its parameters (the structured
+        columns are its frames and Jacobian at the poses)
+    columns : names of the model's parameters whose Jacobian columns are structured columns
+    step_tau : shape (J, K), the steps' widths tau per frame [N m]
+    coefficients : shape (J * 6 * F + len(columns),), the structured coefficients [m or rad
+        per feature unit, then per parameter unit]; zeros: no structure
+    ridge, dof : the ridge (relative; inf: no structure) and its degrees of freedom
+    structured_rms_m : rms norm of the structured part at the fitted poses [m]
+    gp : the Gaussian process of what the structure leaves (`identify.correction`)
+    n_targets, n_fitted, rms_m, method, warnings : as `ResidualCorrection`'s
+    """
+
+    model: KinematicModel
+    parameters: ParameterVector
+    columns: tuple[str, ...]
+    step_tau: Array
+    coefficients: Array
+    ridge: float
+    dof: float
+    structured_rms_m: float
+    gp: ResidualCorrection
+    n_targets: int
+    n_fitted: int
+    rms_m: float
+    method: str
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def n_joints(self) -> int:
+        return int(self.model.robot.n_joints)
+
+    @property
+    def hyper(self) -> Hyperparameters:
+        """The Gaussian process's hyperparameters (a warm start for another fit)."""
+        return self.gp.hyper
+
+    @property
+    def length_scales_deg(self) -> list[float | None]:
+        return self.gp.length_scales_deg
+
+    @property
+    def noise_mm(self) -> float:
+        return self.gp.noise_mm
+
+    def structured(self, poses: Poses) -> Array:
+        """The structured part's predicted residual (n, 3) [m, tracker frame]."""
+        out = np.zeros((len(poses), 3))
+        if not np.any(self.coefficients):
+            return out
+        for rows in _blocks(len(poses)):
+            design = _design(self.model, self.parameters, self.columns, self.step_tau,
+                             poses.subset(rows))  # fmt: skip
+            out[rows] = design @ self.coefficients
+        return out
+
+    def predict(self, poses: Poses) -> Array:
+        """The predicted residual (predicted - measured) at `poses`: shape (n, 3) [m,
+        tracker frame], the structure plus the process, its norm capped at
+        MAX_CORRECTION_M; subtract it from the model's points."""
+        if poses.q.shape[1] != self.n_joints:
+            raise InputError(f"learned correction: poses of {poses.q.shape[1]} joints, the "
+                             f"correction was fitted on {self.n_joints}")  # fmt: skip
+        out = self.gp.predict(poses) + self.structured(poses)
+        size = np.linalg.norm(out, axis=1, keepdims=True)
+        return out * np.minimum(1.0, MAX_CORRECTION_M / np.maximum(size, 1e-300))
+
+    def strongest(self, poses: Poses, count: int = 3) -> list[dict[str, Any]]:
+        """The `count` load-driven motions whose pose-dependent part moves the points at
+        `poses` most: joint (whose housing frame), motion (MOTIONS) and rms at the point [m]."""
+        if not np.any(self.coefficients):
+            return []
+        n_joints, n_features = self.n_joints, len(FEATURES)
+        block = n_joints * 6 * n_features
+        sums = np.zeros((len(poses), 3, n_joints, 6))
+        coefficients = self.coefficients[:block].reshape(n_joints, 6, n_features).copy()
+        coefficients[:, :, 0] = 0.0  # the constant part is geometry, not load
+        for rows in _blocks(len(poses)):
+            part = poses.subset(rows)
+            features = _features(frame_loads(self.model.robot, part.q), self.step_tau)
+            motions = _motions(self.model, self.parameters, part)
+            sums[rows] = motions * np.einsum("njf,jmf->njm", features, coefficients)[:, None]
+        size = np.sqrt(np.mean(np.sum(sums**2, axis=1), axis=0))  # (J, 6)
+        order = np.argsort(size, axis=None)[::-1][:count]
+        return [{"joint": int(k // 6) + 1, "motion": MOTIONS[k % 6], "rms_m": float(size.flat[k])}
+                for k in order]  # fmt: skip
+
+    def line(self) -> str:
+        """One human line: size, the structured part's, the process's."""
+        return (
+            f"learned correction: {self.rms_m * 1e3:.4f} mm rms at its {self.n_fitted} "
+            f"calibration poses: load-driven geometry {self.structured_rms_m * 1e3:.4f} mm "
+            f"({self.dof:.0f} degrees of freedom), then a Gaussian process of the rest ("
+            + self.gp.line().removeprefix("learned correction: ")
+            + ")"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """PARAMS.json `correction` of format 2 (msgs_doc/parameters.md)."""
+        return {
+            "format": FORMAT,
+            "method": self.method,
+            "n_targets": self.n_targets,
+            "fitted_poses": self.n_fitted,
+            "rms_m": self.rms_m,
+            "structured": {
+                "rms_m": self.structured_rms_m,
+                "parameters": {
+                    p.name: float(v)
+                    for p, v in zip(self.parameters.parameters, self.parameters.values)
+                },
+                "jacobian_columns": list(self.columns),
+                "step_tau_nm": self.step_tau.tolist(),
+                "coefficients": self.coefficients.tolist(),
+                "ridge": None if math.isinf(self.ridge) else self.ridge,
+                "degrees_of_freedom": self.dof,
+            },  # fmt: skip
+            "gaussian_process": self.gp.to_dict(),
+            "warnings": list(self.warnings),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], model: KinematicModel,
+                  where: str = "correction") -> StructuredCorrection:  # fmt: skip
+        """The correction of a `to_dict` mapping for `model` (the file's physical model);
+        InputError naming `where` when it is of another format, lacks a field, names
+        parameters the model has not, has arrays of inconsistent shapes, values that are
+        not finite or a correction beyond MAX_CORRECTION_M."""
+        if not isinstance(data, Mapping) or data.get("format") != FORMAT:
+            found = data.get("format") if isinstance(data, Mapping) else type(data).__name__
+            raise InputError(f"{where}: not a learned correction of format {FORMAT} "
+                             f"(format {found!r})")  # fmt: skip
+        check_keys(data, CORRECTION_KEYS, where)
+        part = data.get("structured")
+        if not isinstance(part, Mapping):
+            raise InputError(f"{where}: malformed learned correction: no `structured` section")
+        check_keys(part, STRUCTURED_KEYS, f"{where}: structured")
+        process = ResidualCorrection.from_dict(data.get("gaussian_process", {}),
+                                               f"{where}: gaussian_process")  # fmt: skip
+        try:
+            values = {str(k): float(v) for k, v in dict(part["parameters"]).items()}
+            columns = tuple(str(c) for c in part["jacobian_columns"])
+            step_tau = np.array(part["step_tau_nm"], dtype=float)
+            coefficients = np.array(part["coefficients"], dtype=float)
+            ridge = math.inf if part["ridge"] is None else float(part["ridge"])
+            dof, structured_rms = float(part["degrees_of_freedom"]), float(part["rms_m"])
+            n_targets, n_fitted = int(data["n_targets"]), int(data["fitted_poses"])
+            rms = float(data["rms_m"])
+            warnings = tuple(str(v) for v in data.get("warnings", []))
+            method = str(data["method"])
+        except KeyError as exc:
+            raise InputError(f"{where}: malformed learned correction (no field {exc})") from None
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{where}: malformed learned correction ({exc})") from None
+        nominal = model.parameters()
+        unknown = sorted(set(values) ^ {p.name for p in nominal.parameters})
+        if unknown:
+            raise InputError(f"{where}: learned correction: parameters {unknown[:5]} do not "
+                             "match the model's")  # fmt: skip
+        n_joints = model.robot.n_joints
+        size = n_joints * 6 * len(FEATURES) + len(columns)
+        problems = [
+            (step_tau.shape != (n_joints, len(STEP_SHARES)),
+             f"step_tau_nm must be a ({n_joints}, {len(STEP_SHARES)}) table"),
+            (bool(step_tau.size) and not bool(np.all(step_tau > 0)), "step_tau_nm must be > 0"),
+            (coefficients.shape != (size,), f"coefficients must have {size} values"),
+            (not set(columns) <= set(values), "jacobian_columns must name parameters"),
+            (not np.isfinite(coefficients).all() or not np.isfinite(step_tau).all()
+             or not all(math.isfinite(v) for v in (*values.values(), dof, structured_rms, rms)),
+             "values not finite"),
+            (n_targets != process.n_targets or n_joints != process.n_joints,
+             "the Gaussian process has another number of joints or targets"),
+        ]  # fmt: skip
+        for bad, what in problems:
+            if bad:
+                raise InputError(f"{where}: malformed learned correction: {what}")
+        if not 0 <= rms <= MAX_CORRECTION_M or not 0 <= structured_rms <= MAX_CORRECTION_M:
+            raise InputError(f"{where}: implausible learned correction: rms_m beyond 0..10 mm")
+        return cls(model, nominal.with_values(values), columns, step_tau, coefficients, ridge,
+                   dof, structured_rms, process, n_targets, n_fitted, rms, method,
+                   warnings)  # fmt: skip
+
+
+#: a correction of the hybrid model: the process alone (format 1) or structured (format 2)
+LearnedCorrection = ResidualCorrection | StructuredCorrection
+
+
+def correction_from_dict(data: Mapping[str, Any], model: KinematicModel,
+                         where: str = "correction") -> LearnedCorrection:  # fmt: skip
+    """A PARAMS.json `correction` of either format (1: the process alone, still read)."""
+    if isinstance(data, Mapping) and data.get("format") == FORMAT:
+        return StructuredCorrection.from_dict(data, model, where)
+    return ResidualCorrection.from_dict(data, where)
+
+
+def fit_structured(
+    model: KinematicModel,
+    parameters: ParameterVector,
+    poses: Poses,
+    residuals: Array,
+    rng: np.random.Generator | None = None,
+    hyper: Hyperparameters | None = None,
+    start: Hyperparameters | None = None,
+    max_learn: int = MAX_LEARN,
+) -> StructuredCorrection:
+    """The hybrid correction of `residuals` (n, 3) [m, tracker frame, predicted -
+    measured] of `model` at `parameters` at `poses`: the load-driven geometry by ridge
+    least squares (ridge by generalised cross-validation on these residuals), then the
+    Gaussian process of the rest (`fit_correction` with `rng`, `hyper`, `start`,
+    `max_learn`)."""
+    rng = np.random.default_rng(0) if rng is None else rng
+    n = len(poses)
+    if residuals.shape != (n, 3) or n == 0:
+        raise InputError(f"learned correction: residuals of shape {residuals.shape} for "
+                         f"{n} poses (expected ({n}, 3), n >= 1)")  # fmt: skip
+    columns = tuple(name for name, free in zip(parameters.names, parameters.free) if free)
+    n_joints = model.robot.n_joints
+    torque = np.sqrt(np.mean(frame_loads(model.robot, poses.q)[:, :, 2] ** 2, axis=0))
+    # one set of widths for every joint, sized by the most loaded joint: a lightly loaded
+    # wrist joint gets no step sharper than the shoulder's (a sharp step fits noise and
+    # makes the correction steep, which a compensation's fixed point does not survive)
+    step_tau = np.maximum(np.outer(np.full(n_joints, torque.max()), STEP_SHARES), MIN_TAU_NM)
+    size = n_joints * 6 * len(FEATURES) + len(columns)
+    rows = 3 * n
+    warnings: tuple[str, ...] = ()
+    if rows < MIN_ROWS_PER_COLUMN * size:
+        fit = Ridge(np.zeros(size), math.inf, 0.0, False)
+        how = (f"left out: {n} poses give {rows} rows for {size} columns (at least "
+               f"{MIN_ROWS_PER_COLUMN:g} per column)")  # fmt: skip
+    else:
+        gram, rhs, total = np.zeros((size, size)), np.zeros(size), 0.0
+        for block in _blocks(n):
+            design = _design(model, parameters, columns, step_tau, poses.subset(block))
+            flat, y = design.reshape(-1, size), residuals[block].reshape(-1)
+            gram += flat.T @ flat
+            rhs += flat.T @ y
+            total += float(y @ y)
+        fit = _ridge(gram, rhs, total, rows)
+        how = (f"{size} columns, ridge {fit.ridge:.2g} of the largest eigenvalue by "
+               f"generalised cross-validation, {fit.dof:.0f} degrees of freedom")  # fmt: skip
+        if fit.at_edge:
+            warnings += (
+                "warning: learned correction: the structured part's ridge ends at the "
+                "smallest of its grid (the residuals are nearly all structure)",
+            )
+    structured = replace(
+        _empty(model, parameters, columns, step_tau, n), coefficients=fit.coefficients
+    ).structured(poses)
+    process = fit_correction(poses, residuals - structured, len(model.targets), rng,
+                             hyper=hyper, start=start, max_learn=max_learn)  # fmt: skip
+    if not _process_generalises(process, poses, residuals - structured):
+        process = replace(
+            process, dual=np.zeros_like(process.dual), mean_m=np.zeros(3), rms_m=0.0,
+            method=process.method + "; left out: it learned nothing held out in a 2-fold "
+            "check on the fitted poses",
+        )  # fmt: skip
+    method = (
+        "load-driven geometry (every link frame's small motion times 1, the gravity moment "
+        "it carries and steps of its joint's gravity torque, plus the model's own Jacobian "
+        f"columns; ridge least squares: {how}), then a {process.method[0].lower()}"
+        f"{process.method[1:]}"
+    )
+    out = StructuredCorrection(
+        model, parameters, columns, step_tau, fit.coefficients, fit.ridge, fit.dof,
+        _rms(structured), process, len(model.targets), n, 0.0, method,
+        warnings + process.warnings,
+    )  # fmt: skip
+    return replace(out, rms_m=_rms(out.predict(poses)))
+
+
+def _process_generalises(process: ResidualCorrection, poses: Poses, left: Array) -> bool:
+    """True when the process (its hyperparameters) fitted on either half of the poses
+    brings the other half's `left` residuals (n, 3) [m] below (1 - MIN_PROCESS_GAIN) of
+    their rms, over both halves: else what the structure leaves is noise to it (a process
+    that interpolates noise roughens the correction for nothing)."""
+    n = len(poses)
+    if n < 2 * CHECK_MIN_POSES:
+        return True
+    half = np.random.default_rng(1).permutation(n) < n // 2
+    before, after = 0.0, 0.0
+    for train in (half, ~half):
+        local = fit_correction(poses.subset(train), left[train], process.n_targets,
+                               hyper=process.hyper)  # fmt: skip
+        test = poses.subset(~train)
+        before += float(np.sum(left[~train] ** 2))
+        after += float(np.sum((left[~train] - local.predict(test)) ** 2))
+    return after < (1.0 - MIN_PROCESS_GAIN) ** 2 * before
+
+
+def _rms(values: Array) -> float:
+    return float(np.sqrt(np.mean(np.sum(values**2, axis=1)))) if len(values) else 0.0
+
+
+def _empty(model: KinematicModel, parameters: ParameterVector, columns: tuple[str, ...],
+           step_tau: Array, n: int) -> StructuredCorrection:  # fmt: skip
+    """A structured correction with zero coefficients and a placeholder process (to
+    evaluate the structured part of given coefficients)."""
+    size = model.robot.n_joints * 6 * len(FEATURES) + len(columns)
+    placeholder = ResidualCorrection(
+        np.zeros((1, model.robot.n_joints)), np.zeros(1, dtype=np.int64), np.zeros((1, 3)),
+        Hyperparameters(np.zeros(model.robot.n_joints), 1.0, 1.0), np.zeros(3), 1.0,
+        len(model.targets), n, 0.0, "",
+    )  # fmt: skip
+    return StructuredCorrection(model, parameters, columns, step_tau, np.zeros(size),
+                                math.inf, 0.0, 0.0, placeholder, len(model.targets), n, 0.0,
+                                "")  # fmt: skip

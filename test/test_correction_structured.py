@@ -1,0 +1,90 @@
+"""The hybrid model's load-driven geometry (issue 22, effects outside the vocabulary).
+Known answers on the simulated UR10 (700 calibration / 300 hold-out poses): a gravity-side
+backlash of joint 2 and link 3 twisting out of the arm plane, which the physical rungs
+leave at 65 x and 20 x the noise floor and the Gaussian process alone at 27 x and 9 x, come
+to about 1.1 x held out, and the strongest load-driven motion names the joint; where the
+physical rung already reaches the floor the correction does no harm; the correction
+survives PARAMS.json, and a file of the process alone (format 1) still loads."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from robot_calib.errors import InputError
+from robot_calib.identify.calibrate import Calibration, calibrate
+from robot_calib.identify.correction_structured import StructuredCorrection, fit_structured
+from robot_calib.kinematics.frames import Array
+from robot_calib.sim.blind import ur10_out_of_vocabulary
+from robot_calib.sim.scenarios import Scenario, noise_rms_mm, ur10_random
+
+HARMONICS = "geometric+joint_harmonics:2:orders=11,27+joint_harmonics:1:orders=17"
+
+
+def rms_mm(residuals: Array) -> float:
+    return float(np.sqrt(np.mean(np.sum(residuals**2, axis=1))) * 1e3)
+
+
+def hybrid_ratio(scenario: Scenario, model: str) -> tuple[float, float, StructuredCorrection]:
+    """Held-out rms / noise floor of the physical model and of the hybrid."""
+    cal = calibrate(scenario.calibration, scenario.world.model.robot, model)
+    correction = fit_structured(cal.model, cal.parameters, scenario.calibration.poses,
+                                cal.residuals)  # fmt: skip
+    floor = noise_rms_mm(scenario.world, scenario.holdout)
+    held = cal.predict(scenario.holdout.poses) - scenario.holdout.points
+    after = held - correction.predict(scenario.holdout.poses)
+    return rms_mm(held) / floor, rms_mm(after) / floor, correction
+
+
+@pytest.mark.parametrize(("kind", "joint", "motion"), [
+    ("gravity_backlash", 2, "rz"),  # joint 2's angle steps with its gravity torque's sign
+    ("link_bending", 4, "rx"),  # joint 4's housing tilts about link 3's axis
+])  # fmt: skip
+def test_out_of_vocabulary_effects_come_to_the_floor(kind: str, joint: int, motion: str) -> None:
+    scenario = ur10_out_of_vocabulary(kind, seed=0, n=1000)
+    physical, hybrid, correction = hybrid_ratio(scenario, "geometric")
+    assert physical > 15, physical  # measured: 65 x, 20.5 x
+    assert hybrid < 1.5, (physical, hybrid)  # measured: 1.08 x, 1.05 x (goal: 3 x)
+    strongest = correction.strongest(scenario.calibration.poses)[0]
+    assert (strongest["joint"], strongest["motion"]) == (joint, motion), strongest
+
+
+def test_no_harm_where_the_physical_rung_reaches_the_floor() -> None:
+    scenario = ur10_random(seed=0, n=1000)
+    physical, hybrid, correction = hybrid_ratio(scenario, HARMONICS)
+    assert physical < 1.1 and hybrid <= physical * 1.01, (physical, hybrid)
+    assert correction.dof == 0 and not np.any(correction.gp.dual), correction.line()
+
+
+def test_the_structured_correction_round_trips_through_params_json() -> None:
+    scenario = ur10_out_of_vocabulary("link_bending", seed=0, n=400)
+    recording, held = scenario.calibration, scenario.holdout
+    geo = calibrate(recording, scenario.world.model.robot, "geometric")
+    hybrid = geo.with_learned_correction(recording)
+    assert isinstance(hybrid.correction, StructuredCorrection)
+    doc = json.loads(json.dumps(hybrid.to_dict(recording)))
+    assert doc["correction"]["format"] == "robot_calib.correction/2"
+    back = Calibration.from_dict(doc, "hybrid.json")
+    assert np.allclose(back.predict(held.poses), hybrid.predict(held.poses), rtol=0,
+                       atol=1e-12)  # fmt: skip
+    assert rms_mm(back.predict(held.poses) - held.points) < 0.5 * rms_mm(
+        geo.predict(held.poses) - held.points
+    )
+    # the format-1 section (the process alone) still loads, as written before
+    old = {**doc, "correction": hybrid.correction.gp.to_dict()}
+    assert old["correction"]["format"] == "robot_calib.correction/1"
+    loaded = Calibration.from_dict(old, "old.json").correction
+    assert loaded is not None and not isinstance(loaded, StructuredCorrection)
+    assert np.allclose(loaded.predict(held.poses), hybrid.correction.gp.predict(held.poses),
+                       rtol=0, atol=1e-12)  # fmt: skip
+    for change, said in (
+        ({"coefficients": [1.0]}, "coefficients must have"),
+        ({"parameters": {"bogus": 0.0}}, "do not match"),
+        ({"rms_m": 1.0}, "beyond"),
+    ):
+        bad = json.loads(json.dumps(doc))
+        bad["correction"]["structured"].update(change)
+        with pytest.raises(InputError, match=f"^bad.json: correction: .*{said}"):
+            Calibration.from_dict(bad, "bad.json")
