@@ -18,11 +18,15 @@ import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
 from robot_calib.diagnose.frequency import JointSpectrum, harmonic_candidates, joint_spectra
-from robot_calib.diagnose.learnable import LearnableBound, bound_of, corrected_heldout
+from robot_calib.diagnose.learnable import (
+    LearnableBound,
+    bound_of,
+    corrected_heldout,
+    final_correction,
+)
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.identify.calibrate import LEARNED_SUFFIX, Calibration, calibrate, model_name
-from robot_calib.identify.correction import fit_correction
 from robot_calib.identify.fit import PRIOR_ROW, blocked_jacobian, weighted_rows
 from robot_calib.identify.outliers import (
     Outlier,
@@ -379,7 +383,8 @@ def run_ladder(
 def _learn_the_rest(
     rungs: list[Rung], recording: Recording, holdout: Recording | None, scored_on: str
 ) -> tuple[LearnableBound, Rung | None]:
-    """The learnable bound and the hybrid rung: a Gaussian process of what the best
+    """The learnable bound and the hybrid rung: a learned correction (load-driven geometry,
+    then a Gaussian process: `identify.correction_structured`) of what the best
     physical rung leaves (`learnable.corrected_heldout`), scored on the held-out data of
     the rungs (hold-out bags, else the same k-fold, nested); the hybrid rung (the best
     rung plus the correction fitted on all its calibration residuals) when it beats the
@@ -395,11 +400,7 @@ def _learn_the_rest(
     score = combined_rms(after, None)
     gain = score <= (1.0 - MIN_GAIN) * combined_rms(before, None)
     if gain and holdout is None:  # k-fold: the first fold's correction stood in so far
-        cal = physical.calibration
-        residuals = cal.model.target_points(cal.parameters, recording.poses) - recording.points
-        final = fit_correction(recording.poses, residuals, len(cal.model.targets),
-                               np.random.default_rng(0), hyper=correction.hyper)  # fmt: skip
-        correction = replace(final, warnings=correction.warnings)
+        correction = final_correction(physical.calibration, recording, correction)
     bound = bound_of(rungs[0].heldout_residuals, after, correction, scored_on,
                      physical.model)  # fmt: skip
     if not gain:
