@@ -49,6 +49,8 @@ BASE_TRANSLATION = ("base2tracker_x", "base2tracker_y", "base2tracker_z")
 BASE_ROTATION = ("base2tracker_roll", "base2tracker_pitch", "base2tracker_yaw")
 TARGET = ("target_x", "target_y", "target_z")
 DH_UNITS = {"theta": "rad", "d": "m", "a": "m", "alpha": "rad", "beta": "rad"}
+#: poses per block where a whole chain would be held only to keep a part of it
+CHAIN_BLOCK_POSES = 5000
 
 REASON_HAYATI = "dropped: axes {j} and {k} nominally parallel, Hayati beta{j} used instead"
 REASON_BASE = "redundant with base2tracker (rotation about and shift along joint 1's axis)"
@@ -301,8 +303,17 @@ class KinematicModel:
         return out
 
     def flange2base(self, params: ParameterVector, poses: Poses) -> Array:
-        """Flange (DH frame J) poses in the robot base frame, with effects, shape (n, 4, 4)."""
-        return self._chain(params, poses).frames[:, -1]
+        """Flange (DH frame J) poses in the robot base frame, with effects, shape (n, 4, 4);
+        the chain computed CHAIN_BLOCK_POSES poses at a time (its every frame, (n, J + 1,
+        4, 4), would be 7x the result)."""
+        n = len(poses)
+        if n <= CHAIN_BLOCK_POSES:
+            return self._chain(params, poses).frames[:, -1]
+        out = np.empty((n, 4, 4))
+        for start in range(0, n, CHAIN_BLOCK_POSES):
+            rows = slice(start, min(start + CHAIN_BLOCK_POSES, n))
+            out[rows] = self._chain(params, poses.subset(rows)).frames[:, -1]
+        return out
 
     def link_frames(self, params: ParameterVector, poses: Poses) -> Array:
         """Every DH frame in the robot base, effects applied, shape (n, J + 1, 4, 4)
@@ -318,8 +329,16 @@ class KinematicModel:
         return origins, frames[..., :3, 2] @ b2t[:3, :3].T
 
     def target_points(self, params: ParameterVector, poses: Poses) -> Array:
-        """Predicted target centres in the tracker frame, shape (n, 3) [m]."""
-        return self._evaluate(params, poses, with_jacobian=False)[0]
+        """Predicted target centres in the tracker frame, shape (n, 3) [m] (CHAIN_BLOCK_POSES
+        poses at a time: memory O(block) beyond the result)."""
+        n = len(poses)
+        if n <= CHAIN_BLOCK_POSES:
+            return self._evaluate(params, poses, with_jacobian=False)[0]
+        out = np.empty((n, 3))
+        for start in range(0, n, CHAIN_BLOCK_POSES):
+            rows = slice(start, min(start + CHAIN_BLOCK_POSES, n))
+            out[rows] = self._evaluate(params, poses.subset(rows), with_jacobian=False)[0]
+        return out
 
     def jacobian(self, params: ParameterVector, poses: Poses) -> tuple[Array, Array]:
         """Points (n, 3) [m] and d points / d parameters, shape (n, 3, P), full vector order."""
@@ -391,14 +410,15 @@ class KinematicModel:
         n = len(poses)
         jac = np.zeros((n, 3, len(params)))
         deriv = point_derivatives(dh, frames, p_in_base, errors)
-        for j in range(1, self.robot.n_joints + 1):
-            for field in DH_UNITS:
-                name = f"{field}{j}"
-                if name in params:
-                    col = getattr(deriv, field)[:, :, j - 1]
-                    if field in ("a", "d"):
-                        col = col * scale  # the effective length is (1 + strain) * value
-                    jac[:, :, params.index(name)] = col @ rot.T
+        for field in DH_UNITS:  # every joint's column of the field at once, (n, 3, J)
+            joints = [j for j in range(self.robot.n_joints) if f"{field}{j + 1}" in params]
+            if not joints:
+                continue
+            cols = getattr(deriv, field)[:, :, joints]
+            if field in ("a", "d"):
+                cols = cols * scale[:, :, None]  # the effective length is (1 + strain) * value
+            index = [params.index(f"{field}{j + 1}") for j in joints]
+            jac[:, :, index] = np.moveaxis(np.tensordot(cols, rot, axes=([1], [1])), 2, 1)
         for axis, name in enumerate(BASE_TRANSLATION):
             jac[:, axis, params.index(name)] = 1.0
         # Rotation R = Rz(yaw) Ry(pitch) Rx(roll): each angle turns about an axis of the

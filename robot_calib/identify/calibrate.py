@@ -365,11 +365,11 @@ def _by_extra_targets(cal: Calibration, recording: Recording) -> tuple[str, ...]
     own = {p for t in cal.model.targets[1:] for p in target_parameters(t)}
     params = cal.parameters.fixed(sorted(own & set(cal.parameters.free_names)), "other target")
     # rows as the fit sees them: a 6-DoF probe's orientation rows and the weights included
-    residuals, jac = weighted_jacobian(
+    residuals, jac, rows = weighted_jacobian(
         cal.model, params, recording.poses.subset(first), recording.points[first]
     )
-    kept, analysis = fix_unidentifiable(params, jac)
-    _, weak = fix_poorly_determined(kept, jac, residuals)
+    kept, analysis = fix_unidentifiable(params, jac, rows=rows)
+    _, weak = fix_poorly_determined(kept, jac, residuals, rows=rows)
     return tuple(name for name, _ in analysis.fixed + tuple(weak))
 
 

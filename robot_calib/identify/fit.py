@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -119,7 +120,7 @@ def _solve(
         residual = problem.evaluate(x)[0]
         if progress and time.monotonic() - last_report[0] > 1.0:
             last_report[0] = time.monotonic()
-            rms = np.sqrt(np.mean(residual[: problem.n_data] ** 2)) * 1e3
+            rms = problem.data_rms(x) * 1e3
             progress(f"  LM: {problem.evaluations} evaluations, rms {rms:.4f} mm")
         return residual
 
@@ -212,6 +213,7 @@ class _Problem:
         objective: Objective,
         fallback: tuple[float, float] | None = None,
         prior_reference: float | None = None,
+        compressed: bool = False,
     ) -> None:
         self.model, self.start, self.poses, self.points = model, start, poses, points
         self.objective, self.fallback = objective, fallback
@@ -232,10 +234,16 @@ class _Problem:
         self.prior_nominal = start.nominal[start.free][self.prior_cols]
         self._costs: dict[bytes, float] = {}  # sum of squares at every x evaluated
         self.n_data = objective.n_rows(len(points))
+        # compressed: the rows reduced block by block to R of [J | r] (`_compress`)
+        self.compressed = compressed and type(objective) is AbsoluteObjective
+        self._data_r = np.zeros((0, 0))  # R of the data's [J | r] at the last x (compressed)
+        self._data_ss = 0.0  # the data's sum of squares at the last x [m^2]
         if type(objective) is AbsoluteObjective:  # not a subclass with other residuals
             self.rows6 = np.flatnonzero(self.weights.oriented)
             self.n_data = 3 * (len(poses) + len(self.rows6))
-            self._jac = np.zeros((self.n_data + len(self.prior_cols), int(start.free.sum())))
+            if not self.compressed:
+                self._jac = np.zeros((self.n_data + len(self.prior_cols),
+                                      int(start.free.sum())))  # fmt: skip
 
     def evaluate(self, x: Array) -> tuple[Array, Array]:
         """Objective residuals (m,) [m] and their Jacobian (m, n_free) at free values x,
@@ -244,7 +252,9 @@ class _Problem:
         if self._x is None or not np.array_equal(x, self._x):
             params = self.start.unpack(x)
             prior = self.prior_weight * (x[self.prior_cols] - self.prior_nominal)
-            if self._jac is None:
+            if self.compressed:
+                self._cache = self._compress(params, prior)
+            elif self._jac is None:
                 predicted, jac = blocked_jacobian(self.model, params, self.poses)
                 residual, data_jac = self.objective.residuals(
                     predicted, jac[:, :, params.free], self.points
@@ -258,7 +268,11 @@ class _Problem:
                 rows = self.n_data + np.arange(len(prior))
                 self._jac[rows, self.prior_cols] = self.prior_weight  # the rest stays 0
                 self._cache = (np.concatenate([residual, prior]), self._jac)
-            self.predicted = predicted
+            if not self.compressed:
+                self.predicted = predicted
+                self._data_ss = float(
+                    self._cache[0][: self.n_data] @ self._cache[0][: self.n_data]
+                )
             self._x = x.copy()
             self.evaluations += 1
             self._costs[x.tobytes()] = float(self._cache[0] @ self._cache[0])
@@ -280,11 +294,96 @@ class _Problem:
         self._costs.clear()
         if self._x is None:
             return
+        if self.compressed:
+            prior = self.prior_weight * (self._x[self.prior_cols] - self.prior_nominal)
+            self._cache = self._with_prior(prior)
+            self._costs[self._x.tobytes()] = float(self._cache[0] @ self._cache[0])
+            return
         residual, jac = self._cache
         rows = self.n_data + np.arange(len(self.prior_cols))
         residual[rows] = self.prior_weight * (self._x[self.prior_cols] - self.prior_nominal)
         jac[rows, self.prior_cols] = self.prior_weight
         self._costs[self._x.tobytes()] = float(residual @ residual)
+
+    def data_rms(self, x: Array) -> float:
+        """rms of the data's (weighted) residuals at free values x [m], the prior's rows left
+        out."""
+        self.evaluate(x)
+        return float(np.sqrt(self._data_ss / max(self.n_data, 1)))
+
+    def data_rows(self, x: Array) -> tuple[Array, Array, int]:
+        """The data's rows at free values x, the prior's left out: residuals (k,) [m] and
+        their Jacobian (k, n_free), and the number of data rows m. Uncompressed k = m, the
+        rows themselves (the Jacobian valid until the next evaluation); compressed k = n_free
+        + 1, the R of [J | r] (the same J^T J, J^T r and r^T r: what the identifiability
+        analysis and the covariance use, with `rows` m)."""
+        residual, jac = self.evaluate(x)
+        if not self.compressed:
+            return residual[: self.n_data], jac[: self.n_data], self.n_data
+        r = self._data_r
+        return r[:, -1].copy(), r[:, :-1].copy(), self.n_data
+
+    def _compress(self, params: ParameterVector, prior: Array) -> tuple[Array, Array]:
+        """The compressed rows at `params` (`compressed`): the data's rows (weighted, 6-DoF
+        orientation rows included) computed BLOCK_POSES poses at a time and each block
+        folded into R of [J | r] by a QR of [R so far; block] (a tall-skinny QR), then the
+        prior's rows `prior` (k,). Returns f (n_free + 1,) and its Jacobian (n_free + 1,
+        n_free): Q^T r and R of the whole [J | r] = Q [R_J  f] (R_J's last row zero), so
+        that |f| = |r|, f's Jacobian^T f = J^T r and its Gram matrix J^T J at every x:
+        Levenberg-Marquardt (MINPACK) on them takes the steps it takes on the rows, while
+        memory stays O(block x n_free) whatever the number of poses (issue 23)."""
+        n, w = len(self.poses), self.weights
+        free = params.free
+        n_free = int(free.sum())
+        r = np.zeros((0, n_free + 1))
+        predicted = np.empty((n, 3))
+        ss = 0.0
+
+        def fold(r: Array, jac: Array, residual: Array) -> Array:
+            block = np.empty((len(r) + len(residual), n_free + 1), order="F")
+            block[: len(r)] = r
+            block[len(r) :, :-1] = jac
+            block[len(r) :, -1] = residual
+            return cast(Array, np.linalg.qr(block, mode="r"))
+
+        for start in range(0, n, BLOCK_POSES):
+            rows = slice(start, min(start + BLOCK_POSES, n))
+            block = self.poses if n <= BLOCK_POSES else self.poses.subset(rows)
+            points, jac = self.model.jacobian(params, block)
+            predicted[rows] = points
+            weight = w.position[rows]
+            residual = ((points - self.points[rows]) * weight[:, None]).reshape(-1)
+            jac = jac[:, :, free] * weight[:, None, None]
+            ss += float(residual @ residual)
+            r = fold(r, jac.reshape(len(residual), n_free), residual)
+        for start in range(0, len(self.rows6), BLOCK_POSES):
+            which = self.rows6[start : start + BLOCK_POSES]
+            sub = self.poses.subset(which)
+            assert sub.rotation is not None
+            frames, omega = self.model.orientation_jacobian(params, sub)
+            error = orientation_errors(frames, sub.rotation)
+            self.orientation_error = (error if start == 0 else
+                                      np.concatenate([self.orientation_error, error]))  # fmt: skip
+            factor = w.orientation[which]
+            residual = (error * factor[:, None]).reshape(-1)
+            jac = (omega[:, :, free] * factor[:, None, None]).reshape(len(residual), n_free)
+            ss += float(residual @ residual)
+            r = fold(r, jac, residual)
+        self.predicted, self._data_ss, self._data_r = predicted, ss, r
+        return self._with_prior(prior)
+
+    def _with_prior(self, prior: Array) -> tuple[Array, Array]:
+        """f and its Jacobian (`_compress`) of the data's R at the last x and the prior's
+        rows `prior` (k,) [m]."""
+        n_free = self._data_r.shape[1] - 1
+        rows = np.zeros((len(prior), n_free + 1))
+        rows[np.arange(len(prior)), self.prior_cols] = self.prior_weight
+        rows[:, -1] = prior
+        stacked = np.vstack([self._data_r, rows])
+        r = stacked if len(stacked) <= n_free + 1 else np.linalg.qr(stacked, mode="r")
+        out = np.zeros((n_free + 1, n_free + 1))  # MINPACK needs rows >= columns
+        out[: len(r)] = r
+        return out[:, -1].copy(), out[:, :-1].copy()
 
     def _weighted(self, params: ParameterVector, out: Array) -> tuple[Array, Array]:
         """Points (n, 3) [m] and the weighted residuals (3n + 3m,); their Jacobian written
@@ -327,7 +426,8 @@ class _Problem:
         """The same problem (from `start`, default the same) with accuracies not stated
         taken as `fallback` (position [m], orientation [rad]); evaluations carried on."""
         out = _Problem(self.model, start or self.start, self.poses, self.points,
-                       self.objective, fallback, self.prior_reference)  # fmt: skip
+                       self.objective, fallback, self.prior_reference,
+                       self.compressed)  # fmt: skip
         out.evaluations = self.evaluations
         return out
 
@@ -360,14 +460,18 @@ def weighted_jacobian(
     poses: Poses,
     points: Array,
     objective: Objective | None = None,
-) -> tuple[Array, Array]:
-    """The objective's residuals (m,) and their Jacobian (m, P) with respect to every
-    parameter (free or not, vector order) at `params`: rows as the fit sees them (6-DoF
-    orientation rows and the stated accuracies' weights included)."""
+) -> tuple[Array, Array, int]:
+    """The objective's rows as the fit sees them (6-DoF orientation rows and the stated
+    accuracies' weights included) at `params`, with respect to every parameter (free or
+    not, vector order), in the form the identifiability analysis and the covariance take:
+    residuals (k,) [m], their Jacobian (k, P) and the number of rows m. For the absolute
+    objective the R of [J | r] (k = P + 1: the same J^T J, J^T r, r^T r, memory O(P^2)
+    whatever m), else the rows themselves (k = m)."""
     every = params.freed(params.names)
-    problem = _Problem(model, every, poses, points, objective or AbsoluteObjective())
-    residual, jac = problem.evaluate(every.pack())
-    return residual[: problem.n_data], jac[: problem.n_data].copy()  # the data's rows
+    problem = _Problem(model, every, poses, points, objective or AbsoluteObjective(),
+                       compressed=True)  # fmt: skip
+    residual, jac, rows = problem.data_rows(every.pack())
+    return residual.copy(), jac.copy(), rows
 
 
 #: `weighted_rows`' owner of the weak prior's rows (they belong to no measurement)
@@ -403,8 +507,8 @@ def _structurally_identifiable(
     property of the Jacobian's structure that no start changes) fixed, and (name, reason)
     of each. Its own function so that the full Jacobian at the start, (n, 3, P), is freed
     before the solver allocates its own."""
-    _, jac_full = weighted_jacobian(model, start, poses, points, objective)
-    params, ident = fix_unidentifiable(start, jac_full)
+    _, jac_full, rows = weighted_jacobian(model, start, poses, points, objective)
+    params, ident = fix_unidentifiable(start, jac_full, rows=rows)
     return params, ident.fixed
 
 
@@ -478,10 +582,11 @@ def fit_model(
     fixed: tuple[tuple[str, str], ...] = ()
     if check_identifiability:
         params, fixed = _structurally_identifiable(model, start, poses, points, goal)
-    problem = _Problem(model, params, poses, points, goal)
+    # least squares: the rows compressed to R of [J | r] (`_Problem._compress`); a robust
+    # loss acts on each row, so trust-region reflective gets the rows themselves
+    problem = _Problem(model, params, poses, points, goal, compressed=robust_scale is None)
     if len(problem.prior_cols):  # the prior's unit: what the start leaves per residual
-        start_residual = problem.evaluate(params.pack())[0][: problem.n_data]
-        at_start = float(np.sqrt(np.mean(start_residual**2))) if len(start_residual) else 0.0
+        at_start = problem.data_rms(params.pack())
         problem.set_prior_reference(max(problem.prior_reference, at_start))
     # Where a parameter is poorly determined, LM crawls along its flat valley: a coarse
     # solve (ROUGH_TOLERANCE) gets near enough to judge it, then the exact solve runs.
@@ -493,11 +598,10 @@ def fit_model(
     if fallback is not None:
         problem = problem.reweighted(fallback)
     if check_identifiability and len(solved.x):
-        residual, jac_free = problem.evaluate(solved.x)
-        data = slice(0, problem.n_data)
+        residual, jac_free, n_rows = problem.data_rows(solved.x)
         at_solution = params.unpack(solved.x)
-        _, weak = fix_poorly_determined(at_solution, jac_free[data], residual[data],
-                                        columns_are_free=True)  # fmt: skip
+        _, weak = fix_poorly_determined(at_solution, jac_free, residual,
+                                        columns_are_free=True, rows=n_rows)  # fmt: skip
         if weak:  # held at their start values, the rest refitted FROM THE START: at the
             # rough solution the weak ones may have traded radians with the rest
             for name, reason in weak:
@@ -518,13 +622,12 @@ def fit_model(
     if len(x) and robust_scale is None and problem.cost(x) > problem.cost(x0):
         x, status, success_note = x0, 0, "ended above its start: the start kept"
         message = f"{message} ({success_note})"
-    residual, jac_free = problem.evaluate(x)
-    data_residual, data_jac = residual[: problem.n_data], jac_free[: problem.n_data]
+    data_residual, data_jac, n_rows = problem.data_rows(x)
     fitted = params.unpack(x)
     std = np.zeros(len(fitted))
     if len(x) and statistics:
-        std[fitted.free] = np.sqrt(np.diag(covariance(data_jac, data_residual)))
-    figures = (describe(data_jac, fixed) if statistics
+        std[fitted.free] = np.sqrt(np.diag(covariance(data_jac, data_residual, rows=n_rows)))
+    figures = (describe(data_jac, fixed, rows=n_rows) if statistics
                else Identifiability(np.nan, np.nan, len(x), fixed))  # fmt: skip
     return FitResult(
         fitted,

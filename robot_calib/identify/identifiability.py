@@ -41,7 +41,10 @@ class Identifiability:
 
 
 def fix_unidentifiable(
-    params: ParameterVector, jac_full: Array, tolerance: float = RELATIVE_TOLERANCE
+    params: ParameterVector,
+    jac_full: Array,
+    tolerance: float = RELATIVE_TOLERANCE,
+    rows: int | None = None,
 ) -> tuple[ParameterVector, Identifiability]:
     """Fix free parameters the data cannot identify.
 
@@ -52,6 +55,8 @@ def fix_unidentifiable(
         residual units per parameter unit [m/m, m/rad, ...].
     tolerance : a unit-scaled column whose part outside the accepted columns is below this
         is unidentifiable [1].
+    rows : the number of residuals m when jac_full is an R factor of the Jacobian (the
+        same J^T J), default jac_full's rows.
 
     Returns
     -------
@@ -66,7 +71,7 @@ def fix_unidentifiable(
     """
     free = np.flatnonzero(params.free)
     order = sorted(map(int, free), key=lambda i: params.parameters[i].group != "geometric")
-    m = jac_full.shape[0]
+    m = jac_full.shape[0] if rows is None else rows
     columns = r_factor(jac_full, free)  # column c of it: J[:, free[c]] in Q's coordinates
     position = {int(i): c for c, i in enumerate(free)}
     basis = np.zeros((columns.shape[0], len(order)))  # orthonormal: the accepted parameters
@@ -236,7 +241,11 @@ def _std_bound(p: Parameter) -> float:
 
 
 def fix_poorly_determined(
-    params: ParameterVector, jac_full: Array, residuals: Array, columns_are_free: bool = False
+    params: ParameterVector,
+    jac_full: Array,
+    residuals: Array,
+    columns_are_free: bool = False,
+    rows: int | None = None,
 ) -> tuple[ParameterVector, list[tuple[str, str]]]:
     """Fix, one at a time, the free parameter whose predicted 1-sigma most exceeds its
     STD_BOUNDS, until none does.
@@ -249,6 +258,8 @@ def fix_poorly_determined(
     residuals : (m,) residuals there [m]; the noise level comes from one linearised
         (Gauss-Newton) step from there (no step at a converged solution, where it belongs:
         from a poor start the step falls short and the noise looks far too large).
+    rows : the number of residuals m when jac_full and residuals are the R of [J | r]
+        (the same J^T J, J^T r, r^T r: e.g. a compressed fit's), default jac_full's rows.
 
     Returns
     -------
@@ -259,7 +270,7 @@ def fix_poorly_determined(
     their residual norms and the covariances are those of J, from (p + 1)-row matrices.
     """
     fixed: list[tuple[str, str]] = []
-    m = jac_full.shape[0]
+    m = jac_full.shape[0] if rows is None else rows
     start_free = np.flatnonzero(params.free)
     if not len(start_free):
         return params, fixed
