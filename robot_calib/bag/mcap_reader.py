@@ -5,20 +5,34 @@ through its seeking reader, messages in file order through its stream reader. A 
 writer was killed has no summary or footer; `BagReader(path, allow_truncated=True)` reads
 it up to the last complete record: every closed chunk, nothing of the chunk that was open.
 Bad input raises BagError with a one-line message naming the file.
+
+`BagReader.channel_messages` reads a complete bag's messages of some topics in bulk: the
+chunks decompressed with mcap's own codecs and their records parsed here, every message of a
+channel in arrays (times, file order, payloads back to back) for `bulk_decode`. It checks
+what mcap's stream reader checks (CRCs, record bounds, known channels) and gives None where
+anything is off, so that the caller falls back to `messages()` and its errors.
 """
 
 from __future__ import annotations
 
 import functools
+import io
 import os
 import struct
+import zlib
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
+import numpy as np
+import numpy.typing as npt
+from mcap import records as _records
+from mcap import stream_reader as _stream_reader
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.opcode import Opcode
 from mcap.reader import FOOTER_SIZE, make_reader
 from mcap.records import Channel, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import MAGIC_SIZE, StreamReader
@@ -78,6 +92,178 @@ class BagMessage:
         if self._decoder is None:
             raise BagError(f"{self.topic}: message has no decoder attached")
         return self._decoder(self.data)
+
+
+@dataclass(frozen=True)
+class ChannelMessages:
+    """The messages of one channel in file order, as arrays (`BagReader.channel_messages`).
+
+    index: each message's position among all the bag's messages in file order (to merge
+    channels); log_time_ns, publish_time_ns, sequence as recorded; payload: the messages'
+    CDR bytes back to back, message i at payload[offsets[i]:offsets[i + 1]].
+    """
+
+    channel: Channel
+    schema: Schema | None
+    index: npt.NDArray[np.int64]
+    log_time_ns: npt.NDArray[np.uint64]
+    publish_time_ns: npt.NDArray[np.uint64]
+    sequence: npt.NDArray[np.uint32]
+    payload: npt.NDArray[np.uint8]
+    offsets: npt.NDArray[np.int64]
+    decode: Callable[[bytes], Any] = field(repr=False, compare=False)
+    """mcap_ros2's decoder of the channel (BagError when it cannot decode)."""
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    @property
+    def topic(self) -> str:
+        return self.channel.topic
+
+    def data(self, i: int) -> bytes:
+        """Message i's CDR bytes."""
+        return self.payload[self.offsets[i] : self.offsets[i + 1]].tobytes()
+
+    def fixed(self) -> npt.NDArray[np.uint8] | None:
+        """The payloads as rows (n, size) when all have the same size (n > 0), else None."""
+        sizes = np.diff(self.offsets)
+        if len(sizes) == 0 or sizes.min() != sizes.max():
+            return None
+        return self.payload.reshape(len(sizes), int(sizes[0]))
+
+
+class _Fallback(Exception):
+    """Something `channel_messages` does not read itself: the caller reads `messages()`."""
+
+
+_RECORD_HEAD = struct.Struct("<BQ")
+_MESSAGE_HEAD = np.dtype(
+    {
+        "names": ["length", "channel", "sequence", "log_time", "publish_time"],
+        "formats": ["<u8", "<u2", "<u4", "<u8", "<u8"],
+        "offsets": [1, 9, 11, 15, 23],
+        "itemsize": 31,
+    }
+)
+"""A message record's opcode, length, channel id, sequence, log and publish time."""
+_RECORD_SIZE_LIMIT = 4 * 2**30  # mcap's stream reader's default
+_TOP_LEVEL: dict[int, Any] = {
+    Opcode.ATTACHMENT: _records.Attachment,
+    Opcode.ATTACHMENT_INDEX: _records.AttachmentIndex,
+    Opcode.CHANNEL: _records.Channel,
+    Opcode.CHUNK: _records.Chunk,
+    Opcode.CHUNK_INDEX: _records.ChunkIndex,
+    Opcode.DATA_END: _records.DataEnd,
+    Opcode.FOOTER: _records.Footer,
+    Opcode.HEADER: _records.Header,
+    Opcode.MESSAGE_INDEX: _records.MessageIndex,
+    Opcode.METADATA: _records.Metadata,
+    Opcode.METADATA_INDEX: _records.MetadataIndex,
+    Opcode.SCHEMA: _records.Schema,
+    Opcode.STATISTICS: _records.Statistics,
+    Opcode.SUMMARY_OFFSET: _records.SummaryOffset,
+}
+"""Records mcap's stream reader parses outside chunks (besides messages), by opcode."""
+
+
+def _record_stream(body: bytes) -> ReadDataStream:
+    """A record's content to parse with mcap's record classes; reading past it raises."""
+    return ReadDataStream(_ExactReads(io.BytesIO(body)))  # type: ignore[arg-type]
+
+
+def _uncompressed(chunk: Any) -> bytes:
+    """A chunk's records, decompressed as mcap's stream reader does, CRC checked."""
+    if chunk.compression == "zstd" and _stream_reader.zstandard is not None:
+        data = _stream_reader.zstandard.decompress(chunk.data, chunk.uncompressed_size)
+    elif chunk.compression == "lz4" and _stream_reader.lz4 is not None:
+        data = _stream_reader.lz4.decompress(chunk.data)
+    elif chunk.compression == "":
+        data = chunk.data
+    else:
+        raise _Fallback(f"compression {chunk.compression!r}")
+    if len(data) != chunk.uncompressed_size:
+        raise _Fallback("uncompressed size")
+    if chunk.uncompressed_crc != 0 and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise _Fallback("chunk CRC")
+    return bytes(data)
+
+
+class _ChannelTable:
+    """Collects the messages of some channels, chunk by chunk (`BagReader.channel_messages`)."""
+
+    def __init__(self, known: Iterable[int], wanted: Iterable[int]) -> None:
+        self.known = np.array(sorted(known), dtype=np.int64)
+        self.wanted = set(wanted)
+        self.count = 0  # messages so far (all channels)
+        self.pieces: dict[int, list[tuple[npt.NDArray[Any], ...]]] = {c: [] for c in self.wanted}
+
+    def add_records(self, data: bytes) -> None:
+        """The records of one chunk (or one message record outside chunks): messages
+        collected, schema and channel records parsed as mcap's `breakup_chunk` does."""
+        positions: list[int] = []
+        append, head = positions.append, _RECORD_HEAD.unpack_from
+        pos, end = 0, len(data)
+        while pos < end:
+            opcode, length = head(data, pos)
+            after = pos + 9 + length
+            if after > end:
+                raise _Fallback("record beyond its chunk")
+            if opcode == Opcode.MESSAGE:
+                if length < 22:
+                    raise _Fallback("short message record")
+                append(pos)
+            elif opcode == Opcode.SCHEMA or opcode == Opcode.CHANNEL:
+                stream = _record_stream(data[pos + 9 : after])
+                _TOP_LEVEL[opcode].read(stream)
+                if stream.count != length:  # breakup_chunk reads on where the record's fields end
+                    raise _Fallback("schema or channel record of another length")
+            pos = after
+        if not positions:
+            return
+        chunk = np.frombuffer(data, dtype=np.uint8)
+        starts = np.array(positions, dtype=np.int64)
+        heads = chunk[starts[:, None] + np.arange(_MESSAGE_HEAD.itemsize)].view(_MESSAGE_HEAD)
+        heads = heads.reshape(-1)
+        channel = heads["channel"].astype(np.int64)
+        if not np.isin(channel, self.known).all():
+            raise _Fallback("message on a channel not in the summary")
+        index = self.count + np.arange(len(starts), dtype=np.int64)
+        self.count += len(starts)
+        for c in self.wanted.intersection(np.unique(channel).tolist()):
+            mine = channel == c
+            first = starts[mine] + _MESSAGE_HEAD.itemsize
+            sizes = heads["length"][mine].astype(np.int64) - 22
+            if sizes.min() == sizes.max():
+                payload = chunk[first[:, None] + np.arange(sizes[0])].reshape(-1)
+            else:
+                skip = np.repeat(first - (np.cumsum(sizes) - sizes), sizes)
+                payload = chunk[skip + np.arange(int(sizes.sum()))]
+            self.pieces[c].append(
+                (
+                    index[mine],
+                    heads["log_time"][mine],
+                    heads["publish_time"][mine],
+                    heads["sequence"][mine],
+                    payload,
+                    sizes,
+                )
+            )
+
+    def channel(
+        self, channel: Channel, schema: Schema | None, decode: Callable[[bytes], Any]
+    ) -> ChannelMessages:
+        pieces = self.pieces[channel.id]
+        columns = [
+            np.concatenate([p[k] for p in pieces]) if pieces else np.empty(0, dtype=dtype)
+            for k, dtype in enumerate([np.int64, np.uint64, np.uint64, np.uint32, np.uint8])
+        ]
+        sizes = np.concatenate([p[5] for p in pieces]) if pieces else np.empty(0, np.int64)
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        index, log_time, publish_time, sequence, payload = columns
+        return ChannelMessages(
+            channel, schema, index, log_time, publish_time, sequence, payload, offsets, decode
+        )
 
 
 class _ExactReads:
@@ -210,6 +396,30 @@ class BagReader:
                     _decoder=functools.partial(self._decode, channel, schema),
                 )
 
+    def channel_messages(self, topics: Iterable[str]) -> dict[int, ChannelMessages] | None:
+        """The messages of `topics` in bulk: {channel id: its messages in file order} for
+        every channel of those topics, read in one pass. None when the bag is not one this
+        reads itself (truncated, a compression mcap cannot open, a CRC or record that does
+        not check out, a message on a channel or schema the summary lacks): then
+        `messages()` reads it, with its errors."""
+        if not self.complete:
+            return None
+        names = set(topics)
+        wanted = {c.id: c for c in self._channels.values() if c.topic in names}
+        if any(c.schema_id not in self._schemas for c in wanted.values()):
+            return None
+        table = _ChannelTable(self._channels, wanted)
+        try:
+            with open(self.path, "rb") as stream:
+                self._read_all(stream, table)
+        except Exception:  # anything off: `messages()` reads the bag and says what
+            return None
+        return {
+            c.id: table.channel(c, schema, functools.partial(self._decode, c, schema))
+            for c in wanted.values()
+            for schema in [self._schemas.get(c.schema_id)]
+        }
+
     def rosbag2_metadata(self) -> str | None:
         """The last `rosbag2` metadata record's `serialized_metadata` (YAML text), if any."""
         try:
@@ -257,6 +467,46 @@ class BagReader:
                     raise BagError(f"{self.path}: corrupt MCAP data: ends in a record") from None
             except _CORRUPT as exc:
                 raise BagError(f"{self.path}: corrupt MCAP data: {exc}") from None
+
+    @staticmethod
+    def _read_all(stream: IO[bytes], table: _ChannelTable) -> None:
+        """Every record of a complete bag from the start into `table`, checked as mcap's
+        stream reader (validate_crcs=True) checks them; _Fallback (or mcap's errors) where
+        it would raise or read on differently."""
+
+        def read(size: int) -> bytes:
+            data = stream.read(size)
+            if len(data) != size:
+                raise _Fallback("file ends in a record")
+            return data
+
+        crc = zlib.crc32(read(MAGIC_SIZE))
+        if crc != zlib.crc32(MAGIC):
+            raise _Fallback("magic")
+        while True:
+            head = read(9)
+            opcode, length = _RECORD_HEAD.unpack(head)
+            if length > _RECORD_SIZE_LIMIT:
+                raise _Fallback("record length limit")
+            body = read(length)
+            if opcode == Opcode.MESSAGE:
+                table.add_records(head + body)
+            elif opcode == Opcode.MESSAGE_INDEX:  # MessageIndex.read, without its records
+                (records_length,) = struct.unpack_from("<I", body, 2)
+                if 6 + -(-records_length // 16) * 16 > length:
+                    raise _Fallback("message index beyond its record")
+            elif opcode in _TOP_LEVEL:
+                record_stream = _record_stream(body)
+                record = _TOP_LEVEL[opcode].read(record_stream)
+                if opcode == Opcode.CHUNK:
+                    table.add_records(_uncompressed(record))
+                elif opcode == Opcode.DATA_END and record.data_section_crc not in (0, crc):
+                    raise _Fallback("data section CRC")
+                elif opcode == Opcode.FOOTER:
+                    if read(MAGIC_SIZE) != MAGIC:
+                        raise _Fallback("magic after the footer")
+                    return
+            crc = zlib.crc32(body, zlib.crc32(head, crc))
 
     def _topic_info(self, channel: Channel, count: int) -> TopicInfo:
         schema = self._schemas.get(channel.schema_id)

@@ -10,10 +10,13 @@ import shlex
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import NamedTuple
+from types import SimpleNamespace
+from typing import Any, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
+from robot_calib.bag.bulk_decode import Columns, decode_columns
 from robot_calib.bag.mcap_reader import BagReader
 from robot_calib.errors import BagError, InputError, TruncatedBagError
 from robot_calib.kinematics.description import RobotDescription
@@ -31,7 +34,9 @@ from robot_calib.messages import (
     POINT_TOPIC,
     POINT_TYPE,
     POSE_TOPIC,
+    POSE_TYPE,
     POSE_TYPES,
+    QUATERNION_TOLERANCE,
     TEMPERATURE_TOPIC,
     TRACKER_FRAME,
     joint_positions,
@@ -116,19 +121,30 @@ class _BagMessages(NamedTuple):
     warnings: list[str]
 
 
-def _bag_messages(path: Path, robot: RobotDescription) -> _BagMessages:
-    """Read the measurement topics of the bag `path` (BagError on unusable input)."""
+class _Decoded(NamedTuple):
+    """What `_bag_messages` reads from the messages, before joining: joint-state stamps
+    [ns] (m,), readings (m, J) [rad], velocity signs (m, J); the points' stamps [ns],
+    positions (3,) [m] and target indices in file order; per target the 6-DoF readings by
+    stamp; the side topic's (stamp [ns], deg C); the points' and poses' frame ids."""
+
+    js_ns: IntArray
+    q: Array
+    velocity_sign: Array
+    pt_t: list[int]
+    pts: list[Array]
+    pt_target: list[int]
+    poses: list[dict[int, PoseReading]]
+    celsius: list[tuple[int, float]]
+    frames: set[str]
+
+
+def _bag_messages(path: Path, robot: RobotDescription, bulk: bool = True) -> _BagMessages:
+    """Read the measurement topics of the bag `path` (BagError on unusable input).
+    bulk: decode the messages in bulk where they allow it (`_read_bulk`; the same result as
+    message by message, which False forces)."""
     if not path.is_file():
         raise BagError(f"{path}: no such bag file")
     warnings: list[str] = []
-    js_t: list[int] = []  # stamps [ns]
-    pt_t: list[int] = []
-    js_q: list[Array] = []
-    js_v: list[Array] = []
-    pts: list[Array] = []
-    pt_target: list[int] = []
-    frames: set[str] = set()
-    names_seen: tuple[str, ...] = robot.joint_names
     try:
         reader = BagReader(path)
     except TruncatedBagError:
@@ -139,45 +155,15 @@ def _bag_messages(path: Path, robot: RobotDescription) -> _BagMessages:
     with reader:
         _check_topic(reader, JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         target_topics, pose_topics, names = _target_topics(reader, path, warnings)
-        poses: list[dict[int, PoseReading]] = [{} for _ in names]
         side = [TEMPERATURE_TOPIC] if TEMPERATURE_TOPIC in reader.topics else []
-        celsius: list[tuple[int, float]] = []  # (stamp [ns], deg C) of the side topic
-        for m in reader.messages([JOINT_STATES_TOPIC, *target_topics, *pose_topics, *side]):
-            msg = m.decode()
-            if m.topic == TEMPERATURE_TOPIC:
-                celsius.append((stamp_to_ns(msg.header.stamp), float(msg.temperature)))
-                continue
-            if m.topic == JOINT_STATES_TOPIC:
-                js_q.append(
-                    joint_positions(msg, robot.joint_names, f"{path}: {JOINT_STATES_TOPIC}")
-                )
-                if tuple(msg.name) != names_seen:  # checked once per set of names
-                    names_seen = tuple(msg.name)
-                    _check_no_extra_joints(names_seen, robot, path)
-                js_t.append(stamp_to_ns(msg.header.stamp))
-                js_v.append(velocity_signs(msg, robot.joint_names))
-                continue
-            frames.add(msg.header.frame_id)
-            if m.topic in pose_topics:
-                k = pose_topics[m.topic]
-                where = f"{path}: {m.topic} message {len(poses[k]) + 1}"
-                stamp = stamp_to_ns(msg.header.stamp)
-                if stamp in poses[k]:
-                    raise BagError(f"{where}: a second pose at stamp {stamp} ns")
-                try:
-                    poses[k][stamp] = pose_measurement(msg, where)
-                except InputError as exc:
-                    raise BagError(str(exc)) from None
-                continue
-            p = np.array([msg.point.x, msg.point.y, msg.point.z])
-            k = target_topics[m.topic]
-            if not np.all(np.isfinite(p)):
-                raise BagError(
-                    f"{path}: {m.topic} message {pt_target.count(k) + 1} is not finite: {p}"
-                )
-            pt_t.append(stamp_to_ns(msg.header.stamp))
-            pts.append(p)
-            pt_target.append(k)
+        decoded = (
+            _read_bulk(reader, robot, target_topics, pose_topics, side, len(names))
+            if bulk
+            else None
+        )
+        if decoded is None:
+            decoded = _read_each(reader, path, robot, target_topics, pose_topics, side, len(names))
+    js_ns, q, velocity_sign, pt_t, pts, pt_target, poses, celsius, frames = decoded
     if frames != {TRACKER_FRAME}:
         warnings.append(
             f"warning: {path}: tracker point frame_id {sorted(frames)} is not "
@@ -186,16 +172,250 @@ def _bag_messages(path: Path, robot: RobotDescription) -> _BagMessages:
     stamped = join_poses(
         str(path), names, pt_t, pts, pt_target, poses, set(target_topics.values()), BagError
     )
+    return _BagMessages(js_ns, q, velocity_sign, stamped, names, celsius, warnings)
+
+
+def _read_each(
+    reader: BagReader,
+    path: Path,
+    robot: RobotDescription,
+    target_topics: dict[str, int],
+    pose_topics: dict[str, int],
+    side: list[str],
+    n_targets: int,
+) -> _Decoded:
+    """The measurement messages decoded one by one (BagError at the first unusable one)."""
+    js_t: list[int] = []  # stamps [ns]
+    pt_t: list[int] = []
+    js_q: list[Array] = []
+    js_v: list[Array] = []
+    pts: list[Array] = []
+    pt_target: list[int] = []
+    frames: set[str] = set()
+    names_seen: tuple[str, ...] = robot.joint_names
+    poses: list[dict[int, PoseReading]] = [{} for _ in range(n_targets)]
+    celsius: list[tuple[int, float]] = []  # (stamp [ns], deg C) of the side topic
+    for m in reader.messages([JOINT_STATES_TOPIC, *target_topics, *pose_topics, *side]):
+        msg = m.decode()
+        if m.topic == TEMPERATURE_TOPIC:
+            celsius.append((stamp_to_ns(msg.header.stamp), float(msg.temperature)))
+            continue
+        if m.topic == JOINT_STATES_TOPIC:
+            js_q.append(joint_positions(msg, robot.joint_names, f"{path}: {JOINT_STATES_TOPIC}"))
+            if tuple(msg.name) != names_seen:  # checked once per set of names
+                names_seen = tuple(msg.name)
+                _check_no_extra_joints(names_seen, robot, path)
+            js_t.append(stamp_to_ns(msg.header.stamp))
+            js_v.append(velocity_signs(msg, robot.joint_names))
+            continue
+        frames.add(msg.header.frame_id)
+        if m.topic in pose_topics:
+            k = pose_topics[m.topic]
+            where = f"{path}: {m.topic} message {len(poses[k]) + 1}"
+            stamp = stamp_to_ns(msg.header.stamp)
+            if stamp in poses[k]:
+                raise BagError(f"{where}: a second pose at stamp {stamp} ns")
+            try:
+                poses[k][stamp] = pose_measurement(msg, where)
+            except InputError as exc:
+                raise BagError(str(exc)) from None
+            continue
+        p = np.array([msg.point.x, msg.point.y, msg.point.z])
+        k = target_topics[m.topic]
+        if not np.all(np.isfinite(p)):
+            raise BagError(
+                f"{path}: {m.topic} message {pt_target.count(k) + 1} is not finite: {p}"
+            )
+        pt_t.append(stamp_to_ns(msg.header.stamp))
+        pts.append(p)
+        pt_target.append(k)
     n_joints = robot.n_joints
-    return _BagMessages(
+    return _Decoded(
         np.array(js_t, dtype=np.int64),
         np.array(js_q).reshape(-1, n_joints),
         np.array(js_v).reshape(-1, n_joints),
-        stamped,
-        names,
+        pt_t, pts, pt_target, poses, celsius, frames,
+    )  # fmt: skip
+
+
+class _NoBulk(Exception):
+    """The messages are not all of a layout `_read_bulk` reads, or one of them is unusable:
+    read them one by one (`_read_each`), which gives the same result or the error."""
+
+
+def _column(columns: Columns, name: str, kinds: str = "f") -> Array:
+    """A bulk-decoded field (`Columns.fields`) of one of the dtype kinds 'f', 'i', 'u'."""
+    values = columns.fields.get(name)
+    if values is None or values.dtype.kind not in kinds or values.dtype.itemsize > 8:
+        raise _NoBulk(name)
+    return values
+
+
+def _stamps(columns: Columns) -> IntArray:
+    """header.stamp [ns] of each message (`stamp_to_ns`)."""
+    sec = _column(columns, "header.stamp.sec", "iu").astype(np.int64)
+    nanosec = _column(columns, "header.stamp.nanosec", "iu").astype(np.int64)
+    if columns.fields["header.stamp.sec"].dtype.itemsize > 4:
+        raise _NoBulk("64-bit seconds")
+    return sec * 1_000_000_000 + nanosec
+
+
+def _read_bulk(
+    reader: BagReader,
+    robot: RobotDescription,
+    target_topics: dict[str, int],
+    pose_topics: dict[str, int],
+    side: list[str],
+    n_targets: int,
+) -> _Decoded | None:
+    """What `_read_each` gives, from messages decoded in bulk (`bulk_decode`): None when a
+    topic is not all of one layout, or a message is one `_read_each` stops at (a missing
+    joint, a non-finite point, ...; reading again one by one raises its error)."""
+    topics = [JOINT_STATES_TOPIC, *target_topics, *pose_topics, *side]
+    table = reader.channel_messages(topics)
+    if table is None:
+        return None
+    columns: dict[str, Columns] = {}
+    index: dict[str, npt.NDArray[Any]] = {}
+    for channel in table.values():
+        if channel.topic in index:  # several channels of a topic
+            return None
+        index[channel.topic] = channel.index
+        if len(channel):
+            decoded = decode_columns(channel)
+            if decoded is None:
+                return None
+            columns[channel.topic] = decoded
+    try:
+        return _bulk_values(reader, robot, columns, index, target_topics, pose_topics, n_targets)
+    except _NoBulk:
+        return None
+
+
+def _bulk_values(
+    reader: BagReader,
+    robot: RobotDescription,
+    columns: dict[str, Columns],
+    index: dict[str, npt.NDArray[Any]],
+    target_topics: dict[str, int],
+    pose_topics: dict[str, int],
+    n_targets: int,
+) -> _Decoded:
+    """`_read_bulk`'s values from the decoded columns (_NoBulk where `_read_each` raises)."""
+    n_joints = robot.n_joints
+    js_ns: npt.NDArray[Any] = np.zeros(0, dtype=np.int64)
+    q = velocity_sign = np.zeros((0, n_joints))
+    js = columns.get(JOINT_STATES_TOPIC)
+    if js is not None:
+        names = list(js.first.name)
+        if any(n not in names for n in robot.joint_names):
+            raise _NoBulk("joint names")
+        if tuple(names) != robot.joint_names and any(n not in robot.joint_names for n in names):
+            raise _NoBulk("extra joints")
+        position = _column(js, "position")
+        if position.ndim != 2 or position.shape[1] != len(names) or position.dtype != np.float64:
+            raise _NoBulk("positions")
+        at = [names.index(n) for n in robot.joint_names]
+        q = position[:, at]
+        if not np.all(np.isfinite(q)):
+            raise _NoBulk("positions not finite")
+        velocity = _column(js, "velocity")
+        if velocity.ndim != 2 or velocity.dtype != np.float64:
+            raise _NoBulk("velocity")
+        velocity_sign = (
+            np.sign(velocity[:, at])
+            if velocity.shape[1] == len(names)
+            else np.zeros((len(position), n_joints))
+        )
+        js_ns = _stamps(js)
+    frames: set[str] = set()
+    point_parts: list[tuple[npt.NDArray[Any], ...]] = []
+    for topic, k in target_topics.items():
+        points = columns.get(topic)
+        if points is None:
+            continue
+        xyz = np.stack([_column(points, f"point.{a}") for a in "xyz"], axis=1)
+        if xyz.dtype != np.float64 or not np.all(np.isfinite(xyz)):
+            raise _NoBulk("points")
+        frames.add(points.first.header.frame_id)
+        point_parts.append((index[topic], _stamps(points), xyz, np.full(len(xyz), k)))
+    order = np.argsort(np.concatenate([p[0] for p in point_parts] or [np.zeros(0)]), kind="stable")
+    pt_t = np.concatenate([p[1] for p in point_parts] or [np.zeros(0, np.int64)])[order]
+    pts = np.concatenate([p[2] for p in point_parts] or [np.zeros((0, 3))])[order]
+    pt_target = np.concatenate([p[3] for p in point_parts] or [np.zeros(0, np.int64)])[order]
+    poses: list[dict[int, PoseReading]] = [{} for _ in range(n_targets)]
+    for topic, k in pose_topics.items():
+        pose = columns.get(topic)
+        if pose is not None:
+            frames.add(pose.first.header.frame_id)
+            poses[k] = _bulk_poses(reader, topic, pose)
+    celsius: list[tuple[int, float]] = []
+    temperature = columns.get(TEMPERATURE_TOPIC)
+    if temperature is not None:
+        celsius = list(
+            zip(_stamps(temperature).tolist(), _column(temperature, "temperature").tolist())
+        )
+    return _Decoded(
+        js_ns,
+        q,
+        velocity_sign,
+        pt_t.tolist(),
+        list(pts),
+        pt_target.tolist(),
+        poses,
         celsius,
-        warnings,
+        frames,
     )
+
+
+def _poses_one_by_one(topic: str, pose: Columns, stamps: IntArray) -> dict[int, PoseReading]:
+    """The readings of a PoseWithCovarianceStamped topic: `pose_measurement` per message,
+    given the bulk-decoded fields (_NoBulk where it raises)."""
+    base = "pose.pose."
+    position = np.stack([_column(pose, f"{base}position.{a}") for a in "xyz"], axis=1)
+    quat = np.stack([_column(pose, f"{base}orientation.{a}") for a in "xyzw"], axis=1)
+    covariance = _column(pose, "pose.covariance")
+    readings: dict[int, PoseReading] = {}
+    for stamp, p, o, c in zip(stamps.tolist(), position.tolist(), quat.tolist(), covariance):
+        msg = SimpleNamespace(
+            pose=SimpleNamespace(
+                pose=SimpleNamespace(
+                    position=SimpleNamespace(x=p[0], y=p[1], z=p[2]),
+                    orientation=SimpleNamespace(x=o[0], y=o[1], z=o[2], w=o[3]),
+                ),
+                covariance=c,
+            )
+        )
+        try:
+            readings[stamp] = pose_measurement(msg, topic)
+        except InputError:
+            raise _NoBulk("a pose pose_measurement rejects") from None
+    return readings
+
+
+def _bulk_poses(reader: BagReader, topic: str, pose: Columns) -> dict[int, PoseReading]:
+    """The 6-DoF readings of a PoseStamped topic by stamp, as `pose_measurement` gives them
+    message by message (_NoBulk for another type or a message it rejects)."""
+    stamps = _stamps(pose)
+    if len(np.unique(stamps)) != len(stamps):
+        raise _NoBulk("a second pose at a stamp")
+    if reader.topics[topic].type_name != POSE_TYPE:
+        return _poses_one_by_one(topic, pose, stamps)
+    position = np.stack([_column(pose, f"pose.position.{a}") for a in "xyz"], axis=1)
+    quat = np.stack([_column(pose, f"pose.orientation.{a}") for a in "xyzw"], axis=1)
+    if position.dtype != np.float64 or quat.dtype != np.float64:
+        raise _NoBulk("pose types")
+    if not (np.all(np.isfinite(position)) and np.all(np.isfinite(quat))):
+        raise _NoBulk("pose not finite")
+    near = np.abs(np.linalg.norm(quat, axis=1) - 1.0) > QUATERNION_TOLERANCE / 2
+    for i in np.flatnonzero(near):  # the norm as pose_measurement takes it (batches round apart)
+        if abs(np.linalg.norm(quat[i]) - 1.0) > QUATERNION_TOLERANCE:
+            raise _NoBulk("not a unit quaternion")
+    from scipy.spatial.transform import Rotation
+
+    rotation = Rotation.from_quat(quat).as_matrix()
+    sigma = np.full((len(stamps), 2), np.nan)
+    return {t: (p, r, s) for t, p, r, s in zip(stamps.tolist(), position, rotation, sigma)}
 
 
 def read_bag(
