@@ -113,6 +113,8 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
     for figures in diagnosis.iso9283:
         print(figures.line())
     print(f"dominant effect: {diagnosis.verdict}")
+    if diagnosis.outside_vocabulary is not None:
+        print(diagnosis.outside_vocabulary.line())
     for spectrum in diagnosis.unexplained.where.harmonic_orders:  # what the model leaves
         if spectrum.dominant_orders:
             print(f"joint-angle harmonics left by {diagnosis.physical_model}: "

@@ -10,6 +10,7 @@ which is parametrized over the registry.
 
 from __future__ import annotations
 
+import json
 from types import SimpleNamespace
 from typing import Any, cast
 
@@ -343,3 +344,21 @@ def test_judge_a_real_diagnosis_whose_hybrid_rung_won() -> None:
     assert hybrid.holdout_abs_rms_mm <= 0.95 * physical.holdout_abs_rms_mm  # it won
     verdict = judge(case, diagnosis)
     assert verdict["chosen_model"] == hybrid.model and verdict["chosen_rms_mm"] > 0
+
+
+@pytest.mark.parametrize(("kind", "joint"), [("gravity_backlash", 2), ("link_bending", 4)])
+def test_the_diagnosis_says_what_lies_outside_the_vocabulary(kind: str, joint: int) -> None:
+    """Issue 22: on the UR10 campaign the physical rungs stay far above the floor, the
+    hybrid rung comes to it, and the diagnosis says that most of what remains lies outside
+    the vocabulary, naming the joint whose load-driven motion it is (gravity backlash:
+    joint 2's angle; link 3 twisting: joint 4's axis) in the verdict and DIAGNOSIS.json."""
+    scenario = ur10_out_of_vocabulary(kind, seed=0, n=1000)
+    diagnosis, _ = diagnose(scenario.calibration, UR10, holdout=scenario.holdout)
+    outside = diagnosis.outside_vocabulary
+    assert outside is not None, diagnosis.verdict
+    floor = noise_rms_mm(scenario.world, scenario.holdout)
+    assert outside.hybrid_abs_rms_mm < 1.5 * floor < outside.physical_abs_rms_mm / 5, outside
+    assert outside.joints[0] == joint, outside.line()
+    assert "outside the vocabulary" in diagnosis.verdict and f"[{joint}" in diagnosis.verdict
+    again = Diagnosis.from_dict(json.loads(json.dumps(diagnosis.to_dict())))
+    assert again.outside_vocabulary == outside

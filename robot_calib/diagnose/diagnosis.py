@@ -19,6 +19,7 @@ from robot_calib.diagnose.ladder import (
 )
 from robot_calib.diagnose.learnable import MIN_LEARNABLE_SHARE, LearnableBound
 from robot_calib.diagnose.noise import NoiseLevel, refine_with_model
+from robot_calib.diagnose.outside import OutsideVocabulary, outside_vocabulary
 from robot_calib.diagnose.signatures import WhereItLies, where_it_lies
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
@@ -140,6 +141,8 @@ class Diagnosis(Record):
     # the geometric calibration's implausibility reasons (identify.plausibility): readings
     # in degrees, a residual 1000 x the noise, ...; empty: plausible
     implausible: list[str] = field(default_factory=list)
+    # the hybrid rung far below the best physical one: what lies outside the vocabulary
+    outside_vocabulary: OutsideVocabulary | None = None
     format: str = FORMAT
 
     def to_dict(self) -> dict[str, Any]:
@@ -197,8 +200,16 @@ class Diagnosis(Record):
                 "joint signature stands out)"
             )
         if dom.effect == UNKNOWN:
-            return f"{UNKNOWN} (outside the vocabulary) on joints {dom.joints}"
-        return f"{dom.effect} on joints {dom.joints}"
+            named = f"{UNKNOWN} (outside the vocabulary) on joints {dom.joints}"
+        else:
+            named = f"{dom.effect} on joints {dom.joints}"
+        out = self.outside_vocabulary
+        if out is None:
+            return named
+        where = f" (load-driven, joints {out.joints})" if out.joints else ""
+        return (f"{named}; most of what remains lies outside the vocabulary{where}: "
+                f"{out.physical_abs_rms_mm:.4f} -> {out.hybrid_abs_rms_mm:.4f} mm held-out with a "
+                "learned correction")  # fmt: skip
 
     def summary(self) -> str:
         """A few human lines: the verdict, the ladder (held-out, seed criterion), what
@@ -383,6 +394,7 @@ def diagnose(
         outliers=list(ladder.outliers),
         warnings=list(geo.warnings),
         learnable=learnable,
+        outside_vocabulary=outside_vocabulary(ladder, recording),
         iso9283=_iso9283(ladder, recording, robot),
         refits=list(ladder.refits),
         implausible=list(geo.implausible) + _holdout_in_degrees(holdout_sources, robot),

@@ -295,6 +295,8 @@ def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibr
         ("Named effect", diagnosis.verdict + (f" (share of the learnable gap: {shares})"
                                               if shares else "")),
         ("What remains", diagnosis.unexplained.note),
+        *([("Outside the vocabulary", diagnosis.outside_vocabulary.line())]
+          if diagnosis.outside_vocabulary is not None else []),
         ("Warnings", f"{len(warnings)} warning(s), {len(diagnosis.outliers)} flagged "
                      "outlier(s): see below" if warnings or diagnosis.outliers else "none"),
     ]  # fmt: skip

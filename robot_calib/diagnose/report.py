@@ -135,6 +135,15 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         "",
         *(
             [
+                f"**{diagnosis.outside_vocabulary.line()[0].upper()}"
+                f"{diagnosis.outside_vocabulary.line()[1:]}**.",
+                "",
+            ]
+            if diagnosis.outside_vocabulary is not None
+            else []
+        ),
+        *(
+            [
                 f"**IMPLAUSIBLE** — {'; '.join(diagnosis.implausible)}: fix the data (units, "
                 "--robot, joint order) and diagnose again.",
                 "",
