@@ -27,7 +27,7 @@ from robot_calib.diagnose.learnable import (
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.identify.calibrate import LEARNED_SUFFIX, Calibration, calibrate, model_name
-from robot_calib.identify.fit import PRIOR_ROW, blocked_jacobian, weighted_rows
+from robot_calib.identify.fit import BLOCK_POSES, PRIOR_ROW, weighted_rows
 from robot_calib.identify.outliers import (
     Outlier,
     describe_outliers,
@@ -150,14 +150,8 @@ def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
     params = superset.parameters().with_values(
         dict(zip(cal.parameters.names, cal.parameters.values))
     )
-    predicted, jac = blocked_jacobian(superset, params, recording.poses)
-    residual = predicted - recording.points
     base_cols = [params.index(name) for name in cal.parameters.free_names]
-    h_res = h_jac = None
-    if holdout is not None:
-        h_pred, h_jac = blocked_jacobian(superset, params, holdout.poses)
-        h_res = h_pred - holdout.points
-    screen = LinearScreen(residual, jac, pose_folds(recording), h_res, h_jac)
+    screen = LinearScreen.of_model(superset, params, recording, holdout)
     base = screen.score(base_cols)
     scores = []
     for effect in pool:
@@ -183,28 +177,64 @@ class LinearScreen:
     dx^T J^T J dx, never a pass over the rows: the ladder screens ~100 candidates per
     round, and memory beyond the Jacobian is O(P^2) per fold.
 
-    residual (n, 3) [m], jac (n, 3, P), fold (n,); h_res (m, 3), h_jac (m, 3, P) or None.
+    own : each fold's sums over its own rows (unscaled); holdout : the hold-out rows' sums
+    or None; n_points, n_holdout : their numbers of points (3 rows each).
     """
 
-    def __init__(self, residual: Array, jac: Array, fold: IntArray, h_res: Array | None,
-                 h_jac: Array | None) -> None:  # fmt: skip
-        n_cols = jac.shape[-1]
-        norms = np.sqrt(np.einsum("nij,nij->j", jac, jac))
+    def __init__(self, own: dict[int, _Sums], holdout: _Sums | None, n_points: int,
+                 n_holdout: int = 0) -> None:  # fmt: skip
+        n_cols = len(next(iter(own.values())).rhs) if own else 0
+        total = _Sums.total(list(own.values()), n_cols)
+        norms = np.sqrt(np.maximum(np.diag(total.gram), 0.0))  # the columns' norms
         self.keep = norms > 0
         scale = np.where(self.keep, 1.0 / np.where(self.keep, norms, 1.0), 0.0)
-        self.n_points = len(residual)
+        self.n_points, self.n_holdout = n_points, n_holdout
         # each fold's own sums (its test set's) and the training set's: the total minus its own
-        self.own: dict[int, _Sums] = {}
-        for f in np.unique(fold):
-            test = fold == f
-            self.own[int(f)] = _Sums.of(jac[test].reshape(-1, n_cols) * scale,
-                                        residual[test].reshape(-1))  # fmt: skip
-        self.all = _Sums.total(list(self.own.values()), n_cols)
+        self.own = {f: s.scaled(scale) for f, s in own.items()}
+        self.all = total.scaled(scale)
         self.training = {f: self.all.minus(s) for f, s in self.own.items()}
-        self.holdout: _Sums | None = None
+        self.holdout = None if holdout is None else holdout.scaled(scale)
+
+    @classmethod
+    def of_rows(cls, residual: Array, jac: Array, fold: IntArray, h_res: Array | None = None,
+                h_jac: Array | None = None) -> LinearScreen:  # fmt: skip
+        """The screen of residuals (n, 3) [m] and their Jacobian (n, 3, P) with the fold
+        (n,) of each, and hold-out rows h_res (m, 3), h_jac (m, 3, P) or None."""
+        n_cols = jac.shape[-1]
+        own = {int(f): _Sums.of(jac[fold == f].reshape(-1, n_cols),
+                                residual[fold == f].reshape(-1))
+               for f in np.unique(fold)}  # fmt: skip
+        held = None
         if h_res is not None and h_jac is not None:
-            self.holdout = _Sums.of(h_jac.reshape(-1, n_cols) * scale, h_res.reshape(-1))
-            self.n_holdout = len(h_res)
+            held = _Sums.of(h_jac.reshape(-1, n_cols), h_res.reshape(-1))
+        return cls(own, held, len(residual), 0 if h_res is None else len(h_res))
+
+    @classmethod
+    def of_model(cls, model: KinematicModel, params: ParameterVector, recording: Recording,
+                 holdout: Recording | None) -> LinearScreen:  # fmt: skip
+        """The screen of `model` at `params` on `recording` (k-fold by `pose_folds`) and
+        `holdout`, its Jacobian evaluated BLOCK_POSES poses at a time and folded into the
+        sums: memory O(block x P + P^2 x folds), never (n, 3, P)."""
+        n_cols = len(params)
+        fold = pose_folds(recording)
+
+        def sums(rec: Recording, which: IntArray | None) -> dict[int, _Sums]:
+            out: dict[int, _Sums] = {}
+            n = len(rec)
+            for start in range(0, n, BLOCK_POSES):
+                rows = slice(start, min(start + BLOCK_POSES, n))
+                predicted, jac = model.jacobian(params, rec.poses.subset(rows))
+                residual = predicted - rec.points[rows]
+                labels = np.zeros(len(residual), dtype=int) if which is None else which[rows]
+                for f in np.unique(labels):
+                    part = labels == f
+                    block = _Sums.of(jac[part].reshape(-1, n_cols), residual[part].reshape(-1))
+                    out[int(f)] = block if int(f) not in out else out[int(f)].plus(block)
+            return out
+
+        held = None if holdout is None else sums(holdout, None).get(0)
+        return cls(sums(recording, fold), held, len(recording),
+                   0 if holdout is None else len(holdout))  # fmt: skip
 
     @staticmethod
     def _step(normal: _Sums, cols: list[int]) -> Array:
@@ -257,6 +287,13 @@ class _Sums:
     def minus(self, other: _Sums) -> _Sums:
         return _Sums(self.gram - other.gram, self.rhs - other.rhs, self.rr - other.rr)
 
+    def plus(self, other: _Sums) -> _Sums:
+        return _Sums(self.gram + other.gram, self.rhs + other.rhs, self.rr + other.rr)
+
+    def scaled(self, scale: Array) -> _Sums:
+        """The sums of the rows with column c multiplied by scale[c] (P,)."""
+        return _Sums(self.gram * np.outer(scale, scale), self.rhs * scale, self.rr)
+
     def after(self, step: Array, cols: list[int]) -> float:
         """|r + A[:, cols] step|^2 [m^2] of these rows (never below 0: rounding)."""
         value = self.rr + 2.0 * float(step @ self.rhs[cols])
@@ -294,16 +331,20 @@ def kfold_parameters(
     row_fold = np.full(len(owner), -1)  # the prior's rows are in no fold: every fold keeps them
     row_fold[~prior] = fold[owner[~prior]]
     x = params.pack()
-    norms = np.linalg.norm(jac[~prior], axis=0)  # the data's columns set the scale
+    # each fold's sums over its own rows, and the prior's (in every fold's training set):
+    # a fold's training sums are the total minus its own (no copy of the rows per fold)
+    own = {int(f): _Sums.of(jac[row_fold == f], residual[row_fold == f])
+           for f in np.unique(fold)}  # fmt: skip
+    data = _Sums.total(list(own.values()), len(x))
+    norms = np.sqrt(np.maximum(np.diag(data.gram), 0.0))  # the data's columns set the scale
     scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
-    scaled = jac * scale
+    total = data.plus(_Sums.of(jac[prior], residual[prior])).scaled(scale)
     fitted = {}
-    for f in np.unique(fold):
-        train = row_fold != f
-        a = scaled[train]
-        gram = a.T @ a + SCREEN_DAMPING * np.eye(len(x))
-        step = -np.linalg.solve(gram, a.T @ residual[train]) * scale
-        fitted[int(f)] = params.unpack(x + step)
+    for f, sums in own.items():
+        train = total.minus(sums.scaled(scale))
+        gram = train.gram + SCREEN_DAMPING * np.eye(len(x))
+        step = -np.linalg.solve(gram, train.rhs) * scale
+        fitted[f] = params.unpack(x + step)
     return fold, fitted
 
 

@@ -37,7 +37,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from robot_calib.identify.calibrate import Calibration
-from robot_calib.identify.correction import INDUCING, MAX_LEARN, MAX_POINTS, Hyperparameters
+from robot_calib.identify.correction import (
+    INDUCING,
+    MAX_LEARN,
+    MAX_POINTS,
+    Hyperparameters,
+    fitting_rows,
+)
 from robot_calib.identify.correction_structured import (
     LearnedCorrection,
     StructuredCorrection,
@@ -159,7 +165,9 @@ def corrected_heldout(
     poses, points = recording.poses, recording.points
     residuals = cal.model.target_points(cal.parameters, poses) - points
     if holdout is not None:
-        correction = fit_structured(cal.model, cal.parameters, poses, residuals, rng)
+        rows = fitting_rows(len(poses))
+        correction = fit_structured(cal.model, cal.parameters, poses.subset(rows),
+                                    residuals[rows], rng)  # fmt: skip
         before = cal.model.target_points(cal.parameters, holdout.poses) - holdout.points
         return before, before - correction.predict(holdout.poses), correction
     before, after = np.zeros_like(points), np.zeros_like(points)
@@ -170,7 +178,9 @@ def corrected_heldout(
     def one(k: int) -> StructuredCorrection:
         """Fold folds[k]: its correction learned on its training poses; `after` filled."""
         f = folds[k]
-        train, test = fold != f, fold == f
+        test = fold == f
+        train = np.flatnonzero(~test)
+        train = train[fitting_rows(len(train))]
         fitted = cal.model.target_points(fold_parameters[f], poses) - points
         local = fit_structured(cal.model, fold_parameters[f], poses.subset(train),
                                fitted[train], np.random.default_rng(seeds[k]), start=start,
@@ -193,7 +203,9 @@ def corrected_heldout(
         return before[scored], after[scored], replace(learned[0], warnings=tuple(warnings))
     # all calibration residuals, with the first fold's hyperparameters (learned on most of
     # the same calibration poses: a search again would change them by its noise)
-    correction = fit_structured(cal.model, cal.parameters, poses, residuals, rng, hyper=start)
+    rows = fitting_rows(len(poses))
+    correction = fit_structured(cal.model, cal.parameters, poses.subset(rows), residuals[rows],
+                                rng, hyper=start)  # fmt: skip
     correction = replace(correction, warnings=correction.warnings + tuple(warnings))
     return before[scored], after[scored], correction
 
@@ -204,9 +216,11 @@ def final_correction(
     """The correction of every calibration residual of `cal` (of `recording`), its
     process's hyperparameters those of `first` (the first fold's, from `corrected_heldout`
     with `final` False) and its warnings `first`'s (every fold's)."""
-    residuals = cal.model.target_points(cal.parameters, recording.poses) - recording.points
-    out = fit_structured(cal.model, cal.parameters, recording.poses, residuals,
-                         np.random.default_rng(0), hyper=first.hyper)  # fmt: skip
+    rows = fitting_rows(len(recording))
+    poses = recording.poses.subset(rows)
+    residuals = cal.model.target_points(cal.parameters, poses) - recording.points[rows]
+    out = fit_structured(cal.model, cal.parameters, poses, residuals, np.random.default_rng(0),
+                         hyper=first.hyper)  # fmt: skip
     return replace(out, warnings=first.warnings)
 
 

@@ -27,6 +27,7 @@ from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.canonical import canonical_form
+from robot_calib.identify.correction import fitting_rows
 from robot_calib.identify.correction_structured import LearnedCorrection, fit_structured
 from robot_calib.identify.cpa import CPAResult, circle_point_analysis
 from robot_calib.identify.fit import (
@@ -172,6 +173,9 @@ class Calibration:
         Gaussian process: `identify.correction_structured`, the hybrid model); `accuracy`
         and `residuals` stay the physical model's."""
         fitted = recording if self.inliers is None else recording.subset(self.inliers)
+        keep = np.zeros(len(fitted), dtype=bool)
+        keep[fitting_rows(len(fitted))] = True  # at most MAX_FIT_POSES of them
+        fitted = fitted.subset(keep)
         residuals = self.model.target_points(self.parameters, fitted.poses) - fitted.points
         learned = fit_structured(self.model, self.parameters, fitted.poses, residuals)
         return replace(self, correction=learned)

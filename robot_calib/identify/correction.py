@@ -53,6 +53,11 @@ CORRECTION_KEYS = (
 #: that says so (or predicts so at its own poses) is refused
 MAX_CORRECTION_M = 0.010
 MAX_LEARN = 400  # poses the hyperparameters are learned on (a random subset above)
+#: poses a learned correction is fitted on at most (`fitting_rows`: a fixed random subset
+#: above): its cost grows with n (the load-driven part's normal equations, the process's
+#: subset of regressors), what it learns of structure in six joint readings does not
+#: (diagnose of 100k poses spent minutes on corrections of 80k poses each)
+MAX_FIT_POSES = 5000
 MAX_POINTS = 3000  # poses fitted exactly (one Cholesky, 0.4 s at 3000); above, a subset of
 INDUCING = 2000  # regressors on this many inducing poses: O(n INDUCING^2), 100k poses ~15 s
 MIN_LENGTH_SCALE_RAD = math.radians(1.0)  # a joint's shortest length scale (an edge)
@@ -229,6 +234,13 @@ def _subset(n: int, size: int, rng: np.random.Generator) -> IntArray:
     if n <= size:
         return np.arange(n)
     return np.sort(rng.choice(n, size, replace=False))
+
+
+def fitting_rows(n: int) -> IntArray:
+    """Sorted indices of the at most MAX_FIT_POSES of n poses a learned correction is
+    fitted on: all up to MAX_FIT_POSES, else a random subset (its own seed: the same rows
+    for the same n, whatever else draws random numbers)."""
+    return _subset(n, MAX_FIT_POSES, np.random.default_rng(20260))
 
 
 def _shuffled_subset(n: int, size: int, rng: np.random.Generator) -> IntArray:
