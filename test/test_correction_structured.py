@@ -9,13 +9,19 @@ survives PARAMS.json, and a file of the process alone (format 1) still loads."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
 
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import Calibration, calibrate
-from robot_calib.identify.correction_structured import StructuredCorrection, fit_structured
+from robot_calib.identify.correction_structured import (
+    StructuredCorrection,
+    correction_from_dict,
+    fit_structured,
+)
 from robot_calib.kinematics.frames import Array
 from robot_calib.sim.blind import ur10_out_of_vocabulary
 from robot_calib.sim.scenarios import Scenario, noise_rms_mm, ur10_random
@@ -47,8 +53,16 @@ def test_out_of_vocabulary_effects_come_to_the_floor(kind: str, joint: int, moti
     physical, hybrid, correction = hybrid_ratio(scenario, "geometric")
     assert physical > 15, physical  # measured: 65 x, 20.5 x
     assert hybrid < 1.5, (physical, hybrid)  # measured: 1.08 x, 1.05 x (goal: 3 x)
-    strongest = correction.strongest(scenario.calibration.poses)[0]
-    assert (strongest["joint"], strongest["motion"]) == (joint, motion), strongest
+    first, *others = correction.strongest(scenario.calibration.poses)
+    assert (first.joint, first.motion) == (joint, motion), first
+    # the first explains the structure, what the others add is of the noise's size
+    assert first.rms_um > 100 * max(m.rms_um for m in others), (first, others)
+    # columns of rounding noise (loads zero by the geometry) are left out: coefficients of
+    # a physical size, and the correction a smooth function of the readings
+    assert np.abs(correction.coefficients).max() < 0.1
+    poses = scenario.holdout.poses
+    again = correction.predict(replace(poses, q=poses.q * (1 + 1e-15)))
+    assert np.abs(again - correction.predict(poses)).max() < 1e-12
 
 
 def test_no_harm_where_the_physical_rung_reaches_the_floor() -> None:
@@ -56,6 +70,16 @@ def test_no_harm_where_the_physical_rung_reaches_the_floor() -> None:
     physical, hybrid, correction = hybrid_ratio(scenario, HARMONICS)
     assert physical < 1.1 and hybrid <= physical * 1.01, (physical, hybrid)
     assert correction.dof == 0 and not np.any(correction.gp.dual), correction.line()
+
+
+def load(doc: dict[str, Any]) -> StructuredCorrection:
+    """The structured correction of a PARAMS.json document `doc` ('bad.json'), checked
+    against the file's own parameters."""
+    cal = Calibration.from_dict(doc, "bad.json")  # the file's model and parameters
+    out = correction_from_dict(doc["correction"], cal.model, "bad.json: correction",
+                               cal.parameters)  # fmt: skip
+    assert isinstance(out, StructuredCorrection)
+    return out
 
 
 def test_the_structured_correction_round_trips_through_params_json() -> None:
@@ -79,12 +103,34 @@ def test_the_structured_correction_round_trips_through_params_json() -> None:
     assert loaded is not None and not isinstance(loaded, StructuredCorrection)
     assert np.allclose(loaded.predict(held.poses), hybrid.correction.gp.predict(held.poses),
                        rtol=0, atol=1e-12)  # fmt: skip
+    structured = doc["correction"]["structured"]
+    parameters = structured["parameters"]
+    changed = dict(parameters, **{k: v + 1e-9 for k, v in list(parameters.items())[:1]})
     for change, said in (
         ({"coefficients": [1.0]}, "coefficients must have"),
         ({"parameters": {"bogus": 0.0}}, "do not match"),
         ({"rms_m": 1.0}, "beyond"),
-    ):
+        # beyond physics: what it predicts at its own poses, against its stored size
+        ({"coefficients": [1e4 * c for c in structured["coefficients"]]},
+         "predicts .* mm at its own poses"),
+        ({"coefficients": [1.5 * c for c in structured["coefficients"]]},
+         "structured.rms_m .* it predicts"),
+        ({"rms_m": 0.5 * structured["rms_m"]}, "structured.rms_m .* it predicts"),
+        ({"ridge": -5.0}, "ridge must be >= 0"),
+        ({"degrees_of_freedom": -1.0}, "degrees_of_freedom must be >= 0"),
+        ({"ridge": None}, "coefficients must be zero with ridge null"),
+        # its own parameters: those of the file
+        ({"parameters": changed}, "differ from the file's parameters"),
+    ):  # fmt: skip
         bad = json.loads(json.dumps(doc))
         bad["correction"]["structured"].update(change)
         with pytest.raises(InputError, match=f"^bad.json: correction: .*{said}"):
-            Calibration.from_dict(bad, "bad.json")
+            load(bad)
+    for change, said in (
+        ({"rms_m": 2.0 * doc["correction"]["rms_m"]}, "rms_m .* it predicts"),
+        ({"fitted_poses": -3}, "fitted_poses must be >= 1"),
+    ):
+        bad = json.loads(json.dumps(doc))
+        bad["correction"].update(change)
+        with pytest.raises(InputError, match=f"^bad.json: correction: .*{said}"):
+            load(bad)

@@ -25,27 +25,40 @@ feature and the calibrated model's own Jacobian columns J_p (its free parameters
 fit redo what the physical fit absorbed of the structure. The coefficients are a ridge
 least-squares fit, the columns scaled to unit rms and the ridge chosen by generalised
 cross-validation on the fitted residuals only (the normal equations accumulated in blocks
-of poses: memory O(P^2) for any number of poses); with fewer than MIN_ROWS_PER_COLUMN rows
-per column the structured part is left out (said in `method`).
+of poses: memory O(P^2) for any number of poses); columns that hold only rounding noise
+(a load zero by the geometry, e.g. frame 1's M_y or a vertical axis's torque: rms below
+TINY_COLUMN x the largest column's) are left out, coefficient zero (scaled to unit rms
+they got coefficients of 1e11 and made the correction a function of the rounding of q);
+with fewer than MIN_ROWS_PER_COLUMN rows per column the structured part is left out (said
+in `method`).
 
 What the structure leaves, the Gaussian process of `identify.correction` learns (its
-kernel, hyperparameters and limits). The total is capped at MAX_CORRECTION_M per pose.
+kernel, hyperparameters and limits). A correction read from a file is checked at its
+process's inducing poses (its fitted poses): what it predicts there must stay within
+MAX_CORRECTION_M and agree with its stored sizes; where a prediction elsewhere exceeds
+MAX_CORRECTION_M it is capped there with a RuntimeWarning.
 
-Measured (simulated UR10, 700 calibration / 300 hold-out poses, held-out rms / noise
-floor; `test/test_correction_structured.py`): a 2 mrad gravity-side backlash of joint 2
-from 65 x (geometric) to 1.3 x (the process alone: 27 x); link 3 twisting out of the arm
-plane from 20.5 x to 1.1 x (the process alone: 9.2 x); gear harmonics the physical rung
-already models (1.00 x): unchanged.
+Measured (simulated UR10, `ur10_out_of_vocabulary(kind, seed=0, n=1000)` and
+`ur10_random`, 700 calibration / 300 hold-out poses, held-out rms / noise floor;
+`test/test_correction_structured.py`): a 2 mrad gravity-side backlash of joint 2 from
+65.0 x (geometric) to 1.08 x (the process alone: 27 x); link 3 twisting out of the arm
+plane from 20.5 x to 1.05 x (the process alone: 9.2 x); compliance of joints 2 and 3
+(`ur10_random(seed=1)`) from 87.9 x to 1.06 x; gear harmonics the physical rung already
+models (1.006 x): 1.006 x, no structure fitted. The largest coefficient 5e-3; the
+prediction changes by < 1e-16 m when the readings change by their rounding (q x (1 +
+1e-15)), and the compensation's fixed point holds to 1e-9 m.
 """
 
 from __future__ import annotations
 
 import math
+import warnings as python_warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from robot_calib.effects.compliance import GRAVITY
 from robot_calib.errors import InputError, check_keys
@@ -58,10 +71,11 @@ from robot_calib.identify.correction import (
 )
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, chain
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses
+from robot_calib.records import Record
 
 FORMAT = "robot_calib.correction/2"
 CORRECTION_KEYS = (
@@ -93,6 +107,42 @@ MIN_PROCESS_GAIN = 0.02
 CHECK_MIN_POSES = 50  # per half; with fewer poses the process is kept unchecked
 BLOCK_POSES = 2000  # poses per block of the design matrix (a block: 3 x 2000 x ~300 x 8 B)
 EIGEN_FLOOR = 1e-13  # eigenvalues below this share of the largest: a null direction
+#: a column whose rms over the poses is below this share of the largest column's holds only
+#: rounding noise (a load zero by the geometry: frame 1's M_y, a vertical axis's torque,
+#: ~1e-15 N m): left out of the fit (coefficient zero; scaled to unit rms it would get a
+#: coefficient of 1e11 and make the correction a function of the rounding of q)
+TINY_COLUMN = 1e-9
+#: the loaded correction's rms at the process's inducing poses may differ from the stored
+#: rms_m by this share (plus ABS_RMS_TOLERANCE_M) when those are all the fitted poses
+#: (rounding), SUBSET_RMS_TOLERANCE when they are a subset of them (sampling)
+RMS_TOLERANCE, SUBSET_RMS_TOLERANCE, ABS_RMS_TOLERANCE_M = 1e-6, 0.3, 1e-9
+PARAMETER_TOLERANCE = 1e-12  # relative: the stored parameters are the file's
+
+_MEANING = {
+    "rz": "joint {j}'s angle changes with the gravity load it carries (play or a compliance "
+    "whose side the load chooses)",
+    "rx": "joint {j}'s axis tilts with the load (the link carrying it bends or twists out of "
+    "its plane)",
+    "ry": "joint {j}'s axis tilts with the load (the link carrying it bends or twists out of "
+    "its plane)",
+    "x": "joint {j}'s housing shifts with the load",
+    "y": "joint {j}'s housing shifts with the load",
+    "z": "joint {j}'s housing shifts along its axis with the load",
+}
+
+
+@dataclass(frozen=True)
+class LoadMotion(Record):
+    """One load-driven motion of a structured correction (`StructuredCorrection.strongest`,
+    DIAGNOSIS.json `outside_vocabulary.motions`): the joint whose housing moves, the motion
+    (x, y, z translations along, rx, ry, rz rotations about its frame's axes), what of the
+    correction at the points only it explains, rms [um] (the drop of the fit's explained
+    sum of squares when it is left out), and what it usually is."""
+
+    joint: int
+    motion: str
+    rms_um: float
+    meaning: str
 
 
 def frame_loads(robot: RobotDescription, q: Array) -> Array:
@@ -156,26 +206,41 @@ def _blocks(n: int) -> list[slice]:
 
 @dataclass(frozen=True)
 class Ridge:
-    """The structured part's fit: coefficients (P,) in the columns' units, the ridge
-    relative to the largest eigenvalue of the scaled normal equations (inf: no structure),
-    its degrees of freedom, and whether it ended at the grid's smallest ridge."""
+    """The structured part's fit: coefficients (P,) in the columns' units (zero for the
+    columns left out), the ridge relative to the largest eigenvalue of the scaled normal
+    equations (inf: no structure), its degrees of freedom, whether it ended at the grid's
+    smallest ridge, and how many columns were left out as rounding noise (TINY_COLUMN)."""
 
     coefficients: Array
     ridge: float
     dof: float
     at_edge: bool
+    left_out: int = 0
+
+
+def _kept(gram: Array, rows: int) -> tuple[Array, NDArray[np.bool_]]:
+    """The columns' rms (P,) over `rows` rows of normal equations `gram` (P, P), and which
+    carry more than rounding noise (rms above TINY_COLUMN x the largest)."""
+    scale = np.sqrt(np.maximum(np.diag(gram), 0.0) / max(rows, 1))
+    top = float(scale.max()) if scale.size else 0.0
+    return scale, scale > TINY_COLUMN * top
 
 
 def _ridge(gram: Array, rhs: Array, total: float, rows: int) -> Ridge:
     """The ridge solution of the normal equations (gram (P, P), rhs (P,), y.y `total`, of
     `rows` rows) with the ridge of least generalised cross-validation
-    RSS / (rows - dof)^2 over RIDGE_GRID and no structure at all."""
-    scale = np.sqrt(np.diag(gram) / max(rows, 1))
-    scale[~(scale > 0)] = 1.0
-    values, vectors = np.linalg.eigh(gram / np.outer(scale, scale))
+    RSS / (rows - dof)^2 over RIDGE_GRID and no structure at all; columns of rounding noise
+    (`_kept`) left out (coefficient zero)."""
+    coefficients = np.zeros(len(rhs))
+    scale, kept = _kept(gram, rows)
+    left_out = int(np.sum(~kept))
+    if not kept.any():
+        return Ridge(coefficients, math.inf, 0.0, False, left_out)
+    scale = scale[kept]
+    values, vectors = np.linalg.eigh(gram[np.ix_(kept, kept)] / np.outer(scale, scale))
     keep = values > EIGEN_FLOOR * max(float(values[-1]), 0.0)
     values, vectors = values[keep], vectors[:, keep]
-    projected = vectors.T @ (rhs / scale)  # V^T A^T y
+    projected = vectors.T @ (rhs[kept] / scale)  # V^T A^T y
     u_y = projected / np.sqrt(values)  # U^T y
     explained = float(np.sum(u_y**2))
     best = (total / rows**2, math.inf, 0.0)  # no structure: RSS = y.y, dof 0
@@ -191,9 +256,9 @@ def _ridge(gram: Array, rhs: Array, total: float, rows: int) -> Ridge:
             best = (gcv, relative, dof)
     _, relative, dof = best
     if not math.isfinite(relative):
-        return Ridge(np.zeros(len(rhs)), math.inf, 0.0, False)
-    coefficients = vectors @ (projected / (values + relative * top)) / scale
-    return Ridge(coefficients, relative, dof, relative == RIDGE_GRID[0])
+        return Ridge(coefficients, math.inf, 0.0, False, left_out)
+    coefficients[kept] = vectors @ (projected / (values + relative * top)) / scale
+    return Ridge(coefficients, relative, dof, relative == RIDGE_GRID[0], left_out)
 
 
 @dataclass(frozen=True)
@@ -208,8 +273,9 @@ class StructuredCorrection:
         per feature unit, then per parameter unit]; zeros: no structure
     ridge, dof : the ridge (relative; inf: no structure) and its degrees of freedom
     structured_rms_m : rms norm of the structured part at the fitted poses [m]
-    gp : the Gaussian process of what the structure leaves (`identify.correction`)
-    n_targets, n_fitted, rms_m, method, warnings : as `ResidualCorrection`'s
+    gp : the Gaussian process of what the structure leaves (`identify.correction`: its
+        hyperparameters, length scales, noise, number of targets and of fitted poses)
+    rms_m, method, warnings : as `ResidualCorrection`'s
     """
 
     model: KinematicModel
@@ -221,8 +287,6 @@ class StructuredCorrection:
     dof: float
     structured_rms_m: float
     gp: ResidualCorrection
-    n_targets: int
-    n_fitted: int
     rms_m: float
     method: str
     warnings: tuple[str, ...] = ()
@@ -230,6 +294,14 @@ class StructuredCorrection:
     @property
     def n_joints(self) -> int:
         return int(self.model.robot.n_joints)
+
+    @property
+    def n_targets(self) -> int:
+        return self.gp.n_targets
+
+    @property
+    def n_fitted(self) -> int:
+        return self.gp.n_fitted
 
     @property
     def hyper(self) -> Hyperparameters:
@@ -255,36 +327,82 @@ class StructuredCorrection:
             out[rows] = design @ self.coefficients
         return out
 
-    def predict(self, poses: Poses) -> Array:
-        """The predicted residual (predicted - measured) at `poses`: shape (n, 3) [m,
-        tracker frame], the structure plus the process, its norm capped at
-        MAX_CORRECTION_M; subtract it from the model's points."""
+    def _raw(self, poses: Poses) -> Array:
+        """The structure plus the process at `poses` (n, 3) [m], uncapped."""
         if poses.q.shape[1] != self.n_joints:
             raise InputError(f"learned correction: poses of {poses.q.shape[1]} joints, the "
                              f"correction was fitted on {self.n_joints}")  # fmt: skip
-        out = self.gp.predict(poses) + self.structured(poses)
+        return self.gp.predict(poses) + self.structured(poses)
+
+    def predict(self, poses: Poses) -> Array:
+        """The predicted residual (predicted - measured) at `poses`: shape (n, 3) [m,
+        tracker frame], the structure plus the process; subtract it from the model's points.
+        A pose where it exceeds MAX_CORRECTION_M (far from any fitted pose: a loaded
+        correction is refused when it does at its own poses) is capped there, with a
+        RuntimeWarning saying how many and how far."""
+        out = self._raw(poses)
         size = np.linalg.norm(out, axis=1, keepdims=True)
+        beyond = size[:, 0] > MAX_CORRECTION_M
+        if not beyond.any():
+            return out
+        python_warnings.warn(
+            f"learned correction: {int(beyond.sum())} of {len(poses)} poses predicted beyond "
+            f"{MAX_CORRECTION_M * 1e3:.0f} mm (up to {float(size.max()) * 1e3:.3g} mm), "
+            "capped there: far from the calibration poses", RuntimeWarning, stacklevel=2,
+        )  # fmt: skip
         return out * np.minimum(1.0, MAX_CORRECTION_M / np.maximum(size, 1e-300))
 
-    def strongest(self, poses: Poses, count: int = 3) -> list[dict[str, Any]]:
-        """The `count` load-driven motions whose pose-dependent part moves the points at
-        `poses` most: joint (whose housing frame), motion (MOTIONS) and rms at the point [m]."""
-        if not np.any(self.coefficients):
+    def strongest(self, poses: Poses, count: int = 3) -> list[LoadMotion]:
+        """The `count` load-driven motions (a frame's motion times its load features: one
+        group of columns each) that explain most of the structured part at `poses`, in
+        turn: the ridge fit (the fit's ridge, the columns' normal equations at `poses`) of
+        the structured part on the geometry (every constant feature and Jacobian column)
+        and the motions chosen so far, each further motion ranked by how much the explained
+        sum of squares drops when it is left out of that fit with it (`LoadMotion.rms_um`:
+        the square root of that drop per pose). The drops add up to what the load-driven
+        motions explain: collinear motions that cancel each other count once, and of two
+        motions that explain the same (joint 2 turning with its gravity torque, the base
+        tilting with the moment it carries) the one that explains it alone is named."""
+        if not math.isfinite(self.ridge) or not np.any(self.coefficients):
             return []
-        n_joints, n_features = self.n_joints, len(FEATURES)
-        block = n_joints * 6 * n_features
-        sums = np.zeros((len(poses), 3, n_joints, 6))
-        coefficients = self.coefficients[:block].reshape(n_joints, 6, n_features).copy()
-        coefficients[:, :, 0] = 0.0  # the constant part is geometry, not load
+        size, n_rows = len(self.coefficients), 3 * len(poses)
+        gram = np.zeros((size, size))
         for rows in _blocks(len(poses)):
-            part = poses.subset(rows)
-            features = _features(frame_loads(self.model.robot, part.q), self.step_tau)
-            motions = _motions(self.model, self.parameters, part)
-            sums[rows] = motions * np.einsum("njf,jmf->njm", features, coefficients)[:, None]
-        size = np.sqrt(np.mean(np.sum(sums**2, axis=1), axis=0))  # (J, 6)
-        order = np.argsort(size, axis=None)[::-1][:count]
-        return [{"joint": int(k // 6) + 1, "motion": MOTIONS[k % 6], "rms_m": float(size.flat[k])}
-                for k in order]  # fmt: skip
+            flat = _design(self.model, self.parameters, self.columns, self.step_tau,
+                           poses.subset(rows)).reshape(-1, size)  # fmt: skip
+            gram += flat.T @ flat
+        scale, kept = _kept(gram, n_rows)
+        index = np.flatnonzero(kept)
+        scale = scale[index]
+        scaled = gram[np.ix_(index, index)] / np.outer(scale, scale)
+        rhs = scaled @ (self.coefficients[index] * scale)  # A^T y of the structured part
+        total = float((self.coefficients[index] * scale) @ rhs)  # y = A c: y.y
+        ridge = self.ridge * float(np.linalg.eigvalsh(scaled)[-1])
+
+        def unexplained(columns: IntArray) -> float:
+            """y.y - the explained sum of squares of the ridge fit of y on `columns`."""
+            normal = scaled[np.ix_(columns, columns)]
+            b = np.linalg.solve(normal + ridge * np.eye(len(columns)), rhs[columns])
+            return total - 2.0 * float(b @ rhs[columns]) + float(b @ normal @ b)
+
+        n_features = len(FEATURES)
+        load = (index % n_features != 0) & (index < self.n_joints * 6 * n_features)
+        group = index // n_features  # (frame, motion) of every column
+        chosen = ~load
+        left = unexplained(np.flatnonzero(chosen))
+        out: list[LoadMotion] = []
+        candidates = [int(g) for g in np.unique(group[load])]
+        while candidates and len(out) < count:
+            after = [unexplained(np.flatnonzero(chosen | (load & (group == g))))
+                     for g in candidates]  # fmt: skip
+            best = int(np.argmin(after))
+            g = candidates.pop(best)
+            joint, motion = g // 6 + 1, MOTIONS[g % 6]
+            rms_um = math.sqrt(max(left - after[best], 0.0) / len(poses)) * 1e6
+            out.append(LoadMotion(joint, motion, rms_um, _MEANING[motion].format(j=joint)))
+            chosen |= load & (group == g)
+            left = after[best]
+        return out
 
     def line(self) -> str:
         """One human line: size, the structured part's, the process's."""
@@ -322,11 +440,15 @@ class StructuredCorrection:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], model: KinematicModel,
-                  where: str = "correction") -> StructuredCorrection:  # fmt: skip
-        """The correction of a `to_dict` mapping for `model` (the file's physical model);
-        InputError naming `where` when it is of another format, lacks a field, names
-        parameters the model has not, has arrays of inconsistent shapes, values that are
-        not finite or a correction beyond MAX_CORRECTION_M."""
+                  where: str = "correction",
+                  parameters: ParameterVector | None = None) -> StructuredCorrection:  # fmt: skip
+        """The correction of a `to_dict` mapping for `model` (the file's physical model) and,
+        when given, `parameters` (the file's: the stored ones must be these); InputError
+        naming `where` and the field when it is of another format, lacks a field, names
+        parameters the model has not, has arrays of inconsistent shapes, values that are not
+        finite or out of range, or when what it predicts at its process's inducing poses (the
+        fitted poses, or a subset of them) goes beyond MAX_CORRECTION_M or disagrees with
+        its stored rms_m."""
         if not isinstance(data, Mapping) or data.get("format") != FORMAT:
             found = data.get("format") if isinstance(data, Mapping) else type(data).__name__
             raise InputError(f"{where}: not a learned correction of format {FORMAT} "
@@ -369,28 +491,75 @@ class StructuredCorrection:
             (not np.isfinite(coefficients).all() or not np.isfinite(step_tau).all()
              or not all(math.isfinite(v) for v in (*values.values(), dof, structured_rms, rms)),
              "values not finite"),
+            (not ridge >= 0, "structured.ridge must be >= 0 (null: no structure)"),
+            (not dof >= 0, "structured.degrees_of_freedom must be >= 0"),
+            (n_targets < 1 or n_fitted < 1, "n_targets and fitted_poses must be >= 1"),
+            (math.isinf(ridge) and bool(np.any(coefficients)),
+             "structured.coefficients must be zero with ridge null (no structure)"),
             (n_targets != process.n_targets or n_joints != process.n_joints,
              "the Gaussian process has another number of joints or targets"),
+            (n_fitted != process.n_fitted,
+             "fitted_poses differs from the Gaussian process's fitted_poses"),
         ]  # fmt: skip
         for bad, what in problems:
             if bad:
                 raise InputError(f"{where}: malformed learned correction: {what}")
         if not 0 <= rms <= MAX_CORRECTION_M or not 0 <= structured_rms <= MAX_CORRECTION_M:
             raise InputError(f"{where}: implausible learned correction: rms_m beyond 0..10 mm")
-        return cls(model, nominal.with_values(values), columns, step_tau, coefficients, ridge,
-                   dof, structured_rms, process, n_targets, n_fitted, rms, method,
-                   warnings)  # fmt: skip
+        stored = nominal.with_values(values)
+        if parameters is not None:
+            theirs = dict(zip(parameters.names, parameters.values))
+            differ = [k for k, v in values.items() if k not in theirs
+                      or abs(v - theirs[k]) > PARAMETER_TOLERANCE * max(1.0, abs(v))]  # fmt: skip
+            if differ:
+                raise InputError(f"{where}: learned correction: structured.parameters "
+                                 f"{differ[:3]} differ from the file's parameters")  # fmt: skip
+        out = cls(model, stored, columns, step_tau, coefficients, ridge, dof, structured_rms,
+                  process, rms, method, warnings)  # fmt: skip
+        out.check_at_fitted_poses(where)
+        return out
+
+    def check_at_fitted_poses(self, where: str) -> None:
+        """InputError naming `where` when what this correction predicts at its process's
+        inducing poses (every fitted pose, or a random subset above the process's
+        MAX_POINTS) is not finite, goes beyond MAX_CORRECTION_M, or its rms (of the
+        structured part, of the whole) disagrees with the stored structured.rms_m, rms_m."""
+        gp = self.gp
+        poses = replace(Poses.from_readings(gp.inducing_q), target=gp.inducing_target)
+        with np.errstate(all="ignore"):
+            structured = self.structured(poses)
+            total = self._raw(poses)
+        size = np.linalg.norm(total, axis=1)
+        if not (np.isfinite(total).all() and np.isfinite(structured).all()):
+            raise InputError(f"{where}: implausible learned correction: it predicts "
+                             "non-finite values at its own poses")  # fmt: skip
+        if float(size.max()) > MAX_CORRECTION_M:
+            raise InputError(f"{where}: implausible learned correction: it predicts "
+                             f"{float(size.max()) * 1e3:.3g} mm at its own poses (at most "
+                             f"{MAX_CORRECTION_M * 1e3:.0f} mm)")  # fmt: skip
+        share = RMS_TOLERANCE if len(poses) == self.n_fitted else SUBSET_RMS_TOLERANCE
+        for field, found, stored in (("structured.rms_m", _rms(structured), self.structured_rms_m),
+                                     ("rms_m", _rms(total), self.rms_m)):  # fmt: skip
+            if abs(found - stored) > share * stored + ABS_RMS_TOLERANCE_M:
+                raise InputError(f"{where}: implausible learned correction: {field} "
+                                 f"{stored * 1e3:.4g} mm, it predicts {found * 1e3:.4g} mm rms "
+                                 "at its own poses")  # fmt: skip
 
 
 #: a correction of the hybrid model: the process alone (format 1) or structured (format 2)
 LearnedCorrection = ResidualCorrection | StructuredCorrection
 
 
-def correction_from_dict(data: Mapping[str, Any], model: KinematicModel,
-                         where: str = "correction") -> LearnedCorrection:  # fmt: skip
-    """A PARAMS.json `correction` of either format (1: the process alone, still read)."""
+def correction_from_dict(
+    data: Mapping[str, Any],
+    model: KinematicModel,
+    where: str = "correction",
+    parameters: ParameterVector | None = None,
+) -> LearnedCorrection:
+    """A PARAMS.json `correction` of either format (1: the process alone, still read);
+    `parameters`: the file's (format 2 stores those it was fitted at: they must be these)."""
     if isinstance(data, Mapping) and data.get("format") == FORMAT:
-        return StructuredCorrection.from_dict(data, model, where)
+        return StructuredCorrection.from_dict(data, model, where, parameters)
     return ResidualCorrection.from_dict(data, where)
 
 
@@ -437,8 +606,9 @@ def fit_structured(
             rhs += flat.T @ y
             total += float(y @ y)
         fit = _ridge(gram, rhs, total, rows)
-        how = (f"{size} columns, ridge {fit.ridge:.2g} of the largest eigenvalue by "
-               f"generalised cross-validation, {fit.dof:.0f} degrees of freedom")  # fmt: skip
+        how = (f"{size - fit.left_out} columns ({fit.left_out} of zero loads left out), "
+               f"ridge {fit.ridge:.2g} of the largest eigenvalue by generalised "
+               f"cross-validation, {fit.dof:.0f} degrees of freedom")  # fmt: skip
         if fit.at_edge:
             warnings += (
                 "warning: learned correction: the structured part's ridge ends at the "
@@ -463,10 +633,9 @@ def fit_structured(
     )
     out = StructuredCorrection(
         model, parameters, columns, step_tau, fit.coefficients, fit.ridge, fit.dof,
-        _rms(structured), process, len(model.targets), n, 0.0, method,
-        warnings + process.warnings,
+        _rms(structured), process, 0.0, method, warnings + process.warnings,
     )  # fmt: skip
-    return replace(out, rms_m=_rms(out.predict(poses)))
+    return replace(out, rms_m=_rms(out._raw(poses)))
 
 
 def _process_generalises(process: ResidualCorrection, poses: Poses, left: Array) -> bool:
@@ -503,5 +672,4 @@ def _empty(model: KinematicModel, parameters: ParameterVector, columns: tuple[st
         len(model.targets), n, 0.0, "",
     )  # fmt: skip
     return StructuredCorrection(model, parameters, columns, step_tau, np.zeros(size),
-                                math.inf, 0.0, 0.0, placeholder, len(model.targets), n, 0.0,
-                                "")  # fmt: skip
+                                math.inf, 0.0, 0.0, placeholder, 0.0, "")  # fmt: skip
