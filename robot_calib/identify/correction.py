@@ -53,13 +53,13 @@ CORRECTION_KEYS = (
 #: that says so (or predicts so at its own poses) is refused
 MAX_CORRECTION_M = 0.010
 MAX_LEARN = 400  # poses the hyperparameters are learned on (a random subset above)
+MAX_POINTS = 3000  # poses fitted exactly (one Cholesky, 0.4 s at 3000); above, a subset of
+INDUCING = 2000  # regressors on this many inducing poses: O(n INDUCING^2), 100k poses ~15 s
 #: poses a learned correction is fitted on at most (`fitting_rows`: a fixed random subset
 #: above): its cost grows with n (the load-driven part's normal equations, the process's
 #: subset of regressors), what it learns of structure in six joint readings does not
 #: (diagnose of 100k poses spent minutes on corrections of 80k poses each)
-MAX_FIT_POSES = 5000
-MAX_POINTS = 3000  # poses fitted exactly (one Cholesky, 0.4 s at 3000); above, a subset of
-INDUCING = 2000  # regressors on this many inducing poses: O(n INDUCING^2), 100k poses ~15 s
+MAX_FIT_POSES = MAX_POINTS  # the process exact, no subset of regressors
 MIN_LENGTH_SCALE_RAD = math.radians(1.0)  # a joint's shortest length scale (an edge)
 # the target code's largest inverse length scale: targets uncorrelated to e^-25 there (a
 # saturation, not an edge that changes predictions)
