@@ -513,13 +513,14 @@ def _plausible_or_forced(
 
 
 def _correction(
-    doc: Mapping[str, Any], model: KinematicModel, args: argparse.Namespace
-) -> LearnedCorrection | None:
-    """The learned correction of args.params (PARAMS.json `correction`, the hybrid model),
-    None when it has none."""
+    doc: Mapping[str, Any], model: KinematicModel, params: ParameterVector,
+    args: argparse.Namespace,
+) -> LearnedCorrection | None:  # fmt: skip
+    """The learned correction of args.params (PARAMS.json `correction`, the hybrid model,
+    fitted at the file's `params`), None when it has none."""
     from robot_calib.identify.params_file import correction_of
 
-    return correction_of(doc, model, args.params)
+    return correction_of(doc, model, params, args.params)
 
 
 def cmd_predict(args: argparse.Namespace) -> int:
@@ -529,7 +530,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
 
     model, params, doc = _calibration(args)
     _plausible_or_forced(doc, args)
-    correction = _correction(doc, model, args)
+    correction = _correction(doc, model, params, args)
     args.target = model.targets[0] if args.target is None else args.target
     if args.target not in model.targets:
         known = ", ".join(repr(t) for t in model.targets)
@@ -565,7 +566,7 @@ def cmd_compensate(args: argparse.Namespace) -> int:
 
     model, params, doc = _calibration(args)
     _plausible_or_forced(doc, args)
-    correction = _correction(doc, model, args)
+    correction = _correction(doc, model, params, args)
     n_joints, limits = model.robot.n_joints, model.robot.limits
     source = args.joints or args.targets
     inputs = [args.params, source] + ([args.seed_joints] if args.seed_joints else [])
@@ -721,7 +722,7 @@ def cmd_score(args: argparse.Namespace) -> int:
         table = output_path(args.points_csv, "the per-point table",
                             [args.params, *args.bags], args.force)  # fmt: skip
     recording = pipeline.read_bags(args.bags, robot, args.pair_tolerance, _log)
-    correction = _correction(doc, model, args)
+    correction = _correction(doc, model, params, args)
     result = score(model, params, recording, in_sample, fitted, correction)
     for warning in result.warnings:  # also in stdout and the per-point table
         _log(warning)

@@ -186,7 +186,7 @@ def test_bag_mode_with_a_learned_correction_publishes_the_hybrid_model(
     listener = solve_in_bag_mode(calibrator, context)
     assert calibrator.error is None
     doc = json.loads(listener.last["parameters"].data)
-    assert doc["correction"]["format"] == "robot_calib.correction/1"
+    assert doc["correction"]["format"] == "robot_calib.correction/2"
     assert doc["correction"]["fitted_poses"] == 290
     assert "learned correction:" in listener.last["summary"].data
     cal = calibrator.calibration

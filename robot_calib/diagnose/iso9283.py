@@ -64,8 +64,11 @@ def repeat_groups(recording: Recording, min_repeats: int = MIN_REPEATS) -> list[
         [np.round(poses.q / JOINT_CHANGE_TOLERANCE), poses.direction, poses.target_index]
     )
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    groups = [np.flatnonzero(inverse.reshape(-1) == g) for g in np.argsort(first)]
-    return [g for g in groups if len(g) >= min_repeats]
+    inverse = inverse.reshape(-1)
+    counts = np.bincount(inverse, minlength=len(first))
+    order = np.argsort(inverse, kind="stable")  # each key's measurements in recording order
+    members = np.split(order, np.cumsum(counts)[:-1])  # by key, O(n log n)
+    return [members[g] for g in np.argsort(first) if counts[g] >= min_repeats]
 
 
 def iso9283(

@@ -136,18 +136,6 @@ def _replace(present: tuple[Effect, ...], new: Effect,
 SCREEN_POSES = 20000
 
 
-def _at_most(recording: Recording, limit: int) -> Recording:
-    """`recording`, or a fixed random subset of `limit` of its poses (every target measured
-    at a kept pose kept) when it has more."""
-    pose = recording.pose_index()
-    n_poses = int(pose[-1]) + 1 if len(pose) else 0
-    if n_poses <= limit:
-        return recording
-    kept = np.zeros(n_poses, dtype=bool)
-    kept[np.random.default_rng(0).choice(n_poses, limit, replace=False)] = True
-    return recording.subset(kept[pose])
-
-
 Screened = tuple[Effect, float, float]  # candidate, linearised held-out, in-sample rms [m]
 
 
@@ -156,8 +144,8 @@ def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
     """Linearised held-out rms [m] of the current model, and of each candidate added with
     its linearised in-sample rms [m] (one step on all calibration points)."""
     robot = cal.model.robot
-    recording = _at_most(recording, SCREEN_POSES)  # a ranking: a random subset above
-    holdout = None if holdout is None else _at_most(holdout, SCREEN_POSES)
+    recording = recording.at_most(SCREEN_POSES)  # a ranking: a random subset above
+    holdout = None if holdout is None else holdout.at_most(SCREEN_POSES)
     every = cal.model.effects + tuple(pool)
     widest: list[Effect] = []  # every effect that no other covers (e.g. the highest order)
     for e in every:

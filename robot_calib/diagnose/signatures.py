@@ -251,11 +251,19 @@ def _strongest(signature: Signature | None, spectra: list[JointSpectrum]) -> Sig
     return best
 
 
+#: poses the signatures are computed on at most (a fixed random subset above)
+WHERE_POSES = 20000
+
+
 def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Recording,
                   residuals: Array, noise_sigma_m: float,
                   spectra: list[JointSpectrum] | None = None) -> WhereItLies:  # fmt: skip
     """Where the residual lies (units in the field names); `spectra`: the frequency scan
-    of these residuals when already made (else it is made here)."""
+    of these residuals when already made (else it is made here). Above WHERE_POSES poses
+    from a fixed random subset of them (statistics whose precision 20k poses give)."""
+    keep = recording.sample_mask(WHERE_POSES)
+    if keep is not None:
+        recording, residuals = recording.subset(keep), residuals[keep]
     q, direction = recording.poses.q, recording.poses.direction
     joints = []
     tau = gravity_torques(model.robot, q)

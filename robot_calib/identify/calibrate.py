@@ -201,7 +201,7 @@ class Calibration:
         )
 
         model, params = params_from_dict(doc, where)
-        correction = correction_of(doc, model, where)  # None: the physical model alone
+        correction = correction_of(doc, model, params, where)  # None: the physical model alone
         try:
             std = np.array([float(r.get("std", 0.0)) for r in doc["parameters"]])
             acc = Accuracy.from_dict(doc["residuals"])

@@ -287,19 +287,19 @@ def in_sample_accuracy(doc: Mapping[str, Any], where: str | Path) -> Accuracy | 
 
 
 def correction_of(
-    doc: Mapping[str, Any], model: KinematicModel, where: str | Path
+    doc: Mapping[str, Any], model: KinematicModel, parameters: ParameterVector, where: str | Path
 ) -> LearnedCorrection | None:
     """The learned correction of a PARAMS.json document (its `correction` section,
     msgs_doc/parameters.md; format 2, structured, or 1, the Gaussian process alone), None
     when it has none (the physical model alone); InputError naming `where` when the
     section is malformed or was fitted on another number of joints or targets than `model`
-    has."""
+    has, or (format 2) was fitted at other parameters than the file's `parameters`."""
     if "correction" not in doc:
         return None
     section = f"{where}: correction"
     if doc["correction"] is None:
         raise InputError(f"{section}: null (leave the section out for no correction)")
-    correction = correction_from_dict(doc["correction"], model, section)
+    correction = correction_from_dict(doc["correction"], model, section, parameters)
     if correction.n_joints != model.robot.n_joints or correction.n_targets != len(model.targets):
         raise InputError(
             f"{section}: fitted on {correction.n_joints} joints and {correction.n_targets} "

@@ -95,6 +95,23 @@ class Recording:
             self.target_names,
         )
 
+    def at_most(self, limit: int, seed: int = 0) -> Recording:
+        """This recording, or a fixed random subset (`seed`) of `limit` of its poses (every
+        target measured at a kept pose kept) when it has more: for statistics whose
+        precision does not grow with 100k poses (screening, signatures)."""
+        keep = self.sample_mask(limit, seed)
+        return self if keep is None else self.subset(keep)
+
+    def sample_mask(self, limit: int, seed: int = 0) -> NDArray[np.bool_] | None:
+        """(n,) the measurements of `at_most`'s subset, None when every pose is kept."""
+        pose = self.pose_index()
+        n_poses = int(pose[-1]) + 1 if len(pose) else 0
+        if n_poses <= limit:
+            return None
+        kept = np.zeros(n_poses, dtype=bool)
+        kept[np.random.default_rng(seed).choice(n_poses, limit, replace=False)] = True
+        return kept[pose]
+
     def pose_index(self) -> IntArray:
         """(n,) 0-based pose of each measurement: consecutive measurements of one source at
         the same readings (paired with one joint state), each of a target not yet measured
@@ -102,6 +119,16 @@ class Recording:
         n = len(self)
         out = np.zeros(n, dtype=np.int64)
         q, bag, target = self.poses.q, self.bag_index, self.poses.target_index
+        if n == 0:
+            return out
+        # runs of consecutive measurements of one source at the same readings; where no
+        # target repeats within a run (the usual case), every run is one pose
+        repeated = np.zeros(n, dtype=bool)
+        repeated[1:] = (bag[1:] == bag[:-1]) & np.all(q[1:] == q[:-1], axis=1)
+        run = np.cumsum(~repeated) - 1
+        pairs = run.astype(np.int64) * (int(target.max()) + 1) + target
+        if len(np.unique(pairs)) == n:
+            return run.astype(np.int64)
         pose, seen = -1, set[int]()
         for i in range(n):
             same = (

@@ -142,7 +142,7 @@ class CompensatorNode(Node):
         if warning is not None:
             self.get_logger().warning(warning)
         # a hybrid calibration's learned correction, applied by the compensation (None: none)
-        self.correction = correction_of(doc, self.model, params_file)
+        self.correction = correction_of(doc, self.model, self.params, params_file)
         if joint_names:
             robot = with_joint_names(self.model.robot, joint_names)
             self.model = replace(self.model, robot=robot)
