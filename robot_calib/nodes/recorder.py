@@ -173,6 +173,26 @@ class RecorderNode(Node):
             text += "; LOST in transport: " + ", ".join(f"{t}={n}" for t, n in self.lost.items())
         return text
 
+    @property
+    def subscribed(self) -> list[str]:
+        """The topics subscribed so far, in the order of their subscriptions (that in which
+        an executor takes their messages when several are waiting)."""
+        return list(self._subscriptions_by_topic)
+
+    def take(self, topic: str) -> bool:
+        """Record the next message waiting on `topic`'s subscription as the executor would
+        deliver it, for a driver that steps the graph itself (`robot-calib simulate`);
+        False if none is waiting or the topic is not subscribed."""
+        subscription = self._subscriptions_by_topic.get(topic)
+        if subscription is None:
+            return False
+        with subscription.handle:
+            taken = subscription.handle.take_message(subscription.msg_type, True)
+        if taken is None:
+            return False
+        self._on_message(topic, *taken)
+        return True
+
     def close(self) -> None:
         """Stop recording and finalise the bag (summary, index). Idempotent; logs counts."""
         if self._closed:

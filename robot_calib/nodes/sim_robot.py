@@ -32,6 +32,7 @@ from sensor_msgs.msg import JointState
 
 from robot_calib.errors import InputError
 from robot_calib.messages import JOINT_STATES_TOPIC, ns_to_sec_nanosec
+from robot_calib.nodes._cdr import ClockEncoder, JointStateEncoder
 from robot_calib.nodes._common import declare, run_node
 from robot_calib.sim.controller import Motion, follow, hold, state_at
 from robot_calib.sim.plans import PLAN_NAMES, Plan, home_pose, make_plan, plan_times
@@ -108,6 +109,11 @@ class SimRobotNode(Node):
             self.create_publisher(Clock, "/clock", 10) if publish_clock else None
         )
         self.next_pose = 0
+        # publish_poses' CDR template (nodes/_cdr.py); None: messages (rclpy read it otherwise)
+        self._encoder: JointStateEncoder | None = None
+        self._encoder_checked = False
+        self._clock_encoder: ClockEncoder | None = None  # the same for /clock
+        self._clock_encoder_checked = False
         self.start_ns: int | None = None
         self._start_wall_ns = 0
         self._done_wall_ns: int | None = None
@@ -225,8 +231,18 @@ class SimRobotNode(Node):
         time starts at the wall-clock time of the first pose, so bags carry real dates."""
         if self.start_ns is None:
             self.start_ns = SYSTEM_CLOCK.now().nanoseconds
-        if self.clock_publisher is not None:
-            self.clock_publisher.publish(Clock(clock=Time(nanoseconds=self.stamp_ns(k)).to_msg()))
+        if self.clock_publisher is None:
+            return
+        stamp = self.stamp_ns(k)
+        sec, nanosec = ns_to_sec_nanosec(stamp)
+        if not self._clock_encoder_checked:  # rclpy must read the template's bytes
+            self._clock_encoder_checked = True
+            encoder = ClockEncoder()
+            self._clock_encoder = encoder if encoder.check(sec, nanosec) else None
+        if self._clock_encoder is not None:
+            self.clock_publisher.publish(self._clock_encoder.encode(sec, nanosec))
+        else:
+            self.clock_publisher.publish(Clock(clock=Time(nanoseconds=stamp).to_msg()))
 
     def publish_pose(self) -> int:
         """Publish the next pose's readings; returns its stamp [ns]."""
@@ -241,6 +257,38 @@ class SimRobotNode(Node):
         self.publisher.publish(msg)
         self.next_pose += 1
         return stamp
+
+    def publish_poses(self, count: int) -> list[int]:
+        """Publish the next `count` poses' readings at once (a burst: the readers' queues
+        must hold `count` messages; `robot-calib simulate` sizes it so); returns their
+        stamps [ns]. The messages are those of `publish_pose`, their CDR bytes built from a
+        template (nodes/_cdr.py) unless rclpy reads the first ones otherwise."""
+        if self.start_ns is None:
+            self.start_ns = self.get_clock().now().nanoseconds
+        stop = min(self.next_pose + count, len(self.plan))
+        stamps = [self.stamp_ns(k) for k in range(self.next_pose, stop)]
+        positions = self.plan.q[self.next_pose : stop].tolist()
+        encoder = self._encoder
+        if not self._encoder_checked and stamps:  # rclpy must read the template's bytes
+            self._encoder_checked = True
+            sec, nanosec = ns_to_sec_nanosec(stamps[0])
+            encoder = JointStateEncoder(self.world.model.robot.joint_names)
+            self._encoder = encoder = (
+                encoder if encoder.check(sec, nanosec, positions[0]) else None
+            )
+        publish = self.publisher.publish
+        for stamp, q in zip(stamps, positions):
+            sec, nanosec = divmod(stamp, 1_000_000_000)
+            if encoder is not None:
+                publish(encoder.encode(sec, nanosec, q))
+            else:
+                msg = JointState()
+                msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+                msg.name = list(self.world.model.robot.joint_names)
+                msg.position = q
+                publish(msg)
+        self.next_pose = stop
+        return stamps
 
     @property
     def finished(self) -> bool:

@@ -12,6 +12,7 @@ geometry_msgs/PoseWithCovarianceStamped on /laser_tracker/(NAME/)pose (msgs_doc/
 
 from __future__ import annotations
 
+import math
 import sys
 from typing import Any
 
@@ -19,6 +20,7 @@ import numpy as np
 from geometry_msgs.msg import Point, PointStamped, PoseWithCovarianceStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
@@ -36,6 +38,7 @@ from robot_calib.messages import (
     stamp_to_ns,
     target_topic,
 )
+from robot_calib.nodes._cdr import JointStateEncoder, PointStampedEncoder
 from robot_calib.nodes._common import declare, run_node
 from robot_calib.nodes.sim_robot import QOS
 from robot_calib.sim.measure import StreamingTracker, TrackerReading
@@ -93,6 +96,10 @@ class SimTrackerNode(Node):
         self.received = 0
         self.published = 0
         self.dropped = 0
+        # the points' CDR template (nodes/_cdr.py); None: messages (rclpy read it otherwise)
+        self._point_encoder: PointStampedEncoder | None = None
+        self._point_encoder_checked = False
+        self._joint_template: JointStateEncoder | None = None
         # on the steady clock: under use_sim_time /clock stands still until the robot starts
         self._wait_timer = self.create_timer(
             0.01, self._subscribe_when_ready, clock=Clock(clock_type=ClockType.STEADY_TIME)
@@ -128,6 +135,69 @@ class SimTrackerNode(Node):
             return
         self._publish(stamp, reading)
 
+    def take_joint_states(self) -> list[bool]:
+        """Take every joint state waiting on the subscription and measure them in one batch
+        (`StreamingTracker.measure_batch`: the readings of `on_joint_state`, bit for bit),
+        publishing as `on_joint_state` does: for a driver stepping the graph in bursts
+        (`robot-calib simulate`). Returns per joint state taken whether it was measured and
+        published (False: dropped, or not a reading of the robot's joints)."""
+        subscription = self.subscription
+        if subscription is None:
+            return []
+        names = self.world.model.robot.joint_names
+        template = self._joint_template
+        if template is None:
+            template = self._joint_template = JointStateEncoder(names)
+        stamps: list[int] = []
+        readings: list[list[float] | tuple[float, ...]] = []
+        taken: list[bool] = []
+        with subscription.handle:
+            take = subscription.handle.take_message
+            while (result := take(JointState, True)) is not None:
+                self.received += 1
+                data = result[0]
+                decoded = template.decode(data)
+                if decoded is None:  # another layout: by name, as on_joint_state
+                    try:
+                        msg = deserialize_message(data, JointState)
+                        q = joint_positions(msg, names).tolist()
+                    except InputError as exc:
+                        self.get_logger().error(str(exc))
+                        taken.append(False)
+                        continue
+                    stamp = stamp_to_ns(msg.header.stamp)
+                else:
+                    sec, nanosec, q = decoded
+                    stamp = sec * 1_000_000_000 + nanosec
+                    if not all(math.isfinite(v) for v in q):
+                        self.get_logger().error(
+                            f"{JOINT_STATES_TOPIC}: JointState positions not finite: {list(q)}"
+                        )
+                        taken.append(False)
+                        continue
+                stamps.append(stamp)
+                readings.append(q)
+                taken.append(True)
+        if not stamps:
+            return taken
+        measured = self.tracker.measure_batch(
+            np.array(readings, dtype=float), np.array(stamps, dtype=np.int64) * np.float64(1e-9)
+        )
+        published = iter(zip(stamps, measured))
+        out = []
+        for ok in taken:
+            if not ok:
+                out.append(False)
+                continue
+            stamp, reading = next(published)
+            if self.triggered:
+                self._latest = (stamp, reading)
+                out.append(False)
+                continue
+            self._publish(stamp, reading)
+            out.append(reading is not None)
+        return out
+
     def _on_trigger(self, request: Any, response: Any) -> Any:  # noqa: ANN401 - std_srvs
         """Trigger: publish the measurement at the latest joint state (success false when
         there is none yet or the line of sight is lost)."""
@@ -147,12 +217,23 @@ class SimTrackerNode(Node):
         if reading is None:
             self.dropped += 1
             return
+        sec, nanosec = ns_to_sec_nanosec(stamp - int(round(reading.latency_s * 1e9)))
         header = Header(frame_id=TRACKER_FRAME)
-        header.stamp.sec, header.stamp.nanosec = ns_to_sec_nanosec(
-            stamp - int(round(reading.latency_s * 1e9))
-        )
-        for publisher, xyz in zip(self.point_publishers, reading.points):
-            publisher.publish(PointStamped(header=header, point=point_message(xyz)))
+        header.stamp.sec, header.stamp.nanosec = sec, nanosec
+        encoder = self._point_encoder
+        if not self._point_encoder_checked:  # rclpy must read the template's bytes
+            self._point_encoder_checked = True
+            x, y, z = (float(v) for v in reading.points[0])
+            encoder = PointStampedEncoder(TRACKER_FRAME)
+            if not encoder.check(sec, nanosec, x, y, z):
+                encoder = None
+            self._point_encoder = encoder
+        if encoder is not None:
+            for publisher, xyz in zip(self.point_publishers, reading.points.tolist()):
+                publisher.publish(encoder.encode(sec, nanosec, *xyz))
+        else:
+            for publisher, xyz in zip(self.point_publishers, reading.points):
+                publisher.publish(PointStamped(header=header, point=point_message(xyz)))
         for k, publisher in self.pose_publishers.items():
             assert reading.frames is not None  # the world has probes
             publisher.publish(

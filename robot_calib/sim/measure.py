@@ -5,14 +5,17 @@ direction history and time), plus tracker and target noise, latency and dropouts
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording, recording_from_arrays
-from robot_calib.poses import Poses, approach_directions, next_direction
+from robot_calib.model import KinematicModel
+from robot_calib.poses import JOINT_CHANGE_TOLERANCE, Poses, approach_directions, next_direction
 from robot_calib.sim.plans import Plan, plan_times
 from robot_calib.sim.world import NoiseModel, World
 
@@ -99,6 +102,10 @@ def measure_six_dof(
     return points, frames
 
 
+BATCH_CHECK_POSES = 32
+"""Poses of the first batch `StreamingTracker.measure_batch` checks against `measure_all`."""
+
+
 @dataclass(frozen=True)
 class TrackerReading:
     """What the streaming tracker measured at one pose.
@@ -127,6 +134,7 @@ class StreamingTracker:
     _direction: Array | None = None
     _t0: float | None = None
     count: int = field(default=0)
+    _batch_ok: bool | None = field(default=None, repr=False)  # measure_batch's check
 
     def measure(self, q: Array, stamp_s: float) -> tuple[Array, float] | None:
         """Point (3,) [m] of the first target for reading q (J,) stamped `stamp_s`, and the
@@ -170,6 +178,154 @@ class StreamingTracker:
         self.count += 1
         points, frames = measure_six_dof(self.world, poses, self.rng)
         return TrackerReading(points, frames, stated_accuracy(self.world.noise, points), latency)
+
+    def measure_batch(self, q: Array, stamp_s: Array) -> list[TrackerReading | None]:
+        """`measure_all` of each reading q (m, J) stamped stamp_s (m,) [s] in turn, bit for
+        bit (the same random draws in the same order), the kinematics of all m poses in a
+        few numpy calls instead of m model evaluations (~100x faster).
+
+        The first batch is checked against `measure_all` pose by pose (up to
+        BATCH_CHECK_POSES, from a copy of the state): the batched arithmetic must give the
+        same bits (a model whose points depend on how many poses it evaluates at once
+        would not); if it does not, this tracker measures pose by pose from then on."""
+        q = np.asarray(q, dtype=float)
+        stamps = np.asarray(stamp_s, dtype=float)
+        if self._batch_ok is False or len(q) == 0:
+            return [self.measure_all(q[k], float(stamps[k])) for k in range(len(q))]
+        if self._batch_ok is None:
+            reference = StreamingTracker(self.world, copy.deepcopy(self.rng), self._last_q,
+                                         self._direction, self._t0, self.count)  # fmt: skip
+            state = copy.deepcopy(self.rng.bit_generator.state)
+            before = (self._last_q, self._direction, self._t0, self.count)
+            readings = self._measure_batch(q, stamps)
+            check = min(len(q), BATCH_CHECK_POSES)
+            expected = [reference.measure_all(q[k], float(stamps[k])) for k in range(check)]
+            self._batch_ok = all(_same(a, b) for a, b in zip(readings, expected))
+            if self._batch_ok:
+                return readings
+            self.rng.bit_generator.state = state  # measure this batch again, pose by pose
+            self._last_q, self._direction, self._t0, self.count = before
+            return self.measure_batch(q, stamps)
+        return self._measure_batch(q, stamps)
+
+    def _measure_batch(self, q: Array, stamps: Array) -> list[TrackerReading | None]:
+        """`measure_batch` without its check: the random draws pose by pose in
+        `measure_all`'s order (`physical_poses`, `tracker_noise`, `measure_six_dof` for
+        one pose of T targets), the arithmetic on all poses at once."""
+        m, n_joints = q.shape
+        world, rng = self.world, self.rng
+        model, noise, options = world.model, world.noise, world.tracker
+        n_targets = len(model.targets)
+        # approach directions: each joint's last move beyond the tolerance (next_direction)
+        if self._last_q is None:
+            start, previous, self._t0 = np.ones(n_joints), q[:1], float(stamps[0])
+        else:
+            assert self._direction is not None
+            start, previous = self._direction, self._last_q[None, :]
+        step = q - np.concatenate([previous, q[:-1]])
+        moved = np.abs(step) > JOINT_CHANGE_TOLERANCE
+        last = np.maximum.accumulate(np.where(moved, np.arange(m)[:, None], -1), axis=0)
+        direction = np.where(last >= 0, np.sign(step)[np.maximum(last, 0), np.arange(n_joints)],
+                             start)  # fmt: skip
+        self._direction, self._last_q = direction[-1].copy(), q[-1].copy()
+        assert self._t0 is not None
+        # the draws, pose by pose
+        latency = np.empty(m)
+        measured = np.zeros(m, dtype=bool)
+        draws: list[list[Array]] = []
+        for k in range(m):
+            latency[k] = rng.uniform(0.0, options.latency_max_s)
+            if rng.random() < options.dropout_probability:
+                continue
+            measured[k] = True
+            pose = [rng.normal(0.0, noise.joint_sigma_rad, (1, n_joints)),
+                    rng.normal(0.0, noise.target_sigma_m, (n_targets, 3))]  # fmt: skip
+            if noise.anisotropic:
+                pose += [rng.normal(0.0, noise.tracker_radial_sigma_m, (n_targets, 1)),
+                         rng.normal(0.0, 1.0, (n_targets, 1)),
+                         rng.normal(0.0, 1.0, (n_targets, 1))]  # fmt: skip
+            else:
+                pose.append(rng.normal(0.0, noise.tracker_sigma_m, (n_targets, 3)))
+            if model.oriented:
+                pose.append(rng.normal(0.0, noise.orientation_sigma_rad, (n_targets, 3)))
+            draws.append(pose)
+        self.count += len(draws)
+        out: list[TrackerReading | None] = [None] * m
+        if not draws:
+            return out
+        columns = [np.concatenate(c) for c in zip(*draws)]
+        rows = np.flatnonzero(measured)
+        physical = Poses(
+            np.repeat(q[rows], n_targets, axis=0) + np.repeat(columns[0], n_targets, axis=0),
+            np.repeat(direction[rows], n_targets, axis=0),
+            np.repeat(stamps[rows] - self._t0, n_targets),
+            np.tile(np.arange(n_targets), len(rows)) if n_targets > 1 else None,
+        )
+        points = _target_points(model, world.truth, physical, n_targets)
+        n = len(points)
+        if noise.anisotropic:
+            radial_draw, across1_draw, across2_draw = columns[2:5]
+            distance = np.linalg.norm(points, axis=1, keepdims=True)
+            radial = points / distance
+            helper = np.where(np.abs(radial[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+            across1 = np.cross(radial, helper)
+            across1 /= np.linalg.norm(across1, axis=1, keepdims=True)
+            across2 = np.cross(radial, across1)
+            sigma_t = noise.tracker_transverse_sigma_rad * distance
+            points = points + (
+                columns[1]
+                + radial * radial_draw
+                + across1 * across1_draw * sigma_t
+                + across2 * across2_draw * sigma_t
+            )
+        else:
+            points = points + (columns[1] + columns[2])
+        frames = None
+        if model.oriented:
+            frames = model.probe_orientations(world.truth, physical)
+            frames = Rotation.from_rotvec(columns[-1]).as_matrix() @ frames
+            probes = [model.targets.index(t) for t in model.oriented]
+            frames[~np.isin(physical.target_index, probes)] = np.nan
+        sigma = stated_accuracy(noise, points)
+        for i, row in enumerate(rows.tolist()):
+            pose_rows = slice(i * n_targets, (i + 1) * n_targets)
+            out[row] = TrackerReading(points[pose_rows],
+                                      None if frames is None else frames[pose_rows],
+                                      sigma[pose_rows], float(latency[row]))  # fmt: skip
+        assert n == len(rows) * n_targets
+        return out
+
+
+def _target_points(
+    model: KinematicModel, truth: ParameterVector, poses: Poses, n_targets: int
+) -> Array:
+    """`model.target_points(truth, poses)` for poses of n_targets consecutive rows each, as
+    evaluating each pose's rows alone gives them: with one target per pose that is one row
+    per evaluation, whose last product numpy hands to BLAS as a vector times a matrix
+    (gemv), not a matrix product (gemm): the same point to the last bit only this way."""
+    if n_targets > 1:
+        return model.target_points(truth, poses)
+    flange = model.flange2base(truth, poses)
+    target = model.target_offsets(truth)[poses.target_index]
+    p_in_base = np.einsum("nab,nb->na", flange[:, :3, :3], target) + flange[:, :3, 3]
+    b2t = model.base2tracker(truth)
+    return np.asarray((p_in_base[:, None, :] @ b2t[:3, :3].T)[:, 0] + b2t[:3, 3])
+
+
+def _same(a: TrackerReading | None, b: TrackerReading | None) -> bool:
+    """Two readings equal to the last bit (NaN frames equal)."""
+    if a is None or b is None:
+        return a is b
+    if a.frames is None or b.frames is None:
+        frames_equal = a.frames is None and b.frames is None
+    else:
+        frames_equal = np.array_equal(a.frames, b.frames, equal_nan=True)
+    return (
+        frames_equal
+        and np.array_equal(a.points, b.points)
+        and np.array_equal(a.sigma, b.sigma)
+        and a.latency_s == b.latency_s
+    )
 
 
 def measure_every_target(
