@@ -13,11 +13,18 @@ the housing of joint j + 1; a = translation along and rotation about its x, y, z
 frame j: rotation about z is an error of joint j + 1's angle, about x and y a tilt of its
 axis), on the calibrated model at its parameters; g_jf the load features of frame j:
 
-    1, M_x, M_y, M_z, tanh(M_z / tau_k)   (k = 1..len(STEP_SHARES))
+    1, M_x, M_y, M_z, P_x, P_y, P_z, C_ab (a, b = x, y, z), tanh(M_z / tau_k)
+    (k = 1..len(STEP_SHARES))
 
 M (3,) [N m] the gravity moment about frame j's origin of every link beyond it, in frame j
 (nominal kinematics and the robot's mass model, a payload included; M_z is joint j + 1's
-gravity torque): M makes a compliance of frame j in every direction, the tanh of M_z a
+gravity torque); P (3,) [N m / kg] that of a unit mass at the flange's origin and C_a (3,)
+[N m / (kg m)] that of a unit first moment along flange axis a: a tool the mass model does
+not know (mass m, centre c in the flange frame) loads frame j by m P + sum_a m c_a C_a, so
+its compliance is learned whatever its mass and centre (a KR5 carrying an unknown 3-5 kg
+tool 0.1-0.15 m off the joint-6 axis, its upper arm or forearm twisting under it: 9-34 x
+the floor geometric, 1.14-1.16 x with these features, 5-21 x without). M makes a
+compliance of frame j in every direction, the tanh of M_z a
 step where the joint's torque changes sign (play whose side the load chooses; tau_k =
 STEP_SHARES x the largest rms of a joint's M_z over the fitted poses: the steps' widths,
 the same for every joint); the constant
@@ -41,8 +48,8 @@ MAX_CORRECTION_M it is capped there with a RuntimeWarning.
 Measured (simulated UR10, `ur10_out_of_vocabulary(kind, seed=0, n=1000)` and
 `ur10_random`, 700 calibration / 300 hold-out poses, held-out rms / noise floor;
 `test/test_correction_structured.py`): a 2 mrad gravity-side backlash of joint 2 from
-65.0 x (geometric) to 1.08 x (the process alone: 27 x); link 3 twisting out of the arm
-plane from 20.5 x to 1.05 x (the process alone: 9.2 x); compliance of joints 2 and 3
+65.0 x (geometric) to 1.11 x (the process alone: 27 x); link 3 twisting out of the arm
+plane from 20.5 x to 1.08 x (the process alone: 9.2 x); compliance of joints 2 and 3
 (`ur10_random(seed=1)`) from 87.9 x to 1.06 x; gear harmonics the physical rung already
 models (1.006 x): 1.006 x, no structure fitted. The largest coefficient 5e-3; the
 prediction changes by < 1e-16 m when the readings change by their rounding (q x (1 +
@@ -92,13 +99,15 @@ STEP_SHARES = (0.01, 0.03, 0.1)
 #: a frame whose torque rms is below this [N m] gets steps of this width (a vertical axis:
 #: M_z = 0 everywhere, the steps are zero columns)
 MIN_TAU_NM = 1e-6
-FEATURES = ("1", "M_x", "M_y", "M_z", *(f"step{k + 1}" for k in range(len(STEP_SHARES))))
+FEATURES = ("1", "M_x", "M_y", "M_z", "P_x", "P_y", "P_z",
+            *(f"C{a}_{b}" for a in "xyz" for b in "xyz"),
+            *(f"step{k + 1}" for k in range(len(STEP_SHARES))))  # fmt: skip
 MOTIONS = ("x", "y", "z", "rx", "ry", "rz")
 #: the ridge's grid, relative to the largest eigenvalue of the scaled normal equations (and
 #: no structure at all: the ridge's other end); ending at the smallest is said
 RIDGE_GRID = tuple(float(v) for v in np.logspace(-12, 0, 49))
 #: rows (3 per pose) per column below which the structured part is not fitted
-MIN_ROWS_PER_COLUMN = 2.0
+MIN_ROWS_PER_COLUMN = 1.0
 #: a candidate ridge may spend at most this share of the rows as degrees of freedom
 MAX_DOF_SHARE = 0.5
 #: the process of what the structure leaves is kept when, fitted on half the poses, it
@@ -146,23 +155,34 @@ class LoadMotion(Record):
 
 
 def frame_loads(robot: RobotDescription, q: Array) -> Array:
-    """(n, J, 3) [N m]: M of every frame j = 0..J-1 (the housing of joint j + 1), the
-    gravity moment about its origin of the links beyond it (links j + 1..J), in frame j;
-    nominal kinematics of readings q (n, J) [rad] and the robot's mass model."""
+    """(n, J, 6): of every frame j = 0..J-1 (the housing of joint j + 1), in frame j, M
+    [N m] the gravity moment about its origin of the links beyond it (links j + 1..J, the
+    robot's mass model), then P [N m / kg] that of a unit mass at the flange's origin: a
+    payload or tool the mass model does not know (its mass unknown) loads every frame as a
+    multiple of P. Nominal kinematics of readings q (n, J) [rad]."""
     dh = DHTable(robot.theta + robot.joint_variables(q), robot.d, robot.a, robot.alpha, robot.beta)
     frames = chain(dh)
     com = np.einsum("njab,jb->nja", frames[:, 1:, :3, :3], robot.link_com) + frames[:, 1:, :3, 3]
     force = robot.link_mass[:, None] * GRAVITY  # (J, 3) base frame
     n, n_joints = q.shape
-    out = np.zeros((n, n_joints, 3))
+    flange, flange_axes = frames[:, -1, :3, 3], frames[:, -1, :3, :3]
+    weight = np.broadcast_to(GRAVITY, flange.shape)
+    # a unit first moment along each flange axis: x R6 e_a g (the payload's centre off the
+    # flange, times its mass), the same about every frame's origin
+    first = [np.cross(flange_axes[:, :, a], weight) for a in range(3)]
+    out = np.zeros((n, n_joints, 15))
     for j in range(n_joints):
-        moment = np.cross(com[:, j:] - frames[:, j, None, :3, 3], force[j:]).sum(axis=1)
-        out[:, j] = np.einsum("nab,na->nb", frames[:, j, :3, :3], moment)
+        origin, axes = frames[:, j, None, :3, 3], frames[:, j, :3, :3]
+        moment = np.cross(com[:, j:] - origin, force[j:]).sum(axis=1)
+        unit = np.cross(flange - origin[:, 0], weight)
+        for k, vector in enumerate([moment, unit, *first]):
+            out[:, j, 3 * k : 3 * k + 3] = np.einsum("nab,na->nb", axes, vector)
     return out
 
 
 def _features(loads: Array, step_tau: Array) -> Array:
-    """(n, J, F) load features (`FEATURES`) of loads (n, J, 3) [N m], steps tau (J, K)."""
+    """(n, J, F) load features (`FEATURES`) of loads (n, J, 6) (`frame_loads`), steps tau
+    (J, K) [N m]."""
     n, n_joints, _ = loads.shape
     steps = np.tanh(loads[:, :, 2:3] / step_tau[None])  # (n, J, K)
     return np.concatenate([np.ones((n, n_joints, 1)), loads, steps], axis=2)
