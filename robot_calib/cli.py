@@ -259,6 +259,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     robot = _robot(args)
     output = pipeline.output_path(args.output, "PARAMS.json", args.bags, args.force)
+    _check_model_terms(args.model, robot, args.ecc_order)
     started = time.perf_counter()
     if args.stream:
         if args.objective != "absolute":
@@ -285,6 +286,35 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if not cal.plausible:  # written for inspection; predict, compensate, export refuse it
         raise ImplausibleError(f"{'; '.join(cal.implausible)} ({output}: plausible false)")
     return 0
+
+
+def _check_model_terms(spec: str, robot: RobotDescription, ecc_order: int) -> None:
+    """Before any fit: InputError naming --model and the terms when two terms give the same
+    parameters (`joint_harmonics:2:orders=11,27+joint_harmonics:2:orders=11`), and a log
+    line for each joint_harmonics term that leaves its defaults to be guessed (no
+    `orders=`: order 2 alone; no joints: every joint; msgs_doc/effects.md)."""
+    from robot_calib.identify.calibrate import parse_model
+
+    _, effects = parse_model(spec, robot, ecc_order)
+    terms = spec.split("+")[1:]
+    owner: dict[str, str] = {}
+    for text, effect in zip(terms, effects):
+        for name in effect.parameter_names(robot):
+            if name in owner:
+                raise InputError(f"--model {spec}: terms {owner[name]!r} and {text!r} both "
+                                 f"give parameter {name}: give each joint (and order) "
+                                 "once")  # fmt: skip
+            owner[name] = text
+        if effect.name != "joint_harmonics":
+            continue
+        options = text.split(":")[1:]
+        guessed = [what for what, given in (
+            ("the default order 2 alone", any(o.startswith("orders=") for o in options)),
+            ("every joint", any(not o.startswith("orders=") for o in options)),
+        ) if not given]  # fmt: skip
+        if guessed:
+            _log(f"--model: {text} is {effect.spec} ({' and '.join(guessed)}: "
+                 "msgs_doc/effects.md)")  # fmt: skip
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
@@ -624,7 +654,20 @@ def cmd_compensate(args: argparse.Namespace) -> int:
         if (flags == flag).any():
             print(f"warning: {source}: {int((flags == flag).sum())} row(s) {text}: "
                   f"{_data_rows(flags == flag)[0]} (column status)", file=sys.stderr)  # fmt: skip
+    if n and not reached:  # written for inspection, but no exit 0 when nothing is usable
+        raise NothingReached(f"{source}: none of its {n} rows reached by the calibration "
+                             f"{args.params} ({output} written, every row flagged in column "
+                             "status): a calibration far from the robot, or targets out of "
+                             "its reach?")  # fmt: skip
     return 0
+
+
+class NothingReached(RobotCalibError):
+    """`compensate` ran to its end but reached no row (msgs_doc/compensate.md): exit 3, the
+    output written for inspection."""
+
+    exit_status = 3
+    kind = "nothing reached"
 
 
 def _data_rows(*masks: np.ndarray) -> list[str]:
@@ -706,10 +749,14 @@ def cmd_split(args: argparse.Namespace) -> int:
 def cmd_score(args: argparse.Namespace) -> int:
     """A calibration scored on bags it was not fitted on (absolute and seed criterion)."""
     from robot_calib import pipeline
-    from robot_calib.identify.params_file import in_sample_accuracy
+    from robot_calib.identify.params_file import implausible_of, in_sample_accuracy
     from robot_calib.score import score, write_points_table
 
     model, params, doc = _calibration(args)
+    reasons = implausible_of(doc, args.params, model, params)
+    if reasons:  # scored all the same: that is inspecting it
+        _log(f"warning: {args.params}: fitted, implausible ({'; '.join(reasons)}); scored to "
+             "inspect it")  # fmt: skip
     in_sample = in_sample_accuracy(doc, args.params)
     fitted = doc.get("recordings", [])
     if not isinstance(fitted, list) or not all(isinstance(f, str) for f in fitted):
@@ -723,7 +770,15 @@ def cmd_score(args: argparse.Namespace) -> int:
                             [args.params, *args.bags], args.force)  # fmt: skip
     recording = pipeline.read_bags(args.bags, robot, args.pair_tolerance, _log)
     correction = _correction(doc, model, params, args)
-    result = score(model, params, recording, in_sample, fitted, correction)
+    judged_by = "the calibration's in-sample rms"
+    if correction is not None:  # the model applied: physical + learned correction
+        hybrid = in_sample_accuracy(doc, args.params, "hybrid_residuals")
+        if hybrid is not None:
+            in_sample, judged_by = hybrid, "the hybrid model's in-sample rms"
+        else:
+            judged_by = ("the physical model's in-sample rms (the file has no "
+                         "hybrid_residuals: written before them)")  # fmt: skip
+    result = score(model, params, recording, in_sample, fitted, correction, judged_by)
     for warning in result.warnings:  # also in stdout and the per-point table
         _log(warning)
     for line in result.lines(", ".join(args.bags)):

@@ -559,7 +559,7 @@ def write_diagnosis(
     from robot_calib.atomic import staged_outputs
     from robot_calib.diagnose.figures import FigureCache
     from robot_calib.diagnose.html_report import compare_models, html_report
-    from robot_calib.diagnose.report import write_report
+    from robot_calib.diagnose.report import plot_paths, write_report
     from robot_calib.identify.params_file import write_json_atomic
 
     output = Path(output)
@@ -582,11 +582,25 @@ def write_diagnosis(
         if best is None:  # run writes its own params_best.json: one best model per folder
             scores = {r.model: r.heldout.absolute_rms_mm for r in ladder.rungs}
             write_json_atomic(
-                selected_document(chosen.calibration, fitted, "the diagnosis ladder's chosen "
-                                  "rung", diagnosis.scored_on, scores),
+                selected_document(marked_implausible(chosen.calibration, diagnosis), fitted,
+                                  "the diagnosis ladder's chosen rung", diagnosis.scored_on,
+                                  scores),
                 stage / best_file.name,
             )  # fmt: skip
+        written = {p.name for p in stage.iterdir()}
+    if force:  # replaced whole: no figure of the old set that the new report does not have
+        for stale in plot_paths(report.with_suffix("")):
+            if stale.name not in written:
+                stale.unlink(missing_ok=True)
     return report
+
+
+def marked_implausible(cal: Calibration, diagnosis: Diagnosis) -> Calibration:
+    """`cal` (the best model of `diagnosis`) carrying the diagnosis' implausibility reasons
+    too: its PARAMS.json says `plausible: false` with them whenever the diagnosis is
+    implausible, so that export, compensate and predict refuse it (without --force)."""
+    reasons = tuple(dict.fromkeys([*cal.implausible, *diagnosis.implausible]))
+    return cal if reasons == cal.implausible else replace(cal, implausible=reasons)
 
 
 def best_params_path(output: str | Path) -> Path:
@@ -771,7 +785,8 @@ def _run_in(
     scores = {n: m.holdout.absolute_rms_mm for n, m in models.items()}
     scores.update({r.model: r.heldout.absolute_rms_mm for r in ladder.rungs})
     write_json_atomic(
-        selected_document(best, recording, "the lowest held-out error of the run's models and "
+        selected_document(marked_implausible(best, diagnosis), recording,
+                          "the lowest held-out error of the run's models and "
                           "the diagnosis ladder's rungs", "hold-out bag", scores),
         folder / "params_best.json",
     )  # fmt: skip

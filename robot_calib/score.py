@@ -70,6 +70,7 @@ def score(
     in_sample: Accuracy | None = None,
     fitted: Sequence[str | Path] = (),
     correction: LearnedCorrection | None = None,
+    judged_by: str = "the calibration's in-sample rms",
 ) -> Score:
     """The calibration `model` at `params` scored on every measurement of `recording`
     (of the model's targets; InputError naming a target the model has not identified).
@@ -77,7 +78,8 @@ def score(
     `residuals`, `recordings`), to flag a score far above them, or of a bag it was fitted
     on (`score_warnings`). correction: the calibration's learned correction (PARAMS.json
     `correction`, the hybrid model), subtracted from the model's points; orientations
-    have none."""
+    have none: `in_sample` is then the hybrid model's (PARAMS.json `hybrid_residuals`), the
+    model actually applied. judged_by: what `in_sample` is, for the warning."""
     recording = recording.with_targets(model.targets)
     predicted = model.target_points(params, recording.poses)
     if correction is not None:
@@ -86,7 +88,7 @@ def score(
     n_suspect = int(outlier_mask(residuals, robust_sigma(residuals)).sum())
     rotation = orientation_residuals(model, params, recording.poses)
     figures = accuracy(recording.points, predicted)
-    warnings = score_warnings(figures, in_sample, fitted, model, recording)
+    warnings = score_warnings(figures, in_sample, fitted, model, recording, judged_by)
     if n_suspect:
         warnings.append(
             f"warning: {n_suspect} point(s) beyond {OUTLIER_K:g} robust sigmas of the "
@@ -108,13 +110,15 @@ def score_warnings(
     fitted: Sequence[str | Path],
     model: KinematicModel,
     recording: Recording,
+    judged_by: str = "the calibration's in-sample rms",
 ) -> list[str]:
     """'warning: ...' lines for a score that cannot be taken at face value: a bag among the
     `fitted` recordings (same path or name: the score is in-sample); an absolute rms above
     IMPLAUSIBLE_FACTOR x the `in_sample` rms and above IMPLAUSIBLE_MM (the calibration does
     not describe these data); 6-DoF orientations that the recording has and the model does
     not use, or the model expects and the recording lacks. `recording` indexed by the
-    model's targets."""
+    model's targets; `judged_by`: what `in_sample` is (the hybrid model's, physical +
+    learned correction, when one is applied)."""
     out = []
     known = [Path(str(f)) for f in fitted]  # as given then (maybe relative)
     for bag in map(Path, recording.sources):
@@ -127,8 +131,8 @@ def score_warnings(
         if rms > IMPLAUSIBLE_MM and rms > IMPLAUSIBLE_FACTOR * fitted_rms:
             times = f"{rms / fitted_rms:.0f} x" if fitted_rms > 0 else "far above"
             out.append(
-                f"warning: {where}: absolute error rms {rms:.4f} mm is {times} the "
-                f"calibration's in-sample rms {fitted_rms:.4f} mm: implausible for held-out "
+                f"warning: {where}: absolute error rms {rms:.4f} mm is {times} "
+                f"{judged_by} {fitted_rms:.4f} mm: implausible for held-out "
                 f"data: {IMPLAUSIBLE_HINT}"
             )
     measured = {recording.target_names[int(k)] for k in np.unique(recording.poses.target_index)}

@@ -7,6 +7,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from robot_calib.diagnose.frequency import MAX_SCAN_ORDER
 from robot_calib.diagnose.iso9283 import Iso9283, iso9283, repeat_groups
 from robot_calib.diagnose.ladder import (
@@ -20,7 +22,8 @@ from robot_calib.diagnose.ladder import (
 from robot_calib.diagnose.learnable import MIN_LEARNABLE_SHARE, LearnableBound
 from robot_calib.diagnose.noise import NoiseLevel, refine_with_model
 from robot_calib.diagnose.outside import OutsideVocabulary, outside_vocabulary
-from robot_calib.diagnose.signatures import WhereItLies, where_it_lies
+from robot_calib.diagnose.signatures import Signature, WhereItLies, where_it_lies
+from robot_calib.effects.compliance import gravity_torques
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.outliers import Outlier
@@ -37,6 +40,17 @@ UNKNOWN = "unknown"  # the verdict for structure no effect of the vocabulary exp
 #: is structure even where the floor is unknown and the learned correction learns nothing (a
 #: clean recording's strongest signature stays near 3)
 SIGNATURE_STRUCTURE = 5.0
+#: a remaining signature is structure worth naming only when it moves the points by at least
+#: this share of the noise floor (the best held-out rms when the floor is unknown): with
+#: 36k poses a 0.5 urad harmonic is 6 sigma and still nothing (`signature_size_mm`)
+STRUCTURE_SHARE = 0.1
+#: hold-out bags whose best held-out rms exceeds this many times the larger of the noise
+#: floor (when known) and the geometric calibration's in-sample rms do not belong to the
+#: calibration (another robot, joint names mapped wrongly, another tracker placement): every
+#: held-out figure is meaningless (a reason of `Diagnosis.implausible`, exit 3)
+FOREIGN_HOLDOUT_FACTOR = 1000.0
+#: ... and than this [mm] (1 um: below any tracker; noise-free simulations fit to ~1e-10 mm)
+FOREIGN_HOLDOUT_MIN_MM = 1e-3
 
 
 @dataclass(frozen=True)
@@ -193,6 +207,8 @@ class Diagnosis(Record):
         """One phrase: the dominant effect and its joints, or null."""
         dom = self.dominant_effect
         if dom is None:
+            if self.implausible:
+                return "none (the result is implausible: see IMPLAUSIBLE)"
             if self.noise.floor_known:
                 return "null (geometric reaches the noise level)"
             return (
@@ -341,16 +357,27 @@ def diagnose(
                               int(last.calibration.parameters.free.sum()))  # fmt: skip
     floor_mm = noise.floor_rms_m * 1e3 if noise.independent else None
     ratio = None if floor_mm is None else best.heldout.absolute_rms_mm / floor_mm
-    sig = after.strongest_signature
-    structure = f"; strongest structure: {sig.text}" if sig and sig.significance >= 3 else ""
     learnable = ladder.learnable
-    if ratio is None:
+    foreign = foreign_holdout(ladder, geo.accuracy.absolute_rms_mm, floor_mm)
+    outside = None if foreign else outside_vocabulary(ladder, recording)
+    reference_mm = floor_mm if floor_mm is not None else best.heldout.absolute_rms_mm
+    sig = after.strongest_signature
+    sized = sig is not None and sig.significance >= 3
+    if sig is not None and sized:
+        size = signature_size_mm(sig, after, recording, robot)
+        sized = size is None or size >= STRUCTURE_SHARE * reference_mm
+    structure = f"; strongest structure: {sig.text}" if sig and sized else ""
+    if foreign:
+        note = f"no verdict: {foreign}"
+    elif ratio is None:
         note = (
             "noise floor unknown (no repeat poses, circle sweeps or stated tracker accuracy; "
             "give --tracker-accuracy): held-out errors are not compared with one"
             + (f"; {learnable.line()}" if learnable is not None else "")
             + structure
         )
+    elif best.learned and floor_mm is not None:
+        note = _hybrid_note(best.model, ratio, last, floor_mm, structure, outside)
     elif ratio <= AT_FLOOR:
         note = f"at the noise level: held-out rms {ratio:.2f} x the noise floor"
     else:
@@ -363,7 +390,7 @@ def diagnose(
             + structure.replace("strongest structure", "strongest remaining structure")
         )  # fmt: skip
     diagnosis = Diagnosis(
-        dominant_effect=dominant_effect(ladder, where, noise),
+        dominant_effect=None if foreign else dominant_effect(ladder, where, noise),
         ladder=[RungScore.of(r, learnable_gap(ladder)) for r in ladder.rungs],
         unexplained=Unexplained(
             best.heldout.pairwise_mean_mm,
@@ -394,12 +421,88 @@ def diagnose(
         outliers=list(ladder.outliers),
         warnings=list(geo.warnings),
         learnable=learnable,
-        outside_vocabulary=outside_vocabulary(ladder, recording),
+        outside_vocabulary=outside,
         iso9283=_iso9283(ladder, recording, robot),
         refits=list(ladder.refits),
-        implausible=list(geo.implausible) + _holdout_in_degrees(holdout_sources, robot),
-    )
+        implausible=list(geo.implausible) + _holdout_in_degrees(holdout_sources, robot)
+        + ([foreign] if foreign else []),
+    )  # fmt: skip
     return diagnosis, ladder
+
+
+def _hybrid_note(hybrid: str, ratio: float, physical: Rung, floor_mm: float, structure: str,
+                 outside: OutsideVocabulary | None) -> str:  # fmt: skip
+    """The 'what remains' note when the hybrid rung `hybrid` won (held-out `ratio` x the
+    floor): what the physical model leaves (its ratio, its strongest structure), what the
+    hybrid leaves, and where the difference lies (`outside`, DIAGNOSIS.json
+    `outside_vocabulary`), never the physical model's structure as what remains."""
+    left = physical.heldout.absolute_rms_mm / floor_mm
+    hybrid_part = (f"at the noise level with the hybrid model {hybrid}: held-out rms {ratio:.2f} "
+                   "x the noise floor" if ratio <= AT_FLOOR else
+                   f"held-out rms {ratio:.2f} x the noise floor remains with the hybrid model "
+                   f"{hybrid}")  # fmt: skip
+    physical_part = (f"; the physical model {physical.model} alone leaves {left:.2f} x"
+                     + structure.replace("; strongest structure", " (its strongest structure")
+                     + (")" if structure else ""))  # fmt: skip
+    if outside is not None:
+        closed = (
+            "; the learned correction closes most of that: it lies outside the "
+            "vocabulary (see outside_vocabulary"
+            + (f": load-driven, joints {outside.joints})" if outside.joints else ")")
+        )
+    else:
+        closed = "; the learned correction closes part of that"
+    return hybrid_part + physical_part + closed
+
+
+def signature_size_mm(
+    sig: Signature, where: WhereItLies, recording: Recording, robot: RobotDescription
+) -> float | None:
+    """The rms [mm] the signature `sig` moves the measured points by: its joint-angle error
+    (a harmonic's amplitude / sqrt 2; the approach direction's value; the reading's or the
+    gravity torque's value times that signal's standard deviation over `recording`) times the
+    median lever of its joint (`where.joints_from_all_poses`); None when unknown."""
+    terms = {t.joint: t for t in where.joints_from_all_poses}
+    entry = terms.get(sig.joint)
+    if entry is None or entry.lever_mm is None:
+        return None
+    q = recording.poses.q[:, sig.joint - 1]
+    if sig.harmonic is not None:
+        angle = abs(sig.value) / np.sqrt(2.0)
+    elif "approach direction" in sig.text:
+        angle = abs(sig.value)
+    elif "reading (scale-like)" in sig.text:
+        angle = abs(sig.value) * float(np.std(q))
+    elif "gravity torque" in sig.text:
+        tau = gravity_torques(robot, recording.poses.q[:: max(1, len(q) // 5000)])
+        angle = abs(sig.value) * float(np.std(tau[:, sig.joint - 1]))
+    else:
+        return None
+    return angle * 1e-6 * entry.lever_mm
+
+
+def foreign_holdout(ladder: Ladder, insample_mm: float, floor_mm: float | None) -> str:
+    """Why the hold-out bags do not belong to this calibration: the lowest held-out rms of
+    the rungs above FOREIGN_HOLDOUT_FACTOR times the noise floor `floor_mm`, or, the floor
+    unknown (None), times the geometric calibration's in-sample rms `insample_mm` [mm] (and
+    above FOREIGN_HOLDOUT_FACTOR x FOREIGN_HOLDOUT_MIN_MM); '' when it is not, or without
+    hold-out bags (k-fold)."""
+    if ladder.holdout is None or not ladder.rungs:
+        return ""
+    held = min(r.heldout.absolute_rms_mm for r in ladder.rungs)
+    reference = max(floor_mm if floor_mm else insample_mm, FOREIGN_HOLDOUT_MIN_MM)
+    if not held > FOREIGN_HOLDOUT_FACTOR * reference:
+        return ""
+    floor = (f"{held / floor_mm:.0f} x the noise floor ({floor_mm:.4f} mm; limit "
+             f"{FOREIGN_HOLDOUT_FACTOR:.0f} x) and " if floor_mm else "")  # fmt: skip
+    limit = "" if floor_mm else f"; limit {FOREIGN_HOLDOUT_FACTOR:.0f} x, the floor unknown"
+    return (
+        f"held-out rms {held:.4g} mm is {floor}{held / max(insample_mm, 1e-12):.0f} x the "
+        f"geometric calibration's in-sample rms ({insample_mm:.4f} mm{limit}): the hold-out "
+        f"bags ({', '.join(ladder.holdout.sources)}) do not belong to this calibration "
+        "(another robot, joint names or order mapped wrongly, another tracker placement?): "
+        "every held-out figure is meaningless"
+    )
 
 
 def _holdout_in_degrees(holdout: Recording | None, robot: RobotDescription) -> list[str]:

@@ -542,7 +542,8 @@ def html_report(
         '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
         '<meta name="viewport" content="width=device-width, initial-scale=1">'
         f"<title>robot_calib report: {_e(best.label)}</title><style>{CSS}</style></head>"
-        f"<body><main><h1>Calibration report</h1><p class='sub'>Robot "
+        f"<body><main><h1>{'IMPLAUSIBLE: ' if diagnosis.implausible else ''}Calibration "
+        "report</h1><p class='sub'>Robot "
         f"{_e(best.model.robot.name)}; recordings {_e(', '.join(diagnosis.recordings))}; "
         f"scored on {_e(diagnosis.scored_on)}{_e(held)}. Units: positions and errors in mm, "
         "angles in deg, scale errors in ppm.</p>"

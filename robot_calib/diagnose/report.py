@@ -19,6 +19,15 @@ from robot_calib.diagnose.signatures import ArcSignature, JointTerms
 from robot_calib.identify.outliers import OUTLIER_K
 from robot_calib.measurements import Recording
 
+#: the figures' file name suffixes: `<stem>_<suffix>.png` (a figure with nothing to show is
+#: not written)
+PLOT_SUFFIXES = ("ladder", "angle", "map", "time")
+
+
+def plot_paths(stem: Path) -> list[Path]:
+    """Every PNG a report `<stem>.md` may have beside it (`PLOT_SUFFIXES`)."""
+    return [stem.with_name(f"{stem.name}_{suffix}.png") for suffix in PLOT_SUFFIXES]
+
 
 def _plots(ladder: Ladder, recording: Recording, stem: Path, floor_mm: float | None,
            figures: FigureCache) -> list[tuple[str, str]]:  # fmt: skip
@@ -125,7 +134,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         else f"dominant effect: **{dom.effect}** on joint(s) {dom.joints or '-'}"
     )
     lines = [
-        "# Sim-to-real gap diagnosis",
+        "# Sim-to-real gap diagnosis" + (" — IMPLAUSIBLE" if diagnosis.implausible else ""),
         "",
         f"Recordings: {', '.join(diagnosis.recordings)}; scored on {diagnosis.scored_on}"
         + (f" ({', '.join(diagnosis.holdout)})" if diagnosis.holdout else "")

@@ -447,8 +447,9 @@ class ResidualCorrection(Record):
         are not finite."""
         if not isinstance(data, Mapping) or data.get("format") != FORMAT:
             found = data.get("format") if isinstance(data, Mapping) else type(data).__name__
-            raise InputError(f"{where}: not a learned correction of format {FORMAT} "
-                             f"(format {found!r})")  # fmt: skip
+            raise InputError(f"{where}: not a learned correction of a known format "
+                             "(robot_calib.correction/2, the hybrid model's, or "
+                             f"{FORMAT}, the process alone; format {found!r})")  # fmt: skip
         check_keys(data, CORRECTION_KEYS, where)
         if not isinstance(data.get("warnings", []), list):
             raise InputError(f"{where}: malformed learned correction: warnings must be a list")
@@ -474,8 +475,8 @@ class ResidualCorrection(Record):
              "inducing_target must hold m target indices below n_targets"),
             (dual.shape != (m, 3), "dual must be an (m, 3) table"),
             (q.ndim == 2 and w.shape != (q.shape[1] + (n_targets > 1),),
-             "inverse_length_scales must have one value per joint (+ 1 with "
-             "several targets)"),
+             f"inducing_q_rad has {q.shape[-1]} columns (joints) and inverse_length_scales "
+             f"{w.size} values: one per joint (+ 1 with several targets) in both"),
             (mean.shape != (3,), "mean_m must have 3 values"),
             (n_targets < 1, "n_targets must be >= 1"),
             (not all(np.isfinite(a).all() for a in (q, dual, w, mean)), "values not finite"),

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from robot_calib.accuracy import Accuracy, orientation_accuracy
+from robot_calib.accuracy import Accuracy, accuracy, orientation_accuracy
 from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
@@ -31,6 +31,11 @@ if TYPE_CHECKING:  # light at run time: reading a parameter file needs no scipy
     from robot_calib.measurements import Recording
 
 FORMAT = "robot_calib.params/1"
+#: Beyond these a result is no robot of its table at all, but nonsense (PARAMS.json
+#: `plausible: false`, `calibrate` exit 3; re-checked whenever a PARAMS.json is read): a
+#: geometric parameter this far from nominal (identify.plausibility)
+PHYSICAL_LENGTH_M = 0.5
+PHYSICAL_ANGLE_RAD = math.radians(30.0)
 SI_UNITS = (
     "m",
     "rad",
@@ -114,6 +119,7 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
             doc["orientation_residuals"] = figures.to_dict()
     if cal.correction is not None:  # the hybrid model's learned part
         doc["correction"] = cal.correction.to_dict()
+        doc["hybrid_residuals"] = hybrid_in_sample(cal, recording).to_dict()
     if len(cal.model.targets) > 1:
         doc["identifiable_only_with_extra_targets"] = list(cal.by_extra_targets)
     if cal.identifiability is not None:
@@ -241,10 +247,56 @@ def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict
     return model, params, doc
 
 
-def implausible_of(doc: Mapping[str, Any], where: str | Path) -> tuple[str, ...]:
+def far_from_nominal_values(
+    params: ParameterVector,
+    length_m: float,
+    angle_rad: float,
+    free_only: bool = False,
+    deg_digits: int = 1,
+    nominal: ParameterVector | None = None,
+) -> list[str]:
+    """'a2 +882.0 mm', 'theta4 +64.6 deg', ...: the geometric parameters of `params` (free
+    ones only with `free_only`) more than `length_m` [m] or `angle_rad` [rad] from nominal
+    (the nominal values of `nominal`, by name, else those `params` carries)."""
+    reference = params if nominal is None else nominal
+    out = []
+    for p, value in zip(params.parameters, params.values):
+        if p.group != "geometric" or (free_only and not p.free):
+            continue
+        base = reference.nominal[reference.index(p.name)] if p.name in reference else p.nominal
+        deviation = value - base
+        if p.unit == "m" and abs(deviation) > length_m:
+            out.append(f"{p.name} {deviation * 1e3:+.1f} mm")
+        elif p.unit == "rad" and abs(deviation) > angle_rad:
+            out.append(f"{p.name} {np.degrees(deviation):+.{deg_digits}f} deg")
+    return out
+
+
+def beyond_physics(robot_name: str, far: Sequence[str]) -> str:
+    """The implausibility reason for geometric parameters `far` ('a2 +5000.0 mm', ...)
+    beyond PHYSICAL_LENGTH_M / PHYSICAL_ANGLE_RAD of nominal; '' when there are none."""
+    if not far:
+        return ""
+    return (
+        f"geometric parameters beyond physics ({robot_name}; more than "
+        f"{PHYSICAL_LENGTH_M * 1e3:.0f} mm or {math.degrees(PHYSICAL_ANGLE_RAD):.0f} deg from "
+        f"nominal): {', '.join(far)}"
+    )
+
+
+def implausible_of(
+    doc: Mapping[str, Any],
+    where: str | Path,
+    model: KinematicModel | None = None,
+    params: ParameterVector | None = None,
+) -> tuple[str, ...]:
     """Why the calibration of a PARAMS.json document is nonsense (`plausible: false`, its
-    `implausible` reasons), empty when it is plausible (a file without the fields is: it
-    predates them); InputError naming `where` when they are malformed or disagree."""
+    `implausible` reasons), empty when it is plausible; InputError naming `where` when they
+    are malformed or disagree. A file that says `plausible: true`, or says nothing (it
+    predates the fields, or was written by hand), is re-checked: geometric parameters beyond
+    PHYSICAL_LENGTH_M / PHYSICAL_ANGLE_RAD of the robot's nominal make it implausible all
+    the same (`model`, `params`: the file's, as `params_from_dict`; read from `doc` when
+    not given)."""
     plausible, reasons = doc.get("plausible", True), doc.get("implausible", [])
     if not isinstance(plausible, bool) or not (
         isinstance(reasons, list) and all(isinstance(r, str) for r in reasons)
@@ -253,7 +305,17 @@ def implausible_of(doc: Mapping[str, Any], where: str | Path) -> tuple[str, ...]
                          "of reasons")  # fmt: skip
     if plausible and reasons:
         raise InputError(f"{where}: 'plausible' is true but 'implausible' gives reasons")
-    return () if plausible else tuple(reasons) or ("marked plausible: false",)
+    if not plausible:
+        return tuple(reasons) or ("marked plausible: false",)
+    if model is None or params is None:
+        model, params = params_from_dict(doc, str(where))
+    far = far_from_nominal_values(params, PHYSICAL_LENGTH_M, PHYSICAL_ANGLE_RAD,
+                                  nominal=model.parameters())  # fmt: skip
+    if far:
+        said = "says plausible: true" if "plausible" in doc else "has no 'plausible' field"
+        return (f"{beyond_physics(model.robot.name, far)} (re-checked on reading: the file "
+                f"{said}; edited by hand?)",)  # fmt: skip
+    return ()
 
 
 def check_plausible(reasons: Sequence[str], where: str | Path, force: bool) -> str | None:
@@ -269,20 +331,34 @@ def check_plausible(reasons: Sequence[str], where: str | Path, force: bool) -> s
     return f"warning: {where}: fitted, implausible ({why}); used because of --force"
 
 
-def in_sample_accuracy(doc: Mapping[str, Any], where: str | Path) -> Accuracy | None:
-    """The calibration's in-sample figures (PARAMS.json `residuals`, mm), None when the file
-    has none; InputError naming `where` when they are not finite numbers >= 0."""
-    if "residuals" not in doc:
+def hybrid_in_sample(cal: Calibration, recording: Recording) -> Accuracy:
+    """The in-sample figures of the hybrid model (`cal`'s physical model minus its learned
+    correction) at the measurements of `recording` it was fitted on (its inliers when the
+    calibration screened outliers of this recording): PARAMS.json `hybrid_residuals`."""
+    inliers = cal.inliers
+    fitted = recording.with_targets(cal.model.targets)
+    if inliers is not None and len(inliers) == len(fitted):
+        fitted = fitted.subset(inliers)
+    return accuracy(fitted.points, cal.predict(fitted.poses))
+
+
+def in_sample_accuracy(
+    doc: Mapping[str, Any], where: str | Path, key: str = "residuals"
+) -> Accuracy | None:
+    """The calibration's in-sample figures (PARAMS.json `residuals`, mm; `key`
+    'hybrid_residuals': the hybrid model's, physical model minus learned correction), None
+    when the file has none; InputError naming `where` when they are not finite numbers >= 0."""
+    if key not in doc:
         return None
     try:
-        figures = Accuracy.from_dict(doc["residuals"])
+        figures = Accuracy.from_dict(doc[key])
     except InputError as exc:
-        raise InputError(f"{where}: residuals: {exc}") from None
+        raise InputError(f"{where}: {key}: {exc}") from None
     for name, value in figures.to_dict().items():
         if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 0:
-            raise InputError(f"{where}: residuals: {name} {value!r} is not a number >= 0")
+            raise InputError(f"{where}: {key}: {name} {value!r} is not a number >= 0")
         if not math.isfinite(value):
-            raise InputError(f"{where}: residuals: {name} {value!r} is not finite")
+            raise InputError(f"{where}: {key}: {name} {value!r} is not finite")
     return figures
 
 

@@ -12,6 +12,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from robot_calib.identify.params_file import (
+    PHYSICAL_ANGLE_RAD,
+    PHYSICAL_LENGTH_M,
+    beyond_physics,
+    far_from_nominal_values,
+)
 from robot_calib.identify.weights import DEFAULT_ORIENTATION_SIGMA_RAD
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import Recording
@@ -118,16 +124,7 @@ def far_from_nominal(cal: Calibration, length_m: float, angle_rad: float,
                      free_only: bool = False, deg_digits: int = 1) -> list[str]:  # fmt: skip
     """'a2 +882.0 mm', 'theta4 +64.6 deg', ...: the geometric parameters of `cal` (free
     ones only with `free_only`) more than `length_m` [m] or `angle_rad` [rad] from nominal."""
-    out = []
-    for p, value in zip(cal.parameters.parameters, cal.parameters.values):
-        if p.group != "geometric" or (free_only and not p.free):
-            continue
-        deviation = value - p.nominal
-        if p.unit == "m" and abs(deviation) > length_m:
-            out.append(f"{p.name} {deviation * 1e3:+.1f} mm")
-        elif p.unit == "rad" and abs(deviation) > angle_rad:
-            out.append(f"{p.name} {np.degrees(deviation):+.{deg_digits}f} deg")
-    return out
+    return far_from_nominal_values(cal.parameters, length_m, angle_rad, free_only, deg_digits)
 
 
 def calibration_warnings(cal: Calibration, geometry_fitted: bool = True) -> list[str]:
@@ -158,8 +155,7 @@ def calibration_warnings(cal: Calibration, geometry_fitted: bool = True) -> list
 #: `plausible: false`, `calibrate` exit 3): a geometric parameter this far from nominal
 #: after the canonical form (`identify.canonical`: angles within pi of nominal, DH flips
 #: undone) ...
-PHYSICAL_LENGTH_M = 0.5
-PHYSICAL_ANGLE_RAD = np.radians(30.0)
+#: (PHYSICAL_LENGTH_M, PHYSICAL_ANGLE_RAD: identify.params_file, re-checked on reading)
 #: ... an in-sample residual per axis this many times the noise (`noise_per_axis`) ...
 IMPLAUSIBLE_RESIDUAL_FACTOR = 1000.0
 #: ... an in-sample rms per axis above that of the simpler model it extends (fitted on the
@@ -196,11 +192,7 @@ def implausible_reasons(
             )
     beyond = far_from_nominal(cal, PHYSICAL_LENGTH_M, PHYSICAL_ANGLE_RAD)
     if beyond:
-        out.append(
-            f"geometric parameters beyond physics ({robot.name}; more than "
-            f"{PHYSICAL_LENGTH_M * 1e3:.0f} mm or {np.degrees(PHYSICAL_ANGLE_RAD):.0f} deg from "
-            f"nominal): {', '.join(beyond)}"
-        )
+        out.append(beyond_physics(robot.name, beyond))
     if simpler is not None and len(cal.residuals):
         name, simpler_rms = simpler
         if per_axis > simpler_rms * (1.0 + WORSE_TOLERANCE):
