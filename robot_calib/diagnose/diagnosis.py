@@ -270,14 +270,15 @@ def physical_rungs(ladder: Ladder) -> list[Rung]:
 
 
 def dominant_effect(
-    ladder: Ladder, where: WhereItLies, noise: NoiseLevel
+    ladder: Ladder, where: WhereItLies, noise: NoiseLevel, outside: OutsideVocabulary | None = None
 ) -> DominantEffect | None:
     """The effect that removed most of what `geometric` left (with its joints); None when
     geometric is already at the noise level, or, the floor unknown, when neither the
     residual model learns more than geometric held out (`Ladder.learnable`) nor a joint
     signature reaches SIGNATURE_STRUCTURE: never because geometric fits itself; 'unknown'
-    with the joints of the strongest residual signature when structure remains that no
-    candidate explains."""
+    with the joint of the learned correction's strongest load-driven motion when `outside`
+    (the hybrid rung far below the physical ones) has one, else of the strongest residual
+    signature, when structure remains that no candidate explains."""
     rungs = physical_rungs(ladder)  # a learned correction is no effect
     floor_mm = noise.floor_rms_m * 1e3
     gains: dict[str, float] = {}
@@ -297,6 +298,8 @@ def dominant_effect(
     signed = strongest is not None and strongest.significance >= SIGNATURE_STRUCTURE
     if not noise.independent and not learnt and not signed:
         return None  # floor unknown, nothing learnable and no signature: no evidence
+    if outside is not None and outside.motions:  # what the learned correction found
+        return DominantEffect(UNKNOWN, [outside.motions[0].joint])
     return DominantEffect(UNKNOWN, [strongest.joint] if strongest else [])
 
 
@@ -390,7 +393,7 @@ def diagnose(
             + structure.replace("strongest structure", "strongest remaining structure")
         )  # fmt: skip
     diagnosis = Diagnosis(
-        dominant_effect=None if foreign else dominant_effect(ladder, where, noise),
+        dominant_effect=None if foreign else dominant_effect(ladder, where, noise, outside),
         ladder=[RungScore.of(r, learnable_gap(ladder)) for r in ladder.rungs],
         unexplained=Unexplained(
             best.heldout.pairwise_mean_mm,
