@@ -89,6 +89,7 @@ def _payload(text: str) -> tuple[float, tuple[float, float, float]]:
 def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: float) -> None:
     """The diagnosis for people: the ladder (mm), the floor, the verdict, what remains,
     the measurements left out as tracker blunders."""
+    from robot_calib.diagnose.diagnosis import percent
     from robot_calib.identify.params_file import outlier_lines
 
     print(f"{'model':<40}{'held-out mean/max [mm]':>24}{'abs rms [mm]':>14}")
@@ -107,7 +108,7 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
         note = diagnosis.bound_note()
         if note is not None:
             print(note)
-        shares = [f"{effect} {100 * share:.0f} %" for effect, share in diagnosis.effect_shares()]
+        shares = [f"{effect} {percent(share)}" for effect, share in diagnosis.effect_shares()]
         if shares:
             print("share of the learnable gap each effect closed: " + ", ".join(shares))
     for figures in diagnosis.iso9283:

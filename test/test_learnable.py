@@ -104,3 +104,13 @@ def test_each_rung_reports_its_share_of_the_learnable_gap() -> None:
     assert effects == pytest.approx({added: 1.0}, abs=0.01)
     ratio = diagnosis.unexplained.ratio_to_noise_floor
     assert ratio is not None and ratio < 1.5
+
+
+def test_a_share_never_prints_as_minus_zero() -> None:
+    """Issue 24: geometric's own share came out as -1.3e-16 and printed '-0 %'."""
+    from robot_calib.diagnose.diagnosis import percent
+
+    assert percent(-1.33e-16) == "0 %"
+    assert percent(-0.004) == "0 %"
+    assert percent(0.996) == "100 %"
+    assert percent(-0.25) == "-25 %"

@@ -61,6 +61,12 @@ class DominantEffect(Record):
     joints: list[int]
 
 
+def percent(share: float) -> str:
+    """A share as a whole percentage ('12 %'); never '-0 %' (round() of a float is an int,
+    so -0.4 % prints as '0 %')."""
+    return f"{round(100 * share)} %"
+
+
 @dataclass(frozen=True)
 class RungScore(Record):
     """One rung of the ladder: held-out figures (seed criterion and absolute) and in-sample."""
@@ -89,6 +95,8 @@ class RungScore(Record):
         share = None
         if gap is not None and gap[0] > gap[1]:
             share = (gap[0] - held.absolute_rms_mm) / (gap[0] - gap[1])
+            if abs(share) < 1e-9:  # geometric itself (the reference): 0, not -1e-16
+                share = 0.0
         return cls(
             rung.model, held.pairwise_mean_mm, held.pairwise_max_mm, held.absolute_mean_mm,
             held.absolute_max_mm, held.absolute_rms_mm, fit.pairwise_mean_mm,

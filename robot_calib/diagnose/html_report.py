@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
-from robot_calib.diagnose.diagnosis import Diagnosis
+from robot_calib.diagnose.diagnosis import Diagnosis, percent
 from robot_calib.diagnose.figures import (
     ANGLE_UNITS,
     FigureCache,
@@ -282,7 +282,7 @@ def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibr
     before = next((m for m in compared if m.model == "nominal"), None)
     if before is not None and row is not None:
         error += f"; nominal: {before.accuracy.absolute_rms_mm:.4f} mm rms"
-    shares = ", ".join(f"{e} {100 * v:.0f} %" for e, v in diagnosis.effect_shares())
+    shares = ", ".join(f"{e} {percent(v)}" for e, v in diagnosis.effect_shares())
     ratio = diagnosis.unexplained.ratio_to_noise_floor
     # green when the best model is at the noise floor (warnings are listed either way), red
     # when it is not, or when there are warnings and no floor to judge by
@@ -349,7 +349,7 @@ def _ladder(diagnosis: Diagnosis, ladder: Ladder, figures: FigureCache) -> str:
             f"{rung.holdout_mean_mm:.4f} / {rung.holdout_max_mm:.4f}",
             f"{rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f}",
             _times_floor(rung.holdout_abs_rms_mm, diagnosis),
-            "-" if share is None else f"{100 * share:.0f} %",
+            "-" if share is None else percent(share),
         ])  # fmt: skip
     head = [
         "model",
@@ -365,7 +365,7 @@ def _ladder(diagnosis: Diagnosis, ladder: Ladder, figures: FigureCache) -> str:
     if shares:
         out.append(
             "<p>Share of the learnable gap each effect closed: "
-            + _e(", ".join(f"{e} {100 * v:.0f} %" for e, v in shares))
+            + _e(", ".join(f"{e} {percent(v)}" for e, v in shares))
             + ".</p>"
         )
     if diagnosis.learnable is not None:

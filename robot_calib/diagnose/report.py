@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport
+from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport, percent
 from robot_calib.diagnose.figures import (
     FigureCache,
     angle_figure,
@@ -172,7 +172,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
             f"| {rung.model} | {rung.holdout_mean_mm:.4f} / {rung.holdout_max_mm:.4f} "
             f"| {rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f} "
             f"| {_times_floor(rung.holdout_abs_rms_mm, noise.floor_abs_rms_mm)} "
-            f"| {'-' if share is None else f'{100 * share:.0f} %'} |"
+            f"| {'-' if share is None else percent(share)} |"
         )
     if diagnosis.learnable is not None:
         bound = diagnosis.learnable
@@ -182,7 +182,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
             f"{'; ' + note if (note := diagnosis.bound_note()) else ''}. "
             f"Method: {bound.method}. The last column: the share of that learnable gap "
             "(geometric's held-out rms minus the bound) each rung closes"
-            + (": by effect " + ", ".join(f"{e} {100 * v:.0f} %"
+            + (": by effect " + ", ".join(f"{e} {percent(v)}"
                                           for e, v in diagnosis.effect_shares())
                if diagnosis.effect_shares() else "")
             + ".",
