@@ -123,7 +123,7 @@ def test_a_trajectory_comes_back_compensated(context: Context, params_file: Path
     corrected = np.array([p.positions for p in out.points])[:, np.argsort(ORDER)]  # model order
     seconds = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec
                         for p in out.points])  # fmt: skip
-    np.testing.assert_array_equal(seconds, 0.5 * np.arange(len(q)))
+    np.testing.assert_allclose(seconds, 0.5 * np.arange(len(q)), rtol=0, atol=1e-9)  # sec + ns
     assert [list(p.velocities) for p in out.points] == [
         list(p.velocities) for p in trajectory(q, names).points
     ]
@@ -131,7 +131,7 @@ def test_a_trajectory_comes_back_compensated(context: Context, params_file: Path
     cal, _ = calibrated()
     nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     commands = Poses.from_readings(q, approach_directions(q, start=start), seconds)
-    assert commands.direction[0, 3] == -1.0
+    assert commands.direction[0, 3] == -1.0  # a sign (+-1), not a computed value
     expected = compensate_commands(cal.model, cal.parameters, nominal, nominal_params, commands)
     np.testing.assert_allclose(corrected, expected.q, rtol=0, atol=1e-12)
     assert np.abs(corrected - q).max() > 1e-4  # corrected (backlash 2 mrad), not passed on

@@ -170,7 +170,7 @@ def test_the_dh_table_holds_every_row_with_its_sigma_in_si_and_mm_deg() -> None:
     assert float(rows[1]["beta_rad"]) == params["beta2"]  # joint 2: Hayati
     assert float(rows[1]["beta_std_rad"]) == 1e-5
     assert float(rows[2]["alpha_deg"]) == pytest.approx(np.degrees(params["alpha3"]), abs=1e-6)
-    assert rows[3]["beta_rad"] == "0" or float(rows[3]["beta_rad"]) == 0.0  # no beta4
+    assert rows[3]["beta_rad"] == "0" or float(rows[3]["beta_rad"]) == 0.0  # no beta4 (written 0)
     # Fixed parameters: sigma 0, named.
     assert rows[0]["fixed"] == "theta1 d1" and float(rows[0]["d_std_m"]) == 0.0
     assert rows[1]["fixed"] == "d2"
@@ -187,7 +187,7 @@ def test_the_json_export_is_a_flat_mapping_with_units_and_sigma() -> None:
     assert list(doc["parameters"]) == list(cal.parameters.names)
     a2 = doc["parameters"]["a2"]
     assert a2 == {"value": cal.parameters["a2"], "unit": "m", "std": 1e-5, "estimated": True}
-    assert doc["parameters"]["theta1"]["std"] == 0.0
+    assert doc["parameters"]["theta1"]["std"] == 0.0  # 0 is the "fixed" flag, exact
     assert doc["parameters"]["theta1"]["estimated"] is False
 
 

@@ -103,6 +103,7 @@ def test_signatures_give_no_figure_for_columns_the_model_has(scenario) -> None: 
     terms = joint_terms(cal.model, cal.parameters, scenario.calibration, cal.residuals, 5e-6)
     joint2 = terms[1]
     assert joint2.harmonics_urad is not None
+    # skipped columns are reported as the literal 0.0 (no figure), not a computed value
     assert all(a == 0.0 for a in joint2.harmonics_urad), joint2.harmonics_urad
     for t in terms:
         assert all(a < 1e6 for a in (t.harmonics_urad or [])), t

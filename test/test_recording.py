@@ -88,10 +88,11 @@ def test_sample_bag_pairs_every_point() -> None:
     assert len(rec) == 290 and rec.n_unpaired == 0
     assert [s.joint for s in rec.sweeps] == [1, 2, 3, 4, 5, 6]
     assert rec.general.sum() == 0
+    # the first stamp minus itself (integer ns): exactly 0
     assert rec.poses.time[0] == 0.0 and np.all(np.diff(rec.poses.time) > 0)
     # Forth then back: joint 1 approaches its first half from +, the second half from -.
     d = rec.poses.direction[rec.sweeps[0].index, 0]
-    assert np.all(d[1:30] == -1.0) and np.all(d[31:] == 1.0)
+    assert np.all(d[1:30] == -1.0) and np.all(d[31:] == 1.0)  # signs (+-1), exact
 
 
 def test_unpaired_points_are_counted_and_reported(tmp_path: Path) -> None:

@@ -202,7 +202,7 @@ def test_stated_accuracy_is_the_simulated_tracker_noise() -> None:
     stated = stated_accuracy(aniso, at)
     # sqrt(3^2 + (2.5^2 + 2 (2 urad * range)^2) / 3) um: range 2 m -> 4.6637 um, 5 m -> 8.8176
     np.testing.assert_allclose(stated[:, 0], [4.6637e-6, 8.8176e-6], rtol=1e-4)
-    assert (stated[:, 1] == 0.0).all()  # no orientation noise: not stated
+    assert (stated[:, 1] == 0.0).all()  # no orientation noise: not stated (the 0 flag, exact)
     rng = np.random.default_rng(0)
     for k, p in enumerate(at):
         draws = tracker_noise(aniso, np.repeat(p[None], 20000, axis=0), rng)

@@ -100,7 +100,7 @@ def test_steffensen_jumps_to_the_limit_of_a_linear_iteration() -> None:
     """g(x) = 2 + 0.15 (x - 2): from 0, two rounds and one step reach 2 exactly."""
     g = lambda x: 2.0 + 0.15 * (x - 2.0)  # noqa: E731
     assert steffensen([0.0, g(0.0), g(g(0.0))]) == pytest.approx(2.0, abs=1e-12)
-    assert steffensen([0.0, 1.0, 3.0]) == 3.0  # not shrinking: the last value
+    assert steffensen([0.0, 1.0, 3.0]) == 3.0  # not shrinking: the last value (a copy)
 
 
 def test_stream_bag_round_trip_hint_and_cli(simulated: SimulatedStream, tmp_path: Path) -> None:
@@ -130,7 +130,8 @@ def test_stream_bag_round_trip_hint_and_cli(simulated: SimulatedStream, tmp_path
     assert run.returncode == 0, run.stderr
     assert "latency 2.0000 ms (given)" in run.stdout
     doc = json.loads(out.read_text())
-    assert doc["stream"]["latency_s"] == 0.002 and doc["stream"]["points"] == int(short.sum())
+    assert doc["stream"]["latency_s"] == pytest.approx(0.002, abs=1e-12)
+    assert doc["stream"]["points"] == int(short.sum())
     bad = robot_calib("calibrate", str(bag), "--latency", "0.002", "-o", str(tmp_path / "x"))
     assert bad.returncode == 2 and "--latency applies with --stream only" in bad.stderr
     assert len(bad.stderr.strip().splitlines()) == 1
