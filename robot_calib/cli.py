@@ -590,7 +590,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
 def cmd_compensate(args: argparse.Namespace) -> int:
     """Nominal joint commands, or targets, -> compensated commands (msgs_doc/compensate.md)."""
     from robot_calib.compensate import compensate_commands, compensate_targets
-    from robot_calib.compensate.solve import nominal_counterpart
+    from robot_calib.compensate.solve import nominal_counterpart, within_limits
     from robot_calib.compensate.targets import check_reach, goals_in_base, read_targets_csv
     from robot_calib.compensate.write import LARGE_CHANGE_DEG, row_status, write_compensated_csv
     from robot_calib.predict import read_joints_csv
@@ -609,7 +609,9 @@ def cmd_compensate(args: argparse.Namespace) -> int:
         poses = read_joints_csv(args.joints, n_joints, limits)
         output = output_path(args.output, "JOINTS.csv", inputs, args.force)
         result = compensate_commands(model, params, nominal, nominal_params, poses, correction)
-        status = row_status(result, poses.q)
+        # a command or its correction beyond the limits: `beyond_limits` (the one check)
+        inside = within_limits(model.robot, result.q) & within_limits(model.robot, poses.q)
+        status = row_status(result, poses.q, inside)
         write_compensated_csv(output, result, poses.direction, status)
         change = np.degrees(np.abs(result.q - poses.q)).max()
         what = f"compensated commands (rad); largest change {change:.4f} deg"

@@ -101,7 +101,10 @@ def _plan_doc(**changes: object) -> dict[str, object]:
     [
         (_plan_doc(poses=None), "missing key(s) poses"),
         (_plan_doc(poses=[[0.0] * 5]), "pose 0 has 5 readings, the robot 6"),
-        (_plan_doc(poses=[[0.0, -1.0, 1.0, 0.0, 1.0, 4.0]]), "pose 0 joint 6 reading 4 rad"),
+        (
+            _plan_doc(poses=[[0.0, -1.0, 1.0, 0.0, 1.0, 4.0]]),
+            "pose 0: joint_a6 = 4 rad (229.18 deg) outside its limits",
+        ),
         (_plan_doc(poses=[[0.0, -1.0, float("nan"), 0.0, 1.0, 0.0]]), "non-finite"),
         (_plan_doc(robot="ur10"), "planned for robot ur10, not for kr5_sixx_r650"),
         (_plan_doc(posess=[]), "unknown key 'posess'"),

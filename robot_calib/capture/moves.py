@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robot_calib.errors import InputError
+from robot_calib.kinematics.description import joint_violations
 from robot_calib.kinematics.frames import Array
 
 
@@ -71,20 +72,8 @@ def parse_approach(text: str, n_joints: int) -> Array:
 
 def limit_violations(q: Array, limits: Array, names: tuple[str, ...]) -> list[str | None]:
     """Per pose of q (n, J) [rad]: None inside `limits` (J, 2) [rad], else the first joint
-    outside, as text (deg)."""
-    lo, hi = limits.T
-    out: list[str | None] = []
-    for row in q:
-        bad = np.flatnonzero(~np.isfinite(row) | (row < lo) | (row > hi))
-        if len(bad) == 0:
-            out.append(None)
-            continue
-        j = int(bad[0])
-        out.append(
-            f"{names[j]} = {np.degrees(row[j]):.3f} deg outside its limits "
-            f"[{np.degrees(lo[j]):.1f}, {np.degrees(hi[j]):.1f}] deg"
-        )
-    return out
+    outside (or in degrees), as text: `kinematics.description.joint_violations`."""
+    return joint_violations(q, limits, names)  # the one check (RobotDescription.check_joints)
 
 
 def _split(start: Array, end: Array, max_step: float) -> Array:

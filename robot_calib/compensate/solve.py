@@ -52,6 +52,7 @@ from robot_calib.ik import (
     solve_ik,
     tool2base,
 )
+from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
@@ -295,9 +296,19 @@ def compensate_targets(
                                  correction)  # fmt: skip
         steps += result.iterations
     result = replace(result, iterations=steps)
-    limits = calibrated.robot.limits
-    within = np.all((result.q >= limits[:, 0]) & (result.q <= limits[:, 1]), axis=1)
+    within = within_limits(calibrated.robot, result.q)
     return TargetCompensation(first, result, direction, within)
+
+
+def within_limits(robot: RobotDescription, q: Array) -> NDArray[np.bool_]:
+    """(n,) readings q (n, J) [rad] that pass the one check of limits and units
+    (`RobotDescription.check_joints`: finite, within the limits, not degrees); nan rows
+    (not reached) count as within, their status says not_reached."""
+    q = np.asarray(q, dtype=float).reshape(-1, robot.n_joints)
+    unreached = np.asarray(~np.isfinite(q).all(axis=1), dtype=np.bool_)
+    within = unreached.copy()
+    within[~unreached] = [text is None for text in robot.joint_violations(q[~unreached])]
+    return within
 
 
 def nominal_counterpart(

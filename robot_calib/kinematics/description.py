@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from robot_calib.errors import RobotDescriptionError, check_keys
+from robot_calib.errors import InputError, RobotDescriptionError, check_keys
 from robot_calib.kinematics.frames import Array
 
 ROBOTS_DIR = Path(__file__).resolve().parent / "robots"
@@ -33,6 +33,67 @@ DH_FIELDS = ("theta", "d", "a", "alpha")
 ROBOT_KEYS = ("name", "source", "angle_unit", "reading_to_joint", "joints")
 JOINT_KEYS = ("name", *DH_FIELDS, "beta", "hayati", "limits", "mass", "com")  # each joint
 MAPPING_KEYS = ("sign", "offset", "coupling")  # the `reading_to_joint` section
+LIMIT_TOLERANCE_RAD = 1e-9
+"""How far beyond a joint limit a reading may lie [rad]: the rounding of a reading written
+at its limit (a PLAN.yaml, a CSV); the one tolerance of `RobotDescription.check_joints`."""
+JOINT_UNITS = {"rad": 1.0, "deg": np.pi / 180}
+
+
+class JointLimitError(InputError):
+    """Joint readings outside the robot's limits, not finite, or in the wrong unit (degrees
+    given as rad): `RobotDescription.check_joints`, the one check of `compensate`, the
+    compensator node, `capture`, `sim_robot` and `plan`. Its message names where (file,
+    topic), the pose, the joint, the reading in rad and deg and the limits in deg."""
+
+
+def joint_violations(
+    q: Array,
+    limits: Array,
+    joint_names: Sequence[str],
+    unit: str = "rad",
+    tolerance: float = LIMIT_TOLERANCE_RAD,
+) -> list[str | None]:
+    """Per pose of q (n, J) (or one pose (J,)) in `unit` ('rad' or 'deg'): None when
+    every reading is finite and within `limits` (J, 2) [rad] (+- `tolerance` [rad]), else
+    what is wrong with its first bad joint (one in degrees first), as text: "joint_3 = 95
+    rad is beyond any reading of this joint in rad (|q| <= 6.28): degrees? joint readings
+    take rad" or
+    "joint_2 = 2.1 rad (120.32 deg) outside its limits [-190.0, 45.0] deg".
+
+    A reading in rad beyond `poses.beyond_reach` (2 pi, or 1.5 x the joint's largest
+    |limit|) is no reading of that joint: degrees given as rad, most likely."""
+    from robot_calib.poses import beyond_reach
+
+    if unit not in JOINT_UNITS:
+        raise InputError(f"joint unit {unit!r}: one of {sorted(JOINT_UNITS)}")
+    given = np.atleast_2d(np.asarray(q, dtype=float))
+    if given.shape[1] != len(joint_names):
+        raise JointLimitError(
+            f"{given.shape[1]} joint readings per pose for {len(joint_names)} joints"
+        )
+    rad = given * JOINT_UNITS[unit]
+    lo, hi = limits.T
+    finite = np.isfinite(rad)
+    degrees, reach = beyond_reach(np.where(finite, rad, 0.0), limits)
+    degrees &= unit == "rad"
+    outside = ~finite | (rad < lo - tolerance) | (rad > hi + tolerance)
+    out: list[str | None] = [None] * len(rad)
+    for k in np.flatnonzero((outside | degrees).any(axis=1)).tolist():
+        j = int(np.flatnonzero(degrees[k] if degrees[k].any() else outside[k])[0])
+        value = f"{joint_names[j]} = {rad[k, j]:.6g} rad"
+        if not finite[k, j]:
+            out[k] = f"{joint_names[j]} = {given[k, j]} (not a finite number)"
+        elif degrees[k, j]:
+            out[k] = (
+                f"{value} is beyond any reading of this joint in rad (|q| <= "
+                f"{reach[j]:.2f}): degrees? joint readings take rad"
+            )
+        else:
+            out[k] = (
+                f"{value} ({np.degrees(rad[k, j]):.2f} deg) outside its limits "
+                f"[{np.degrees(lo[j]):.1f}, {np.degrees(hi[j]):.1f}] deg"
+            )
+    return out
 
 
 @dataclass(frozen=True)
@@ -102,6 +163,31 @@ class RobotDescription:
         if self.reading_matrix is not None:
             out = np.linalg.solve(self.reading_matrix, out.T).T
         return out
+
+    def joint_violations(
+        self, q: Array, unit: str = "rad", tolerance: float = LIMIT_TOLERANCE_RAD
+    ) -> list[str | None]:
+        """Per pose of q (n, J) (or one pose (J,)) in `unit`: `joint_violations` with this
+        robot's limits and joint names."""
+        return joint_violations(q, self.limits, self.joint_names, unit, tolerance)
+
+    def check_joints(
+        self,
+        q: Array,
+        where: str,
+        unit: str = "rad",
+        tolerance: float = LIMIT_TOLERANCE_RAD,
+        what: str = "pose",
+    ) -> None:
+        """JointLimitError "WHERE: WHAT k: <joint_violations text> (m of n WHATs
+        outside)" for the first pose of q (n, J) in `unit` with a reading that is not
+        finite, outside the limits (+- `tolerance` [rad]) or in degrees where rad is due;
+        nothing when every pose is fine."""
+        found = self.joint_violations(q, unit, tolerance)
+        bad = [k for k, text in enumerate(found) if text is not None]
+        if bad:
+            more = f" ({len(bad)} of {len(found)} {what}s)" if len(found) > 1 else ""
+            raise JointLimitError(f"{where}: {what} {bad[0]}: {found[bad[0]]}{more}")
 
     def fingerprint(self, with_names: bool = False) -> str:
         """SHA-256 of what the model uses from this description (the DH/Hayati table,

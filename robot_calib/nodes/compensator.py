@@ -10,7 +10,9 @@ points, the first point's from where the robot stands and how it got there, as
 (parameter `output_topic`) with the same header, joint_names, times, velocities,
 accelerations and efforts, only the positions corrected (a hybrid calibration's learned
 correction, PARAMS.json `correction`, included). A message with unknown, missing or
-repeated joints, or positions that are not finite, is logged as one error line and dropped.
+repeated joints, positions that are not finite, in degrees or beyond the joint limits (before
+or after the correction: `RobotDescription.check_joints`, the check `compensate` applies) is
+logged as one error line and dropped: nothing leaves the node that the CLI would refuse.
 
 Standalone: `ros2 run robot_calib compensator --ros-args -p params:=params_best.json`.
 """
@@ -165,6 +167,7 @@ class CompensatorNode(Node):
             self.create_subscription(JointState, states_topic, self.on_joint_state, 100)
         self._warned_no_state = False
         self.received = self.published = self.dropped = 0
+        self.last_error: str | None = None  # the last dropped trajectory's error line
         self.last: Compensation | None = None
         self.get_logger().info(
             f"compensating {self.subscription.topic_name} -> {self.publisher.topic_name} "
@@ -201,24 +204,34 @@ class CompensatorNode(Node):
             poses = replace(poses, temperature=np.full(len(poses), self.temperature))
         return poses
 
+    def _drop(self, error: str) -> None:
+        self.dropped += 1
+        self.last_error = error
+        self.get_logger().error(error)
+
     def on_trajectory(self, msg: JointTrajectory) -> None:
         self.received += 1
         names = self.model.robot.joint_names
         try:
             q, time = trajectory_readings(msg, names, self.subscription.topic_name)
+            # the one check of limits and units, as `compensate` and sim_robot apply it:
+            # degrees or a point beyond the limits never reach the controller
+            self.model.robot.check_joints(q, self.subscription.topic_name, what="point")
             result = compensate_commands(self.model, self.params, self.nominal,
                                          self.nominal_params, self.commands(q, time),
                                          self.correction)  # fmt: skip
+            if result.converged.all():
+                self.model.robot.check_joints(
+                    result.q, f"{self.subscription.topic_name}: compensated", what="point"
+                )
         except RobotCalibError as exc:
-            self.dropped += 1
-            self.get_logger().error(f"dropped a trajectory: {exc}")
+            self._drop(f"dropped a trajectory, not sent: {exc}")
             return
         change = np.abs(result.q - q)
         k, j = np.unravel_index(int(np.argmax(change)), change.shape)
         if not result.converged.all() or np.degrees(change[k, j]) > self.max_correction:
-            self.dropped += 1
             bad = np.flatnonzero(~result.converged).tolist()
-            self.get_logger().error(
+            self._drop(
                 f"dropped a trajectory, not sent: points {bad[:10]} not reached by the "
                 f"calibrated model (singularity or out of reach)" if bad else
                 f"dropped a trajectory, not sent: point {k} {names[j]} would be corrected by "

@@ -31,6 +31,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from robot_calib.errors import InputError
+from robot_calib.kinematics.description import JointLimitError
 from robot_calib.messages import JOINT_STATES_TOPIC, ns_to_sec_nanosec
 from robot_calib.nodes._cdr import ClockEncoder, JointStateEncoder
 from robot_calib.nodes._common import declare, run_node
@@ -201,14 +202,10 @@ class SimRobotNode(Node):
                 "simulation moves at its speed limit",
                 throttle_duration_sec=10.0,
             )
-        lo, hi = robot.limits.T
-        outside = ~np.isfinite(waypoints) | (waypoints < lo - 1e-9) | (waypoints > hi + 1e-9)
-        if outside.any():
-            k, j = np.argwhere(outside)[0]
-            self.get_logger().error(
-                f"{self.topic}: rejected: point {k} joint {robot.joint_names[j]} = "
-                f"{waypoints[k, j]:.6g} rad outside its limits [{lo[j]:.4f}, {hi[j]:.4f}]"
-            )
+        try:  # the one check of limits and units (compensate, compensator, capture, plan)
+            robot.check_joints(waypoints, f"{self.topic}: rejected", what="point")
+        except JointLimitError as exc:
+            self.get_logger().error(str(exc))
             return
         speed = np.asarray(self.world.timing.max_joint_speed_rad_s)[: robot.n_joints]
         self.motion = follow(now, q_now, waypoints, times, self.speed_fraction * speed)

@@ -9,7 +9,6 @@ readings, readings outside the joint limits).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,7 +25,6 @@ REQUIRED_KEYS = ("format", "robot", "joint_names", "poses")
 KNOWN_KEYS = (*REQUIRED_KEYS, "model", "units", "speed_fraction", "design", "predicted")
 POSE_UNIT = "rad"
 DEFAULT_SPEED_FRACTION = 0.1  # of each joint's max speed, as the built-in `random` plan
-LIMIT_TOLERANCE_RAD = 1e-9  # rounding of a reading written at its limit
 
 
 @dataclass(frozen=True)
@@ -107,16 +105,7 @@ def load_plan(path: str | Path, robot: RobotDescription) -> PlanFile:
             f"{where}: joint_names {names} are not the robot's {list(robot.joint_names)}"
         )
     q = _readings(doc["poses"], n_joints, where)
-    lo, hi = robot.limits.T
-    outside = (q < lo - LIMIT_TOLERANCE_RAD) | (q > hi + LIMIT_TOLERANCE_RAD)
-    if outside.any():
-        row, joint = (int(v) for v in np.argwhere(outside)[0])
-        raise InputError(
-            f"{where}: pose {row} joint {joint + 1} reading {q[row, joint]:.6g} rad "
-            f"({math.degrees(q[row, joint]):.2f} deg) outside its limits "
-            f"[{math.degrees(lo[joint]):.1f}, {math.degrees(hi[joint]):.1f}] deg "
-            f"({int(outside.any(axis=1).sum())} pose(s) outside)"
-        )
+    robot.check_joints(q, where)  # the one check of limits and units (JointLimitError)
     speed = doc.get("speed_fraction", DEFAULT_SPEED_FRACTION)
     if isinstance(speed, bool) or not isinstance(speed, int | float) or not 0 < speed <= 1:
         raise InputError(f"{where}: speed_fraction must be a number in (0, 1], got {speed!r}")
