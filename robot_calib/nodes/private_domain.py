@@ -7,11 +7,17 @@ second simulation's /clock or a user's `sim_robot` on the default domain stalled
 offline simulation ("simulation stalled waiting for pose 124"). Fast DDS accepts domains
 0-101 and 215-232; 0 is everybody's default, so it is never claimed. The lock is released
 when its file handle is closed, or by the OS when the process ends (even killed).
+
+A lock only keeps robot_calib processes apart; a foreign process may use any domain. So the
+offline graph's context also starts with discovery off (`discovery_off`): its nodes match
+each other in-process and nobody else (test_private_domain: two simulations at once with
+foreign /joint_states and /clock publishers on domain 0 and on the domains they claim).
 """
 
 from __future__ import annotations
 
 import fcntl
+import os
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -37,6 +43,29 @@ def claim() -> tuple[int, IO[str]]:
             continue
         return domain, handle
     raise RobotCalibError(f"no free ROS 2 domain: all {len(DOMAINS)} are held ({LOCK_DIR})")
+
+
+DISCOVERY_VARIABLES = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF", "ROS_STATIC_PEERS": ""}
+"""rcl reads these when a context is initialised: discovery OFF, no static peers, so the
+context's participant matches its own nodes only (its endpoints match in-process) and no
+other process's, even one on the same domain that holds no lock (a robot, a user's
+`sim_robot`, `ROS_DOMAIN_ID=1` set by hand)."""
+
+
+@contextmanager
+def discovery_off() -> Iterator[None]:
+    """While a context is initialised in the block (`rclpy.init`), rcl's discovery
+    variables say OFF (`DISCOVERY_VARIABLES`); the environment is restored after."""
+    saved = {name: os.environ.get(name) for name in DISCOVERY_VARIABLES}
+    os.environ.update(DISCOVERY_VARIABLES)
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 @contextmanager

@@ -33,7 +33,7 @@ from rclpy.subscription import Subscription
 
 from robot_calib.errors import RobotCalibError
 from robot_calib.messages import JOINT_STATES_TOPIC
-from robot_calib.nodes.private_domain import private_domain
+from robot_calib.nodes.private_domain import discovery_off, private_domain
 from robot_calib.nodes.recorder import RecorderNode
 from robot_calib.nodes.sim_robot import QOS, SimRobotNode
 from robot_calib.nodes.sim_tracker import SimTrackerNode
@@ -46,6 +46,39 @@ BURST = 500
 
 class SimulationStalled(RobotCalibError):
     """The in-process graph did not deliver a message within STEP_TIMEOUT_S."""
+
+
+SIMULATION_TOPICS = (JOINT_STATES_TOPIC, "/clock")
+
+
+def stall_cause(node: Node, own: Sequence[str]) -> str:
+    """What most likely stalled a graph of nodes named `own` that `node` belongs to: the
+    nodes of other graphs publishing on /joint_states or /clock on its domain (named, from
+    `get_publishers_info_by_topic`), other nodes on the domain, or neither (then a machine
+    too loaded to answer within STEP_TIMEOUT_S)."""
+    domain = f"ROS domain {node.context.get_domain_id()}"
+    foreign: dict[str, set[str]] = {}
+    for topic in SIMULATION_TOPICS:
+        for info in node.get_publishers_info_by_topic(topic):
+            if info.node_name not in own:
+                name = f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+                if "_UNKNOWN_" in name:  # its process has not yet said its nodes' names
+                    name = "a node of another process"
+                foreign.setdefault(topic, set()).add(name)
+    if foreign:
+        listed = "; ".join(f"{t} by {', '.join(sorted(n))}" for t, n in foreign.items())
+        return (
+            f"another ROS 2 graph on {domain} publishes the simulation's topics ({listed}): "
+            "stop it, or simulate on a free domain (robot-calib simulate alone, not inside "
+            "a running ROS 2 graph)"
+        )
+    others = sorted(set(node.get_node_names()) - set(own))
+    if others:
+        return f"other nodes on {domain} ({', '.join(others[:5])}): another ROS 2 graph?"
+    return (
+        f"no other publisher of {' or '.join(SIMULATION_TOPICS)} on {domain}: a machine "
+        f"too loaded to deliver a message within {STEP_TIMEOUT_S:g} s?"
+    )
 
 
 def _spin_until(
@@ -123,6 +156,11 @@ class _Stepper:
 
         def answered() -> bool:
             measured.extend(tracker.take_joint_states())
+            if len(measured) > len(stamps):  # joint states the robot did not publish
+                raise SimulationStalled(
+                    f"sim_tracker received {len(measured)} joint states for the "
+                    f"{len(stamps)} poses {first}..{first + len(stamps) - 1} published"
+                )
             return len(measured) >= len(stamps)
 
         self._wait(answered, f"sim_tracker at poses {first}..{first + len(stamps) - 1}")
@@ -215,7 +253,8 @@ def _simulate_bag(
 ) -> dict[str, int]:
     owns_context = not rclpy.ok()
     if owns_context:
-        rclpy.init(signal_handler_options=SignalHandlerOptions.NO, domain_id=domain_id)
+        with discovery_off():  # its own nodes only, whoever else is on the domain
+            rclpy.init(signal_handler_options=SignalHandlerOptions.NO, domain_id=domain_id)
     sim_time = Parameter("use_sim_time", value=True)
     world_param = Parameter("world", value=str(world) if world else "")
     nodes: list[Node] = []
@@ -264,6 +303,9 @@ def _simulate_bag(
                 progress(robot.next_pose, total)
         recorder.close()
         return dict(recorder.counts)
+    except SimulationStalled as exc:  # say why, while the graph is still up
+        cause = stall_cause(nodes[0], [n.get_name() for n in nodes])
+        raise SimulationStalled(f"{exc}: {cause}") from None
     finally:
         for node in reversed(nodes):
             if isinstance(node, RecorderNode):
