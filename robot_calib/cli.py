@@ -99,7 +99,9 @@ def _print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: 
     floor = diagnosis.noise.floor_abs_rms_mm
     unknown = "unknown (no repeat poses, circle sweeps or stated accuracy; --tracker-accuracy)"
     known = f"{floor:.4f} mm ({diagnosis.noise.source})" if floor is not None else ""
-    print(f"noise floor (abs rms): {known or unknown}")
+    print(f"noise floor (abs rms): {known or ('unknown' if diagnosis.noise.warning else unknown)}")
+    if diagnosis.noise.warning:  # a stated accuracy the evidence contradicts (issue 24)
+        print(diagnosis.noise.warning)
     geometric = diagnosis.unexplained.geometric_ratio_to_noise_floor
     if geometric is not None:
         print(f"geometric held-out: {geometric:.2f} x the noise floor")
@@ -139,6 +141,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     robot = load_robot(args.robot)
     check_plan(args.plan, robot)  # a bad plan: its error before any output
+    _run_folder(Path(args.output))
     print(_robot_table(robot))
     started = time.perf_counter()
     result = pipeline.run(
@@ -165,6 +168,21 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"{result.folder / 'params_best.json'}")  # fmt: skip
     print(f"done: {result.folder} (report: {result.report})")
     return 0
+
+
+def _run_folder(folder: Path) -> None:
+    """`run -o FOLDER`: created where missing; InputError (exit 2, one line) when a part of
+    it is a file or it cannot be created or written (read-only, permissions)."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise InputError(f"{folder}: exists and is not a folder") from None
+    except OSError as exc:
+        raise InputError(f"{folder}: cannot create the output folder ({exc.strerror})") from None
+    if not folder.is_dir():
+        raise InputError(f"{folder}: exists and is not a folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"{folder}: folder not writable; cannot write a run there")
 
 
 def _progress() -> Callable[[str, int, int], None]:
@@ -217,6 +235,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
     noise = args.noise_mm
     if noise is not None and not (math.isfinite(noise) and 0 < noise < 10):
         raise InputError(f"--noise-mm {noise}: a 1-sigma per coordinate in mm, > 0 and < 10")
+    if Path(args.output).suffix.lower() not in (".yaml", ".yml"):
+        raise InputError(f"{args.output}: a plan is written as YAML: give a .yaml or .yml name")
+    floor = args.floor_z
+    if math.isnan(floor) or (math.isfinite(floor) and abs(floor) > MAX_FLOOR_Z_M):
+        raise InputError(
+            f"--floor-z {floor:g}: a height in m of the robot base frame within "
+            f"+-{MAX_FLOOR_Z_M:g} m (or -inf: no floor); mm given as m? ({floor:g} mm = "
+            f"{floor * 1e-3:g} m)"
+        )
     world = pipeline.simulation_world(args.world, args.robot, (), args.seed)
     output = output_path(args.output, "PLAN.yaml", pipeline.simulation_inputs(world), args.force)
     c = plan_campaign(world, args.model, args.poses, args.candidates, args.seed, args.floor_z,
@@ -832,7 +859,7 @@ def cmd_repair(args: argparse.Namespace) -> int:
     """Copy every complete message of a crashed (or intact) bag into a new, indexed bag."""
     from robot_calib.bag.repair import repair_bag
 
-    print(repair_bag(Path(args.bag), Path(args.output)).summary())
+    print(repair_bag(Path(args.bag), Path(args.output), args.force).summary())
     return 0
 
 
@@ -981,6 +1008,7 @@ def _add_payload(p: argparse.ArgumentParser) -> None:
     )
 
 
+MAX_FLOOR_Z_M = 10.0  # plan --floor-z: no robot reaches a floor 10 m from its base (mm as m?)
 MAX_CANDIDATES = 100_000  # plan --candidates: ~1.5 GB of Jacobian rows for geometric
 
 
@@ -1128,7 +1156,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.0,
         metavar="M",
         help="flange and target stay at or above z = M [m] of the robot base frame "
-        "(default 0.0: the base's mounting plane; -inf: no floor)",
+        f"(default 0.0: the base's mounting plane; -inf: no floor; within +-{MAX_FLOOR_Z_M:g})",
     )
     pla.add_argument(
         "--noise-mm",
@@ -1417,6 +1445,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep = add("repair", cmd_repair, "recover the messages of a crashed recording -> a new bag")
     rep.add_argument("bag", metavar="BAG", help="bag whose writer was killed (.mcap)")
     rep.add_argument("-o", "--output", required=True, help="new bag to write (FIXED.mcap)")
+    rep.add_argument("--force", action="store_true", help="replace an existing output")
 
     run = add("run", cmd_run, "the main job on built-in defaults")
     run.add_argument(

@@ -65,7 +65,8 @@ def test_without_independent_evidence_the_floor_is_unknown_and_said_so() -> None
     assert stated.noise.floor_known and stated.noise.source.startswith("stated")
     ratio = stated.unexplained.ratio_to_noise_floor
     assert ratio is not None and 0.8 < ratio < 1.4
-    assert stated.verdict == "null (geometric reaches the noise level)"
+    assert stated.verdict.startswith("null (geometric reaches the noise level; that floor rests")
+    assert "stated tracker accuracy (--tracker-accuracy) alone" in stated.verdict
 
 
 def test_structure_no_effect_explains_is_unknown_not_null_without_a_floor() -> None:

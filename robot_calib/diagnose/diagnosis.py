@@ -20,7 +20,7 @@ from robot_calib.diagnose.ladder import (
     run_ladder,
 )
 from robot_calib.diagnose.learnable import MIN_LEARNABLE_SHARE, LearnableBound
-from robot_calib.diagnose.noise import NoiseLevel, refine_with_model
+from robot_calib.diagnose.noise import STATED, NoiseLevel, refine_with_model
 from robot_calib.diagnose.outside import OutsideVocabulary, outside_vocabulary
 from robot_calib.diagnose.signatures import Signature, WhereItLies, where_it_lies
 from robot_calib.effects.compliance import gravity_torques
@@ -131,6 +131,9 @@ class NoiseReport(Record):
     ladder_sigma_mm: float
     ladder_source: str
     floor_known: bool = True
+    # a stated accuracy against the evidence (issue 24): unused beside measured noise, far
+    # above it or the geometric fit's residual (a unit slip), refuted; '' when none
+    warning: str = ""
 
 
 @dataclass(frozen=True)
@@ -217,6 +220,11 @@ class Diagnosis(Record):
         if dom is None:
             if self.implausible:
                 return "none (the result is implausible: see IMPLAUSIBLE)"
+            if self.noise.floor_known and self.noise.source.startswith(STATED):
+                return (
+                    "null (geometric reaches the noise level; that floor rests on the "
+                    f"{self.noise.source} alone, not on repeat poses or circle fits)"
+                )
             if self.noise.floor_known:
                 return "null (geometric reaches the noise level)"
             return (
@@ -381,9 +389,11 @@ def diagnose(
     if foreign:
         note = f"no verdict: {foreign}"
     elif ratio is None:
+        why = ("the stated tracker accuracy is refuted by the geometric fit's residual: see "
+               "the warning" if ladder.noise.warning else "no repeat poses, circle sweeps or "
+               "stated tracker accuracy; give --tracker-accuracy")  # fmt: skip
         note = (
-            "noise floor unknown (no repeat poses, circle sweeps or stated tracker accuracy; "
-            "give --tracker-accuracy): held-out errors are not compared with one"
+            f"noise floor unknown ({why}): held-out errors are not compared with one"
             + (f"; {learnable.line()}" if learnable is not None else "")
             + structure
         )
@@ -421,6 +431,7 @@ def diagnose(
             ladder.noise.sigma_m * 1e3,
             ladder.noise.source,
             noise.independent,
+            ladder.noise.warning,
         ),  # fmt: skip
         scored_on=ladder.scored_on,
         selected_on=f"{N_FOLDS}-fold CV over poses"
@@ -430,7 +441,7 @@ def diagnose(
         recordings=sources,
         holdout=[] if holdout_sources is None else list(holdout_sources.sources),
         outliers=list(ladder.outliers),
-        warnings=list(geo.warnings),
+        warnings=list(geo.warnings) + ([ladder.noise.warning] if ladder.noise.warning else []),
         learnable=learnable,
         outside_vocabulary=outside,
         iso9283=_iso9283(ladder, recording, robot),

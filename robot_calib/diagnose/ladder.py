@@ -384,7 +384,7 @@ def run_ladder(
     and listed in `Ladder.outliers`."""
     say = log or (lambda _m: None)
     full = recording
-    geo = calibrate(recording, robot, "geometric", log=log)
+    geo = calibrate(recording, robot, "geometric", log=log, tracker_sigma_m=tracker_sigma_m)
     outliers = geo.outliers
     if geo.inliers is not None:
         recording = recording.subset(geo.inliers)
@@ -402,7 +402,8 @@ def run_ladder(
             say(f"outliers: {readmitted} of the {n_flagged} flagged measurements are explained "
                 f"by {best.name}: re-admitted, climbing again")  # fmt: skip
             recording = full.subset(~still)
-            geo = calibrate(recording, robot, "geometric", log=None, screen_outliers=False)
+            geo = calibrate(recording, robot, "geometric", log=None, screen_outliers=False,
+                            tracker_sigma_m=tracker_sigma_m)  # fmt: skip
             outliers = describe_outliers(full, still, residual, sigma)
             found = climb(recording, geo=geo, holdout=holdout)
     if holdout is not None:  # judged against the best model: an effect's structure is not
@@ -527,9 +528,12 @@ def _climb(
                            tracker_sigma_m)  # fmt: skip
     scored_on = "hold-out bags" if holdout is not None else f"{N_FOLDS}-fold CV over poses"
     floor = (f"{noise.sigma_m * 1e3:.4f} mm per axis ({noise.basis})"
-             if noise.independent else "unknown (no repeat poses, circle sweeps or stated "
+             if noise.independent else "unknown (the stated accuracy is refuted: see below)"
+             if noise.warning else "unknown (no repeat poses, circle sweeps or stated "
              "accuracy)")  # fmt: skip
     say(f"noise floor: {floor}; scoring on {scored_on}")
+    if noise.warning:
+        say(noise.warning)
     acc, res, score = score_rung(geo, recording, holdout)
     rungs = [Rung("geometric", (), geo, acc, res, score)]
     rounds: list[list[tuple[str, float]]] = []

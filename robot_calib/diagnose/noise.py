@@ -16,11 +16,17 @@
    every output says the floor is unknown.
 The final verdict pools the independent estimate with the best model's in-sample residual
 where they agree (`refine_with_model`).
+
+A stated accuracy is checked against the evidence (`NoiseLevel.warning`, issue 24): not
+used beside repeat poses or circle fits (said so, naming both figures); FAR_ABOVE x or more
+above them, or above the geometric fit's in-sample residual, a warning (a unit slip: 5 mm
+typed for 5 um); REFUTED x or more above that residual (no fit lies that far below the
+noise) it is not used at all and the floor is unknown.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -34,6 +40,9 @@ STATED = "stated tracker accuracy"
 MAX_REPEAT_GAP_S = 60.0  # repeats farther apart in time may include drift, not only noise
 MAX_REPEAT_LAG = 50  # rows between a pose and its repeat, at most
 AGREE = 1.5  # circle-fit noise within this factor of the repeat-pose noise: pool them
+FAR_ABOVE = 3.0  # a stated accuracy this many times the data's evidence: a warning
+REFUTED = 10.0  # ... this many times the geometric fit's residual: not used (floor unknown)
+UNIT_HINT = "check its unit: a 1-sigma in mm (0.005 for 5 um)"
 
 
 def noise_basis(source: str, n: int) -> str:
@@ -53,6 +62,8 @@ class NoiseLevel:
     sigma_m: float
     source: str
     n: int
+    # what a stated accuracy is against the evidence (a warning line, '' when none)
+    warning: str = ""
 
     @property
     def basis(self) -> str:
@@ -116,7 +127,35 @@ def estimate_noise(
 ) -> NoiseLevel:
     """The noise level of `recording` (see the module docstring for the order of methods);
     fallback_residuals (n, 3) [m] of a fitted model with `fallback_dof` free parameters;
-    stated_sigma_m: the tracker's accuracy as the user states it (1-sigma per axis [m])."""
+    stated_sigma_m: the tracker's accuracy as the user states it (1-sigma per axis [m]).
+    A stated accuracy the evidence contradicts leaves a `warning` (module docstring)."""
+    measured = _measured_noise(recording)
+    stated = _stated(recording, stated_sigma_m)
+    if measured is not None:
+        return replace(measured, warning=_unused(stated, measured, stated_sigma_m is not None))
+    model = (None if fallback_residuals is None
+             else _model_noise(fallback_residuals, fallback_dof))  # fmt: skip
+    if stated is not None:
+        if model is None or stated.sigma_m < FAR_ABOVE * model.sigma_m:
+            return stated
+        ratio = _ratio(stated.sigma_m, model.sigma_m)
+        figures = (f"the {stated.source} {stated.sigma_m * 1e3:.4g} mm per axis is {ratio:.0f} x "
+                   f"the geometric fit's in-sample residual ({model.sigma_m * 1e3:.4g} mm per "
+                   "axis)")  # fmt: skip
+        if ratio >= REFUTED:
+            return replace(model, warning=(
+                f"warning: {figures}: no fit lies that far below the noise, so it is not used "
+                f"and the noise floor is unknown; {UNIT_HINT}"))  # fmt: skip
+        return replace(stated, warning=(
+            f"warning: {figures}: the noise floor and the verdict rest on the stated accuracy "
+            f"alone (no repeat poses or circle sweeps to check it); {UNIT_HINT}"))  # fmt: skip
+    if model is not None:
+        return model
+    return NoiseLevel(float("nan"), "unknown", 0)
+
+
+def _measured_noise(recording: Recording) -> NoiseLevel | None:
+    """The noise measured without a model: repeat poses, circle fits, both pooled, or None."""
     pairs = repeat_pairs(recording)
     repeat = None
     if len(pairs) >= MIN_REPEATS:
@@ -127,16 +166,30 @@ def estimate_noise(
         if circles.sigma_m <= AGREE * repeat.sigma_m:  # circles not bent by effects: pool
             return _pooled(repeat, circles, "repeat poses + circle fits")
         return repeat
-    if repeat is not None:
-        return repeat
-    if circles is not None:
-        return circles
-    stated = _stated(recording, stated_sigma_m)
-    if stated is not None:
-        return stated
-    if fallback_residuals is not None:
-        return _model_noise(fallback_residuals, fallback_dof)
-    return NoiseLevel(float("nan"), "unknown", 0)
+    return repeat if repeat is not None else circles
+
+
+def _ratio(stated: float, evidence: float) -> float:
+    """stated / evidence; inf when the evidence is 0 (identical points)."""
+    return stated / evidence if evidence > 0 else float("inf")
+
+
+def _unused(stated: NoiseLevel | None, measured: NoiseLevel, given: bool) -> str:
+    """The word on a stated accuracy that measured noise makes unused: always for the
+    user's --tracker-accuracy (`given`), for the recording's own figures when FAR_ABOVE x
+    the measured noise; '' otherwise."""
+    if stated is None:
+        return ""
+    ratio = _ratio(stated.sigma_m, measured.sigma_m)
+    far = ratio >= FAR_ABOVE
+    if not given and not far:
+        return ""
+    return (
+        f"{'warning' if far else 'note'}: the {stated.source} {stated.sigma_m * 1e3:.4g} mm "
+        f"per axis is not used: the noise floor rests on {measured.source} "
+        f"({measured.sigma_m * 1e3:.4g} mm per axis, measured)"
+        + (f"; the stated accuracy is {ratio:.0f} x that: {UNIT_HINT}" if far else "")
+    )
 
 
 def _stated(recording: Recording, stated_sigma_m: float | None) -> NoiseLevel | None:

@@ -74,17 +74,20 @@ def _value(value: float | None, digits: int, significance: float | None = None) 
 
 
 def _floor_sentence(noise: NoiseReport) -> str:
-    """The report's sentence on the noise floor (or that it is unknown)."""
+    """The report's sentence on the noise floor (or that it is unknown), and the word on a
+    stated accuracy the evidence contradicts."""
+    said = f" **{noise.warning[0].upper()}{noise.warning[1:]}.**" if noise.warning else ""
     if noise.sigma_mm is None or noise.floor_abs_rms_mm is None:
         return (
-            "Noise floor **unknown**: the data have no repeat poses or circle sweeps and no "
-            "accuracy is stated (`--tracker-accuracy`); held-out errors are not compared "
-            "with a floor."
-        )
+            "Noise floor **unknown**: "
+            + ("" if noise.warning else "the data have no repeat poses or circle sweeps and no "
+               "accuracy is stated (`--tracker-accuracy`); ")
+            + "held-out errors are not compared with a floor." + said
+        )  # fmt: skip
     return (
         f"Noise level ({noise_basis(noise.source, noise.n)}): {noise.sigma_mm * 1e3:.1f} um per "
         f"axis; a perfect model would leave {noise.floor_abs_rms_mm:.4f} mm rms on held-out "
-        "points."
+        "points." + said
     )
 
 

@@ -257,11 +257,14 @@ def calibrate(
     start: Calibration | None = None,
     objective: str = "absolute",
     screen_outliers: bool = True,
+    tracker_sigma_m: float | None = None,
 ) -> Calibration:
     """Identify `model_spec` from `recording`. `start`: a calibration to start from (its
     parameters seed the geometry), else the ladder below the model is climbed first.
     objective: 'absolute' residuals, or 'seed' (pairwise distances anchored on the CPA
-    centres of circles 1, 3, 5, the seed's eq. 18) for the LM models.
+    centres of circles 1, 3, 5, the seed's eq. 18) for the LM models. `tracker_sigma_m`:
+    the user's stated tracker accuracy (1-sigma per axis [m]), the noise its warnings
+    compare the residual with when there are no circle fits (else an assumed noise).
 
     Tracker blunders (`screen_outliers`): when a point lies beyond OUTLIER_K robust sigmas
     of the fit, every point is judged against a robust (soft-L1) refit that blunders barely
@@ -333,7 +336,7 @@ def calibrate(
         recording_warnings(recording, robot)
         + blunders
         + ([mixed_up] if mixed_up else [])
-        + calibration_warnings(cal, geometry_fitted)
+        + calibration_warnings(cal, geometry_fitted, tracker_sigma_m)
         + (stated_accuracy_warnings(cal, recording) if geometry_fitted else [])
     )
     say = log or (lambda _msg: None)

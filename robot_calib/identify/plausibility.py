@@ -106,10 +106,11 @@ def degrees_reason(recording: Recording, robot: RobotDescription, what: str = "r
     return f"{what} of joint(s) {joints} look like degrees; the contract wants rad"
 
 
-def noise_per_axis(cal: Calibration) -> tuple[float, str]:
+def noise_per_axis(cal: Calibration, stated_sigma_m: float | None = None) -> tuple[float, str]:
     """What the tracker alone leaves per axis [m], and where that figure comes from: the
     circle fits of the sweeps (pooled rms over 3 components) when CPA ran, else the
-    assumed DEFAULT_NOISE_M."""
+    user's stated accuracy `stated_sigma_m` [m] (`--tracker-accuracy`), else the assumed
+    DEFAULT_NOISE_M."""
     if cal.cpa is not None and cal.cpa.sweeps:
         total = sum(
             float(np.sum(s.circle.plane_residuals**2 + s.circle.radial_residuals**2))
@@ -117,6 +118,8 @@ def noise_per_axis(cal: Calibration) -> tuple[float, str]:
         )
         count = sum(2 * len(s.circle.plane_residuals) for s in cal.cpa.sweeps)
         return float(np.sqrt(total / count)), "circle fits"
+    if stated_sigma_m is not None:
+        return float(stated_sigma_m), "stated tracker accuracy (--tracker-accuracy)"
     return DEFAULT_NOISE_M, "assumed tracker noise"
 
 
@@ -127,7 +130,8 @@ def far_from_nominal(cal: Calibration, length_m: float, angle_rad: float,
     return far_from_nominal_values(cal.parameters, length_m, angle_rad, free_only, deg_digits)
 
 
-def calibration_warnings(cal: Calibration, geometry_fitted: bool = True) -> list[str]:
+def calibration_warnings(cal: Calibration, geometry_fitted: bool = True,
+                         stated_sigma_m: float | None = None) -> list[str]:  # fmt: skip
     """Geometric parameters far from nominal, and (when the geometry was fitted: not for
     the nominal model or CPA, whose residual is the gap calibration closes) an in-sample
     residual far above the noise, each with what usually causes it."""
@@ -139,7 +143,7 @@ def calibration_warnings(cal: Calibration, geometry_fitted: bool = True) -> list
             f"{', '.join(far)}: {HINT}"
         )
     if geometry_fitted and len(cal.residuals):
-        noise, source = noise_per_axis(cal)
+        noise, source = noise_per_axis(cal, stated_sigma_m)
         per_axis = float(np.sqrt(np.mean(cal.residuals**2)))
         if per_axis > RESIDUAL_FACTOR * noise:
             out.append(
@@ -184,7 +188,7 @@ def implausible_reasons(
         out.append(degrees)
     per_axis = float(np.sqrt(np.mean(cal.residuals**2))) if len(cal.residuals) else 0.0
     if geometry_fitted and len(cal.residuals):
-        noise, source = noise_per_axis(cal)
+        noise, source = noise_per_axis(cal)  # never a stated figure: a typo is no nonsense
         if per_axis > IMPLAUSIBLE_RESIDUAL_FACTOR * noise:
             out.append(
                 f"in-sample residual {per_axis * 1e3:.4g} mm per axis is {per_axis / noise:.0f}"
