@@ -425,7 +425,15 @@ def read_bag(
     with a warning suggesting `--stream` when the bag looks like a stream (`stream_hint`)."""
     js_ns, q, velocity_sign, stamped, names, celsius, warnings = _bag_messages(path, robot)
     order = np.argsort(js_ns, kind="stable")
-    hint = stream_hint(js_ns[order], q[order], len(stamped.point_ns), str(path))
+    # a stream is told by one target's points per joint state: several targets measured at
+    # each pose of a static bag are no stream (issue 24)
+    per_target = (len(stamped.point_ns) if len(names) <= 1 else
+                  int(np.bincount(stamped.point_target, minlength=len(names)).max()))  # fmt: skip
+    hint = stream_hint(js_ns[order], q[order], per_target, str(path))
+    if hint and len(names) > 1:  # --stream reads a single target (read_stream)
+        advice = (f" (points per target); --stream reads the single target of {POINT_TOPIC}: "
+                  "measure each pose at rest (msgs_doc/stream.md)")  # fmt: skip
+        hint = hint.replace(": use --stream (msgs_doc/stream.md)", advice)
     warnings = warnings + ([hint] if hint else [])
     rec = recording_from_stream(
         js_ns,
