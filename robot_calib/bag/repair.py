@@ -61,10 +61,11 @@ class RepairReport:
         return text
 
 
-def repair_bag(source: Path, output: Path) -> RepairReport:
+def repair_bag(source: Path, output: Path, force: bool = False) -> RepairReport:
     """Copy every complete message of the bag `source` into the new bag `output`.
 
-    Raises InputError if `output` is `source`, exists or has no folder; BagError if
+    Raises InputError if `output` is `source`, exists (unless `force`: then it is replaced
+    whole, at the final rename) or has no folder; BagError if
     `source` is not a readable ros2 MCAP bag or holds no complete message. Nothing is
     written then.
 
@@ -74,7 +75,7 @@ def repair_bag(source: Path, output: Path) -> RepairReport:
         Messages recovered per topic, whether the source was complete, what was lost.
     """
     source, output = Path(source), Path(output)
-    _check_output(source, output)
+    _check_output(source, output, force)
     with BagReader(source, allow_truncated=True) as reader:
         if reader.message_count == 0:
             raise BagError(
@@ -105,7 +106,10 @@ def repair_bag(source: Path, output: Path) -> RepairReport:
                 for m in reader.messages():
                     writer.write(m.topic, m.data, m.log_time_ns, m.publish_time_ns, m.sequence)
                 recovered = writer.counts
-            _rename_new(tmp, output)
+            if force:
+                os.replace(tmp, output)  # the repair replaces it whole, never in part
+            else:
+                _rename_new(tmp, output)
         except BaseException:
             with contextlib.suppress(OSError):
                 tmp.unlink()
@@ -120,12 +124,16 @@ def repair_bag(source: Path, output: Path) -> RepairReport:
         )
 
 
-def _check_output(source: Path, output: Path) -> None:
-    """The output must be a new file in an existing folder (never the source)."""
+def _check_output(source: Path, output: Path, force: bool = False) -> None:
+    """The output must be a new file (an existing one only with `force`, never a folder) in
+    an existing folder, never the source (not even with `force`)."""
     if output.exists() or output.is_symlink():
         if source.exists() and output.resolve() == source.resolve():
             raise InputError(f"{output}: is the bag to repair; will not overwrite it")
-        raise InputError(f"{output}: exists; will not overwrite it")
+        if output.is_dir():
+            raise InputError(f"{output}: is a folder; give a file name for the repaired bag")
+        if not force:
+            raise InputError(f"{output}: exists; will not overwrite it (use --force)")
     if not output.parent.is_dir():
         raise InputError(f"{output.parent}: no such folder for the repaired bag")
 
