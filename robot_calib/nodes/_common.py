@@ -116,6 +116,7 @@ def run_node(
     on_stop: Callable[[N], Any] | None = None,
     name: str | None = None,
     multithreaded: bool = False,
+    left: Callable[[N], str | None] | None = None,
 ) -> int:
     """Run one node alone until SIGINT, SIGTERM, SIGHUP, external shutdown or `done(node)`.
 
@@ -126,6 +127,9 @@ def run_node(
     Returns the exit status: 0, or 2 for bad input (one line on stderr: "NAME: error: …").
     multithreaded: spin a MultiThreadedExecutor, for a node whose long callbacks sit in
     their own callback group (the calibrator); otherwise one thread keeps callbacks ordered.
+    left: what a signal left undone (None: nothing); when it says something the node was
+    interrupted: "NAME: interrupted: <left>" on stderr and exit status 130, so an
+    interrupted campaign never looks finished.
     """
     received: list[int] = []
 
@@ -162,7 +166,11 @@ def run_node(
             if node is not None:
                 if on_stop is not None:
                     on_stop(node)
+                undone = left(node) if received and left is not None and status == 0 else None
                 node.destroy_node()
+                if undone:
+                    print(f"{name}: interrupted: {undone}", file=sys.stderr, flush=True)
+                    status = 130
         except RobotCalibError as exc:
             print(f"{name}: error: {exc}", file=sys.stderr, flush=True)
             status = exc.exit_status

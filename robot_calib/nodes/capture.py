@@ -488,8 +488,16 @@ def _done(node: CaptureNode) -> bool:
     return node.finished
 
 
+def _left(node: CaptureNode) -> str | None:
+    """What a signal left of the campaign (its summary), None when it had finished."""
+    if node.finished and node._index >= len(node.moves):
+        return None
+    node.close()  # the robot told to hold, the bag closed: the summary is final
+    return node.summary() if node._index < len(node.moves) else None
+
+
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(CaptureNode, args, done=_done, name="capture"))
+    sys.exit(run_node(CaptureNode, args, done=_done, name="capture", left=_left))
 
 
 if __name__ == "__main__":
