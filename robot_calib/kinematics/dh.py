@@ -48,16 +48,25 @@ def link_transforms(dh: DHTable) -> Array:
     cb, sb = np.cos(t.beta), np.sin(t.beta)
     # Rz(theta) Rx(alpha) Ry(beta) written out: no (n J, 3, 3) factors and no batched
     # products of 3 x 3 matrices (the model's hottest function: every evaluation, per link);
-    # the 16 entries stacked in one pass (strided writes per entry cost 3x more)
+    # the 16 entries written as contiguous planes, then one transposing copy (writing each
+    # entry into an (n, J, 4, 4) array strides through memory: 3.6x slower)
     sa_sb, sa_cb = sa * sb, sa * cb
-    zero, one = np.zeros_like(ct), np.ones_like(ct)
-    out = np.stack(
-        [ct * cb - st * sa_sb, -st * ca, ct * sb + st * sa_cb, t.a * ct,
-         st * cb + ct * sa_sb, ct * ca, st * sb - ct * sa_cb, t.a * st,
-         -ca * sb, sa, ca * cb, t.d,
-         zero, zero, zero, one],
-        axis=-1,
-    ).reshape(n, j, 4, 4)  # fmt: skip
+    planes = np.empty((16, n, j))
+    planes[0], planes[1], planes[2], planes[3] = (
+        ct * cb - st * sa_sb,
+        -st * ca,
+        ct * sb + st * sa_cb,
+        t.a * ct,
+    )
+    planes[4], planes[5], planes[6], planes[7] = (
+        st * cb + ct * sa_sb,
+        ct * ca,
+        st * sb - ct * sa_cb,
+        t.a * st,
+    )
+    planes[8], planes[9], planes[10], planes[11] = -ca * sb, sa, ca * cb, t.d
+    planes[12:15], planes[15] = 0.0, 1.0
+    out = planes.transpose(1, 2, 0).copy().reshape(n, j, 4, 4)
     return out
 
 
@@ -73,12 +82,14 @@ def chain(dh: DHTable, housing_error: Array | None = None) -> Array:
     if housing_error is not None:
         links = housing_error @ links
     n, j = links.shape[:2]
-    # each frame a contiguous (n, 4, 4) product, stacked once (products of strided slices
-    # of one (n, J + 1, 4, 4) array cost twice as much)
-    out = [np.broadcast_to(np.eye(4), (n, 4, 4))]
-    for k in range(j):
-        out.append(links[:, k] if k == 0 else out[-1] @ links[:, k])
-    return np.stack(out, axis=1)
+    # frame-major storage: each frame a contiguous (n, 4, 4) product written in place; the
+    # (n, J + 1, 4, 4) result is a view of it (no stacking copy)
+    frames = np.empty((j + 1, n, 4, 4))
+    frames[0] = np.eye(4)
+    frames[1] = links[:, 0]
+    for k in range(1, j):
+        np.matmul(frames[k], links[:, k], out=frames[k + 1])
+    return frames.transpose(1, 0, 2, 3)
 
 
 @dataclass(frozen=True)
