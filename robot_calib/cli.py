@@ -387,6 +387,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         PRESETS,
         CsvFormat,
         counted,
+        joined_times,
         read_measurement_csv,
         target_label,
         with_overrides,
@@ -446,10 +447,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         tables.append(table)
     q = np.concatenate([t.q for t in tables])
     points = np.concatenate([t.points for t in tables])
-    times = None
-    stamps = [t.time for t in tables if t.time is not None]
-    if len(stamps) == len(tables):
-        times = np.concatenate([s - s[0] + k * 1e6 for k, s in enumerate(stamps)])
+    times = joined_times([t.time for t in tables])  # absolute Unix times kept as they are
     temperature = None
     if all(t.temperature is not None for t in tables):
         temperature = np.concatenate([t.temperature for t in tables if t.temperature is not None])

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from robot_calib.errors import InputError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
@@ -297,22 +298,31 @@ def check_distinct_bags(bags: Sequence[str | Path], holdout: Sequence[str | Path
 
 def check_distinct_recordings(*recordings: Recording) -> None:
     """InputError when two sources (bags) of `recordings` hold the same measurements, as a
-    copy of a bag under another name does: half or more of one's point stamps are also the
-    other's (the path check, `check_distinct_bags`, cannot see a copy)."""
+    copy of a bag under another name does: half or more of one's measurements (readings
+    and point, to 1 nrad / 1 nm: a tracker never measures a point twice alike) are also the
+    other's, whatever their stamps (the path check, `check_distinct_bags`, cannot see a
+    copy; two halves of one CSV imported apart share synthetic stamps, not measurements)."""
     sources = [
-        (rec.sources[b], rec.stamp_ns[rec.bag_index == b])
+        (rec.sources[b], _measurement_keys(rec, rec.bag_index == b))
         for rec in recordings
-        if rec.stamp_ns is not None
         for b in range(len(rec.sources))
     ]
-    for k, (first, stamps) in enumerate(sources):
+    for k, (first, keys) in enumerate(sources):
         for second, others in sources[k + 1 :]:
-            shared = len(np.intersect1d(stamps, others))
-            if len(stamps) and len(others) and shared >= 0.5 * min(len(stamps), len(others)):
+            shared = len(keys & others)
+            if keys and others and shared >= 0.5 * min(len(keys), len(others)):
                 raise InputError(
-                    f"{second}: {shared} of its point stamps are also in {first}: the same "
-                    "measurements twice (a copy?); give them once"
+                    f"{second}: {shared} of its measurements (readings and point) are also in "
+                    f"{first}: the same measurements twice (a copy?); give them once"
                 )
+
+
+def _measurement_keys(rec: Recording, rows: NDArray[np.bool_]) -> set[bytes]:
+    """Each measurement of `rec` at `rows` as a key: its readings [nrad] and point [nm]."""
+    values = np.column_stack([rec.poses.q[rows], rec.points[rows]])
+    ok = np.all(np.isfinite(values), axis=1)
+    scaled = np.round(values[ok] * 1e9).astype(np.int64)
+    return {row.tobytes() for row in scaled}
 
 
 def calibrate_recording(

@@ -121,3 +121,108 @@ def test_three_targets_per_pose_are_no_stream(tmp_path: Path) -> None:
     assert run.returncode == 0, run.stderr
     assert "targets: 3 (/laser_tracker/point 36" in run.stderr + run.stdout
     assert "stream" not in run.stderr + run.stdout
+
+
+@pytest.fixture(scope="module")
+def measured_rows(tmp_path_factory: pytest.TempPathFactory) -> list[list[float]]:
+    """60 random poses of a simulated KR5: [q1..q6 rad, x, y, z m] per row."""
+    from robot_calib.bag.read import read_recording
+    from robot_calib.kinematics.description import load_robot
+
+    bag = tmp_path_factory.mktemp("rows") / "r60.mcap"
+    run = robot_calib("simulate", "--plan", "random", "--n-random", "60", "--seed", "3", "-o",
+                      str(bag))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    rec = read_recording([bag], load_robot("kr5_sixx_r650"))
+    return [[*q, *p] for q, p in zip(rec.poses.q.tolist(), rec.points.tolist())]
+
+
+def _write_csv(path: Path, rows: list[list[float]], header: str | None, sep: str = ",",
+               time0: float | None = None) -> Path:  # fmt: skip
+    lines = [] if header is None else [header]
+    for k, row in enumerate(rows):
+        cells = ([] if time0 is None else [f"{time0 + 2.0 * k:.3f}"]) + [f"{v:.9f}" for v in row]
+        lines.append(sep.join(cells))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+COLUMNS = ("--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z")
+HEADER = "q1,q2,q3,q4,q5,q6,x,y,z"
+
+
+def test_two_halves_of_one_csv_are_calibration_and_hold_out(
+    measured_rows: list[list[float]], tmp_path: Path
+) -> None:
+    """Imported apart, both halves are stamped from the same start: still different
+    measurements, so diagnose takes them as calibration + hold-out; a copy of one half is
+    still refused (the same readings and points), exit 2 and nothing written."""
+    bags = []
+    for name, rows in (("a", measured_rows[:30]), ("b", measured_rows[30:])):
+        csv = _write_csv(tmp_path / f"{name}.csv", rows, HEADER)
+        bags.append(tmp_path / f"{name}.mcap")
+        run = robot_calib("import", str(csv), *COLUMNS, "-o", str(bags[-1]))
+        assert run.returncode == 0, run.stderr
+    run = robot_calib("diagnose", str(bags[0]), "--holdout", str(bags[1]), "-o",
+                      str(tmp_path / "d.json"))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    again = tmp_path / "a_again.mcap"
+    run = robot_calib("import", str(tmp_path / "a.csv"), *COLUMNS, "-o", str(again))
+    assert run.returncode == 0, run.stderr
+    run = robot_calib("diagnose", str(bags[0]), "--holdout", str(again), "-o",
+                      str(tmp_path / "x.json"))  # fmt: skip
+    assert run.returncode == 2 and "the same measurements twice" in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1 and not (tmp_path / "x.json").exists()
+
+
+def test_an_absolute_time_column_is_kept(measured_rows: list[list[float]], tmp_path: Path) -> None:
+    """A time column of Unix seconds (2026) is the stamps' absolute time; a relative one
+    (from 0) starts at the import's fixed origin."""
+    from robot_calib.bag.mcap_reader import BagReader
+
+    epoch = 1_790_000_000.0
+    cols = (*COLUMNS, "--time", "t")
+    for name, time0 in (("abs", epoch), ("rel", 0.0)):
+        csv = _write_csv(tmp_path / f"{name}.csv", measured_rows[:10], "t," + HEADER,
+                         time0=time0)  # fmt: skip
+        run = robot_calib("import", str(csv), *cols, "-o", str(tmp_path / f"{name}.mcap"))
+        assert run.returncode == 0, run.stderr
+    with BagReader(tmp_path / "abs.mcap") as reader:
+        stamps = sorted(m.log_time_ns for m in reader.messages(["/joint_states"]))
+    assert abs(stamps[0] - epoch * 1e9) < 1e3 and abs(stamps[-1] - (epoch + 18.0) * 1e9) < 1e3
+    with BagReader(tmp_path / "rel.mcap") as reader:
+        first = min(m.log_time_ns for m in reader.messages(["/joint_states"]))
+    assert first == 1_700_000_000_000_000_000  # the import's fixed origin (an integer)
+
+
+def test_an_all_numeric_first_row_is_no_header(
+    measured_rows: list[list[float]], tmp_path: Path
+) -> None:
+    """A file without a header, columns by index: the first row (a measurement) was taken
+    as the header, 35 of 36 imported without a word. Now exit 2 naming the line and
+    --no-header, nothing written; with --no-header all 36 rows."""
+    csv = _write_csv(tmp_path / "n.csv", measured_rows[:36], None)
+    out = tmp_path / "n.mcap"
+    index = ("--joints", "0,1,2,3,4,5", "--point", "6,7,8")
+    run = robot_calib("import", str(csv), *index, "-o", str(out))
+    assert run.returncode == 2, run.stdout
+    assert f"error: {csv}:1: the header row is all numbers" in run.stderr
+    assert "--no-header" in run.stderr and len(run.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+    run = robot_calib("import", str(csv), *index, "--no-header", "-o", str(out))
+    assert run.returncode == 0, run.stderr
+    assert f"{csv}: 36 rows imported" in run.stdout
+
+
+def test_a_space_separated_file_gets_the_sep_hint(
+    measured_rows: list[list[float]], tmp_path: Path
+) -> None:
+    """Space-separated (aligned by runs of spaces): read with ',' it is one column; the
+    error says --sep ' ', which then reads all 36 rows."""
+    csv = _write_csv(tmp_path / "s.csv", measured_rows[:36], HEADER.replace(",", "  "), "  ")
+    out = tmp_path / "s.mcap"
+    run = robot_calib("import", str(csv), *COLUMNS, "-o", str(out))
+    assert run.returncode == 2 and "give --sep ' '" in run.stderr, run.stderr
+    run = robot_calib("import", str(csv), *COLUMNS, "--sep", " ", "-o", str(out))
+    assert run.returncode == 0, run.stderr
+    assert f"{csv}: 36 rows imported" in run.stdout

@@ -14,7 +14,7 @@ column, else 1 s apart) and each point carries its joint state's stamp.
 from __future__ import annotations
 
 import csv
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -56,6 +56,9 @@ SIGMA_ANGLE_UNITS = {**ANGLE_UNITS, "mdeg": np.pi / 180e3, "urad": 1e-6}
 PLAUSIBLE_SIGMA = {"position": (1e-7, 1e-3), "orientation": (1e-7, 2e-2)}
 START_NS = 1_700_000_000_000_000_000  # stamp of the first pose when the CSV has no time
 STEP_NS = 1_000_000_000
+# a time column whose first value is at least this [s] (March 1973 on) is absolute time,
+# Unix epoch seconds: written as it is (two halves of one file keep their own stamps)
+EPOCH_MIN_S = 1e8
 
 
 SixDof = tuple[Array, Array]  # rotation (n, 3, 3) and sigma (n, 2) [m, rad] of one target
@@ -229,7 +232,7 @@ def _row_numbers(
     return numbers, ""
 
 
-SEPARATORS = {";": "';'", "\t": "tab", ",": "','", "|": "'|'"}  # as --sep spells them
+SEPARATORS = {";": "';'", "\t": "tab", ",": "','", "|": "'|'", " ": "' '"}  # as --sep spells them
 
 
 def _check_separator(path: Path, fmt: CsvFormat, line: int, row: list[str]) -> None:
@@ -244,6 +247,16 @@ def _check_separator(path: Path, fmt: CsvFormat, line: int, row: list[str]) -> N
             f"(separator {SEPARATORS.get(fmt.separator, repr(fmt.separator))}): give --sep "
             f"{SEPARATORS[sep]}"
         )
+
+
+def _is_number(cell: str, fmt: CsvFormat) -> bool:
+    """True when `cell` reads as a number (with the file's decimal mark)."""
+    text = cell.strip().replace(",", ".") if fmt.decimal_comma else cell.strip()
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _check_decimal_mark(path: Path, fmt: CsvFormat, cells: list[tuple[int, str]]) -> None:
@@ -355,9 +368,11 @@ def read_measurement_csv(
     _check_six_dof_format(path, fmt)
     if len(fmt.separator) != 1:
         raise InputError(f"{path}: separator {fmt.separator!r}: one character (--sep tab: a tab)")
+    spaced = fmt.separator == " "  # a run of spaces (aligned columns) is one separator
     try:
         with path.open(newline="", encoding="utf-8-sig") as handle:
-            rows = list(csv.reader(handle, delimiter=fmt.separator))
+            text = (line.lstrip(" ") for line in handle) if spaced else handle
+            rows = list(csv.reader(text, delimiter=fmt.separator, skipinitialspace=spaced))
     except (UnicodeDecodeError, csv.Error) as exc:
         raise InputError(f"{path}: not a readable CSV ({exc})") from None
     numbered = [
@@ -366,6 +381,12 @@ def read_measurement_csv(
     if not numbered:
         raise InputError(f"{path}: the file is empty (no header, no rows)")
     header = [h.strip() for h in numbered[0][1]] if fmt.header else None
+    if header is not None and len(header) > 1 and all(_is_number(h, fmt) for h in header):
+        raise InputError(
+            f"{path}:{numbered[0][0]}: the header row is all numbers ({', '.join(header[:3])}"
+            f"{', ...' if len(header) > 3 else ''}): a measurement, not column names; give "
+            "--no-header (columns by 0-based index) or add a header row"
+        )
     body = numbered[1:] if fmt.header else numbered
     if not body:
         raise InputError(f"{path}: no rows after the header (the file holds only a header)")
@@ -651,17 +672,22 @@ def write_measurement_bag(
     six_dof: Mapping[str, SixDof] | None = None,
 ) -> dict[str, int]:  # fmt: skip
     """A contract bag: one JointState and one PointStamped per pose, stamped in row order
-    (`time` [s] from the first pose, else 1 s apart; see `write_measurements`). Written
+    (`time` [s]: absolute Unix time from EPOCH_MIN_S on, else from the first pose; without
+    `time` 1 s apart; see `write_measurements`). Written
     under a temporary name and moved in when complete (an existing `output` is replaced
     only with `force`): a failure or Ctrl-C leaves nothing. Returns messages per topic."""
     output = Path(output)
-    offsets = (np.arange(len(q)) * STEP_NS if time is None
-               else np.round((time - time[0]) * 1e9).astype(np.int64))  # fmt: skip
+    if time is None:
+        start, offsets = START_NS, np.arange(len(q)) * STEP_NS
+    elif len(time) and time[0] >= EPOCH_MIN_S:  # absolute Unix time: as it is
+        start, offsets = 0, np.round(np.asarray(time) * 1e9).astype(np.int64)
+    else:
+        start, offsets = START_NS, np.round((time - time[0]) * 1e9).astype(np.int64)
     if np.any(np.diff(offsets) <= 0):
         raise InputError("time column must increase from row to row")
     with staged_outputs(output.parent, force) as stage:
         return write_measurements(
-            stage / output.name, q, points, joint_names, START_NS + offsets, direction,
+            stage / output.name, q, points, joint_names, start + offsets, direction,
             temperature, extra_points, six_dof,
         )  # fmt: skip
 
@@ -843,6 +869,18 @@ def _pose_writers(store: Any, six_dof: Mapping[str, SixDof]) -> list[_PoseWriter
                 quat[oriented] = Rotation.from_matrix(rotation[oriented]).as_quat()
             out.append(_PoseWriter(name, quat, sigma, store))
     return out
+
+
+def joined_times(times: Sequence[Array | None]) -> Array | None:
+    """One time column [s] for the rows of several CSVs in order (None unless every file has
+    one): absolute times (EPOCH_MIN_S on, every file) as they are, else each file from 0,
+    1e6 s after the one before."""
+    if not times or any(t is None for t in times):
+        return None
+    given = [t for t in times if t is not None]
+    if all(len(t) and t[0] >= EPOCH_MIN_S for t in given):
+        return np.concatenate(given)
+    return np.concatenate([t - t[0] + k * 1e6 for k, t in enumerate(given)])
 
 
 def with_overrides(fmt: CsvFormat, **changes: Any) -> CsvFormat:
