@@ -154,6 +154,14 @@ def test_a_robot_file_edited_after_calibration_is_noticed(tmp_path: Path) -> Non
             1,
         )
     )  # noqa: E501
+    # issue 24: PARAMS.json carries its description: the edited file is not read, the
+    # prediction is the calibrated robot's (its own text is guarded by the fingerprint)
+    proc = run("predict", str(params), "--joints", str(joints), "-o", str(tmp_path / "c.csv"))
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "c.csv").read_text() == (tmp_path / "a.csv").read_text()
+    old = json.loads(params.read_text())  # a file from before: the path, checked
+    del old["robot_description"]
+    params.write_text(json.dumps(old))
     proc = run("predict", str(params), "--joints", str(joints), "-o", str(tmp_path / "b.csv"))
     one_line_error(proc, "is not the one it was calibrated with")
     assert not (tmp_path / "b.csv").exists()

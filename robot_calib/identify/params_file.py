@@ -18,9 +18,10 @@ from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
 from robot_calib.identify.correction_structured import LearnedCorrection, correction_from_dict
-from robot_calib.kinematics.description import load_robot, with_payload
+from robot_calib.kinematics.description import RobotDescription, load_robot, with_payload
 from robot_calib.kinematics.frames import matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.kinematics.urdf import description_from_text, is_urdf_reference
 from robot_calib.messages import target_topic
 from robot_calib.model import KinematicModel, target_parameters
 from robot_calib.poses import PRIMARY_TARGET
@@ -68,6 +69,7 @@ def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any
         "model": cal.name,
         "robot": robot.reference(),
         "robot_fingerprint": robot.fingerprint(),
+        **({"robot_description": section} if (section := description_section(robot)) else {}),
         **(
             {"payload": {"mass_kg": robot.payload_kg, "com_m": list(robot.payload_com_m)}}
             if robot.payload_kg
@@ -170,12 +172,56 @@ def _read_document(path: Path) -> dict[str, Any]:
     return doc
 
 
+#: the descriptions read from PARAMS.json sections, by (reference, fingerprint): a result
+#: written again from a model read on another machine carries its section on
+_SECTIONS: dict[tuple[str, str], dict[str, str]] = {}
+
+
+def description_section(robot: RobotDescription) -> dict[str, str] | None:
+    """PARAMS.json's own copy of the robot description (issue 24: the result is portable,
+    it needs no file of the machine it was made on): `format` (urdf | yaml), `text` (the
+    file's), None for a built-in robot (its name is enough) or a description whose file no
+    longer reads back as `robot` (edited since it was loaded: the path alone, as before)."""
+    reference = robot.reference()
+    if reference == robot.name:
+        return None
+    known = _SECTIONS.get((reference, robot.fingerprint()))
+    if known is not None:
+        return known
+    kind = "urdf" if is_urdf_reference(reference) else "yaml"
+    try:
+        text = Path(reference.partition("#")[0]).read_text(encoding="utf-8")
+        section = {"format": kind, "text": text}
+        back = robot_from_section(section, reference, reference)
+    except (OSError, UnicodeDecodeError, RobotCalibError):
+        return None
+    if robot.payload_kg:
+        back = with_payload(back, robot.payload_kg, robot.payload_com_m)
+    return section if back.fingerprint() == robot.fingerprint() else None
+
+
+def robot_from_section(section: Any, reference: str, where: str) -> RobotDescription:
+    """The robot of a PARAMS.json `robot_description` section (`description_section`),
+    named `reference` (the file's `robot`); errors name `where`."""
+    if not isinstance(section, dict) or not all(
+        isinstance(section.get(k), str) for k in ("format", "text")
+    ):
+        raise InputError(f"{where}: 'robot_description' must hold 'format' and 'text' strings")
+    robot = description_from_text(section["format"], section["text"], reference,
+                                  f"{where}: robot_description")  # fmt: skip
+    _SECTIONS[(reference, robot.fingerprint())] = {"format": section["format"],
+                                                   "text": section["text"]}  # fmt: skip
+    return robot
+
+
 def params_from_dict(
     doc: Mapping[str, Any], where: str = "PARAMS.json"
 ) -> tuple[KinematicModel, ParameterVector]:
     """The forward model and parameters of a PARAMS.json document; errors name `where`."""
     try:
-        robot = load_robot(doc["robot"])
+        section = doc.get("robot_description")
+        robot = (load_robot(doc["robot"]) if section is None
+                 else robot_from_section(section, str(doc["robot"]), where))  # fmt: skip
         payload = doc.get("payload")
         if payload is not None:  # the calibration's payload (--payload), masses and all
             try:

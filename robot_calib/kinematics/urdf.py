@@ -131,6 +131,32 @@ def load_urdf(
     return replace(robot, description=replace(robot.description, path=reference))
 
 
+def description_from_text(kind: str, text: str, reference: str, where: str) -> RobotDescription:
+    """A robot description from its own text, as a PARAMS.json carries it (issue 24): `kind`
+    'urdf' (the chain of `reference`'s #base_link=..&tip_link=.. choice, else the defaults)
+    or 'yaml' (a robot YAML file's text); the result's path is `reference`, the original
+    file's, so it is written back unchanged. Errors name `where`."""
+    import yaml
+
+    from robot_calib.kinematics.description import parse_robot
+
+    if kind == "urdf":
+        options = dict(_fragment(reference.partition("#")[2], where))
+        model = parse_urdf(text, where)
+        found = urdf_to_description(
+            model, options.get("base_link"), options.get("tip_link"), where
+        )
+        return replace(found.description, path=reference)
+    if kind == "yaml":
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise RobotDescriptionError(f"{where}: not valid YAML ({first})") from None
+        return replace(parse_robot(data, where), path=reference)
+    raise RobotDescriptionError(f"{where}: description format {kind!r}: urdf or yaml")
+
+
 @contextlib.contextmanager
 def _quiet_parser() -> Iterator[list[str]]:
     """urdf_parser_py prints what it does not know to stderr: collect it instead (yields
