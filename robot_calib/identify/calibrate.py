@@ -494,7 +494,7 @@ def _calibrate_once(
             "cpa",
             geometric,
             cpa_params,
-            np.zeros(len(cpa_params)),
+            _cpa_std(recording, robot, geometric, cpa, cpa_params),
             accuracy(points, predicted),
             predicted - points,
             solver=SolverReport("circle point analysis (seed section 5)"),
@@ -541,6 +541,46 @@ def _canonical(model: KinematicModel, fit: FitResult, poses: Poses, say: Log) ->
     for line in found.applied:
         say(f"canonical form: {line}")
     return replace(fit, parameters=found.parameters) if found.applied else fit
+
+
+#: draws of the parametric bootstrap that gives CPA's parameters their 1-sigma
+CPA_DRAWS = 40
+
+
+def _cpa_std(recording: Recording, robot: RobotDescription, geometric: KinematicModel,
+             cpa: CPAResult, params: ParameterVector) -> Array:  # fmt: skip
+    """1-sigma of CPA's parameters (issue 24; was 0, which PARAMS.json reserves for fixed
+    ones): a parametric bootstrap of the circle fits. CPA_DRAWS times, the measured points
+    plus Gaussian noise of the circle fits' own level (`pooled_circle_noise`, per axis)
+    go through the same analysis; each free parameter's spread over the draws is its
+    1-sigma (angles wrapped about the estimate), 0 where fixed. A fixed seed: the same
+    file every run. All 0 when the circles leave no noise to draw (exact points)."""
+    from robot_calib.identify.cpa import pooled_circle_noise
+
+    noise = pooled_circle_noise(list(cpa.sweeps))
+    std = np.zeros(len(params))
+    if not noise > 0:
+        return std
+    rng = np.random.default_rng(0)
+    draws = []
+    for _ in range(CPA_DRAWS):
+        shaken = replace(
+            recording, points=recording.points + rng.normal(0.0, noise, recording.points.shape)
+        )
+        try:
+            again = circle_point_analysis(shaken, robot)
+        except InputError:  # a draw no circle survives: left out
+            continue
+        values = initial_tool_rotations(geometric, _seeded(geometric, again.parameters),
+                                        shaken.poses).values  # fmt: skip
+        draws.append(values)
+    if len(draws) < 2:
+        return std
+    diff = np.asarray(draws) - params.values
+    angles = np.array([p.unit == "rad" for p in params.parameters], dtype=bool)
+    diff[:, angles] = (diff[:, angles] + np.pi) % (2 * np.pi) - np.pi
+    std[params.free] = np.sqrt(np.mean(diff**2, axis=0))[params.free]
+    return std
 
 
 def _seeded(
