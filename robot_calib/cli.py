@@ -172,18 +172,18 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _run_folder(folder: Path) -> None:
-    """`run -o FOLDER`: created where missing; InputError (exit 2, one line) when a part of
-    it is a file or it cannot be created or written (read-only, permissions)."""
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except FileExistsError:
-        raise InputError(f"{folder}: exists and is not a folder") from None
-    except OSError as exc:
-        raise InputError(f"{folder}: cannot create the output folder ({exc.strerror})") from None
-    if not folder.is_dir():
-        raise InputError(f"{folder}: exists and is not a folder")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise InputError(f"{folder}: folder not writable; cannot write a run there")
+    """`run -o FOLDER` checked before any work, nothing created (the run creates it when it
+    writes, so a bad argument found later leaves no empty folder): InputError (exit 2, one
+    line) when a part of it is a file, or the deepest part that exists cannot be written
+    (read-only, permissions)."""
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(f"{folder}: {existing} exists and is not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        what = "folder not writable" if existing == folder else f"{existing} not writable"
+        raise InputError(f"{folder}: {what}; cannot write a run there")
 
 
 def _progress() -> Callable[[str, int, int], None]:
@@ -236,8 +236,6 @@ def cmd_plan(args: argparse.Namespace) -> int:
     noise = args.noise_mm
     if noise is not None and not (math.isfinite(noise) and 0 < noise < 10):
         raise InputError(f"--noise-mm {noise}: a 1-sigma per coordinate in mm, > 0 and < 10")
-    if Path(args.output).suffix.lower() not in (".yaml", ".yml"):
-        raise InputError(f"{args.output}: a plan is written as YAML: give a .yaml or .yml name")
     floor = args.floor_z
     if math.isnan(floor) or (math.isfinite(floor) and abs(floor) > MAX_FLOOR_Z_M):
         raise InputError(
@@ -247,6 +245,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
         )
     world = pipeline.simulation_world(args.world, args.robot, (), args.seed)
     output = output_path(args.output, "PLAN.yaml", pipeline.simulation_inputs(world), args.force)
+    if output.suffix.lower() not in (".yaml", ".yml"):  # after the input check: never an input
+        raise InputError(f"{output}: a plan is written as YAML: give a .yaml or .yml name")
     c = plan_campaign(world, args.model, args.poses, args.candidates, args.seed, args.floor_z,
                       None if noise is None else noise * 1e-3, args.ecc_order, args.trials,
                       args.holdout, _log)  # fmt: skip

@@ -66,7 +66,7 @@ def test_plan_takes_a_plausible_floor(tmp_path: Path) -> None:
 def test_run_into_a_path_through_a_file_is_one_line(tmp_path: Path) -> None:
     (tmp_path / "afile").write_text("x")
     proc = robot_calib("run", "-o", "afile/out", cwd=tmp_path)
-    one_line_error(proc, "afile/out: cannot create the output folder (Not a directory)")
+    one_line_error(proc, "afile/out: afile exists and is not a folder")
 
 
 @pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a read-only folder")
