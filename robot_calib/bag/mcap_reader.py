@@ -48,8 +48,11 @@ from robot_calib.bag.ros2_formats import (
 from robot_calib.errors import BagError, TruncatedBagError
 
 MAGIC = b"\x89MCAP0\r\n"
-_CORRUPT = (McapError, ValueError, KeyError, IndexError, EOFError, struct.error)
-"""What mcap raises on a malformed file."""
+_CORRUPT = (McapError, ValueError, KeyError, IndexError, EOFError, struct.error, MemoryError)
+"""What mcap raises on a malformed file (MemoryError: a length beyond memory, e.g. a chunk
+to decompress to more bytes than there are, read whole by mcap)."""
+_LARGE_READ = 1 << 20
+"""Reads above this size [B] are checked against the bytes left in the file first."""
 
 
 @dataclass(frozen=True)
@@ -278,10 +281,20 @@ class _ExactReads:
         self.seek, self.tell, self.seekable = file.seek, file.tell, file.seekable
 
     def read(self, size: int = -1) -> bytes:
+        if size > _LARGE_READ and size > _bytes_left(self._file):
+            raise EndOfFile()  # a record longer than the file (a corrupt length): never allocated
         data = self._file.read(size)
         if size > 0 and len(data) < size:
             raise EndOfFile()
         return data
+
+
+def _bytes_left(file: IO[bytes]) -> int:
+    """Bytes from the position of `file` to its end now (a live bag grows)."""
+    try:
+        return os.fstat(file.fileno()).st_size - file.tell()
+    except (OSError, io.UnsupportedOperation, AttributeError):  # in memory: reads are short
+        return 1 << 62
 
 
 class BagReader:
@@ -464,7 +477,10 @@ class BagReader:
                     yield record
             except EndOfFile:
                 if self.complete:
-                    raise BagError(f"{self.path}: corrupt MCAP data: ends in a record") from None
+                    raise BagError(
+                        f"{self.path}: corrupt MCAP data: a record runs past the end of "
+                        "the file (a corrupt length)"
+                    ) from None
             except _CORRUPT as exc:
                 raise BagError(f"{self.path}: corrupt MCAP data: {exc}") from None
 
@@ -488,6 +504,8 @@ class BagReader:
             opcode, length = _RECORD_HEAD.unpack(head)
             if length > _RECORD_SIZE_LIMIT:
                 raise _Fallback("record length limit")
+            if length > _LARGE_READ and length > _bytes_left(stream):
+                raise _Fallback("record beyond the end of the file")
             body = read(length)
             if opcode == Opcode.MESSAGE:
                 table.add_records(head + body)

@@ -89,8 +89,17 @@ def repair_bag(source: Path, output: Path, force: bool = False) -> RepairReport:
                     f"{info.message_encoding!r}, not {MESSAGE_ENCODING!r}"
                 )
         tmp = output.with_name(f".{output.name}.{os.getpid()}.tmp")
-        # BagWriter never overwrites: an existing `tmp` is an error, and not ours to remove
-        writer = BagWriter(tmp, ros_distro=_ros_distro(reader), file_name=output.name)
+        distro = _ros_distro(reader)
+        # BagWriter never overwrites: an existing `tmp` is an error, and not ours to remove;
+        # one it created and could not start (a full disk at the header) is removed
+        existed = tmp.exists() or tmp.is_symlink()
+        try:
+            writer = BagWriter(tmp, ros_distro=distro, file_name=output.name)
+        except BaseException:
+            if not existed:
+                with contextlib.suppress(OSError):
+                    tmp.unlink()
+            raise
         try:
             with writer:
                 for info in reader.topics.values():
