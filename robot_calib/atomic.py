@@ -8,6 +8,11 @@
 A failed write (OSError: full disk, read-only folder, ...) removes what it wrote and raises
 InputError naming the file. Existing targets are replaced only with `force`; the caller
 checks inputs (`pipeline.output_path`), which are never overwritten.
+
+A target checked to be new (`claim_new`, called by `pipeline.output_path` without
+`--force`) is created exclusively at the final rename: a file that appeared there
+meanwhile (a second command writing the same output) is never replaced, the command fails
+with "exists" instead and the other's result stays.
 """
 
 from __future__ import annotations
@@ -21,21 +26,53 @@ from pathlib import Path
 
 from robot_calib.errors import InputError
 
+_NEW: set[Path] = set()
+"""Targets checked to be new (absolute): created exclusively, never replaced."""
+
+
+def claim_new(path: str | Path) -> None:
+    """`path` was checked not to exist and may not be replaced (no `--force`): writing it
+        by `write_text_atomic` fails if it exists by the final rename (`staged_outputs` moves
+    in without replacing whenever it is not forced)."""
+    _NEW.add(Path(os.path.abspath(path)))
+
+
+def must_be_new(path: str | Path) -> bool:
+    """True if `path` was claimed new (`claim_new`)."""
+    return Path(os.path.abspath(path)) in _NEW
+
 
 def write_text_atomic(path: str | Path, text: str) -> None:
-    """Write `text` to `path` via `.<name>.tmp` in the same folder and a rename; on any
-    failure the temporary file is removed and the target is untouched (InputError)."""
+    """Write `text` to `path` via a temporary `.<name>.<random>.tmp` in the same folder and
+    a rename; on any failure the temporary file is removed and the target is untouched
+    (InputError). A target claimed new (`claim_new`) is refused if it exists by then."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
     try:
-        tmp.write_text(text)
-        os.replace(tmp, path)
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+    tmp = Path(name)
+    try:
+        with os.fdopen(fd, "w") as file:
+            file.write(text)
+        os.chmod(tmp, 0o666 & ~_umask())
+        if must_be_new(path):
+            _move_new(tmp, path)
+        else:
+            os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
         raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def _umask() -> int:
+    """The process's umask (mkstemp creates 0600; outputs get the usual mode)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 @contextlib.contextmanager

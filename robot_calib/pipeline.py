@@ -255,6 +255,10 @@ def output_path(
         raise InputError(f"{path.parent}: folder not writable; cannot write {what} there")
     if path.exists() and not force:
         raise InputError(f"{path}: exists; will not overwrite it (use --force)")
+    if not force:  # still new at the final rename, or refused (a second command wrote it)
+        from robot_calib.atomic import claim_new
+
+        claim_new(path)
     return path
 
 

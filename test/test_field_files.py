@@ -8,6 +8,7 @@ memory or file-size limit where the fault needs one.
 
 from __future__ import annotations
 
+import json
 import shutil
 import struct
 import subprocess
@@ -114,3 +115,37 @@ def test_repair_onto_a_full_disk_leaves_no_temporary(tmp_path: Path, fsize: int)
     one_line_error(result, "r.mcap")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.mcap"]
     assert bag.read_bytes() == SAMPLE.read_bytes()
+
+
+# --- item 1: two commands writing one output at once ------------------------------------------
+
+
+def test_two_calibrates_of_one_output_at_once_never_replace_a_result(tmp_path: Path) -> None:
+    """Two `calibrate -o p.json` started together both passed the 'exists' check and both
+    exited 0, the later rename silently replacing the first result. Now the output is
+    created exclusively at the final rename: one writes it (exit 0), the other is refused
+    (exit 2, 'exists') and leaves the result and no temporary."""
+    bag = tmp_path / "in.mcap"
+    shutil.copy(SAMPLE, bag)
+    output = tmp_path / "p.json"
+    args = [sys.executable, "-m", "robot_calib", "calibrate", "in.mcap", "-o", output.name]
+    runs = [  # two models, so that the file shows which of them wrote it
+        subprocess.Popen(
+            [*args, "--model", model],
+            cwd=tmp_path,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        for model in ("geometric", "cpa")
+    ]
+    results = [(p.wait(timeout=300), *p.communicate()) for p in runs]
+    codes = sorted(code for code, _, _ in results)
+    assert codes == [0, 2], results  # was [0, 0]: one result silently replaced
+    loser = next(err for code, _, err in results if code == 2)
+    assert "p.json: exists; will not overwrite it" in loser, loser
+    assert "Traceback" not in loser
+    winner = next(out for code, out, _ in results if code == 0)
+    name = json.loads(output.read_text())["model"]
+    assert f"p.json: {name} in" in winner, (name, winner)
+    assert leftovers(tmp_path) == []
