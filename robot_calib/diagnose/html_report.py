@@ -452,8 +452,11 @@ def _vectors(ladder: Ladder, recording: Recording) -> str:
     held = ladder.holdout
     points = held.points if held is not None else recording.points
     rungs = (ladder.rungs[0], ladder.rungs[-1])[: len(ladder.rungs)]
-    fig = quiver_figure(ladder, points, [(r.model, r.heldout_residuals) for r in rungs],
-                        ladder.scored_on)  # fmt: skip
+    rows = rungs[-1].scored_rows  # a subset scored (100k poses): both panels on it
+    residuals = [(r.model, r.heldout_residuals if r.scored_rows is not None or rows is None
+                  else r.heldout_residuals[rows]) for r in rungs]  # fmt: skip
+    fig = quiver_figure(ladder, rungs[-1].scored(points) if held is None else points,
+                        residuals, ladder.scored_on)  # fmt: skip
     return _img(
         fig,
         "Residual vectors (predicted - measured) at the measured points, robot "

@@ -66,6 +66,13 @@ class Rung:
     # accuracy with it (the calibration's own `accuracy` is the physical model's)
     learned: bool = False
     insample: Accuracy | None = None
+    # the measurements (indices into the recording) of `heldout_residuals` in the k-fold
+    # case when only a subset was scored (SCORED_POSES); None: all of them
+    scored_rows: IntArray | None = None
+
+    def scored(self, points: Array) -> Array:
+        """`points` (n, 3) of the recording (k-fold) at the rung's scored measurements."""
+        return points if self.scored_rows is None else points[self.scored_rows]
 
 
 @dataclass(frozen=True)
@@ -130,6 +137,9 @@ def _replace(present: tuple[Effect, ...], new: Effect,
     return tuple(e for e in present if not new.supersedes(e, robot)) + (new,)
 
 
+#: poses the hybrid rung's learned correction is scored on at most in the k-fold case (and
+#: its in-sample figures computed on): a fixed random subset of whole poses above
+SCORED_POSES = 20000
 #: poses the screening ranks candidates on at most (a fixed random subset of whole poses
 #: above): its linearised figures only order the candidates, the refits and their k-fold
 #: scores use every pose (a screening round of 100k poses and ~150 columns took 20 s)
@@ -441,26 +451,33 @@ def _learn_the_rest(
     best rung by MIN_GAIN on those data, else None. The bound: geometric's held-out error
     and the hybrid's, on the same data."""
     physical = rungs[-1]
+    geometric = rungs[0].heldout_residuals
+    # above SCORED_POSES poses the correction is scored on a fixed random subset of them
+    # (its predictions at 80k held-out poses cost more than the rest of a diagnosis)
+    keep = recording.sample_mask(SCORED_POSES)
+    scored = recording if keep is None else recording.subset(keep)
     if holdout is None:  # the folds' parameters refitted, for the correction's own k-fold
         fold, fitted = kfold_parameters(physical.calibration, recording)
+        if keep is not None:
+            fold, geometric = fold[keep], geometric[keep]
     else:
-        fold, fitted = pose_folds(recording), {}
-    before, after, correction = corrected_heldout(physical.calibration, recording, holdout,
+        fold, fitted = pose_folds(scored), {}
+    before, after, correction = corrected_heldout(physical.calibration, scored, holdout,
                                                   fold, fitted, final=False)  # fmt: skip
     score = combined_rms(after, None)
     gain = score <= (1.0 - MIN_GAIN) * combined_rms(before, None)
     if gain and holdout is None:  # k-fold: the first fold's correction stood in so far
         correction = final_correction(physical.calibration, recording, correction)
-    bound = bound_of(rungs[0].heldout_residuals, after, correction, scored_on,
-                     physical.model)  # fmt: skip
+    bound = bound_of(geometric, after, correction, scored_on, physical.model)
     if not gain:
         return bound, None
-    measured = holdout.points if holdout is not None else recording.points  # as `after`
+    measured = holdout.points if holdout is not None else scored.points  # as `after`
     cal = replace(physical.calibration, correction=correction)
     acc = accuracy(measured, measured + after)
-    insample = accuracy(recording.points, cal.predict(recording.poses))
+    insample = accuracy(scored.points, cal.predict(scored.poses))
+    rows = None if keep is None or holdout is not None else np.flatnonzero(keep)
     return bound, Rung(physical.model + LEARNED_SUFFIX, physical.effects, cal, acc, after,
-                       score, learned=True, insample=insample)  # fmt: skip
+                       score, learned=True, insample=insample, scored_rows=rows)  # fmt: skip
 
 
 @dataclass(frozen=True)
