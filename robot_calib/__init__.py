@@ -4,7 +4,9 @@ Flow (one package per step): sim -> bag -> identify (CPA, geometric, effects) ->
 The core imports numpy/scipy only; ROS lives in `robot_calib.nodes`.
 """
 
+import _signal  # the C module: `signal` takes ~10 ms to import (its enums)
 import os
+import sys
 
 # The linear algebra here is many small solves (thousands of rows, tens of columns): one
 # BLAS thread is fastest, and threaded OpenBLAS next to another busy process slows them down
@@ -14,3 +16,28 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 __version__ = "0.1.0"
+
+
+def _interrupted_while_starting(signum: int, _frame: object) -> None:
+    """Ctrl-C / SIGTERM while `robot-calib` loads its modules (before `cli.main` installs its
+    own handlers): nothing is written yet, so one line and exit 130 at once (was a
+    KeyboardInterrupt traceback of whatever import was in progress)."""
+    verb = next((a for a in sys.argv[1:2] if not a.startswith("-")), "")
+    os.write(2, f"robot-calib{' ' + verb if verb else ''}: interrupted\n".encode())
+    os._exit(130)
+
+
+def _console_program() -> bool:
+    """True when the package is loaded by the `robot-calib` program or `python -m
+    robot_calib` (not imported by a test, a node or another program)."""
+    argv = getattr(sys, "orig_argv", [])
+    as_module = any(a == "-m" and b == "robot_calib" for a, b in zip(argv, argv[1:]))
+    program = sys.argv[0] if sys.argv and sys.argv[0] else ""
+    return as_module or os.path.basename(program) == "robot-calib"
+
+
+if _console_program():  # before the heavy imports of robot_calib.cli (numpy, ...: ~0.3 s)
+    if _signal.getsignal(_signal.SIGINT) is _signal.default_int_handler:
+        _signal.signal(_signal.SIGINT, _interrupted_while_starting)
+    if _signal.getsignal(_signal.SIGTERM) == _signal.SIG_DFL:
+        _signal.signal(_signal.SIGTERM, _interrupted_while_starting)

@@ -1481,19 +1481,37 @@ def _interrupt(signum: int, _frame: object) -> NoReturn:
     raise KeyboardInterrupt
 
 
+def _ignore_interrupt_in_callback(unraisable: Any) -> None:
+    """A KeyboardInterrupt raised by `_interrupt` inside a callback Python cannot raise from
+    (a weakref or __del__: 'Exception ignored in ... WeakSet') is not printed: the signal
+    is recorded and `main` exits 130 after all (was: the program went on to exit 0)."""
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and _SIGNALLED:
+        return
+    sys.__unraisablehook__(unraisable)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    from robot_calib import _interrupted_while_starting
+
     args = build_parser().parse_args(argv)
     signal.signal(signal.SIGTERM, _interrupt)
     if signal.getsignal(signal.SIGHUP) is signal.SIG_DFL:  # not under nohup (ignored)
         signal.signal(signal.SIGHUP, _interrupt)
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when ignored
+    if signal.getsignal(signal.SIGINT) in (  # not when ignored
+        signal.default_int_handler,
+        _interrupted_while_starting,  # robot_calib/__init__.py's, while the modules loaded
+    ):
         signal.signal(signal.SIGINT, _interrupt)
+    sys.unraisablehook = _ignore_interrupt_in_callback
     try:
         if args.base_link or args.tip_link:  # carried in the robot reference (PARAMS.json)
             from robot_calib.kinematics.urdf import urdf_reference
 
             args.robot = urdf_reference(args.robot or "", args.base_link, args.tip_link)
-        return int(args.func(args))
+        status = int(args.func(args))
+        if _SIGNALLED:  # the interrupt fell in a callback that swallowed it
+            raise KeyboardInterrupt
+        return status
     except BaseException as exc:
         # A signal can surface as another exception when it lands in a C extension's call
         # back into Python (e.g. an rclpy callback): it is still an interruption.
