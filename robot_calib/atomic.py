@@ -42,10 +42,11 @@ def must_be_new(path: str | Path) -> bool:
     return Path(os.path.abspath(path)) in _NEW
 
 
-def write_text_atomic(path: str | Path, text: str) -> None:
+def write_text_atomic(path: str | Path, text: str, *, rewrite: bool = False) -> None:
     """Write `text` to `path` via a temporary `.<name>.<random>.tmp` in the same folder and
     a rename; on any failure the temporary file is removed and the target is untouched
-    (InputError). A target claimed new (`claim_new`) is refused if it exists by then."""
+    (InputError). A target claimed new (`claim_new`) is refused if it exists by then,
+    unless `rewrite` (the command rewrites a file it wrote itself)."""
     path = Path(path)
     try:
         fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -56,7 +57,7 @@ def write_text_atomic(path: str | Path, text: str) -> None:
         with os.fdopen(fd, "w") as file:
             file.write(text)
         os.chmod(tmp, 0o666 & ~_umask())
-        if must_be_new(path):
+        if must_be_new(path) and not rewrite:
             _move_new(tmp, path)
         else:
             os.replace(tmp, path)

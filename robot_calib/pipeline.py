@@ -726,6 +726,7 @@ def run(
     try:
         result = _run_in(folder, final, description, plan, world, seed, n_holdout,
                          robot, say, log, progress)  # fmt: skip
+        _name_final_paths(folder, final)
         os.rename(folder, final)
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
@@ -744,6 +745,30 @@ def run(
         report=moved(result.report),
         html=None if result.html is None else moved(result.html),
     )  # fmt: skip
+
+
+def _name_final_paths(folder: Path, final: Path) -> None:
+    """The run's text files (reports, PARAMS.json, world files) name the bags and files by
+    their final paths in `final`, not by the hidden `folder` they were built in (which is
+    gone once renamed): every spelling of `folder` (plain, JSON-escaped, HTML-escaped)
+    replaced before the rename."""
+    import html
+    import json
+
+    from robot_calib.atomic import write_text_atomic
+
+    spellings = {str(folder): str(final)}
+    spellings[json.dumps(str(folder))[1:-1]] = json.dumps(str(final))[1:-1]
+    spellings[html.escape(str(folder))] = html.escape(str(final))
+    for path in sorted(folder.iterdir()):
+        if path.suffix not in (".json", ".md", ".html", ".yaml", ".csv", ".txt"):
+            continue
+        text = path.read_text()
+        renamed = text
+        for old, new in spellings.items():
+            renamed = renamed.replace(old, new)
+        if renamed != text:
+            write_text_atomic(path, renamed, rewrite=True)
 
 
 def _run_in(

@@ -191,3 +191,26 @@ def test_ctrl_c_while_the_program_starts_is_one_line_and_130(tmp_path: Path) -> 
             assert not output.exists()
     assert ours >= 20
     assert leftovers(tmp_path) == []
+
+
+# --- item 7: a run's files name its final folder -----------------------------------------------
+
+
+def test_a_run_names_its_final_folder_not_the_one_it_was_built_in(tmp_path: Path) -> None:
+    """`run -o out` builds `out/.run-XXXX.partial` and renames it: its reports, PARAMS.json
+    and world files named the bags in that folder, gone once renamed. Every path of the
+    run's files that names one of its bags now names the final folder, and exists."""
+    result = robot_calib("run", "-o", str(tmp_path / "out"), "--holdout", "20")
+    assert result.returncode == 0, result.stderr
+    (run,) = (tmp_path / "out").iterdir()
+    assert run.name.startswith("run-")
+    named = 0
+    for path in run.iterdir():
+        if path.suffix in (".json", ".md", ".html", ".yaml"):
+            text = path.read_text()
+            assert ".partial" not in text, path.name
+            for bag in ("calibration.mcap", "holdout.mcap"):
+                if str(run / bag) in text:
+                    named += 1
+    assert named >= 5  # the diagnosis, its reports, the PARAMS.json files, the world file
+    assert (run / "calibration.mcap").exists() and (run / "holdout.mcap").exists()
