@@ -84,6 +84,13 @@ def _payload(text: str) -> tuple[float, tuple[float, float, float]]:
         ) from None
     if len(values) != 3:
         raise InputError(f"--payload {text}: the centre of mass takes three values X,Y,Z [m]")
+    if not (math.isfinite(kg) and 0 <= kg <= MAX_PAYLOAD_KG) or not all(
+        math.isfinite(v) and abs(v) <= MAX_PAYLOAD_COM_M for v in values
+    ):
+        raise InputError(
+            f"--payload {text}: a mass 0 to {MAX_PAYLOAD_KG:g} kg and a centre of mass within "
+            f"+-{MAX_PAYLOAD_COM_M:g} m of the flange (msgs_doc/units.md)"
+        )
     return kg, (values[0], values[1], values[2])
 
 
@@ -386,6 +393,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     from robot_calib.bag.csv_import import (
         PRESETS,
         CsvFormat,
+        check_no_copies,
         counted,
         joined_times,
         read_measurement_csv,
@@ -432,6 +440,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     if len(fmt.point) != 3 or (fmt.dif is not None and len(fmt.dif) != 3):
         raise InputError("--point and --dif take three columns: x,y,z")
     tables = []
+    check_no_copies(args.csv, [])  # a CSV given twice, before any is read
     for csv_path in args.csv:
         table = read_measurement_csv(csv_path, fmt, robot.limits)
         for warning in table.warnings:
@@ -445,6 +454,7 @@ def cmd_import(args: argparse.Namespace) -> int:
                   f"orientations, {np.isfinite(sigma).any(axis=1).sum()} rows with stated "
                   "standard deviations")  # fmt: skip
         tables.append(table)
+    check_no_copies(args.csv, tables)
     q = np.concatenate([t.q for t in tables])
     points = np.concatenate([t.points for t in tables])
     times = joined_times([t.time for t in tables])  # absolute Unix times kept as they are
@@ -887,14 +897,34 @@ def _at_least(low: int) -> Callable[[str], int]:
 _count, _positive = _at_least(0), _at_least(1)
 
 
+MAX_TOLERANCE_S = 10.0  # --pair-tolerance, --max-gap: beyond, any two messages pair
+MAX_LATENCY_S = 1.0  # --latency: a clock offset above 1 s is no latency
+MAX_RATE_HZ = 100_000.0  # --joint-rate, --point-rate: no tracker or controller streams faster
+MAX_PAYLOAD_KG, MAX_PAYLOAD_COM_M = 2500.0, 2.0  # --payload: the largest robots' ratings
+
+
 def _tolerance(text: str) -> float:
-    """An argparse type: a finite number >= 0 [s] (else a one-line usage error, exit 2)."""
+    """An argparse type: a finite number 0..MAX_TOLERANCE_S [s] (else a one-line usage
+    error, exit 2)."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"{text} s: need a finite number >= 0")
+    if not (math.isfinite(value) and 0 <= value <= MAX_TOLERANCE_S):
+        raise argparse.ArgumentTypeError(
+            f"{text} s: need a finite number >= 0 and <= {MAX_TOLERANCE_S:g}"
+        )
+    return value
+
+
+def _signed_seconds(text: str) -> float:
+    """An argparse type: a latency [s] within +-MAX_LATENCY_S."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not (math.isfinite(value) and abs(value) <= MAX_LATENCY_S):
+        raise argparse.ArgumentTypeError(f"{text} s: need a number within +-{MAX_LATENCY_S:g} s")
     return value
 
 
@@ -943,8 +973,8 @@ def _rate(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"{text} Hz: need a finite number > 0")
+    if not (math.isfinite(value) and 0 < value <= MAX_RATE_HZ):
+        raise argparse.ArgumentTypeError(f"{text} Hz: need a number > 0 and <= {MAX_RATE_HZ:g}")
     return value
 
 
@@ -953,11 +983,9 @@ def _latency(text: str) -> str:
     if text == "auto":
         return text
     try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: 'auto' or a number of seconds") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text}: a finite number of seconds")
+        _signed_seconds(text)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"'auto' or {exc}") from None
     return text
 
 
@@ -1126,7 +1154,7 @@ def build_parser() -> argparse.ArgumentParser:
             help=f"with --stream: {what} per second [Hz] (default {default:g})",
         )  # fmt: skip
     sim.add_argument(
-        "--latency", dest="sim_latency", type=float, default=0.002, metavar="SECONDS",
+        "--latency", dest="sim_latency", type=_signed_seconds, default=0.002, metavar="SECONDS",
         help="with --stream: the controller's stamps minus the tracker's for one instant [s] "
         "(default 0.002)",
     )  # fmt: skip

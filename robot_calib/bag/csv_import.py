@@ -28,6 +28,7 @@ from robot_calib.bag.mcap_writer import BagWriter
 from robot_calib.bag.ros2_formats import typestore
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array, IntArray
+from robot_calib.measurements.recording import COPY_RESOLUTION, copies
 from robot_calib.messages import (
     JOINT_STATE_TYPE,
     JOINT_STATES_TOPIC,
@@ -173,6 +174,37 @@ class ImportedTable:
     temperature: Array | None = None
     extra_points: Mapping[str, Array] = field(default_factory=dict)
     six_dof: Mapping[str, SixDof] = field(default_factory=dict)
+    lines: tuple[int, ...] = ()  # the file line of each row
+
+
+def check_no_copies(paths: Sequence[str | Path], tables: Sequence[ImportedTable]) -> None:
+    """InputError when a CSV is given twice, or a row repeats an earlier row's joint
+    readings and point (to 1 nrad / 1 nm, `copies`: the same measurement, not the tracker
+    measuring again), in one file or across the files; names the first copy and how many."""
+    seen: dict[Path, str] = {}
+    for path in paths:
+        key = Path(path).resolve()
+        if key in seen:
+            raise InputError(f"{path}: given twice (as {seen[key]}): its rows would be "
+                             "imported twice; give each CSV once")  # fmt: skip
+        seen[key] = str(path)
+    if not tables:
+        return
+    q = np.concatenate([t.q for t in tables])
+    points = np.concatenate([t.points for t in tables])
+    copied = copies(q, points)
+    if not copied.any():
+        return
+    where = [f"{p}:{line}" for p, t in zip(paths, tables)
+             for line in (t.lines or range(1, len(t.q) + 1))]  # fmt: skip
+    k = int(np.flatnonzero(copied)[0])
+    rows = np.round(np.column_stack([q, points]) / COPY_RESOLUTION)
+    first = int(np.flatnonzero((rows[:k] == rows[k]).all(axis=1))[0])
+    raise InputError(
+        f"{where[k]}: the same joint readings and point as {where[first]} (to 1 nrad / 1 nm; "
+        f"{int(copied.sum())} of {len(copied)} rows are such copies): a tracker measuring "
+        "again never repeats a point exactly; give each measurement once"
+    )
 
 
 MAX_TRACKER_RANGE_M = 50.0  # beyond a laser tracker's range: millimetres read as metres
@@ -186,7 +218,28 @@ def _column(ref: str, header: list[str] | None, path: Path) -> int:
         raise InputError(f"{path}: column {ref!r} by name needs a header row (or give an index)")
     if ref not in header:
         raise InputError(f"{path}: no column {ref!r} (header: {', '.join(header)})")
+    if header.count(ref) > 1:
+        at = [k for k, h in enumerate(header) if h == ref]
+        raise InputError(
+            f"{path}: the header has {len(at)} columns named {ref!r} (0-based {at}): which "
+            "one is meant is unknown; rename one or give the column by index"
+        )
     return header.index(ref)
+
+
+def _check_distinct_columns(
+    path: Path, refs: list[str], cols: list[int], header: list[str] | None
+) -> None:
+    """InputError when two of the columns given (--joints, --point, --dif, --time,
+    --temperature, --target) are one column of the file: one number read as two."""
+    for k, col in enumerate(cols):
+        if col in cols[:k]:
+            other = refs[cols.index(col)]
+            raise InputError(
+                f"{path}: column {_column_label(refs[k], col, header)!r} is given twice (as "
+                f"{other!r} and {refs[k]!r} in --joints/--point/--dif/--time/--temperature/"
+                "--target): each value needs its own column"
+            )
 
 
 def counted(n: int, noun: str) -> str:
@@ -407,6 +460,7 @@ def read_measurement_csv(
     refs += [c for o in fmt.orientations for c in o.columns]
     refs += [c for s in fmt.sigmas for c in (s.position, s.orientation) if c]
     cols = [_column(r, header, path) for r in refs]
+    _check_distinct_columns(path, refs[:n_optional], cols[:n_optional], header)
     if max(cols) >= n_fields:
         raise InputError(f"{path}: no column {max(cols)} ({of} {counted(n_fields, 'field')})")
     cells: list[tuple[int, str]] = []
@@ -480,8 +534,9 @@ def read_measurement_csv(
         measured[name] = np.asarray(np.isfinite(xyz).all(axis=1), dtype=bool)
     six_dof, more = _six_dof_columns(path, fmt, table[:, n_optional:], given, lines, measured)
     return ImportedTable(
-        q, points, time, tuple(bad), (*warnings, *more), temperature, extra, six_dof
-    )
+        q, points, time, tuple(bad), (*warnings, *more), temperature, extra, six_dof,
+        tuple(lines),
+    )  # fmt: skip
 
 
 def _check_six_dof_format(path: Path, fmt: CsvFormat) -> None:

@@ -22,9 +22,13 @@ from robot_calib.errors import BagError, InputError, TruncatedBagError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements.recording import (
+    MAX_COORDINATE_M,
+    MAX_READING_RAD,
     PAIR_TOLERANCE_S,
     Recording,
+    implausible_values,
     recording_from_stream,
+    without_copies,
 )
 from robot_calib.measurements.six_dof import PoseReading, StampedMeasurements, join_poses
 from robot_calib.measurements.stream import JointStream, stream_hint
@@ -43,6 +47,7 @@ from robot_calib.messages import (
     pose_measurement,
     pose_topic_name,
     stamp_to_ns,
+    target_topic,
     target_topic_name,
     velocity_signs,
 )
@@ -424,6 +429,8 @@ def read_bag(
     """The paired measurements of one bag (its own time origin and direction history),
     with a warning suggesting `--stream` when the bag looks like a stream (`stream_hint`)."""
     js_ns, q, velocity_sign, stamped, names, celsius, warnings = _bag_messages(path, robot)
+    _check_values(path, q, stamped, names)
+    warnings = warnings + _backwards_stamps(path, js_ns)
     order = np.argsort(js_ns, kind="stable")
     # a stream is told by one target's points per joint state: several targets measured at
     # each pose of a static bag are no stream (issue 24)
@@ -451,7 +458,48 @@ def read_bag(
         sigma=stamped.sigma,
         temperature=_temperature_at(path, celsius, stamped.point_ns),
     )
+    rec = without_copies(rec, str(path))
     return replace(rec, warnings=tuple(warnings) + rec.warnings)
+
+
+def _check_values(path: Path, q: Array, stamped: StampedMeasurements, names: list[str]) -> None:
+    """BagError naming the bag, topic and message when a joint reading or a tracker
+    coordinate is beyond any plausible value (MAX_READING_RAD, MAX_COORDINATE_M): a
+    corrupt number (1e300) would otherwise reach the fit (an SVD that never returns)."""
+    bad = implausible_values(q, MAX_READING_RAD)
+    if len(bad):
+        k = int(bad[0])
+        raise BagError(
+            f"{path}: {JOINT_STATES_TOPIC} message {k + 1}: reading {q[k].tolist()} is beyond "
+            f"+-{MAX_READING_RAD:g} rad, no joint angle in rad or deg (a corrupt value?)"
+        )
+    bad = implausible_values(stamped.points, MAX_COORDINATE_M)
+    if len(bad):
+        k = int(bad[0])
+        t = int(stamped.point_target[k]) if len(stamped.point_target) else 0
+        nth = int(np.sum(np.asarray(stamped.point_target[:k]) == t)) + 1
+        raise BagError(
+            f"{path}: {target_topic(names[t] if t < len(names) else PRIMARY_TARGET)} message "
+            f"{nth}: point {stamped.points[k].tolist()} m is beyond +-{MAX_COORDINATE_M:g} m "
+            "of the tracker, no measured point (a corrupt value?)"
+        )
+
+
+def _backwards_stamps(path: Path, js_ns: IntArray) -> list[str]:
+    """A warning when the joint states' header stamps (in file order, the order the
+    recorder received them) go backwards: the visiting order, and with it the approach
+    directions a backlash model uses, comes from the stamps, so it may be wrong."""
+    back = np.flatnonzero(np.diff(np.asarray(js_ns, dtype=np.int64)) < 0)
+    if not len(back):
+        return []
+    k = int(back[0]) + 1
+    return [
+        f"warning: {path}: {JOINT_STATES_TOPIC}: {len(back)} of {len(js_ns)} stamps go "
+        f"backwards against the receive order (first: message {k + 1}, "
+        f"{(int(js_ns[k - 1]) - int(js_ns[k])) / 1e6:.3f} ms before the message received "
+        "before it): the visiting order, hence the approach directions (backlash), is taken "
+        "from the stamps and may be wrong; a clock jump or re-stamped messages?"
+    ]
 
 
 def read_stream(path: Path, robot: RobotDescription) -> JointStream:

@@ -54,6 +54,7 @@ from robot_calib.identify.outliers import (
 )
 from robot_calib.identify.plausibility import (
     calibration_warnings,
+    check_points_spread,
     implausible_reasons,
     inconsistent_orientations,
     recording_warnings,
@@ -310,6 +311,7 @@ def calibrate(
             the limits or in degrees; empty when none.
     """
     base, effects = parse_model(model_spec, robot, ecc_order)
+    check_points_spread(recording, robot)
     if base != "cpa":  # too few measurements: say so before any work
         targets, oriented = recording.target_names, recording.oriented_targets
         fitted = KinematicModel(robot, tuple(effects), targets, oriented).parameters().parameters

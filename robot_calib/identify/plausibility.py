@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from robot_calib.errors import InputError
 from robot_calib.identify.params_file import (
     PHYSICAL_ANGLE_RAD,
     PHYSICAL_LENGTH_M,
@@ -79,6 +80,34 @@ def recording_warnings(recording: Recording, robot: RobotDescription) -> list[st
                 "another robot?"
             )
     return out
+
+
+MIN_FLANGE_SPREAD_M = 0.05  # poses that move the flange this much (rms) must move the points
+COLLAPSED_SPREAD = 0.01  # points spread below this share of the flange's: one point measured
+
+
+def check_points_spread(recording: Recording, robot: RobotDescription) -> None:
+    """InputError when the tracker points barely move (rms about their centroid below
+    COLLAPSED_SPREAD x the nominal flange's) while the poses move the flange by
+    MIN_FLANGE_SPREAD_M or more: the tracker measured one point again and again (frozen,
+    or a pivot about the target), and a fit would collapse the robot to explain it."""
+    from robot_calib.model import KinematicModel
+
+    if len(recording) < 3:
+        return
+    model = KinematicModel(robot, ())
+    flange = model.flange2base(model.parameters(), recording.poses)[:, :3, 3]
+    spread_flange = float(np.sqrt(np.mean(np.sum((flange - flange.mean(0)) ** 2, axis=1))))
+    for target in np.unique(recording.poses.target_index):
+        pts = recording.points[recording.poses.target_index == target]
+        spread = float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1))))
+        if spread_flange >= MIN_FLANGE_SPREAD_M and spread < COLLAPSED_SPREAD * spread_flange:
+            raise InputError(
+                f"{', '.join(recording.sources)}: the tracker points stay within "
+                f"{spread * 1e3:.4f} mm (rms) while the poses move the flange "
+                f"{spread_flange * 1e3:.0f} mm (nominal model): the tracker measured one "
+                "point (frozen, or a pivot about the target); nothing to calibrate from"
+            )
 
 
 def degree_like_joints(recording: Recording, robot: RobotDescription) -> list[tuple[int, float]]:

@@ -252,6 +252,53 @@ def check_metres(points: Array, where: str, error: type[Exception] = InputError)
         )
 
 
+MAX_COORDINATE_M = 1e4  # no tracker measures 10 km away: a corrupt value, not a point
+MAX_READING_RAD = 1e4  # 1600 turns (28 in degrees): no joint reading in rad or deg
+COPY_RESOLUTION = 1e-9  # readings [rad] and points [m] equal to 1 nrad / 1 nm: one measurement
+
+
+def implausible_values(values: Array, bound: float) -> IntArray:
+    """Rows of `values` (n, k) holding a value not finite or beyond +-`bound`."""
+    values = np.asarray(values, dtype=float).reshape(len(values), -1)
+    with np.errstate(invalid="ignore"):
+        return np.flatnonzero(~(np.abs(values) <= bound).all(axis=1))
+
+
+def copies(q: Array, points: Array, target: IntArray | None = None) -> NDArray[np.bool_]:
+    """Mask (n,) of the measurements that are copies of an earlier one: the same readings
+    q (n, J) [rad] and point (n, 3) [m] of the same target, to COPY_RESOLUTION. A tracker
+    measuring again never gives the same point to 1 nm; a copy is the same measurement."""
+    n = len(points)
+    if n < 2:
+        return np.zeros(n, dtype=bool)
+    key = np.column_stack(
+        [np.round(np.asarray(q, dtype=float).reshape(n, -1) / COPY_RESOLUTION),
+         np.round(np.asarray(points, dtype=float) / COPY_RESOLUTION),
+         np.zeros(n) if target is None else target]
+    )  # fmt: skip
+    _, first = np.unique(key, axis=0, return_index=True)
+    out = np.ones(n, dtype=bool)
+    out[first] = False
+    return out
+
+
+def without_copies(recording: Recording, source: str) -> Recording:
+    """`recording` with each copied measurement (`copies`) kept once, and a warning naming
+    how many were dropped (none: unchanged)."""
+    copied = copies(recording.poses.q, recording.points, recording.poses.target_index)
+    if not copied.any():
+        return recording
+    k = int(np.flatnonzero(copied)[0])
+    warning = (
+        f"warning: {source}: {int(copied.sum())} of {len(copied)} measurements are copies of "
+        f"others (the same joint readings and point to 1 nrad / 1 nm; first: measurement "
+        f"{k + 1}): a tracker measuring again never repeats a point exactly, so each is "
+        "counted once"
+    )
+    kept = recording.subset(~copied)
+    return replace(kept, warnings=(*kept.warnings, warning))
+
+
 def pair_nearest(reference_ns: IntArray, query_ns: IntArray, tolerance_ns: int) -> IntArray:
     """Index into sorted `reference_ns` of the stamp nearest each of `query_ns`, -1 where
     none lies within `tolerance_ns`; shape of `query_ns`."""
