@@ -9,6 +9,7 @@ memory or file-size limit where the fault needs one.
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import signal
 import struct
@@ -214,3 +215,60 @@ def test_a_run_names_its_final_folder_not_the_one_it_was_built_in(tmp_path: Path
                     named += 1
     assert named >= 5  # the diagnosis, its reports, the PARAMS.json files, the world file
     assert (run / "calibration.mcap").exists() and (run / "holdout.mcap").exists()
+
+
+# --- item 9: messages ----------------------------------------------------------------------
+
+
+def test_a_stream_kept_whole_says_all_points_not_every_1th(tmp_path: Path) -> None:
+    """A stream of fewer points than --stream-max-points: 'every 1th of 976 points' ->
+    'all 976 points'; a decimated one says 'every 2nd of'."""
+    bag = tmp_path / "s.mcap"
+    made = robot_calib(
+        "simulate", "--plan", "paper-test1", "--stream", "--point-rate", "20", "-o", str(bag)
+    )
+    assert made.returncode == 0, made.stderr
+    whole = robot_calib("calibrate", str(bag), "--stream", "-o", str(tmp_path / "a.json"))
+    assert whole.returncode == 0, whole.stderr
+    text = whole.stdout + whole.stderr
+    assert "every 1th" not in text and re.search(r"stream pairing: .*, all \d+ points", text)
+    half = robot_calib(
+        "calibrate", str(bag), "--stream", "--stream-max-points", "600", "-o",
+        str(tmp_path / "b.json"),
+    )  # fmt: skip
+    assert half.returncode == 0, half.stderr
+    assert "every 2nd of" in half.stdout + half.stderr
+
+
+def test_capture_says_no_earlier_bag_and_max_step_in_degrees(tmp_path: Path) -> None:
+    """capture's start line said '0 already in no bag'; max_step (a parameter in degrees)
+    of 0 was refused as 'max step per move must be > 0 rad, not 0.0'."""
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from robot_calib.errors import InputError
+    from robot_calib.nodes.capture import CaptureNode
+
+    context = Context()
+    import rclpy
+
+    rclpy.init(context=context)
+    try:
+        common = [
+            Parameter("plan", value="paper-test1"),
+            Parameter("output", value=str(tmp_path / "d.mcap")),
+            Parameter("dry_run", value=True),
+        ]
+        node = CaptureNode(context=context, parameter_overrides=common)
+        assert node.resume_line() == "no earlier bag; 120 to measure, 0 refused"
+        node.destroy_node()
+        for name, value, message in (
+            ("max_step", 0.0, "parameter 'max_step' must be > 0 deg, not 0.0"),
+            ("approach_overshoot", -1.0, "parameter 'approach_overshoot' must be >= 0 deg"),
+        ):
+            with pytest.raises(InputError, match=message):
+                CaptureNode(
+                    context=context, parameter_overrides=[*common, Parameter(name, value=value)]
+                )
+    finally:
+        rclpy.shutdown(context=context)

@@ -129,10 +129,18 @@ class StreamPairing:
     def line(self) -> str:
         """One human line."""
         return (
-            f"stream pairing: latency {self.latency_s * 1e3:.4f} ms, every {self.every}th "
-            f"of {self.n_points} points ({self.n_kept} kept), {self.n_outside} outside the "
+            f"stream pairing: latency {self.latency_s * 1e3:.4f} ms, "
+            f"{'all' if self.every == 1 else f'every {_ordinal(self.every)} of'} "
+            f"{self.n_points} points ({self.n_kept} kept), {self.n_outside} outside the "
             f"joint-state span and {self.n_in_gaps} in joint-state gaps dropped"
         )
+
+
+def _ordinal(k: int) -> str:
+    """'2nd', '3rd', '11th', '21st', ..."""
+    if k % 100 in (11, 12, 13):
+        return f"{k}th"
+    return f"{k}{ {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th') }"
 
 
 def joints_at(

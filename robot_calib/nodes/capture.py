@@ -179,6 +179,10 @@ class CaptureNode(Node):
                             ("connect_timeout", self.connect_timeout)):  # fmt: skip
             if not value > 0:
                 raise InputError(f"parameter {name!r} must be > 0, not {value}")
+        for name, value in (("max_step", max_step), ("approach_overshoot", overshoot)):
+            if not (value > 0 if name == "max_step" else value >= 0):  # given in degrees
+                bound = "> 0" if name == "max_step" else ">= 0"
+                raise InputError(f"parameter {name!r} must be {bound} deg, not {value}")
         if not self.move_time >= 0 or self.trigger_retries < 1:
             raise InputError("parameters 'move_time' >= 0 and 'trigger_retries' >= 1")
         self.speed_rad_s = float(np.radians(speed))
@@ -210,11 +214,7 @@ class CaptureNode(Node):
             self.get_logger().warning(f"refused {skip.reason}")
         self.n_already = int(done.sum())
         log = self.get_logger()
-        log.info(
-            f"plan {plan_name}: {len(plan.q)} poses; {self.n_already} already in "
-            f"{', '.join(map(str, self.parts)) or 'no bag'}; {len(self.moves)} to measure, "
-            f"{len(self.skipped)} refused"
-        )
+        log.info(f"plan {plan_name}: {len(plan.q)} poses; {self.resume_line()}")
         self.finished = False
         self.measured = 0
         self._index = 0
@@ -264,6 +264,15 @@ class CaptureNode(Node):
                  "written from the first pose measured")  # fmt: skip
 
     # --- callbacks ------------------------------------------------------------------------
+
+    def resume_line(self) -> str:
+        """'N already in BAG, ...; M to measure, K refused', or 'no earlier bag; ...'."""
+        earlier = (
+            f"{self.n_already} already in {', '.join(map(str, self.parts))}"
+            if self.parts
+            else "no earlier bag"
+        )
+        return f"{earlier}; {len(self.moves)} to measure, {len(self.skipped)} refused"
 
     def _on_state(self, msg: JointState) -> None:
         try:
