@@ -192,6 +192,8 @@ def check_no_copies(paths: Sequence[str | Path], tables: Sequence[ImportedTable]
         return
     q = np.concatenate([t.q for t in tables])
     points = np.concatenate([t.points for t in tables])
+    if all(t.time is not None for t in tables):  # rows logged at other times: kept
+        q = np.column_stack([q, np.concatenate([t.time for t in tables if t.time is not None])])
     copied = copies(q, points)
     if not copied.any():
         return

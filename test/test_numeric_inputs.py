@@ -1,0 +1,212 @@
+"""Issue 24, second private battery: every numeric input has a finite plausible range
+(msgs_doc/units.md, walked row by row), copies of measurements are no data, stamps going
+backwards are said, a tracker measuring one point is refused, duplicate CSV columns are
+refused. Real CLI on a simulated KR5."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from cli_runner import robot_calib
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[list[float]]]:
+    """60 random poses of a simulated KR5: the bag and its rows [q1..q6 rad, x, y, z m]."""
+    from robot_calib.bag.read import read_recording
+    from robot_calib.kinematics.description import load_robot
+
+    bag = tmp_path_factory.mktemp("sim") / "r60.mcap"
+    run = robot_calib("simulate", "--plan", "random", "--n-random", "60", "--seed", "3",
+                      "-o", str(bag))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    rec = read_recording([bag], load_robot("kr5_sixx_r650"))
+    return bag, [[*q, *p] for q, p in zip(rec.poses.q.tolist(), rec.points.tolist())]
+
+
+def _csv(path: Path, rows: list[list[float]], header: str = "q1,q2,q3,q4,q5,q6,x,y,z") -> Path:
+    path.write_text(header + "\n" + "".join(",".join(f"{v:.9f}" for v in r) + "\n" for r in rows))
+    return path
+
+
+COLUMNS = ("--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z")
+
+
+def _bag(path: Path, rows: list[list[float]], order: list[int] | None = None) -> Path:
+    """A contract bag of `rows`, stamped 1 s apart; `order`: the receive (file) order."""
+    from robot_calib.bag.csv_import import joint_state_cdr, point_cdr
+    from robot_calib.bag.mcap_writer import BagWriter
+    from robot_calib.bag.ros2_formats import typestore
+    from robot_calib.kinematics.description import load_robot
+    from robot_calib.messages import JOINT_STATE_TYPE, JOINT_STATES_TOPIC, POINT_TOPIC, POINT_TYPE
+
+    names = load_robot("kr5_sixx_r650").joint_names
+    store = typestore(JOINT_STATE_TYPE, POINT_TYPE)
+    t0 = 1_700_000_000_000_000_000
+    with BagWriter(path) as writer:
+        writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
+        writer.add_topic(POINT_TOPIC, POINT_TYPE)
+        for n, k in enumerate(order or range(len(rows))):
+            stamp = t0 + k * 1_000_000_000
+            received = t0 + n * 1_000_000_000
+            writer.write(JOINT_STATES_TOPIC,
+                         joint_state_cdr(store, stamp, names, np.array(rows[k][:6]), np.zeros(0)),
+                         received)  # fmt: skip
+            writer.write(POINT_TOPIC, point_cdr(store, stamp, np.array(rows[k][6:])), received + 1)
+    return path
+
+
+def _one_line_error(run: object, *needles: str) -> None:
+    assert run.returncode == 2, (run.stdout, run.stderr)  # type: ignore[attr-defined]
+    err = run.stderr.strip()  # type: ignore[attr-defined]
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for needle in needles:
+        assert needle in err, err
+
+
+def test_a_csv_given_twice_or_copied_rows_are_refused(
+    sim: tuple[Path, list[list[float]]], tmp_path: Path
+) -> None:
+    """Item 1: `import a.csv a.csv` wrote every row twice (exit 0); copies of rows are no
+    measurements: exit 2 naming the file, line and how many, nothing written."""
+    _, rows = sim
+    a = _csv(tmp_path / "a.csv", rows)
+    out = tmp_path / "aa.mcap"
+    _one_line_error(robot_calib("import", str(a), str(a), *COLUMNS, "-o", str(out)),
+                    "a.csv", "given twice")  # fmt: skip
+    x10 = _csv(tmp_path / "x10.csv", [r for r in rows for _ in range(10)])
+    _one_line_error(robot_calib("import", str(x10), *COLUMNS, "-o", str(out)),
+                    "x10.csv:3", "x10.csv:2", "540 of 600 rows")  # fmt: skip
+    assert not out.exists()
+    # the tracker measuring again (a new point at the same readings) is a repeat, kept
+    again = [r[:6] + [v + 2e-6 for v in r[6:]] for r in rows[:5]]
+    run = robot_calib("import", str(a), str(_csv(tmp_path / "b.csv", again)), *COLUMNS,
+                      "-o", str(out))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+
+
+def test_copies_in_a_bag_count_once_with_a_warning(
+    sim: tuple[Path, list[list[float]]], tmp_path: Path
+) -> None:
+    """Item 1: a bag of 60 measurements x10 fitted 600 points without a word."""
+    _, rows = sim
+    bag = _bag(tmp_path / "x10.mcap", [r for r in rows for _ in range(10)])
+    run = robot_calib("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
+    assert run.returncode == 0, run.stderr
+    assert "540 of 600 measurements are copies" in run.stderr
+    assert "(60 points)" in run.stdout + run.stderr
+
+
+def test_stamps_going_backwards_are_said(
+    sim: tuple[Path, list[list[float]]], tmp_path: Path
+) -> None:
+    """Item 2: joint-state stamps against the receive order (exit 0, no warning before)."""
+    _, rows = sim
+    order = list(range(len(rows)))
+    order[10], order[11] = order[11], order[10]
+    bag = _bag(tmp_path / "back.mcap", rows, order)
+    run = robot_calib("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
+    assert run.returncode == 0, run.stderr
+    assert re.search(r"back\.mcap: /joint_states: 1 of 60 stamps go backwards", run.stderr)
+    ok = robot_calib("calibrate", str(_bag(tmp_path / "ok.mcap", rows)), "-o",
+                     str(tmp_path / "q.json"))  # fmt: skip
+    assert ok.returncode == 0 and "backwards" not in ok.stderr
+
+
+@pytest.mark.parametrize("column", [2, 7])
+def test_a_corrupt_number_in_a_bag_is_refused(
+    sim: tuple[Path, list[list[float]]], tmp_path: Path, column: int
+) -> None:
+    """Item 3: a joint reading (exit 0, 1.83 mm) or a tracker coordinate (an SVD that hung)
+    of 1e300: one line naming the bag, topic and message, exit 2."""
+    _, rows = sim
+    bad = [list(r) for r in rows]
+    bad[5][column] = 1e300
+    bag = _bag(tmp_path / "bad.mcap", bad)
+    topic = "/joint_states" if column < 6 else "/laser_tracker/point"
+    run = robot_calib("calibrate", str(bag), "-o", str(tmp_path / "p.json"), timeout=120)
+    _one_line_error(run, "bad.mcap", f"{topic} message 6", "1e+300")
+    assert not (tmp_path / "p.json").exists()
+
+
+def test_one_point_measured_on_every_pose_is_refused(
+    sim: tuple[Path, list[list[float]]], tmp_path: Path
+) -> None:
+    """Item 4: every tracker point identical on random poses: a collapsed robot (exit 0)."""
+    _, rows = sim
+    bag = _bag(tmp_path / "same.mcap", [r[:6] + [v + 1e-7 * k for v in rows[0][6:]]
+                                        for k, r in enumerate(rows)])  # fmt: skip
+    run = robot_calib("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
+    _one_line_error(run, "same.mcap", "tracker points stay within", "measured one point")
+    assert not (tmp_path / "p.json").exists()
+
+
+@pytest.mark.parametrize(
+    ("header", "joints", "needle"),
+    [("q1,q2,q3,q4,q5,q6,x,y,z", "q1,q1,q3,q4,q5,q6", "'q1' is given twice"),
+     ("q1,q2,q3,q4,q5,q6,x,x,z", "q1,q2,q3,q4,q5,q6", "2 columns named 'x'")],
+)  # fmt: skip
+def test_duplicate_columns_are_refused(
+    sim: tuple[Path, list[list[float]]], tmp_path: Path, header: str, joints: str, needle: str
+) -> None:
+    """Item 5: `--joints q1,q1,...` and a header with two x columns were read silently."""
+    _, rows = sim
+    csv = _csv(tmp_path / "d.csv", rows, header)
+    run = robot_calib("import", str(csv), "--joints", joints, "--point", "x,y,z", "-o",
+                      str(tmp_path / "d.mcap"))  # fmt: skip
+    _one_line_error(run, "d.csv", needle)
+    assert not (tmp_path / "d.mcap").exists()
+
+
+def _table() -> list[tuple[str, str, str]]:
+    """(verb, option, out-of-range value) of every row of msgs_doc/units.md's option table."""
+    out = []
+    for line in (ROOT / "msgs_doc" / "units.md").read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 5 and cells[1].startswith("`--"):
+            for verb in cells[0].split(", "):
+                out.append((verb, cells[1].strip("`"), cells[4]))
+    return out
+
+
+def test_the_units_table_covers_every_unit_bearing_option() -> None:
+    """Every option whose help names a unit in brackets is in the table."""
+    from robot_calib.cli import build_parser
+
+    listed = {(verb, option) for verb, option, _ in _table()}
+    assert len(listed) >= 14
+    parser = build_parser()
+    verbs = next(a for a in parser._actions if a.dest == "command" or a.choices)
+    for verb, sub in verbs.choices.items():  # type: ignore[union-attr]
+        for action in sub._actions:
+            unit = re.search(r"\[(s|Hz|mm|m|kg)\]", action.help or "")
+            flag = next((o for o in action.option_strings if o.startswith("--")), None)
+            if unit and flag and action.type is not None:
+                assert (verb, flag) in listed, (verb, flag, action.help)
+
+
+@pytest.mark.parametrize(("verb", "option", "value"), _table())
+def test_every_option_of_the_units_table_refuses_out_of_range(
+    sim: tuple[Path, list[list[float]]], tmp_path: Path, verb: str, option: str, value: str
+) -> None:
+    """Item 6: each row's out-of-range value through the real CLI: exit 2, one line naming
+    the option, nothing written."""
+    bag, _ = sim
+    out = tmp_path / "out"
+    base = {
+        "simulate": ["--stream", "-o", f"{out}.mcap"],
+        "plan": ["--poses", "20", "--trials", "0", "-o", f"{out}.yaml"],
+        "calibrate": [str(bag), "-o", f"{out}.json"],
+        "diagnose": [str(bag), "-o", f"{out}.json"],
+        "split": [str(bag), "--calibration-out", f"{out}.c.mcap", "--holdout-out",
+                  f"{out}.h.mcap"],
+        "score": [str(tmp_path / "missing.json"), str(bag)],
+    }[verb]  # fmt: skip
+    run = robot_calib(verb, *base, f"{option}={value}", timeout=120)
+    _one_line_error(run, option)
+    assert not list(tmp_path.iterdir())
