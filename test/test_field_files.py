@@ -272,3 +272,65 @@ def test_capture_says_no_earlier_bag_and_max_step_in_degrees(tmp_path: Path) -> 
                 )
     finally:
         rclpy.shutdown(context=context)
+
+
+# --- item 5: an unexpanded xacro in the old namespace -------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def ur5_params(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A PARAMS.json of a simulated UR5 (40 random poses)."""
+    folder = tmp_path_factory.mktemp("ur5")
+    bag, params = folder / "ur5.mcap", folder / "p.json"
+    made = robot_calib("simulate", "--robot", "ur5", "--plan", "random", "--n-random", "40",
+                       "-o", str(bag))  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    fitted = robot_calib("calibrate", str(bag), "--robot", "ur5", "-o", str(params))
+    assert fitted.returncode == 0, fitted.stderr
+    return params
+
+
+@pytest.mark.parametrize(
+    "namespace",
+    ["http://ros.org/wiki/xacro", "http://www.ros.org/wiki/xacro", "https://ros.org/wiki/xacro"],
+)
+def test_an_unexpanded_xacro_in_either_namespace_is_refused(
+    tmp_path: Path, ur5_params: Path, namespace: str
+) -> None:
+    """A xacro with the old `http://ros.org/wiki/xacro` namespace passed `--nominal-urdf`
+    (the output kept `xacro:include` and dropped the gripper it includes) and `--robot`.
+    Refused in either namespace, one line naming the file with the hint to run xacro,
+    nothing written. An expanded URDF that still declares the namespace is fine."""
+    urdf = (ROOT / "test" / "data" / "ur5.urdf").read_text()
+    xacro = tmp_path / "ur5.urdf.xacro"
+    xacro.write_text(urdf.replace(
+        '<robot name="ur5">',
+        f'<robot name="ur5" xmlns:xacro="{namespace}">'
+        '<xacro:include filename="gripper.xacro"/>',
+    ))  # fmt: skip
+    out = tmp_path / "out.urdf"
+    result = robot_calib(
+        "export", str(ur5_params), "--format", "urdf", "--nominal-urdf", str(xacro), "-o", str(out)
+    )
+    one_line_error(result, str(xacro), "a xacro file, not a URDF: expand it first", "xacro ")
+    assert not out.exists()
+    named_urdf = tmp_path / "robot.urdf"  # a xacro under a URDF's name, as --robot
+    named_urdf.write_text(xacro.read_text())
+    as_robot = robot_calib("simulate", "--robot", str(named_urdf), "-o", str(tmp_path / "x.mcap"))
+    one_line_error(as_robot, str(named_urdf), "a xacro file, not a URDF")
+    assert not (tmp_path / "x.mcap").exists()
+    declared = tmp_path / "declared.urdf"  # xacro's output keeps the declaration
+    declared.write_text(
+        urdf.replace('<robot name="ur5">', f'<robot name="ur5" xmlns:xacro="{namespace}">')
+    )
+    result = robot_calib(
+        "export",
+        str(ur5_params),
+        "--format",
+        "urdf",
+        "--nominal-urdf",
+        str(declared),
+        "-o",
+        str(out),
+    )
+    assert result.returncode == 0, result.stderr

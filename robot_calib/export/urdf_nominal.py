@@ -62,6 +62,7 @@ from robot_calib.kinematics.urdf import (
     default_tip,
     joints_up,
     parse_urdf,
+    refuse_xacro,
     zero_frames,
 )
 from robot_calib.model import KinematicModel, target_parameters
@@ -73,7 +74,6 @@ NOMINAL_TOLERANCE_M = 1e-3  # the nominal file's axes farther from the model's: 
 NOMINAL_TOLERANCE_RAD = 1e-3
 VERIFY_TOLERANCE_M = 1e-9  # the written file vs the calibrated geometry (a self-check)
 CHECK_POSES = 20  # random poses of both checks (seeded: the same file, the same result)
-XACRO_NS = "http://www.ros.org/wiki/xacro"
 
 
 @dataclass(frozen=True)
@@ -236,15 +236,7 @@ def _xml(text: bytes, source: str):  # type: ignore[no-untyped-def] # lxml's ele
         tree = etree.parse(io.BytesIO(text), etree.XMLParser(remove_blank_text=False))
     except etree.XMLSyntaxError as exc:
         raise RobotDescriptionError(f"{source}: not valid XML ({exc})") from None
-    root = tree.getroot()
-    for element in root.iter():
-        tag = element.tag if isinstance(element.tag, str) else ""
-        attributes = " ".join(str(v) for v in element.attrib.values())
-        if tag.startswith(f"{{{XACRO_NS}}}") or "${" in attributes:
-            raise ExportError(
-                f"{source}: a xacro file, not a URDF: expand it first "
-                f"(xacro {Path(source).name} > robot.urdf)"
-            )
+    refuse_xacro(tree.getroot(), source, ExportError)  # either xacro namespace
     return tree
 
 

@@ -187,9 +187,41 @@ def read_urdf(path: str | Path) -> UrdfModel:
     return parse_urdf(text, str(path))
 
 
+XACRO_NAMESPACES = ("http://www.ros.org/wiki/xacro", "http://ros.org/wiki/xacro")
+"""xacro's namespace and the older one without www (both still in use)."""
+
+
+def is_xacro_tag(tag: object) -> bool:
+    """True for an element of xacro (`{namespace}name` with either xacro namespace, in
+    http or https)."""
+    if not isinstance(tag, str) or not tag.startswith("{"):
+        return False
+    namespace = tag[1 : tag.find("}")].replace("https://", "http://").rstrip("/")
+    return namespace in XACRO_NAMESPACES
+
+
+def refuse_xacro(root: Any, source: str, error: type[Exception]) -> None:  # noqa: ANN401
+    """`error` naming `source` with a hint to run xacro when the XML tree `root` (lxml or
+    ElementTree) holds xacro elements or `${...}` expressions: an unexpanded xacro file
+    read as a URDF loses its includes and macros (a gripper, a tool) without a word."""
+    for element in root.iter():
+        attributes = " ".join(str(v) for v in element.attrib.values())
+        if is_xacro_tag(element.tag) or "${" in attributes:
+            raise error(
+                f"{source}: a xacro file, not a URDF: expand it first "
+                f"(xacro {Path(source).name} > robot.urdf)"
+            )
+
+
 def parse_urdf(text: bytes | str, source: str) -> UrdfModel:
-    """Parse URDF text (named `source` in errors) into a `UrdfModel`."""
+    """Parse URDF text (named `source` in errors) into a `UrdfModel`; an unexpanded xacro
+    file is refused with the hint to expand it."""
+    import xml.etree.ElementTree as ET
+
     from urdf_parser_py.urdf import URDF
+
+    with contextlib.suppress(ET.ParseError):  # if so, the URDF parser says what is wrong
+        refuse_xacro(ET.fromstring(text), source, RobotDescriptionError)
 
     try:
         with _quiet_parser() as messages:
