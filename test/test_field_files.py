@@ -334,3 +334,41 @@ def test_an_unexpanded_xacro_in_either_namespace_is_refused(
         str(out),
     )
     assert result.returncode == 0, result.stderr
+
+
+# --- item 8: reading compensated commands back ---------------------------------------------------
+
+
+def test_compensated_commands_read_back_as_the_doc_says(tmp_path: Path) -> None:
+    """compensate.md said `predict` reads the compensated CSV back; it refuses it ('not a
+    number in [... 'ok']'). The doc now says so and how: the first 2 J columns (q, dir)
+    are a JOINTS.csv that predict reads."""
+    doc = (ROOT / "msgs_doc" / "compensate.md").read_text()
+    assert "`predict` and `compensate --joints` read the file\n  back" not in doc
+    assert "cut -d, -f1-12 OUT.csv > CMD.csv" in doc
+    params = tmp_path / "p.json"
+    assert robot_calib("calibrate", str(SAMPLE), "-o", str(params)).returncode == 0
+    rows = [
+        [0.3, -1.2, 0.9, 0.4, 0.8, -0.5],
+        [-0.6, -0.9, 0.4, -0.3, -0.7, 1.1],
+        [1.0, -1.5, 1.2, 0.9, 1.0, 0.2],
+    ]
+    joints = tmp_path / "j.csv"
+    joints.write_text("q1,q2,q3,q4,q5,q6\n" + "".join(",".join(map(str, r)) + "\n" for r in rows))
+    out = tmp_path / "OUT.csv"
+    done = robot_calib("compensate", str(params), "--joints", str(joints), "-o", str(out))
+    assert done.returncode == 0, done.stderr
+    refused = robot_calib("predict", str(params), "--joints", str(out), "-o", "x.csv")
+    one_line_error(refused, "not a number")
+    commands = tmp_path / "CMD.csv"
+    commands.write_text(
+        "".join(",".join(line.split(",")[:12]) + "\n" for line in out.read_text().splitlines())
+    )
+    aimed = robot_calib(
+        "predict", str(params), "--joints", str(joints), "-o", str(tmp_path / "a.csv")
+    )
+    back = robot_calib(
+        "predict", str(params), "--joints", str(commands), "-o", str(tmp_path / "b.csv")
+    )
+    assert aimed.returncode == 0 and back.returncode == 0, aimed.stderr + back.stderr
+    assert (tmp_path / "b.csv").exists()
