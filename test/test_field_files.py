@@ -9,6 +9,7 @@ memory or file-size limit where the fault needs one.
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import signal
@@ -64,7 +65,7 @@ def leftovers(folder: Path) -> list[str]:
     return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
 
 
-# --- item 3: one bit flipped in a chunk's length -------------------------------------------
+# --- item 3: one bit flipped in a chunk's length ---
 
 
 def flip_chunk_length(source: Path, target: Path, bit: int) -> None:
@@ -105,7 +106,7 @@ def test_a_flipped_bit_in_a_chunk_length_is_a_one_line_error(tmp_path: Path, bit
     assert leftovers(tmp_path) == []
 
 
-# --- item 4: repair onto a full disk ----------------------------------------------------------
+# --- item 4: repair onto a full disk ---
 
 
 @pytest.mark.parametrize("fsize", [100, 20_000])
@@ -120,7 +121,7 @@ def test_repair_onto_a_full_disk_leaves_no_temporary(tmp_path: Path, fsize: int)
     assert bag.read_bytes() == SAMPLE.read_bytes()
 
 
-# --- item 1: two commands writing one output at once ------------------------------------------
+# --- item 1: two commands writing one output at once ---
 
 
 def test_two_calibrates_of_one_output_at_once_never_replace_a_result(tmp_path: Path) -> None:
@@ -154,7 +155,7 @@ def test_two_calibrates_of_one_output_at_once_never_replace_a_result(tmp_path: P
     assert leftovers(tmp_path) == []
 
 
-# --- item 6: Ctrl-C while the program starts -------------------------------------------------
+# --- item 6: Ctrl-C while the program starts ---
 
 
 def test_ctrl_c_while_the_program_starts_is_one_line_and_130(tmp_path: Path) -> None:
@@ -194,7 +195,7 @@ def test_ctrl_c_while_the_program_starts_is_one_line_and_130(tmp_path: Path) -> 
     assert leftovers(tmp_path) == []
 
 
-# --- item 7: a run's files name its final folder -----------------------------------------------
+# --- item 7: a run's files name its final folder ---
 
 
 def test_a_run_names_its_final_folder_not_the_one_it_was_built_in(tmp_path: Path) -> None:
@@ -217,7 +218,7 @@ def test_a_run_names_its_final_folder_not_the_one_it_was_built_in(tmp_path: Path
     assert (run / "calibration.mcap").exists() and (run / "holdout.mcap").exists()
 
 
-# --- item 9: messages ----------------------------------------------------------------------
+# --- item 9: messages ---
 
 
 def test_a_stream_kept_whole_says_all_points_not_every_1th(tmp_path: Path) -> None:
@@ -274,7 +275,7 @@ def test_capture_says_no_earlier_bag_and_max_step_in_degrees(tmp_path: Path) -> 
         rclpy.shutdown(context=context)
 
 
-# --- item 5: an unexpanded xacro in the old namespace -------------------------------------------
+# --- item 5: an unexpanded xacro in the old namespace ---
 
 
 @pytest.fixture(scope="module")
@@ -336,7 +337,7 @@ def test_an_unexpanded_xacro_in_either_namespace_is_refused(
     assert result.returncode == 0, result.stderr
 
 
-# --- item 8: reading compensated commands back ---------------------------------------------------
+# --- item 8: reading compensated commands back ---
 
 
 def test_compensated_commands_read_back_as_the_doc_says(tmp_path: Path) -> None:
@@ -372,3 +373,60 @@ def test_compensated_commands_read_back_as_the_doc_says(tmp_path: Path) -> None:
     )
     assert aimed.returncode == 0 and back.returncode == 0, aimed.stderr + back.stderr
     assert (tmp_path / "b.csv").exists()
+
+
+# --- item 11: capture interrupted ---
+
+
+def node_process(name: str, cwd: Path, *ros_args: str) -> subprocess.Popen[str]:
+    """robot_calib.nodes.NAME of this tree as its own process (as `ros2 run`), output piped."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    return subprocess.Popen(
+        [sys.executable, "-m", f"robot_calib.nodes.{name}", "--ros-args", *ros_args],
+        cwd=cwd, env=env, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+    )  # fmt: skip
+
+
+def test_capture_interrupted_mid_plan_exits_130_with_its_summary(tmp_path: Path) -> None:
+    """capture against sim_robot (controller mode) and sim_tracker, three processes on this
+    test's ROS domain; Ctrl-C after the 3rd measured pose of 120: exit 130 (was 0: an
+    interrupted campaign looked finished) and 'capture: interrupted: N poses measured ->
+    BAG; stopped with K pose(s) to go ... resume'; the bag holds the N poses."""
+    bag = tmp_path / "c.mcap"
+    robot = node_process("sim_robot", tmp_path, "-p", "mode:=controller",
+                         "-p", "speed_fraction:=3.0", "-p", "state_rate:=100.0")  # fmt: skip
+    tracker = node_process("sim_tracker", tmp_path)
+    capture = node_process("capture", tmp_path, "-p", "plan:=paper-test1", "-p", f"output:={bag}")
+    lines: list[str] = []
+    try:
+        assert capture.stdout is not None
+        deadline = time.monotonic() + 120
+        for line in capture.stdout:
+            lines.append(line)
+            if "pose 3 of 120" in line and "measured" in line:
+                capture.send_signal(signal.SIGINT)
+                break
+            assert time.monotonic() < deadline, "".join(lines)
+        rest, _ = capture.communicate(timeout=60)
+        lines.append(rest)
+    finally:
+        for process in (capture, robot, tracker):
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        for process in (capture, robot, tracker):
+            try:
+                process.communicate(timeout=20)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.communicate()
+    output = "".join(lines)
+    assert capture.returncode == 130, output
+    (summary,) = [line for line in output.splitlines() if line.startswith("capture: interrupted")]
+    measured = int(re.search(r"interrupted: (\d+) poses measured -> ", summary).group(1))
+    assert measured >= 3 and str(bag) in summary, summary
+    assert re.search(r"stopped with \d+ pose\(s\) to go .*resume", summary), summary
+    from robot_calib.bag.read import read_recording
+    from robot_calib.kinematics.description import load_robot
+
+    assert len(read_recording([bag], load_robot("kr5_sixx_r650"))) == measured
