@@ -114,6 +114,9 @@ MAX_DOF_SHARE = 0.5
 #: brings the other half's rms down by this share (`_process_generalises`)
 MIN_PROCESS_GAIN = 0.02
 CHECK_MIN_POSES = 50  # per half; with fewer poses the process is kept unchecked
+#: up to this many fitted poses the design's blocks are kept for the fitted values (a
+#: block: 3 x 2000 x ~700 x 8 B = 34 MB; above, the design is computed again)
+KEEP_DESIGN_POSES = 3000
 BLOCK_POSES = 2000  # poses per block of the design matrix (a block: 3 x 2000 x ~300 x 8 B)
 EIGEN_FLOOR = 1e-13  # eigenvalues below this share of the largest: a null direction
 #: a column whose rms over the poses is below this share of the largest column's holds only
@@ -613,6 +616,7 @@ def fit_structured(
     size = n_joints * 6 * len(FEATURES) + len(columns)
     rows = 3 * n
     warnings: tuple[str, ...] = ()
+    designs: list[Array] = []  # the design's blocks, kept for the fitted values
     if rows < MIN_ROWS_PER_COLUMN * size:
         fit = Ridge(np.zeros(size), math.inf, 0.0, False)
         how = (f"left out: {n} poses give {rows} rows for {size} columns (at least "
@@ -622,6 +626,8 @@ def fit_structured(
         for block in _blocks(n):
             design = _design(model, parameters, columns, step_tau, poses.subset(block))
             flat, y = design.reshape(-1, size), residuals[block].reshape(-1)
+            if n <= KEEP_DESIGN_POSES:
+                designs.append(design)
             gram += flat.T @ flat
             rhs += flat.T @ y
             total += float(y @ y)
@@ -634,9 +640,12 @@ def fit_structured(
                 "warning: learned correction: the structured part's ridge ends at the "
                 "smallest of its grid (the residuals are nearly all structure)",
             )
-    structured = replace(
-        _empty(model, parameters, columns, step_tau, n), coefficients=fit.coefficients
-    ).structured(poses)
+    if designs:  # the fitted values from the blocks the fit was made of (no second pass)
+        structured = np.concatenate([d @ fit.coefficients for d in designs])
+    else:
+        structured = replace(
+            _empty(model, parameters, columns, step_tau, n), coefficients=fit.coefficients
+        ).structured(poses)
     process = fit_correction(poses, residuals - structured, len(model.targets), rng,
                              hyper=hyper, start=start, max_learn=max_learn)  # fmt: skip
     if not _process_generalises(process, poses, residuals - structured):
@@ -655,7 +664,7 @@ def fit_structured(
         model, parameters, columns, step_tau, fit.coefficients, fit.ridge, fit.dof,
         _rms(structured), process, 0.0, method, warnings + process.warnings,
     )  # fmt: skip
-    return replace(out, rms_m=_rms(out._raw(poses)))
+    return replace(out, rms_m=_rms(structured + process.predict(poses)))  # = out._raw(poses)
 
 
 def _process_generalises(process: ResidualCorrection, poses: Poses, left: Array) -> bool:
