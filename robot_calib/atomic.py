@@ -20,9 +20,13 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import signal
 import tempfile
+import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from robot_calib.errors import InputError
 
@@ -95,6 +99,7 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
     except OSError as exc:
         raise InputError(f"{folder}: cannot write there: {exc.strerror or exc}") from None
     moved: list[Path] = []
+    deferred = False
     try:
         yield stage
         files = sorted(stage.iterdir())
@@ -104,6 +109,7 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
                     raise InputError(
                         f"{folder / staged.name}: exists; will not overwrite it (use --force)"
                     )
+        deferred = _defer_signals(True)  # the set moves in as one: no signal between renames
         for staged in files:
             target = folder / staged.name
             if force:
@@ -111,6 +117,9 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
             else:
                 _move_new(staged, target)
             moved.append(target)
+            _pause_between_renames()
+        if not force and deferred:  # a signal that came meanwhile: the new set taken back
+            deferred = _defer_signals(False)
     except OSError as exc:
         for target in moved:
             target.unlink(missing_ok=True)
@@ -121,6 +130,47 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
         raise
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+        if deferred:  # with force the old set is replaced: a signal comes after, set whole
+            _defer_signals(False)
+
+
+_DEFERRED = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+_held: list[tuple[dict[int, Any], list[int]]] = []
+
+
+def _defer_signals(hold: bool) -> bool:
+    """Hold (`hold`) or release Ctrl-C, SIGTERM and SIGHUP: while held they are recorded,
+    not handled; on release the handlers are restored and each recorded signal is raised
+    again (the command's handler: 'interrupted', exit 130). True if now held. Only in the
+    main thread (where Python runs its signal handlers); ignored signals stay ignored.
+    SIGKILL cannot be held: a set is then left part-moved."""
+    if threading.current_thread() is not threading.main_thread():
+        return False
+    if hold:
+        caught: list[int] = []
+        previous: dict[int, Any] = {}
+        for sig in _DEFERRED:
+            handler = signal.getsignal(sig)
+            if handler not in (signal.SIG_IGN, None):
+                previous[sig] = handler
+                signal.signal(sig, lambda signum, _frame: caught.append(signum))
+        _held.append((previous, caught))
+        return True
+    if _held:
+        restore, pending = _held.pop()
+        for number, handler in restore.items():
+            signal.signal(number, handler)
+        for number in dict.fromkeys(pending):
+            signal.raise_signal(number)
+    return False
+
+
+def _pause_between_renames() -> None:
+    """Tests: ROBOT_CALIB_TEST_RENAME_PAUSE_S seconds between the renames of a set (the
+    window a signal must not split; 0 / unset in use)."""
+    pause = os.environ.get("ROBOT_CALIB_TEST_RENAME_PAUSE_S")
+    if pause:
+        time.sleep(float(pause))
 
 
 def _move_new(staged: Path, target: Path) -> None:

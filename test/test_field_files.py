@@ -430,3 +430,51 @@ def test_capture_interrupted_mid_plan_exits_130_with_its_summary(tmp_path: Path)
     from robot_calib.kinematics.description import load_robot
 
     assert len(read_recording([bag], load_robot("kr5_sixx_r650"))) == measured
+
+
+# --- item 2: a set of files commits as one ---
+
+
+def diagnose_set(folder: Path) -> dict[str, int]:
+    """The diagnosis set in `folder` (d.json, d.md, d.html, d.params_best.json, plots):
+    name -> inode."""
+    return {p.name: p.stat().st_ino for p in folder.iterdir() if p.name.startswith("d")}
+
+
+def interrupted_diagnose(folder: Path, *extra: str) -> subprocess.CompletedProcess[str]:
+    """`diagnose SAMPLE -o d.json` paused 1 s between the renames of its set
+    (ROBOT_CALIB_TEST_RENAME_PAUSE_S, inside the real move loop) and Ctrl-C as soon as
+    the set starts to move in (a file of it appears or is replaced)."""
+    before = diagnose_set(folder)
+    env = dict(os.environ, ROBOT_CALIB_TEST_RENAME_PAUSE_S="1.0")
+    run = subprocess.Popen(
+        [sys.executable, "-m", "robot_calib", "diagnose", str(SAMPLE), "-o", "d.json", *extra],
+        cwd=folder, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 240
+    while diagnose_set(folder) == before and run.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    run.send_signal(signal.SIGINT)
+    out, err = run.communicate(timeout=120)
+    return subprocess.CompletedProcess(run.args, run.returncode, out, err)
+
+
+def test_an_interrupted_diagnosis_set_appears_whole_or_not_at_all(tmp_path: Path) -> None:
+    """Ctrl-C between the renames of diagnose's .json/.md/.html/params_best/plots: without
+    --force nothing of the set is left; with --force over an earlier set every file is the
+    new run's (was: some new, some old: a report that does not match its DIAGNOSIS.json)."""
+    result = interrupted_diagnose(tmp_path)
+    assert result.returncode == 130, result.stderr
+    assert "interrupted" in result.stderr and "Traceback" not in result.stderr
+    assert diagnose_set(tmp_path) == {} and leftovers(tmp_path) == []
+    first = robot_calib("diagnose", str(SAMPLE), "-o", str(tmp_path / "d.json"))
+    assert first.returncode == 0, first.stderr
+    old = diagnose_set(tmp_path)
+    assert {"d.json", "d.md", "d.html"} <= set(old)
+    result = interrupted_diagnose(tmp_path, "--force")
+    assert result.returncode == 130, result.stderr
+    new = diagnose_set(tmp_path)
+    assert set(new) == set(old)
+    assert all(new[name] != old[name] for name in old), (old, new)  # every file replaced
+    assert leftovers(tmp_path) == []
