@@ -1,4 +1,5 @@
-"""Accuracy figures (CONTRACT.md section 5): the seed paper's pairwise-distance criterion,
+"""Accuracy figures (msgs_doc/specification.md section 5): the seed paper's pairwise-distance
+criterion,
 which needs no common frame, and the absolute point error where the tracker pose is known.
 """
 

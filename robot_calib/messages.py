@@ -1,4 +1,4 @@
-"""Conversions between the contract's messages and arrays (CONTRACT.md section 1).
+"""Conversions between the contract's messages and arrays (msgs_doc/specification.md section 1).
 
 Duck-typed on field names, so they serve rclpy messages and messages decoded from a bag
 (mcap_ros2) alike; no ROS import here. Quaternions go through scipy's `Rotation`.

@@ -7,7 +7,7 @@ predicted in the laser-tracker frame:
 
 Readings enter the DH table only as the robot's joint variables
 (`RobotDescription.joint_variables`: the readings themselves unless the robot declares a
-`reading_to_joint` mapping); effects stay functions of the readings (CONTRACT.md).
+`reading_to_joint` mapping); effects stay functions of the readings (msgs_doc/specification.md).
 
 Parameter layout (names are the public vocabulary of PARAMS.json):
   thetaJ, dJ, aJ, alphaJ [rad, m, m, rad] for every joint, betaJ [rad] for Hayati joints;

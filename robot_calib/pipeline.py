@@ -268,7 +268,7 @@ def read_bags(
     pair_tolerance: float = PAIR_TOLERANCE_S,
     log: Log | None = None,
 ) -> Recording:
-    """The paired measurements of `bags` (CONTRACT.md section 1).
+    """The paired measurements of `bags` (msgs_doc/specification.md section 1).
 
     Returns
     -------

@@ -1,6 +1,6 @@
 """Measurement poses: joint readings with the approach direction and time of each pose.
 
-The direction rule is the contract's (CONTRACT.md section 1, "Measurements"): the
+The direction rule is the contract's (msgs_doc/specification.md section 1, "Measurements"): the
 direction from which joint j approached a pose is the sign of its change since the
 previous pose; unchanged (within `joint_change_tolerance`) keeps the previous direction;
 at the first pose every direction is +1.

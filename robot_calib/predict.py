@@ -1,4 +1,5 @@
-"""`robot-calib predict`: target positions for given joint angles (CONTRACT.md section 2).
+"""`robot-calib predict`: target positions for given joint angles (msgs_doc/specification.md
+section 2).
 
 JOINTS.csv: header q1..qJ [rad], optional leading column t [s] and optional dir1..dirJ (+1/-1);
 without dir columns the directions follow the row order, without t the time is 0. A reading

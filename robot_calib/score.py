@@ -1,6 +1,7 @@
 """`robot-calib score`: how well a calibration (PARAMS.json) predicts measurements it was
 not fitted on: absolute errors in the tracker frame (the tracker has not moved since the
-calibration, CONTRACT.md section 1) and the seed's frame-free pairwise criterion, with a
+calibration, msgs_doc/specification.md section 1) and the seed's frame-free pairwise criterion,
+with a
 per-point table for plots. A score far above the calibration's own in-sample residual, and
 orientations that one side has and the other cannot use, are said in warnings."""
 

@@ -1,5 +1,5 @@
 """Measurements exported by tracker software (CSV) into a bag of the contract, so real data
-takes exactly the path of simulated data (CONTRACT.md section 2, `import`).
+takes exactly the path of simulated data (msgs_doc/specification.md section 2, `import`).
 
 A row is one measurement pose: joint angles and the measured target point (optionally as a
 commanded point plus a difference column, as some exports give it), optionally a time;

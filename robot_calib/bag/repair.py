@@ -3,7 +3,7 @@
 A writer killed by SIGKILL, a power loss or a closed terminal leaves an MCAP file without
 summary or footer; its closed chunks are intact, the chunk it held open is lost.
 `repair_bag` reads what survived (`BagReader(..., allow_truncated=True)`) and writes it
-again with `BagWriter`, so the output is the contract's bag (CONTRACT.md section 1):
+again with `BagWriter`, so the output is the contract's bag (msgs_doc/specification.md section 1):
 indexed, with the same topics, types, message definitions, offered QoS, type hashes,
 receive/publish times, sequence numbers and ROS distro. An intact bag is copied the same
 way. The output is written to a temporary file beside it and renamed at the end: it is

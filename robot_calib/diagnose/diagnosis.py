@@ -1,5 +1,6 @@
 """`robot-calib diagnose`: the ladder, the dominant effect, where the rest lies, as the
-DIAGNOSIS.json document of CONTRACT.md section 4 (extended: msgs_doc/diagnosis.md)."""
+DIAGNOSIS.json document of msgs_doc/specification.md section 4 (extended:
+msgs_doc/diagnosis.md)."""
 
 from __future__ import annotations
 
@@ -144,7 +145,7 @@ class CandidateScore(Record):
 
 @dataclass(frozen=True)
 class Diagnosis(Record):
-    """DIAGNOSIS.json (CONTRACT.md section 4, extended: msgs_doc/diagnosis.md)."""
+    """DIAGNOSIS.json (msgs_doc/specification.md section 4, extended: msgs_doc/diagnosis.md)."""
 
     dominant_effect: DominantEffect | None
     ladder: list[RungScore]

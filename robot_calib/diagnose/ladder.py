@@ -1,5 +1,5 @@
 """The diagnosis ladder: from `geometric`, add the effect that most reduces the error on data
-not used to fit it, until nothing beats the noise level (CONTRACT.md section 4).
+not used to fit it, until nothing beats the noise level (msgs_doc/specification.md section 4).
 
 Screening is linearised and cheap: the current model is extended by every candidate at
 zero (which changes no prediction), one Jacobian gives all candidate columns, and each

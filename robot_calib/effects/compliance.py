@@ -3,7 +3,7 @@
 theta_j += c_j * tau_j(q), with tau_j the torque of gravity about joint j's axis from the
 robot's (approximate) mass model, evaluated on the nominal kinematics: it depends on the
 whole pose, not only on q_j. Parameter `complianceJ` [rad/(N m)] = c_j.
-Base z is up; gravity is -z of the base frame (CONTRACT.md).
+Base z is up; gravity is -z of the base frame (msgs_doc/specification.md).
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """thermal_drift: link lengths that grow with time since the start of the recording.
 
 Warm-up expands the structure: every a_j and d_j is scaled by (1 + rate * t), with t the
-time since the first measurement of the recording (CONTRACT.md). Over a recording of tens
+time since the first measurement of the recording (msgs_doc/specification.md). Over a recording
+of tens
 of minutes the warm-up exponential is close to this linear start. It belongs to no joint.
 Parameter `thermal_drift_rate` [1/s].
 """

@@ -1,4 +1,4 @@
-"""The models of the ladder (CONTRACT.md sections 2-3) identified from a recording.
+"""The models of the ladder (msgs_doc/specification.md sections 2-3) identified from a recording.
 
 - `nominal`: the nominal DH table; only the tracker pose and the target offset are fitted.
 - `cpa`: circle point analysis (seed section 5), parameters straight from the axis lines.

@@ -6,7 +6,8 @@ See `robots/kr5_sixx_r650.yaml` for a commented example. Keys outside `ROBOT_KEY
 level), `JOINT_KEYS` (each joint) and `MAPPING_KEYS` (`reading_to_joint`) are rejected, so a
 misspelt key is not silently ignored.
 
-Readings to joint variables (CONTRACT.md, "Joint and model conventions"; msgs_doc/robots.md):
+Readings to joint variables (msgs_doc/specification.md, "Joint and model conventions";
+msgs_doc/robots.md):
 the DH joint variable is ``theta_j = theta_j(table) + (M q + offset)_j`` with q the readings
 and ``M = diag(sign) + coupling``; without a `reading_to_joint` section M = I and offset = 0
 (the contract's default), and `joint_variables` returns the readings themselves.

@@ -1,6 +1,6 @@
 """Denavit-Hartenberg chain with the Hayati-Mirmirani beta, batched over poses.
 
-Convention (CONTRACT.md, "Joint and model conventions"; seed paper eq. 1-5):
+Convention (msgs_doc/specification.md, "Joint and model conventions"; seed paper eq. 1-5):
 link j maps frame j-1 to frame j by ``Rz(theta_j) Tz(d_j) Tx(a_j) Rx(alpha_j) Ry(beta_j)``
 with ``theta_j = theta_j(table) + q_j``. The axis of joint j is z of frame j-1.
 beta_j is used (and d_j dropped) only where axes j and j+1 are nominally parallel.

@@ -1,4 +1,4 @@
-"""The measurement model (CONTRACT.md section 1), free of file formats: paired
+"""The measurement model (msgs_doc/specification.md section 1), free of file formats: paired
 measurements (`Recording`), pairing by stamp, approach directions and circle sweeps."""
 
 from robot_calib.measurements.recording import (

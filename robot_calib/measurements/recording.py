@@ -1,4 +1,5 @@
-"""A recording as the identifier sees it: paired measurements (CONTRACT.md section 1).
+"""A recording as the identifier sees it: paired measurements (msgs_doc/specification.md
+section 1).
 
 Each tracker point is paired with the joint state nearest in stamp (within
 `PAIR_TOLERANCE_S`); approach directions and time since the first measurement follow;

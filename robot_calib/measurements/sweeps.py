@@ -1,4 +1,5 @@
-"""Circle sweeps (CONTRACT.md section 1): runs of >= 3 consecutive poses in which exactly one
+"""Circle sweeps (msgs_doc/specification.md section 1): runs of >= 3 consecutive poses in which
+exactly one
 joint changes. Found from the readings, or from the joint variables of a robot whose readings
 are coupled (`RobotDescription.joint_variables`, passed in by the caller); the rest are
 general poses."""

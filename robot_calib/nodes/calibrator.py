@@ -1,6 +1,6 @@
 """calibrator: identify a model from bags or from live topics and publish it, latched.
 
-Bag mode (parameter `bags` set): once at start, read and pair the bags (CONTRACT.md
+Bag mode (parameter `bags` set): once at start, read and pair the bags (msgs_doc/specification.md
 section 1), calibrate, publish. Live mode (`bags` empty): buffer /joint_states and
 /laser_tracker/point (with parameter `targets` also further targets' /laser_tracker/NAME/point,
 with `six_dof_targets` 6-DoF probes' /laser_tracker/(NAME/)pose); on a call of the service

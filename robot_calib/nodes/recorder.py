@@ -46,7 +46,7 @@ from robot_calib.messages import (
 from robot_calib.nodes._common import declare, message_class, overrides, qos_to_record, run_node
 
 DEFAULT_TOPICS = [JOINT_STATES_TOPIC, POINT_TOPIC]
-KNOWN_TYPES = {  # CONTRACT.md section 1
+KNOWN_TYPES = {  # msgs_doc/specification.md section 1
     JOINT_STATES_TOPIC: JOINT_STATE_TYPE,
     POINT_TOPIC: POINT_TYPE,
 }
