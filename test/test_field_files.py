@@ -34,6 +34,13 @@ LIMITED = (  # robot_calib with an address-space limit argv[1] [B] and a file-si
 )
 
 
+def as_from_a_shell() -> None:
+    """In a child before it runs the program: Ctrl-C's default disposition, as a terminal
+    gives it (a pytest-xdist worker ignores SIGINT, and an ignored signal stays ignored in
+    its children: the program rightly keeps ignoring it, and the test would hear nothing)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def limited(
     *args: str, memory: int = 0, fsize: int = 0, cwd: Path | None = None
 ) -> subprocess.CompletedProcess[str]:
@@ -176,6 +183,7 @@ def test_ctrl_c_while_the_program_starts_is_one_line_and_130(tmp_path: Path) -> 
             run = subprocess.Popen(
                 [*program, "calibrate", str(SAMPLE), "-o", str(output)],
                 cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                preexec_fn=as_from_a_shell,
             )  # fmt: skip
             time.sleep(0.02 * i)
             run.send_signal(signal.SIGINT)
@@ -385,6 +393,7 @@ def node_process(name: str, cwd: Path, *ros_args: str) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, "-m", f"robot_calib.nodes.{name}", "--ros-args", *ros_args],
         cwd=cwd, env=env, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        preexec_fn=as_from_a_shell,
     )  # fmt: skip
 
 
@@ -450,6 +459,7 @@ def interrupted_diagnose(folder: Path, *extra: str) -> subprocess.CompletedProce
     run = subprocess.Popen(
         [sys.executable, "-m", "robot_calib", "diagnose", str(SAMPLE), "-o", "d.json", *extra],
         cwd=folder, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=as_from_a_shell,
     )  # fmt: skip
     deadline = time.monotonic() + 240
     while diagnose_set(folder) == before and run.poll() is None:

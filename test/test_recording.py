@@ -100,7 +100,9 @@ def test_unpaired_points_are_counted_and_reported(tmp_path: Path) -> None:
     offsets = np.zeros(len(plan.q))
     offsets[[5, 50, 100]] = 0.3  # 0.3 s from any joint state: beyond the 0.05 s tolerance
     path = tmp_path / "late.mcap"
-    write_measurements(path, plan.q, np.ones((len(plan.q), 3)), point_offsets_s=offsets)
+    # distinct points, as a tracker measures (identical ones would be copies: counted once)
+    points = 1.0 + np.random.default_rng(0).normal(0.0, 1e-3, (len(plan.q), 3))
+    write_measurements(path, plan.q, points, point_offsets_s=offsets)
     log: list[str] = []
     rec = read_recording([path], ROBOT, log=log.append)
     assert rec.n_unpaired == 3 and len(rec) == len(plan.q) - 3

@@ -265,17 +265,21 @@ def implausible_values(values: Array, bound: float) -> IntArray:
         return np.flatnonzero(~(np.abs(values) <= bound).all(axis=1))
 
 
-def copies(q: Array, points: Array, target: IntArray | None = None) -> NDArray[np.bool_]:
+def copies(q: Array, points: Array, target: IntArray | None = None,
+           direction: Array | None = None) -> NDArray[np.bool_]:  # fmt: skip
     """Mask (n,) of the measurements that are copies of an earlier one: the same readings
-    q (n, J) [rad] and point (n, 3) [m] of the same target, to COPY_RESOLUTION. A tracker
-    measuring again never gives the same point to 1 nm; a copy is the same measurement."""
+    q (n, J) [rad] and point (n, 3) [m] of the same target, to COPY_RESOLUTION, reached
+    from the same side (`direction` (n, J) of approach when given: a visit from the other
+    side is another measurement, backlash apart). A tracker measuring again never gives
+    the same point to 1 nm; a copy is the same measurement."""
     n = len(points)
     if n < 2:
         return np.zeros(n, dtype=bool)
     key = np.column_stack(
         [np.round(np.asarray(q, dtype=float).reshape(n, -1) / COPY_RESOLUTION),
          np.round(np.asarray(points, dtype=float) / COPY_RESOLUTION),
-         np.zeros(n) if target is None else target]
+         np.zeros(n) if target is None else target,
+         np.zeros((n, 1)) if direction is None else np.sign(direction).reshape(n, -1)]
     )  # fmt: skip
     _, first = np.unique(key, axis=0, return_index=True)
     out = np.ones(n, dtype=bool)
@@ -286,7 +290,8 @@ def copies(q: Array, points: Array, target: IntArray | None = None) -> NDArray[n
 def without_copies(recording: Recording, source: str) -> Recording:
     """`recording` with each copied measurement (`copies`) kept once, and a warning naming
     how many were dropped (none: unchanged)."""
-    copied = copies(recording.poses.q, recording.points, recording.poses.target_index)
+    poses = recording.poses
+    copied = copies(poses.q, recording.points, poses.target_index, poses.direction)
     if not copied.any():
         return recording
     k = int(np.flatnonzero(copied)[0])
