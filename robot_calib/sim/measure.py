@@ -20,19 +20,24 @@ from robot_calib.sim.plans import Plan, plan_times
 from robot_calib.sim.world import NoiseModel, World
 
 
+def line_of_sight(p_in_tracker: Array) -> tuple[Array, Array, Array, Array]:
+    """Of points (n, 3) [m] seen from the tracker at the origin: their range (n, 1) [m], the
+    unit vector along the line of sight and two unit vectors across it (each (n, 3))."""
+    distance = np.linalg.norm(p_in_tracker, axis=1, keepdims=True)
+    radial = p_in_tracker / distance
+    helper = np.where(np.abs(radial[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    across1 = np.cross(radial, helper)
+    across1 /= np.linalg.norm(across1, axis=1, keepdims=True)
+    return distance, radial, across1, np.cross(radial, across1)
+
+
 def tracker_noise(noise: NoiseModel, p_in_tracker: Array, rng: np.random.Generator) -> Array:
     """Noise vectors (n, 3) [m] for points p_in_tracker (n, 3) (tracker at the origin)."""
     n = p_in_tracker.shape[0]
     target = rng.normal(0.0, noise.target_sigma_m, (n, 3))
     if not noise.anisotropic:
         return target + rng.normal(0.0, noise.tracker_sigma_m, (n, 3))
-    distance = np.linalg.norm(p_in_tracker, axis=1, keepdims=True)
-    radial = p_in_tracker / distance
-    # Two unit vectors across the line of sight.
-    helper = np.where(np.abs(radial[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
-    across1 = np.cross(radial, helper)
-    across1 /= np.linalg.norm(across1, axis=1, keepdims=True)
-    across2 = np.cross(radial, across1)
+    distance, radial, across1, across2 = line_of_sight(p_in_tracker)
     sigma_t = noise.tracker_transverse_sigma_rad * distance
     return (
         target
@@ -265,12 +270,7 @@ class StreamingTracker:
         n = len(points)
         if noise.anisotropic:
             radial_draw, across1_draw, across2_draw = columns[2:5]
-            distance = np.linalg.norm(points, axis=1, keepdims=True)
-            radial = points / distance
-            helper = np.where(np.abs(radial[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
-            across1 = np.cross(radial, helper)
-            across1 /= np.linalg.norm(across1, axis=1, keepdims=True)
-            across2 = np.cross(radial, across1)
+            distance, radial, across1, across2 = line_of_sight(points)
             sigma_t = noise.tracker_transverse_sigma_rad * distance
             points = points + (
                 columns[1]
