@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import ctypes
-import fcntl
 import os
 import platform
 import resource
@@ -78,8 +77,6 @@ MIB = 2.0**20
 MEASURE_CHUNK = 5_000  # poses simulated at once
 # ROS 2 domains: the same lock files as test/conftest.py, so the simulate run never shares
 # a DDS domain with a test or another benchmark running on this machine.
-ROS_DOMAINS = [*range(1, 102), *range(215, 233)]
-ROS_LOCK_DIR = Path(tempfile.gettempdir()) / "robot_calib_ros_domains"
 
 
 @dataclass
@@ -206,26 +203,15 @@ def perturbed_start(world: World, model: KinematicModel, seed: int) -> Parameter
 # --- sections --------------------------------------------------------------------------
 
 
-def claim_ros_domain() -> tuple[int, Any]:
-    ROS_LOCK_DIR.mkdir(exist_ok=True)
-    for domain in ROS_DOMAINS:
-        handle = open(ROS_LOCK_DIR / f"{domain}.lock", "w")  # noqa: SIM115 - held while used
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            handle.close()
-            continue
-        return domain, handle
-    raise RuntimeError(f"no free ROS_DOMAIN_ID: all of {len(ROS_DOMAINS)} are locked")
-
-
 def bench_bag(robot: RobotDescription, runs: int, tmp: Path) -> dict[str, Timing]:
     section("read_recording of a Test 2 bag (robot-calib simulate --plan paper-test2)")
     bag = tmp / "test2.mcap"
     cli = Path(sys.executable).with_name("robot-calib")
     command = [str(cli)] if cli.exists() else [sys.executable, "-m", "robot_calib.cli"]
     command += ["simulate", "--plan", "paper-test2", "-o", str(bag)]
-    domain, lock = claim_ros_domain()
+    from robot_calib.nodes.private_domain import claim  # the suite's and simulate's claim
+
+    domain, lock = claim()
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_LOG_DIR=str(tmp / "roslog"))
     started = time.perf_counter()
     done = subprocess.run(command, env=env, capture_output=True, text=True, cwd=tmp)

@@ -31,6 +31,7 @@ fitted on every calibration residual, is the learned part of the hybrid model
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
@@ -203,11 +204,7 @@ def corrected_heldout(
         return before[scored], after[scored], replace(learned[0], warnings=tuple(warnings))
     # all calibration residuals, with the first fold's hyperparameters (learned on most of
     # the same calibration poses: a search again would change them by its noise)
-    rows = fitting_rows(len(poses))
-    correction = fit_structured(cal.model, cal.parameters, poses.subset(rows), residuals[rows],
-                                rng, hyper=start)  # fmt: skip
-    correction = replace(correction, warnings=correction.warnings + tuple(warnings))
-    return before[scored], after[scored], correction
+    return before[scored], after[scored], _fitted_on_all(cal, recording, start, warnings)
 
 
 def final_correction(
@@ -216,12 +213,21 @@ def final_correction(
     """The correction of every calibration residual of `cal` (of `recording`), its
     process's hyperparameters those of `first` (the first fold's, from `corrected_heldout`
     with `final` False) and its warnings `first`'s (every fold's)."""
+    return _fitted_on_all(cal, recording, first.hyper, first.warnings)
+
+
+def _fitted_on_all(cal: Calibration, recording: Recording, hyper: Hyperparameters | None,
+                   folds_warnings: Sequence[str]) -> StructuredCorrection:  # fmt: skip
+    """The correction of the residuals of `cal` at (at most MAX_FIT_POSES of) the poses of
+    `recording`, its process's hyperparameters `hyper` (None: learned), its warnings its
+    own and then the folds'. With `hyper` given on at most MAX_POINTS poses no random draw
+    is made (the seed only serves a search)."""
     rows = fitting_rows(len(recording))
     poses = recording.poses.subset(rows)
     residuals = cal.model.target_points(cal.parameters, poses) - recording.points[rows]
     out = fit_structured(cal.model, cal.parameters, poses, residuals, np.random.default_rng(0),
-                         hyper=first.hyper)  # fmt: skip
-    return replace(out, warnings=first.warnings)
+                         hyper=hyper)  # fmt: skip
+    return replace(out, warnings=out.warnings + tuple(folds_warnings))
 
 
 def learnable_bound(
