@@ -37,6 +37,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from robot_calib.errors import InputError, check_keys
 from robot_calib.kinematics.frames import Array, IntArray
@@ -150,7 +151,11 @@ def _offset(hyper: Hyperparameters) -> float:
 
 def _kernel(phi_a: Array, phi_b: Array, hyper: Hyperparameters) -> Array:
     """(n_a, n_b) signal kernel of scaled features (`_phi`)."""
-    return hyper.signal_variance * np.exp(phi_a @ phi_b.T - _offset(hyper))
+    out = phi_a @ phi_b.T  # in place from here: no n_a x n_b temporaries
+    out -= _offset(hyper)
+    np.exp(out, out=out)
+    out *= hyper.signal_variance
+    return out
 
 
 def _squared_distances(q: Array, target: IntArray, n_targets: int) -> Array:
@@ -169,7 +174,10 @@ def _negative_log_likelihood(theta: Array, dist: Array, y: Array) -> tuple[float
 
     n, n_outputs = y.shape
     u, signal, noise = theta[:-2], np.exp(theta[-2]), np.exp(theta[-1])
-    k_signal = signal * np.exp(-0.5 * np.tensordot(u**2, dist, 1))
+    k_signal = np.tensordot(u**2, dist, 1)  # in place from here (no n x n temporaries)
+    k_signal *= -0.5
+    np.exp(k_signal, out=k_signal)
+    k_signal *= signal
     k = k_signal.copy()
     k.flat[:: n + 1] += noise
     factor, info = lapack.dpotrf(k, lower=1)  # clean: the upper triangle zero
@@ -515,6 +523,21 @@ class ResidualCorrection(Record):
         return out
 
 
+@dataclass(frozen=True)
+class FittedCorrection:
+    """`fit_correction_at`'s result: the correction and what its fit computed anyway.
+
+    correction : the fitted ResidualCorrection
+    fitted : shape (n, 3), its predicted residual at the fitted poses [m, tracker frame]
+    kernel : shape (n, n), the signal kernel of the fitted poses [1] (exact fits; None
+        for a subset of regressors): `exact_holdout` slices it instead of recomputing it
+    """
+
+    correction: ResidualCorrection
+    fitted: Array
+    kernel: Array | None
+
+
 def fit_correction(
     poses: Poses,
     residuals: Array,
@@ -543,6 +566,24 @@ def fit_correction(
     -------
     correction : ResidualCorrection; `predict` gives the predicted residual (n, 3) [m]
     """
+    return fit_correction_at(poses, residuals, n_targets, rng, hyper, start,
+                             min_length_scale_rad, max_points, max_learn).correction  # fmt: skip
+
+
+def fit_correction_at(
+    poses: Poses,
+    residuals: Array,
+    n_targets: int,
+    rng: np.random.Generator | None = None,
+    hyper: Hyperparameters | None = None,
+    start: Hyperparameters | None = None,
+    min_length_scale_rad: float = MIN_LENGTH_SCALE_RAD,
+    max_points: int = MAX_POINTS,
+    max_learn: int = MAX_LEARN,
+) -> FittedCorrection:
+    """`fit_correction`, with its predictions at the fitted poses and (exact fits) the
+    kernel of those poses, which it computes anyway (a caller needing them saves one or
+    more n x n kernels)."""
     from scipy.linalg import LinAlgError, cho_factor, cho_solve, solve
 
     rng = np.random.default_rng(0) if rng is None else rng
@@ -561,9 +602,12 @@ def fit_correction(
     if n <= max_points:
         inducing: IntArray = np.arange(n)
         phi = _phi(q, target, hyper, n_targets)
-        k = _kernel(phi, phi, hyper)
-        k.flat[:: n + 1] += hyper.noise_variance
-        dual = cho_solve(cho_factor(k, lower=True), y)
+        kernel: Array | None = _kernel(phi, phi, hyper)
+        assert kernel is not None
+        with_noise = kernel.copy()
+        with_noise.flat[:: n + 1] += hyper.noise_variance
+        dual = cho_solve(cho_factor(with_noise, lower=True, overwrite_a=True), y)
+        fitted = (kernel @ dual) * scale + mean
         how = f"exact on all {n} poses"
     else:
         inducing = _subset(n, min(max_points, INDUCING), rng)
@@ -580,6 +624,7 @@ def fit_correction(
         except LinAlgError:  # numerically singular: the least-squares solution
             dual = np.linalg.lstsq(gram, rhs, rcond=None)[0]
         how = f"subset of regressors on {m} of {n} poses"
+        kernel = None
     method = (
         "Gaussian process of the residuals (squared-exponential kernel on sin/cos of the "
         "joint readings, one length scale per joint, white noise; "
@@ -587,5 +632,25 @@ def fit_correction(
     )
     correction = ResidualCorrection(q[inducing].copy(), target[inducing].copy(), dual, hyper,
                                     mean, scale, n_targets, n, 0.0, method, warnings)  # fmt: skip
-    size = np.linalg.norm(correction.predict(poses), axis=1)
-    return replace(correction, rms_m=float(np.sqrt(np.mean(size**2))))
+    if kernel is None:
+        fitted = correction.predict(poses)
+    size = np.linalg.norm(fitted, axis=1)
+    correction = replace(correction, rms_m=float(np.sqrt(np.mean(size**2))))
+    return FittedCorrection(correction, fitted, kernel)
+
+
+def exact_holdout(kernel: Array, residuals: Array, train: NDArray[np.bool_],
+                  noise_variance: float) -> Array:  # fmt: skip
+    """The exact process of `kernel` (n, n) (the signal kernel of n poses, `FittedCorrection`)
+    and white noise `noise_variance` fitted on `residuals[train]` ((n, 3) [m]) and
+    predicting at the other poses: shape (n - train.sum(), 3) [m]. The same as
+    `fit_correction` of the training poses with these hyperparameters, then its `predict`
+    at the others, without computing the kernel again."""
+    from scipy.linalg import cho_factor, cho_solve
+
+    mean, scale = _scaling(residuals[train])
+    y = (residuals[train] - mean) / scale
+    with_noise = kernel[np.ix_(train, train)]  # a copy
+    with_noise.flat[:: len(y) + 1] += noise_variance
+    dual = cho_solve(cho_factor(with_noise, lower=True, overwrite_a=True), y)
+    return (kernel[np.ix_(~train, train)] @ dual) * scale + mean

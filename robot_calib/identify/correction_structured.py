@@ -72,9 +72,12 @@ from robot_calib.errors import InputError, check_keys
 from robot_calib.identify.correction import (
     MAX_CORRECTION_M,
     MAX_LEARN,
+    FittedCorrection,
     Hyperparameters,
     ResidualCorrection,
+    exact_holdout,
     fit_correction,
+    fit_correction_at,
 )
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, chain
@@ -646,9 +649,12 @@ def fit_structured(
         structured = replace(
             _empty(model, parameters, columns, step_tau, n), coefficients=fit.coefficients
         ).structured(poses)
-    process = fit_correction(poses, residuals - structured, len(model.targets), rng,
-                             hyper=hyper, start=start, max_learn=max_learn)  # fmt: skip
-    if not _process_generalises(process, poses, residuals - structured):
+    left = residuals - structured
+    fitted = fit_correction_at(poses, left, len(model.targets), rng, hyper=hyper, start=start,
+                               max_learn=max_learn)  # fmt: skip
+    process, process_fitted = fitted.correction, fitted.fitted
+    if not _process_generalises(fitted, poses, left):
+        process_fitted = np.zeros_like(left)
         process = replace(
             process, dual=np.zeros_like(process.dual), mean_m=np.zeros(3), rms_m=0.0,
             method=process.method + "; left out: it learned nothing held out in a 2-fold "
@@ -664,25 +670,30 @@ def fit_structured(
         model, parameters, columns, step_tau, fit.coefficients, fit.ridge, fit.dof,
         _rms(structured), process, 0.0, method, warnings + process.warnings,
     )  # fmt: skip
-    return replace(out, rms_m=_rms(structured + process.predict(poses)))  # = out._raw(poses)
+    return replace(out, rms_m=_rms(structured + process_fitted))  # = out._raw(poses)
 
 
-def _process_generalises(process: ResidualCorrection, poses: Poses, left: Array) -> bool:
+def _process_generalises(fitted: FittedCorrection, poses: Poses, left: Array) -> bool:
     """True when the process (its hyperparameters) fitted on either half of the poses
     brings the other half's `left` residuals (n, 3) [m] below (1 - MIN_PROCESS_GAIN) of
     their rms, over both halves: else what the structure leaves is noise to it (a process
-    that interpolates noise roughens the correction for nothing)."""
+    that interpolates noise roughens the correction for nothing). An exact fit's kernel
+    is sliced, not computed again."""
     n = len(poses)
     if n < 2 * CHECK_MIN_POSES:
         return True
+    process = fitted.correction
     half = np.random.default_rng(1).permutation(n) < n // 2
     before, after = 0.0, 0.0
     for train in (half, ~half):
-        local = fit_correction(poses.subset(train), left[train], process.n_targets,
-                               hyper=process.hyper)  # fmt: skip
-        test = poses.subset(~train)
+        if fitted.kernel is not None:
+            predicted = exact_holdout(fitted.kernel, left, train, process.hyper.noise_variance)
+        else:
+            local = fit_correction(poses.subset(train), left[train], process.n_targets,
+                                   hyper=process.hyper)  # fmt: skip
+            predicted = local.predict(poses.subset(~train))
         before += float(np.sum(left[~train] ** 2))
-        after += float(np.sum((left[~train] - local.predict(test)) ** 2))
+        after += float(np.sum((left[~train] - predicted) ** 2))
     return after < (1.0 - MIN_PROCESS_GAIN) ** 2 * before
 
 
