@@ -32,7 +32,7 @@ fitted on every calibration residual, is the learned part of the hybrid model
 from __future__ import annotations
 
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -48,7 +48,9 @@ from robot_calib.identify.correction import (
 from robot_calib.identify.correction_structured import (
     LearnedCorrection,
     StructuredCorrection,
+    StructuredPart,
     fit_structured,
+    fit_structured_part,
 )
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
@@ -175,29 +177,45 @@ def corrected_heldout(
     folds = list(fold_parameters)
     seeds = rng.integers(0, 2**63, size=len(folds))  # each fold its own stream: any order
     start: Hyperparameters | None = None
+    train_rows: list[IntArray] = []
+    for f in folds:
+        train = np.flatnonzero(fold != f)
+        train_rows.append(train[fitting_rows(len(train))])
 
-    def one(k: int) -> StructuredCorrection:
+    def residuals_of(k: int) -> Array:
+        return cal.model.target_points(fold_parameters[folds[k]], poses) - points
+
+    def structure(k: int) -> StructuredPart:
+        """Fold folds[k]'s load-driven geometry (no hyperparameter needed)."""
+        train = train_rows[k]
+        return fit_structured_part(cal.model, fold_parameters[folds[k]], poses.subset(train),
+                                   residuals_of(k)[train])  # fmt: skip
+
+    def one(k: int, part: Future[StructuredPart]) -> StructuredCorrection:
         """Fold folds[k]: its correction learned on its training poses; `after` filled."""
-        f = folds[k]
+        f, train = folds[k], train_rows[k]
         test = fold == f
-        train = np.flatnonzero(~test)
-        train = train[fitting_rows(len(train))]
-        fitted = cal.model.target_points(fold_parameters[f], poses) - points
+        fitted = residuals_of(k)
         local = fit_structured(cal.model, fold_parameters[f], poses.subset(train),
                                fitted[train], np.random.default_rng(seeds[k]), start=start,
-                               max_learn=MAX_LEARN if start is None else WARM_LEARN)  # fmt: skip
+                               max_learn=MAX_LEARN if start is None else WARM_LEARN,
+                               part=part.result())  # fmt: skip
         before[test] = fitted[test]
         after[test] = fitted[test] - local.predict(poses.subset(test))
         return local
 
     learned: list[StructuredCorrection] = []  # one per fold, in the order of `folds`
-    if folds:  # the first fold's hyperparameters start the others' search
-        learned.append(one(0))
-        start = learned[0].hyper
-        # the other folds are independent: both cores (numpy's linear algebra releases
-        # the GIL; each fold writes only its own rows)
+    if folds:
+        # the folds are independent but for the process's hyperparameters, the first
+        # fold's starting the others' search: the pool fits every fold's load-driven
+        # geometry (first fold's first) while this thread searches the first fold's
+        # hyperparameters, then the other folds' processes (numpy's linear algebra
+        # releases the GIL; each fold writes only its own rows)
         with ThreadPoolExecutor(max_workers=FOLD_THREADS) as pool:
-            learned += pool.map(one, range(1, len(folds)))
+            parts = [pool.submit(structure, k) for k in range(len(folds))]
+            learned.append(one(0, parts[0]))
+            start = learned[0].hyper
+            learned += pool.map(one, range(1, len(folds)), parts[1:])
     warnings = [f"{w} (fold {f})" for f, c in zip(folds, learned) for w in c.warnings]
     scored = np.isin(fold, folds)
     if not final and learned:

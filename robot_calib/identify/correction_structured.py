@@ -589,22 +589,31 @@ def correction_from_dict(
     return ResidualCorrection.from_dict(data, where)
 
 
-def fit_structured(
-    model: KinematicModel,
-    parameters: ParameterVector,
-    poses: Poses,
-    residuals: Array,
-    rng: np.random.Generator | None = None,
-    hyper: Hyperparameters | None = None,
-    start: Hyperparameters | None = None,
-    max_learn: int = MAX_LEARN,
-) -> StructuredCorrection:
-    """The hybrid correction of `residuals` (n, 3) [m, tracker frame, predicted -
-    measured] of `model` at `parameters` at `poses`: the load-driven geometry by ridge
-    least squares (ridge by generalised cross-validation on these residuals), then the
-    Gaussian process of the rest (`fit_correction` with `rng`, `hyper`, `start`,
-    `max_learn`)."""
-    rng = np.random.default_rng(0) if rng is None else rng
+@dataclass(frozen=True)
+class StructuredPart:
+    """The load-driven geometry of a hybrid correction, before its process
+    (`fit_structured_part`): what `fit_structured` needs to go on.
+
+    columns, step_tau, fit : as StructuredCorrection's (`fit` the ridge solution)
+    structured : shape (n, 3), its predicted residual at the fitted poses [m, tracker frame]
+    how : how it was fitted, for the method line
+    warnings : its own warnings (a ridge at its grid's edge)
+    """
+
+    columns: tuple[str, ...]
+    step_tau: Array
+    fit: Ridge
+    structured: Array
+    how: str
+    warnings: tuple[str, ...]
+
+
+def fit_structured_part(model: KinematicModel, parameters: ParameterVector, poses: Poses,
+                        residuals: Array) -> StructuredPart:  # fmt: skip
+    """The load-driven geometry of `residuals` (n, 3) [m, tracker frame, predicted -
+    measured] of `model` at `parameters` at `poses` by ridge least squares (ridge by
+    generalised cross-validation on these residuals). Needs no hyperparameter of the
+    process: folds can fit it while another fold's process searches them."""
     n = len(poses)
     if residuals.shape != (n, 3) or n == 0:
         raise InputError(f"learned correction: residuals of shape {residuals.shape} for "
@@ -649,6 +658,29 @@ def fit_structured(
         structured = replace(
             _empty(model, parameters, columns, step_tau, n), coefficients=fit.coefficients
         ).structured(poses)
+    return StructuredPart(columns, step_tau, fit, structured, how, warnings)
+
+
+def fit_structured(
+    model: KinematicModel,
+    parameters: ParameterVector,
+    poses: Poses,
+    residuals: Array,
+    rng: np.random.Generator | None = None,
+    hyper: Hyperparameters | None = None,
+    start: Hyperparameters | None = None,
+    max_learn: int = MAX_LEARN,
+    part: StructuredPart | None = None,
+) -> StructuredCorrection:
+    """The hybrid correction of `residuals` (n, 3) [m, tracker frame, predicted -
+    measured] of `model` at `parameters` at `poses`: the load-driven geometry
+    (`fit_structured_part`, or `part` already fitted on these same arguments), then the
+    Gaussian process of the rest (`fit_correction` with `rng`, `hyper`, `start`,
+    `max_learn`)."""
+    rng = np.random.default_rng(0) if rng is None else rng
+    if part is None:
+        part = fit_structured_part(model, parameters, poses, residuals)
+    structured, fit = part.structured, part.fit
     left = residuals - structured
     fitted = fit_correction_at(poses, left, len(model.targets), rng, hyper=hyper, start=start,
                                max_learn=max_learn)  # fmt: skip
@@ -663,12 +695,12 @@ def fit_structured(
     method = (
         "load-driven geometry (every link frame's small motion times 1, the gravity moment "
         "it carries and steps of its joint's gravity torque, plus the model's own Jacobian "
-        f"columns; ridge least squares: {how}), then a {process.method[0].lower()}"
+        f"columns; ridge least squares: {part.how}), then a {process.method[0].lower()}"
         f"{process.method[1:]}"
     )
     out = StructuredCorrection(
-        model, parameters, columns, step_tau, fit.coefficients, fit.ridge, fit.dof,
-        _rms(structured), process, 0.0, method, warnings + process.warnings,
+        model, parameters, part.columns, part.step_tau, fit.coefficients, fit.ridge, fit.dof,
+        _rms(structured), process, 0.0, method, part.warnings + process.warnings,
     )  # fmt: skip
     return replace(out, rms_m=_rms(structured + process_fitted))  # = out._raw(poses)
 
