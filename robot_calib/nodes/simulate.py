@@ -25,6 +25,7 @@ from functools import partial
 from pathlib import Path
 
 import rclpy
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -225,20 +226,16 @@ def simulate_bag(
 ) -> dict[str, int]:
     """Simulate `plan` in `world` and record it to the MCAP file `output` (must not exist).
 
-    Returns the recorder's message counts per topic. Owns rclpy init/shutdown unless a
-    context is already initialised (then it uses the default context and leaves it up);
-    an owned context runs on a private domain (`nodes.private_domain`), so that no other
-    ROS 2 graph on this machine (a robot, another simulation) reaches the offline one.
-    An owned context installs no signal handlers of rclpy's: Ctrl-C (and SIGTERM where
-    the caller maps it so) raises KeyboardInterrupt at the next step, the bag is closed
-    and the caller discards it.
+    Returns the recorder's message counts per topic. The graph always runs in a ROS 2
+    context of its own, on a private domain (`nodes.private_domain`) with discovery off,
+    even when the caller's process runs a graph of its own (an initialised default
+    context): no other ROS 2 graph on this machine (a robot, another simulation, the
+    caller's nodes) reaches the offline one, and it reaches none of them. It installs no
+    signal handlers of rclpy's: Ctrl-C (and SIGTERM where the caller maps it so) raises
+    KeyboardInterrupt at the next step, the bag is closed and the caller discards it.
     """
-    with _deferred_signals() as received:
-        if rclpy.ok():  # the caller's graph: its domain
-            return _simulate_bag(output, plan, world, seed, n_random, progress, received)
-        with private_domain() as domain:  # an offline graph sees nobody else's topics
-            return _simulate_bag(output, plan, world, seed, n_random, progress, received,
-                                 domain)  # fmt: skip
+    with _deferred_signals() as received, private_domain() as domain:
+        return _simulate_bag(output, plan, world, seed, n_random, progress, received, domain)
 
 
 def _simulate_bag(
@@ -249,17 +246,18 @@ def _simulate_bag(
     n_random: int,
     progress: Callable[[int, int], None] | None,
     received: Sequence[int],
-    domain_id: int | None = None,
+    domain_id: int,
 ) -> dict[str, int]:
-    owns_context = not rclpy.ok()
-    if owns_context:
-        with discovery_off():  # its own nodes only, whoever else is on the domain
-            rclpy.init(signal_handler_options=SignalHandlerOptions.NO, domain_id=domain_id)
+    context = Context()
+    with discovery_off():  # its own nodes only, whoever else is on the domain
+        rclpy.init(context=context, domain_id=domain_id,
+                   signal_handler_options=SignalHandlerOptions.NO)  # fmt: skip
     sim_time = Parameter("use_sim_time", value=True)
     world_param = Parameter("world", value=str(world) if world else "")
     nodes: list[Node] = []
     try:
         robot = SimRobotNode(
+            context=context,
             parameter_overrides=[
                 sim_time,
                 world_param,
@@ -269,20 +267,21 @@ def _simulate_bag(
                 Parameter("publish_clock", value=True),
                 Parameter("wait_for_subscribers", value=2),
                 Parameter("autostart", value=False),
-            ]
+            ],
         )
         nodes.append(robot)
-        tracker = SimTrackerNode(parameter_overrides=[sim_time, world_param])
+        tracker = SimTrackerNode(context=context, parameter_overrides=[sim_time, world_param])
         nodes.append(tracker)
         recorder = RecorderNode(
+            context=context,
             parameter_overrides=[
                 sim_time,
                 Parameter("output", value=str(output)),
                 Parameter("topics", value=[JOINT_STATES_TOPIC, *tracker.topics]),
-            ]
+            ],
         )
         nodes.append(recorder)
-        executor = SingleThreadedExecutor()
+        executor = SingleThreadedExecutor(context=context)
         for node in nodes:
             executor.add_node(node)
         _spin_until(
@@ -311,5 +310,4 @@ def _simulate_bag(
             if isinstance(node, RecorderNode):
                 node.close()
             node.destroy_node()
-        if owns_context:
-            rclpy.try_shutdown()
+        rclpy.try_shutdown(context=context)
