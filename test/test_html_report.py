@@ -19,6 +19,7 @@ import pytest
 from robot_calib import pipeline
 from robot_calib.diagnose.diagnosis import Diagnosis
 from robot_calib.diagnose.ladder import Ladder
+from robot_calib.diagnose.names import with_breaks
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points
@@ -120,8 +121,8 @@ def test_the_report_is_self_contained_and_says_what_happened(report: Path) -> No
     assert "robot-calib export diagnosis.params_best.json --format urdf" in verdict
     # before / after: nominal, CPA, geometric and the best rung, all on the hold-out bag
     table = text[text.index('id="accuracy"') : text.index('id="ladder"')]
-    for model in ("nominal", "cpa", "geometric", "geometric+backlash:4"):
-        assert f'<td class="text">{model}</td>' in table
+    for model in ("nominal", "cpa", "geometric", "geometric+backlash:4"):  # breaks at '+' only
+        assert f'<td class="text"><span class="model">{with_breaks(model)}</span></td>' in table
     assert table.count("hold-out bags</td>") == 4
     # the blunder is named, ISO 9283 before/after, the parameter table with 1-sigma and why
     problems = text[text.index('id="warnings"') :]

@@ -23,7 +23,13 @@ from robot_calib.diagnose.ladder import (
 from robot_calib.diagnose.learnable import MIN_LEARNABLE_SHARE, LearnableBound
 from robot_calib.diagnose.noise import STATED, NoiseLevel, refine_with_model
 from robot_calib.diagnose.outside import OutsideVocabulary, outside_vocabulary
-from robot_calib.diagnose.signatures import Signature, WhereItLies, where_it_lies
+from robot_calib.diagnose.signatures import (
+    RemovedSignature,
+    Signature,
+    WhereItLies,
+    removed_signatures,
+    where_it_lies,
+)
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
@@ -169,6 +175,9 @@ class Diagnosis(Record):
     implausible: list[str] = field(default_factory=list)
     # the hybrid rung far below the best physical one: what lies outside the vocabulary
     outside_vocabulary: OutsideVocabulary | None = None
+    # the per-joint signature families of `where` (geometric's residuals) the chosen model
+    # has an effect for: what it removed (the reports say so in those rows); empty: none
+    removed_by_best_model: list[RemovedSignature] = field(default_factory=list)
     format: str = FORMAT
 
     def to_dict(self) -> dict[str, Any]:
@@ -447,6 +456,7 @@ def diagnose(
         outside_vocabulary=outside,
         iso9283=_iso9283(ladder, recording, robot),
         refits=list(ladder.refits),
+        removed_by_best_model=removed_signatures(best.effects),
         implausible=list(geo.implausible) + _holdout_in_degrees(holdout_sources, robot)
         + ([foreign] if foreign else []),
     )  # fmt: skip

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from robot_calib.diagnose.ladder import Ladder, Rung
+from robot_calib.diagnose.names import wrap_name
 from robot_calib.diagnose.signatures import arc_angle_errors
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording
@@ -39,6 +40,8 @@ def pyplot() -> Any:  # noqa: ANN401 - the matplotlib.pyplot module
 #: a screen shows no more, and matplotlib's cost grows with every marker (issue 23)
 MAX_DRAWN = 1500
 MAX_ARROWS = 500  # 3D arrows of the residual-vector figure
+#: the quantity and unit of the residual-vector figure's colour bars
+COLOUR_BAR_LABEL = "|residual| [mm]"
 
 
 def drawn(n: int, limit: int = MAX_DRAWN) -> IntArray:
@@ -84,24 +87,56 @@ def compared_rungs(ladder: Ladder) -> tuple[Rung, ...]:
     return (ladder.rungs[0], ladder.rungs[-1])[: len(ladder.rungs)]
 
 
+#: a ladder figure whose values (bars, floor, bound) span more than this ratio is drawn on
+#: a logarithmic axis: on a linear one a 0.02 mm rung beside a 50 mm one is invisible
+LOG_AXIS_RATIO = 10.0
+
+
+def ladder_yscale(values_mm: Sequence[float]) -> str:
+    """'log' when the positive `values_mm` [mm] (the rungs' held-out rms, the noise floor,
+    the learnable bound) span more than LOG_AXIS_RATIO, else 'linear'."""
+    positive = [v for v in values_mm if v > 0 and np.isfinite(v)]
+    if len(positive) < 2:
+        return "linear"
+    return "log" if max(positive) > LOG_AXIS_RATIO * min(positive) else "linear"
+
+
 def ladder_figure(ladder: Ladder, floor_mm: float | None) -> Figure:
-    """Held-out rms [mm] of every rung as bars, the noise floor and the learnable bound."""
+    """Held-out rms [mm] of every rung as bars, the noise floor and the learnable bound as
+    lines labelled where they are drawn; on a log axis when the values span more than
+    LOG_AXIS_RATIO (`ladder_yscale`)."""
     plt = pyplot()
-    names = [r.model for r in ladder.rungs]
-    fig, ax = plt.subplots(figsize=(7, 3.2))
-    bars = ax.bar(range(len(names)), [r.heldout.absolute_rms_mm for r in ladder.rungs],
-                  color=COLOURS[0])  # fmt: skip
-    ax.bar_label(bars, fmt="%.4f mm", fontsize=8)
-    if floor_mm is not None:
-        ax.axhline(floor_mm, color="k", ls="--", label="noise floor")
+    names = [wrap_name(r.model, 20) for r in ladder.rungs]
+    heights = [r.heldout.absolute_rms_mm for r in ladder.rungs]
+    lines = [] if floor_mm is None else [(floor_mm, "noise floor", "k", "--")]
     if ladder.learnable is not None:
-        ax.axhline(ladder.learnable.holdout_abs_rms_mm, color=COLOURS[1], ls=":",
-                   label="learnable bound (residual model)")  # fmt: skip
-    ax.set_xticks(range(len(names)), names, rotation=15, ha="right", fontsize=8)
-    ax.set_ylabel("held-out rms error [mm]")
+        lines.append((ladder.learnable.holdout_abs_rms_mm, "learnable bound\n(residual model)",
+                      COLOURS[1], ":"))  # fmt: skip
+    rows = max(name.count("\n") + 1 for name in names)
+    longest = max(len(line) for name in names for line in name.split("\n"))
+    per_bar = max(1.5, 0.07 * longest)  # [in]: the longest label line fits its slot
+    fig, ax = plt.subplots(figsize=(max(7.0, 1.2 + per_bar * len(names)), 3.2 + 0.15 * rows))
+    every = [v for v in heights + [value for value, *_ in lines] if v > 0]
+    scale = ladder_yscale(every)
+    ax.set_yscale(scale)
+    bars = ax.bar(range(len(names)), heights, color=COLOURS[0])
+    ax.bar_label(bars, fmt="%.4f mm", fontsize=8)
+    if scale == "log":  # bars from below the lowest value, room above for their labels
+        ax.set_ylim(min(every) / 3.0, max(every) * 3.0)
+    else:
+        ax.set_ylim(0.0, max(every, default=1.0) * 1.15)
+    # each line labelled beside the axes (never over a bar or its label): the lower line's
+    # label below its line, the other's above, so two close lines keep readable labels
+    lowest = min((value for value, *_ in lines), default=0.0)
+    for value, label, colour, style in lines:
+        ax.axhline(value, color=colour, ls=style, lw=1.2)
+        below = value == lowest and len(lines) > 1
+        ax.annotate(f"{label}\n{value:.4f} mm", (1.0, value), xycoords=("axes fraction", "data"),
+                    xytext=(4, -2 if below else 2), textcoords="offset points", ha="left",
+                    va="top" if below else "bottom", fontsize=8, color=colour)  # fmt: skip
+    ax.set_xticks(range(len(names)), names, fontsize=8)
+    ax.set_ylabel("held-out rms error [mm]" + (" (log scale)" if scale == "log" else ""))
     ax.set_title(f"the ladder (scored on {ladder.scored_on})")
-    if floor_mm is not None or ladder.learnable is not None:
-        ax.legend()
     fig.tight_layout()
     return fig
 
@@ -157,8 +192,8 @@ def residual_map_figure(ladder: Ladder, recording: Recording) -> Figure:
     n_rows = -(-len(axes_x) // n_cols)
     fig, axes = plt.subplots(n_rows, n_cols, figsize=(12, 2.6 * n_rows), sharey=True)
     rows = drawn(len(recording))
-    norms = [(rung.model, np.linalg.norm(insample_residuals(rung, recording), axis=1) * 1e3)
-             for rung in compared_rungs(ladder)]  # fmt: skip
+    norms = [(wrap_name(rung.model), np.linalg.norm(insample_residuals(rung, recording), axis=1)
+              * 1e3) for rung in compared_rungs(ladder)]  # fmt: skip
     for ax, (label, x) in zip(np.ravel(axes), axes_x.items()):
         for model, norm in norms:
             ax.plot(x[rows], norm[rows], ".", ms=2, label=model)
@@ -179,7 +214,7 @@ def time_figure(ladder: Ladder, recording: Recording) -> Figure:
     rows = drawn(len(recording))
     for rung in compared_rungs(ladder):
         norm = np.linalg.norm(insample_residuals(rung, recording), axis=1) * 1e3
-        ax.plot(recording.poses.time[rows], norm[rows], ".", ms=3, label=rung.model)
+        ax.plot(recording.poses.time[rows], norm[rows], ".", ms=3, label=wrap_name(rung.model))
     ax.set_xlabel("time since the first measurement [s]")
     ax.set_ylabel("|residual| [mm]")
     ax.legend(fontsize=8)
@@ -189,9 +224,10 @@ def time_figure(ladder: Ladder, recording: Recording) -> Figure:
 
 def error_histogram_figure(errors_mm: Sequence[tuple[str, Array]], scored_on: str) -> Figure:
     """Histograms of the per-point error [mm] of each (model, errors (m,) [mm]) on
-    logarithmic bins (models differ by orders of magnitude), with each model's rms."""
+    logarithmic bins (models differ by orders of magnitude), with each model's rms; the
+    legend to the right of the axes, where it covers no bar."""
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(7, 3.4))
+    fig, ax = plt.subplots(figsize=(9, 3.4))
     every = np.concatenate([e for _, e in errors_mm])
     low = max(float(every[every > 0].min()) if np.any(every > 0) else 1e-4, 1e-5)
     high = max(float(every.max()), 2 * low)
@@ -200,13 +236,14 @@ def error_histogram_figure(errors_mm: Sequence[tuple[str, Array]], scored_on: st
         rms = float(np.sqrt(np.mean(errors**2)))
         colour = COLOURS[k % len(COLOURS)]
         ax.hist(np.clip(errors, low, high), bins=bins, histtype="step", lw=1.6, color=colour,
-                label=f"{model} (rms {rms:.4f} mm)")  # fmt: skip
+                label=f"{wrap_name(model)}\n(rms {rms:.4f} mm)")  # fmt: skip
         ax.axvline(rms, color=colour, ls=":", lw=1)
     ax.set_xscale("log")
     ax.set_xlabel("per-point error |predicted - measured| [mm] (log scale)")
     ax.set_ylabel("points")
     ax.set_title(f"per-point error, {scored_on}", fontsize=10)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
+              labelspacing=0.8)  # fmt: skip
     fig.tight_layout()
     return fig
 
@@ -217,25 +254,34 @@ def quiver_figure(ladder: Ladder, points: Array, residuals: Sequence[tuple[str, 
     measured, tracker frame) at the measured `points` (n, 3) [m, tracker frame], drawn in
     the robot base frame [mm]; every panel at one scale (the largest arrow 0.3 of the
     points' extent, rounded down to 1, 2 or 5 x 10^k), written in the title as
-    'arrows x K: 1 mm of error drawn as K mm'."""
+    'arrows x K: 1 mm of error drawn as K mm'; colour: |residual| [mm] from 0 to the
+    panel's largest, read on the panel's colour bar."""
     plt = pyplot()
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
     rows = drawn(len(points), MAX_ARROWS)  # the scale and the figures in titles from all
     in_base, rotation = points_in_base(ladder, points)
     xyz = in_base * 1e3
     extent = float(np.ptp(xyz, axis=0).max()) or 1.0
     largest = max(float(np.linalg.norm(r, axis=1).max()) for _, r in residuals) * 1e3
     scale = _round_scale(0.3 * extent / largest) if largest > 0 else 1.0
-    fig = plt.figure(figsize=(5.2 * len(residuals), 5.0))
+    fig = plt.figure(figsize=(6.0 * len(residuals), 5.0))
     for k, (model, res) in enumerate(residuals):
         arrows = (res @ rotation) * 1e3 * scale  # (n, 3) mm in the base frame, scaled
         norm = np.linalg.norm(res, axis=1) * 1e3
         ax = fig.add_subplot(1, len(residuals), k + 1, projection="3d")
         ax.scatter(*xyz[rows].T, s=3, color="0.6")
-        colours = plt.get_cmap("viridis")(norm[rows] / max(float(norm.max()), 1e-12))
-        ax.quiver(*xyz[rows].T, *arrows[rows].T, colors=colours, arrow_length_ratio=0.2,
-                  lw=1.3)  # fmt: skip
-        ax.set_title(f"{model}: rms {np.sqrt(np.mean(norm**2)):.4f} mm, max {norm.max():.4f} mm",
-                     fontsize=9)  # fmt: skip
+        colour_scale = Normalize(0.0, max(float(norm.max()), 1e-12))
+        cmap = plt.get_cmap("viridis")
+        ax.quiver(*xyz[rows].T, *arrows[rows].T, colors=cmap(colour_scale(norm[rows])),
+                  arrow_length_ratio=0.2, lw=1.3)  # fmt: skip
+        bar = fig.colorbar(ScalarMappable(colour_scale, cmap), ax=ax,
+                           shrink=0.6, pad=0.12)  # fmt: skip
+        bar.set_label(COLOUR_BAR_LABEL, fontsize=8)
+        bar.ax.tick_params(labelsize=7)
+        ax.set_title(f"{wrap_name(model, 40)}\nrms {np.sqrt(np.mean(norm**2)):.4f} mm, max "
+                     f"{norm.max():.4f} mm", fontsize=9)  # fmt: skip
         ax.set_xlabel("x [mm]", fontsize=8)
         ax.set_ylabel("y [mm]", fontsize=8)
         ax.set_zlabel("z [mm]", fontsize=8)
@@ -245,7 +291,7 @@ def quiver_figure(ladder: Ladder, points: Array, residuals: Sequence[tuple[str, 
         f"arrows x {scale:g}: 1 mm of error drawn as {scale:g} mm",
         fontsize=10,
     )
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.94))  # below the suptitle
     return fig
 
 

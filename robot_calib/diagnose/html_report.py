@@ -33,9 +33,17 @@ from robot_calib.diagnose.figures import (
     time_figure,
 )
 from robot_calib.diagnose.ladder import Ladder
+from robot_calib.diagnose.names import MODEL_CLASS, MODEL_CSS, with_breaks
 from robot_calib.diagnose.noise import noise_basis
 from robot_calib.diagnose.report import unobservable
-from robot_calib.diagnose.signatures import FAMILIES, ArcSignature, JointTerms, ordinal
+from robot_calib.diagnose.signatures import (
+    FAMILIES,
+    ArcSignature,
+    JointTerms,
+    ordinal,
+    removed_note,
+    signature_removed,
+)
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import Calibration, calibrate
 from robot_calib.identify.params_file import fixed_reasons
@@ -46,6 +54,8 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 DEG_PER_URAD = ANGLE_UNITS["deg"] * 1e-6
+#: the per-joint tables' last column: what of that joint the best model removed
+BEST_MODEL_COLUMN = "best model"
 #: SI unit -> (factor, the unit people read); a unit not listed is shown as it is
 HUMAN_UNITS = {
     "m": (1e3, "mm"),
@@ -115,7 +125,8 @@ def _scored(model: str, role: str, scored_on: str, residuals: Array, points: Arr
     return ModelErrors(model, role, scored_on, residuals, accuracy(points, points + residuals))
 
 
-CSS = """
+CSS = (
+    """
 body{font:15px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-serif;
  color:#1d2733;background:#f4f6f8;margin:0}
 main{max-width:1120px;margin:0 auto;padding:24px 28px 48px;background:#fff}
@@ -131,7 +142,7 @@ table{border-collapse:collapse;margin:8px 0 12px;font-size:13.5px;
  font-variant-numeric:tabular-nums}
 th,td{border:1px solid #d5dce4;padding:4px 8px;text-align:right;vertical-align:top}
 th{background:#eef1f5;text-align:center}td:first-child,th:first-child{text-align:left}
-td.text{text-align:left;overflow-wrap:anywhere;max-width:320px}
+td.text{text-align:left;overflow-wrap:break-word;max-width:320px}
 tr.best td{background:#fff7d6;font-weight:600}
 td.fixed{color:#7a8794}
 figure{margin:10px 0 18px}figure img{max-width:100%;border:1px solid #e3e8ee}
@@ -139,12 +150,33 @@ figcaption{color:#5b6b7b;font-size:13px}
 pre{background:#1d2733;color:#e8eef5;padding:10px 14px;border-radius:4px;overflow-x:auto}
 code{font-family:"DejaVu Sans Mono",monospace;font-size:13px}
 ul.tight li{margin:2px 0}.muted{color:#7a8794}
+td>.note{display:block;text-align:left;color:#2e6b45;min-width:160px}
 """
+    + MODEL_CSS
+)
 
 
 def _e(text: object) -> str:
     """`text` escaped for HTML (every text of the report goes through here)."""
     return html.escape(str(text), quote=True)
+
+
+class Markup(str):
+    """Text already escaped and marked up (`_model`): `_table` writes it as it is."""
+
+
+def _note(note: str) -> Markup:
+    """A per-joint row's note on what the best model removed (`removed_note`), left-aligned,
+    breaking at spaces, after '+' or ',' only (it names model terms); '' for none."""
+    if not note:
+        return Markup("")
+    return Markup(f'<span class="{MODEL_CLASS} note">{with_breaks(_e(note))}</span>')
+
+
+def _model(name: str) -> Markup:
+    """A model name that breaks only between its terms or after a comma (names.py), never
+    inside a term: escaped, with <wbr> there, in a `MODEL_CLASS` span (CSS `MODEL_CSS`)."""
+    return Markup(f'<span class="{MODEL_CLASS}">{with_breaks(_e(name))}</span>')
 
 
 def _img(fig: Figure | bytes | None, caption: str, dpi: int = 100) -> str:
@@ -172,8 +204,9 @@ def _table(head: Sequence[str], rows: Sequence[Sequence[object]],
     for k, row in enumerate(rows):
         cls = classes[k] if k < len(classes) and classes[k] else ""
         out.append(f'<tr class="{cls}">' if cls else "<tr>")
-        out += [f'<td class="text">{_e(c)}</td>' if i < text_columns else f"<td>{_e(c)}</td>"
-                for i, c in enumerate(row)]  # fmt: skip
+        cells = [c if isinstance(c, Markup) else _e(c) for c in row]
+        out += [f'<td class="text">{c}</td>' if i < text_columns else f"<td>{c}</td>"
+                for i, c in enumerate(cells)]  # fmt: skip
         out.append("</tr>")
     out.append("</tbody></table>")
     return "".join(out)
@@ -320,7 +353,7 @@ def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibr
 
 def _accuracy(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: str) -> str:
     rows = [
-        [m.model, m.role, m.scored_on, m.accuracy.n_points,
+        [_model(m.model), m.role, m.scored_on, m.accuracy.n_points,
          f"{m.accuracy.pairwise_mean_mm:.4f} / {m.accuracy.pairwise_max_mm:.4f}",
          f"{m.accuracy.absolute_mean_mm:.4f}", f"{m.accuracy.absolute_rms_mm:.4f}",
          f"{m.accuracy.absolute_max_mm:.4f}", _times_floor(m.accuracy.absolute_rms_mm, diagnosis)]
@@ -345,7 +378,7 @@ def _ladder(diagnosis: Diagnosis, ladder: Ladder, figures: FigureCache) -> str:
     for rung in diagnosis.ladder:
         share = rung.learnable_gap_share
         rows.append([
-            rung.model, rung.free_parameters,
+            _model(rung.model), rung.free_parameters,
             f"{rung.holdout_mean_mm:.4f} / {rung.holdout_max_mm:.4f}",
             f"{rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f}",
             _times_floor(rung.holdout_abs_rms_mm, diagnosis),
@@ -384,18 +417,19 @@ def _ladder(diagnosis: Diagnosis, ladder: Ladder, figures: FigureCache) -> str:
 
 def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
            figures: FigureCache) -> str:  # fmt: skip
-    where = diagnosis.where
+    where, removed = diagnosis.where, diagnosis.removed_by_best_model
     out = []
     if where.joints:
         out.append("<h3>Per joint, from its circle sweeps (geometric model)</h3>"
                    "<p>Angle-equivalent error along each sweep's arc; a joint is observable "
                    "only through targets at least 5 mm from its axis.</p>")  # fmt: skip
         rows = [[j.joint, _deg(j.arc_rms_urad), _harmonics_deg(j), _deg(j.direction_split_urad),
-                 _mm(j.slope_vs_angle_urad_per_rad, 1), _mm(j.gravity_torque_correlation, 2)]
+                 _mm(j.slope_vs_angle_urad_per_rad, 1), _mm(j.gravity_torque_correlation, 2),
+                 _note(removed_note(removed, j.joint))]
                 for j in where.joints]  # fmt: skip
         out.append(_table(["joint", "rms [deg]", "harmonics 1-4 [deg] (x noise)",
                            "forth-back split [deg]", "slope vs angle [ppm]",
-                           "corr. with gravity torque"], rows))  # fmt: skip
+                           "corr. with gravity torque", BEST_MODEL_COLUMN], rows))  # fmt: skip
     else:
         out.append("<p>No circle sweeps in the recording (no run of poses in which one "
                    "joint moves alone): no per-joint arc figures.</p>")  # fmt: skip
@@ -409,10 +443,12 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
              "-" if t.scale_urad_per_rad is None
              else f"{t.scale_urad_per_rad:.1f} ({t.scale_significance:.0f}x)",
              "-" if t.gravity_urad_per_Nm is None
-             else f"{t.gravity_urad_per_Nm * DEG_PER_URAD:.3g} ({t.gravity_significance:.0f}x)"]
+             else f"{t.gravity_urad_per_Nm * DEG_PER_URAD:.3g} ({t.gravity_significance:.0f}x)",
+             _note(removed_note(removed, t.joint))]
             for t in where.joints_from_all_poses]  # fmt: skip
     out.append(_table(["joint", "harmonics 1-4 [deg]", "direction (backlash) [deg]",
-                       "scale [ppm]", "gravity [deg/(N m)]"], rows))  # fmt: skip
+                       "scale [ppm]", "gravity [deg/(N m)]", BEST_MODEL_COLUMN],
+                      rows))  # fmt: skip
     found = [s for s in where.harmonic_orders if s.dominant_orders]
     if found:
         out.append(
@@ -420,17 +456,27 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
             "1-64 of each joint's reading, beyond what the geometry absorbs.</p>"
         )
         rows = [
-            [s.joint, k, f"{a * DEG_PER_URAD:.5f}", f"{z:.0f}", why]
+            [
+                s.joint,
+                k,
+                f"{a * DEG_PER_URAD:.5f}",
+                f"{z:.0f}",
+                why,
+                _note(removed_note(removed, s.joint, (k,), ("harmonics",))),
+            ]
             for s in found
             for k, a, z, why in zip(
                 s.dominant_orders, s.dominant_urad, s.dominant_significance, s.meaning
             )
         ]
         out.append(_table(["joint", "order [per turn]", "amplitude [deg]",
-                           "x the residual's scatter", "usually"], rows))  # fmt: skip
+                           "x the residual's scatter", "usually", BEST_MODEL_COLUMN],
+                          rows))  # fmt: skip
     quartiles = ", ".join(f"{v:.4f}" for v in where.time.rms_by_quartile_mm)
     reach = ", ".join(f"{v:.4f}" for v in where.workspace.rms_by_reach_tertile_mm)
-    out.append(f"<p><b>Strongest structure</b>: {_e(_strongest(diagnosis))}. Against time: "
+    gone = signature_removed(where.strongest_signature, removed)
+    strongest = _strongest(diagnosis) + (f" ({gone})" if gone else "")
+    out.append(f"<p><b>Strongest structure</b>: {_e(strongest)}. Against time: "
                f"rms by quartile {quartiles} mm, trend {where.time.slope_mm_per_h:.3f} mm/h. "
                f"By reach (near to far): {reach} mm.</p>")  # fmt: skip
     out.append(_img(angle_figure(ladder, recording, "deg"),
@@ -469,7 +515,7 @@ def _iso(diagnosis: Diagnosis) -> str:
         return ("<p class='muted'>No repeated poses (readings measured at least 3 times): no "
                 "ISO 9283 figures. The <code>iso9283</code> plan records them.</p>")  # fmt: skip
     figures = diagnosis.iso9283
-    rows = [[f.model, len(f.poses), f"{f.ap_max_mm:.4f}", f"{f.rp_max_mm:.4f}"]
+    rows = [[_model(f.model), len(f.poses), f"{f.ap_max_mm:.4f}", f"{f.rp_max_mm:.4f}"]
             for f in figures]  # fmt: skip
     out = [f"<p>Pose accuracy AP and repeatability RP (positions), {_e(figures[0].scored_on)}, "
            "before (nominal) and after calibration.</p>",

@@ -14,8 +14,14 @@ from robot_calib.diagnose.figures import (
     time_figure,
 )
 from robot_calib.diagnose.ladder import HOLDOUT_K, Ladder
+from robot_calib.diagnose.names import with_breaks
 from robot_calib.diagnose.noise import noise_basis
-from robot_calib.diagnose.signatures import ArcSignature, JointTerms
+from robot_calib.diagnose.signatures import (
+    ArcSignature,
+    JointTerms,
+    removed_note,
+    signature_removed,
+)
 from robot_calib.identify.outliers import OUTLIER_K
 from robot_calib.measurements import Recording
 
@@ -99,6 +105,7 @@ def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
     """The frequency scan of the geometric and the best model's residuals, with what the
     orders usually mean, and the refits the ladder made."""
     out: list[str] = []
+    removed = diagnosis.removed_by_best_model
     for title, where in (("geometric", diagnosis.where),
                          (diagnosis.physical_model, diagnosis.unexplained.where)):  # fmt: skip
         found = [s for s in where.harmonic_orders if s.dominant_orders]
@@ -108,7 +115,9 @@ def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
                 "orders 1-64, beyond what the model absorbs; amplitude, x the residual's "
                 "scatter):", ""]  # fmt: skip
         for spectrum in found:
-            out.append(f"- {spectrum.line()}")
+            gone = removed_note(removed, spectrum.joint, spectrum.dominant_orders, ("harmonics",))
+            out.append(f"- {spectrum.line()}" + (f" ({gone})" if gone and title == "geometric"
+                                                   else ""))  # fmt: skip
             out += [f"  - order {k}: {why}"
                     for k, why in zip(spectrum.dominant_orders, spectrum.meaning)]  # fmt: skip
     if diagnosis.refits:
@@ -118,8 +127,8 @@ def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
         for r in diagnosis.refits:
             held = "-" if r.heldout_mm is None else f"{r.heldout_mm:.4f}"
             outcome = "rung" if r.accepted else f"rejected: {r.reason}"
-            out.append(f"| {r.model} | {r.linearised_mm:.4f} | {r.insample_rms_mm:.4f} "
-                       f"| {held} | {outcome} |")  # fmt: skip
+            out.append(f"| {with_breaks(r.model)} | {r.linearised_mm:.4f} "
+                       f"| {r.insample_rms_mm:.4f} | {held} | {outcome} |")  # fmt: skip
     return out
 
 
@@ -128,6 +137,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
     """Markdown report `path` (+ PNGs beside it named after it); `figures`: where the
     figures are drawn once for both reports (default: a new one)."""
     noise, where = diagnosis.noise, diagnosis.where
+    removed = diagnosis.removed_by_best_model
     figures = FigureCache() if figures is None else figures
     plots = _plots(ladder, recording, path.with_suffix(""), noise.floor_abs_rms_mm, figures)
     dom = diagnosis.dominant_effect
@@ -172,7 +182,8 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
     for rung in diagnosis.ladder:
         share = rung.learnable_gap_share
         lines.append(
-            f"| {rung.model} | {rung.holdout_mean_mm:.4f} / {rung.holdout_max_mm:.4f} "
+            f"| {with_breaks(rung.model)} "
+            f"| {rung.holdout_mean_mm:.4f} / {rung.holdout_max_mm:.4f} "
             f"| {rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f} "
             f"| {_times_floor(rung.holdout_abs_rms_mm, noise.floor_abs_rms_mm)} "
             f"| {'-' if share is None else percent(share)} |"
@@ -200,7 +211,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
             "|---|---|---|---|",
         ]
         lines += [
-            f"| {f.model} | {len(f.poses)} | {f.ap_max_mm:.4f} | {f.rp_max_mm:.4f} |"
+            f"| {with_breaks(f.model)} | {len(f.poses)} | {f.ap_max_mm:.4f} | {f.rp_max_mm:.4f} |"
             for f in diagnosis.iso9283
         ]
     if diagnosis.outliers:
@@ -221,15 +232,16 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
             "arc; a joint is observable only through targets at least 5 mm from its axis):",
             "",
             "| joint | rms [urad] | harmonics 1-4 [urad] (x their noise sigma) "
-            "| forth-back split [urad] | slope vs angle [urad/rad] | corr. with gravity torque |",
-            "|---|---|---|---|---|---|",
+            "| forth-back split [urad] | slope vs angle [urad/rad] | corr. with gravity torque "
+            "| best model |",
+            "|---|---|---|---|---|---|---|",
         ]
         for j in where.joints:
             lines.append(
                 f"| {j.joint} | {_value(j.arc_rms_urad, 1)} | {_harmonics(j)} | "
                 f"{_value(j.direction_split_urad, 1)} | "
                 f"{_value(j.slope_vs_angle_urad_per_rad, 1)} | "
-                f"{_value(j.gravity_torque_correlation, 2)} |"
+                f"{_value(j.gravity_torque_correlation, 2)} | {removed_note(removed, j.joint)} |"
             )
     else:
         lines.append(
@@ -242,18 +254,21 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         "geometry can absorb (which does not count; in brackets: x their noise sigma):",
         "",
         "| joint | harmonics 1-4 [urad] | direction (backlash) [urad] "
-        "| scale [urad/rad] | gravity [urad/(N m)] |",
-        "|---|---|---|---|---|",
+        "| scale [urad/rad] | gravity [urad/(N m)] | best model |",
+        "|---|---|---|---|---|---|",
     ]
     for t in where.joints_from_all_poses:
         lines.append(
             f"| {t.joint} | {_harmonics(t)} "
             f"| {_value(t.direction_urad, 1, t.direction_significance)} "
             f"| {_value(t.scale_urad_per_rad, 1, t.scale_significance)} "
-            f"| {_value(t.gravity_urad_per_Nm, 2, t.gravity_significance)} |"
+            f"| {_value(t.gravity_urad_per_Nm, 2, t.gravity_significance)} "
+            f"| {removed_note(removed, t.joint)} |"
         )
     if where.strongest_signature:
-        lines += ["", f"Strongest structure: {where.strongest_signature.text}."]
+        gone = signature_removed(where.strongest_signature, removed)
+        lines += ["", f"Strongest structure: {where.strongest_signature.text}"
+                  + (f" ({gone})." if gone else ".")]  # fmt: skip
     lines += _harmonic_lines(diagnosis)
     quartiles = ", ".join(f"{v:.4f}" for v in where.time.rms_by_quartile_mm)
     lines += [

@@ -10,12 +10,14 @@ signatures of the joint effects.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from robot_calib.diagnose.frequency import JointSpectrum, joint_spectra
 from robot_calib.diagnose.projection import MIN_LEFT, MIN_LEVER_M, model_span
+from robot_calib.effects.base import Effect
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.effects.eccentricity import fourier_basis
 from robot_calib.kinematics.frames import Array, IntArray
@@ -200,6 +202,84 @@ FAMILIES = (  # (field of the value, field of the significance, words, unit)
     ("gravity_urad_per_Nm", "gravity_significance", "gravity torque (compliance-like)",
      "urad/(N m)"),
 )  # fmt: skip
+
+
+#: the per-joint signature families: the harmonics, then one per FAMILIES entry, in order
+#: (`Effect.signature_family`, `RemovedSignature.family`)
+SIGNATURE_FAMILIES = ("harmonics", "direction", "scale", "gravity")
+
+
+def signature_family(sig: Signature) -> str:
+    """The family (SIGNATURE_FAMILIES) of a strongest signature: its harmonic, else the
+    FAMILIES entry whose words its sentence holds; '' for none."""
+    if sig.harmonic is not None:
+        return SIGNATURE_FAMILIES[0]
+    for family, (_, _, words, _) in zip(SIGNATURE_FAMILIES[1:], FAMILIES):
+        if words in sig.text:
+            return family
+    return ""
+
+
+@dataclass(frozen=True)
+class RemovedSignature(Record):
+    """A per-joint signature family the chosen (best) model has an effect for (DIAGNOSIS.json
+    `removed_by_best_model`): what `where` finds of it on `joint` in the geometric model's
+    residuals the best model removed. `family`: one of SIGNATURE_FAMILIES; `effect`: the
+    best model's term that models it (e.g. 'backlash:4'); `orders`: the joint-angle
+    harmonic orders it models (family 'harmonics' only, else empty)."""
+
+    joint: int
+    family: str
+    effect: str
+    orders: list[int] = field(default_factory=list)
+
+
+def removed_signatures(effects: Sequence[Effect]) -> list[RemovedSignature]:
+    """Every (joint, family) the model of `effects` removes: each effect's
+    `signature_family` on each of its joints, and its `harmonic_orders` there."""
+    out = []
+    for effect in effects:
+        for j in effect.joints:
+            if effect.signature_family:
+                out.append(RemovedSignature(j, effect.signature_family, effect.spec))
+            orders = effect.harmonic_orders(j)
+            if orders:
+                out.append(RemovedSignature(j, SIGNATURE_FAMILIES[0], effect.spec, sorted(orders)))
+    return out
+
+
+REMOVED = "removed by the best model"
+
+
+def removed_note(removed: Sequence[RemovedSignature], joint: int,
+                 orders: Iterable[int] = range(1, HARMONICS + 1),
+                 families: Iterable[str] = SIGNATURE_FAMILIES) -> str:  # fmt: skip
+    """'removed by the best model: direction (backlash:4); harmonics 2 (transmission_error:
+    4:order=2)': what of joint `joint`'s `families` the best model removes (`removed`), the
+    harmonics only for the `orders` shown (the tables' 1-4, a frequency scan's picked
+    orders); '' when nothing."""
+    wanted, shown = set(families), set(orders)
+    parts = []
+    for r in removed:
+        if r.joint != joint or r.family not in wanted:
+            continue
+        if r.family == SIGNATURE_FAMILIES[0]:
+            common = sorted(shown.intersection(r.orders))
+            if common:
+                parts.append(f"harmonics {', '.join(map(str, common))} ({r.effect})")
+        else:
+            parts.append(f"{r.family} ({r.effect})")
+    return f"{REMOVED}: {'; '.join(parts)}" if parts else ""
+
+
+def signature_removed(sig: Signature | None, removed: Sequence[RemovedSignature]) -> str:
+    """`removed_note` for a strongest signature (its joint, family and harmonic order):
+    'removed by the best model: ...' when the best model has an effect for it, else ''."""
+    family = "" if sig is None else signature_family(sig)
+    if sig is None or not family:
+        return ""
+    orders = () if sig.harmonic is None else (sig.harmonic,)
+    return removed_note(removed, sig.joint, orders, (family,))
 
 
 def ordinal(k: int) -> str:

@@ -15,6 +15,7 @@ from robot_calib.poses import Poses
 @register_effect
 class Backlash(JointOffsetEffect):
     name = "backlash"
+    signature_family = "direction"
     unit = "rad"
     # A joint-4 play of 2 mrad moves the target ~0.25 mm between approach directions (the
     # seed reports 250 um).

@@ -68,6 +68,7 @@ def visible_gravity_joints(robot: RobotDescription, poses: Poses) -> list[int]:
 @register_effect
 class Compliance(JointOffsetEffect):
     name = "compliance"
+    signature_family = "gravity"
     unit = "rad/(N m)"
     default_magnitude = 2.0e-5
     draw_range = (1e-5, 4e-5)

@@ -15,6 +15,7 @@ from robot_calib.poses import Poses
 @register_effect
 class EncoderScale(JointOffsetEffect):
     name = "encoder_scale"
+    signature_family = "scale"
     unit = "1"
     default_magnitude = 3e-4  # tenths of a mm over the workspace
     draw_range = (2e-4, 8e-4)

@@ -67,6 +67,7 @@ def gravity_regressors(robot: RobotDescription, q: Array) -> Array:
 @dataclass(frozen=True)
 class GravityCompliance(Effect):
     name = "gravity_compliance"
+    signature_family = "gravity"
 
     @staticmethod
     def term(joint: int, link: int, term: str) -> str:
