@@ -183,6 +183,19 @@ def test_targets_from_the_home_pose_in_either_frame() -> None:
     np.testing.assert_allclose(again[:, :3, 3], goal[:, :3, 3], atol=1e-12)
 
 
+def test_a_target_at_no_finite_distance_is_not_reached() -> None:
+    """The nominal inverse kinematics retries a target it missed from its nearest reached
+    neighbour; a target at 1e300 m (a caller past the CSV reader's check) has none: it is
+    not reached, the others are, nothing raises."""
+    cal, _ = calibrated()
+    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
+    _, goal = target_poses(6, 9)
+    goal[2, 0, 3] = 1e300
+    targets = targets_of(goal, False, None)
+    found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params, targets, goal)
+    assert not found.reached[2] and found.reached[[0, 1, 3, 4, 5]].sum() >= 4
+
+
 def test_the_compensate_command_with_targets(tmp_path: Path) -> None:
     from scipy.spatial.transform import Rotation
 
@@ -234,3 +247,8 @@ def test_the_compensate_command_with_targets(tmp_path: Path) -> None:
     np.savetxt(targets, table[:, :3], delimiter=",", comments="", header="x,y,z")  # mm as m
     assert "every target is out of robot" in refused("--targets", str(targets))
     assert "(--unit mm)" in refused("--targets", str(targets))
+    table[1, 0] = 1e300  # a corrupt coordinate (it made the nominal IK's retry crash)
+    np.savetxt(targets, table[:, :3], delimiter=",", comments="", header="x,y,z")
+    message = refused("--targets", str(targets), "--unit", "mm")
+    assert "t.csv:3: target x,y,z" in message and "beyond +-10000 m" in message, message
+    assert len(message.strip().splitlines()) == 1, message

@@ -235,8 +235,11 @@ def _nominal_ik(
     from scipy.spatial import cKDTree  # nearest neighbours of thousands in milliseconds
 
     points = goal2base[:, :3, 3]
-    _, nearest = cKDTree(points[done]).query(points[retry])
-    seeds = first.q[done[nearest]]
+    distance, nearest = cKDTree(points[done]).query(points[retry])
+    retry = retry[np.isfinite(distance)]  # no neighbour (a point at infinity): as it was
+    if not retry.size:
+        return first
+    seeds = first.q[done[nearest[np.isfinite(distance)]]]
     again = solve(replace(start.subset(retry), q=seeds), goal2base[retry], oriented[retry])
     better = again.converged
     fields = {}

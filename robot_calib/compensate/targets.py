@@ -18,6 +18,7 @@ import numpy as np
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.measurements.recording import MAX_COORDINATE_M, implausible_values
 from robot_calib.messages import QUATERNION_TOLERANCE
 from robot_calib.model import KinematicModel
 from robot_calib.predict import TEMPERATURE_COLUMN, joint_columns, read_csv_table
@@ -82,8 +83,16 @@ def read_targets_csv(
 
         rotation = Rotation.from_quat(quaternion / norm[:, None]).as_matrix()
     seed, direction = joint_columns(table, n_joints, limits, required=False)
+    position = table.columns(POSITION_COLUMNS) * UNITS[unit]
+    beyond = implausible_values(position, MAX_COORDINATE_M)
+    if beyond.size:
+        k = int(beyond[0])
+        raise InputError(
+            f"{table.path}:{table.lines[k]}: target x,y,z {position[k].tolist()} m is beyond "
+            f"+-{MAX_COORDINATE_M:g} m from the frame's origin (a corrupt value?)"
+        )
     return Targets(
-        position=table.columns(POSITION_COLUMNS) * UNITS[unit],
+        position=position,
         rotation=rotation,
         seed=seed,
         direction=direction,
