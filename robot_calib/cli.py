@@ -25,10 +25,10 @@ from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.kinematics.description import (
     RobotDescription,
     available_robots,
-    load_robot,
     with_joint_names,
     with_payload,
 )
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import PAIR_TOLERANCE_S
 from robot_calib.pipeline import (
     DEFAULT_PLAN,

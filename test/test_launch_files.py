@@ -28,7 +28,7 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 
 from robot_calib.errors import InputError
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.messages import TRACKER_FRAME
 from robot_calib.pipeline import calibrate_recording, read_bags
 

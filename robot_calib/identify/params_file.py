@@ -18,8 +18,9 @@ from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
 from robot_calib.identify.correction_structured import LearnedCorrection, correction_from_dict
-from robot_calib.kinematics.description import RobotDescription, load_robot, with_payload
+from robot_calib.kinematics.description import RobotDescription, with_payload
 from robot_calib.kinematics.frames import matrix_to_rpy
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.kinematics.urdf import description_from_text, is_urdf_reference
 from robot_calib.messages import target_topic
