@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from robot_calib.diagnose.diagnosis import Diagnosis
     from robot_calib.diagnose.html_report import ModelErrors
     from robot_calib.diagnose.ladder import Ladder
-    from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.calibration import Calibration
     from robot_calib.identify.latency import StreamCalibration
     from robot_calib.measurements import Recording
     from robot_calib.sim.stream import StreamOptions

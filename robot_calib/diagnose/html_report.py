@@ -37,7 +37,8 @@ from robot_calib.diagnose.noise import noise_basis
 from robot_calib.diagnose.report import unobservable
 from robot_calib.diagnose.signatures import FAMILIES, ArcSignature, JointTerms, ordinal
 from robot_calib.errors import InputError
-from robot_calib.identify.calibrate import Calibration, calibrate
+from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.params_file import fixed_reasons
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements import Recording
