@@ -34,7 +34,7 @@ import json, resource, sys, time, hashlib
 from pathlib import Path
 import numpy as np
 from robot_calib.bag import mcap_reader, read
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 if sys.argv[2] == "each":  # the reader before issue 23: every message through mcap_ros2
     mcap_reader.BagReader.channel_messages = lambda self, topics: None
 robot, bag = load_robot("ur10"), Path(sys.argv[1])

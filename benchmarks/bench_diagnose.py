@@ -25,7 +25,7 @@ from robot_calib.diagnose.diagnosis import diagnose
 from robot_calib.effects.backlash import Backlash
 from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.effects.thermal_drift import ThermalDrift
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 
 TARGET_S = 10.0
 

@@ -9,99 +9,11 @@ collects /joint_states and /laser_tracker/point and solves on
 /calibrator/solve, or `solve_after_idle_s` after the last point. Results are latched
 (msgs_doc/calibrator.md); rviz:=true starts RViz with rviz/robot_calib.rviz (markers of
 the identified axes, circles, measured points and residuals, fixed frame laser_tracker).
-msgs_doc/launch.md.
+msgs_doc/launch.md; what it starts: robot_calib/nodes/launch_support.py.
 """
 
-from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
-from launch.conditions import IfCondition
-from launch.substitutions import (
-    EqualsSubstitution,
-    LaunchConfiguration,
-    NotEqualsSubstitution,
-    PathJoinSubstitution,
-)
-from launch_ros.actions import Node
-from launch_ros.parameter_descriptions import ParameterValue
-from launch_ros.substitutions import FindPackageShare
-
-PACKAGE = "robot_calib"
+from robot_calib.nodes.launch_support import CALIBRATOR, launch_description
 
 
-def generate_launch_description() -> LaunchDescription:
-    params_file = LaunchConfiguration("params_file")
-    bags = LaunchConfiguration("bags")
-    # string parameters go through ParameterValue(value_type=str): launch_ros reads a bare
-    # launch argument as YAML ('' -> null, which it refuses)
-    common = {
-        "model": ParameterValue(LaunchConfiguration("model"), value_type=str),
-        "robot": ParameterValue(LaunchConfiguration("robot"), value_type=str),
-        "output": ParameterValue(LaunchConfiguration("output"), value_type=str),
-        "diagnose": LaunchConfiguration("diagnose"),
-    }
-    return LaunchDescription(
-        [
-            DeclareLaunchArgument(
-                "params_file",
-                default_value=PathJoinSubstitution(
-                    [FindPackageShare(PACKAGE), "config", "robot_calib.yaml"]
-                ),
-                description="parameters YAML of the nodes (the arguments below win)",
-            ),
-            DeclareLaunchArgument(
-                "bags",
-                default_value="",
-                description="YAML list of calibration bags, e.g. \"['run.mcap']\"; '' = live mode",
-            ),
-            DeclareLaunchArgument(
-                "model", default_value="geometric", description="model of the ladder to fit"
-            ),
-            DeclareLaunchArgument(
-                "robot", default_value="kr5_sixx_r650", description="built-in robot, YAML, URDF"
-            ),
-            DeclareLaunchArgument(
-                "output", default_value="", description="also write PARAMS.json here"
-            ),
-            DeclareLaunchArgument(
-                "diagnose", default_value="false", description="also run the diagnosis"
-            ),
-            DeclareLaunchArgument(
-                "solve_after_idle_s",
-                default_value="0.0",
-                description="live: solve this long after the last point [s]; 0 = on request",
-            ),
-            DeclareLaunchArgument(
-                "rviz", default_value="false", description="start RViz with robot_calib.rviz"
-            ),
-            Node(  # bag mode
-                package=PACKAGE,
-                executable="calibrator",
-                output="screen",
-                condition=IfCondition(NotEqualsSubstitution(bags, "")),
-                parameters=[params_file, {**common, "bags": bags}],
-            ),
-            Node(  # live mode (an empty list is no launch_ros parameter value: not passed)
-                package=PACKAGE,
-                executable="calibrator",
-                output="screen",
-                condition=IfCondition(EqualsSubstitution(bags, "")),
-                parameters=[
-                    params_file,
-                    {
-                        **common,
-                        "solve_after_idle_s": LaunchConfiguration("solve_after_idle_s"),
-                    },
-                ],
-            ),
-            Node(
-                package="rviz2",
-                executable="rviz2",
-                output="screen",
-                condition=IfCondition(LaunchConfiguration("rviz")),
-                arguments=[
-                    "-d",
-                    PathJoinSubstitution([FindPackageShare(PACKAGE), "rviz", "robot_calib.rviz"]),
-                ],
-            ),
-        ]
-    )
+def generate_launch_description():  # -> launch.LaunchDescription
+    return launch_description(CALIBRATOR)

@@ -25,10 +25,10 @@ from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.kinematics.description import (
     RobotDescription,
     available_robots,
-    load_robot,
     with_joint_names,
     with_payload,
 )
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import PAIR_TOLERANCE_S
 from robot_calib.pipeline import (
     DEFAULT_PLAN,
@@ -144,7 +144,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     bag, calibrate the models of the ladder, score them on the hold-out poses, diagnose.
     Every run writes a new folder under --output."""
     from robot_calib import pipeline
-    from robot_calib.identify.params_file import summary
+    from robot_calib.identify.calibration import summary
     from robot_calib.sim.plans import check_plan
 
     robot = load_robot(args.robot)
@@ -291,7 +291,8 @@ def _log(message: str) -> None:
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """Identify a model from bags; write PARAMS.json; print a summary in mm/deg."""
     from robot_calib import pipeline
-    from robot_calib.identify.params_file import summary, write_json_atomic
+    from robot_calib.identify.calibration import summary
+    from robot_calib.identify.params_file import write_json_atomic
 
     robot = _robot(args)
     output = pipeline.output_path(args.output, "PARAMS.json", args.bags, args.force)
@@ -835,7 +836,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from robot_calib.atomic import write_text_atomic
     from robot_calib.export import FORMATS
     from robot_calib.export.base import correction_lines
-    from robot_calib.identify.params_file import load_calibration
+    from robot_calib.identify.calibration import load_calibration
 
     cal = load_calibration(args.params)
     _plausible_or_forced(cal.implausible, args)

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from robot_calib.diagnose.diagnosis import Diagnosis
     from robot_calib.diagnose.html_report import ModelErrors
     from robot_calib.diagnose.ladder import Ladder
-    from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.calibration import Calibration
     from robot_calib.identify.latency import StreamCalibration
     from robot_calib.measurements import Recording
     from robot_calib.sim.stream import StreamOptions
@@ -82,7 +82,7 @@ def simulation_world(
         The simulated truth: model (the robot with the effects), truth (every true
         parameter value, SI), noise, tracker options (latency, dropout), timing, seed.
     """
-    from robot_calib.kinematics.description import load_robot
+    from robot_calib.kinematics.loader import load_robot
     from robot_calib.sim.world import build_world, load_world, parse_sim_effect, with_effect
 
     if world is None and robot not in (None, DEFAULT_ROBOT):
@@ -705,7 +705,7 @@ def run(
             The self-contained HTML report beside it (diagnosis.html).
     """
     from robot_calib.effects import MAIN_JOB_EFFECTS
-    from robot_calib.kinematics.description import load_robot
+    from robot_calib.kinematics.loader import load_robot
     from robot_calib.sim.plans import check_plan
 
     description = load_robot(robot)  # every input checked before anything is written

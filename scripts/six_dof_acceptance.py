@@ -15,7 +15,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from robot_calib.identify.calibrate import Calibration, calibrate
+from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.calibration import Calibration
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import recording_from_arrays
 from robot_calib.model import absorb_base_offsets, target_parameters, tool_rotation_parameters

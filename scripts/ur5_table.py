@@ -32,7 +32,7 @@ from robot_calib.bag.csv_import import (
 from robot_calib.bag.read import read_recording
 from robot_calib.diagnose.diagnosis import diagnose
 from robot_calib.identify.calibrate import calibrate
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 
 DATA = Path(__file__).resolve().parents[1] / "datasets" / "ur5_jacobi2025"
 GRID, RANDOM = "3D_UR5_uncalibrated_grid_cleaned.csv", "3D_UR5_uncalibrated_random_cleaned.csv"

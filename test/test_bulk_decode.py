@@ -21,7 +21,7 @@ from robot_calib.bag.csv_import import (
 )
 from robot_calib.bag.ros2_formats import typestore
 from robot_calib.errors import BagError
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.messages import (
     JOINT_STATE_TYPE,
     JOINT_STATES_TOPIC,

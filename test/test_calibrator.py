@@ -30,7 +30,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from robot_calib.bag import BagReader
 from robot_calib.bag.read import read_recording
 from robot_calib.errors import InputError
-from robot_calib.identify.calibrate import Calibration
+from robot_calib.identify.calibration import Calibration
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import recording_from_stream
 from robot_calib.messages import (

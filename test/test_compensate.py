@@ -17,7 +17,8 @@ from robot_calib.compensate import compensate_commands, compensate_targets
 from robot_calib.compensate.solve import nominal_counterpart
 from robot_calib.compensate.targets import Targets, goals_in_base
 from robot_calib.effects import parse_effect
-from robot_calib.identify.calibrate import Calibration, calibrate
+from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.params_file import write_json_atomic
 from robot_calib.ik import first_tool2flange, tool2base
 from robot_calib.measurements import Recording, recording_from_arrays

@@ -20,7 +20,8 @@ from robot_calib.compensate.solve import nominal_counterpart
 from robot_calib.diagnose.ladder import kfold_parameters
 from robot_calib.diagnose.learnable import corrected_heldout, learnable_bound
 from robot_calib.errors import InputError
-from robot_calib.identify.calibrate import Calibration, calibrate
+from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.correction import ResidualCorrection, fit_correction
 from robot_calib.identify.correction_structured import StructuredCorrection
 from robot_calib.ik import first_tool2flange, tool2base

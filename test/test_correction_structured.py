@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from robot_calib.errors import InputError
-from robot_calib.identify.calibrate import Calibration, calibrate
+from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.correction_structured import (
     StructuredCorrection,
     correction_from_dict,

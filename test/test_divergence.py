@@ -28,7 +28,8 @@ import numpy as np
 import pytest
 
 from robot_calib.effects import EFFECTS, make_effect, vocabulary
-from robot_calib.identify.calibrate import Calibration, calibrate
+from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.canonical import VERIFY_TOLERANCE_M, canonical_form
 from robot_calib.measurements import Recording
 from robot_calib.sim.scenarios import Scenario, ur10_random

@@ -25,7 +25,8 @@ from robot_calib.effects import (
     vocabulary,
 )
 from robot_calib.identify.calibrate import calibrate, parse_model
-from robot_calib.identify.params_file import load_calibration, load_params, write_json_atomic
+from robot_calib.identify.calibration import load_calibration
+from robot_calib.identify.params_file import load_params, write_json_atomic
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import recording_from_arrays
 from robot_calib.model import KinematicModel

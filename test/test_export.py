@@ -22,8 +22,8 @@ from robot_calib.accuracy import Accuracy
 from robot_calib.effects import make_effect
 from robot_calib.errors import InputError
 from robot_calib.export import FORMATS
-from robot_calib.identify.calibrate import Calibration
-from robot_calib.kinematics.description import load_robot
+from robot_calib.identify.calibration import Calibration
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses

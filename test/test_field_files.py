@@ -436,7 +436,7 @@ def test_capture_interrupted_mid_plan_exits_130_with_its_summary(tmp_path: Path)
     assert measured >= 3 and str(bag) in summary, summary
     assert re.search(r"stopped with \d+ pose\(s\) to go .*resume", summary), summary
     from robot_calib.bag.read import read_recording
-    from robot_calib.kinematics.description import load_robot
+    from robot_calib.kinematics.loader import load_robot
 
     assert len(read_recording([bag], load_robot("kr5_sixx_r650"))) == measured
 

@@ -128,7 +128,7 @@ def test_three_targets_per_pose_are_no_stream(tmp_path: Path) -> None:
 def measured_rows(tmp_path_factory: pytest.TempPathFactory) -> list[list[float]]:
     """60 random poses of a simulated KR5: [q1..q6 rad, x, y, z m] per row."""
     from robot_calib.bag.read import read_recording
-    from robot_calib.kinematics.description import load_robot
+    from robot_calib.kinematics.loader import load_robot
 
     bag = tmp_path_factory.mktemp("rows") / "r60.mcap"
     run = robot_calib("simulate", "--plan", "random", "--n-random", "60", "--seed", "3", "-o",

@@ -16,7 +16,7 @@ from robot_calib.accuracy import accuracy
 from robot_calib.bag.csv_import import PRESETS, CsvFormat, read_measurement_csv
 from robot_calib.bag.read import read_recording
 from robot_calib.identify.calibrate import calibrate
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "datasets" / "ur5_jacobi2025"

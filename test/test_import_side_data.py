@@ -11,7 +11,7 @@ from cli_runner import robot_calib
 
 from robot_calib.bag import BagReader
 from robot_calib.bag.read import read_recording
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.messages import stamp_to_ns
 
 

@@ -22,7 +22,8 @@ from robot_calib.accuracy import accuracy
 from robot_calib.errors import RobotDescriptionError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.params_file import load_params
-from robot_calib.kinematics.description import ROBOTS_DIR, load_robot
+from robot_calib.kinematics.description import ROBOTS_DIR
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import find_sweeps
 from robot_calib.model import KinematicModel, absorb_base_offsets
 from robot_calib.poses import Poses

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.dh import DHTable, chain, link_transforms
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.model import KinematicModel, geometric_parameters
 from robot_calib.poses import Poses
 

@@ -1,21 +1,27 @@
 """The files for a ROS install: launch/*.launch.py, config/robot_calib.yaml, rviz/robot_calib.rviz.
 
 `launch` and `launch_ros` are not installable here (not in the Jazzy wheels), so the
-launch files are checked as far as that allows: they compile; parsed with `ast`, every
-Node of this package names a console script of setup.py and passes only parameters that
-the real node declares (the nodes are instantiated in a private rclpy context), with launch
-argument defaults of the declared types; every launch configuration used is declared;
-every package file referenced exists. Where `launch` is importable (a ROS install), each
-description is also built. The parameters YAML holds every node's declared parameters at
-their real defaults and loads through rcl's own parser (`--params-file`). colcon installs
-these files: test/test_package_layout.py.
+launch files are checked as far as that allows: they compile and import only
+robot_calib.nodes.launch_support, whose specs (the pure part: arguments, defaults, the
+parameters of each node) are checked against the real nodes (instantiated in a private
+rclpy context): every node of this package names a console script of setup.py and is given
+only parameters it declares, with launch argument defaults of the declared types; every
+launch argument used is declared; every package file referenced exists. The builder runs
+against stand-ins of launch/launch_ros with the Jazzy constructors' signatures; where
+`launch_ros` is importable (a ROS install), each description is also built for real. The
+parameters YAML holds every node's declared parameters at their real defaults and loads
+through rcl's own parser (`--params-file`). colcon installs these files:
+test/test_package_layout.py.
 """
 
 from __future__ import annotations
 
 import ast
+import inspect
 import math
-import re
+import subprocess
+import sys
+import types
 from pathlib import Path
 from typing import Any
 
@@ -28,8 +34,18 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 
 from robot_calib.errors import InputError
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.messages import TRACKER_FRAME
+from robot_calib.nodes import launch_support
+from robot_calib.nodes.launch_support import (
+    SIM_GRAPH,
+    SPECS,
+    FromArgument,
+    LaunchSpec,
+    ShareFile,
+    Value,
+    When,
+)
 from robot_calib.pipeline import calibrate_recording, read_bags
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -217,188 +233,260 @@ def test_required_parameters_are_refused_empty(context: Context, tmp_path: Path)
 # --- the launch files ----------------------------------------------------------------------
 
 
-def call_name(call: ast.Call) -> str:
-    return getattr(call.func, "id", getattr(call.func, "attr", ""))
+def imports_of(path: Path) -> list[tuple[str, list[str]]]:
+    """Every import of a file, anywhere in it: (module, names)."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            out.append((node.module, [a.name for a in node.names]))
+        elif isinstance(node, ast.Import):
+            out += [(a.name, []) for a in node.names]
+    return out
 
 
-def keyword(call: ast.Call, name: str) -> ast.expr | None:
-    return next((k.value for k in call.keywords if k.arg == name), None)
+def test_launch_files_import_only_the_helper_and_start_its_spec() -> None:
+    """Each launch file compiles, imports robot_calib.nodes.launch_support and nothing else
+    (not launch, not launch_ros: the helper does, when the description is built) and builds
+    the helper's spec of its own name."""
+    assert {p.name for p in LAUNCH_FILES} == set(SPECS) == {
+        "sim_graph.launch.py", "capture.launch.py", "calibrator.launch.py"
+    }  # fmt: skip
+    for path in LAUNCH_FILES:
+        code = compile(path.read_text(), str(path), "exec")
+        assert "generate_launch_description" in code.co_names
+        ((module, names),) = imports_of(path)
+        assert module == "robot_calib.nodes.launch_support", path.name
+        (spec,) = [n for n in names if n != "launch_description"]
+        assert getattr(launch_support, spec) is SPECS[path.name], path.name
+        assert f"return launch_description({spec})" in path.read_text(), path.name
 
 
-def first_argument(call: ast.Call) -> str:
-    arg = call.args[0] if call.args else keyword(call, "name")
-    assert isinstance(arg, ast.Constant) and isinstance(arg.value, str), ast.unparse(call)
-    return arg.value
+def test_importing_the_helper_needs_no_launch_package() -> None:
+    probe = (
+        "import sys, robot_calib.nodes.launch_support\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('launch', 'launch_ros')))"
+    )
+    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         check=True, cwd=ROOT / "test")  # fmt: skip
+    assert run.stdout.strip() == "[]"
 
 
-class LaunchFile:
-    """What a launch description declares and starts, read with ast."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.tree = ast.parse(path.read_text(), filename=str(path))
-        calls = [n for n in ast.walk(self.tree) if isinstance(n, ast.Call)]
-        self.arguments: dict[str, str | None] = {}  # launch argument -> default value
-        for call in calls:
-            if call_name(call) == "DeclareLaunchArgument":
-                default = keyword(call, "default_value")
-                value = default.value if isinstance(default, ast.Constant) else None
-                self.arguments[first_argument(call)] = value
-        self.configurations = {
-            first_argument(c) for c in calls if call_name(c) == "LaunchConfiguration"
-        }
-        self.nodes = [c for c in calls if call_name(c) == "Node"]
-        # simple assignments (PACKAGE = "robot_calib", params_file = LaunchConfiguration(...))
-        self.names = {
-            a.targets[0].id: a.value
-            for a in ast.walk(self.tree)
-            if isinstance(a, ast.Assign) and len(a.targets) == 1
-            and isinstance(a.targets[0], ast.Name)
-        }  # fmt: skip
-        self.share_files = [
-            [a.value for a in c.args[0].elts[1:] if isinstance(a, ast.Constant)]
-            for c in calls
-            if call_name(c) == "PathJoinSubstitution"
-            and isinstance(c.args[0], ast.List)
-            and "FindPackageShare" in ast.unparse(c.args[0].elts[0])
-        ]
-
-    def resolve(self, expr: ast.expr | None) -> ast.expr:
-        """`expr`, a name replaced by what it was assigned."""
-        assert expr is not None
-        while isinstance(expr, ast.Name) and expr.id in self.names:
-            expr = self.names[expr.id]
-        return expr
-
-    def constant(self, call: ast.Call, name: str) -> str:
-        value = self.resolve(keyword(call, name))
-        assert isinstance(value, ast.Constant), f"{self.path.name}: {ast.unparse(call)}"
-        return str(value.value)
-
-    def nonempty_arguments(self, call: ast.Call) -> set[str]:
-        """Launch arguments the Node's condition requires to be non-empty
-        (`condition=IfCondition(NotEqualsSubstitution(LaunchConfiguration(x), ''))`)."""
-        condition = keyword(call, "condition")
-        if not (isinstance(condition, ast.Call) and call_name(condition) == "IfCondition"):
-            return set()
-        test = condition.args[0]
-        if not (isinstance(test, ast.Call) and call_name(test) == "NotEqualsSubstitution"):
-            return set()
-        left, right = (self.resolve(a) for a in test.args)
-        match = re.fullmatch(ARGUMENT, ast.unparse(left))
-        return {match.group(1)} if match and ast.unparse(right) == "''" else set()
-
-    def parameters(self, call: ast.Call) -> tuple[ast.expr, dict[str, ast.expr]]:
-        """A Node's `parameters=[FILE, {name: value, **more}, ...]`: FILE and the dicts'
-        entries (names resolved)."""
-        params = self.resolve(keyword(call, "parameters"))
-        assert isinstance(params, ast.List), f"{self.path.name}: {ast.unparse(call)}"
-        entries: dict[str, ast.expr] = {}
-
-        def add(d: ast.expr) -> None:
-            d = self.resolve(d)
-            assert isinstance(d, ast.Dict), f"{self.path.name}: {ast.unparse(d)}"
-            for key, value in zip(d.keys, d.values):
-                if key is None:  # **more
-                    add(value)
-                else:
-                    assert isinstance(key, ast.Constant) and isinstance(key.value, str)
-                    entries[key.value] = self.resolve(value)
-
-        for entry in params.elts[1:]:
-            add(entry)
-        return self.resolve(params.elts[0]), entries
-
-
-ARGUMENT = r"LaunchConfiguration\('(\w+)'\)"  # a launch argument's value, as ast unparses it
-
-
-def typed_value(value: ast.expr, launch: LaunchFile, nonempty: set[str]) -> tuple[Any, str]:
-    """The value a parameter gets and how: a constant, or a launch argument's default as
-    launch_ros types it (yaml.safe_load of the text; ParameterValue(value_type=str): text).
-    None where there is no default to check (a required argument, or one in `nonempty`: the
-    Node's condition keeps its default out)."""
-    if isinstance(value, ast.Constant):
-        return value.value, "constant"
-    text = ast.unparse(value)
-    match = re.fullmatch(ARGUMENT, text)
-    forced = re.fullmatch(rf"ParameterValue\({ARGUMENT}, value_type=str\)", text)
-    if forced:
-        return launch.arguments[forced.group(1)], f"argument {forced.group(1)} as text"
-    assert match, f"{launch.path.name}: parameter value {text} is not checked by this test"
-    default = launch.arguments[match.group(1)]
-    if default is None or match.group(1) in nonempty:  # no default reaches the node
-        return None, f"argument {match.group(1)} (given)"
+def typed_default(value: Value, spec: LaunchSpec, when: When | None) -> tuple[Any, str]:
+    """The value a parameter gets by default and how: a constant, or a launch argument's
+    default as launch_ros types it (yaml.safe_load of the text; `text`: the text itself).
+    None where no default reaches the node (a required argument, or one the node's
+    condition requires to be given)."""
+    if not isinstance(value, FromArgument):
+        return value, "constant"
+    arguments = {a.name: a.default for a in spec.all_arguments}
+    default = arguments[value.argument]
+    if default is None or (when == When(value.argument, "given")):
+        return None, f"argument {value.argument} (given)"
+    assert isinstance(default, str)
+    if value.text:
+        return default, f"argument {value.argument} as text"
     loaded = yaml.safe_load(default)
     # launch_ros (evaluate_parameter_dict) refuses None ('') and empty or mixed lists
     assert isinstance(loaded, bool | int | float | str) or (
         isinstance(loaded, list) and loaded and len({type(x) for x in loaded}) == 1
-    ), f"{launch.path.name}: launch_ros refuses {match.group(1)}'s default {default!r}"
-    return loaded, f"argument {match.group(1)}"
+    ), f"{spec.name}: launch_ros refuses {value.argument}'s default {default!r}"
+    return loaded, f"argument {value.argument}"
 
 
-def test_launch_files_exist_and_compile() -> None:
-    names = {p.name for p in LAUNCH_FILES}
-    assert names == {"sim_graph.launch.py", "capture.launch.py", "calibrator.launch.py"}
-    for path in LAUNCH_FILES:
-        code = compile(path.read_text(), str(path), "exec")
-        assert "generate_launch_description" in code.co_names
-
-
-def test_launch_files_start_our_executables_with_declared_parameters(
+def test_launch_specs_start_our_executables_with_declared_parameters(
     defaults: dict[str, dict[str, Any]],
 ) -> None:
+    """The helper's pure part against the real nodes: every node of this package is a
+    console script of setup.py, every parameter it is given is one the node declares, of
+    the declared type at the launch argument's default; every argument used is declared
+    once; every package file named exists."""
     nodes = setup_nodes()
     started: set[str] = set()
-    for path in LAUNCH_FILES:
-        launch = LaunchFile(path)
-        assert launch.nodes, path.name
-        undeclared = launch.configurations - set(launch.arguments)
-        assert not undeclared, f"{path.name}: launch configurations {undeclared} not declared"
-        for parts in launch.share_files:  # FindPackageShare('robot_calib') / DIR / FILE
-            assert (ROOT.joinpath(*parts)).is_file(), f"{path.name}: no {'/'.join(parts)}"
-        for call in launch.nodes:
-            package = launch.constant(call, "package")
-            executable = launch.constant(call, "executable")
-            if package == "rviz2":
-                assert executable == "rviz2"
-                assert ["rviz", RVIZ.name] in launch.share_files, "rviz2 without our config"
+    for spec in SPECS.values():
+        names = [a.name for a in spec.all_arguments]
+        assert len(names) == len(set(names)) and names[0] == "params_file", spec.name
+        for argument in spec.all_arguments:
+            if isinstance(argument.default, ShareFile):
+                assert (ROOT / argument.default.folder / argument.default.name).is_file()
+        for node in spec.nodes:
+            used = [v.argument for v in node.parameters.values() if isinstance(v, FromArgument)]
+            used += [node.when.argument] if node.when else []
+            assert set(used) <= set(names), f"{spec.name}: {set(used) - set(names)} undeclared"
+            for item in node.arguments:
+                if isinstance(item, ShareFile):
+                    assert (ROOT / item.folder / item.name).is_file(), item
+            if node.package == "rviz2":
+                assert node.executable == "rviz2" and not node.parameters
+                assert ShareFile("rviz", RVIZ.name) in node.arguments, "rviz2 without our config"
                 continue
-            assert package == PACKAGE, f"{path.name}: unknown package {package}"
-            assert executable in nodes, f"{path.name}: {executable} is not in setup.py NODES"
-            assert keyword(call, "name") is None  # the YAML's sections are the default names
-            started.add(executable)
-            first, entries = launch.parameters(call)
-            # the YAML first, then the launch's own values (they win)
-            assert ast.unparse(first) == "LaunchConfiguration('params_file')", path.name
-            for name, value in entries.items():
-                declared = defaults[executable]
-                assert name in declared, f"{path.name}: {executable} declares no {name!r}"
-                got, how = typed_value(value, launch, launch.nonempty_arguments(call))
+            assert node.package == PACKAGE, f"{spec.name}: unknown package {node.package}"
+            assert node.executable in nodes, f"{spec.name}: {node.executable} not in setup.py"
+            started.add(node.executable)
+            declared = defaults[node.executable]
+            for name, value in node.parameters.items():
+                assert name in declared, f"{spec.name}: {node.executable} declares no {name!r}"
+                got, how = typed_default(value, spec, node.when)
                 if got is None:
                     continue
                 want = type(declared[name])
                 ok = isinstance(got, want) and not (want is int and isinstance(got, bool))
                 if want is float:  # declare() takes an int for a float parameter
                     ok = isinstance(got, int | float) and not isinstance(got, bool)
-                assert ok, f"{path.name}: {executable}.{name} = {got!r} ({how}), want {want}"
+                assert ok, f"{spec.name}: {node.executable}.{name} = {got!r} ({how}), want {want}"
     assert started == {"sim_robot", "sim_tracker", "recorder", "capture", "calibrator"}
 
 
 def test_sim_graph_launch_waits_as_the_recipe_does() -> None:
     """sim_robot waits for its two readers, sim_tracker for the recorder (issue 16)."""
-    launch = LaunchFile(ROOT / "launch" / "sim_graph.launch.py")
-    assert launch.arguments["wait_for_subscribers"] == "2"
-    text = {launch.constant(c, "executable"): ast.unparse(c) for c in launch.nodes}
-    assert (
-        "'wait_for_subscribers': LaunchConfiguration('wait_for_subscribers')" in text["sim_robot"]
-    )
-    assert "'wait_for_subscribers': 1" in text["sim_tracker"]
-    for executable in ("sim_robot", "sim_tracker"):  # one world for both
-        assert (
-            "'world': ParameterValue(LaunchConfiguration('world'), value_type=str)"
-            in text[executable]
-        )
+    arguments = {a.name: a.default for a in SIM_GRAPH.all_arguments}
+    assert arguments["wait_for_subscribers"] == "2"
+    nodes = {n.executable: n for n in SIM_GRAPH.nodes}
+    robot, tracker = nodes["sim_robot"].parameters, nodes["sim_tracker"].parameters
+    assert robot["wait_for_subscribers"] == FromArgument("wait_for_subscribers")
+    assert tracker["wait_for_subscribers"] == 1
+    assert robot["world"] == tracker["world"] == FromArgument("world", text=True)  # one world
+    assert nodes["sim_robot"].shutdown_after_s == 1.0  # the last points reach the bag
+
+
+# Stand-ins for the parts of launch and launch_ros the helper uses, with the constructors'
+# signatures of ROS 2 Jazzy (launch 3.4, launch_ros 0.26): a wrong keyword fails as it would
+# there. Node's **kwargs go to launch.actions.ExecuteProcess / Action.
+EXECUTE_PROCESS_KEYWORDS = {
+    *("output", "condition", "respawn", "respawn_delay", "emulate_tty", "sigterm_timeout"),
+    *("sigkill_timeout", "on_exit", "cwd", "env"),
+}
+
+
+def _signatures() -> dict[str, dict[str, Any]]:
+    def launch_description(initial_entities=None, *, deprecated_reason=None): ...
+    def declare_launch_argument(
+        name, *, default_value=None, description=None, choices=None, **kwargs
+    ): ...
+    def emit_event(*, event, **kwargs): ...
+    def register_event_handler(event_handler, **kwargs): ...
+    def timer_action(*, period, actions, cancel_on_shutdown=True, **kwargs): ...
+    def if_condition(predicate_expression): ...
+    def on_process_exit(*, target_action=None, on_exit, **kwargs): ...
+    def shutdown(*, reason="reason not given", **kwargs): ...
+    def equals(left, right): ...
+    def launch_configuration(variable_name, *, default=None): ...
+    def path_join(substitutions): ...
+    def node(
+        *,
+        executable,
+        package=None,
+        name=None,
+        namespace=None,
+        exec_name=None,
+        parameters=None,
+        remappings=None,
+        ros_arguments=None,
+        arguments=None,
+        **kwargs,
+    ): ...
+    def parameter_value(value, *, value_type=None): ...
+    def find_package_share(package): ...
+
+    return {
+        "launch": {"LaunchDescription": launch_description},
+        "launch.actions": {"DeclareLaunchArgument": declare_launch_argument,
+                           "EmitEvent": emit_event, "RegisterEventHandler": register_event_handler,
+                           "TimerAction": timer_action},
+        "launch.conditions": {"IfCondition": if_condition},
+        "launch.event_handlers": {"OnProcessExit": on_process_exit},
+        "launch.events": {"Shutdown": shutdown},
+        "launch.substitutions": {"EqualsSubstitution": equals, "NotEqualsSubstitution": equals,
+                                 "LaunchConfiguration": launch_configuration,
+                                 "PathJoinSubstitution": path_join},
+        "launch_ros.actions": {"Node": node},
+        "launch_ros.parameter_descriptions": {"ParameterValue": parameter_value},
+        "launch_ros.substitutions": {"FindPackageShare": find_package_share},
+    }  # fmt: skip
+
+
+class StandIn:
+    """An object of a stand-in class: its class name and the arguments it was given."""
+
+    def __init__(self, kind: str, given: dict[str, Any]) -> None:
+        self.kind, self.given = kind, given
+
+
+def stand_in_modules() -> dict[str, types.ModuleType]:
+    modules = {}
+    for module_name, classes in _signatures().items():
+        module = types.ModuleType(module_name)
+        for class_name, function in classes.items():
+            signature = inspect.signature(function)
+
+            def make(*args: Any, _s: Any = signature, _n: str = class_name, **kw: Any) -> StandIn:
+                bound = _s.bind(*args, **kw)  # TypeError as the real constructor
+                given = {k: v for k, v in bound.arguments.items() if k != "kwargs"}
+                given.update(bound.arguments.get("kwargs", {}))
+                return StandIn(_n, given)
+
+            setattr(module, class_name, make)
+        modules[module_name] = module
+    return modules
+
+
+def render(x: Any) -> Any:  # noqa: ANN401 - any part of a description
+    """A description as plain data: (class, {argument: value}) for every launch object."""
+    if isinstance(x, StandIn):
+        return (x.kind, {k: render(v) for k, v in x.given.items()})
+    if isinstance(x, list | tuple):
+        return [render(v) for v in x]
+    if isinstance(x, dict):
+        return {k: render(v) for k, v in x.items()}
+    return x
+
+
+def built_with_stand_ins(path: Path, monkeypatch: pytest.MonkeyPatch) -> Any:  # noqa: ANN401
+    import runpy
+
+    for name, module in stand_in_modules().items():
+        monkeypatch.setitem(sys.modules, name, module)
+    return runpy.run_path(str(path))["generate_launch_description"]()
+
+
+def test_launch_descriptions_build_with_stand_ins_of_the_jazzy_api(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The builder against constructors of launch/launch_ros's signatures: every launch
+    file builds; our nodes load the YAML first, then their parameters; string parameters as
+    text; the shutdown after sim_robot (1 s later) and capture (at once)."""
+    config = ("PathJoinSubstitution", {"substitutions": [
+        ("FindPackageShare", {"package": PACKAGE}), "config", "robot_calib.yaml"]})  # fmt: skip
+    text = {}
+    for path in LAUNCH_FILES:
+        (kind, given) = render(built_with_stand_ins(path, monkeypatch))
+        assert kind == "LaunchDescription", path.name
+        entities = given["initial_entities"]
+        first = entities[0]
+        assert first == ("DeclareLaunchArgument", {
+            "name": "params_file", "default_value": config,
+            "description": "parameters YAML of the nodes (the arguments below win)"})  # fmt: skip
+        for kind, args in entities:
+            if kind == "Node":
+                assert set(args) - {"package", "executable", "parameters", "arguments"} <= (
+                    EXECUTE_PROCESS_KEYWORDS
+                ), args
+                assert args["output"] == "screen"
+                if args["package"] == PACKAGE:
+                    yaml_file, own = args["parameters"]
+                    assert yaml_file == ("LaunchConfiguration", {"variable_name": "params_file"})
+                    assert isinstance(own, dict) and own, args
+        text[path.name] = repr(entities)
+    assert "('ParameterValue', {'value': ('LaunchConfiguration', {'variable_name': 'plan'}), " \
+        "'value_type': <class 'str'>})" in text["sim_graph.launch.py"]  # fmt: skip
+    assert "'period': 1.0" in text["sim_graph.launch.py"]
+    assert "'reason': 'plan done'" in text["sim_graph.launch.py"]
+    assert "'reason': 'capture ended'" in text["capture.launch.py"]
+    assert "TimerAction" not in text["capture.launch.py"]
+    calibrator = text["calibrator.launch.py"]  # bag mode if bags given, else live mode
+    assert "('NotEqualsSubstitution', {'left': ('LaunchConfiguration', {'variable_name': " \
+        "'bags'}), 'right': ''})" in calibrator  # fmt: skip
+    assert "('EqualsSubstitution', {'left': ('LaunchConfiguration', {'variable_name': " \
+        "'bags'}), 'right': ''})" in calibrator  # fmt: skip
 
 
 def test_launch_descriptions_build_where_launch_is_installed() -> None:
@@ -440,12 +528,13 @@ def test_rviz_config_shows_what_the_calibrator_publishes(context: Context) -> No
 
 
 def test_package_xml_declares_what_the_launch_files_use() -> None:
+    """The packages the launch files and their helper import (launch, launch_ros), `ros2
+    launch` itself and rviz2 (calibrator.launch.py rviz:=true) are exec_depends."""
     from test_package_layout import package_xml_depends
 
     depends = package_xml_depends()
-    for path in LAUNCH_FILES:
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ImportFrom) and node.module:
-                top = node.module.split(".")[0]
-                assert top in depends, f"{path.name} imports {top}: not in package.xml"
-    assert {"ros2launch", "rviz2"} <= depends  # `ros2 launch`; calibrator.launch.py rviz:=true
+    files = [*LAUNCH_FILES, Path(launch_support.__file__)]
+    tops = {module.split(".")[0] for path in files for module, _ in imports_of(path)}
+    tops -= {PACKAGE, *sys.stdlib_module_names}
+    assert tops == {"launch", "launch_ros"}
+    assert tops | {"ros2launch", "rviz2"} <= depends

@@ -26,7 +26,7 @@ from robot_calib.cli import build_parser
 from robot_calib.diagnose.noise import estimate_noise, noise_basis
 from robot_calib.errors import InputError
 from robot_calib.identify.params_file import in_sample_accuracy, load_params
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import recording_from_arrays
 from robot_calib.predict import read_joints_csv
 from robot_calib.score import IMPLAUSIBLE_HINT, score, score_warnings, write_points_table

@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def sim(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[list[float]]]:
     """60 random poses of a simulated KR5: the bag and its rows [q1..q6 rad, x, y, z m]."""
     from robot_calib.bag.read import read_recording
-    from robot_calib.kinematics.description import load_robot
+    from robot_calib.kinematics.loader import load_robot
 
     bag = tmp_path_factory.mktemp("sim") / "r60.mcap"
     run = robot_calib("simulate", "--plan", "random", "--n-random", "60", "--seed", "3",
@@ -42,7 +42,7 @@ def _bag(path: Path, rows: list[list[float]], order: list[int] | None = None) ->
     from robot_calib.bag.csv_import import joint_state_cdr, point_cdr
     from robot_calib.bag.mcap_writer import BagWriter
     from robot_calib.bag.ros2_formats import typestore
-    from robot_calib.kinematics.description import load_robot
+    from robot_calib.kinematics.loader import load_robot
     from robot_calib.messages import JOINT_STATE_TYPE, JOINT_STATES_TOPIC, POINT_TOPIC, POINT_TYPE
 
     names = load_robot("kr5_sixx_r650").joint_names

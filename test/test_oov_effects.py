@@ -33,7 +33,7 @@ from robot_calib.effects.link_bending import (
 )
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses

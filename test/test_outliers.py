@@ -17,8 +17,8 @@ from test_recording import write_measurements
 from robot_calib.accuracy import accuracy
 from robot_calib.diagnose.diagnosis import diagnose
 from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.calibration import summary
 from robot_calib.identify.fit import fit_model
-from robot_calib.identify.params_file import summary
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses

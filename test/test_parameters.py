@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from robot_calib.errors import ParameterError
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import geometric_parameters
 

@@ -15,7 +15,7 @@ from cli_runner import robot_calib
 from robot_calib.cli import main
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.plan.campaign import planning_problem
 from robot_calib.plan.design import d_optimal
 from robot_calib.plan.evaluate import predict, world_noise_m

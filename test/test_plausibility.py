@@ -16,8 +16,8 @@ import pytest
 
 from robot_calib.effects import make_effect
 from robot_calib.identify.calibrate import calibrate
-from robot_calib.identify.params_file import summary
-from robot_calib.kinematics.description import load_robot
+from robot_calib.identify.calibration import summary
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import recording_from_arrays
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points

@@ -24,7 +24,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from robot_calib.bag.read import read_recording
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.nodes.private_domain import DOMAINS, LOCK_DIR, claim, private_domain
 from robot_calib.nodes.simulate import simulate_bag, stall_cause
 

@@ -17,7 +17,8 @@ from sensor_msgs.msg import JointState
 from robot_calib.bag import BagWriter
 from robot_calib.bag.read import read_recording
 from robot_calib.errors import RobotCalibError
-from robot_calib.kinematics.description import load_robot, with_joint_names
+from robot_calib.kinematics.description import with_joint_names
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import find_sweeps, recording_from_arrays
 from robot_calib.sim.plans import paper_test_plan, random_plan
 

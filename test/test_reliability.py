@@ -57,7 +57,7 @@ WRAPPED = (  # robot_calib with a file-size limit of argv[1] bytes (0: none), as
 def sample_measurements() -> tuple[np.ndarray, np.ndarray]:
     """Readings (n, 6) [rad] and points (n, 3) [m] of the sample bag."""
     from robot_calib.bag.read import read_recording
-    from robot_calib.kinematics.description import load_robot
+    from robot_calib.kinematics.loader import load_robot
 
     rec = read_recording([SAMPLE], load_robot("kr5_sixx_r650"))
     return rec.poses.q, rec.points
@@ -68,7 +68,7 @@ def calibrated_params(folder: Path) -> Path:
     """One PARAMS.json of the sample bag per session."""
     from robot_calib import pipeline
     from robot_calib.identify.params_file import write_json_atomic
-    from robot_calib.kinematics.description import load_robot
+    from robot_calib.kinematics.loader import load_robot
 
     robot = load_robot("kr5_sixx_r650")
     cal, rec = pipeline.calibrate_bags([SAMPLE], robot)

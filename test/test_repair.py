@@ -34,7 +34,7 @@ from robot_calib.bag import BagReader, BagWriter
 from robot_calib.bag.read import read_recording
 from robot_calib.bag.repair import repair_bag
 from robot_calib.errors import BagError
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 
 REPO = Path(__file__).resolve().parents[1]
 SAMPLE = REPO / "bags" / "paper_test3.mcap"  # 290 poses, one chunk

@@ -12,13 +12,8 @@ import pytest
 import yaml
 
 from robot_calib.errors import RobotDescriptionError
-from robot_calib.kinematics.description import (
-    JOINT_KEYS,
-    ROBOT_KEYS,
-    ROBOTS_DIR,
-    available_robots,
-    load_robot,
-)
+from robot_calib.kinematics.description import JOINT_KEYS, ROBOT_KEYS, ROBOTS_DIR, available_robots
+from robot_calib.kinematics.loader import load_robot
 
 REPO = Path(__file__).resolve().parents[1]
 

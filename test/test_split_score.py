@@ -15,7 +15,7 @@ import pytest
 from robot_calib.accuracy import accuracy
 from robot_calib.bag.read import read_recording
 from robot_calib.identify.params_file import load_params
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "bags" / "paper_test3.mcap"

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_calib.kinematics.description import load_robot
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.model import KinematicModel, geometric_parameters
 from robot_calib.poses import Poses
 

@@ -19,8 +19,9 @@ import numpy as np
 import pytest
 
 from robot_calib.errors import RobotDescriptionError
-from robot_calib.kinematics.description import RobotDescription, load_robot
+from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, chain
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.kinematics.urdf import load_urdf
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -299,7 +300,7 @@ def test_cli_calibrate_then_predict_with_a_urdf(tmp_path: Path) -> None:
 def test_a_typo_inside_a_joint_is_an_error(tmp_path: Path) -> None:
     """`<axs>` for `<axis>`: the parser would fall back to the default axis silently."""
     from robot_calib.errors import RobotDescriptionError
-    from robot_calib.kinematics.description import load_robot
+    from robot_calib.kinematics.loader import load_robot
 
     text = (DATA / "kr5_sixx_r650.urdf").read_text().replace("<axis ", "<axs ", 1)
     bad = tmp_path / "typo.urdf"

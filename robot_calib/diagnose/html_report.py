@@ -45,7 +45,8 @@ from robot_calib.diagnose.signatures import (
     signature_removed,
 )
 from robot_calib.errors import InputError
-from robot_calib.identify.calibrate import Calibration, calibrate
+from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.params_file import fixed_reasons
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements import Recording

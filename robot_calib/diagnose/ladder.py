@@ -26,7 +26,8 @@ from robot_calib.diagnose.learnable import (
 )
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
-from robot_calib.identify.calibrate import LEARNED_SUFFIX, Calibration, calibrate, model_name
+from robot_calib.identify.calibrate import calibrate, model_name
+from robot_calib.identify.calibration import LEARNED_SUFFIX, Calibration
 from robot_calib.identify.fit import BLOCK_POSES, PRIOR_ROW, weighted_rows
 from robot_calib.identify.outliers import (
     Outlier,

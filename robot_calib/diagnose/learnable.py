@@ -37,7 +37,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from robot_calib.identify.calibrate import Calibration
+from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.correction import (
     INDUCING,
     MAX_LEARN,

@@ -14,7 +14,7 @@ from robot_calib.kinematics.dh import link_transforms
 from robot_calib.kinematics.frames import Array
 
 if TYPE_CHECKING:
-    from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.calibration import Calibration
 
 _GIMBAL_COS = 1e-9  # |cos(pitch)| below this: roll and yaw turn about one axis, roll := 0
 

@@ -19,7 +19,7 @@ from robot_calib.export.base import Exporter, number
 from robot_calib.model import DH_UNITS
 
 if TYPE_CHECKING:
-    from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.calibration import Calibration
 
 FIELDS = tuple(DH_UNITS)  # theta, d, a, alpha, beta
 HUMAN = {"m": ("mm", 1e3), "rad": ("deg", float(np.degrees(1.0)))}

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 from robot_calib.export.base import Exporter, correction_lines
 
 if TYPE_CHECKING:
-    from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.calibration import Calibration
 
 FORMAT = "robot_calib.export/1"
 

@@ -34,7 +34,7 @@ from robot_calib.export.base import (
 from robot_calib.kinematics.frames import Array, rot_x, rot_y, rot_z
 
 if TYPE_CHECKING:
-    from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.calibration import Calibration
 
 ENTRIES = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
 UR_JOINTS = (

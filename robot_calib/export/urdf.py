@@ -37,7 +37,7 @@ from robot_calib.model import target_parameters
 from robot_calib.poses import PRIMARY_TARGET
 
 if TYPE_CHECKING:
-    from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.calibration import Calibration
 
 EFFORT_LIMIT = 1000.0  # [N m] placeholder: URDF requires one
 VELOCITY_LIMIT = 3.14  # [rad/s] placeholder: URDF requires one

@@ -68,7 +68,7 @@ from robot_calib.kinematics.urdf import (
 from robot_calib.model import KinematicModel, target_parameters
 
 if TYPE_CHECKING:
-    from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.calibration import Calibration
 
 NOMINAL_TOLERANCE_M = 1e-3  # the nominal file's axes farther from the model's: refused
 NOMINAL_TOLERANCE_RAD = 1e-3

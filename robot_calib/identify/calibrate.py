@@ -14,22 +14,19 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from functools import partial
-from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
-from robot_calib.accuracy import Accuracy, accuracy
+from robot_calib.accuracy import accuracy
 from robot_calib.effects import Effect, parse_effect, vocabulary
 from robot_calib.effects.eccentricity import Eccentricity
-from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.errors import InputError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
+from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.canonical import canonical_form
-from robot_calib.identify.correction import fitting_rows
-from robot_calib.identify.correction_structured import LearnedCorrection, fit_structured
-from robot_calib.identify.cpa import CPAResult, circle_point_analysis
+from robot_calib.identify.cpa import CPAResult, circle_point_analysis, pooled_circle_noise
 from robot_calib.identify.fit import (
     FitResult,
     SolverReport,
@@ -39,14 +36,12 @@ from robot_calib.identify.fit import (
     weighted_jacobian,
 )
 from robot_calib.identify.identifiability import (
-    Identifiability,
     fix_poorly_determined,
     fix_unidentifiable,
 )
 from robot_calib.identify.objectives import AbsoluteObjective, Objective, SeedObjective
 from robot_calib.identify.outliers import (
     OUTLIER_K,
-    Outlier,
     describe_outliers,
     group_sigmas,
     outlier_mask,
@@ -70,8 +65,6 @@ from robot_calib.model import KinematicModel, target_parameters
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE, Poses
 
 BASE_MODELS = ("nominal", "cpa", "geometric")
-#: what the hybrid model's label adds to its physical model's name (`Calibration.label`)
-LEARNED_SUFFIX = "+learned"
 OBJECTIVES = ("absolute", "seed")
 SEED_ANCHORS = (1, 3, 5)  # the seed fixes the cloud on the centres of circles 1, 3 and 5
 MAX_OUTLIER_ROUNDS = 4  # refits without the flagged points until the set is stable
@@ -111,126 +104,6 @@ def parse_model(
         except InputError as exc:
             raise InputError(f"--model {spec}: {exc}") from None
     return base, effects
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """An identified model: its name, forward model, parameters with 1-sigma std (P,) in
-    SI units (0 where fixed), in-sample accuracy and the evidence behind it."""
-
-    name: str
-    model: KinematicModel
-    parameters: ParameterVector
-    std: Array
-    accuracy: Accuracy
-    residuals: Array  # (n, 3) predicted - measured [m]; (0, 3) when read from a file
-    identifiability: Identifiability | None = None
-    solver: SolverReport = field(default_factory=lambda: SolverReport("none"))
-    cpa: CPAResult | None = None
-    outliers: tuple[Outlier, ...] = ()  # measurements flagged as blunders, not fitted
-    warnings: tuple[str, ...] = ()  # implausible results, labelled (`plausibility`)
-    inliers: NDArray[np.bool_] | None = None  # (n,) of the recording given; None: all
-    # free parameters that the first target's measurements alone could not identify: what
-    # the further targets add (msgs_doc/targets.md); empty with one target
-    by_extra_targets: tuple[str, ...] = ()
-    # (n, 3) rotation vectors of predicted * measured 6-DoF orientation [rad], tracker
-    # frame, NaN where none was fitted; None without 6-DoF measurements
-    orientation_residuals: Array | None = None
-    # a learned correction of what the model leaves (`identify.correction_structured`,
-    # `identify.correction` in files of format 1: the hybrid model); `predict` subtracts
-    # its predicted residual; None: the physical model alone
-    correction: LearnedCorrection | None = None
-    # why the result is nonsense rather than a calibration (`plausibility.implausible_reasons`:
-    # readings in degrees, residual > 1000 x noise, parameters beyond physics, worse than the
-    # simpler model it extends), one line each; empty: plausible (PARAMS.json `plausible`)
-    implausible: tuple[str, ...] = ()
-    # the simpler model this one extends, fitted first on the same measurements: its name
-    # and in-sample rms per axis [m]; None when none was fitted here (a base model, a start)
-    simpler: tuple[str, float] | None = None
-
-    @property
-    def plausible(self) -> bool:
-        """False when `implausible` names a reason (PARAMS.json `plausible`)."""
-        return not self.implausible
-
-    def predict(self, poses: Poses) -> Array:
-        """Target points (n, 3) [m] in the tracker frame: the model's, minus the learned
-        correction's predicted residual when the calibration has one."""
-        points = self.model.target_points(self.parameters, poses)
-        if self.correction is not None:
-            points = points - self.correction.predict(poses)
-        return points
-
-    @property
-    def label(self) -> str:
-        """The model's name for people: `name` (the physical model, what `--model` and
-        PARAMS.json `model` parse), plus LEARNED_SUFFIX when a learned correction completes
-        it (the hybrid model)."""
-        return self.name + (LEARNED_SUFFIX if self.correction is not None else "")
-
-    def with_learned_correction(self, recording: Recording) -> Calibration:
-        """This calibration with a correction learned from its residuals at the measurements
-        of `recording` (its calibration recording) it fitted (load-driven geometry, then a
-        Gaussian process: `identify.correction_structured`, the hybrid model); `accuracy`
-        and `residuals` stay the physical model's."""
-        fitted = recording if self.inliers is None else recording.subset(self.inliers)
-        keep = np.zeros(len(fitted), dtype=bool)
-        keep[fitting_rows(len(fitted))] = True  # at most MAX_FIT_POSES of them
-        fitted = fitted.subset(keep)
-        residuals = self.model.target_points(self.parameters, fitted.poses) - fitted.points
-        learned = fit_structured(self.model, self.parameters, fitted.poses, residuals)
-        return replace(self, correction=learned)
-
-    def to_dict(self, recording: Recording) -> dict[str, Any]:
-        """The PARAMS.json document (msgs_doc/parameters.md) of this calibration from
-        `recording` (its sources, counts and warnings go into the document)."""
-        from robot_calib.identify.params_file import calibration_to_dict
-
-        return calibration_to_dict(self, recording)
-
-    @classmethod
-    def from_dict(cls, doc: Mapping[str, Any], where: str = "PARAMS.json") -> Calibration:
-        """The calibration of a PARAMS.json document: model, parameters, 1-sigma, in-sample
-        accuracy, identifiability (its figures; the parameters it fixed are those fixed in
-        the file but free in the model), solver report and learned correction (None without
-        a `correction` section). The per-point residuals and the CPA circles are not in the
-        file: residuals is empty (0, 3), cpa None."""
-        from robot_calib.identify.params_file import (
-            correction_of,
-            implausible_of,
-            params_from_dict,
-        )
-
-        model, params = params_from_dict(doc, where)
-        correction = correction_of(doc, model, params, where)  # None: the physical model alone
-        try:
-            std = np.array([float(r.get("std", 0.0)) for r in doc["parameters"]])
-            acc = Accuracy.from_dict(doc["residuals"])
-            solver = SolverReport.from_dict(doc.get("solver") or {"method": "unknown"})
-            ident = None
-            if "identifiability" in doc:
-                figures = doc["identifiability"]
-                structural = model.parameters()
-                by_data = tuple(
-                    (p.name, p.fixed_reason)
-                    for p in params.parameters
-                    if not p.free and structural.parameters[structural.index(p.name)].free
-                )
-                ident = Identifiability(
-                    float(figures["condition_number"]),
-                    float(figures["observability_index"]),
-                    int(figures["free_parameters"]),
-                    by_data,
-                )
-        except (KeyError, TypeError, ValueError, RobotCalibError) as exc:
-            raise InputError(f"{where}: malformed parameter file ({exc})") from None
-        try:
-            outliers = tuple(Outlier.from_dict(o) for o in doc.get("outliers", []))
-        except (TypeError, RobotCalibError) as exc:
-            raise InputError(f"{where}: malformed outliers ({exc})") from None
-        return cls(str(doc.get("model", "")), model, params, std, acc, np.empty((0, 3)),
-                   ident, solver, outliers=outliers, correction=correction,
-                   implausible=implausible_of(doc, where))  # fmt: skip
 
 
 def _from_fit(name: str, model: KinematicModel, fit: FitResult, points: Array,
@@ -557,8 +430,6 @@ def _cpa_std(recording: Recording, robot: RobotDescription, geometric: Kinematic
     go through the same analysis; each free parameter's spread over the draws is its
     1-sigma (angles wrapped about the estimate), 0 where fixed. A fixed seed: the same
     file every run. All 0 when the circles leave no noise to draw (exact points)."""
-    from robot_calib.identify.cpa import pooled_circle_noise
-
     noise = pooled_circle_noise(list(cpa.sweeps))
     std = np.zeros(len(params))
     if not noise > 0:

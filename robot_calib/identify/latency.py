@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.identify.calibrate import Calibration, calibrate
+from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.calibration import Calibration
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements.recording import Recording

@@ -1,6 +1,10 @@
-"""PARAMS.json: an identified model as a file (msgs_doc/parameters.md), and its human summary.
+"""PARAMS.json, the format (msgs_doc/parameters.md): the document <-> forward model and
+parameters, its checks (finite SI values, plausibility re-checked on reading, the robot
+description it carries) and the helpers of its human summary. Light on purpose: no scipy.
 
-Values are SI (m, rad); the summary printed for people is in mm and deg, labelled.
+The `Calibration` object as a document and back, and the summary itself, live in
+`identify.calibration`, above this module. Values are SI (m, rad); what is printed for
+people is in mm and deg, labelled.
 """
 
 from __future__ import annotations
@@ -13,23 +17,20 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from robot_calib.accuracy import Accuracy, accuracy, orientation_accuracy
+from robot_calib.accuracy import Accuracy
 from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
 from robot_calib.errors import InputError, ParameterError, RobotCalibError
 from robot_calib.identify.correction_structured import LearnedCorrection, correction_from_dict
-from robot_calib.kinematics.description import RobotDescription, load_robot, with_payload
-from robot_calib.kinematics.frames import matrix_to_rpy
+from robot_calib.kinematics.description import RobotDescription, with_payload
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.kinematics.urdf import description_from_text, is_urdf_reference
-from robot_calib.messages import target_topic
-from robot_calib.model import KinematicModel, target_parameters
+from robot_calib.model import KinematicModel
 from robot_calib.poses import PRIMARY_TARGET
 
-if TYPE_CHECKING:  # light at run time: reading a parameter file needs no scipy
-    from robot_calib.identify.calibrate import Calibration
+if TYPE_CHECKING:
     from robot_calib.identify.outliers import Outlier
-    from robot_calib.measurements import Recording
 
 FORMAT = "robot_calib.params/1"
 #: Beyond these a result is no robot of its table at all, but nonsense (PARAMS.json
@@ -58,109 +59,12 @@ def human_value(name: str, unit: str, value: float) -> tuple[float, str]:
     return value, unit
 
 
-def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any]:
-    """The JSON document of a calibration (see msgs_doc/parameters.md)."""
-    robot = cal.model.robot
-    records = cal.parameters.to_dict()
-    for record, std in zip(records, cal.std):
-        record["std"] = float(std)
-    doc: dict[str, Any] = {
-        "format": FORMAT,
-        "model": cal.name,
-        "robot": robot.reference(),
-        "robot_fingerprint": robot.fingerprint(),
-        **({"robot_description": section} if (section := description_section(robot)) else {}),
-        **(
-            {"payload": {"mass_kg": robot.payload_kg, "com_m": list(robot.payload_com_m)}}
-            if robot.payload_kg
-            else {}
-        ),
-        "effects": [e.to_dict() for e in cal.model.effects],
-        "parameters": records,
-        "fixed": [
-            {"name": p.name, "reason": p.fixed_reason}
-            for p in cal.parameters.parameters
-            if not p.free
-        ],
-        "residuals": cal.accuracy.to_dict(),
-        "solver": cal.solver.to_dict(),
-        "recordings": list(recording.sources),
-        "measurements": {
-            "paired": len(recording),
-            "unpaired": recording.n_unpaired,
-            "sweeps": len(recording.sweeps),
-            "general_poses": int(recording.general.sum()),
-        },
-        "warnings": list(recording.warnings) + list(cal.warnings),
-        "plausible": cal.plausible,
-        "implausible": list(cal.implausible),
-        "outliers": [o.to_dict() for o in cal.outliers],
-        "targets": [
-            {
-                "name": name,
-                "topic": target_topic(name),
-                "measurements": int(np.sum(recording.poses.target_index == k)),
-                "offset_m": [cal.parameters[p] for p in target_parameters(name)],
-                **(
-                    {
-                        "six_dof": True,
-                        "probe_rpy_deg": np.degrees(
-                            matrix_to_rpy(cal.model.tool_rotations(cal.parameters)[k])
-                        ).tolist(),
-                    }
-                    if name in cal.model.oriented
-                    else {}
-                ),
-            }
-            for k, name in enumerate(cal.model.targets)
-        ],
-    }
-    if cal.orientation_residuals is not None:
-        figures = orientation_accuracy(cal.orientation_residuals)
-        if figures is not None:
-            doc["orientation_residuals"] = figures.to_dict()
-    if cal.correction is not None:  # the hybrid model's learned part
-        doc["correction"] = cal.correction.to_dict()
-        doc["hybrid_residuals"] = hybrid_in_sample(cal, recording).to_dict()
-    if len(cal.model.targets) > 1:
-        doc["identifiable_only_with_extra_targets"] = list(cal.by_extra_targets)
-    if cal.identifiability is not None:
-        ident = cal.identifiability
-        doc["identifiability"] = {
-            "condition_number": ident.condition_number,
-            "observability_index": ident.observability_index,
-            "free_parameters": ident.n_free,
-            "fixed_by_data": len(ident.fixed),
-        }
-    if cal.cpa is not None:
-        doc["cpa"] = {
-            "q_ref": cal.cpa.q_ref.tolist(),
-            "sweeps": [
-                {
-                    "joint": s.joint,
-                    "points": s.n_points,
-                    "span_deg": float(np.degrees(s.span_rad)),
-                    "radius_m": s.circle.radius,
-                    "rms_m": s.circle.rms,
-                    "plane_rms_m": float(np.sqrt(np.mean(s.circle.plane_residuals**2))),
-                    "radial_rms_m": float(np.sqrt(np.mean(s.circle.radial_residuals**2))),
-                }
-                for s in cal.cpa.sweeps
-            ],
-            "axes": [
-                {"point_m": a.point.tolist(), "direction": a.direction.tolist()}
-                for a in cal.cpa.axes
-            ],
-        }
-    return doc
-
-
 def write_json_atomic(doc: dict[str, Any], path: Path) -> None:
     """Write JSON via a temporary file and rename: never a half-written file."""
     write_text_atomic(path, json.dumps(doc, indent=2) + "\n")
 
 
-def _read_document(path: Path) -> dict[str, Any]:
+def read_document(path: Path) -> dict[str, Any]:
     if not path.is_file():
         raise InputError(f"{path}: no such parameter file")
     try:
@@ -288,7 +192,7 @@ def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict
 
     Light on purpose (no scipy): `predict` reads parameter files through it."""
     path = Path(path)
-    doc = _read_document(path)
+    doc = read_document(path)
     model, params = params_from_dict(doc, str(path))
     return model, params, doc
 
@@ -377,17 +281,6 @@ def check_plausible(reasons: Sequence[str], where: str | Path, force: bool) -> s
     return f"warning: {where}: fitted, implausible ({why}); used because of --force"
 
 
-def hybrid_in_sample(cal: Calibration, recording: Recording) -> Accuracy:
-    """The in-sample figures of the hybrid model (`cal`'s physical model minus its learned
-    correction) at the measurements of `recording` it was fitted on (its inliers when the
-    calibration screened outliers of this recording): PARAMS.json `hybrid_residuals`."""
-    inliers = cal.inliers
-    fitted = recording.with_targets(cal.model.targets)
-    if inliers is not None and len(inliers) == len(fitted):
-        fitted = fitted.subset(inliers)
-    return accuracy(fitted.points, cal.predict(fitted.poses))
-
-
 def in_sample_accuracy(
     doc: Mapping[str, Any], where: str | Path, key: str = "residuals"
 ) -> Accuracy | None:
@@ -430,14 +323,6 @@ def correction_of(
     return correction
 
 
-def load_calibration(path: str | Path) -> Calibration:
-    """The `Calibration` of a PARAMS.json file (see `Calibration.from_dict`)."""
-    from robot_calib.identify import calibrate  # scipy: only when a Calibration is wanted
-
-    path = Path(path)
-    return calibrate.Calibration.from_dict(_read_document(path), str(path))
-
-
 def outlier_lines(outliers: Sequence[Outlier]) -> list[str]:
     """Human lines for the flagged measurements (none: no line)."""
     if not outliers:
@@ -447,25 +332,6 @@ def outlier_lines(outliers: Sequence[Outlier]) -> list[str]:
         "the fit (hold-out ones: not scored):"
     )
     return [head] + [f"  {o.line()}" for o in outliers]
-
-
-def probe_lines(cal: Calibration) -> list[str]:
-    """Each 6-DoF probe's frame in the flange frame for people: roll, pitch, yaw [deg]
-    (Rz Ry Rx) and the quaternion (the parameters themselves are a rotation vector)."""
-    from scipy.spatial.transform import Rotation
-
-    out = []
-    tools = cal.model.tool_rotations(cal.parameters)
-    for name in cal.model.oriented:
-        tool = tools[cal.model.targets.index(name)]
-        where = target_topic(name).replace("/point", "")
-        out.append(
-            f"probe frame in the flange ({where}): roll, pitch, yaw "
-            f"{', '.join(f'{v:.4f}' for v in np.degrees(matrix_to_rpy(tool)))} deg; "
-            "quaternion x, y, z, w "
-            f"{', '.join(f'{v:.6f}' for v in Rotation.from_matrix(tool).as_quat())}"
-        )
-    return out
 
 
 def fixed_reasons(parameters: ParameterVector) -> dict[str, list[str]]:
@@ -480,45 +346,3 @@ def fixed_reasons(parameters: ParameterVector) -> dict[str, list[str]]:
         key = p.fixed_reason.split(":")[0] if many else p.fixed_reason
         reasons.setdefault(key, []).append(p.name)
     return reasons
-
-
-def summary(cal: Calibration, recording: Recording) -> str:
-    """Human summary: measurements, parameters (mm/deg) with 1-sigma, fixed, residuals."""
-    lines = [recording.summary(), f"model: {cal.label}"]
-    if cal.implausible:
-        lines.append("IMPLAUSIBLE (plausible: false): " + "; ".join(cal.implausible))
-    if cal.identifiability is not None:
-        ident = cal.identifiability
-        lines.append(
-            f"identifiability: {ident.n_free} free parameters, condition number "
-            f"{ident.condition_number:.1f}, observability index {ident.observability_index:.2e}"
-            f", {len(ident.fixed)} fixed by the data"
-        )
-    lines.append(f"{'parameter':<22}{'value':>14}{'nominal':>14}{'deviation':>12}{'1-sigma':>11}")
-    for p, value, std in zip(cal.parameters.parameters, cal.parameters.values, cal.std):
-        if p.group not in ("geometric", "frames") and not p.free:
-            continue  # effect terms the data fixed at 0: listed once below
-        v, unit = human_value(p.name, p.unit, value)
-        n, _ = human_value(p.name, p.unit, p.nominal)
-        s, _ = human_value(p.name, p.unit, std)
-        sigma = f"{s:11.5f}" if p.free else "      fixed"
-        # the tracker pose and the target offsets have no nominal: no deviation to show
-        deviation = f"{'-':>12}" if p.group == "frames" else f"{v - n:12.5f}"
-        nominal = f"{'-':>14}" if p.group == "frames" else f"{n:14.5f}"
-        lines.append(f"{p.name + ' [' + unit + ']':<22}{v:14.5f}{nominal}{deviation}{sigma}")
-    for reason, names in fixed_reasons(cal.parameters).items():
-        shown = ", ".join(names[:8]) + (f" (+{len(names) - 8} more)" if len(names) > 8 else "")
-        lines.append(f"fixed ({reason}): {shown}")
-    lines += probe_lines(cal)
-    lines.append(f"residuals (in-sample): {cal.accuracy.line()}")
-    if cal.orientation_residuals is not None:
-        figures = orientation_accuracy(cal.orientation_residuals)
-        if figures is not None:
-            lines.append(f"residuals (in-sample): {figures.line()}")
-    lines += outlier_lines(cal.outliers)
-    if cal.correction is not None:  # the hybrid model's learned part
-        lines += [cal.correction.line(), *cal.correction.warnings]
-    lines += list(cal.warnings)
-    if cal.solver.time_s is not None:
-        lines.append(cal.solver.line())
-    return "\n".join(lines)

@@ -25,7 +25,7 @@ from robot_calib.measurements import Recording
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE
 
 if TYPE_CHECKING:
-    from robot_calib.identify.calibrate import Calibration
+    from robot_calib.identify.calibration import Calibration
 
 #: a geometric parameter this far from nominal is no manufacturing tolerance
 FAR_LENGTH_M = 0.020

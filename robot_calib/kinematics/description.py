@@ -251,7 +251,10 @@ def with_payload(
 @functools.cache
 def _builtin_joint_names() -> dict[str, tuple[str, ...]]:
     """{built-in robot: its JointState names}, read once per process."""
-    return {name: load_robot(name).joint_names for name in available_robots()}
+    return {
+        name: load_robot_yaml(ROBOTS_DIR / f"{name}.yaml").joint_names
+        for name in available_robots()
+    }
 
 
 def robots_with_joint_names(names: Sequence[str]) -> list[str]:
@@ -282,20 +285,11 @@ def with_joint_names(robot: RobotDescription, names: Sequence[str] | str) -> Rob
     return replace(robot, joint_names=names)
 
 
-def load_robot(name_or_path: str | Path) -> RobotDescription:
-    """A built-in robot by name, a robot YAML file by path, or a URDF (kinematics/urdf.py)."""
-    from robot_calib.kinematics import urdf  # imports this module: loaded on use
-
-    if urdf.is_urdf_reference(name_or_path):
-        return urdf.load_urdf_reference(name_or_path)
-    path = Path(name_or_path)
-    if not path.suffix:
-        path = ROBOTS_DIR / f"{name_or_path}.yaml"
-        if not path.is_file():
-            raise RobotDescriptionError(
-                f"unknown robot {str(name_or_path)!r} (built-in: {', '.join(available_robots())}"
-                "; or give a YAML file)"
-            )
+def load_robot_yaml(path: Path) -> RobotDescription:
+    """The description in a robot YAML file (the format of robots/*.yaml); its `path` is the
+    file's absolute path. RobotDescriptionError naming the file when it is missing, not
+    YAML or not a valid description. A built-in robot, a YAML or a URDF by one name:
+    `kinematics.loader.load_robot`."""
     if not path.is_file():
         raise RobotDescriptionError(f"{path}: no such robot description file")
     try:

@@ -39,7 +39,7 @@ import numpy as np
 
 from robot_calib.errors import InputError, RobotDescriptionError
 from robot_calib.kinematics.axes import AxisLine, angle_about, dh_from_axes, link_transform, wrap
-from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.description import RobotDescription, parse_robot
 from robot_calib.kinematics.frames import Array, homogeneous, rpy_to_matrix
 
 URDF_SUFFIX = ".urdf"
@@ -137,8 +137,6 @@ def description_from_text(kind: str, text: str, reference: str, where: str) -> R
     or 'yaml' (a robot YAML file's text); the result's path is `reference`, the original
     file's, so it is written back unchanged. Errors name `where`."""
     import yaml
-
-    from robot_calib.kinematics.description import parse_robot
 
     if kind == "urdf":
         options = dict(_fragment(reference.partition("#")[2], where))

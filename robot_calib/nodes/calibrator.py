@@ -47,10 +47,12 @@ from visualization_msgs.msg import Marker, MarkerArray
 from robot_calib.diagnose.diagnosis import Diagnosis
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
-from robot_calib.identify.calibrate import Calibration, parse_model
-from robot_calib.identify.params_file import summary, write_json_atomic
-from robot_calib.kinematics.description import load_robot, with_joint_names
+from robot_calib.identify.calibrate import parse_model
+from robot_calib.identify.calibration import Calibration, summary
+from robot_calib.identify.params_file import write_json_atomic
+from robot_calib.kinematics.description import with_joint_names
 from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import PAIR_TOLERANCE_S, Recording, recording_from_stream
 from robot_calib.measurements.six_dof import PoseReading, join_poses
 from robot_calib.messages import (

@@ -53,8 +53,8 @@ from robot_calib.capture.moves import (
 from robot_calib.capture.resume import existing_parts, measured, part_path
 from robot_calib.capture.settle import Settler
 from robot_calib.errors import InputError, RobotCalibError
-from robot_calib.kinematics.description import load_robot
 from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.messages import (
     JOINT_STATE_TYPE,
     JOINT_STATES_TOPIC,

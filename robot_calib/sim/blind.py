@@ -62,7 +62,8 @@ from robot_calib.effects.thermal_warmup import ThermalWarmup
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.fit import fit_model
-from robot_calib.kinematics.description import RobotDescription, load_robot, with_payload
+from robot_calib.kinematics.description import RobotDescription, with_payload
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
 from robot_calib.sim.measure import record_plan

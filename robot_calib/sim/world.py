@@ -25,8 +25,9 @@ from robot_calib.effects import (
     parse_effect,
 )
 from robot_calib.errors import InputError, RobotCalibError, check_keys
-from robot_calib.kinematics.description import load_robot, with_payload
+from robot_calib.kinematics.description import with_payload
 from robot_calib.kinematics.frames import Array, matrix_to_rpy, rpy_to_matrix
+from robot_calib.kinematics.loader import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel, target_parameters, tool_rotation_parameters
 from robot_calib.poses import PRIMARY_TARGET, TARGET_NAME

@@ -1,0 +1,35 @@
+"""One name for every robot description: a built-in robot, a robot YAML file or a URDF.
+
+The layers below it: `description` (the `RobotDescription` type and robot YAML files) and
+`urdf` (a URDF chain converted into a `RobotDescription`); this module only dispatches.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from robot_calib.errors import RobotDescriptionError
+from robot_calib.kinematics.description import (
+    ROBOTS_DIR,
+    RobotDescription,
+    available_robots,
+    load_robot_yaml,
+)
+from robot_calib.kinematics.urdf import is_urdf_reference, load_urdf_reference
+
+
+def load_robot(name_or_path: str | Path) -> RobotDescription:
+    """A built-in robot by name, a robot YAML file by path, or a URDF (kinematics/urdf.py:
+    `PATH.urdf` or `PATH.urdf#base_link=B&tip_link=T`). RobotDescriptionError naming the
+    robot or file when it is unknown, missing or invalid."""
+    if is_urdf_reference(name_or_path):
+        return load_urdf_reference(name_or_path)
+    path = Path(name_or_path)
+    if not path.suffix:
+        path = ROBOTS_DIR / f"{name_or_path}.yaml"
+        if not path.is_file():
+            raise RobotDescriptionError(
+                f"unknown robot {str(name_or_path)!r} (built-in: {', '.join(available_robots())}"
+                "; or give a YAML file)"
+            )
+    return load_robot_yaml(path)
