@@ -207,7 +207,7 @@ def bench_bag(robot: RobotDescription, runs: int, tmp: Path) -> dict[str, Timing
     section("read_recording of a Test 2 bag (robot-calib simulate --plan paper-test2)")
     bag = tmp / "test2.mcap"
     cli = Path(sys.executable).with_name("robot-calib")
-    command = [str(cli)] if cli.exists() else [sys.executable, "-m", "robot_calib.cli"]
+    command = [str(cli)] if cli.exists() else [sys.executable, "-m", "robot_calib"]
     command += ["simulate", "--plan", "paper-test2", "-o", str(bag)]
     from robot_calib.nodes.private_domain import claim  # the suite's and simulate's claim
 

@@ -7,9 +7,10 @@
 
 A failed write (OSError: full disk, read-only folder, ...) removes what it wrote and raises
 InputError naming the file. Existing targets are replaced only with `force`; the caller
-checks inputs (`pipeline.output_path`), which are never overwritten.
+checks inputs (`output_path`, the overwrite policy of every verb), which are never
+overwritten.
 
-A target checked to be new (`claim_new`, called by `pipeline.output_path` without
+A target checked to be new (`claim_new`, called by `output_path` without
 `--force`) is created exclusively at the final rename: a file that appeared there
 meanwhile (a second command writing the same output) is never replaced, the command fails
 with "exists" instead and the other's result stays.
@@ -24,7 +25,7 @@ import signal
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -186,3 +187,34 @@ def _move_new(staged: Path, target: Path) -> None:
         os.replace(staged, target)
         return
     staged.unlink()
+
+
+def output_path(
+    raw: str | Path, what: str, inputs: Sequence[str | Path] = (), force: bool = False
+) -> Path:
+    """The path of a file to write (the overwrite policy of every verb): its folder must
+    exist and be writable, it must not be a folder, it must not be one of the command's
+    `inputs` (an input is never overwritten, even with `force`), and it must not exist
+    unless `force`; InputError naming the path otherwise.
+
+    Returns
+    -------
+    path : Path
+        `raw` as a Path.
+    """
+    path = Path(raw)
+    if not path.parent.is_dir():
+        raise InputError(f"{path.parent}: no such folder for {what}")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder; give a file name for {what}")
+    if path.exists() and any(
+        Path(p).exists() and path.resolve() == Path(p).resolve() for p in inputs
+    ):
+        raise InputError(f"{path}: is an input of this command; will not overwrite it")
+    if not os.access(path.parent, os.W_OK | os.X_OK):
+        raise InputError(f"{path.parent}: folder not writable; cannot write {what} there")
+    if path.exists() and not force:
+        raise InputError(f"{path}: exists; will not overwrite it (use --force)")
+    if not force:  # still new at the final rename, or refused (a second command wrote it)
+        claim_new(path)
+    return path

@@ -173,9 +173,9 @@ def test_version_and_the_summary_of_frames() -> None:
     proc = run("--version")
     assert proc.returncode == 0 and proc.stdout.strip().startswith("robot-calib 0.")
     bag = ROOT / "bags" / "paper_test3.mcap"
+    from robot_calib.flows.calibrate import calibrate_bags
     from robot_calib.identify.calibration import summary
     from robot_calib.kinematics.loader import load_robot
-    from robot_calib.pipeline import calibrate_bags
 
     cal, recording = calibrate_bags([bag], load_robot("kr5_sixx_r650"), "geometric")
     lines = summary(cal, recording).splitlines()

@@ -16,16 +16,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robot_calib import pipeline
 from robot_calib.diagnose.diagnosis import Diagnosis
 from robot_calib.diagnose.ladder import Ladder
 from robot_calib.diagnose.names import with_breaks
+from robot_calib.flows.diagnose import (
+    compare_before_after,
+    diagnose_recordings,
+    html_report_path,
+    write_diagnosis,
+)
+from robot_calib.flows.simulate import simulation_world
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points
 from robot_calib.sim.plans import Plan, iso9283_plan, paper_test_plan, plan_times, random_plan
 
-WORLD = pipeline.simulation_world(effects=["backlash:4"], seed=3)
+WORLD = simulation_world(effects=["backlash:4"], seed=3)
 ROBOT = WORLD.model.robot
 BLUNDER = 40  # the calibration point knocked 4.6 mm off
 SECTIONS = ("accuracy", "ladder", "where", "vectors", "iso9283", "parameters", "warnings")
@@ -47,7 +53,7 @@ def diagnosed() -> tuple[Diagnosis, Ladder, Recording]:
     cube = iso9283_plan(WORLD.model, WORLD.truth, cycles=3)
     held = recorded(Plan("holdout", np.vstack([rnd.q, cube.q]),
                          np.concatenate([rnd.sweep, cube.sweep]), 0.1), 2)  # fmt: skip
-    diagnosis, ladder = pipeline.diagnose_recordings(calibration, ROBOT, held)
+    diagnosis, ladder = diagnose_recordings(calibration, ROBOT, held)
     return diagnosis, ladder, calibration
 
 
@@ -56,13 +62,11 @@ def report(
     tmp_path_factory: pytest.TempPathFactory, diagnosed: tuple[Diagnosis, Ladder, Recording]
 ) -> Path:
     diagnosis, ladder, calibration = diagnosed
-    compared, warnings = pipeline.compare_before_after(ladder)
+    compared, warnings = compare_before_after(ladder)
     out = tmp_path_factory.mktemp("html") / "diagnosis.json"
     extra = ["warning: <script>alert(1)</script> & co", *warnings]
-    pipeline.write_diagnosis(
-        diagnosis, ladder, calibration, out, compared=compared, warnings=extra
-    )
-    return pipeline.html_report_path(out)
+    write_diagnosis(diagnosis, ladder, calibration, out, compared=compared, warnings=extra)
+    return html_report_path(out)
 
 
 def test_diagnose_says_when_a_richer_model_generalises_worse(
@@ -70,7 +74,7 @@ def test_diagnose_says_when_a_richer_model_generalises_worse(
 ) -> None:
     """Scored on hold-out bags, each model that does worse than the simpler one before it
     (nominal, cpa, geometric, the best rung) gets a warning, which the report lists."""
-    compared, warnings = pipeline.compare_before_after(diagnosed[1])
+    compared, warnings = compare_before_after(diagnosed[1])
     scores = [(m.model, m.accuracy.absolute_rms_mm) for m in compared]
     assert [m for m, _ in scores][:3] == ["nominal", "cpa", "geometric"]
     worse = [rich for (_, a), (rich, b) in zip(scores, scores[1:]) if b > a]
@@ -78,7 +82,7 @@ def test_diagnose_says_when_a_richer_model_generalises_worse(
     page = report.read_text()
     assert all(html.escape(w, quote=True) in page for w in warnings)
     no_holdout = dataclasses.replace(diagnosed[1], holdout=None)
-    assert pipeline.compare_before_after(no_holdout)[1] == []  # not comparable: silent
+    assert compare_before_after(no_holdout)[1] == []  # not comparable: silent
 
 
 class Links(HTMLParser):

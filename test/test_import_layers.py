@@ -1,4 +1,4 @@
-"""Layering by imports: the core (measurement model, identification, diagnosis, pipeline)
+"""Layering by imports: the core (measurement model, identification, diagnosis, flows)
 never loads a file format or ROS, and each command line verb loads only what it uses
 (checked in a fresh interpreter, through `sys.modules`; timings live in
 benchmarks/bench_startup.py)."""
@@ -28,11 +28,11 @@ def loaded_after(code: str) -> set[str]:
 
 def core_modules() -> list[str]:
     """Every module of the core packages (measurement model, effects, identification,
-    diagnosis, kinematics) and the pipeline and the lazy bag package itself."""
+    diagnosis, kinematics), the flows and the lazy bag package itself."""
     import robot_calib
 
-    names = ["robot_calib.pipeline", "robot_calib.bag", "robot_calib.model"]
-    for package in ("measurements", "effects", "identify", "diagnose", "kinematics"):
+    names = ["robot_calib.flows", "robot_calib.bag", "robot_calib.model"]
+    for package in ("measurements", "effects", "identify", "diagnose", "kinematics", "flows"):
         path = [str(Path(robot_calib.__file__).parent / package)]
         names += [f"robot_calib.{package}.{m.name}" for m in pkgutil.iter_modules(path)]
     return names
@@ -59,3 +59,19 @@ def test_help_and_reading_a_parameter_file_stay_light() -> None:
     assert not loaded_after(
         "import robot_calib.identify.params_file, robot_calib.predict, robot_calib.cli"
     )
+
+
+def test_only_the_command_line_imports_the_command_line() -> None:
+    """The command line sits on top: no module outside `robot_calib.cli` imports it (the
+    flows, the core and the nodes work without it), but `python -m robot_calib`."""
+    from test_import_cycles import PACKAGE, import_graph
+
+    graph = import_graph(PACKAGE)
+    assert "robot_calib.cli.registry" in graph["robot_calib.cli"]
+    above = {"robot_calib.__main__"}  # `python -m robot_calib`
+    importers = {
+        module: sorted(t for t in targets if t.split(".")[:2] == ["robot_calib", "cli"])
+        for module, targets in graph.items()
+        if module.split(".")[:2] != ["robot_calib", "cli"] and module not in above
+    }
+    assert not {m: t for m, t in importers.items() if t}

@@ -34,6 +34,8 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 
 from robot_calib.errors import InputError
+from robot_calib.flows.bags import read_bags
+from robot_calib.flows.calibrate import calibrate_recording
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.messages import TRACKER_FRAME
 from robot_calib.nodes import launch_support
@@ -46,7 +48,6 @@ from robot_calib.nodes.launch_support import (
     Value,
     When,
 )
-from robot_calib.pipeline import calibrate_recording, read_bags
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "robot_calib"

@@ -298,7 +298,7 @@ def test_a_joints_file_that_is_no_csv_is_one_line(
 def test_an_interrupted_run_leaves_no_half_folder(tmp_path: Path) -> None:
     """The new user's Ctrl-C during `run` left a half-filled run folder: the run is built in
     a hidden folder and renamed when complete; interrupted, nothing of it stays."""
-    from robot_calib import pipeline
+    from robot_calib.flows.run import run
 
     calls = []
 
@@ -308,6 +308,6 @@ def test_an_interrupted_run_leaves_no_half_folder(tmp_path: Path) -> None:
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        pipeline.run(tmp_path / "o", plan="paper-test1", n_holdout=20, progress=interrupt,
-                     say=lambda text: None)  # fmt: skip
+        run(tmp_path / "o", plan="paper-test1", n_holdout=20, progress=interrupt,
+            say=lambda text: None)  # fmt: skip
     assert "random" in calls and list((tmp_path / "o").iterdir()) == []

@@ -78,7 +78,7 @@ def test_plan_file_round_trip_through_simulate_and_run(tmp_path: Path) -> None:
     assert q.shape == (20, 6)
     sim = robot_calib("simulate", "--plan", str(plan), "-o", str(tmp_path / "p.mcap"))
     assert sim.returncode == 0, sim.stderr
-    from robot_calib.pipeline import read_bags
+    from robot_calib.flows.bags import read_bags
 
     recorded = read_bags([tmp_path / "p.mcap"], WORLD.model.robot)
     np.testing.assert_allclose(recorded.poses.q, q, atol=1e-12)  # visited in the order listed

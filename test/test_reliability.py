@@ -66,12 +66,12 @@ def sample_measurements() -> tuple[np.ndarray, np.ndarray]:
 @cache
 def calibrated_params(folder: Path) -> Path:
     """One PARAMS.json of the sample bag per session."""
-    from robot_calib import pipeline
+    from robot_calib.flows.calibrate import calibrate_bags
     from robot_calib.identify.params_file import write_json_atomic
     from robot_calib.kinematics.loader import load_robot
 
     robot = load_robot("kr5_sixx_r650")
-    cal, rec = pipeline.calibrate_bags([SAMPLE], robot)
+    cal, rec = calibrate_bags([SAMPLE], robot)
     path = folder / "params.json"
     write_json_atomic(cal.to_dict(rec), path)
     return path

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 from matplotlib.transforms import Bbox
 
-from robot_calib import pipeline
 from robot_calib.diagnose.figures import (
     COLOUR_BAR_LABEL,
     error_histogram_figure,
@@ -32,6 +31,13 @@ from robot_calib.diagnose.signatures import (
     removed_signatures,
 )
 from robot_calib.effects import make_effect
+from robot_calib.flows.diagnose import (
+    compare_before_after,
+    diagnose_recordings,
+    html_report_path,
+    write_diagnosis,
+)
+from robot_calib.flows.simulate import simulation_world
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points
@@ -171,7 +177,7 @@ def test_what_the_best_model_removes_per_joint() -> None:
     assert removed_note(removed, 4, families=("scale",)) == ""
 
 
-WORLD = pipeline.simulation_world(effects=["backlash:4"], seed=3)
+WORLD = simulation_world(effects=["backlash:4"], seed=3)
 ROBOT = WORLD.model.robot
 
 
@@ -188,12 +194,12 @@ def test_joint_4_backlash_is_said_removed_by_the_best_model(tmp_path: Path) -> N
     the model names in the HTML tables break only between their terms."""
     calibration = recorded(paper_test_plan(2), 1)
     held = recorded(random_plan(ROBOT, 60, np.random.default_rng(5)), 2)
-    diagnosis, ladder = pipeline.diagnose_recordings(calibration, ROBOT, held)
+    diagnosis, ladder = diagnose_recordings(calibration, ROBOT, held)
     assert diagnosis.ladder[-1].model == "geometric+backlash:4"
-    compared, warnings = pipeline.compare_before_after(ladder)
+    compared, warnings = compare_before_after(ladder)
     out = tmp_path / "d.json"
-    pipeline.write_diagnosis(diagnosis, ladder, calibration, out, compared=compared,
-                             warnings=warnings)  # fmt: skip
+    write_diagnosis(diagnosis, ladder, calibration, out, compared=compared,
+                    warnings=warnings)  # fmt: skip
     note = f"{REMOVED}: direction (backlash:4)"
     doc = json.loads(out.read_text())
     assert {"joint": 4, "family": "direction", "effect": "backlash:4", "orders": []} in doc[
@@ -206,7 +212,7 @@ def test_joint_4_backlash_is_said_removed_by_the_best_model(tmp_path: Path) -> N
     assert not [line for line in markdown.splitlines()
                 if line.startswith(("| 1 |", "| 2 |")) and REMOVED in line]  # fmt: skip
     assert "| geometric+<wbr>backlash:4 |" in markdown
-    page = pipeline.html_report_path(out).read_text()
+    page = html_report_path(out).read_text()
     where = page[page.index('id="where"') : page.index('id="vectors"')]
     row = where[where.index('<tr><td class="text">4</td>') :]
     row = row[: row.index("</tr>")]

@@ -13,6 +13,7 @@ from cli_runner import robot_calib
 
 from robot_calib.bag.csv_import import write_stream_bag
 from robot_calib.bag.read import read_bag, read_stream
+from robot_calib.flows.simulate import simulation_world
 from robot_calib.identify.latency import calibrate_stream, steffensen
 from robot_calib.measurements.stream import (
     JointStream,
@@ -20,7 +21,6 @@ from robot_calib.measurements.stream import (
     stream_recording,
     velocity_directions,
 )
-from robot_calib.pipeline import simulation_world
 from robot_calib.score import score
 from robot_calib.sim.controller import states_at
 from robot_calib.sim.measure import record_plan

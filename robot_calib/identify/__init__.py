@@ -1,6 +1,6 @@
 """Identification: circle point analysis, geometric and effect fits, identifiability.
 
-The defaults every caller shares (the CLI, the pipeline, the calibrator node) live here, in
+The defaults every caller shares (the CLI, the flows, the calibrator node) live here, in
 the package's light `__init__` (importing it loads no solver).
 """
 

@@ -46,6 +46,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from robot_calib.diagnose.diagnosis import Diagnosis
 from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.flows import DEFAULT_ROBOT
+from robot_calib.flows.bags import read_bags
+from robot_calib.flows.calibrate import calibrate_recording
+from robot_calib.flows.diagnose import diagnose_recordings
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.calibrate import parse_model
 from robot_calib.identify.calibration import Calibration, summary
@@ -68,12 +72,6 @@ from robot_calib.messages import (
     velocity_signs,
 )
 from robot_calib.nodes._common import declare, overrides, run_node
-from robot_calib.pipeline import (
-    DEFAULT_ROBOT,
-    calibrate_recording,
-    diagnose_recordings,
-    read_bags,
-)
 from robot_calib.poses import PRIMARY_TARGET, TARGET_NAME
 
 LATCHED = QoSProfile(  # late joiners (RViz, a test, `ros2 topic echo`) get the last result

@@ -53,6 +53,7 @@ from robot_calib.capture.moves import (
 from robot_calib.capture.resume import existing_parts, measured, part_path
 from robot_calib.capture.settle import Settler
 from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.flows import DEFAULT_ROBOT
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.messages import (
@@ -66,7 +67,6 @@ from robot_calib.messages import (
 from robot_calib.model import KinematicModel
 from robot_calib.nodes._common import declare, run_node
 from robot_calib.nodes.sim_robot import QOS, trajectory_topic
-from robot_calib.pipeline import DEFAULT_ROBOT
 from robot_calib.plan.plan_file import is_plan_file, planned_robot
 from robot_calib.poses import DirectionTracker
 from robot_calib.sim.plans import home_pose, make_plan

@@ -1,0 +1,76 @@
+"""`robot-calib` command line: parse, call the flows (robot_calib/flows/), print, map errors
+to exit codes. One module per verb (`registry.VERBS`, in --help order), the options several
+verbs share in `options`, what they do with them in `common`.
+
+Every bad input ends in one line on stderr naming the file/value and exit status 2; a
+calibration that ran to its end with a nonsense result (PARAMS.json `plausible: false`,
+written for inspection) in "fitted, implausible: REASON" and exit status 3; Ctrl-C,
+SIGTERM or SIGHUP in "interrupted" and exit status 130, nothing left behind.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+from collections.abc import Sequence
+from typing import Any, NoReturn
+
+from robot_calib.cli.options import OVERWRITE_POLICY
+from robot_calib.cli.registry import build_parser
+from robot_calib.errors import RobotCalibError
+
+__all__ = ["OVERWRITE_POLICY", "build_parser", "main"]
+
+_SIGNALLED: list[int] = []  # signals received (SIGINT, SIGTERM, SIGHUP) while a verb runs
+
+
+def _interrupt(signum: int, _frame: object) -> NoReturn:
+    """Ctrl-C, SIGTERM and SIGHUP (the terminal closed): unwind (staged outputs are
+    removed), 'interrupted', exit 130."""
+    _SIGNALLED.append(signum)
+    raise KeyboardInterrupt
+
+
+def _ignore_interrupt_in_callback(unraisable: Any) -> None:
+    """A KeyboardInterrupt raised by `_interrupt` inside a callback Python cannot raise from
+    (a weakref or __del__: 'Exception ignored in ... WeakSet') is not printed: the signal
+    is recorded and `main` exits 130 after all (was: the program went on to exit 0)."""
+    if isinstance(unraisable.exc_value, KeyboardInterrupt) and _SIGNALLED:
+        return
+    sys.__unraisablehook__(unraisable)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """`robot-calib ARGV...` (None: the program's arguments): the verb's exit status; a
+    package error (RobotCalibError) as one line and its status, an interruption as 130."""
+    from robot_calib import _interrupted_while_starting
+
+    args = build_parser().parse_args(argv)
+    signal.signal(signal.SIGTERM, _interrupt)
+    if signal.getsignal(signal.SIGHUP) is signal.SIG_DFL:  # not under nohup (ignored)
+        signal.signal(signal.SIGHUP, _interrupt)
+    if signal.getsignal(signal.SIGINT) in (  # not when ignored
+        signal.default_int_handler,
+        _interrupted_while_starting,  # robot_calib/__init__.py's, while the modules loaded
+    ):
+        signal.signal(signal.SIGINT, _interrupt)
+    sys.unraisablehook = _ignore_interrupt_in_callback
+    try:
+        if args.base_link or args.tip_link:  # carried in the robot reference (PARAMS.json)
+            from robot_calib.kinematics.urdf import urdf_reference
+
+            args.robot = urdf_reference(args.robot or "", args.base_link, args.tip_link)
+        status = int(args.func(args))
+        if _SIGNALLED:  # the interrupt fell in a callback that swallowed it
+            raise KeyboardInterrupt
+        return status
+    except BaseException as exc:
+        # A signal can surface as another exception when it lands in a C extension's call
+        # back into Python (e.g. an rclpy callback): it is still an interruption.
+        if isinstance(exc, KeyboardInterrupt) or _SIGNALLED:
+            print(f"robot-calib {args.command}: interrupted", file=sys.stderr)
+            return 130
+        if isinstance(exc, RobotCalibError):
+            print(f"robot-calib {args.command}: {exc.kind}: {exc}", file=sys.stderr)
+            return exc.exit_status
+        raise

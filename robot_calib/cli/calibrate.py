@@ -1,0 +1,122 @@
+"""`robot-calib calibrate`: a model identified from bags, written as PARAMS.json with a
+summary in mm/deg (flows/calibrate.py). A fit that ran to its end with a nonsense result is
+written for inspection and exits 3."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from robot_calib.cli.common import log, robot_of
+from robot_calib.cli.options import (
+    add_force,
+    add_joint_names,
+    add_output,
+    add_pair_tolerance,
+    add_payload,
+    add_stream,
+    positive,
+)
+from robot_calib.errors import ImplausibleError, InputError
+from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
+from robot_calib.kinematics.description import RobotDescription
+
+NAME = "calibrate"
+HELP = "identify a model from bags -> PARAMS.json"
+ROBOT = None  # --robot's default: DEFAULT_ROBOT
+
+
+def add_arguments(cal: argparse.ArgumentParser) -> None:
+    cal.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
+    cal.add_argument(
+        "--model",
+        default=DEFAULT_MODEL,
+        help="nominal | cpa | geometric | geometric+eccentricity | geometric+EFFECT[:joints]"
+        " (default geometric)",
+    )
+    cal.add_argument(
+        "--ecc-order",
+        type=positive,
+        default=DEFAULT_ECC_ORDER,
+        help=f"eccentricity Fourier order (default {DEFAULT_ECC_ORDER})",
+    )
+    cal.add_argument(
+        "--objective",
+        default="absolute",
+        choices=("absolute", "seed"),
+        help="absolute tracker-frame residuals (O(N), default) or the seed's pairwise "
+        "distances anchored on the CPA centres of circles 1, 3, 5 (O(N^2))",
+    )
+    add_pair_tolerance(cal)
+    add_stream(cal)
+    add_joint_names(cal)
+    add_payload(cal)
+    add_output(cal, "PARAMS.json to write")
+    add_force(cal)
+
+
+def main(args: argparse.Namespace) -> int:
+    """Identify a model from bags; write PARAMS.json; print a summary in mm/deg."""
+    from robot_calib.atomic import output_path
+    from robot_calib.flows.calibrate import calibrate_bags, calibrate_stream_bag
+    from robot_calib.identify.calibration import summary
+    from robot_calib.identify.params_file import write_json_atomic
+
+    robot = robot_of(args)
+    output = output_path(args.output, "PARAMS.json", args.bags, args.force)
+    check_model_terms(args.model, robot, args.ecc_order)
+    started = time.perf_counter()
+    if args.stream:
+        if args.objective != "absolute":
+            raise InputError("--stream: only --objective absolute")
+        fit = calibrate_stream_bag(
+            args.bags, robot, args.model, args.ecc_order,
+            None if args.latency == "auto" else float(args.latency),
+            args.stream_max_points, args.max_gap, log,
+        )  # fmt: skip
+        cal, recording = fit.calibration, fit.recording
+        print(fit.line())
+        print(summary(cal, recording))
+        write_json_atomic(fit.document(), output)
+    else:
+        if args.latency != "auto":
+            raise InputError("--latency applies with --stream only")
+        cal, recording = calibrate_bags(
+            args.bags, robot, args.model, args.ecc_order, args.objective, args.pair_tolerance,
+            log,
+        )  # fmt: skip
+        print(summary(cal, recording))
+        write_json_atomic(cal.to_dict(recording), output)
+    print(f"{output}: {cal.name} in {time.perf_counter() - started:.2f} s")
+    if not cal.plausible:  # written for inspection; predict, compensate, export refuse it
+        raise ImplausibleError(f"{'; '.join(cal.implausible)} ({output}: plausible false)")
+    return 0
+
+
+def check_model_terms(spec: str, robot: RobotDescription, ecc_order: int) -> None:
+    """Before any fit: InputError naming --model and the terms when two terms give the same
+    parameters (`joint_harmonics:2:orders=11,27+joint_harmonics:2:orders=11`), and a log
+    line for each joint_harmonics term that leaves its defaults to be guessed (no
+    `orders=`: order 2 alone; no joints: every joint; msgs_doc/effects.md)."""
+    from robot_calib.identify.calibrate import parse_model
+
+    _, effects = parse_model(spec, robot, ecc_order)
+    terms = spec.split("+")[1:]
+    owner: dict[str, str] = {}
+    for text, effect in zip(terms, effects):
+        for name in effect.parameter_names(robot):
+            if name in owner:
+                raise InputError(f"--model {spec}: terms {owner[name]!r} and {text!r} both "
+                                 f"give parameter {name}: give each joint (and order) "
+                                 "once")  # fmt: skip
+            owner[name] = text
+        if effect.name != "joint_harmonics":
+            continue
+        options = text.split(":")[1:]
+        guessed = [what for what, given in (
+            ("the default order 2 alone", any(o.startswith("orders=") for o in options)),
+            ("every joint", any(not o.startswith("orders=") for o in options)),
+        ) if not given]  # fmt: skip
+        if guessed:
+            log(f"--model: {text} is {effect.spec} ({' and '.join(guessed)}: "
+                "msgs_doc/effects.md)")  # fmt: skip

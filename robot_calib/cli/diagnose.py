@@ -1,0 +1,92 @@
+"""`robot-calib diagnose`: the sim-to-real gap diagnosis of bags -> DIAGNOSIS.json, a
+Markdown report with plots, a self-contained HTML report and the best model's PARAMS.json
+(flows/diagnose.py). An implausible diagnosis is written to be read and exits 3."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import time
+
+from robot_calib.cli.common import log, print_diagnosis, robot_of
+from robot_calib.cli.options import (
+    add_force,
+    add_joint_names,
+    add_output,
+    add_pair_tolerance,
+    add_payload,
+)
+from robot_calib.errors import ImplausibleError, InputError
+
+NAME = "diagnose"
+HELP = "sim-to-real gap diagnosis -> DIAGNOSIS.json + report"
+ROBOT = None  # --robot's default: DEFAULT_ROBOT
+
+
+def add_arguments(diag: argparse.ArgumentParser) -> None:
+    diag.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
+    diag.add_argument(
+        "--holdout", nargs="*", metavar="BAG",
+        help="hold-out bag(s): scored only (default: none; the calibration bags' k-fold)",
+    )  # fmt: skip
+    add_pair_tolerance(diag)
+    add_joint_names(diag)
+    add_payload(diag)
+    diag.add_argument(
+        "--tracker-accuracy",
+        type=float,
+        metavar="MM",
+        help="the tracker's stated 1-sigma per axis of a point [mm], e.g. 0.005: the noise floor "
+        "when the data have no repeat poses or circle sweeps (default: none; then the floor "
+        "is unknown and said so)",
+    )
+    add_output(
+        diag,
+        "DIAGNOSIS.json to write; the reports go beside it as <name>.md (+ "
+        "<name>_*.png) and <name>.html (self-contained), so -o may not end in .md or .html",
+    )
+    add_force(diag)
+
+
+def main(args: argparse.Namespace) -> int:
+    """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots + a
+    self-contained HTML report."""
+    from robot_calib.atomic import output_path
+    from robot_calib.flows.diagnose import (
+        best_params_path,
+        compare_before_after,
+        diagnose_bags,
+        html_report_path,
+        report_path,
+        write_diagnosis,
+    )
+
+    robot = robot_of(args)
+    inputs = [*args.bags, *(args.holdout or ())]
+    output = output_path(args.output, "DIAGNOSIS.json", inputs, args.force)
+    output_path(report_path(output), "the report", inputs, args.force)
+    output_path(html_report_path(output), "the HTML report", inputs, args.force)
+    best = output_path(best_params_path(output), "the best model's PARAMS.json", inputs,
+                       args.force)  # fmt: skip
+    started = time.perf_counter()
+    accuracy = args.tracker_accuracy
+    if accuracy is not None and not (math.isfinite(accuracy) and 1e-4 <= accuracy < 10):
+        raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, 0.0001 (0.1 um) "
+                         "to 10")  # fmt: skip
+    diagnosis, ladder, recording = diagnose_bags(
+        args.bags, robot, args.holdout or (), args.pair_tolerance, log,
+        None if accuracy is None else accuracy * 1e-3,
+    )  # fmt: skip
+    compared, warnings = compare_before_after(ladder)
+    diagnosis = dataclasses.replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
+    report = write_diagnosis(diagnosis, ladder, recording, output, args.force,
+                             warnings=warnings, compared=compared)  # fmt: skip
+    print_diagnosis(diagnosis, output, report, time.perf_counter() - started)
+    for warning in warnings:
+        print(warning)
+    print(f"best model (the ladder's chosen rung): {diagnosis.ladder[-1].model} -> {best}")
+    if diagnosis.implausible:  # written (to be read), but no exit 0 with nonsense
+        raise ImplausibleError(f"{'; '.join(diagnosis.implausible)} ({output}: implausible, "
+                               "written to be read)")  # fmt: skip
+    return 0

@@ -1,0 +1,140 @@
+"""`robot-calib plan`: N measurement poses chosen for a model (D-optimal), what they promise
+against random poses at equal N, written as PLAN.yaml (robot_calib/plan/)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from robot_calib.cli.common import log
+from robot_calib.cli.options import (
+    WORLD_ROBOT,
+    add_force,
+    add_output,
+    bounded_count,
+    count,
+    positive,
+)
+from robot_calib.errors import InputError
+from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
+
+NAME = "plan"
+HELP = "choose measurement poses for a model (D-optimal) -> PLAN.yaml"
+ROBOT = WORLD_ROBOT  # --robot's default, in words
+
+MAX_FLOOR_Z_M = 10.0  # --floor-z: no robot reaches a floor 10 m from its base (mm as m?)
+MAX_CANDIDATES = 100_000  # --candidates: ~1.5 GB of Jacobian rows for geometric
+
+
+def add_arguments(pla: argparse.ArgumentParser) -> None:
+    pla.add_argument(
+        "--model",
+        default=DEFAULT_MODEL,
+        help=f"geometric[+EFFECT[:joints]...] to plan for (default {DEFAULT_MODEL})",
+    )
+    pla.add_argument("--poses", type=positive, required=True, help="N: poses to plan")
+    pla.add_argument(
+        "--candidates",
+        type=bounded_count(MAX_CANDIDATES),
+        default=2000,
+        help=f"M: random candidate poses to choose from (default 2000, at most {MAX_CANDIDATES})",
+    )
+    pla.add_argument(
+        "--floor-z",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="flange and target stay at or above z = M [m] of the robot base frame "
+        f"(default 0.0: the base's mounting plane; -inf: no floor; within +-{MAX_FLOOR_Z_M:g})",
+    )
+    pla.add_argument(
+        "--noise-mm",
+        type=float,
+        metavar="MM",
+        help="tracker noise, 1-sigma per coordinate [mm] (default: the world's "
+        "tracker, target and repeatability noise)",
+    )
+    pla.add_argument(
+        "--world",
+        help="world YAML file: robot, tracker pose, target, noise "
+        "(default: the built-in default world)",
+    )
+    pla.add_argument(
+        "--seed",
+        type=count,
+        default=0,
+        help="random seed of candidates and simulations (default 0)",
+    )
+    pla.add_argument(
+        "--trials",
+        type=count,
+        default=1,
+        help="simulated calibrations (random true robots) per plan for the "
+        "held-out error (default 1; 0: none)",
+    )
+    pla.add_argument(
+        "--holdout",
+        type=positive,
+        default=200,
+        help="random held-out poses per simulated calibration (default 200)",
+    )
+    pla.add_argument(
+        "--ecc-order",
+        type=positive,
+        default=DEFAULT_ECC_ORDER,
+        help=f"eccentricity Fourier order (default {DEFAULT_ECC_ORDER})",
+    )
+    add_output(pla, "PLAN.yaml to write")
+    add_force(pla)
+
+
+def main(args: argparse.Namespace) -> int:
+    """Plan N measurement poses for a model (D-optimal), print what they promise against
+    random poses at equal N, write PLAN.yaml."""
+    from robot_calib.atomic import output_path, write_text_atomic
+    from robot_calib.flows.simulate import simulation_inputs, simulation_world
+    from robot_calib.plan.campaign import campaign_yaml, plan_campaign
+    from robot_calib.plan.evaluate import human
+
+    noise = args.noise_mm
+    if noise is not None and not (math.isfinite(noise) and 0 < noise < 10):
+        raise InputError(f"--noise-mm {noise}: a 1-sigma per coordinate in mm, > 0 and < 10")
+    floor = args.floor_z
+    if math.isnan(floor) or (math.isfinite(floor) and abs(floor) > MAX_FLOOR_Z_M):
+        raise InputError(
+            f"--floor-z {floor:g}: a height in m of the robot base frame within "
+            f"+-{MAX_FLOOR_Z_M:g} m (or -inf: no floor); mm given as m? ({floor:g} mm = "
+            f"{floor * 1e-3:g} m)"
+        )
+    world = simulation_world(args.world, args.robot, (), args.seed)
+    output = output_path(args.output, "PLAN.yaml", simulation_inputs(world), args.force)
+    if output.suffix.lower() not in (".yaml", ".yml"):  # after the input check: never an input
+        raise InputError(f"{output}: a plan is written as YAML: give a .yaml or .yml name")
+    c = plan_campaign(world, args.model, args.poses, args.candidates, args.seed, args.floor_z,
+                      None if noise is None else noise * 1e-3, args.ecc_order, args.trials,
+                      args.holdout, log)  # fmt: skip
+    planned, rand = c.planned.prediction, c.random.prediction
+    print(f"{args.model} on {world.model.robot.name}: {args.poses} poses of "
+          f"{len(c.problem.candidates)} candidates in {c.design_seconds:.2f} s; noise "
+          f"{planned.noise_m * 1e3:.4f} mm per coordinate; predicted 1-sigma:")  # fmt: skip
+    print(f"{'parameter':<22}{'planned':>34}{'random (same N)':>34}")
+    for k, name in enumerate(planned.names):
+        unit = planned.units[k]
+        print(f"{name:<22}{human(float(planned.std[k]), unit):>34}"
+              f"{human(float(rand.std[k]), unit):>34}")  # fmt: skip
+    for name, reason in c.problem.fixed:
+        print(f"{name:<22} fixed: {reason}")
+    for label, fig in (("planned", c.planned), ("random", c.random)):
+        pred = fig.prediction
+        held = "not simulated" if fig.holdout is None else (
+            f"{fig.holdout.abs_rms_mm:.4f} mm abs rms, seed criterion mean "
+            f"{fig.holdout.pairwise_mean_mm:.4f} mm, model error (vs the true points) "
+            f"{fig.holdout.model_rms_mm:.4f} mm rms ({fig.holdout.trials} random true "
+            f"robot(s), {fig.holdout.n_poses} held-out poses)")  # fmt: skip
+        print(f"{label}: worst {pred.line(pred.worst)}; held-out {held}; campaign "
+              f"{fig.hours * 60:.1f} min")  # fmt: skip
+    ratio = rand.rms_m.max() / planned.rms_m.max()
+    print(f"worst predicted 1-sigma: {ratio:.2f} x smaller than random poses at equal N")
+    write_text_atomic(output, campaign_yaml(c, args.floor_z))
+    print(f"{output}: {args.poses} poses (msgs_doc/plan.md)")
+    return 0

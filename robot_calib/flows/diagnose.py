@@ -1,0 +1,236 @@
+"""The diagnosis flow: the sim-to-real gap diagnosis of bags or recordings and its files
+(DIAGNOSIS.json, the Markdown report with plots, the self-contained HTML report, the best
+model's PARAMS.json), written together (`robot-calib diagnose`, the calibrator node, `run`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from robot_calib.errors import InputError
+from robot_calib.flows import Log
+from robot_calib.flows.bags import check_distinct_bags, check_distinct_recordings, read_bags
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.measurements import PAIR_TOLERANCE_S
+
+if TYPE_CHECKING:
+    from robot_calib.diagnose.diagnosis import Diagnosis
+    from robot_calib.diagnose.html_report import ModelErrors
+    from robot_calib.diagnose.ladder import Ladder
+    from robot_calib.identify.calibration import Calibration
+    from robot_calib.measurements import Recording
+
+
+def diagnose_recordings(
+    recording: Recording,
+    robot: RobotDescription,
+    holdout: Recording | None = None,
+    log: Log | None = None,
+    tracker_sigma_m: float | None = None,
+) -> tuple[Diagnosis, Ladder]:
+    """The sim-to-real gap diagnosis of `recording`, scored on `holdout` (else k-fold);
+    `tracker_sigma_m`: a stated 1-sigma per axis [m], the floor when the data give none.
+
+    Returns
+    -------
+    diagnosis : Diagnosis
+        The DIAGNOSIS.json document (as `robot_calib.diagnose.diagnosis.diagnose`).
+    ladder : Ladder
+        The rungs behind it, each with its calibration and held-out scores.
+    """
+    from robot_calib.diagnose.diagnosis import diagnose
+
+    if holdout is not None:  # index the hold-out's targets as the calibration's
+        holdout = holdout.with_targets(recording.target_names)
+    return diagnose(recording, robot, holdout, log=log, tracker_sigma_m=tracker_sigma_m)
+
+
+def diagnose_bags(
+    bags: Sequence[str | Path],
+    robot: RobotDescription,
+    holdout: Sequence[str | Path] = (),
+    pair_tolerance: float = PAIR_TOLERANCE_S,
+    log: Log | None = None,
+    tracker_sigma_m: float | None = None,
+) -> tuple[Diagnosis, Ladder, Recording]:
+    """The diagnosis of `bags` scored on the `holdout` bags (none: k-fold CV over poses);
+    `tracker_sigma_m` as in `diagnose_recordings`.
+
+    Returns
+    -------
+    diagnosis, ladder : Diagnosis, Ladder
+        As `diagnose_recordings`.
+    recording : Recording
+        The paired measurements of `bags` (as `read_bags`); the hold-out's are not kept.
+    """
+    check_distinct_bags(bags, holdout)
+    recording = read_bags(bags, robot, pair_tolerance, log)
+    held = read_bags(holdout, robot, pair_tolerance, log) if holdout else None
+    if held is not None:
+        check_distinct_recordings(recording, held)
+    diagnosis, ladder = diagnose_recordings(recording, robot, held, log, tracker_sigma_m)
+    return diagnosis, ladder, recording
+
+
+def report_path(output: str | Path) -> Path:
+    """The Markdown report of DIAGNOSIS.json `output`: beside it, suffix '.md' (its plots
+    `<stem>_*.png`). `output` itself may not end in '.md', so the two never collide.
+
+    Returns
+    -------
+    report : Path
+        `output` with the suffix '.md'.
+    """
+    output = Path(output)
+    if output.suffix.lower() == ".md":
+        raise InputError(
+            f"-o {output}: names DIAGNOSIS.json, and its Markdown report goes beside it as "
+            f"<name>.md; give e.g. -o {output.with_suffix('.json')}"
+        )
+    return output.with_suffix(".md")
+
+
+def html_report_path(output: str | Path) -> Path:
+    """The self-contained HTML report of DIAGNOSIS.json `output`: beside it, suffix
+    '.html' (msgs_doc/report.md). `output` itself may not end in '.html'.
+
+    Returns
+    -------
+    report : Path
+        `output` with the suffix '.html'.
+    """
+    output = Path(output)
+    if output.suffix.lower() in (".html", ".htm"):
+        raise InputError(
+            f"-o {output}: names DIAGNOSIS.json, and its HTML report goes beside it as "
+            f"<name>.html; give e.g. -o {output.with_suffix('.json')}"
+        )
+    return output.with_suffix(".html")
+
+
+def write_diagnosis(
+    diagnosis: Diagnosis,
+    ladder: Ladder,
+    recording: Recording,
+    output: str | Path,
+    force: bool = False,
+    calibrations: Mapping[str, Calibration] | None = None,
+    best: tuple[Calibration, Path] | None = None,
+    warnings: Sequence[str] = (),
+    compared: list[ModelErrors] | None = None,
+) -> Path:
+    """Write DIAGNOSIS.json at `output`, the Markdown report (+ plots) and the HTML report
+    beside it, and (without `best`) the ladder's chosen rung as `best_params_path(output)`,
+    all together
+    (staged, then moved in; an existing file is replaced only with `force`).
+    `calibrations`: nominal / cpa models already identified from `recording` (else the HTML
+    report identifies them); `best`: the model the HTML report recommends and the PARAMS.json
+    it goes to (default: the ladder's chosen rung and `best_params_path(output)`);
+    `warnings`: the caller's own warnings, listed in the HTML report; `compared`: the
+    before/after comparison if the caller has it (`compare_before_after`).
+
+    Returns
+    -------
+    report : Path
+        The Markdown report: `report_path(output)` (the HTML one: `html_report_path`).
+    """
+    from robot_calib.atomic import staged_outputs
+    from robot_calib.diagnose.figures import FigureCache
+    from robot_calib.diagnose.html_report import compare_models, html_report
+    from robot_calib.diagnose.report import plot_paths, write_report
+    from robot_calib.identify.params_file import write_json_atomic
+
+    output = Path(output)
+    report = report_path(output)
+    page = html_report_path(output)
+    best_file = best_params_path(output)
+    chosen = ladder.rungs[-1]
+    recommended, recommended_file = best or (chosen.calibration, best_file)
+    with staged_outputs(output.parent, force) as stage:
+        write_json_atomic(diagnosis.to_dict(), stage / output.name)
+        fitted = ladder.recording if ladder.recording is not None else recording  # no outliers
+        figures = FigureCache()  # each figure drawn once for both reports
+        write_report(diagnosis, ladder, fitted, stage / report.name, figures)
+        if compared is None:
+            compared = compare_models(ladder, calibrations)
+        (stage / page.name).write_text(
+            html_report(diagnosis, ladder, fitted, compared, recommended,
+                        recommended_file.name, warnings, figures)
+        )  # fmt: skip
+        if best is None:  # run writes its own params_best.json: one best model per folder
+            scores = {r.model: r.heldout.absolute_rms_mm for r in ladder.rungs}
+            write_json_atomic(
+                selected_document(marked_implausible(chosen.calibration, diagnosis), fitted,
+                                  "the diagnosis ladder's chosen rung", diagnosis.scored_on,
+                                  scores),
+                stage / best_file.name,
+            )  # fmt: skip
+        written = {p.name for p in stage.iterdir()}
+    if force:  # replaced whole: no figure of the old set that the new report does not have
+        for stale in plot_paths(report.with_suffix("")):
+            if stale.name not in written:
+                stale.unlink(missing_ok=True)
+    return report
+
+
+def marked_implausible(cal: Calibration, diagnosis: Diagnosis) -> Calibration:
+    """`cal` (the best model of `diagnosis`) carrying the diagnosis' implausibility reasons
+    too: its PARAMS.json says `plausible: false` with them whenever the diagnosis is
+    implausible, so that export, compensate and predict refuse it (without --force)."""
+    reasons = tuple(dict.fromkeys([*cal.implausible, *diagnosis.implausible]))
+    return cal if reasons == cal.implausible else replace(cal, implausible=reasons)
+
+
+def best_params_path(output: str | Path) -> Path:
+    """The PARAMS.json of the best model beside DIAGNOSIS.json `output`:
+    `<name>.params_best.json` (msgs_doc/parameters.md, `selected`)."""
+    output = Path(output)
+    return output.with_name(f"{output.stem}.params_best.json")
+
+
+def selected_document(
+    cal: Calibration, recording: Recording, how: str, scored_on: str, scores: dict[str, float]
+) -> dict[str, Any]:
+    """The PARAMS.json document of `cal`, the model selected as the best, with a `selected`
+    section: how it was chosen, on what, and every candidate's held-out rms [mm]."""
+    doc = cal.to_dict(recording)
+    doc["selected"] = {
+        "model": cal.label,
+        "chosen_as": how,
+        "scored_on": scored_on,
+        "holdout_abs_rms_mm": scores,
+    }
+    return doc
+
+
+def generalisation_warnings(scores: Sequence[tuple[str, float]]) -> list[str]:
+    """A warning for every model of `scores` ((name, held-out abs rms [mm]), simplest first)
+    that scores worse than the one before it: a richer model that generalises worse."""
+    warnings = []
+    for (simple, a), (rich, b) in zip(scores, scores[1:]):
+        if b > a:
+            warnings.append(
+                f"warning: {rich} generalises worse than {simple} ({b:.4f} vs {a:.4f} mm "
+                f"held-out abs rms): its extra parameters fit the calibration poses, not the "
+                "robot; the best model is chosen by held-out error"
+            )
+    return warnings
+
+
+def compare_before_after(
+    ladder: Ladder, calibrations: Mapping[str, Calibration] | None = None
+) -> tuple[list[ModelErrors], list[str]]:
+    """The HTML report's before/after models (`compare_models`: nominal, cpa, geometric,
+    the best rung) and, when they are all scored on hold-out bags, a warning for each that
+    generalises worse than the simpler one before it (what `diagnose` says, as `run` does)."""
+    from robot_calib.diagnose.html_report import compare_models
+
+    compared = compare_models(ladder, calibrations)
+    if ladder.holdout is None:  # nominal/cpa in-sample, the rungs k-fold: not comparable
+        return compared, []
+    return compared, generalisation_warnings(
+        [(m.model, m.accuracy.absolute_rms_mm) for m in compared]
+    )
