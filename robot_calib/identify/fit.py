@@ -346,16 +346,19 @@ class _Problem:
             block[len(r) :, -1] = residual
             return cast(Array, np.linalg.qr(block, mode="r"))
 
+        columns = np.flatnonzero(free)
         for start in range(0, n, BLOCK_POSES):
             rows = slice(start, min(start + BLOCK_POSES, n))
             block = self.poses if n <= BLOCK_POSES else self.poses.subset(rows)
-            points, jac = self.model.jacobian(params, block)
+            points, jac_t = self.model.jacobian_columns(params, block, columns)  # (F, m, 3)
             predicted[rows] = points
             weight = w.position[rows]
             residual = ((points - self.points[rows]) * weight[:, None]).reshape(-1)
-            jac = jac[:, :, free] * weight[:, None, None]
+            if not w.uniform:
+                jac_t *= weight[None, :, None]
             ss += float(residual @ residual)
-            r = fold(r, jac.reshape(len(residual), n_free), residual)
+            # (F, 3m) rows are the F-ordered block's columns: contiguous copies
+            r = fold(r, jac_t.reshape(n_free, len(residual)).T, residual)
         for start in range(0, len(self.rows6), BLOCK_POSES):
             which = self.rows6[start : start + BLOCK_POSES]
             sub = self.poses.subset(which)
