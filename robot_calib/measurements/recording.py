@@ -574,7 +574,9 @@ def recording_from_stream(
             f"{pair_tolerance} s ({len(js_ns)} joint states)"
         )
     q, velocity = q[pick[ok]], velocity_sign[pick[ok]]
-    direction = np.where(velocity != 0, velocity, approach_directions(q))
+    direction = np.where(
+        velocity != 0, velocity, _approach_in_receive_order(q, js_order[keep][pick[ok]])
+    )
     time = (point_ns[ok] - point_ns[ok][0]) * 1e-9
     target = None if target is None else target[ok]
     extra = extra.take(ok)
@@ -591,6 +593,19 @@ def recording_from_stream(
         point_ns[ok],
         tuple(target_names),
     )
+
+
+def _approach_in_receive_order(q: Array, received: IntArray) -> Array:
+    """Approach directions (n, J) (+1/-1) of the poses q (n, J) [rad] in the order their
+    joint states were received (`received` (n,): each one's position in the input, the
+    file order): the robot publishes as it moves, so that is the order it visited them,
+    also where header stamps go backwards (a clock jump, re-stamped messages), which would
+    flip the approach side of the poses around the jump. With monotonic stamps the same as
+    in stamp order."""
+    by_receipt = np.argsort(received, kind="stable")
+    out = np.empty_like(q)
+    out[by_receipt] = approach_directions(q[by_receipt])
+    return out
 
 
 def _per_target_index(order: IntArray, point_target: IntArray | None) -> IntArray:
