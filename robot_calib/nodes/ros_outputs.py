@@ -8,6 +8,7 @@ below and call one builder per result.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -91,6 +92,15 @@ def robot_urdf(robot: RobotDescription) -> str:
     return reference.partition("#")[0] if is_urdf_reference(reference) else ""
 
 
+XML_DECLARATION = re.compile(r"\A\s*<\?xml\s[^>]*\?>")
+
+
+def as_text(urdf: str) -> str:
+    """A URDF file's text as a topic's string: its XML declaration without `encoding` (the
+    message is text, not bytes; lxml and urdf_parser_py refuse a str that declares one)."""
+    return XML_DECLARATION.sub('<?xml version="1.0"?>', urdf, count=1)
+
+
 def calibrated_urdf(cal: Calibration, source: str, nominal_urdf: str = "") -> tuple[str, str]:
     """The calibrated URDF of `cal` (`source`: the PARAMS.json it is, for the file's header)
     and what it was written into: the user's URDF `nominal_urdf`, else the robot's own URDF
@@ -101,7 +111,7 @@ def calibrated_urdf(cal: Calibration, source: str, nominal_urdf: str = "") -> tu
     if nominal:
         from robot_calib.export.urdf_nominal import render_on_nominal
 
-        return render_on_nominal(cal, source, nominal), nominal
+        return as_text(render_on_nominal(cal, source, nominal)), nominal
     from robot_calib.export import FORMATS
 
     return FORMATS["urdf"].render(cal, source), "the calibrated chain (export --format urdf)"
@@ -205,7 +215,8 @@ def calibration_status(
 class CaptureProgress:
     """Where a capture campaign stands: poses measured of those to measure (`total`,
     besides `earlier` ones already in the bag), the plan pose at hand (None when none),
-    the state machine's step, the skipped poses' reasons, and `error` once aborted."""
+    the state machine's step ('finished' at the end, also when stopped with poses to go),
+    the skipped poses' reasons (refused or failed), and `error` once aborted."""
 
     measured: int
     total: int
@@ -219,9 +230,10 @@ class CaptureProgress:
 
 
 def capture_status(name: str, robot: str, progress: CaptureProgress) -> DiagnosticStatus:
-    """The capture's progress: ERROR once aborted (`progress.error`), WARN while any pose
-    was skipped (refused up front or failed), else OK. Values: poses done / total, the
-    current plan pose, the step, failures and the last reason, the bag, time left."""
+    """The capture's progress: ERROR once aborted (`progress.error`), WARN once any pose
+    was skipped (refused up front or failed) and when stopped with poses to go, else OK.
+    Values: poses done / total, the current plan pose, the step, failures and the last
+    reason, the bag, time left."""
     p = progress
     values = [
         ("poses_done", str(p.measured)),
@@ -238,7 +250,9 @@ def capture_status(name: str, robot: str, progress: CaptureProgress) -> Diagnost
     done = f"{p.measured} of {p.total} poses measured"
     if p.error is not None:
         return _status(name, robot, ERROR, f"aborted: {p.error} ({done})", values)
+    skipped = f", {len(p.skipped)} skipped" if p.skipped else ""
+    if p.step == "finished" and p.current_pose is not None:  # stopped (Ctrl-C) mid-campaign
+        message = f"stopped at plan pose {p.current_pose}: {done}{skipped}; run again to resume"
+        return _status(name, robot, WARN, message, values)
     at = "" if p.current_pose is None else f"; at plan pose {p.current_pose} ({p.step})"
-    if p.skipped:
-        return _status(name, robot, WARN, f"{done}, {len(p.skipped)} skipped{at}", values)
-    return _status(name, robot, OK, done + at, values)
+    return _status(name, robot, WARN if p.skipped else OK, done + skipped + at, values)
