@@ -25,6 +25,7 @@ from robot_calib.capture.settle import Settler
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.nodes.capture import CaptureNode
+from robot_calib.nodes.ros_outputs import capture_status
 from robot_calib.nodes.sim_robot import SimRobotNode
 from robot_calib.nodes.sim_tracker import SimTrackerNode
 from robot_calib.poses import Poses
@@ -257,6 +258,8 @@ def test_dry_run_moves_nothing_and_bad_parameters_are_refused(
     )
     assert dry.finished and len(dry.moves) == 120 and not (tmp_path / "d.mcap").exists()
     dry.destroy_node()
+    status = capture_status("robot_calib: capture", ROBOT.name, dry.progress())
+    assert status.level == DiagnosticStatus.OK and values(status)["step"] == "dry run"
     for overrides, message in (
         ([], "parameter 'output' must name a .mcap bag"),
         ([Parameter("output", value="x.mcap"), Parameter("settle_time", value=0.0)],

@@ -398,17 +398,18 @@ class CaptureNode(Node):
     def progress(self) -> CaptureProgress:
         """Where the campaign stands (what /diagnostics says); a finished campaign that
         measured nothing is an error, as for the exit status (`_done`)."""
-        left = self._index < len(self.moves)
+        dry_run = self.settings.dry_run
+        left = self._index < len(self.moves) and not dry_run
         error = self.error
-        if error is None and self.finished and not self.measured and self.moves and not left:
-            error = "no pose measured"
+        if error is None and self.finished and not (self.measured or left or dry_run):
+            error = "no pose measured" if self.moves else None
         eta = None
         if self._durations and left:
             eta = (len(self.moves) - self._index) * float(np.mean(self._durations))
         return CaptureProgress(
             measured=self.measured, total=len(self.moves), earlier=self.n_already,
             current_pose=self.moves[self._index].pose if left else None,
-            step="finished" if self.finished else self._state,
+            step="dry run" if dry_run else "finished" if self.finished else self._state,
             skipped=tuple(s.reason for s in self.skipped), bag=str(self.bag_path),
             eta_s=eta, error=error,
         )  # fmt: skip
