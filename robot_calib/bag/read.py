@@ -457,6 +457,7 @@ def read_bag(
         rotation=stamped.rotation,
         sigma=stamped.sigma,
         temperature=_temperature_at(path, celsius, stamped.point_ns),
+        received=np.arange(len(js_ns)),  # the file's order: as the recorder received them
     )
     rec = without_copies(rec, str(path))
     return replace(rec, warnings=tuple(warnings) + rec.warnings)

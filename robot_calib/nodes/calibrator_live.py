@@ -152,6 +152,7 @@ class LiveInputs:
             source=source, robot=self._robot,
             point_target=stamped.point_target if len(targets) > 1 else None,
             target_names=targets, rotation=stamped.rotation, sigma=stamped.sigma,
+            received=np.arange(len(js_ns)),  # appended as they arrived: the visiting order
         )  # fmt: skip
 
     def idle(self, seconds: float) -> str | None:
