@@ -253,6 +253,10 @@ def output_path(
         raise InputError(f"{path}: is an input of this command; will not overwrite it")
     if not os.access(path.parent, os.W_OK | os.X_OK):
         raise InputError(f"{path.parent}: folder not writable; cannot write {what} there")
+    if not force:
+        from robot_calib.atomic import refuse_incomplete
+
+        refuse_incomplete(path)  # a set killed half-moved: said as such, not "exists"
     if path.exists() and not force:
         raise InputError(f"{path}: exists; will not overwrite it (use --force)")
     if not force:  # still new at the final rename, or refused (a second command wrote it)
