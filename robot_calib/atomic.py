@@ -101,9 +101,13 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
         raise InputError(f"{folder}: cannot write there: {exc.strerror or exc}") from None
     moved: list[Path] = []
     deferred = False
+    journal = folder / f"{JOURNAL_PREFIX}{stage.name}.txt"
     try:
         yield stage
         files = sorted(stage.iterdir())
+        stale = _interrupted_sets(folder, {f.name for f in files})
+        if not force:
+            _refuse_incomplete(folder, stale)
         if not force:
             for staged in files:
                 if (folder / staged.name).exists():
@@ -111,6 +115,9 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
                         f"{folder / staged.name}: exists; will not overwrite it (use --force)"
                     )
         deferred = _defer_signals(True)  # the set moves in as one: no signal between renames
+        # what a SIGKILL between the renames (which no handler can hold) would leave part of:
+        # the next write of any of these names finds it and says so
+        journal.write_text(f"{os.getpid()}\n" + "".join(f"{f.name}\n" for f in files))
         for staged in files:
             target = folder / staged.name
             if force:
@@ -119,6 +126,12 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
                 _move_new(staged, target)
             moved.append(target)
             _pause_between_renames()
+        journal.unlink(missing_ok=True)
+        for old_journal in stale:  # the incomplete sets are replaced by a whole one
+            killed = old_journal.name[len(JOURNAL_PREFIX) : -len(".txt")]  # its staging folder
+            if killed.startswith(".robot-calib-") and killed.endswith(".partial"):
+                shutil.rmtree(folder / killed, ignore_errors=True)
+            old_journal.unlink(missing_ok=True)
         if not force and deferred:  # a signal that came meanwhile: the new set taken back
             deferred = _defer_signals(False)
     except OSError as exc:
@@ -131,8 +144,60 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
         raise
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+        journal.unlink(missing_ok=True)
         if deferred:  # with force the old set is replaced: a signal comes after, set whole
             _defer_signals(False)
+
+
+#: a set's journal in the target folder while its files are renamed in: the writer's pid,
+#: then one file name per line; removed once the set is whole (or taken back)
+JOURNAL_PREFIX = ".robot-calib-set-"
+
+
+def _interrupted_sets(folder: Path, names: set[str]) -> dict[Path, list[str]]:
+    """The journals in `folder` of writers that died between their renames (a process
+    that no longer runs; SIGKILL, power loss) listing any of `names`, each with the files
+    of its set present now (the incomplete set)."""
+    out: dict[Path, list[str]] = {}
+    for journal in folder.glob(f"{JOURNAL_PREFIX}*.txt"):
+        try:
+            pid, *listed = journal.read_text().split("\n")
+            alive = _running(int(pid))
+        except (OSError, ValueError):
+            continue
+        listed = [name for name in listed if name]
+        if not alive and names.intersection(listed):
+            out[journal] = [name for name in listed if (folder / name).exists()]
+    return out
+
+
+def refuse_incomplete(path: str | Path) -> None:
+    """InputError when `path` is a file of a set whose writer was killed between its
+    renames (`staged_outputs`' journal): an incomplete set, replaced only with --force."""
+    path = Path(path)
+    if path.parent.is_dir():
+        _refuse_incomplete(path.parent, _interrupted_sets(path.parent, {path.name}))
+
+
+def _refuse_incomplete(folder: Path, stale: dict[Path, list[str]]) -> None:
+    for journal, partial in stale.items():
+        if partial:
+            raise InputError(
+                f"{folder}: {', '.join(partial)}: left by a write that was killed between the "
+                f"renames of its files (journal {journal.name}): an incomplete set; use "
+                "--force to replace it"
+            )
+
+
+def _running(pid: int) -> bool:
+    """True if a process `pid` runs (this one included)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
 
 
 _DEFERRED = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -213,6 +278,8 @@ def output_path(
         raise InputError(f"{path}: is an input of this command; will not overwrite it")
     if not os.access(path.parent, os.W_OK | os.X_OK):
         raise InputError(f"{path.parent}: folder not writable; cannot write {what} there")
+    if not force:
+        refuse_incomplete(path)  # a set killed half-moved: said as such, not "exists"
     if path.exists() and not force:
         raise InputError(f"{path}: exists; will not overwrite it (use --force)")
     if not force:  # still new at the final rename, or refused (a second command wrote it)

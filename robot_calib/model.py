@@ -35,6 +35,7 @@ from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.dh import DHTable, chain, point_derivatives
 from robot_calib.kinematics.frames import (
     Array,
+    IntArray,
     matrix_to_rpy,
     rot_x,
     rot_y,
@@ -341,10 +342,19 @@ class KinematicModel:
         return out
 
     def jacobian(self, params: ParameterVector, poses: Poses) -> tuple[Array, Array]:
-        """Points (n, 3) [m] and d points / d parameters, shape (n, 3, P), full vector order."""
+        """Points (n, 3) [m] and d points / d parameters, shape (n, 3, P), full vector order
+        (a view of parameter-major storage: `jacobian_columns` gives columns contiguous)."""
         points, jac = self._evaluate(params, poses, with_jacobian=True)
         assert jac is not None
         return points, jac
+
+    def jacobian_columns(self, params: ParameterVector, poses: Poses,
+                         columns: IntArray) -> tuple[Array, Array]:  # fmt: skip
+        """Points (n, 3) [m] and d points / d the parameters at `columns` (indices into the
+        full vector), parameter-major: shape (len(columns), n, 3), each column's (n, 3)
+        contiguous (what a column-major least-squares block copies fastest)."""
+        points, jac = self.jacobian(params, poses)
+        return points, jac.transpose(2, 0, 1)[columns]
 
     def _chain(self, params: ParameterVector, poses: Poses) -> Chain:
         """The chain at `poses` with every effect's contribution applied."""
@@ -408,7 +418,10 @@ class KinematicModel:
             return points, None
 
         n = len(poses)
-        jac = np.zeros((n, 3, len(params)))
+        # parameter-major: each column a contiguous (n, 3) plane written whole (writing
+        # columns into an (n, 3, P) array strides through memory); returned as an
+        # (n, 3, P) view, and whole to `jacobian_columns`
+        jac_t = np.zeros((len(params), n, 3))
         deriv = point_derivatives(dh, frames, p_in_base, errors)
         for field in DH_UNITS:  # every joint's column of the field at once, (n, 3, J)
             joints = [j for j in range(self.robot.n_joints) if f"{field}{j + 1}" in params]
@@ -418,9 +431,9 @@ class KinematicModel:
             if field in ("a", "d"):
                 cols = cols * scale[:, :, None]  # the effective length is (1 + strain) * value
             index = [params.index(f"{field}{j + 1}") for j in joints]
-            jac[:, :, index] = np.moveaxis(np.tensordot(cols, rot, axes=([1], [1])), 2, 1)
+            jac_t[index] = np.einsum("naj,ba->jnb", cols, rot)
         for axis, name in enumerate(BASE_TRANSLATION):
-            jac[:, axis, params.index(name)] = 1.0
+            jac_t[params.index(name), :, axis] = 1.0
         # Rotation R = Rz(yaw) Ry(pitch) Rx(roll): each angle turns about an axis of the
         # partially rotated frame, through the tracker-frame image of the base origin.
         roll, pitch, yaw = (params[k] for k in BASE_ROTATION)
@@ -432,12 +445,12 @@ class KinematicModel:
         }
         lever = p_in_base @ rot.T
         for name, axis_vec in axes.items():
-            jac[:, :, params.index(name)] = np.cross(axis_vec, lever)
+            jac_t[params.index(name)] = np.cross(axis_vec, lever)
         flange_in_tracker = rot @ flange[:, :3, :3]  # (n, 3, 3)
         for k, name in enumerate(self.targets):
             rows = which == k
             for axis, pname in enumerate(target_parameters(name)):
-                jac[rows, :, params.index(pname)] = flange_in_tracker[rows, :, axis]
+                jac_t[params.index(pname), rows] = flange_in_tracker[rows, :, axis]
 
         d_housing = None
         if housing is not None:
@@ -458,8 +471,8 @@ class KinematicModel:
                 d_eff += np.concatenate(
                     [(d_housing[:, :, j, :, None] * basis[:, None, None, :]).reshape(n, 3, -1)
                      for j, basis in c.housing_blocks], axis=2)  # fmt: skip
-            jac[:, :, cols] = np.einsum("ab,nbp->nap", rot, d_eff)
-        return points, jac
+            jac_t[cols] = np.einsum("ab,nbp->pna", rot, d_eff)
+        return points, jac_t.transpose(1, 2, 0)
 
 
 def _housing_derivatives(frames: Array, housing: Array, p_in_base: Array) -> Array:

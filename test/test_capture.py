@@ -7,14 +7,17 @@ world, whose true geometry is known."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from robot_calib.bag.read import read_recording
 from robot_calib.capture.moves import MoveRules, describe, parse_approach, plan_moves
@@ -22,6 +25,7 @@ from robot_calib.capture.settle import Settler
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.nodes.capture import CaptureNode
+from robot_calib.nodes.ros_outputs import capture_status
 from robot_calib.nodes.sim_robot import SimRobotNode
 from robot_calib.nodes.sim_tracker import SimTrackerNode
 from robot_calib.poses import Poses
@@ -90,9 +94,11 @@ def run_graph(
     capture_parameters: list[Parameter],
     tracker_parameters: list[Parameter] | None = None,
     stop: Callable[[CaptureNode], bool] = lambda capture: False,
+    listeners: Sequence[Node] = (),
 ) -> CaptureNode:
     """capture + sim_robot (controller mode) + sim_tracker in one executor until capture
-    has finished (or `stop(capture)`: then it is stopped as by Ctrl-C)."""
+    has finished (or `stop(capture)`: then it is stopped as by Ctrl-C); `listeners` spin
+    with them (and are left to the caller)."""
     robot = SimRobotNode(context=context, parameter_overrides=FAST)
     tracker = SimTrackerNode(context=context, parameter_overrides=tracker_parameters or [])
     capture = CaptureNode(
@@ -104,7 +110,7 @@ def run_graph(
         ],
     )
     executor = SingleThreadedExecutor(context=context)
-    for node in (robot, tracker, capture):
+    for node in (robot, tracker, capture, *listeners):
         executor.add_node(node)
     deadline = time.monotonic() + TIMEOUT_S
     try:
@@ -115,6 +121,8 @@ def run_graph(
         for node in (capture, robot, tracker):
             executor.remove_node(node)
             node.destroy_node()
+        for node in listeners:
+            executor.remove_node(node)
         executor.shutdown()
     return capture
 
@@ -250,6 +258,8 @@ def test_dry_run_moves_nothing_and_bad_parameters_are_refused(
     )
     assert dry.finished and len(dry.moves) == 120 and not (tmp_path / "d.mcap").exists()
     dry.destroy_node()
+    status = capture_status("robot_calib: capture", ROBOT.name, dry.progress())
+    assert status.level == DiagnosticStatus.OK and values(status)["step"] == "dry run"
     for overrides, message in (
         ([], "parameter 'output' must name a .mcap bag"),
         ([Parameter("output", value="x.mcap"), Parameter("settle_time", value=0.0)],
@@ -281,3 +291,97 @@ def test_moves_are_timed_for_a_real_controller_and_directions_follow_the_stream(
         tracker.add(np.full(6, q))
     tracker.add(np.full(6, -1e-3 + 5e-5))  # jitter back, below the tolerance
     assert np.all(tracker.direction == -1)
+
+
+class DiagnosticsListener(Node):
+    """capture's statuses on /diagnostics (RELIABLE, VOLATILE, as diagnostic_aggregator
+    reads them), in order."""
+
+    def __init__(self, context: Context) -> None:
+        super().__init__("diagnostics_listener", context=context)
+        self.statuses: list[DiagnosticStatus] = []
+        self.create_subscription(
+            DiagnosticArray,
+            "/diagnostics",
+            lambda msg: self.statuses.extend(
+                s for s in msg.status if s.name == "robot_calib: capture"
+            ),
+            QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE),
+        )
+
+    def spin_until_finished(self, context: Context) -> DiagnosticStatus:
+        """Spin alone until the campaign's last status ('finished') arrived; returns it."""
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(self)
+        deadline = time.monotonic() + TIMEOUT_S
+        try:
+            while not self.statuses or values(self.statuses[-1])["step"] != "finished":
+                assert time.monotonic() < deadline, "no final status"
+                executor.spin_once(timeout_sec=0.01)
+        finally:
+            executor.remove_node(self)
+            executor.shutdown()
+        return self.statuses[-1]
+
+
+def values(status: DiagnosticStatus) -> dict[str, str]:
+    return {kv.key: kv.value for kv in status.values}
+
+
+def test_progress_is_published_on_diagnostics(context: Context, tmp_path: Path) -> None:
+    """Pose by pose, OK with poses done / total and the plan pose at hand; stopped with
+    poses to go: WARN, saying how to resume."""
+    listener = DiagnosticsListener(context)
+    try:
+        run_graph(
+            context,
+            [
+                Parameter("plan", value="paper-test1"),
+                Parameter("output", value=str(tmp_path / "p.mcap")),
+            ],
+            stop=lambda c: c.measured == 3,
+            listeners=[listener],
+        )
+        final = listener.spin_until_finished(context)
+    finally:
+        listener.destroy_node()
+    running = listener.statuses[:-1]
+    assert running and all(s.level == DiagnosticStatus.OK for s in running)
+    assert {s.hardware_id for s in listener.statuses} == {ROBOT.name}
+    done = [int(values(s)["poses_done"]) for s in running]
+    assert done == sorted(done) and {0, 1, 2} <= set(done)
+    assert {values(s)["poses_total"] for s in listener.statuses} == {"120"}
+    moving = [s for s in running if values(s)["step"] == "settle"]
+    assert [values(s)["current_pose"] for s in moving][:3] == ["0", "1", "2"]
+    assert moving[0].message == "0 of 120 poses measured; at plan pose 0 (settle)"
+    assert final.level == DiagnosticStatus.WARN
+    assert final.message.startswith("stopped at plan pose 3: 3 of 120 poses measured")
+    assert values(final)["failures"] == "0" and values(final)["poses_done"] == "3"
+
+
+def test_skipped_poses_warn_and_an_abort_is_an_error(context: Context, tmp_path: Path) -> None:
+    listener = DiagnosticsListener(context)
+    try:
+        with pytest.raises(InputError, match="the first 3 poses all failed"):
+            run_graph(
+                context,
+                [
+                    Parameter("plan", value="paper-test1"),
+                    Parameter("output", value=str(tmp_path / "t.mcap")),
+                    Parameter("measure_timeout", value=0.2),
+                ],
+                [Parameter("triggered", value=True)],  # measures only when asked: never
+                listeners=[listener],
+            )
+        final = listener.spin_until_finished(context)
+    finally:
+        listener.destroy_node()
+    levels = [s.level for s in listener.statuses]
+    assert levels[0] == DiagnosticStatus.OK and DiagnosticStatus.WARN in levels
+    first_warning = listener.statuses[levels.index(DiagnosticStatus.WARN)]
+    assert values(first_warning)["failures"] == "1"
+    assert values(first_warning)["last_failure"].startswith("pose 0: no point on")
+    assert first_warning.message.startswith("0 of 120 poses measured, 1 skipped")
+    assert final.level == DiagnosticStatus.ERROR
+    assert final.message.startswith("aborted: the first 3 poses all failed")
+    assert values(final)["failures"] == "3"

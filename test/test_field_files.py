@@ -490,6 +490,37 @@ def test_an_interrupted_diagnosis_set_appears_whole_or_not_at_all(tmp_path: Path
     assert leftovers(tmp_path) == []
 
 
+def test_a_set_killed_between_its_renames_is_found_by_the_next_write(tmp_path: Path) -> None:
+    """SIGKILL (no handler can hold it) between the renames of diagnose's set leaves part
+    of it and the set's journal; the next `diagnose -o d.json` names the incomplete set
+    (exit 2, one line) instead of "exists" or taking it for a whole one; with --force it
+    writes a whole set and the journal goes."""
+    env = dict(os.environ, ROBOT_CALIB_TEST_RENAME_PAUSE_S="1.0")
+    run = subprocess.Popen(
+        [sys.executable, "-m", "robot_calib", "diagnose", str(SAMPLE), "-o", "d.json"],
+        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 240
+    while not diagnose_set(tmp_path) and run.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    run.kill()
+    run.communicate(timeout=60)
+    partial = set(diagnose_set(tmp_path))
+    journals = [name for name in leftovers(tmp_path) if name.startswith(".robot-calib-set-")]
+    assert partial and len(journals) == 1, (partial, leftovers(tmp_path))
+    listed = set((tmp_path / journals[0]).read_text().split()[1:])
+    assert partial < listed  # part of the set, not all of it
+    again = robot_calib("diagnose", str(SAMPLE), "-o", "d.json", cwd=tmp_path)
+    assert again.returncode == 2, again.stderr
+    err = again.stderr.strip()
+    assert len(err.splitlines()) == 1 and "killed between the renames" in err, err
+    forced = robot_calib("diagnose", str(SAMPLE), "-o", "d.json", "--force", cwd=tmp_path)
+    assert forced.returncode == 0, forced.stderr
+    assert set(diagnose_set(tmp_path)) == listed
+    assert [n for n in leftovers(tmp_path) if not n.startswith(".robot-calib-ros")] == []
+
+
 # --- item 10: the project's own specification ---
 
 

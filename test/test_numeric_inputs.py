@@ -37,8 +37,10 @@ def _csv(path: Path, rows: list[list[float]], header: str = "q1,q2,q3,q4,q5,q6,x
 COLUMNS = ("--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z")
 
 
-def _bag(path: Path, rows: list[list[float]], order: list[int] | None = None) -> Path:
-    """A contract bag of `rows`, stamped 1 s apart; `order`: the receive (file) order."""
+def _bag(path: Path, rows: list[list[float]], order: list[int] | None = None,
+         stamp_of: list[int] | None = None) -> Path:  # fmt: skip
+    """A contract bag of `rows`, stamped 1 s apart; `order`: the receive (file) order;
+    `stamp_of`: row k's stamp number (default k)."""
     from robot_calib.bag.csv_import import joint_state_cdr, point_cdr
     from robot_calib.bag.mcap_writer import BagWriter
     from robot_calib.bag.ros2_formats import typestore
@@ -52,7 +54,7 @@ def _bag(path: Path, rows: list[list[float]], order: list[int] | None = None) ->
         writer.add_topic(JOINT_STATES_TOPIC, JOINT_STATE_TYPE)
         writer.add_topic(POINT_TOPIC, POINT_TYPE)
         for n, k in enumerate(order or range(len(rows))):
-            stamp = t0 + k * 1_000_000_000
+            stamp = t0 + (k if stamp_of is None else stamp_of[k]) * 1_000_000_000
             received = t0 + n * 1_000_000_000
             writer.write(JOINT_STATES_TOPIC,
                          joint_state_cdr(store, stamp, names, np.array(rows[k][:6]), np.zeros(0)),
@@ -116,6 +118,45 @@ def test_stamps_going_backwards_are_said(
     ok = robot_calib("calibrate", str(_bag(tmp_path / "ok.mcap", rows)), "-o",
                      str(tmp_path / "q.json"))  # fmt: skip
     assert ok.returncode == 0 and "backwards" not in ok.stderr
+
+
+def test_approach_sides_follow_the_receive_order(tmp_path: Path) -> None:
+    """Item 2: a backlash bag whose stamps go backwards (a clock jump: the stamps of poses
+    40-79 come before those of 0-39) while the robot visited the poses in the order they
+    were received: each pose's approach side follows the receive order, so the backlash
+    fit equals the clean bag's (before: the sides flipped around the jump, 0.010 -> 0.206
+    mm held out in the field)."""
+    from robot_calib.bag.read import read_recording
+    from robot_calib.kinematics.loader import load_robot
+
+    clean = tmp_path / "clean.mcap"
+    run = robot_calib("simulate", "--plan", "random", "--n-random", "120", "--seed", "5",
+                      "--effects", "backlash:4", "-o", str(clean))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    robot = load_robot("kr5_sixx_r650")
+    rec = read_recording([clean], robot)
+    rows = [[*q, *p] for q, p in zip(rec.poses.q.tolist(), rec.points.tolist())]
+    jump = [k + 80 if k < 40 else k - 40 for k in range(len(rows))]  # 40-79 first
+    bag = _bag(tmp_path / "jump.mcap", rows, stamp_of=jump)
+    jumped = read_recording([bag], robot)
+    same = _bag(tmp_path / "same.mcap", rows)  # the clean rows, stamps in receive order
+    reference = read_recording([same], robot)
+    assert any("stamps go backwards" in w for w in jumped.warnings), jumped.warnings
+    # the same poses (in stamp order there) with the same approach sides
+    by_q = {tuple(np.round(q, 9)): d for q, d in zip(reference.poses.q, reference.poses.direction)}
+    sides = np.array([by_q[tuple(np.round(q, 9))] for q in jumped.poses.q])
+    np.testing.assert_array_equal(sides, jumped.poses.direction)
+    fits = []
+    for name, source in (("a", same), ("b", bag)):
+        out = tmp_path / f"{name}.json"
+        run = robot_calib("calibrate", str(source), "--model", "geometric+backlash:4", "-o",
+                          str(out))  # fmt: skip
+        assert run.returncode == 0, run.stderr
+        found = re.search(r"absolute mean ([0-9.]+) / max", run.stdout)
+        assert found, run.stdout
+        fits.append(float(found.group(1)))
+    # the same fit (the same measurements with the same sides); flipped sides: 0.03+ mm
+    assert abs(fits[0] - fits[1]) <= 0.05 * fits[0] + 1e-4, fits
 
 
 @pytest.mark.parametrize("column", [2, 7])

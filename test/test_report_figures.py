@@ -177,6 +177,36 @@ def test_what_the_best_model_removes_per_joint() -> None:
     assert removed_note(removed, 4, families=("scale",)) == ""
 
 
+def test_a_scanned_order_the_physical_model_leaves_no_trace_of_is_said_an_image() -> None:
+    """A geometric frequency-scan order (joint 6's order 5 while joint 4 has backlash) that
+    the physical model's own scan no longer finds is said to be an image of what that model
+    models; one it still finds gets no note; one the best model has is 'removed'."""
+    from robot_calib.diagnose.frequency import JointSpectrum
+    from robot_calib.diagnose.signatures import (
+        TimeTrend,
+        WhereItLies,
+        Workspace,
+        scan_order_note,
+    )
+
+    def where(*spectra: JointSpectrum) -> WhereItLies:
+        return WhereItLies([], [], None, TimeTrend([], 0.0), Workspace([]), 0.0, list(spectra))
+
+    def spectrum(joint: int, orders: list[int]) -> JointSpectrum:
+        return JointSpectrum(joint, True, 100.0, [0.0] * 64, orders, [1.0] * len(orders),
+                             [9.0] * len(orders), ["?"] * len(orders))  # fmt: skip
+
+    removed = removed_signatures([make_effect("backlash", [4]),
+                                  make_effect("joint_harmonics", [2], orders=(11,))])  # fmt: skip
+    after = where(spectrum(1, [17]))
+    model = "geometric+backlash:4+joint_harmonics:2:orders=11"
+    image = scan_order_note(removed, 6, 5, after, model)
+    assert image == f"not in the residuals of {model}: an image of what it models"
+    assert scan_order_note(removed, 1, 17, after, model) == ""  # still there: a real one
+    assert scan_order_note(removed, 2, 11, after, model).startswith(REMOVED)
+    assert scan_order_note(removed, 6, 5, None, model) == ""  # no scan after: nothing said
+
+
 WORLD = simulation_world(effects=["backlash:4"], seed=3)
 ROBOT = WORLD.model.robot
 

@@ -457,6 +457,7 @@ def read_bag(
         rotation=stamped.rotation,
         sigma=stamped.sigma,
         temperature=_temperature_at(path, celsius, stamped.point_ns),
+        received=np.arange(len(js_ns)),  # the file's order: as the recorder received them
     )
     rec = without_copies(rec, str(path))
     return replace(rec, warnings=tuple(warnings) + rec.warnings)
@@ -487,8 +488,9 @@ def _check_values(path: Path, q: Array, stamped: StampedMeasurements, names: lis
 
 def _backwards_stamps(path: Path, js_ns: IntArray) -> list[str]:
     """A warning when the joint states' header stamps (in file order, the order the
-    recorder received them) go backwards: the visiting order, and with it the approach
-    directions a backlash model uses, comes from the stamps, so it may be wrong."""
+    recorder received them) go backwards: the poses are paired and timed by their stamps,
+    their approach directions (backlash) follow the receive order (the order the robot
+    visited them)."""
     back = np.flatnonzero(np.diff(np.asarray(js_ns, dtype=np.int64)) < 0)
     if not len(back):
         return []
@@ -497,8 +499,8 @@ def _backwards_stamps(path: Path, js_ns: IntArray) -> list[str]:
         f"warning: {path}: {JOINT_STATES_TOPIC}: {len(back)} of {len(js_ns)} stamps go "
         f"backwards against the receive order (first: message {k + 1}, "
         f"{(int(js_ns[k - 1]) - int(js_ns[k])) / 1e6:.3f} ms before the message received "
-        "before it): the visiting order, hence the approach directions (backlash), is taken "
-        "from the stamps and may be wrong; a clock jump or re-stamped messages?"
+        "before it): a clock jump or re-stamped messages? Points are paired and timed by "
+        "their stamps; the approach directions (backlash) follow the receive order"
     ]
 
 

@@ -35,6 +35,7 @@ converged. The correction is of the target point: orientations are the model's.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -227,8 +228,14 @@ def _nominal_ik(
                          max_iterations=NOMINAL_ITERATIONS)  # fmt: skip
         return replace(found, q=wrap_into_limits(found.q, limits))
 
+    def within(q: Array) -> NDArray[np.bool_]:
+        return np.all((q >= limits[:, 0]) & (q <= limits[:, 1]), axis=1)
+
     first = solve(start, goal2base, oriented)
-    good = first.converged & np.all((first.q >= limits[:, 0]) & (first.q <= limits[:, 1]), axis=1)
+    good = first.converged & within(first.q)
+    if not good.all():  # another branch: from seeds spread over the arm's joint ranges
+        first = _other_branches(first, start, goal2base, oriented, solve, within, limits)
+        good = first.converged & within(first.q)
     if good.all() or not good.any():
         return first
     retry, done = np.flatnonzero(~good), np.flatnonzero(good)
@@ -250,6 +257,50 @@ def _nominal_ik(
             merged[retry] += np.where(better, getattr(first, name)[retry], 0)
         fields[name] = merged
     return IKSolution(**fields)
+
+
+#: where in each joint's range the branch seeds put joints 2, 3 and 5 (joint 1 facing the
+#: target, then facing away: reaching over backwards; 4 and 6 at zero): elbow up and down,
+#: wrist flipped or not
+BRANCH_SHARES = (
+    (0.3, 0.3, 0.25), (0.3, 0.7, 0.25), (0.7, 0.3, 0.25), (0.7, 0.7, 0.25),
+    (0.3, 0.3, 0.75), (0.3, 0.7, 0.75), (0.7, 0.3, 0.75), (0.7, 0.7, 0.75),
+)  # fmt: skip
+
+
+def _other_branches(
+    found: IKSolution,
+    start: Poses,
+    goal2base: Array,
+    oriented: NDArray[np.bool_],
+    solve: Callable[[Poses, Array, NDArray[np.bool_]], IKSolution],
+    within: Callable[[Array], NDArray[np.bool_]],
+    limits: Array,
+) -> IKSolution:
+    """`found` with the targets it did not reach within the joint limits (a position target
+    of a 6-joint arm has many solutions; from the home pose the solver may end on the
+    branch behind the robot, beyond joint 1's limits) solved again from BRANCH_SHARES seeds,
+    joint 1 facing the target and then away from it, until one converges within the
+    limits."""
+    out = {name: getattr(found, name).copy()
+           for name in ("q", "error_m", "error_rad", "iterations", "converged")}  # fmt: skip
+    if out["q"].shape[1] < 5:
+        return found
+    for turn, shares in ((t, s) for t in (0.0, np.pi) for s in BRANCH_SHARES):
+        left = np.flatnonzero(~(out["converged"] & within(out["q"])))
+        if not left.size:
+            break
+        seed = start.q[left].copy()
+        seed[:, 0] = np.angle(np.exp(1j * (seed[:, 0] + turn)))  # facing it, or away
+        seed[:, 3:] = 0.0
+        for joint, share in zip((1, 2, 4), shares):
+            seed[:, joint] = limits[joint, 0] + share * (limits[joint, 1] - limits[joint, 0])
+        again = solve(replace(start.subset(left), q=seed), goal2base[left], oriented[left])
+        better = again.converged & within(again.q)
+        for name in ("q", "error_m", "error_rad", "converged"):
+            out[name][left[better]] = getattr(again, name)[better]
+        out["iterations"][left] += again.iterations
+    return IKSolution(**out)
 
 
 def compensate_targets(

@@ -42,6 +42,7 @@ from robot_calib.diagnose.signatures import (
     JointTerms,
     ordinal,
     removed_note,
+    scan_order_note,
     signature_removed,
 )
 from robot_calib.errors import InputError
@@ -451,6 +452,8 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
                        "scale [ppm]", "gravity [deg/(N m)]", BEST_MODEL_COLUMN],
                       rows))  # fmt: skip
     found = [s for s in where.harmonic_orders if s.dominant_orders]
+    after = (None if diagnosis.unexplained.where is diagnosis.where
+             else diagnosis.unexplained.where)  # fmt: skip
     if found:
         out.append(
             "<h3>Joint-angle harmonics (frequency scan, geometric model)</h3><p>Orders "
@@ -463,7 +466,7 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
                 f"{a * DEG_PER_URAD:.5f}",
                 f"{z:.0f}",
                 why,
-                _note(removed_note(removed, s.joint, (k,), ("harmonics",))),
+                _note(scan_order_note(removed, s.joint, k, after, diagnosis.physical_model)),
             ]
             for s in found
             for k, a, z, why in zip(

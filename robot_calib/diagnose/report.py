@@ -20,6 +20,7 @@ from robot_calib.diagnose.signatures import (
     ArcSignature,
     JointTerms,
     removed_note,
+    scan_order_note,
     signature_removed,
 )
 from robot_calib.identify.outliers import OUTLIER_K
@@ -106,6 +107,8 @@ def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
     orders usually mean, and the refits the ladder made."""
     out: list[str] = []
     removed = diagnosis.removed_by_best_model
+    after = (None if diagnosis.unexplained.where is diagnosis.where
+             else diagnosis.unexplained.where)  # fmt: skip
     for title, where in (("geometric", diagnosis.where),
                          (diagnosis.physical_model, diagnosis.unexplained.where)):  # fmt: skip
         found = [s for s in where.harmonic_orders if s.dominant_orders]
@@ -118,8 +121,10 @@ def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
             gone = removed_note(removed, spectrum.joint, spectrum.dominant_orders, ("harmonics",))
             out.append(f"- {spectrum.line()}" + (f" ({gone})" if gone and title == "geometric"
                                                    else ""))  # fmt: skip
-            out += [f"  - order {k}: {why}"
-                    for k, why in zip(spectrum.dominant_orders, spectrum.meaning)]  # fmt: skip
+            for k, why in zip(spectrum.dominant_orders, spectrum.meaning):
+                note = "" if title != "geometric" else scan_order_note(
+                    removed, spectrum.joint, k, after, diagnosis.physical_model)  # fmt: skip
+                out.append(f"  - order {k}: {why}" + (f" ({note})" if note and not gone else ""))
     if diagnosis.refits:
         out += ["", "Candidates refitted by the ladder:", "",
                 "| model | linearised [mm] | in-sample rms [mm] | held-out [mm] | outcome |",

@@ -272,6 +272,21 @@ def removed_note(removed: Sequence[RemovedSignature], joint: int,
     return f"{REMOVED}: {'; '.join(parts)}" if parts else ""
 
 
+def scan_order_note(removed: Sequence[RemovedSignature], joint: int, order: int,
+                    after: WhereItLies | None, after_model: str) -> str:  # fmt: skip
+    """What became of order `order` of joint `joint` found in the geometric model's
+    frequency scan: 'removed by the best model: ...' when the best model has an effect
+    with it (`removed_note`), else 'not in the residuals of M: an image of what M models'
+    when the physical model M's own scan (`after`, None or geometric's: not known) no longer
+    finds it (an unmodelled effect of another joint projects onto a joint's harmonics; a
+    reader must not take it for a gear), else ''."""
+    note = removed_note(removed, joint, (order,), ("harmonics",))
+    if note or after is None:
+        return note
+    still = any(joint == s.joint and order in s.dominant_orders for s in after.harmonic_orders)
+    return "" if still else f"not in the residuals of {after_model}: an image of what it models"
+
+
 def signature_removed(sig: Signature | None, removed: Sequence[RemovedSignature]) -> str:
     """`removed_note` for a strongest signature (its joint, family and harmonic order):
     'removed by the best model: ...' when the best model has an effect for it, else ''."""

@@ -68,6 +68,7 @@ BASE_MODELS = ("nominal", "cpa", "geometric")
 OBJECTIVES = ("absolute", "seed")
 SEED_ANCHORS = (1, 3, 5)  # the seed fixes the cloud on the centres of circles 1, 3 and 5
 MAX_OUTLIER_ROUNDS = 4  # refits without the flagged points until the set is stable
+START_POSES = 20_000  # poses (a fixed random subset above) of the frames-only start fit
 Log = Callable[[str], None]
 
 
@@ -382,7 +383,11 @@ def _calibrate_once(
         initial = cpa.parameters
     else:
         say("geometric: no sweep of every joint, starting from the nominal model")
-        initial = fit_frames(geometric, geometric.parameters(), poses, points).parameters
+        # a start: the frames of at most START_POSES poses place the tracker as well as
+        # 100k do (the fit from there uses every pose)
+        sample = recording.at_most(START_POSES)
+        initial = fit_frames(geometric, geometric.parameters(), sample.poses,
+                             sample.points).parameters  # fmt: skip
     initial = initial_tool_rotations(geometric, _seeded(geometric, initial), poses)
     # a start pi and a sign away (CPA's axis lines, a given start) starts where it ends
     initial = canonical_form(geometric, initial, poses).parameters

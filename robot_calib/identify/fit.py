@@ -346,16 +346,19 @@ class _Problem:
             block[len(r) :, -1] = residual
             return cast(Array, np.linalg.qr(block, mode="r"))
 
+        columns = np.flatnonzero(free)
         for start in range(0, n, BLOCK_POSES):
             rows = slice(start, min(start + BLOCK_POSES, n))
             block = self.poses if n <= BLOCK_POSES else self.poses.subset(rows)
-            points, jac = self.model.jacobian(params, block)
+            points, jac_t = self.model.jacobian_columns(params, block, columns)  # (F, m, 3)
             predicted[rows] = points
             weight = w.position[rows]
             residual = ((points - self.points[rows]) * weight[:, None]).reshape(-1)
-            jac = jac[:, :, free] * weight[:, None, None]
+            if not w.uniform:
+                jac_t *= weight[None, :, None]
             ss += float(residual @ residual)
-            r = fold(r, jac.reshape(len(residual), n_free), residual)
+            # (F, 3m) rows are the F-ordered block's columns: contiguous copies
+            r = fold(r, jac_t.reshape(n_free, len(residual)).T, residual)
         for start in range(0, len(self.rows6), BLOCK_POSES):
             which = self.rows6[start : start + BLOCK_POSES]
             sub = self.poses.subset(which)
@@ -474,6 +477,10 @@ def weighted_jacobian(
     return residual.copy(), jac.copy(), rows
 
 
+#: poses the structural identifiability check looks at (a fixed random subset above): exact
+#: redundancy is a property of the model's structure, which 20k random poses show as well
+#: as 100k (the check's compressed Jacobian of every parameter costs a fit's evaluation)
+STRUCTURE_POSES = 20_000
 #: `weighted_rows`' owner of the weak prior's rows (they belong to no measurement)
 PRIOR_ROW = -1
 
@@ -507,6 +514,9 @@ def _structurally_identifiable(
     property of the Jacobian's structure that no start changes) fixed, and (name, reason)
     of each. Its own function so that the full Jacobian at the start, (n, 3, P), is freed
     before the solver allocates its own."""
+    if len(poses) > STRUCTURE_POSES:  # a structure: a fixed random subset shows it
+        keep = np.sort(np.random.default_rng(0).choice(len(poses), STRUCTURE_POSES, False))
+        poses, points = poses.subset(keep), points[keep]
     _, jac_full, rows = weighted_jacobian(model, start, poses, points, objective)
     params, ident = fix_unidentifiable(start, jac_full, rows=rows)
     return params, ident.fixed

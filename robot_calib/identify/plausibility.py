@@ -184,6 +184,22 @@ def calibration_warnings(cal: Calibration, geometry_fitted: bool = True,
     return out
 
 
+def held_out_warnings(cal: Calibration, held_out_rms_mm: float, where: str) -> list[str]:
+    """A warning when the calibration's held-out absolute rms [mm] (measurements it was
+    not fitted on, from `where`) is more than RESIDUAL_FACTOR times the noise per axis
+    (`noise_per_axis`; the rms over 3 axes compared per axis, as in-sample), else none."""
+    noise, source = noise_per_axis(cal)
+    per_axis = held_out_rms_mm * 1e-3 / np.sqrt(3.0)
+    if per_axis <= RESIDUAL_FACTOR * noise:
+        return []
+    return [
+        f"warning: {where}: held-out residual {per_axis * 1e3:.4f} mm per axis is "
+        f"{per_axis / noise:.0f} x the noise ({noise * 1e3:.4f} mm, {source}): the model "
+        "does not generalise to these poses (an unmodelled effect: see `robot-calib "
+        "diagnose`), or the tracker moved since the calibration"
+    ]
+
+
 #: Beyond these a result is no robot of this table at all, but nonsense (PARAMS.json
 #: `plausible: false`, `calibrate` exit 3): a geometric parameter this far from nominal
 #: after the canonical form (`identify.canonical`: angles within pi of nominal, DH flips

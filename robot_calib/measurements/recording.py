@@ -487,6 +487,7 @@ def recording_from_stream(
     rotation: Array | None = None,
     sigma: Array | None = None,
     temperature: Array | None = None,
+    received: IntArray | None = None,
 ) -> Recording:
     """A recording of one source from its stamped messages (a bag's or live), paired by
     the contract's rule; sweeps are found on `robot`'s joint variables (None: readings).
@@ -498,8 +499,11 @@ def recording_from_stream(
 
     js_ns (m,) joint-state stamps [ns], q (m, J) readings [rad], velocity_sign (m, J) (+1/-1,
     0 = no velocity); point_ns (n,) point stamps [ns], points (n, 3) tracker frame [m]; each
-    in any order (sorted here by stamp, stable). Raises `error` (naming `source`) when the
-    points look like millimetres or none pairs.
+    in any order (sorted here by stamp, stable). received (m,): the joint states' order of
+    arrival (a bag's file order, the order a live node received them), which is the order
+    the robot visited the poses (it publishes as it moves): the approach directions follow
+    it, even where stamps go backwards (a clock jump); None: the stamps' order. Raises
+    `error` (naming `source`) when the points look like millimetres or none pairs.
 
     Returns
     -------
@@ -574,7 +578,10 @@ def recording_from_stream(
             f"{pair_tolerance} s ({len(js_ns)} joint states)"
         )
     q, velocity = q[pick[ok]], velocity_sign[pick[ok]]
-    direction = np.where(velocity != 0, velocity, approach_directions(q))
+    # the visiting order: the joint states' arrival where known, else their stamps'
+    arrival = np.arange(len(js_order)) if received is None else np.asarray(received)[js_order]
+    direction = np.where(velocity != 0, velocity,
+                         _approach_in_receive_order(q, arrival[keep][pick[ok]]))  # fmt: skip
     time = (point_ns[ok] - point_ns[ok][0]) * 1e-9
     target = None if target is None else target[ok]
     extra = extra.take(ok)
@@ -591,6 +598,19 @@ def recording_from_stream(
         point_ns[ok],
         tuple(target_names),
     )
+
+
+def _approach_in_receive_order(q: Array, received: IntArray) -> Array:
+    """Approach directions (n, J) (+1/-1) of the poses q (n, J) [rad] in the order their
+    joint states were received (`received` (n,): each one's position in the input, the
+    file order): the robot publishes as it moves, so that is the order it visited them,
+    also where header stamps go backwards (a clock jump, re-stamped messages), which would
+    flip the approach side of the poses around the jump. With monotonic stamps the same as
+    in stamp order."""
+    by_receipt = np.argsort(received, kind="stable")
+    out = np.empty_like(q)
+    out[by_receipt] = approach_directions(q[by_receipt])
+    return out
 
 
 def _per_target_index(order: IntArray, point_target: IntArray | None) -> IntArray:

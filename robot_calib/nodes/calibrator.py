@@ -10,7 +10,14 @@ ended"), pair everything received so far exactly as a bag is paired and calibrat
 service `~/calibrate` (diagnostic_msgs/srv/SelfTest) does the same for a release more,
 deprecated: its first call logs a warning naming `~/solve`. Results go out on latched (transient
 local) topics: `~/parameters` (the PARAMS.json document), `~/summary`, `~/residuals` and
-`~/markers` (RViz / Foxglove). Topics, layouts and parameters: msgs_doc/calibrator.md.
+`~/markers` (RViz / Foxglove); a plausible result also as a calibrated URDF on
+`robot_description` (latched, as robot_state_publisher publishes it), and the node's health
+and accuracy on `/diagnostics` (nodes/ros_outputs.py, msgs_doc/ros_topics.md). Topics,
+layouts and parameters: msgs_doc/calibrator.md.
+
+The node is this adapter alone: its parameters are read in `calibrator_parameters.py`, live
+mode's subscriptions and pairing live in `calibrator_live.py`, the result messages are built
+in `calibrator_messages.py` and `ros_outputs.py`.
 
 Bad input (RobotCalibError) is logged as one error line. A live node keeps running;
 standalone in bag mode the node then exits with status 2.
@@ -22,72 +29,51 @@ from __future__ import annotations
 
 import json
 import os
-import threading
-import time
 from collections.abc import Sequence
-from functools import partial
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from diagnostic_msgs.srv import SelfTest
-from geometry_msgs.msg import Point, PointStamped, PoseStamped, PoseWithCovarianceStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.event_handler import QoSRequestedIncompatibleQoSInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import JointState
-from std_msgs.msg import ColorRGBA, Empty, Float64MultiArray, MultiArrayDimension, String
+from std_msgs.msg import Empty, Float64MultiArray, String
 from std_srvs.srv import Trigger
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 
 from robot_calib.diagnose.diagnosis import Diagnosis
 from robot_calib.errors import InputError, RobotCalibError
-from robot_calib.flows import DEFAULT_ROBOT
 from robot_calib.flows.bags import read_bags
 from robot_calib.flows.calibrate import calibrate_recording
 from robot_calib.flows.diagnose import diagnose_recordings
-from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
-from robot_calib.identify.calibrate import parse_model
 from robot_calib.identify.calibration import Calibration, summary
 from robot_calib.identify.params_file import write_json_atomic
-from robot_calib.kinematics.description import with_joint_names
-from robot_calib.kinematics.frames import Array
-from robot_calib.kinematics.loader import load_robot
-from robot_calib.measurements import PAIR_TOLERANCE_S, Recording, recording_from_stream
-from robot_calib.measurements.six_dof import PoseReading, join_poses
-from robot_calib.messages import (
-    JOINT_STATES_TOPIC,
-    POSE_COV_TYPE,
-    POSE_TYPE,
-    TRACKER_FRAME,
-    joint_positions,
-    pose_measurement,
-    pose_topic,
-    stamp_to_ns,
-    target_topic,
-    velocity_signs,
+from robot_calib.measurements import Recording
+from robot_calib.messages import JOINT_STATES_TOPIC
+from robot_calib.nodes._common import overrides, run_node
+from robot_calib.nodes.calibrator_live import LiveInputs
+from robot_calib.nodes.calibrator_messages import calibration_markers, residuals_message
+from robot_calib.nodes.calibrator_parameters import declare_parameters
+from robot_calib.nodes.ros_outputs import (
+    DIAGNOSTIC_PERIOD_S,
+    DIAGNOSTICS_QOS,
+    DIAGNOSTICS_TOPIC,
+    ROBOT_DESCRIPTION_QOS,
+    ROBOT_DESCRIPTION_TOPIC,
+    HeldOut,
+    calibrated_urdf,
+    calibration_status,
+    diagnostic_array,
+    score_held_out,
+    status_name,
 )
-from robot_calib.nodes._common import declare, overrides, run_node
-from robot_calib.poses import PRIMARY_TARGET, TARGET_NAME
 
-LATCHED = QoSProfile(  # late joiners (RViz, a test, `ros2 topic echo`) get the last result
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.TRANSIENT_LOCAL,
-)
-DEFAULT_QOS_DEPTH = 10000
-AXIS_LENGTH_M = 0.3  # drawn length of an identified joint axis, centred on its circles
-CIRCLE_SEGMENTS = 72
-RESIDUAL_FIELDS = "x,y,z,residual"  # the columns of ~/residuals (msgs_doc/calibrator.md)
+# late joiners (RViz, a test, `ros2 topic echo`) get the last result: KEEP_LAST 1, RELIABLE,
+# TRANSIENT_LOCAL, the profile robot_state_publisher gives /robot_description
+LATCHED = ROBOT_DESCRIPTION_QOS
 STEADY = ClockType.STEADY_TIME  # timers run on wall time also when /clock stands still
-FIRST_TARGET = "first"  # the first target's name in `six_dof_targets` (as in a world file)
-POSE_CLASSES = {POSE_TYPE: PoseStamped, POSE_COV_TYPE: PoseWithCovarianceStamped}
-DISCOVERY_PERIOD_S = 0.1  # how often the graph is asked for the type of a pose topic
 
 
 class CalibratorNode(Node):
@@ -123,7 +109,7 @@ class CalibratorNode(Node):
             node_name, parameter_overrides=overrides(values, parameter_overrides), **node_kwargs
         )
         try:
-            self._declare_parameters()
+            self.settings = declare_parameters(self)
         except RobotCalibError:
             super().destroy_node()
             raise
@@ -132,26 +118,36 @@ class CalibratorNode(Node):
         self.recording: Recording | None = None
         self.error: RobotCalibError | None = None
         self.solves = 0
+        self.held_out: HeldOut | None = None  # the last result scored on `holdout_bags`
+        self._description_note = ""  # what became of /robot_description (for /diagnostics)
         self._result_publishers = {
             "parameters": self.create_publisher(String, "~/parameters", LATCHED),
             "summary": self.create_publisher(String, "~/summary", LATCHED),
             "residuals": self.create_publisher(Float64MultiArray, "~/residuals", LATCHED),
             "markers": self.create_publisher(MarkerArray, "~/markers", LATCHED),
         }
-        if self.diagnose:
+        if self.settings.diagnose:
             self._result_publishers["diagnosis"] = self.create_publisher(
                 String, "~/diagnosis", LATCHED
             )
             self._result_publishers["diagnosis_summary"] = self.create_publisher(
                 String, "~/diagnosis_summary", LATCHED
             )
+        self._description = self.create_publisher(
+            String, ROBOT_DESCRIPTION_TOPIC, ROBOT_DESCRIPTION_QOS
+        )
+        self._diagnostics = self.create_publisher(
+            DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS
+        )
+        self._status = self._health(waiting="calibrating from the bags" if self.settings.bags else
+                                    "collecting live topics")  # fmt: skip
         steady = Clock(clock_type=STEADY)
+        self.create_timer(DIAGNOSTIC_PERIOD_S, self._publish_status, clock=steady)
         # Solving takes seconds: its callbacks share one mutually exclusive group (one solve
         # at a time), apart from the default group of the subscriptions and the parameter
         # services, so under a MultiThreadedExecutor the node keeps answering while it
         # solves (ros2/examples callback_group.py).
         self._solver_group = MutuallyExclusiveCallbackGroup()
-        self._lock = threading.Lock()  # the live buffers, shared with the solving thread
         self.busy = False  # a solve is running
         self.stopping = False  # destroy_node was called: a running solve publishes nothing
         self._warned_calibrate = False  # the deprecated ~/calibrate warns once
@@ -159,56 +155,32 @@ class CalibratorNode(Node):
         self.create_service(Trigger, "~/solve", self._on_solve_service, callback_group=group)
         # deprecated (issue 16): SelfTest on ~/calibrate, kept for one release beside ~/solve
         self.create_service(SelfTest, "~/calibrate", self._on_calibrate, callback_group=group)
-        if self.bags:
+        if self.settings.bags:
             self._once = self.create_timer(
                 0.0, self._solve_bags, clock=steady, callback_group=self._solver_group
             )
-            self.get_logger().info(f"calibrating {self.model_spec} from {', '.join(self.bags)}")
-            return
-        self._js_ns: list[int] = []
-        self._js_q: list[Array] = []
-        self._js_v: list[Array] = []
-        self._pt_ns: list[int] = []
-        self._pt_xyz: list[Array] = []
-        self._pt_target: list[int] = []  # index into target_names
-        self._poses: list[dict[int, PoseReading]] = [{} for _ in self.target_names]
-        self._counts = dict.fromkeys([JOINT_STATES_TOPIC, *self.live_topics], 0)
-        self.rejected = 0
-        self._last_point_s: float | None = None
-        self._unsolved = False
-        live_qos = QoSProfile(
-            history=HistoryPolicy.KEEP_LAST,
-            depth=self.qos_depth,
-            reliability=ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.VOLATILE,
-        )
-        self._live_qos = live_qos
-        self._subscribe(JointState, JOINT_STATES_TOPIC, self._on_joint_state)
-        for k, name in enumerate(self.target_names):
-            if name in self.point_targets:
-                self._subscribe(PointStamped, target_topic(name), partial(self._on_point, k))
-        # a pose topic's type (PoseStamped or PoseWithCovarianceStamped) comes from the graph
-        self._pending_poses = {pose_topic(t): k for k, t in enumerate(self.target_names)
-                               if t in self.six_dof_targets}  # fmt: skip
-        if self._pending_poses:
-            self._discovery_timer = self.create_timer(
-                DISCOVERY_PERIOD_S, self._discover_poses, clock=steady
+            self.get_logger().info(
+                f"calibrating {self.settings.model_spec} from {', '.join(self.settings.bags)}"
             )
-            self._discover_poses()
+            return
+        self._live = LiveInputs(
+            self, self.settings.robot, self.settings.targets, self.settings.qos_depth
+        )
         self.create_subscription(Empty, "~/solve", self._on_solve, 10, callback_group=group)
-        if self.solve_after_idle_s > 0:
-            period = min(self.solve_after_idle_s / 4, 0.5)
+        if self.settings.solve_after_idle_s > 0:
+            period = min(self.settings.solve_after_idle_s / 4, 0.5)
             self._idle_timer = self.create_timer(
                 period, self._check_idle, clock=steady, callback_group=group
             )
         idle = (
-            f", or {self.solve_after_idle_s} s after the last point"
-            if self.solve_after_idle_s > 0
+            f", or {self.settings.solve_after_idle_s} s after the last point"
+            if self.settings.solve_after_idle_s > 0
             else ""
         )
-        topics = [JOINT_STATES_TOPIC, *self.live_topics]
+        topics = [JOINT_STATES_TOPIC, *self.settings.targets.topics]
         self.get_logger().info(
-            f"collecting {', '.join(topics[:-1])} and {topics[-1]}; solving {self.model_spec} "
+            f"collecting {', '.join(topics[:-1])} and {topics[-1]}; solving "
+            f"{self.settings.model_spec} "
             f"on {self.resolve_topic_name('~/solve')} (topic std_msgs/msg/Empty or service "
             f"std_srvs/srv/Trigger){idle}"
         )
@@ -217,7 +189,7 @@ class CalibratorNode(Node):
         """A service's solve: live mode solves now, bag mode answers with the bags' result.
         Returns the calibration (None on failure) and one line: the model and its in-sample
         accuracy (seed criterion and absolute, mm, points fitted), or the error."""
-        cal = self.calibration if self.bags else self.solve()
+        cal = self.calibration if self.settings.bags else self.solve()
         if cal is None:
             return None, str(self.error) if self.error else "no calibration"
         return cal, f"{cal.name}: in-sample {cal.accuracy.line()}"
@@ -264,130 +236,6 @@ class CalibratorNode(Node):
         response.status = [status]
         return response
 
-    def _declare_parameters(self) -> None:
-        self.bags: list[str] = declare(
-            self, "bags", [], "calibration bags (.mcap) to solve at start; empty: live topics"
-        )
-        self.model_spec: str = declare(
-            self,
-            "model",
-            DEFAULT_MODEL,
-            "model to identify, e.g. geometric, geometric+eccentricity",
-        )
-        self.ecc_order: int = declare(
-            self, "ecc_order", DEFAULT_ECC_ORDER, "Fourier order of the eccentricity effect [1]"
-        )
-        robot_name: str = declare(
-            self, "robot", DEFAULT_ROBOT, "built-in robot name or robot YAML file"
-        )
-        joint_names: list[str] = declare(
-            self,
-            "joint_names",
-            [],
-            "JointState names of joints 1..J in order, if not the robot's own; empty: the robot's",
-        )
-        self.pair_tolerance: float = declare(
-            self,
-            "pair_tolerance",
-            PAIR_TOLERANCE_S,
-            "a point pairs with the joint state nearest in header.stamp within this [s]",
-        )
-        self.output: str = declare(
-            self, "output", "", "also write each result to this PARAMS.json path ('' = no file)"
-        )
-        self.solve_after_idle_s: float = declare(
-            self,
-            "solve_after_idle_s",
-            0.0,
-            "live mode: solve when no new point arrived for this long after the last one "
-            "[s, wall time]; 0 = only on ~/solve",
-        )
-        self.residual_scale: float = declare(
-            self,
-            "residual_scale",
-            100.0,
-            "residual lines in ~/markers are drawn this many times their length [1]",
-        )
-        self.learned_correction: bool = declare(
-            self,
-            "learned_correction",
-            False,
-            "also learn a correction of the model's residuals (a Gaussian process: the hybrid "
-            "model, PARAMS.json correction), which predict, score and compensate apply",
-        )
-        self.diagnose: bool = declare(
-            self,
-            "diagnose",
-            False,
-            "also run the sim-to-real gap diagnosis and publish ~/diagnosis (+ _summary)",
-        )
-        self.holdout_bags: list[str] = declare(
-            self, "holdout_bags", [], "hold-out bags for the diagnosis (empty: k-fold CV)"
-        )
-        self.qos_depth: int = declare(
-            self,
-            "qos_depth",
-            DEFAULT_QOS_DEPTH,
-            "live mode: history depth of the topic subscriptions [messages]",
-        )
-        further: list[str] = declare(
-            self,
-            "targets",
-            [],
-            "live mode: further targets NAME whose /laser_tracker/NAME/point to take too",
-        )
-        six_dof: list[str] = declare(
-            self,
-            "six_dof_targets",
-            [],
-            f"live mode: targets with a 6-DoF probe whose /laser_tracker/(NAME/)pose to take "
-            f"('{FIRST_TARGET}' = the first target, /laser_tracker/pose)",
-        )
-        self.robot = load_robot(robot_name)
-        if joint_names:
-            self.robot = with_joint_names(self.robot, joint_names)
-        parse_model(self.model_spec, self.robot, self.ecc_order)  # a bad model fails now
-        name = self.get_name()
-        if self.ecc_order < 1:
-            raise InputError(f"{name}: parameter 'ecc_order' must be >= 1")
-        if self.pair_tolerance <= 0:
-            raise InputError(f"{name}: parameter 'pair_tolerance' must be > 0 [s]")
-        if self.solve_after_idle_s < 0:
-            raise InputError(f"{name}: parameter 'solve_after_idle_s' must be >= 0 [s]")
-        if self.residual_scale <= 0:
-            raise InputError(f"{name}: parameter 'residual_scale' must be > 0")
-        if self.qos_depth < 1:
-            raise InputError(f"{name}: parameter 'qos_depth' must be >= 1")
-        if self.output and not Path(self.output).parent.is_dir():
-            raise InputError(f"{self.output}: no such folder for the parameter file")
-        self._live_targets(further, six_dof)
-
-    def _live_targets(self, further: list[str], six_dof: list[str]) -> None:
-        """The targets of live mode from the parameters `targets` and `six_dof_targets`:
-        `target_names` ('' first, then by name, as a bag's topics are read), `point_targets`
-        (point topics taken), `six_dof_targets` (pose topics taken) and `live_topics`."""
-        name = self.get_name()
-        for param, values in (("targets", further), ("six_dof_targets", six_dof)):
-            bad = [v for v in values if v != FIRST_TARGET and not TARGET_NAME.fullmatch(v)]
-            if param == "targets" and FIRST_TARGET in values:
-                bad.append(FIRST_TARGET)  # names the first target in six_dof_targets
-            if bad or len(set(values)) != len(values):
-                raise InputError(
-                    f"{name}: parameter {param!r}: {values}: want distinct target names "
-                    f"(letters, digits, underscores, starting with a letter; '{FIRST_TARGET}' "
-                    "in six_dof_targets only, for the first target)"
-                )
-        probes = {PRIMARY_TARGET if t == FIRST_TARGET else t for t in six_dof}
-        self.point_targets: tuple[str, ...] = (PRIMARY_TARGET, *further)
-        self.six_dof_targets: tuple[str, ...] = tuple(sorted(probes))
-        self.target_names: tuple[str, ...] = (
-            PRIMARY_TARGET, *sorted((set(further) | probes) - {PRIMARY_TARGET}),
-        )  # fmt: skip
-        self.live_topics: list[str] = [
-            *(target_topic(t) for t in self.target_names if t in self.point_targets),
-            *(pose_topic(t) for t in self.six_dof_targets),
-        ]
-
     # --- public ---------------------------------------------------------------------------
 
     def destroy_node(self) -> None:
@@ -399,41 +247,23 @@ class CalibratorNode(Node):
     @property
     def failed(self) -> bool:
         """Bag mode could not calibrate (standalone: exit status 2)."""
-        return bool(self.bags) and self.error is not None
+        return bool(self.settings.bags) and self.error is not None
 
     @property
     def received(self) -> dict[str, int]:
         """Live mode: messages buffered per topic (joint states refused are not counted)."""
-        if self.bags:
+        if self.settings.bags:
             return {}
-        with self._lock:
-            return dict(self._counts)
+        return self._live.counts
 
     def solve(self) -> Calibration | None:
         """Live mode: pair everything received so far, calibrate and publish. Bad input is
         logged (one line) and kept in `error`; returns None then."""
-        if self.bags:
+        if self.settings.bags:
             self.get_logger().warning("~/solve ignored: the node calibrates from its bags")
             return None
-        names = self.robot.joint_names
-        with self._lock:  # a consistent snapshot while the subscriptions keep appending
-            self._unsolved = False
-            js_ns = np.array(self._js_ns, dtype=np.int64)
-            js_q = np.array(self._js_q).reshape(-1, len(names))
-            js_v = np.array(self._js_v).reshape(-1, len(names))
-            pt_ns, pt_xyz, pt_target = list(self._pt_ns), list(self._pt_xyz), list(self._pt_target)
-            poses = [dict(by_stamp) for by_stamp in self._poses]
-        source = "live " + " + ".join([JOINT_STATES_TOPIC, *self.live_topics])
-        targets = self.target_names
         try:
-            # a pose joins the point of its target and stamp, as in a bag (msgs_doc/six_dof.md)
-            stamped = join_poses(source, targets, pt_ns, pt_xyz, pt_target, poses, set(pt_target))
-            recording = recording_from_stream(
-                js_ns, js_q, js_v, stamped.point_ns, stamped.points, self.pair_tolerance,
-                source=source, robot=self.robot,
-                point_target=stamped.point_target if len(targets) > 1 else None,
-                target_names=targets, rotation=stamped.rotation, sigma=stamped.sigma,
-            )  # fmt: skip
+            recording = self._live.recording(self.settings.pair_tolerance)
             for warning in recording.warnings:
                 self._log(warning)
             return self._calibrate(recording)
@@ -446,7 +276,9 @@ class CalibratorNode(Node):
     def _solve_bags(self) -> None:
         self._once.cancel()
         try:
-            recording = read_bags(self.bags, self.robot, self.pair_tolerance, self._log)
+            recording = read_bags(
+                self.settings.bags, self.settings.robot, self.settings.pair_tolerance, self._log
+            )
             self._calibrate(recording)
         except RobotCalibError as exc:
             self._fail(exc)
@@ -460,11 +292,12 @@ class CalibratorNode(Node):
             self.busy = False
 
     def _calibrate_and_publish(self, recording: Recording) -> Calibration:
+        settings = self.settings
         self.get_logger().info(recording.summary())
         cal = calibrate_recording(
-            recording, self.robot, self.model_spec, self.ecc_order, log=self._log
+            recording, settings.robot, settings.model_spec, settings.ecc_order, log=self._log
         )
-        if self.learned_correction:  # the hybrid model (`Calibration.with_learned_correction`)
+        if settings.learned_correction:  # the hybrid model (`Calibration.with_learned_correction`)
             cal = cal.with_learned_correction(recording)
             correction = cal.correction
             for line in [] if correction is None else [correction.line(), *correction.warnings]:
@@ -472,11 +305,11 @@ class CalibratorNode(Node):
         doc = cal.to_dict(recording)
         if self.stopping:  # destroyed while solving (Ctrl-C): nothing to publish to
             return cal
-        if self.output:
+        if settings.output:
             try:
-                write_json_atomic(doc, Path(self.output))
+                write_json_atomic(doc, Path(settings.output))
             except OSError as exc:
-                raise InputError(f"{self.output}: cannot write ({exc.strerror})") from None
+                raise InputError(f"{settings.output}: cannot write ({exc.strerror})") from None
         self._result_publishers["parameters"].publish(String(data=json.dumps(doc)))
         # residuals and markers of the points fitted (tracker blunders are left out)
         fitted_points = recording.points if cal.inliers is None else recording.points[cal.inliers]
@@ -485,23 +318,31 @@ class CalibratorNode(Node):
             residuals_message(fitted_points, cal.residuals)
         )
         self._result_publishers["markers"].publish(
-            calibration_markers(cal, fitted_points, self.residual_scale)
+            calibration_markers(cal, fitted_points, settings.residual_scale)
         )
-        if self.diagnose:
-            self._diagnose(recording)
+        self._description_note = self._publish_description(cal)
+        holdout = None
+        if settings.holdout_bags:  # a bad hold-out bag is bad input, as for the diagnosis
+            holdout = read_bags(
+                settings.holdout_bags, settings.robot, settings.pair_tolerance, self._log
+            )
+        held_out = None if holdout is None else score_held_out(cal, recording, holdout)
+        for warning in held_out.warnings if held_out is not None else ():
+            self._log(warning)
+        if settings.diagnose:
+            self._diagnose(recording, holdout)
         self.calibration, self.recording, self.error = cal, recording, None
+        self.held_out = held_out
         self.solves += 1
-        written = f", written to {self.output}" if self.output else ""
+        self._publish_status(self._health())
+        written = f", written to {settings.output}" if settings.output else ""
         self.get_logger().info(f"{cal.name}: {cal.accuracy.line()}; published{written}")
         return cal
 
-    def _diagnose(self, recording: Recording) -> None:
-        """Run the diagnosis on `recording` (scored on `holdout_bags` or k-fold) and publish
-        the DIAGNOSIS.json document and its one-paragraph summary."""
-        holdout = None
-        if self.holdout_bags:
-            holdout = read_bags(self.holdout_bags, self.robot, self.pair_tolerance, self._log)
-        diagnosis, _ = diagnose_recordings(recording, self.robot, holdout)
+    def _diagnose(self, recording: Recording, holdout: Recording | None) -> None:
+        """Run the diagnosis on `recording` (scored on `holdout`, the `holdout_bags`, or
+        k-fold) and publish the DIAGNOSIS.json document and its one-paragraph summary."""
+        diagnosis, _ = diagnose_recordings(recording, self.settings.robot, holdout)
         if self.stopping:
             return
         self.diagnosis = diagnosis
@@ -512,6 +353,41 @@ class CalibratorNode(Node):
     def _fail(self, exc: RobotCalibError) -> None:
         self.error = exc
         self.get_logger().error(str(exc))
+        self._publish_status(self._health())
+
+    # --- robot_description and /diagnostics (nodes/ros_outputs.py) ----------------------------
+
+    def _publish_description(self, cal: Calibration) -> str:
+        """Publish `cal` as a calibrated URDF on robot_description (a plausible one only: a
+        reader has no means to tell); returns what became of it, for /diagnostics."""
+        if not self.settings.publish_robot_description:
+            return "off (parameter publish_robot_description)"
+        if not cal.plausible:
+            return "not published: the calibration is implausible"
+        source = self.settings.output or self.resolve_topic_name("~/parameters")
+        try:
+            text, into = calibrated_urdf(cal, source, self.settings.nominal_urdf)
+        except RobotCalibError as exc:
+            self.get_logger().warning(f"{self._description.topic_name} not published: {exc}")
+            return f"not published: {exc}"
+        self._description.publish(String(data=text))
+        return f"published to {self._description.topic_name}, written into {into}"
+
+    def _health(self, waiting: str = "") -> DiagnosticStatus:
+        """The node's status on /diagnostics from its last result or error."""
+        return calibration_status(
+            status_name(self.get_name()), self.settings.robot.name, self.calibration, self.error,
+            held_out=self.held_out, params_path=self.settings.output,
+            description=self._description_note, waiting=waiting,
+        )  # fmt: skip
+
+    def _publish_status(self, status: DiagnosticStatus | None = None) -> None:
+        """Publish `status` (kept as the last one), or the last one again (the timer)."""
+        if status is not None:
+            self._status = status
+        if not self.stopping:
+            stamp = self.get_clock().now().to_msg()
+            self._diagnostics.publish(diagnostic_array(self._status, stamp))
 
     def _log(self, message: str) -> None:
         """The core's progress lines as info, its 'warning: ...' lines as warnings."""
@@ -520,185 +396,17 @@ class CalibratorNode(Node):
         else:
             self.get_logger().info(message.strip())
 
-    def _on_incompatible_qos(self, topic: str, event: QoSRequestedIncompatibleQoSInfo) -> None:
-        self.get_logger().warning(
-            f"{topic}: a publisher's QoS is incompatible with RELIABLE "
-            f"(policy {event.last_policy_kind}); its messages are not received"
-        )
-
     def _on_solve(self, _msg: Empty) -> None:
         self.solve()
 
-    def _on_joint_state(self, msg: JointState) -> None:
-        names = self.robot.joint_names
-        try:
-            q = joint_positions(msg, names)
-        except InputError as exc:
-            self.rejected += 1
-            self.get_logger().warning(
-                f"{exc} ({self.rejected} refused so far)", throttle_duration_sec=10.0
-            )
-            return
-        with self._lock:
-            self._js_ns.append(stamp_to_ns(msg.header.stamp))
-            self._js_q.append(q)
-            self._js_v.append(velocity_signs(msg, names))
-            self._counts[JOINT_STATES_TOPIC] += 1
-
-    def _subscribe(self, msg_type: type, topic: str, callback: Any) -> None:
-        """A live subscription (RELIABLE, VOLATILE, qos_depth) warning of incompatible QoS."""
-        self.create_subscription(
-            msg_type,
-            topic,
-            callback,
-            self._live_qos,
-            event_callbacks=SubscriptionEventCallbacks(
-                incompatible_qos=partial(self._on_incompatible_qos, topic)
-            ),
-        )
-
-    def _discover_poses(self) -> None:
-        """Subscribe to each pose topic once the graph shows its type (a publisher exists)."""
-        graph = dict(self.get_topic_names_and_types())
-        for topic, k in list(self._pending_poses.items()):
-            types = [t for t in graph.get(topic, []) if t in POSE_CLASSES]
-            if not types:
-                if graph.get(topic):
-                    self.get_logger().warning(
-                        f"{topic}: type {graph[topic]} is none of {list(POSE_CLASSES)}: "
-                        "waiting for a publisher of one of them",
-                        throttle_duration_sec=10.0,
-                    )
-                continue
-            del self._pending_poses[topic]
-            self._subscribe(POSE_CLASSES[types[0]], topic, partial(self._on_pose, k, topic))
-            self.get_logger().info(f"{topic}: subscribed as {types[0]}")
-        if not self._pending_poses:
-            self._discovery_timer.cancel()
-
-    def _check_frame(self, topic: str, frame_id: str) -> None:
-        if frame_id != TRACKER_FRAME:
-            self.get_logger().warning(
-                f"{topic}: frame_id {frame_id!r} is not '{TRACKER_FRAME}' "
-                "(used as the tracker frame anyway)",
-                once=True,
-            )
-
-    def _on_point(self, target: int, msg: PointStamped) -> None:
-        topic = target_topic(self.target_names[target])
-        xyz = np.array([msg.point.x, msg.point.y, msg.point.z])
-        if not np.all(np.isfinite(xyz)):
-            self.get_logger().warning(f"{topic}: point not finite {xyz}: ignored")
-            return
-        self._check_frame(topic, msg.header.frame_id)
-        with self._lock:
-            self._pt_ns.append(stamp_to_ns(msg.header.stamp))
-            self._pt_xyz.append(xyz)
-            self._pt_target.append(target)
-            self._counts[topic] += 1
-            self._last_point_s = time.monotonic()
-            self._unsolved = True
-
-    def _on_pose(
-        self, target: int, topic: str, msg: PoseStamped | PoseWithCovarianceStamped
-    ) -> None:
-        try:
-            where = f"{topic} message {self._counts[topic] + 1}"
-            reading = pose_measurement(msg, where)
-        except InputError as exc:
-            self.get_logger().warning(f"{exc}: ignored", throttle_duration_sec=10.0)
-            return
-        self._check_frame(topic, msg.header.frame_id)
-        with self._lock:
-            self._poses[target][stamp_to_ns(msg.header.stamp)] = reading
-            self._counts[topic] += 1
-            self._last_point_s = time.monotonic()
-            self._unsolved = True
-
     def _check_idle(self) -> None:
         """Solve once the points have stopped for solve_after_idle_s (the plan ended)."""
-        with self._lock:
-            due = (
-                self._unsolved
-                and self._last_point_s is not None
-                and time.monotonic() - self._last_point_s >= self.solve_after_idle_s
+        what = self._live.idle(self.settings.solve_after_idle_s)
+        if what is not None:
+            self.get_logger().info(
+                f"no new point for {self.settings.solve_after_idle_s} s: solving {what}"
             )
-            n_poses = sum(len(by_stamp) for by_stamp in self._poses)
-            what = f"{len(self._pt_ns)} points" + (f" and {n_poses} poses" if n_poses else "")
-        if due:
-            self.get_logger().info(f"no new point for {self.solve_after_idle_s} s: solving {what}")
             self.solve()
-
-
-# --- messages of a result (no ROS graph needed) ---------------------------------------------
-
-
-def residuals_message(measured: Array, residuals: Array) -> Float64MultiArray:
-    """~/residuals: rows [x, y, z, |r|] of the measured points (n, 3) [m, tracker frame] and
-    the norms of the residuals (n, 3) predicted - measured [m], row-major, dims [n, 4]."""
-    table = np.column_stack([measured, np.linalg.norm(residuals, axis=1)])
-    msg = Float64MultiArray()
-    msg.layout.dim = [
-        MultiArrayDimension(label="measurement", size=table.shape[0], stride=table.size),
-        MultiArrayDimension(label=RESIDUAL_FIELDS, size=4, stride=4),
-    ]
-    msg.layout.data_offset = 0
-    msg.data = table.ravel().tolist()
-    return msg
-
-
-def _points(xyz: Array | Sequence[Array]) -> list[Point]:
-    return [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in xyz]
-
-
-def _marker(ns: str, marker_id: int, kind: int, rgba: tuple[float, ...]) -> Marker:
-    marker = Marker(ns=ns, id=marker_id, type=kind, action=Marker.ADD)
-    marker.header.frame_id = TRACKER_FRAME  # stamp 0: RViz uses the latest transform
-    marker.pose.orientation.w = 1.0
-    marker.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
-    return marker
-
-
-def circle_polyline(centre: Array, normal: Array, radius: float, n: int) -> Array:
-    """Closed polyline (n + 1, 3) of the circle of `centre` (3,) [m], unit `normal` (3,),
-    `radius` [m]: first point repeated last."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(normal, helper)
-    u /= np.linalg.norm(u)
-    v = np.cross(normal, u)
-    angle = np.linspace(0.0, 2 * np.pi, n + 1)
-    return centre + radius * (np.cos(angle)[:, None] * u + np.sin(angle)[:, None] * v)
-
-
-def calibration_markers(cal: Calibration, measured: Array, residual_scale: float) -> MarkerArray:
-    """~/markers in the tracker frame: a DELETEALL (clears an earlier result), then namespace
-    "axes" (one ARROW per identified joint axis, id = joint), "circles" (one LINE_STRIP per
-    fitted sweep circle), "measured" (SPHERE_LIST of the points) and "residuals" (LINE_LIST
-    from each measured point towards its prediction, `residual_scale` times the residual)."""
-    markers = [Marker(action=Marker.DELETEALL)]
-    markers[0].header.frame_id = TRACKER_FRAME
-    if cal.cpa is not None:
-        for j, axis in enumerate(cal.cpa.axes, start=1):
-            arrow = _marker("axes", j, Marker.ARROW, (0.1, 0.4, 1.0, 1.0))
-            half = 0.5 * AXIS_LENGTH_M * axis.direction
-            arrow.points = _points([axis.point - half, axis.point + half])
-            arrow.scale.x, arrow.scale.y, arrow.scale.z = 0.004, 0.010, 0.020  # shaft, head [m]
-            markers.append(arrow)
-        for k, sweep in enumerate(cal.cpa.sweeps):
-            strip = _marker("circles", k, Marker.LINE_STRIP, (0.2, 0.8, 0.2, 1.0))
-            c = sweep.circle
-            strip.points = _points(circle_polyline(c.centre, c.normal, c.radius, CIRCLE_SEGMENTS))
-            strip.scale.x = 0.001  # line width [m]
-            markers.append(strip)
-    dots = _marker("measured", 0, Marker.SPHERE_LIST, (1.0, 1.0, 1.0, 1.0))
-    dots.points = _points(measured)
-    dots.scale.x = dots.scale.y = dots.scale.z = 0.003  # sphere diameter [m]
-    lines = _marker("residuals", 0, Marker.LINE_LIST, (1.0, 0.2, 0.1, 1.0))
-    ends = measured + residual_scale * cal.residuals
-    lines.points = _points(np.stack([measured, ends], axis=1).reshape(-1, 3))
-    lines.scale.x = 0.0005  # line width [m]
-    markers += [dots, lines]
-    return MarkerArray(markers=markers)
 
 
 def main(args: Sequence[str] | None = None) -> int:

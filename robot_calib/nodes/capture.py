@@ -18,7 +18,9 @@ For each pose of the plan (a built-in name or a PLAN.yaml of `robot-calib plan`)
    contract reads from a non-empty velocity: with an approach side, the pose-to-pose
    change would give the wrong one.
 
-Progress ("pose k of N, ~m:ss left") is logged per pose. An existing bag resumes the
+Progress ("pose k of N, ~m:ss left") is logged per pose and published on /diagnostics
+(poses done / total, the current pose, failures; WARN once a pose is skipped, ERROR on
+abort: nodes/ros_outputs.py), again every second. An existing bag resumes the
 campaign: its poses (and those of its .partK bags) are skipped, the rest go into the next
 part (capture/resume.py). `dry_run` logs every move and exits without moving or writing.
 Parameters and topics: msgs_doc/capture.md.
@@ -32,10 +34,10 @@ import time
 from collections import deque
 from dataclasses import dataclass
 from functools import partial
-from pathlib import Path
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from rclpy.serialization import serialize_message
@@ -44,18 +46,14 @@ from sensor_msgs.msg import JointState
 from robot_calib.bag import BagWriter
 from robot_calib.capture.moves import (
     Move,
-    MoveRules,
     describe,
-    parse_approach,
     plan_moves,
     waypoint_times,
 )
 from robot_calib.capture.resume import existing_parts, measured, part_path
 from robot_calib.capture.settle import Settler
 from robot_calib.errors import InputError, RobotCalibError
-from robot_calib.flows import DEFAULT_ROBOT
 from robot_calib.kinematics.frames import Array
-from robot_calib.kinematics.loader import load_robot
 from robot_calib.messages import (
     JOINT_STATE_TYPE,
     JOINT_STATES_TOPIC,
@@ -65,9 +63,18 @@ from robot_calib.messages import (
     target_topic,
 )
 from robot_calib.model import KinematicModel
-from robot_calib.nodes._common import declare, run_node
+from robot_calib.nodes._common import run_node
+from robot_calib.nodes.capture_parameters import declare_parameters
+from robot_calib.nodes.ros_outputs import (
+    DIAGNOSTIC_PERIOD_S,
+    DIAGNOSTICS_QOS,
+    DIAGNOSTICS_TOPIC,
+    CaptureProgress,
+    capture_status,
+    diagnostic_array,
+    status_name,
+)
 from robot_calib.nodes.sim_robot import QOS, trajectory_topic
-from robot_calib.plan.plan_file import is_plan_file, planned_robot
 from robot_calib.poses import DirectionTracker
 from robot_calib.sim.plans import home_pose, make_plan
 
@@ -99,114 +106,19 @@ class CaptureNode(Node):
             raise
 
     def _setup(self) -> None:
-        plan_name = declare(self, "plan", "paper-test3", "built-in plan name or PLAN.yaml path")
-        robot_ref = declare(
-            self,
-            "robot",
-            "",
-            "robot: built-in name, YAML or URDF (default: "
-            f"a PLAN.yaml's robot, else {DEFAULT_ROBOT})",
-        )
-        names = declare(
-            self,
-            "joint_names",
-            [],
-            "the controller's joint names in joint "
-            "order, where they are not the robot's own (default: the robot's)",
-        )
-        self.output = Path(declare(self, "output", "", "campaign bag (.mcap; required)"))
-        controller = declare(
-            self,
-            "controller",
-            "joint_trajectory_controller",
-            "controller name: commands on /<controller>/joint_trajectory",
-        )
-        self.tolerance = declare(
-            self, "position_tolerance", 1e-4, "settled: every joint this close to the pose [rad]"
-        )
-        self.settle_s = declare(self, "settle_time", 0.5, "settled for this long [s]")
-        self.move_timeout = declare(
-            self, "move_timeout", 60.0, "a move not settled after this is skipped [s]"
-        )
-        self.measure_timeout = declare(
-            self,
-            "measure_timeout",
-            5.0,
-            "no point this long after settling: the pose is skipped [s]",
-        )
-        trigger = declare(
-            self,
-            "trigger_service",
-            "",
-            "std_srvs/Trigger service that makes the tracker measure ('' = take the next point)",
-        )
-        targets: list[str] = declare(
-            self,
-            "targets",
-            [],
-            "further targets' names (/laser_tracker/NAME/point; default: none)",
-        )
-        max_step = declare(self, "max_step", 90.0, "largest joint step of one move [deg]")
-        approach = declare(
-            self,
-            "approach",
-            "0",
-            "approach side per joint: +, - or 0, one for all or comma-separated per joint",
-        )
-        overshoot = declare(
-            self, "approach_overshoot", 1.0, "approach start before the pose [deg]"
-        )
-        speed = declare(
-            self, "speed", 20.0,
-            "joint speed of the moves [deg/s]: the trajectories' times (a joint_trajectory_"
-            "controller follows the times it is given and has no speed limit of its own)",
-        )  # fmt: skip
-        self.move_time = declare(self, "move_time", 0.0, "every move takes at least this [s]")
-        self.connect_timeout = declare(
-            self, "connect_timeout", 10.0,
-            "no controller subscriber or no joint state this long at the start: error [s]",
-        )  # fmt: skip
-        self.trigger_retries = declare(
-            self, "trigger_retries", 3, "trigger calls per pose while the tracker says no"
-        )
-        self.dry_run = declare(self, "dry_run", False, "log the moves; do not move or write")
-        seed = declare(self, "seed", 0, "seed of the random plan")
-        if not str(self.output) or self.output.suffix != ".mcap":
-            raise InputError("parameter 'output' must name a .mcap bag")
-        for name, value in (("position_tolerance", self.tolerance), ("settle_time", self.settle_s),
-                            ("move_timeout", self.move_timeout), ("speed", speed),
-                            ("measure_timeout", self.measure_timeout),
-                            ("connect_timeout", self.connect_timeout)):  # fmt: skip
-            if not value > 0:
-                raise InputError(f"parameter {name!r} must be > 0, not {value}")
-        for name, value in (("max_step", max_step), ("approach_overshoot", overshoot)):
-            if not (value > 0 if name == "max_step" else value >= 0):  # given in degrees
-                bound = "> 0" if name == "max_step" else ">= 0"
-                raise InputError(f"parameter {name!r} must be {bound} deg, not {value}")
-        if not self.move_time >= 0 or self.trigger_retries < 1:
-            raise InputError("parameters 'move_time' >= 0 and 'trigger_retries' >= 1")
-        self.speed_rad_s = float(np.radians(speed))
-        if not robot_ref:
-            robot_ref = planned_robot(plan_name) if is_plan_file(plan_name) else DEFAULT_ROBOT
-        robot = load_robot(robot_ref)
-        self.robot = robot
-        self.joint_names = tuple(names) if names else robot.joint_names
-        if len(self.joint_names) != robot.n_joints:
-            raise InputError(f"parameter 'joint_names' needs {robot.n_joints} names")
+        self.settings = settings = declare_parameters(self)
+        robot, rules = settings.robot, settings.rules
         model = KinematicModel(robot, ())
-        plan = make_plan(plan_name, model, model.parameters(), np.random.default_rng(seed))
-        rules = MoveRules(
-            np.radians(max_step), parse_approach(approach, robot.n_joints), np.radians(overshoot)
-        )
+        rng = np.random.default_rng(settings.seed)
+        plan = make_plan(settings.plan, model, model.parameters(), rng)
         self.plan_q: Array = plan.q
-        self.parts = [] if self.dry_run else existing_parts(self.output)
-        done = measured(plan.q, self.parts, robot, max(RESUME_MATCH_RAD, 2 * self.tolerance))
+        self.parts = [] if settings.dry_run else existing_parts(settings.output)
+        done = measured(plan.q, self.parts, robot, max(RESUME_MATCH_RAD, 2 * settings.tolerance))
         home = home_pose(robot)
         todo = np.flatnonzero(np.logical_not(done))
         # refusals do not depend on where a move starts; the waypoints are planned again from
         # the robot's latest joint state when each move is sent (`_send`)
-        self.rules = rules
-        moves, refused = plan_moves(plan.q[todo], home, robot.limits, self.joint_names, rules)
+        moves, refused = plan_moves(plan.q[todo], home, robot.limits, settings.joint_names, rules)
         self.moves = [Move(int(todo[m.pose]), m.waypoints) for m in moves]
         self.skipped = [Skipped(int(todo[r.pose]), r.reason.replace(
             f"pose {r.pose}:", f"pose {todo[r.pose]}:", 1)) for r in refused]  # fmt: skip
@@ -214,7 +126,7 @@ class CaptureNode(Node):
             self.get_logger().warning(f"refused {skip.reason}")
         self.n_already = int(done.sum())
         log = self.get_logger()
-        log.info(f"plan {plan_name}: {len(plan.q)} poses; {self.resume_line()}")
+        log.info(f"plan {settings.plan}: {len(plan.q)} poses; {self.resume_line()}")
         self.finished = False
         self.measured = 0
         self._index = 0
@@ -227,41 +139,52 @@ class CaptureNode(Node):
         self._durations: deque[float] = deque(maxlen=20)
         self._pose_started = time.monotonic()
         self._states: deque[tuple[int, Array, Any]] = deque(maxlen=STATE_BUFFER)
-        self._point_topics = [target_topic(t) for t in ("", *targets)]
+        self._point_topics = [target_topic(t) for t in ("", *settings.targets)]
         self._points: dict[str, list[Any]] = {t: [] for t in self._point_topics}
         self._directions = DirectionTracker()
         self.error: str | None = None
         self._attempts = 0
         self._failed = 0  # poses skipped while running (not refused up front)
         self._started = time.monotonic()
-        self.bag_path = part_path(self.output, len(self.parts) + 1)
-        if self.dry_run:
-            start = "; ".join(f"{n}={v:.1f}" for n, v in zip(self.joint_names, np.degrees(home)))
+        self.bag_path = part_path(settings.output, len(self.parts) + 1)
+        self._diagnostics = self.create_publisher(
+            DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS
+        )
+        self.create_timer(DIAGNOSTIC_PERIOD_S, self.report)
+        if settings.dry_run:
+            start = "; ".join(
+                f"{n}={v:.1f}" for n, v in zip(settings.joint_names, np.degrees(home))
+            )
             log.info(f"dry run: from the home pose ({start} deg); a real run plans each move "
                      "from where the robot stands")  # fmt: skip
-            for line in describe(self.moves, self.joint_names):
+            for line in describe(self.moves, settings.joint_names):
                 log.info(f"dry run: {line}")
             log.info("dry run: nothing moved, nothing written")
             self.finished = True
+            self.report()
             return
         if not self.moves:
             log.info("nothing to measure")
             self.finished = True
+            self.report()
             return
         from trajectory_msgs.msg import JointTrajectory
 
-        self.command = self.create_publisher(JointTrajectory, trajectory_topic(controller), 10)
+        self.command = self.create_publisher(
+            JointTrajectory, trajectory_topic(settings.controller), 10
+        )
         self.create_subscription(JointState, JOINT_STATES_TOPIC, self._on_state, QOS)
         for topic in self._point_topics:
             self.create_subscription(PointStamped, topic, partial(self._on_point, topic), QOS)
         self.trigger = None
-        if trigger:
+        if settings.trigger_service:
             from std_srvs.srv import Trigger
 
-            self.trigger = self.create_client(Trigger, trigger)
+            self.trigger = self.create_client(Trigger, settings.trigger_service)
         self._timer = self.create_timer(0.01, self._step)
-        log.info(f"commands on {trajectory_topic(controller)}; the bag {self.bag_path} is "
-                 "written from the first pose measured")  # fmt: skip
+        log.info(f"commands on {trajectory_topic(settings.controller)}; the bag "
+                 f"{self.bag_path} is written from the first pose measured")  # fmt: skip
+        self.report()
 
     # --- callbacks ------------------------------------------------------------------------
 
@@ -276,7 +199,7 @@ class CaptureNode(Node):
 
     def _on_state(self, msg: JointState) -> None:
         try:
-            q = joint_positions(msg, self.joint_names)
+            q = joint_positions(msg, self.settings.joint_names)
         except InputError as exc:
             self.error = f"{JOINT_STATES_TOPIC}: {exc}"
             return
@@ -310,11 +233,11 @@ class CaptureNode(Node):
         if self.command.get_subscription_count() >= 1 and self._states:
             self._state = "send"
             return
-        if time.monotonic() - self._started > self.connect_timeout:
+        if time.monotonic() - self._started > self.settings.connect_timeout:
             missing = (f"no controller subscribes {self.command.topic_name} (parameter "
                        "controller: is it running?)" if self.command.get_subscription_count()
                        < 1 else f"no joint state on {JOINT_STATES_TOPIC}")  # fmt: skip
-            raise InputError(f"{missing} after {self.connect_timeout:g} s")
+            raise InputError(f"{missing} after {self.settings.connect_timeout:g} s")
 
     def _send(self) -> None:
         """Plan the next move from where the robot stands and send it, timed."""
@@ -323,23 +246,24 @@ class CaptureNode(Node):
 
         pose = self.moves[self._index]
         here = self._states[-1][1]
-        planned, _ = plan_moves(self.plan_q[[pose.pose]], here, self.robot.limits,
-                                self.joint_names, self.rules)  # fmt: skip
+        planned, _ = plan_moves(self.plan_q[[pose.pose]], here, self.settings.robot.limits,
+                                self.settings.joint_names, self.settings.rules)  # fmt: skip
         waypoints = planned[0].waypoints
-        times = waypoint_times(here, waypoints, self.speed_rad_s, self.move_time)
+        times = waypoint_times(here, waypoints, self.settings.speed_rad_s, self.settings.move_time)
         msg = JointTrajectory()
-        msg.joint_names = list(self.joint_names)
+        msg.joint_names = list(self.settings.joint_names)
         for q, at in zip(waypoints, times):
             point = JointTrajectoryPoint()
             point.positions = q.tolist()
             point.time_from_start = Duration(sec=int(at), nanosec=int(round((at % 1) * 1e9)))
             msg.points.append(point)
-        self._settler = Settler(waypoints[-1], self.tolerance, self.settle_s)
+        self._settler = Settler(waypoints[-1], self.settings.tolerance, self.settings.settle_s)
         self._since = time.monotonic()
         self._pose_started = self._since
         self._move_s = float(times[-1])
         self.command.publish(msg)
         self._state = "settle"
+        self.report()
 
     def _settle(self) -> None:
         assert self._settler is not None
@@ -349,9 +273,10 @@ class CaptureNode(Node):
             self._settled_wall = time.monotonic()
             self._triggered = False
             self._state = "measure"
-        elif time.monotonic() - self._since > self.move_timeout + self._move_s:
+        elif time.monotonic() - self._since > self.settings.move_timeout + self._move_s:
             self._skip(
-                f"not settled within {self.move_timeout:g} s after its {self._move_s:.1f} s "
+                f"not settled within {self.settings.move_timeout:g} s after its "
+                f"{self._move_s:.1f} s "
                 f"move (largest joint error {np.degrees(self._settler.largest_error_rad):.4f} "
                 "deg)"
             )
@@ -360,7 +285,7 @@ class CaptureNode(Node):
         assert self._settler is not None and self._settler.settled_since is not None
         if self.trigger is not None and not self._triggered:
             if not self.trigger.service_is_ready():
-                if time.monotonic() - self._settled_wall > self.measure_timeout:
+                if time.monotonic() - self._settled_wall > self.settings.measure_timeout:
                     self._skip(f"trigger service {self.trigger.srv_name} not available")
                 return
             from std_srvs.srv import Trigger
@@ -376,7 +301,7 @@ class CaptureNode(Node):
             answer = future.result()
             self._trigger_future = None
             if answer is not None and not answer.success:
-                if self._attempts < self.trigger_retries:
+                if self._attempts < self.settings.trigger_retries:
                     self._triggered = False  # call again
                     return
                 self._skip(f"the tracker said no {self._attempts} times: {answer.message}")
@@ -389,10 +314,10 @@ class CaptureNode(Node):
                 fresh[topic] = after[0]
         if len(fresh) == len(self._points):
             self._record(fresh)
-        elif time.monotonic() - self._settled_wall > self.measure_timeout:
+        elif time.monotonic() - self._settled_wall > self.settings.measure_timeout:
             missing = [t for t in self._points if t not in fresh]
             self._skip(
-                f"no point on {', '.join(missing)} within {self.measure_timeout:g} s "
+                f"no point on {', '.join(missing)} within {self.settings.measure_timeout:g} s "
                 "after settling"
             )
 
@@ -410,7 +335,7 @@ class CaptureNode(Node):
         state = copy.deepcopy(min(self._states, key=lambda s: abs(s[0] - stamp))[2])
         names = list(state.name)
         velocity = np.zeros(len(names))
-        for j, name in enumerate(self.joint_names):
+        for j, name in enumerate(self.settings.joint_names):
             velocity[names.index(name)] = self._directions.direction[j] * DIRECTION_SPEED_RAD_S
         state.velocity = velocity.tolist()
         now = time.time_ns()
@@ -449,6 +374,7 @@ class CaptureNode(Node):
             self.close()
         else:
             self._state = "send"
+            self.report()
 
     def close(self) -> None:
         """Finish: stop the robot if a move may still run (interrupted, or a fatal error),
@@ -461,12 +387,40 @@ class CaptureNode(Node):
             from trajectory_msgs.msg import JointTrajectory
 
             stop = JointTrajectory()  # no points: the controller holds where it is
-            stop.joint_names = list(self.joint_names)
+            stop.joint_names = list(self.settings.joint_names)
             self.command.publish(stop)
         if self._writer is not None:
             self._writer.close()
             self._writer = None
         self.get_logger().info(self.summary())
+        self.report()
+
+    def progress(self) -> CaptureProgress:
+        """Where the campaign stands (what /diagnostics says); a finished campaign that
+        measured nothing is an error, as for the exit status (`_done`)."""
+        dry_run = self.settings.dry_run
+        left = self._index < len(self.moves) and not dry_run
+        error = self.error
+        if error is None and self.finished and not (self.measured or left or dry_run):
+            error = "no pose measured" if self.moves else None
+        eta = None
+        if self._durations and left:
+            eta = (len(self.moves) - self._index) * float(np.mean(self._durations))
+        return CaptureProgress(
+            measured=self.measured, total=len(self.moves), earlier=self.n_already,
+            current_pose=self.moves[self._index].pose if left else None,
+            step="dry run" if dry_run else "finished" if self.finished else self._state,
+            skipped=tuple(s.reason for s in self.skipped), bag=str(self.bag_path),
+            eta_s=eta, error=error,
+        )  # fmt: skip
+
+    def report(self) -> None:
+        """Publish the progress on /diagnostics (on each step and every second)."""
+        if not self.context.ok():
+            return  # shutting down (Ctrl-C): close() runs without a graph
+        name, robot = status_name(self.get_name()), self.settings.robot.name
+        status = capture_status(name, robot, self.progress())
+        self._diagnostics.publish(diagnostic_array(status, self.get_clock().now().to_msg()))
 
     def summary(self) -> str:
         """'N poses measured -> BAG; K skipped: pose i: why; ...' (and what is left)."""
@@ -492,7 +446,7 @@ class CaptureNode(Node):
 
 def _done(node: CaptureNode) -> bool:
     """Finished; a campaign that measured nothing is an error (exit 2), not a success."""
-    if node.finished and node.measured == 0 and node.moves and not node.dry_run:
+    if node.finished and node.measured == 0 and node.moves and not node.settings.dry_run:
         raise InputError(f"no pose measured ({node.summary()})")
     return node.finished
 

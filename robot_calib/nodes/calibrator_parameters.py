@@ -1,0 +1,172 @@
+"""The calibrator's parameters (msgs_doc/calibrator.md, "Parameters"): declared read-only
+with their descriptions, checked once at start, handed to the node as one typed value."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from rclpy.node import Node
+
+from robot_calib.errors import InputError
+from robot_calib.flows import DEFAULT_ROBOT
+from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
+from robot_calib.identify.calibrate import parse_model
+from robot_calib.kinematics.description import RobotDescription, with_joint_names
+from robot_calib.kinematics.loader import load_robot
+from robot_calib.measurements import PAIR_TOLERANCE_S
+from robot_calib.nodes._common import declare
+from robot_calib.nodes.calibrator_live import FIRST_TARGET, LiveTargets, live_targets
+
+DEFAULT_QOS_DEPTH = 10000
+
+
+@dataclass(frozen=True)
+class CalibratorParameters:
+    """The calibrator's parameters as read and checked (names as the parameters', `model`
+    as `model_spec`; `robot` loaded, with `joint_names` applied; `targets` of live mode)."""
+
+    bags: list[str]
+    model_spec: str
+    ecc_order: int
+    robot: RobotDescription
+    pair_tolerance: float
+    output: str
+    solve_after_idle_s: float
+    residual_scale: float
+    learned_correction: bool
+    diagnose: bool
+    holdout_bags: list[str]
+    publish_robot_description: bool
+    nominal_urdf: str
+    qos_depth: int
+    targets: LiveTargets
+
+
+def declare_parameters(node: Node) -> CalibratorParameters:
+    """Declare and read the calibrator's parameters on `node`; InputError naming the node
+    (or the file) for a bad value, an unknown robot or model, a missing folder."""
+    bags: list[str] = declare(
+        node, "bags", [], "calibration bags (.mcap) to solve at start; empty: live topics"
+    )
+    model_spec: str = declare(
+        node,
+        "model",
+        DEFAULT_MODEL,
+        "model to identify, e.g. geometric, geometric+eccentricity",
+    )
+    ecc_order: int = declare(
+        node, "ecc_order", DEFAULT_ECC_ORDER, "Fourier order of the eccentricity effect [1]"
+    )
+    robot_name: str = declare(
+        node, "robot", DEFAULT_ROBOT, "built-in robot name or robot YAML file"
+    )
+    joint_names: list[str] = declare(
+        node,
+        "joint_names",
+        [],
+        "JointState names of joints 1..J in order, if not the robot's own; empty: the robot's",
+    )
+    pair_tolerance: float = declare(
+        node,
+        "pair_tolerance",
+        PAIR_TOLERANCE_S,
+        "a point pairs with the joint state nearest in header.stamp within this [s]",
+    )
+    output: str = declare(
+        node, "output", "", "also write each result to this PARAMS.json path ('' = no file)"
+    )
+    solve_after_idle_s: float = declare(
+        node,
+        "solve_after_idle_s",
+        0.0,
+        "live mode: solve when no new point arrived for this long after the last one "
+        "[s, wall time]; 0 = only on ~/solve",
+    )
+    residual_scale: float = declare(
+        node,
+        "residual_scale",
+        100.0,
+        "residual lines in ~/markers are drawn this many times their length [1]",
+    )
+    learned_correction: bool = declare(
+        node,
+        "learned_correction",
+        False,
+        "also learn a correction of the model's residuals (a Gaussian process: the hybrid "
+        "model, PARAMS.json correction), which predict, score and compensate apply",
+    )
+    diagnose: bool = declare(
+        node,
+        "diagnose",
+        False,
+        "also run the sim-to-real gap diagnosis and publish ~/diagnosis (+ _summary)",
+    )
+    holdout_bags: list[str] = declare(
+        node,
+        "holdout_bags",
+        [],
+        "hold-out bags: each result scored on them (/diagnostics) and the diagnosis's "
+        "(empty: none; the diagnosis then k-fold CV)",
+    )
+    publish_robot_description: bool = declare(
+        node,
+        "publish_robot_description",
+        True,
+        "publish each plausible result as a calibrated URDF on robot_description",
+    )
+    nominal_urdf: str = declare(
+        node,
+        "nominal_urdf",
+        "",
+        "the URDF to write the calibration into for robot_description ('' = the robot's "
+        "own URDF when `robot` is one, else the calibrated chain alone)",
+    )
+    qos_depth: int = declare(
+        node,
+        "qos_depth",
+        DEFAULT_QOS_DEPTH,
+        "live mode: history depth of the topic subscriptions [messages]",
+    )
+    further: list[str] = declare(
+        node,
+        "targets",
+        [],
+        "live mode: further targets NAME whose /laser_tracker/NAME/point to take too",
+    )
+    six_dof: list[str] = declare(
+        node,
+        "six_dof_targets",
+        [],
+        f"live mode: targets with a 6-DoF probe whose /laser_tracker/(NAME/)pose to take "
+        f"('{FIRST_TARGET}' = the first target, /laser_tracker/pose)",
+    )
+    robot = load_robot(robot_name)
+    if joint_names:
+        robot = with_joint_names(robot, joint_names)
+    parse_model(model_spec, robot, ecc_order)  # a bad model fails now
+    name = node.get_name()
+    if ecc_order < 1:
+        raise InputError(f"{name}: parameter 'ecc_order' must be >= 1")
+    if pair_tolerance <= 0:
+        raise InputError(f"{name}: parameter 'pair_tolerance' must be > 0 [s]")
+    if solve_after_idle_s < 0:
+        raise InputError(f"{name}: parameter 'solve_after_idle_s' must be >= 0 [s]")
+    if residual_scale <= 0:
+        raise InputError(f"{name}: parameter 'residual_scale' must be > 0")
+    if qos_depth < 1:
+        raise InputError(f"{name}: parameter 'qos_depth' must be >= 1")
+    if nominal_urdf and not Path(nominal_urdf).is_file():
+        raise InputError(f"{nominal_urdf}: no such nominal URDF (parameter nominal_urdf)")
+    if output and not Path(output).parent.is_dir():
+        raise InputError(f"{output}: no such folder for the parameter file")
+    targets = live_targets(name, further, six_dof)
+
+    return CalibratorParameters(
+        bags=bags, model_spec=model_spec, ecc_order=ecc_order, robot=robot,
+        pair_tolerance=pair_tolerance, output=output, solve_after_idle_s=solve_after_idle_s,
+        residual_scale=residual_scale, learned_correction=learned_correction,
+        diagnose=diagnose, holdout_bags=holdout_bags,
+        publish_robot_description=publish_robot_description, nominal_urdf=nominal_urdf,
+        qos_depth=qos_depth, targets=targets,
+    )  # fmt: skip
