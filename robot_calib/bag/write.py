@@ -2,7 +2,7 @@
 pose (and what a pose may carry besides: a temperature, further targets' points, a 6-DoF
 probe's pose), CDR-serialised and written through `BagWriter`; also a stream's bag
 (msgs_doc/specification.md, msgs_doc/stream.md). `import` writes its CSV rows with it
-(`csv_import`), `split` and the simulator their poses.
+(`csv_import`), `split` its two halves, the simulation of a stream its stream.
 """
 
 from __future__ import annotations
