@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_calib.bag.csv_import import START_NS, STEP_NS, write_measurements
+from robot_calib.bag.write import START_NS, STEP_NS, write_measurements
 from robot_calib.measurements import Recording
 from robot_calib.sim.scenarios import ur10_random
 

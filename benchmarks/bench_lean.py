@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_calib.bag.csv_import import START_NS, STEP_NS, write_measurements
+from robot_calib.bag.write import START_NS, STEP_NS, write_measurements
 from robot_calib.sim.scenarios import ur10_random
 
 PEER_RSS_MIB = {10_000: 171, 50_000: 351, 100_000: 508}  # robotkinecal, issue 23

@@ -23,13 +23,10 @@ from pathlib import Path
 import numpy as np
 
 from robot_calib.accuracy import accuracy
-from robot_calib.bag.csv_import import (
-    PRESETS,
-    read_measurement_csv,
-    with_overrides,
-    write_measurement_bag,
-)
+from robot_calib.bag.csv_format import PRESETS, with_overrides
+from robot_calib.bag.csv_import import read_measurement_csv
 from robot_calib.bag.read import read_recording
+from robot_calib.bag.write import write_measurement_bag
 from robot_calib.diagnose.diagnosis import diagnose
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.kinematics.loader import load_robot

@@ -15,11 +15,11 @@ import pytest
 from robot_calib.bag import BagReader, BagWriter
 from robot_calib.bag import read as bag_read
 from robot_calib.bag.bulk_decode import decode_columns
-from robot_calib.bag.csv_import import (
+from robot_calib.bag.ros2_formats import typestore
+from robot_calib.bag.write import (
     write_measurement_bag,
     write_stream_bag,
 )
-from robot_calib.bag.ros2_formats import typestore
 from robot_calib.errors import BagError
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.messages import (
@@ -114,11 +114,11 @@ def test_contract_bags_of_every_kind_read_the_same_in_bulk(
 ) -> None:
     """JointState with and without velocities, further targets (one with gaps), 6-DoF
     PoseStamped and PoseWithCovarianceStamped, Temperature; chunks compressed or not."""
-    import robot_calib.bag.csv_import as csv_import
+    import robot_calib.bag.write as bag_write
 
-    real = csv_import.BagWriter
+    real = bag_write.BagWriter
     monkeypatch.setattr(  # small chunks: messages of a topic spread over many of them
-        csv_import, "BagWriter", lambda p: real(p, chunk_size=2000, compression=compression)
+        bag_write, "BagWriter", lambda p: real(p, chunk_size=2000, compression=compression)
     )
     q, points, rotation = poses["q"], poses["points"], poses["rotation"]
     extra = points + 0.1

@@ -18,11 +18,8 @@ import pytest
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.calibration import Calibration
-from robot_calib.identify.correction_structured import (
-    StructuredCorrection,
-    correction_from_dict,
-    fit_structured,
-)
+from robot_calib.identify.correction_structured import StructuredCorrection, correction_from_dict
+from robot_calib.identify.correction_structured_fit import fit_structured
 from robot_calib.kinematics.frames import Array
 from robot_calib.sim.blind import ur10_out_of_vocabulary
 from robot_calib.sim.scenarios import Scenario, noise_rms_mm, ur10_random

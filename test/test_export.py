@@ -250,7 +250,7 @@ def test_the_export_verb_writes_every_format_and_keeps_the_overwrite_policy(
         return robot_calib(*args, cwd=tmp_path)
 
     # a UR10 bag simulated in-process (the ROS graph's simulate is tested elsewhere)
-    from robot_calib.bag.csv_import import write_measurement_bag
+    from robot_calib.bag.write import write_measurement_bag
     from robot_calib.sim.measure import measure_every_target
     from robot_calib.sim.plans import paper_test_plan, plan_times
     from robot_calib.sim.world import build_world

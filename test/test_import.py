@@ -13,7 +13,8 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from robot_calib.accuracy import accuracy
-from robot_calib.bag.csv_import import PRESETS, CsvFormat, read_measurement_csv
+from robot_calib.bag.csv_format import PRESETS, CsvFormat
+from robot_calib.bag.csv_import import read_measurement_csv
 from robot_calib.bag.read import read_recording
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.kinematics.loader import load_robot

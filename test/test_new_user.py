@@ -15,13 +15,10 @@ import pytest
 from cli_runner import robot_calib
 
 from robot_calib.accuracy import Accuracy
-from robot_calib.bag.csv_import import (
-    PRESETS,
-    CsvFormat,
-    read_measurement_csv,
-    write_measurement_bag,
-)
+from robot_calib.bag.csv_format import PRESETS, CsvFormat
+from robot_calib.bag.csv_import import read_measurement_csv
 from robot_calib.bag.read import read_recording
+from robot_calib.bag.write import write_measurement_bag
 from robot_calib.cli import build_parser
 from robot_calib.diagnose.noise import estimate_noise, noise_basis
 from robot_calib.errors import InputError

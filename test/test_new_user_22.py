@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from cli_runner import robot_calib
 
-from robot_calib.bag.csv_import import write_measurement_bag
+from robot_calib.bag.write import write_measurement_bag
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.sim.measure import measure_every_target
 from robot_calib.sim.plans import plan_times, random_plan

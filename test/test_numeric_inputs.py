@@ -41,9 +41,9 @@ def _bag(path: Path, rows: list[list[float]], order: list[int] | None = None,
          stamp_of: list[int] | None = None) -> Path:  # fmt: skip
     """A contract bag of `rows`, stamped 1 s apart; `order`: the receive (file) order;
     `stamp_of`: row k's stamp number (default k)."""
-    from robot_calib.bag.csv_import import joint_state_cdr, point_cdr
     from robot_calib.bag.mcap_writer import BagWriter
     from robot_calib.bag.ros2_formats import typestore
+    from robot_calib.bag.write import joint_state_cdr, point_cdr
     from robot_calib.kinematics.loader import load_robot
     from robot_calib.messages import JOINT_STATE_TYPE, JOINT_STATES_TOPIC, POINT_TOPIC, POINT_TYPE
 

@@ -116,7 +116,7 @@ def test_calibrate_of_readings_in_degrees_exits_3_and_the_file_is_refused(tmp_pa
     the reason) unless --force, which warns instead."""
     from cli_runner import robot_calib
 
-    from robot_calib.bag.csv_import import write_measurement_bag
+    from robot_calib.bag.write import write_measurement_bag
 
     q = np.degrees(paper_test_plan(3).q)
     points = physical_points(WORLD, Poses.from_readings(np.radians(q)), np.random.default_rng(5))
@@ -166,7 +166,7 @@ def test_diagnose_of_readings_in_degrees_exits_3_without_a_traceback(tmp_path: P
     writes DIAGNOSIS.json with the reasons and exits 3 with one line."""
     from cli_runner import robot_calib
 
-    from robot_calib.bag.csv_import import write_measurement_bag
+    from robot_calib.bag.write import write_measurement_bag
     from robot_calib.sim.scenarios import ur10_random
 
     scenario = ur10_random(seed=4, n=150, holdout_share=0.0)
@@ -189,7 +189,7 @@ def test_diagnose_with_hold_out_readings_in_degrees_exits_3(tmp_path: Path) -> N
     the verb exits 3."""
     from cli_runner import robot_calib
 
-    from robot_calib.bag.csv_import import START_NS, STEP_NS, write_measurements
+    from robot_calib.bag.write import START_NS, STEP_NS, write_measurements
     from robot_calib.sim.scenarios import ur10_random
 
     scenario = ur10_random(seed=5, n=200, holdout_share=0.3)

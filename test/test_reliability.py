@@ -130,7 +130,7 @@ def bag_with(duplicate: str) -> Callable[[Path], None]:
 
 def many_poses(folder: Path) -> None:
     """big.mcap: 1300 random poses (more than `--objective seed` may take)."""
-    from robot_calib.bag.csv_import import write_measurement_bag
+    from robot_calib.bag.write import write_measurement_bag
 
     rng = np.random.default_rng(0)
     q = rng.uniform(-1.0, 1.0, (1300, 6)) + [0, -1.5, 1.5, 0, 0, 0]

@@ -21,7 +21,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from robot_calib.bag.csv_import import write_measurement_bag
+from robot_calib.bag.write import write_measurement_bag
 from robot_calib.export.urdf_nominal import render_on_nominal
 from robot_calib.kinematics.frames import rot_x, rot_y, rot_z
 from robot_calib.kinematics.parameters import ParameterVector

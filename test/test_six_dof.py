@@ -18,10 +18,10 @@ from cli_runner import robot_calib
 from rosbags.highlevel import AnyReader
 from scipy.spatial.transform import Rotation
 
-from robot_calib.bag.csv_import import write_measurement_bag
 from robot_calib.bag.mcap_writer import BagWriter
 from robot_calib.bag.read import read_recording
 from robot_calib.bag.ros2_formats import typestore
+from robot_calib.bag.write import write_measurement_bag
 from robot_calib.errors import BagError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.measurements import Recording, recording_from_arrays

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from cli_runner import robot_calib
 
-from robot_calib.bag.csv_import import write_stream_bag
 from robot_calib.bag.read import read_bag, read_stream
+from robot_calib.bag.write import write_stream_bag
 from robot_calib.flows.simulate import simulation_world
 from robot_calib.identify.latency import calibrate_stream, steffensen
 from robot_calib.measurements.stream import (

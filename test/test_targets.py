@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from cli_runner import robot_calib
 
-from robot_calib.bag.csv_import import write_measurement_bag
 from robot_calib.bag.mcap_reader import BagReader
 from robot_calib.bag.read import read_recording
+from robot_calib.bag.write import write_measurement_bag
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.params_file import load_params
 from robot_calib.measurements import Recording, recording_from_arrays

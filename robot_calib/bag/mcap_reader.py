@@ -1,5 +1,10 @@
 """Read MCAP bags (profile `ros2`): messages as raw CDR with receive times, topics, QoS.
 
+Why one module: `BagReader` and its bulk path (`channel_messages`: chunks parsed here,
+`_ChannelTable`, `_ExactReads`) read one file through one summary and must agree on what is
+corrupt (the bulk path gives None where mcap's reader would raise, and the caller falls
+back); apart, the bulk path would reach into the reader's private state.
+
 Records come from the `mcap` library: header and summary (topics, counts, metadata index)
 through its seeking reader, messages in file order through its stream reader. A bag whose
 writer was killed has no summary or footer; `BagReader(path, allow_truncated=True)` reads

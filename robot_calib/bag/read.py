@@ -1,6 +1,11 @@
 """Bags -> a `Recording`: read the contract's two topics of each bag and hand their stamps
 and values to the measurement model (`robot_calib.measurements`), which pairs them.
 
+Why one module: a bag is read two ways, in bulk (`_read_bulk`) and message by message
+(`_read_each`), which must give the same arrays and the same errors (the bulk path gives way
+to the other on anything it doubts: `_NoBulk`); they stay side by side with the checks both
+apply (`_check_values`), so that a change to one is read against the other.
+
 Bad input raises `BagError` naming the file and the problem (one line, exit status 2).
 """
 

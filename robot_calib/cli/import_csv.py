@@ -1,5 +1,5 @@
 """`robot-calib import`: measurement CSV(s) -> a bag of the contract (rows in visiting
-order, bad rows reported by line; robot_calib/bag/csv_import.py)."""
+order, bad rows reported by line; robot_calib/bag/csv_import.py, csv_format.py, write.py)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from robot_calib.errors import InputError
 from robot_calib.flows import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
-    from robot_calib.bag.csv_import import OrientationColumns, SigmaColumns
+    from robot_calib.bag.csv_format import OrientationColumns, SigmaColumns
 
 NAME = "import"
 HELP = "measurement CSV(s) -> a bag of the contract"
@@ -113,17 +113,14 @@ def add_arguments(imp: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     """Measurement CSV(s) -> a contract bag (rows in order, bad rows reported by line)."""
     from robot_calib.atomic import output_path
+    from robot_calib.bag.csv_format import PRESETS, CsvFormat, target_label, with_overrides
     from robot_calib.bag.csv_import import (
-        PRESETS,
-        CsvFormat,
         check_no_copies,
         counted,
         joined_times,
         read_measurement_csv,
-        target_label,
-        with_overrides,
-        write_measurement_bag,
     )
+    from robot_calib.bag.write import write_measurement_bag
 
     preset = PRESETS.get(args.preset or "")
     robot_name = args.robot  # else the preset's robot, else the default robot
@@ -247,7 +244,7 @@ def _orientation_columns(
 ) -> tuple[OrientationColumns, ...] | None:
     """--orientation [NAME:]QX,QY,QZ,QW and --orientation-rpy [NAME:]R,P,Y (each repeated)
     -> the format's orientation columns (None when neither is given)."""
-    from robot_calib.bag.csv_import import OrientationColumns
+    from robot_calib.bag.csv_format import OrientationColumns
 
     if not quaternions and not rpys:
         return None
@@ -262,7 +259,7 @@ def _orientation_columns(
 
 def _sigma_columns(specs: list[str] | None) -> tuple[SigmaColumns, ...] | None:
     """--sigma [NAME:]SP[,SR] (repeated) -> the format's standard deviation columns."""
-    from robot_calib.bag.csv_import import SigmaColumns
+    from robot_calib.bag.csv_format import SigmaColumns
 
     if not specs:
         return None

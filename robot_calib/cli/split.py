@@ -38,8 +38,8 @@ def main(args: argparse.Namespace) -> int:
     """One bag -> a calibration bag and a hold-out bag (random share, or the last share),
     both in one folder, written together (a failure leaves neither)."""
     from robot_calib.atomic import output_path, staged_outputs
-    from robot_calib.bag.csv_import import START_NS, write_measurements
     from robot_calib.bag.read import other_topics
+    from robot_calib.bag.write import START_NS, write_measurements
     from robot_calib.flows.bags import read_bags
     from robot_calib.measurements.split import holdout_mask
 

@@ -1,6 +1,11 @@
 """The diagnosis ladder: from `geometric`, add the effect that most reduces the error on data
 not used to fit it, until nothing beats the noise level (msgs_doc/specification.md section 4).
 
+Why one module: the climb (screen, refit, k-fold score, accept or stop) and its linearised
+screen (`LinearScreen`) share the folds over whole poses (`pose_folds`), the selection score
+(`combined_rms`) and the normal-equation sums (`_Sums`, which `kfold_parameters` uses too);
+apart, each half would import the other's private pieces.
+
 Screening is linearised and cheap: the current model is extended by every candidate at
 zero (which changes no prediction), one Jacobian gives all candidate columns, and each
 candidate is scored by k-fold cross-validation over whole poses (and on the hold-out bags

@@ -45,9 +45,8 @@ from robot_calib.identify.correction import (
     Hyperparameters,
     fitting_rows,
 )
-from robot_calib.identify.correction_structured import (
-    LearnedCorrection,
-    StructuredCorrection,
+from robot_calib.identify.correction_structured import LearnedCorrection, StructuredCorrection
+from robot_calib.identify.correction_structured_fit import (
     StructuredPart,
     fit_structured,
     fit_structured_part,

@@ -161,7 +161,7 @@ def simulate_stream(
         As `simulate`'s.
     """
     from robot_calib.atomic import staged_outputs
-    from robot_calib.bag.csv_import import write_stream_bag
+    from robot_calib.bag.write import write_stream_bag
     from robot_calib.sim.plans import make_plan
     from robot_calib.sim.stream import StreamOptions, simulate_stream
     from robot_calib.sim.world import save_world

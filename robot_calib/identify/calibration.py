@@ -20,7 +20,8 @@ from numpy.typing import NDArray
 from robot_calib.accuracy import Accuracy, accuracy, orientation_accuracy
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify.correction import fitting_rows
-from robot_calib.identify.correction_structured import LearnedCorrection, fit_structured
+from robot_calib.identify.correction_structured import LearnedCorrection
+from robot_calib.identify.correction_structured_fit import fit_structured
 from robot_calib.identify.fit import SolverReport
 from robot_calib.identify.identifiability import Identifiability
 from robot_calib.identify.outliers import Outlier

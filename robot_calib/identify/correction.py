@@ -1,5 +1,10 @@
 """A learned correction of what a physical model leaves: a Gaussian process of its residuals.
 
+Why one module: one Gaussian process. Its features and kernel (`_phi`, `_kernel`) serve the
+hyperparameter search, both fits (exact, subset of regressors) and
+`ResidualCorrection.predict`, and its file format is that fitted state; the hybrid model
+builds on it from outside (`identify.correction_structured`).
+
 The residual r = predicted - measured [m] of a calibration is modelled as a function of
 the joint readings (and of which target is measured, with several targets): a Gaussian
 process with a squared-exponential kernel on (sin q_j, cos q_j) of every joint, one length

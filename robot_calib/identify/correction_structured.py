@@ -54,6 +54,11 @@ plane from 20.5 x to 1.08 x (the process alone: 9.2 x); compliance of joints 2 a
 models (1.006 x): 1.006 x, no structure fitted. The largest coefficient 5e-3; the
 prediction changes by < 1e-16 m when the readings change by their rounding (q x (1 +
 1e-15)), and the compensation's fixed point holds to 1e-9 m.
+
+Where its parts live: the load features and the design matrix in `identify.load_features`
+(STEP_SHARES, FEATURES), the ridge in `identify.ridge` (TINY_COLUMN), the fit in
+`identify.correction_structured_fit` (MIN_ROWS_PER_COLUMN); here the fitted correction,
+what it predicts and names, and its file format.
 """
 
 from __future__ import annotations
@@ -65,22 +70,21 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
-from robot_calib.effects.compliance import GRAVITY
 from robot_calib.errors import InputError, check_keys
 from robot_calib.identify.correction import (
     MAX_CORRECTION_M,
-    MAX_LEARN,
-    FittedCorrection,
     Hyperparameters,
     ResidualCorrection,
-    exact_holdout,
-    fit_correction,
-    fit_correction_at,
 )
-from robot_calib.kinematics.description import RobotDescription
-from robot_calib.kinematics.dh import DHTable, chain
+from robot_calib.identify.load_features import (
+    FEATURES,
+    MOTIONS,
+    STEP_SHARES,
+    pose_blocks,
+    structured_design,
+)
+from robot_calib.identify.ridge import kept_columns
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
@@ -96,37 +100,6 @@ STRUCTURED_KEYS = (
     "rms_m", "parameters", "jacobian_columns", "step_tau_nm", "coefficients", "ridge",
     "degrees_of_freedom", "strongest",
 )  # fmt: skip
-#: the steps' widths tau_k: shares of the largest rms gravity torque of a joint over the
-#: fitted poses, the same for every joint (a UR10: about 1, 3 and 10 N m)
-STEP_SHARES = (0.01, 0.03, 0.1)
-#: a frame whose torque rms is below this [N m] gets steps of this width (a vertical axis:
-#: M_z = 0 everywhere, the steps are zero columns)
-MIN_TAU_NM = 1e-6
-FEATURES = ("1", "M_x", "M_y", "M_z", "P_x", "P_y", "P_z",
-            *(f"C{a}_{b}" for a in "xyz" for b in "xyz"),
-            *(f"step{k + 1}" for k in range(len(STEP_SHARES))))  # fmt: skip
-MOTIONS = ("x", "y", "z", "rx", "ry", "rz")
-#: the ridge's grid, relative to the largest eigenvalue of the scaled normal equations (and
-#: no structure at all: the ridge's other end); ending at the smallest is said
-RIDGE_GRID = tuple(float(v) for v in np.logspace(-12, 0, 49))
-#: rows (3 per pose) per column below which the structured part is not fitted
-MIN_ROWS_PER_COLUMN = 1.0
-#: a candidate ridge may spend at most this share of the rows as degrees of freedom
-MAX_DOF_SHARE = 0.5
-#: the process of what the structure leaves is kept when, fitted on half the poses, it
-#: brings the other half's rms down by this share (`_process_generalises`)
-MIN_PROCESS_GAIN = 0.02
-CHECK_MIN_POSES = 50  # per half; with fewer poses the process is kept unchecked
-#: up to this many fitted poses the design's blocks are kept for the fitted values (a
-#: block: 3 x 2000 x ~700 x 8 B = 34 MB; above, the design is computed again)
-KEEP_DESIGN_POSES = 3000
-BLOCK_POSES = 2000  # poses per block of the design matrix (a block: 3 x 2000 x ~300 x 8 B)
-EIGEN_FLOOR = 1e-13  # eigenvalues below this share of the largest: a null direction
-#: a column whose rms over the poses is below this share of the largest column's holds only
-#: rounding noise (a load zero by the geometry: frame 1's M_y, a vertical axis's torque,
-#: ~1e-15 N m): left out of the fit (coefficient zero; scaled to unit rms it would get a
-#: coefficient of 1e11 and make the correction a function of the rounding of q)
-TINY_COLUMN = 1e-9
 #: the loaded correction's rms at the process's inducing poses may differ from the stored
 #: rms_m by this share (plus ABS_RMS_TOLERANCE_M) when those are all the fitted poses
 #: (rounding), SUBSET_RMS_TOLERANCE when they are a subset of them (sampling)
@@ -158,133 +131,6 @@ class LoadMotion(Record):
     motion: str
     rms_um: float
     meaning: str
-
-
-def frame_loads(robot: RobotDescription, q: Array) -> Array:
-    """(n, J, 6): of every frame j = 0..J-1 (the housing of joint j + 1), in frame j, M
-    [N m] the gravity moment about its origin of the links beyond it (links j + 1..J, the
-    robot's mass model), then P [N m / kg] that of a unit mass at the flange's origin: a
-    payload or tool the mass model does not know (its mass unknown) loads every frame as a
-    multiple of P. Nominal kinematics of readings q (n, J) [rad]."""
-    dh = DHTable(robot.theta + robot.joint_variables(q), robot.d, robot.a, robot.alpha, robot.beta)
-    frames = chain(dh)
-    com = np.einsum("njab,jb->nja", frames[:, 1:, :3, :3], robot.link_com) + frames[:, 1:, :3, 3]
-    force = robot.link_mass[:, None] * GRAVITY  # (J, 3) base frame
-    n, n_joints = q.shape
-    flange, flange_axes = frames[:, -1, :3, 3], frames[:, -1, :3, :3]
-    weight = np.broadcast_to(GRAVITY, flange.shape)
-    # a unit first moment along each flange axis: x R6 e_a g (the payload's centre off the
-    # flange, times its mass), the same about every frame's origin
-    first = [np.cross(flange_axes[:, :, a], weight) for a in range(3)]
-    out = np.zeros((n, n_joints, 15))
-    for j in range(n_joints):
-        origin, axes = frames[:, j, None, :3, 3], frames[:, j, :3, :3]
-        moment = np.cross(com[:, j:] - origin, force[j:]).sum(axis=1)
-        unit = np.cross(flange - origin[:, 0], weight)
-        for k, vector in enumerate([moment, unit, *first]):
-            out[:, j, 3 * k : 3 * k + 3] = np.einsum("nab,na->nb", axes, vector)
-    return out
-
-
-def _features(loads: Array, step_tau: Array) -> Array:
-    """(n, J, F) load features (`FEATURES`) of loads (n, J, 6) (`frame_loads`), steps tau
-    (J, K) [N m]."""
-    n, n_joints, _ = loads.shape
-    steps = np.tanh(loads[:, :, 2:3] / step_tau[None])  # (n, J, K)
-    return np.concatenate([np.ones((n, n_joints, 1)), loads, steps], axis=2)
-
-
-def _motions(model: KinematicModel, params: ParameterVector, poses: Poses) -> Array:
-    """(n, 3, J, 6): the tracker-frame displacement of each measured point per unit motion
-    (MOTIONS: [m] translations, [rad] rotations) of each frame j = 0..J-1, in frame j."""
-    frames = model.link_frames(params, poses)
-    b2t = model.base2tracker(params)
-    rot = b2t[:3, :3]
-    point = (model.target_points(params, poses) - b2t[:3, 3]) @ rot  # base frame
-    n, n_joints = poses.q.shape
-    out = np.empty((n, 3, n_joints, 6))
-    for j in range(n_joints):
-        axes = frames[:, j, :3, :3]
-        lever = point - frames[:, j, :3, 3]
-        for a in range(3):
-            out[:, :, j, a] = axes[:, :, a] @ rot.T
-            out[:, :, j, 3 + a] = np.cross(axes[:, :, a], lever) @ rot.T
-    return out
-
-
-def _design(model: KinematicModel, params: ParameterVector, columns: tuple[str, ...],
-            step_tau: Array, poses: Poses) -> Array:  # fmt: skip
-    """(n, 3, P) the structured columns at `poses`: J x 6 x F load-driven motions, then the
-    model's Jacobian columns `columns`."""
-    n = len(poses)
-    features = _features(frame_loads(model.robot, poses.q), step_tau)  # (n, J, F)
-    motions = _motions(model, params, poses)  # (n, 3, J, 6)
-    loaded = np.einsum("najm,njf->najmf", motions, features).reshape(n, 3, -1)
-    if not columns:
-        return loaded
-    _, jac = model.jacobian(params, poses)
-    return np.concatenate([loaded, jac[:, :, [params.index(c) for c in columns]]], axis=2)
-
-
-def _blocks(n: int) -> list[slice]:
-    return [slice(s, min(s + BLOCK_POSES, n)) for s in range(0, n, BLOCK_POSES)]
-
-
-@dataclass(frozen=True)
-class Ridge:
-    """The structured part's fit: coefficients (P,) in the columns' units (zero for the
-    columns left out), the ridge relative to the largest eigenvalue of the scaled normal
-    equations (inf: no structure), its degrees of freedom, whether it ended at the grid's
-    smallest ridge, and how many columns were left out as rounding noise (TINY_COLUMN)."""
-
-    coefficients: Array
-    ridge: float
-    dof: float
-    at_edge: bool
-    left_out: int = 0
-
-
-def _kept(gram: Array, rows: int) -> tuple[Array, NDArray[np.bool_]]:
-    """The columns' rms (P,) over `rows` rows of normal equations `gram` (P, P), and which
-    carry more than rounding noise (rms above TINY_COLUMN x the largest)."""
-    scale = np.sqrt(np.maximum(np.diag(gram), 0.0) / max(rows, 1))
-    top = float(scale.max()) if scale.size else 0.0
-    return scale, scale > TINY_COLUMN * top
-
-
-def _ridge(gram: Array, rhs: Array, total: float, rows: int) -> Ridge:
-    """The ridge solution of the normal equations (gram (P, P), rhs (P,), y.y `total`, of
-    `rows` rows) with the ridge of least generalised cross-validation
-    RSS / (rows - dof)^2 over RIDGE_GRID and no structure at all; columns of rounding noise
-    (`_kept`) left out (coefficient zero)."""
-    coefficients = np.zeros(len(rhs))
-    scale, kept = _kept(gram, rows)
-    left_out = int(np.sum(~kept))
-    if not kept.any():
-        return Ridge(coefficients, math.inf, 0.0, False, left_out)
-    scale = scale[kept]
-    values, vectors = np.linalg.eigh(gram[np.ix_(kept, kept)] / np.outer(scale, scale))
-    keep = values > EIGEN_FLOOR * max(float(values[-1]), 0.0)
-    values, vectors = values[keep], vectors[:, keep]
-    projected = vectors.T @ (rhs[kept] / scale)  # V^T A^T y
-    u_y = projected / np.sqrt(values)  # U^T y
-    explained = float(np.sum(u_y**2))
-    best = (total / rows**2, math.inf, 0.0)  # no structure: RSS = y.y, dof 0
-    top = float(values[-1]) if len(values) else 0.0
-    for relative in RIDGE_GRID:
-        shrink = values / (values + relative * top)
-        dof = float(np.sum(shrink))
-        if dof > MAX_DOF_SHARE * rows:
-            continue
-        rss = max(total - explained, 0.0) + float(np.sum(((1.0 - shrink) * u_y) ** 2))
-        gcv = rss / (rows - dof) ** 2
-        if gcv < best[0]:
-            best = (gcv, relative, dof)
-    _, relative, dof = best
-    if not math.isfinite(relative):
-        return Ridge(coefficients, math.inf, 0.0, False, left_out)
-    coefficients[kept] = vectors @ (projected / (values + relative * top)) / scale
-    return Ridge(coefficients, relative, dof, relative == RIDGE_GRID[0], left_out)
 
 
 @dataclass(frozen=True)
@@ -347,8 +193,8 @@ class StructuredCorrection:
         out = np.zeros((len(poses), 3))
         if not np.any(self.coefficients):
             return out
-        for rows in _blocks(len(poses)):
-            design = _design(self.model, self.parameters, self.columns, self.step_tau,
+        for rows in pose_blocks(len(poses)):
+            design = structured_design(self.model, self.parameters, self.columns, self.step_tau,
                              poses.subset(rows))  # fmt: skip
             out[rows] = design @ self.coefficients
         return out
@@ -393,11 +239,11 @@ class StructuredCorrection:
             return []
         size, n_rows = len(self.coefficients), 3 * len(poses)
         gram = np.zeros((size, size))
-        for rows in _blocks(len(poses)):
-            flat = _design(self.model, self.parameters, self.columns, self.step_tau,
+        for rows in pose_blocks(len(poses)):
+            flat = structured_design(self.model, self.parameters, self.columns, self.step_tau,
                            poses.subset(rows)).reshape(-1, size)  # fmt: skip
             gram += flat.T @ flat
-        scale, kept = _kept(gram, n_rows)
+        scale, kept = kept_columns(gram, n_rows)
         index = np.flatnonzero(kept)
         scale = scale[index]
         scaled = gram[np.ix_(index, index)] / np.outer(scale, scale)
@@ -564,8 +410,10 @@ class StructuredCorrection:
                              f"{float(size.max()) * 1e3:.3g} mm at its own poses (at most "
                              f"{MAX_CORRECTION_M * 1e3:.0f} mm)")  # fmt: skip
         share = RMS_TOLERANCE if len(poses) == self.n_fitted else SUBSET_RMS_TOLERANCE
-        for field, found, stored in (("structured.rms_m", _rms(structured), self.structured_rms_m),
-                                     ("rms_m", _rms(total), self.rms_m)):  # fmt: skip
+        for field, found, stored in (
+            ("structured.rms_m", rms_norm(structured), self.structured_rms_m),
+            ("rms_m", rms_norm(total), self.rms_m),
+        ):
             if abs(found - stored) > share * stored + ABS_RMS_TOLERANCE_M:
                 raise InputError(f"{where}: implausible learned correction: {field} "
                                  f"{stored * 1e3:.4g} mm, it predicts {found * 1e3:.4g} mm rms "
@@ -589,159 +437,6 @@ def correction_from_dict(
     return ResidualCorrection.from_dict(data, where)
 
 
-@dataclass(frozen=True)
-class StructuredPart:
-    """The load-driven geometry of a hybrid correction, before its process
-    (`fit_structured_part`): what `fit_structured` needs to go on.
-
-    columns, step_tau, fit : as StructuredCorrection's (`fit` the ridge solution)
-    structured : shape (n, 3), its predicted residual at the fitted poses [m, tracker frame]
-    how : how it was fitted, for the method line
-    warnings : its own warnings (a ridge at its grid's edge)
-    """
-
-    columns: tuple[str, ...]
-    step_tau: Array
-    fit: Ridge
-    structured: Array
-    how: str
-    warnings: tuple[str, ...]
-
-
-def fit_structured_part(model: KinematicModel, parameters: ParameterVector, poses: Poses,
-                        residuals: Array) -> StructuredPart:  # fmt: skip
-    """The load-driven geometry of `residuals` (n, 3) [m, tracker frame, predicted -
-    measured] of `model` at `parameters` at `poses` by ridge least squares (ridge by
-    generalised cross-validation on these residuals). Needs no hyperparameter of the
-    process: folds can fit it while another fold's process searches them."""
-    n = len(poses)
-    if residuals.shape != (n, 3) or n == 0:
-        raise InputError(f"learned correction: residuals of shape {residuals.shape} for "
-                         f"{n} poses (expected ({n}, 3), n >= 1)")  # fmt: skip
-    columns = tuple(name for name, free in zip(parameters.names, parameters.free) if free)
-    n_joints = model.robot.n_joints
-    torque = np.sqrt(np.mean(frame_loads(model.robot, poses.q)[:, :, 2] ** 2, axis=0))
-    # one set of widths for every joint, sized by the most loaded joint: a lightly loaded
-    # wrist joint gets no step sharper than the shoulder's (a sharp step fits noise and
-    # makes the correction steep, which a compensation's fixed point does not survive)
-    step_tau = np.maximum(np.outer(np.full(n_joints, torque.max()), STEP_SHARES), MIN_TAU_NM)
-    size = n_joints * 6 * len(FEATURES) + len(columns)
-    rows = 3 * n
-    warnings: tuple[str, ...] = ()
-    designs: list[Array] = []  # the design's blocks, kept for the fitted values
-    if rows < MIN_ROWS_PER_COLUMN * size:
-        fit = Ridge(np.zeros(size), math.inf, 0.0, False)
-        how = (f"left out: {n} poses give {rows} rows for {size} columns (at least "
-               f"{MIN_ROWS_PER_COLUMN:g} per column)")  # fmt: skip
-    else:
-        gram, rhs, total = np.zeros((size, size)), np.zeros(size), 0.0
-        for block in _blocks(n):
-            design = _design(model, parameters, columns, step_tau, poses.subset(block))
-            flat, y = design.reshape(-1, size), residuals[block].reshape(-1)
-            if n <= KEEP_DESIGN_POSES:
-                designs.append(design)
-            gram += flat.T @ flat
-            rhs += flat.T @ y
-            total += float(y @ y)
-        fit = _ridge(gram, rhs, total, rows)
-        how = (f"{size - fit.left_out} columns ({fit.left_out} of zero loads left out), "
-               f"ridge {fit.ridge:.2g} of the largest eigenvalue by generalised "
-               f"cross-validation, {fit.dof:.0f} degrees of freedom")  # fmt: skip
-        if fit.at_edge:
-            warnings += (
-                "warning: learned correction: the structured part's ridge ends at the "
-                "smallest of its grid (the residuals are nearly all structure)",
-            )
-    if designs:  # the fitted values from the blocks the fit was made of (no second pass)
-        structured = np.concatenate([d @ fit.coefficients for d in designs])
-    else:
-        structured = replace(
-            _empty(model, parameters, columns, step_tau, n), coefficients=fit.coefficients
-        ).structured(poses)
-    return StructuredPart(columns, step_tau, fit, structured, how, warnings)
-
-
-def fit_structured(
-    model: KinematicModel,
-    parameters: ParameterVector,
-    poses: Poses,
-    residuals: Array,
-    rng: np.random.Generator | None = None,
-    hyper: Hyperparameters | None = None,
-    start: Hyperparameters | None = None,
-    max_learn: int = MAX_LEARN,
-    part: StructuredPart | None = None,
-) -> StructuredCorrection:
-    """The hybrid correction of `residuals` (n, 3) [m, tracker frame, predicted -
-    measured] of `model` at `parameters` at `poses`: the load-driven geometry
-    (`fit_structured_part`, or `part` already fitted on these same arguments), then the
-    Gaussian process of the rest (`fit_correction` with `rng`, `hyper`, `start`,
-    `max_learn`)."""
-    rng = np.random.default_rng(0) if rng is None else rng
-    if part is None:
-        part = fit_structured_part(model, parameters, poses, residuals)
-    structured, fit = part.structured, part.fit
-    left = residuals - structured
-    fitted = fit_correction_at(poses, left, len(model.targets), rng, hyper=hyper, start=start,
-                               max_learn=max_learn)  # fmt: skip
-    process, process_fitted = fitted.correction, fitted.fitted
-    if not _process_generalises(fitted, poses, left):
-        process_fitted = np.zeros_like(left)
-        process = replace(
-            process, dual=np.zeros_like(process.dual), mean_m=np.zeros(3), rms_m=0.0,
-            method=process.method + "; left out: it learned nothing held out in a 2-fold "
-            "check on the fitted poses",
-        )  # fmt: skip
-    method = (
-        "load-driven geometry (every link frame's small motion times 1, the gravity moment "
-        "it carries and steps of its joint's gravity torque, plus the model's own Jacobian "
-        f"columns; ridge least squares: {part.how}), then a {process.method[0].lower()}"
-        f"{process.method[1:]}"
-    )
-    out = StructuredCorrection(
-        model, parameters, part.columns, part.step_tau, fit.coefficients, fit.ridge, fit.dof,
-        _rms(structured), process, 0.0, method, part.warnings + process.warnings,
-    )  # fmt: skip
-    return replace(out, rms_m=_rms(structured + process_fitted))  # = out._raw(poses)
-
-
-def _process_generalises(fitted: FittedCorrection, poses: Poses, left: Array) -> bool:
-    """True when the process (its hyperparameters) fitted on either half of the poses
-    brings the other half's `left` residuals (n, 3) [m] below (1 - MIN_PROCESS_GAIN) of
-    their rms, over both halves: else what the structure leaves is noise to it (a process
-    that interpolates noise roughens the correction for nothing). An exact fit's kernel
-    is sliced, not computed again."""
-    n = len(poses)
-    if n < 2 * CHECK_MIN_POSES:
-        return True
-    process = fitted.correction
-    half = np.random.default_rng(1).permutation(n) < n // 2
-    before, after = 0.0, 0.0
-    for train in (half, ~half):
-        if fitted.kernel is not None:
-            predicted = exact_holdout(fitted.kernel, left, train, process.hyper.noise_variance)
-        else:
-            local = fit_correction(poses.subset(train), left[train], process.n_targets,
-                                   hyper=process.hyper)  # fmt: skip
-            predicted = local.predict(poses.subset(~train))
-        before += float(np.sum(left[~train] ** 2))
-        after += float(np.sum((left[~train] - predicted) ** 2))
-    return after < (1.0 - MIN_PROCESS_GAIN) ** 2 * before
-
-
-def _rms(values: Array) -> float:
+def rms_norm(values: Array) -> float:
+    """The rms of the rows' norms of values (n, 3) [m] (0 for no rows)."""
     return float(np.sqrt(np.mean(np.sum(values**2, axis=1)))) if len(values) else 0.0
-
-
-def _empty(model: KinematicModel, parameters: ParameterVector, columns: tuple[str, ...],
-           step_tau: Array, n: int) -> StructuredCorrection:  # fmt: skip
-    """A structured correction with zero coefficients and a placeholder process (to
-    evaluate the structured part of given coefficients)."""
-    size = model.robot.n_joints * 6 * len(FEATURES) + len(columns)
-    placeholder = ResidualCorrection(
-        np.zeros((1, model.robot.n_joints)), np.zeros(1, dtype=np.int64), np.zeros((1, 3)),
-        Hyperparameters(np.zeros(model.robot.n_joints), 1.0, 1.0), np.zeros(3), 1.0,
-        len(model.targets), n, 0.0, "",
-    )  # fmt: skip
-    return StructuredCorrection(model, parameters, columns, step_tau, np.zeros(size),
-                                math.inf, 0.0, 0.0, placeholder, 0.0, "")  # fmt: skip

@@ -1,6 +1,11 @@
 """Levenberg-Marquardt fit of any `KinematicModel` to measured points (absolute residuals,
 tracker frame, O(N) in the number of poses), with analytic Jacobians.
 
+Why one module: one Levenberg-Marquardt fit. The weighted residuals and their Jacobian
+(`_Problem`, half the module), the solver loop (`_solve`) and `fit_model` (which fixes what
+the data cannot identify before solving and reads the covariance after) all work on the same
+weighted rows (`weighted_rows`, `PRIOR_ROW`, which the ladder reuses).
+
 residual_i = predicted target (params, pose_i) - measured point_i   [m], 3 per pose,
 plus, for a 6-DoF probe's measurement, the rotation vector of predicted * measured
 orientation [rad], 3 more; all weighted by the stated accuracies (`identify.weights`).
@@ -500,7 +505,9 @@ def weighted_rows(
     residual, jac = problem.evaluate(x)
     owner = np.concatenate([np.repeat(np.arange(len(poses)), 3), np.repeat(problem.rows6, 3),
                             np.full(len(problem.prior_cols), PRIOR_ROW)])  # fmt: skip
-    return residual.copy(), jac.copy(), owner
+    # the problem's own arrays, not copies: it ends here, so nothing evaluates it again (a
+    # copy doubled the peak: 2 x 120 MB at 100k poses)
+    return residual, jac, owner
 
 
 def _structurally_identifiable(

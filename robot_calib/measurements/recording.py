@@ -1,6 +1,11 @@
 """A recording as the identifier sees it: paired measurements (msgs_doc/specification.md
 section 1).
 
+Why one module: the `Recording` type and the two ways of building it
+(`recording_from_arrays` from paired arrays, `recording_from_stream` from stamped streams it
+pairs) share their checks and helpers (targets, side data, sweeps, copies); together they
+are the measurement model of msgs_doc/specification.md section 1 and change with it.
+
 Each tracker point is paired with the joint state nearest in stamp (within
 `PAIR_TOLERANCE_S`); approach directions and time since the first measurement follow;
 circle sweeps are found (in the robot's joint variables where a robot with a reading-to-joint
