@@ -3,9 +3,7 @@ DIAGNOSIS.json document of msgs_doc/specification.md section 4 (extended:
 msgs_doc/diagnosis.md).
 
 Why one module: the DIAGNOSIS.json document (its record types, `Diagnosis` first) and
-`diagnose`, which fills it from the ladder, change together with msgs_doc/diagnosis.md. The
-record types could move to a module of their own; that waits for cli.py and pipeline.py
-(being replaced), which import them from here.
+`diagnose`, which fills it from the ladder, change together with msgs_doc/diagnosis.md.
 """
 
 from __future__ import annotations

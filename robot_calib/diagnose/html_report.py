@@ -5,9 +5,8 @@ after calibration, the ladder, where the residual lies, 3D residual vectors, ISO
 the parameters, warnings and outliers (msgs_doc/report.md).
 
 Why one module: one page. The inline CSS, the markup helpers and the builders of its
-sections serve `html_report` alone and change together when the page does; `compare_models`
-(the before/after table the page opens with) stays here while pipeline.py, being replaced,
-imports it from here.
+sections serve `html_report` alone and change together when the page does (with
+`compare_models`, the before/after table the page opens with).
 
 Units for people, one per quantity: positions and errors in mm, angles in deg, scale
 errors in ppm (1 ppm = 1 urad/rad); inside, SI as everywhere.
