@@ -90,15 +90,24 @@ def flip_chunk_length(source: Path, target: Path, bit: int) -> None:
     raise AssertionError(f"{source}: no chunk")
 
 
+@pytest.fixture(scope="module")
+def sample_params(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """`calibrate SAMPLE` once for the module: a PARAMS.json to score the corrupt bags with."""
+    params = tmp_path_factory.mktemp("sample_params") / "params.json"
+    assert cli("calibrate", str(SAMPLE), "-o", str(params)).returncode == 0
+    return params
+
+
 @pytest.mark.parametrize("bit", [31, 20, 36])
-def test_a_flipped_bit_in_a_chunk_length_is_a_one_line_error(tmp_path: Path, bit: int) -> None:
+def test_a_flipped_bit_in_a_chunk_length_is_a_one_line_error(
+    tmp_path: Path, sample_params: Path, bit: int
+) -> None:
     """Bit 31 makes a chunk of 2 GiB: read whole it was a MemoryError traceback (here under
     a 1.5 GB address-space limit); bit 20 a chunk past the end; bit 36 one above mcap's limit.
     repair, calibrate and score end with one line naming the bag, exit 2, nothing written."""
     bag = tmp_path / "flipped.mcap"
     flip_chunk_length(SAMPLE, bag, bit)
-    params = tmp_path / "params.json"
-    assert cli("calibrate", str(SAMPLE), "-o", str(params)).returncode == 0
+    params = sample_params
     memory = 1_500_000_000
     for args, output in [
         (["repair", str(bag), "-o", str(tmp_path / "r.mcap")], "r.mcap"),
@@ -293,7 +302,7 @@ def ur5_params(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("ur5")
     bag, params = folder / "ur5.mcap", folder / "p.json"
     made = cli("simulate", "--robot", "ur5", "--plan", "random", "--n-random", "40",
-                       "-o", str(bag))  # fmt: skip
+               "-o", str(bag))  # fmt: skip
     assert made.returncode == 0, made.stderr
     fitted = cli("calibrate", str(bag), "--robot", "ur5", "-o", str(params))
     assert fitted.returncode == 0, fitted.stderr
@@ -349,15 +358,16 @@ def test_an_unexpanded_xacro_in_either_namespace_is_refused(
 # --- item 8: reading compensated commands back ---
 
 
-def test_compensated_commands_read_back_as_the_doc_says(tmp_path: Path) -> None:
+def test_compensated_commands_read_back_as_the_doc_says(
+    tmp_path: Path, sample_params: Path
+) -> None:
     """compensate.md said `predict` reads the compensated CSV back; it refuses it ('not a
     number in [... 'ok']'). The doc now says so and how: the first 2 J columns (q, dir)
     are a JOINTS.csv that predict reads."""
     doc = (ROOT / "msgs_doc" / "compensate.md").read_text()
     assert "`predict` and `compensate --joints` read the file\n  back" not in doc
     assert "cut -d, -f1-12 OUT.csv > CMD.csv" in doc
-    params = tmp_path / "p.json"
-    assert cli("calibrate", str(SAMPLE), "-o", str(params)).returncode == 0
+    params = sample_params  # calibrate SAMPLE
     rows = [
         [0.3, -1.2, 0.9, 0.4, 0.8, -0.5],
         [-0.6, -0.9, 0.4, -0.3, -0.7, 1.1],
