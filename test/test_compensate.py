@@ -80,7 +80,7 @@ def test_the_compensate_command(tmp_path: Path) -> None:
     joints = tmp_path / "j.csv"
     np.savetxt(joints, q, delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
     proc = cli("compensate", str(params), "--joints", str(joints), "-o", "out.csv",
-                       cwd=tmp_path)  # fmt: skip
+               cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "20 compensated commands" in proc.stdout
     with (tmp_path / "out.csv").open() as handle:
@@ -92,11 +92,11 @@ def test_the_compensate_command(tmp_path: Path) -> None:
     assert change.min() > 0 and np.median(change) < 0.01  # mrad, more only near the wrist
     # singularity (joint 5 near 0: joints 4 and 6 trade a small orientation error)
     again = cli("compensate", str(params), "--joints", str(joints), "-o", "out.csv",
-                        cwd=tmp_path)  # fmt: skip
+                cwd=tmp_path)  # fmt: skip
     assert again.returncode == 2 and "exists" in again.stderr
     np.savetxt(joints, np.degrees(q), delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
     degrees = cli("compensate", str(params), "--joints", str(joints), "-o", "d.csv",
-                          cwd=tmp_path)  # fmt: skip
+                  cwd=tmp_path)  # fmt: skip
     assert degrees.returncode == 2 and "degrees?" in degrees.stderr
     assert not (tmp_path / "d.csv").exists()
 
@@ -200,8 +200,8 @@ def test_the_compensate_command_with_targets(tmp_path: Path) -> None:
     seeds = tmp_path / "s.csv"
     np.savetxt(seeds, q + 0.02, delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
     proc = cli("compensate", str(params), "--targets", str(targets), "--frame",
-                       "tracker", "--unit", "mm", "--seed-joints", str(seeds), "-o", "out.csv",
-                       cwd=tmp_path)  # fmt: skip
+               "tracker", "--unit", "mm", "--seed-joints", str(seeds), "-o", "out.csv",
+               cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "12 commands (rad) for target poses (tracker frame" in proc.stdout
     assert "11/12 reached" in proc.stdout

@@ -20,7 +20,7 @@ def backlash_bags(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]
     work = tmp_path_factory.mktemp("backlash")
     for name, n, seed in (("cal.mcap", "150", "1"), ("held.mcap", "100", "2")):
         run = cli("simulate", "--plan", "random", "--n-random", n, "--effects",
-                          "backlash:4", "--seed", seed, "-o", str(work / name))  # fmt: skip
+                  "backlash:4", "--seed", seed, "-o", str(work / name))  # fmt: skip
         assert run.returncode == 0, run.stderr
     return work / "cal.mcap", work / "held.mcap"
 
@@ -35,7 +35,7 @@ def test_a_stated_accuracy_in_the_wrong_unit_hides_no_effect(
     cal, held = backlash_bags
     out = tmp_path / "d.json"
     run = cli("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy", "5",
-                      "-o", str(out))  # fmt: skip
+              "-o", str(out))  # fmt: skip
     assert run.returncode == 0, run.stderr
     warning = next(line for line in run.stdout.splitlines() if "stated tracker accuracy" in line)
     assert warning.startswith("warning: ") and "5 mm per axis" in warning
@@ -57,7 +57,7 @@ def test_a_stated_accuracy_a_few_times_the_residual_is_used_and_said(
     cal, held = backlash_bags
     out = tmp_path / "d.json"
     run = cli("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy",
-                      "0.2", "-o", str(out))  # fmt: skip
+              "0.2", "-o", str(out))  # fmt: skip
     assert run.returncode == 0, run.stderr
     doc = json.loads(out.read_text())
     assert doc["noise"]["floor_known"] is True
@@ -78,7 +78,7 @@ def test_the_calibrate_warning_inside_diagnose_uses_the_stated_accuracy(
     0.0100 mm."""
     cal, held = backlash_bags
     run = cli("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy",
-                      "0.002", "-o", str(tmp_path / "d.json"))  # fmt: skip
+              "0.002", "-o", str(tmp_path / "d.json"))  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert "(0.0020 mm, stated tracker accuracy (--tracker-accuracy))" in run.stderr
     assert "assumed tracker noise" not in run.stderr
@@ -91,7 +91,7 @@ def test_on_a_bag_with_sweeps_a_stated_accuracy_is_never_ignored_without_a_word(
     (about 0.005 mm per axis) is the floor, and a warning names both figures."""
     bag = tmp_path / "sw.mcap"
     run = cli("simulate", "--plan", "paper-test2", "--effects", "backlash:4", "-o",
-                      str(bag))  # fmt: skip
+              str(bag))  # fmt: skip
     assert run.returncode == 0, run.stderr
     out = tmp_path / "d.json"
     run = cli("diagnose", str(bag), "--tracker-accuracy", "5", "-o", str(out))
@@ -104,7 +104,7 @@ def test_on_a_bag_with_sweeps_a_stated_accuracy_is_never_ignored_without_a_word(
     assert doc["dominant_effect"] == {"effect": "backlash", "joints": [4]}
     # a consistent stated accuracy is a note, still a word
     run = cli("diagnose", str(bag), "--tracker-accuracy", "0.005", "-o",
-                      str(tmp_path / "ok.json"))  # fmt: skip
+              str(tmp_path / "ok.json"))  # fmt: skip
     note = json.loads((tmp_path / "ok.json").read_text())["noise"]["warning"]
     assert note.startswith("note: ") and "not used" in note
 
@@ -116,7 +116,7 @@ def test_three_targets_per_pose_are_no_stream(tmp_path: Path) -> None:
     world.write_text("targets:\n  smr2: [0.0, 0.08, 0.04]\n  smr3: [-0.05, -0.05, 0.06]\n")
     bag = tmp_path / "t3.mcap"
     run = cli("simulate", "--world", str(world), "--plan", "random", "--n-random",
-                      "36", "-o", str(bag))  # fmt: skip
+              "36", "-o", str(bag))  # fmt: skip
     assert run.returncode == 0, run.stderr
     run = cli("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
     assert run.returncode == 0, run.stderr
@@ -132,7 +132,7 @@ def measured_rows(tmp_path_factory: pytest.TempPathFactory) -> list[list[float]]
 
     bag = tmp_path_factory.mktemp("rows") / "r60.mcap"
     run = cli("simulate", "--plan", "random", "--n-random", "60", "--seed", "3", "-o",
-                      str(bag))  # fmt: skip
+              str(bag))  # fmt: skip
     assert run.returncode == 0, run.stderr
     rec = read_recording([bag], load_robot("kr5_sixx_r650"))
     return [[*q, *p] for q, p in zip(rec.poses.q.tolist(), rec.points.tolist())]
@@ -165,13 +165,13 @@ def test_two_halves_of_one_csv_are_calibration_and_hold_out(
         run = cli("import", str(csv), *COLUMNS, "-o", str(bags[-1]))
         assert run.returncode == 0, run.stderr
     run = cli("diagnose", str(bags[0]), "--holdout", str(bags[1]), "-o",
-                      str(tmp_path / "d.json"))  # fmt: skip
+              str(tmp_path / "d.json"))  # fmt: skip
     assert run.returncode == 0, run.stderr
     again = tmp_path / "a_again.mcap"
     run = cli("import", str(tmp_path / "a.csv"), *COLUMNS, "-o", str(again))
     assert run.returncode == 0, run.stderr
     run = cli("diagnose", str(bags[0]), "--holdout", str(again), "-o",
-                      str(tmp_path / "x.json"))  # fmt: skip
+              str(tmp_path / "x.json"))  # fmt: skip
     assert run.returncode == 2 and "the same measurements twice" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1 and not (tmp_path / "x.json").exists()
 
@@ -245,7 +245,7 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
     robot.write_bytes(source.read_bytes())
     bag, params = made / "u.mcap", made / "p.json"
     run = cli("simulate", "--robot", str(robot), "--plan", "random", "--n-random", "60",
-                      "-o", str(bag))  # fmt: skip
+              "-o", str(bag))  # fmt: skip
     assert run.returncode == 0, run.stderr
     run = cli("calibrate", str(bag), "--robot", str(robot), "-o", str(params))
     assert run.returncode == 0, run.stderr
@@ -254,13 +254,13 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
     joints = tmp_path / "j.csv"
     joints.write_text("q1,q2,q3,q4,q5,q6\n0.1,-1.2,1.0,0.3,0.5,0.2\n-0.4,-1.6,1.3,0.2,-0.7,0.9\n")
     before = cli("predict", str(params), "--joints", str(joints), "-o",
-                         str(tmp_path / "before.csv"))  # fmt: skip
+                 str(tmp_path / "before.csv"))  # fmt: skip
     assert before.returncode == 0, before.stderr
     old = dict(doc)
     del old["robot_description"]  # a file written before the section: the path still loads
     (made / "old.json").write_text(json.dumps(old))
     run = cli("predict", str(made / "old.json"), "--joints", str(joints), "-o",
-                      str(tmp_path / "old.csv"))  # fmt: skip
+              str(tmp_path / "old.csv"))  # fmt: skip
     assert run.returncode == 0, run.stderr
     (moved / "p.json").write_bytes(params.read_bytes())
     for path in made.iterdir():
@@ -279,7 +279,7 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
         run = cli("export", str(at), "--format", fmt, "-o", str(moved / f"e.{fmt}"))
         assert run.returncode == 0, run.stderr
     run = cli("compensate", str(at), "--joints", str(joints), "-o",
-                      str(moved / "c.csv"))  # fmt: skip
+              str(moved / "c.csv"))  # fmt: skip
     assert run.returncode == 0, run.stderr
     # the section is the description: edited, the file is refused (fingerprint), exit 2
     edited = json.loads(at.read_text())
@@ -288,7 +288,7 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
     assert edited["robot_description"]["text"] != doc["robot_description"]["text"]
     (moved / "edited.json").write_text(json.dumps(edited))
     run = cli("predict", str(moved / "edited.json"), "--joints", str(joints), "-o",
-                      str(moved / "y.csv"))  # fmt: skip
+              str(moved / "y.csv"))  # fmt: skip
     assert run.returncode == 2 and "is not the one it was calibrated with" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1
 

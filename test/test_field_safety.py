@@ -153,7 +153,7 @@ def test_compensate_flags_commands_beyond_the_limits(tmp_path: Path, params_file
     joints = tmp_path / "j.csv"
     np.savetxt(joints, q, delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
     proc = cli("compensate", str(params_file), "--joints", str(joints), "-o", "out.csv",
-                       cwd=tmp_path)  # fmt: skip
+               cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     with (tmp_path / "out.csv").open() as handle:
         status = [row["status"] for row in csv.DictReader(handle)]

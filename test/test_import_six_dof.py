@@ -168,8 +168,8 @@ def test_a_further_target_takes_its_own_orientation_and_sigma(
     csv = export(tmp_path / "two.csv", columns)
     bag = tmp_path / "two.mcap"
     proc = cli("import", str(csv), *CSV_OPTIONS, "--target", "smr2:X2,Y2,Z2",
-                       "--orientation-rpy", "smr2:R2,P2,W2", "--sigma", "smr2:S2",
-                       "-o", str(bag))  # fmt: skip
+               "--orientation-rpy", "smr2:R2,P2,W2", "--sigma", "smr2:S2",
+               "-o", str(bag))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "target smr2: 18 orientations, 19 rows with stated" in proc.stdout
     recording = read_recording([bag], ROBOT)
@@ -274,7 +274,7 @@ def test_implausible_sigmas_and_empty_orientations_get_warnings(tmp_path: Path) 
         columns[c][:] = np.nan
     csv = export(tmp_path / "um.csv", columns)
     proc = cli("import", str(csv), *CSV_OPTIONS, "--orientation", "QX,QY,QZ,QW",
-                       "--sigma", "SP", "-o", str(tmp_path / "um.mcap"))  # fmt: skip
+               "--sigma", "SP", "-o", str(tmp_path / "um.mcap"))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "position standard deviations SP of the first target have a median of 0.0048" in (
         proc.stderr

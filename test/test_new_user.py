@@ -67,7 +67,7 @@ def test_score_flags_another_robot_in_every_output(work: Path) -> None:
     1082 mm and no word; now stderr, stdout and the per-point table each say it, and that
     the bag's orientations are not scored (the KR5 calibration has no probe)."""
     proc = cli("score", "p5.json", "ur10.mcap", "--joint-names", UR_NAMES,
-                       "--points-csv", "points.csv", cwd=work)  # fmt: skip
+               "--points-csv", "points.csv", cwd=work)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     implausible = [x for x in proc.stderr.splitlines() if IMPLAUSIBLE_HINT in x]
     assert len(implausible) == 1 and implausible[0].startswith("warning: ur10.mcap: absolute")
@@ -184,8 +184,8 @@ def test_import_says_which_column_makes_a_row_bad(tmp_path: Path) -> None:
     # one bad row of three: "1 bad row", not "1 bad rows"
     path.write_text("\n".join(ROWS[:3]) + "\n" + ROWS[1].replace("0.0;", "3.0;", 1) + "\n")
     proc = cli("import", str(path), "--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z",
-                       "--time", "t", "--sep", ";", "--length-unit", "mm", "-o",
-                       str(tmp_path / "e.mcap"))  # fmt: skip
+               "--time", "t", "--sep", ";", "--length-unit", "mm", "-o",
+               str(tmp_path / "e.mcap"))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert f"{path}: 2 rows imported, 1 bad row skipped" in proc.stdout
     assert f"warning: {path}:3: columns q2, y are empty: row skipped" in proc.stderr
@@ -204,13 +204,13 @@ def test_a_header_of_one_column_suggests_the_separator(
     # the hint works: tab spelt 'tab' on the command line
     args = ["--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z", "--length-unit", "mm"]
     proc = cli("import", str(path), *args, "--sep", hint.split()[1].strip("'"),
-                       "-o", str(tmp_path / "e.mcap"))  # fmt: skip
+               "-o", str(tmp_path / "e.mcap"))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
 
 
 def test_a_separator_of_two_characters_is_a_usage_error(tmp_path: Path) -> None:
     proc = cli("import", "e.csv", "--sep", ";;", "--joints", "a", "--point", "x,y,z",
-                       "-o", "e.mcap", cwd=tmp_path)  # fmt: skip
+               "-o", "e.mcap", cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 2 and "argument --sep: ';;': one character" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
 

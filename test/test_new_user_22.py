@@ -57,7 +57,7 @@ def test_a_hold_out_bag_of_elsewhere_is_implausible(work: Path, accuracy: list[s
     refuses it."""
     out = f"d{len(accuracy)}.json"
     proc = cli("diagnose", "cal.mcap", "--holdout", "moved.mcap", "--robot", "ur10",
-                       *accuracy, "-o", out, cwd=work)  # fmt: skip
+               *accuracy, "-o", out, cwd=work)  # fmt: skip
     assert proc.returncode == 3, proc.stderr
     last = proc.stderr.strip().splitlines()[-1]
     assert "Traceback" not in proc.stderr
@@ -76,7 +76,7 @@ def test_a_hold_out_bag_of_elsewhere_is_implausible(work: Path, accuracy: list[s
     best = json.loads((work / f"{stem}.params_best.json").read_text())
     assert best["plausible"] is False and reason in best["implausible"]
     proc = cli("export", f"{stem}.params_best.json", "--format", "dh", "-o", "x.csv",
-                       cwd=work)  # fmt: skip
+               cwd=work)  # fmt: skip
     assert proc.returncode == 2 and "do not belong" in proc.stderr
     assert not (work / "x.csv").exists()
 
@@ -84,7 +84,7 @@ def test_a_hold_out_bag_of_elsewhere_is_implausible(work: Path, accuracy: list[s
 def test_a_hold_out_bag_that_belongs_is_not_flagged(work: Path) -> None:
     """The same poses where the tracker stood: plausible, exit 0, params_best plausible."""
     proc = cli("diagnose", "cal.mcap", "--holdout", "ho.mcap", "--robot", "ur10",
-                       "--tracker-accuracy", "0.005", "-o", "ok.json", cwd=work)  # fmt: skip
+               "--tracker-accuracy", "0.005", "-o", "ok.json", cwd=work)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert json.loads((work / "ok.json").read_text())["implausible"] == []
     assert json.loads((work / "ok.params_best.json").read_text())["plausible"] is True
@@ -194,7 +194,7 @@ def test_model_terms_say_their_defaults_and_repeats(work: Path) -> None:
     without naming --model. Now the log says each default, the error names both terms."""
     model = "geometric+joint_harmonics:2+joint_harmonics:orders=11"
     proc = cli("calibrate", "cal.mcap", "--robot", "ur10", "--model", model,
-                       "-o", "jh.json", cwd=work)  # fmt: skip
+               "-o", "jh.json", cwd=work)  # fmt: skip
     assert proc.returncode in (0, 3), proc.stderr
     assert "joint_harmonics:2 is joint_harmonics:2:orders=2 (the default order 2" in proc.stderr
     assert "joint_harmonics:orders=11 is joint_harmonics:1,2,3,4,5,6:orders=11 (every joint" in (
@@ -202,7 +202,7 @@ def test_model_terms_say_their_defaults_and_repeats(work: Path) -> None:
     )
     model = "geometric+joint_harmonics:2:orders=11,27+joint_harmonics:2:orders=11"
     proc = cli("calibrate", "cal.mcap", "--robot", "ur10", "--model", model,
-                       "-o", "dup.json", cwd=work)  # fmt: skip
+               "-o", "dup.json", cwd=work)  # fmt: skip
     assert proc.returncode == 2 and not (work / "dup.json").exists()
     (line,) = proc.stderr.strip().splitlines()
     assert line.startswith(f"robot-calib calibrate: error: --model {model}: terms ")
@@ -255,7 +255,7 @@ def test_force_replaces_the_whole_output_set(work: Path) -> None:
     assert (folder / "d_angle.png").exists()
     (folder / "d_x_angle.png").write_bytes(b"another set")
     proc = cli("diagnose", "cal.mcap", "--robot", "ur10", "-o", "st/d.json", "--force",
-                       cwd=work)  # fmt: skip
+               cwd=work)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert not (folder / "d_angle.png").exists()
     report = (folder / "d.md").read_text()

@@ -23,7 +23,7 @@ def sim(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[list[float
 
     bag = tmp_path_factory.mktemp("sim") / "r60.mcap"
     run = cli("simulate", "--plan", "random", "--n-random", "60", "--seed", "3",
-                      "-o", str(bag))  # fmt: skip
+              "-o", str(bag))  # fmt: skip
     assert run.returncode == 0, run.stderr
     rec = read_recording([bag], load_robot("kr5_sixx_r650"))
     return bag, [[*q, *p] for q, p in zip(rec.poses.q.tolist(), rec.points.tolist())]
@@ -86,7 +86,7 @@ def test_a_csv_given_twice_or_copied_rows_are_refused(
     # the tracker measuring again (a new point at the same readings) is a repeat, kept
     again = [r[:6] + [v + 2e-6 for v in r[6:]] for r in rows[:5]]
     run = cli("import", str(a), str(_csv(tmp_path / "b.csv", again)), *COLUMNS,
-                      "-o", str(out))  # fmt: skip
+              "-o", str(out))  # fmt: skip
     assert run.returncode == 0, run.stderr
 
 
@@ -114,7 +114,7 @@ def test_stamps_going_backwards_are_said(
     assert run.returncode == 0, run.stderr
     assert re.search(r"back\.mcap: /joint_states: 1 of 60 stamps go backwards", run.stderr)
     ok = cli("calibrate", str(_bag(tmp_path / "ok.mcap", rows)), "-o",
-                     str(tmp_path / "q.json"))  # fmt: skip
+             str(tmp_path / "q.json"))  # fmt: skip
     assert ok.returncode == 0 and "backwards" not in ok.stderr
 
 
@@ -158,7 +158,7 @@ def test_duplicate_columns_are_refused(
     _, rows = sim
     csv = _csv(tmp_path / "d.csv", rows, header)
     run = cli("import", str(csv), "--joints", joints, "--point", "x,y,z", "-o",
-                      str(tmp_path / "d.mcap"))  # fmt: skip
+              str(tmp_path / "d.mcap"))  # fmt: skip
     _one_line_error(run, "d.csv", needle)
     assert not (tmp_path / "d.mcap").exists()
 

@@ -71,7 +71,7 @@ def test_predicted_sigma_matches_the_spread_of_simulated_calibrations(problem) -
 def test_plan_file_round_trip_through_simulate_and_run(tmp_path: Path) -> None:
     plan = tmp_path / "plan.yaml"
     made = cli("plan", "--poses", "20", "--candidates", "300", "--trials", "0",
-                       "-o", str(plan))  # fmt: skip
+               "-o", str(plan))  # fmt: skip
     assert made.returncode == 0, made.stderr
     assert "x smaller than random poses at equal N" in made.stdout
     q = load_plan(plan, WORLD.model.robot).q

@@ -140,7 +140,7 @@ def test_calibrate_of_readings_in_degrees_exits_3_and_the_file_is_refused(tmp_pa
         assert "p.json: fitted, implausible (readings of joint(s) 1 (" in proc.stderr
         assert "--force to use it anyway" in proc.stderr
     proc = cli("predict", "p.json", "--joints", "j.csv", "--force", "-o", "out.csv",
-                       cwd=tmp_path)  # fmt: skip
+               cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 0 and (tmp_path / "out.csv").exists(), proc.stderr
     assert "warning: p.json: fitted, implausible (" in proc.stderr
 
@@ -200,7 +200,7 @@ def test_diagnose_with_hold_out_readings_in_degrees_exits_3(tmp_path: Path) -> N
     write_measurements(tmp_path / "deg.mcap", np.degrees(held.poses.q), held.points,
                        robot.joint_names, stamps[len(cal) :])  # fmt: skip
     proc = cli("diagnose", "cal.mcap", "--holdout", "deg.mcap", "--robot", "ur10",
-                       "-o", "d.json", cwd=tmp_path)  # fmt: skip
+               "-o", "d.json", cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 3, proc.stderr
     doc = json.loads((tmp_path / "d.json").read_text())
     assert any("hold-out readings" in r and "degrees" in r for r in doc["implausible"])

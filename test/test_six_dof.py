@@ -225,7 +225,7 @@ def test_split_calibrate_and_score_keep_the_orientations(tmp_path: Path) -> None
     assert doc["orientation_residuals"]["n_measurements"] == len(parts[0])
     table = tmp_path / "points.csv"
     proc = cli("score", str(params), str(tmp_path / "probe.holdout.mcap"),
-                       "--points-csv", str(table))  # fmt: skip
+               "--points-csv", str(table))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     line = next(x for x in proc.stdout.splitlines() if "orientation error angle" in x)
     rms_urad = float(line.split("per axis rms ")[1].split(" ")[0])

@@ -137,7 +137,7 @@ def test_bag_round_trip_keeps_the_contract_topic_and_adds_one_per_target(tmp_pat
     # split keeps each pose's targets together; score uses every target.
     cal, hold = tmp_path / "cal.mcap", tmp_path / "hold.mcap"
     proc = cli("split", str(bag), "--holdout", "0.3", "--calibration-out", str(cal),
-                       "--holdout-out", str(hold))  # fmt: skip
+               "--holdout-out", str(hold))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     parts = [read_recording([p], ROBOT) for p in (cal, hold)]
     assert sum(len(p) for p in parts) == len(recording)
@@ -167,9 +167,9 @@ def test_import_takes_one_column_triple_per_target(tmp_path: Path) -> None:
     path.write_text("\n".join(lines) + "\n")
     bag = tmp_path / "imported.mcap"
     proc = cli("import", str(path), "--sep", ";", "--decimal-comma", "--angle-unit",
-                       "deg", "--length-unit", "mm", "--joints", "q1,q2,q3,q4,q5,q6",
-                       "--point", "x,y,z", "--target", "smr2:x2,y2,z2", "--target",
-                       "smr3:x3,y3,z3", "-o", str(bag))  # fmt: skip
+               "deg", "--length-unit", "mm", "--joints", "q1,q2,q3,q4,q5,q6",
+               "--point", "x,y,z", "--target", "smr2:x2,y2,z2", "--target",
+               "smr3:x3,y3,z3", "-o", str(bag))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     recording = read_recording([bag], ROBOT)
     assert recording.target_names == ("", "smr2", "smr3") and len(recording) == 119
@@ -190,8 +190,8 @@ def test_import_takes_one_column_triple_per_target(tmp_path: Path) -> None:
         ((str(path), "--target", "smr2:x2,y2,nope"), "no column 'nope'"),
     ]:  # fmt: skip
         proc = cli("import", *args, "--sep", ";", "--decimal-comma", "--angle-unit",
-                           "deg", "--length-unit", "mm", "--joints", "q1,q2,q3,q4,q5,q6",
-                           "--point", "x,y,z", "-o", str(tmp_path / "x.mcap"))  # fmt: skip
+                   "deg", "--length-unit", "mm", "--joints", "q1,q2,q3,q4,q5,q6",
+                   "--point", "x,y,z", "-o", str(tmp_path / "x.mcap"))  # fmt: skip
         assert proc.returncode == 2 and message in proc.stderr, proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
         assert not (tmp_path / "x.mcap").exists()
@@ -223,7 +223,7 @@ def test_predict_takes_the_target_of_a_several_target_calibration(tmp_path: Path
         measured = recording.points[recording.poses.target_index == k][: len(q)]
         assert np.abs(predicted - measured).max() < 5e-5  # the noise, not another target
     proc = cli("predict", str(params), "--joints", str(joints), "-o",
-                       str(tmp_path / "x.csv"), "--target", "smr9")  # fmt: skip
+               str(tmp_path / "x.csv"), "--target", "smr9")  # fmt: skip
     assert proc.returncode == 2 and "no target 'smr9'" in proc.stderr
 
 
