@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import cli
 from diagnostic_msgs.srv import SelfTest
 from geometry_msgs.msg import PointStamped
 from rclpy.context import Context
@@ -398,14 +399,14 @@ def test_bag_mode_runs_the_diagnosis_and_latches_its_summary(
     context: Context, tmp_path: Path
 ) -> None:
     """A world with joint-4 backlash: the node's diagnosis names it, on the hold-out bag."""
-    run = [sys.executable, "-m", "robot_calib", "simulate"]
     bag, holdout = tmp_path / "cal.mcap", tmp_path / "hold.mcap"
     for cmd in (
-        [*run, "--plan", "paper-test3", "--effects", "backlash:4", "--seed", "2", "-o", str(bag)],
-        [*run, "--plan", "random", "--n-random", "100", "--world",
+        ["--plan", "paper-test3", "--effects", "backlash:4", "--seed", "2", "-o", str(bag)],
+        ["--plan", "random", "--n-random", "100", "--world",
          str(bag.with_suffix(".world.yaml")), "--seed", "3", "-o", str(holdout)],
     ):  # fmt: skip
-        subprocess.run(cmd, check=True, capture_output=True)
+        made = cli("simulate", *cmd)
+        assert made.returncode == 0, made.stderr
     calibrator = CalibratorNode(
         bags=[bag],
         context=context,

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from cli_runner import cli
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ROOT / "robot_calib" / "kinematics" / "robots"
@@ -17,7 +18,14 @@ RUN = [sys.executable, "-m", "robot_calib"]
 
 
 def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([*RUN, *args], capture_output=True, text=True, check=False, cwd=cwd)
+    """The command's main() in this process (cli_runner.cli): the same exit status and
+    output as `python -m robot_calib ARGS`, without a Python start-up per command."""
+    return cli(*args, cwd=cwd)
+
+
+def run_process(*args: str) -> subprocess.CompletedProcess[str]:
+    """`python -m robot_calib ARGS` as a process of its own."""
+    return subprocess.run([*RUN, *args], capture_output=True, text=True, check=False)
 
 
 def one_line_error(proc: subprocess.CompletedProcess[str], text: str) -> None:
@@ -170,7 +178,7 @@ def test_a_robot_file_edited_after_calibration_is_noticed(tmp_path: Path) -> Non
 def test_version_and_the_summary_of_frames() -> None:
     """`--version` (issue 15); the tracker pose and target offsets have no nominal: the
     parameter table shows '-' for their nominal and deviation, never their value again."""
-    proc = run("--version")
+    proc = run_process("--version")  # the program itself: its exit status and output
     assert proc.returncode == 0 and proc.stdout.strip().startswith("robot-calib 0.")
     bag = ROOT / "bags" / "paper_test3.mcap"
     from robot_calib.flows.calibrate import calibrate_bags

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 
 from robot_calib.compensate import compensate_commands, compensate_targets
 from robot_calib.compensate.solve import nominal_counterpart
@@ -80,8 +80,8 @@ def test_the_compensate_command(tmp_path: Path) -> None:
     q = random_plan(ROBOT, 20, np.random.default_rng(6)).q
     joints = tmp_path / "j.csv"
     np.savetxt(joints, q, delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
-    proc = robot_calib("compensate", str(params), "--joints", str(joints), "-o", "out.csv",
-                       cwd=tmp_path)  # fmt: skip
+    proc = cli("compensate", str(params), "--joints", str(joints), "-o", "out.csv",
+               cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "20 compensated commands" in proc.stdout
     with (tmp_path / "out.csv").open() as handle:
@@ -92,12 +92,12 @@ def test_the_compensate_command(tmp_path: Path) -> None:
     change = np.abs(corrected - q).max(axis=1)  # per command [rad]
     assert change.min() > 0 and np.median(change) < 0.01  # mrad, more only near the wrist
     # singularity (joint 5 near 0: joints 4 and 6 trade a small orientation error)
-    again = robot_calib("compensate", str(params), "--joints", str(joints), "-o", "out.csv",
-                        cwd=tmp_path)  # fmt: skip
+    again = cli("compensate", str(params), "--joints", str(joints), "-o", "out.csv",
+                cwd=tmp_path)  # fmt: skip
     assert again.returncode == 2 and "exists" in again.stderr
     np.savetxt(joints, np.degrees(q), delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
-    degrees = robot_calib("compensate", str(params), "--joints", str(joints), "-o", "d.csv",
-                          cwd=tmp_path)  # fmt: skip
+    degrees = cli("compensate", str(params), "--joints", str(joints), "-o", "d.csv",
+                  cwd=tmp_path)  # fmt: skip
     assert degrees.returncode == 2 and "degrees?" in degrees.stderr
     assert not (tmp_path / "d.csv").exists()
 
@@ -229,9 +229,9 @@ def test_the_compensate_command_with_targets(tmp_path: Path) -> None:
     np.savetxt(targets, table, delimiter=",", comments="", header="x,y,z,qx,qy,qz,qw")
     seeds = tmp_path / "s.csv"
     np.savetxt(seeds, q + 0.02, delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
-    proc = robot_calib("compensate", str(params), "--targets", str(targets), "--frame",
-                       "tracker", "--unit", "mm", "--seed-joints", str(seeds), "-o", "out.csv",
-                       cwd=tmp_path)  # fmt: skip
+    proc = cli("compensate", str(params), "--targets", str(targets), "--frame",
+               "tracker", "--unit", "mm", "--seed-joints", str(seeds), "-o", "out.csv",
+               cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "12 commands (rad) for target poses (tracker frame" in proc.stdout
     assert "11/12 reached" in proc.stdout
@@ -251,7 +251,7 @@ def test_the_compensate_command_with_targets(tmp_path: Path) -> None:
     assert np.median(np.abs(corrected - q[:-1])) < 0.01  # the seeds' IK is the source pose
 
     def refused(*extra: str) -> str:
-        out = robot_calib("compensate", str(params), *extra, "-o", "bad.csv", cwd=tmp_path)
+        out = cli("compensate", str(params), *extra, "-o", "bad.csv", cwd=tmp_path)
         assert out.returncode == 2 and not (tmp_path / "bad.csv").exists()
         return out.stderr
 

@@ -4,11 +4,10 @@ not told about (calibrated on the seed's Test 2 sweeps, scored on random general
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from cli_runner import cli
 
 from robot_calib.diagnose.diagnosis import Diagnosis, DominantEffect, diagnose
 from robot_calib.identify.params_file import load_params
@@ -69,10 +68,7 @@ def test_diagnosis_document_report_and_ladder() -> None:
 def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:
     bag = Path(__file__).resolve().parents[1] / "bags" / "paper_test3.mcap"
     out = tmp_path / "diagnosis.json"
-    proc = subprocess.run(
-        [sys.executable, "-m", "robot_calib", "diagnose", str(bag), "-o", str(out)],
-        capture_output=True, text=True, check=False,
-    )  # fmt: skip
+    proc = cli("diagnose", str(bag), "-o", str(out))
     assert proc.returncode == 0, proc.stderr
     doc = json.loads(out.read_text())
     assert doc["dominant_effect"] is None  # the sample world has no effect
@@ -92,10 +88,7 @@ def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:
     assert saved["selected"]["model"] == doc["ladder"][-1]["model"] == "geometric"
     assert set(saved["selected"]["holdout_abs_rms_mm"]) == {r["model"] for r in doc["ladder"]}
     # written once: a second run refuses to overwrite it
-    again = subprocess.run(
-        [sys.executable, "-m", "robot_calib", "diagnose", str(bag), "-o", str(out)],
-        capture_output=True, text=True, check=False,
-    )  # fmt: skip
+    again = cli("diagnose", str(bag), "-o", str(out))
     assert again.returncode == 2
 
 

@@ -244,10 +244,10 @@ def test_the_ur_file_is_only_for_ur_robots() -> None:
 def test_the_export_verb_writes_every_format_and_keeps_the_overwrite_policy(
     tmp_path: Path,
 ) -> None:
-    from cli_runner import robot_calib
+    from cli_runner import cli
 
     def run(*args: str) -> subprocess.CompletedProcess[str]:
-        return robot_calib(*args, cwd=tmp_path)
+        return cli(*args, cwd=tmp_path)
 
     # a UR10 bag simulated in-process (the ROS graph's simulate is tested elsewhere)
     from robot_calib.bag.write import write_measurement_bag

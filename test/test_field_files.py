@@ -2,8 +2,9 @@
 disk under repair, two writers of one output, an interrupted multi-file output, Ctrl-C at
 start-up, unexpanded xacro, the compensated CSV read back.
 
-Each command runs as a user runs it (`python -m robot_calib ...` in a subprocess), with a
-memory or file-size limit where the fault needs one.
+Each command whose point is the process (limits, signals, two at once) runs as a user runs
+it (`python -m robot_calib ...` in a subprocess), with a memory or file-size limit where the
+fault needs one; the others run the same main() in this process (cli_runner.cli).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import time
 from pathlib import Path
 
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "bags" / "paper_test3.mcap"
@@ -89,15 +90,24 @@ def flip_chunk_length(source: Path, target: Path, bit: int) -> None:
     raise AssertionError(f"{source}: no chunk")
 
 
+@pytest.fixture(scope="module")
+def sample_params(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """`calibrate SAMPLE` once for the module: a PARAMS.json to score the corrupt bags with."""
+    params = tmp_path_factory.mktemp("sample_params") / "params.json"
+    assert cli("calibrate", str(SAMPLE), "-o", str(params)).returncode == 0
+    return params
+
+
 @pytest.mark.parametrize("bit", [31, 20, 36])
-def test_a_flipped_bit_in_a_chunk_length_is_a_one_line_error(tmp_path: Path, bit: int) -> None:
+def test_a_flipped_bit_in_a_chunk_length_is_a_one_line_error(
+    tmp_path: Path, sample_params: Path, bit: int
+) -> None:
     """Bit 31 makes a chunk of 2 GiB: read whole it was a MemoryError traceback (here under
     a 1.5 GB address-space limit); bit 20 a chunk past the end; bit 36 one above mcap's limit.
     repair, calibrate and score end with one line naming the bag, exit 2, nothing written."""
     bag = tmp_path / "flipped.mcap"
     flip_chunk_length(SAMPLE, bag, bit)
-    params = tmp_path / "params.json"
-    assert robot_calib("calibrate", str(SAMPLE), "-o", str(params)).returncode == 0
+    params = sample_params
     memory = 1_500_000_000
     for args, output in [
         (["repair", str(bag), "-o", str(tmp_path / "r.mcap")], "r.mcap"),
@@ -210,7 +220,7 @@ def test_a_run_names_its_final_folder_not_the_one_it_was_built_in(tmp_path: Path
     """`run -o out` builds `out/.run-XXXX.partial` and renames it: its reports, PARAMS.json
     and world files named the bags in that folder, gone once renamed. Every path of the
     run's files that names one of its bags now names the final folder, and exists."""
-    result = robot_calib("run", "-o", str(tmp_path / "out"), "--holdout", "20")
+    result = cli("run", "-o", str(tmp_path / "out"), "--holdout", "20")
     assert result.returncode == 0, result.stderr
     (run,) = (tmp_path / "out").iterdir()
     assert run.name.startswith("run-")
@@ -233,15 +243,15 @@ def test_a_stream_kept_whole_says_all_points_not_every_1th(tmp_path: Path) -> No
     """A stream of fewer points than --stream-max-points: 'every 1th of 976 points' ->
     'all 976 points'; a decimated one says 'every 2nd of'."""
     bag = tmp_path / "s.mcap"
-    made = robot_calib(
+    made = cli(
         "simulate", "--plan", "paper-test1", "--stream", "--point-rate", "20", "-o", str(bag)
     )
     assert made.returncode == 0, made.stderr
-    whole = robot_calib("calibrate", str(bag), "--stream", "-o", str(tmp_path / "a.json"))
+    whole = cli("calibrate", str(bag), "--stream", "-o", str(tmp_path / "a.json"))
     assert whole.returncode == 0, whole.stderr
     text = whole.stdout + whole.stderr
     assert "every 1th" not in text and re.search(r"stream pairing: .*, all \d+ points", text)
-    half = robot_calib(
+    half = cli(
         "calibrate", str(bag), "--stream", "--stream-max-points", "600", "-o",
         str(tmp_path / "b.json"),
     )  # fmt: skip
@@ -291,10 +301,10 @@ def ur5_params(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A PARAMS.json of a simulated UR5 (40 random poses)."""
     folder = tmp_path_factory.mktemp("ur5")
     bag, params = folder / "ur5.mcap", folder / "p.json"
-    made = robot_calib("simulate", "--robot", "ur5", "--plan", "random", "--n-random", "40",
-                       "-o", str(bag))  # fmt: skip
+    made = cli("simulate", "--robot", "ur5", "--plan", "random", "--n-random", "40",
+               "-o", str(bag))  # fmt: skip
     assert made.returncode == 0, made.stderr
-    fitted = robot_calib("calibrate", str(bag), "--robot", "ur5", "-o", str(params))
+    fitted = cli("calibrate", str(bag), "--robot", "ur5", "-o", str(params))
     assert fitted.returncode == 0, fitted.stderr
     return params
 
@@ -318,21 +328,21 @@ def test_an_unexpanded_xacro_in_either_namespace_is_refused(
         '<xacro:include filename="gripper.xacro"/>',
     ))  # fmt: skip
     out = tmp_path / "out.urdf"
-    result = robot_calib(
+    result = cli(
         "export", str(ur5_params), "--format", "urdf", "--nominal-urdf", str(xacro), "-o", str(out)
     )
     one_line_error(result, str(xacro), "a xacro file, not a URDF: expand it first", "xacro ")
     assert not out.exists()
     named_urdf = tmp_path / "robot.urdf"  # a xacro under a URDF's name, as --robot
     named_urdf.write_text(xacro.read_text())
-    as_robot = robot_calib("simulate", "--robot", str(named_urdf), "-o", str(tmp_path / "x.mcap"))
+    as_robot = cli("simulate", "--robot", str(named_urdf), "-o", str(tmp_path / "x.mcap"))
     one_line_error(as_robot, str(named_urdf), "a xacro file, not a URDF")
     assert not (tmp_path / "x.mcap").exists()
     declared = tmp_path / "declared.urdf"  # xacro's output keeps the declaration
     declared.write_text(
         urdf.replace('<robot name="ur5">', f'<robot name="ur5" xmlns:xacro="{namespace}">')
     )
-    result = robot_calib(
+    result = cli(
         "export",
         str(ur5_params),
         "--format",
@@ -348,15 +358,16 @@ def test_an_unexpanded_xacro_in_either_namespace_is_refused(
 # --- item 8: reading compensated commands back ---
 
 
-def test_compensated_commands_read_back_as_the_doc_says(tmp_path: Path) -> None:
+def test_compensated_commands_read_back_as_the_doc_says(
+    tmp_path: Path, sample_params: Path
+) -> None:
     """compensate.md said `predict` reads the compensated CSV back; it refuses it ('not a
     number in [... 'ok']'). The doc now says so and how: the first 2 J columns (q, dir)
     are a JOINTS.csv that predict reads."""
     doc = (ROOT / "msgs_doc" / "compensate.md").read_text()
     assert "`predict` and `compensate --joints` read the file\n  back" not in doc
     assert "cut -d, -f1-12 OUT.csv > CMD.csv" in doc
-    params = tmp_path / "p.json"
-    assert robot_calib("calibrate", str(SAMPLE), "-o", str(params)).returncode == 0
+    params = sample_params  # calibrate SAMPLE
     rows = [
         [0.3, -1.2, 0.9, 0.4, 0.8, -0.5],
         [-0.6, -0.9, 0.4, -0.3, -0.7, 1.1],
@@ -365,20 +376,16 @@ def test_compensated_commands_read_back_as_the_doc_says(tmp_path: Path) -> None:
     joints = tmp_path / "j.csv"
     joints.write_text("q1,q2,q3,q4,q5,q6\n" + "".join(",".join(map(str, r)) + "\n" for r in rows))
     out = tmp_path / "OUT.csv"
-    done = robot_calib("compensate", str(params), "--joints", str(joints), "-o", str(out))
+    done = cli("compensate", str(params), "--joints", str(joints), "-o", str(out))
     assert done.returncode == 0, done.stderr
-    refused = robot_calib("predict", str(params), "--joints", str(out), "-o", "x.csv")
+    refused = cli("predict", str(params), "--joints", str(out), "-o", "x.csv")
     one_line_error(refused, "not a number")
     commands = tmp_path / "CMD.csv"
     commands.write_text(
         "".join(",".join(line.split(",")[:12]) + "\n" for line in out.read_text().splitlines())
     )
-    aimed = robot_calib(
-        "predict", str(params), "--joints", str(joints), "-o", str(tmp_path / "a.csv")
-    )
-    back = robot_calib(
-        "predict", str(params), "--joints", str(commands), "-o", str(tmp_path / "b.csv")
-    )
+    aimed = cli("predict", str(params), "--joints", str(joints), "-o", str(tmp_path / "a.csv"))
+    back = cli("predict", str(params), "--joints", str(commands), "-o", str(tmp_path / "b.csv"))
     assert aimed.returncode == 0 and back.returncode == 0, aimed.stderr + back.stderr
     assert (tmp_path / "b.csv").exists()
 
@@ -478,7 +485,7 @@ def test_an_interrupted_diagnosis_set_appears_whole_or_not_at_all(tmp_path: Path
     assert result.returncode == 130, result.stderr
     assert "interrupted" in result.stderr and "Traceback" not in result.stderr
     assert diagnose_set(tmp_path) == {} and leftovers(tmp_path) == []
-    first = robot_calib("diagnose", str(SAMPLE), "-o", str(tmp_path / "d.json"))
+    first = cli("diagnose", str(SAMPLE), "-o", str(tmp_path / "d.json"))
     assert first.returncode == 0, first.stderr
     old = diagnose_set(tmp_path)
     assert {"d.json", "d.md", "d.html"} <= set(old)

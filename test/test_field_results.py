@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 
 
 @pytest.fixture(scope="module")
@@ -19,8 +19,8 @@ def backlash_bags(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]
     and hold-out bags."""
     work = tmp_path_factory.mktemp("backlash")
     for name, n, seed in (("cal.mcap", "150", "1"), ("held.mcap", "100", "2")):
-        run = robot_calib("simulate", "--plan", "random", "--n-random", n, "--effects",
-                          "backlash:4", "--seed", seed, "-o", str(work / name))  # fmt: skip
+        run = cli("simulate", "--plan", "random", "--n-random", n, "--effects",
+                  "backlash:4", "--seed", seed, "-o", str(work / name))  # fmt: skip
         assert run.returncode == 0, run.stderr
     return work / "cal.mcap", work / "held.mcap"
 
@@ -34,8 +34,8 @@ def test_a_stated_accuracy_in_the_wrong_unit_hides_no_effect(
     never 'null (geometric reaches the noise level)'."""
     cal, held = backlash_bags
     out = tmp_path / "d.json"
-    run = robot_calib("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy", "5",
-                      "-o", str(out))  # fmt: skip
+    run = cli("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy", "5",
+              "-o", str(out))  # fmt: skip
     assert run.returncode == 0, run.stderr
     warning = next(line for line in run.stdout.splitlines() if "stated tracker accuracy" in line)
     assert warning.startswith("warning: ") and "5 mm per axis" in warning
@@ -56,8 +56,8 @@ def test_a_stated_accuracy_a_few_times_the_residual_is_used_and_said(
     naming both figures; the verdict says the floor rests on the stated accuracy alone."""
     cal, held = backlash_bags
     out = tmp_path / "d.json"
-    run = robot_calib("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy",
-                      "0.2", "-o", str(out))  # fmt: skip
+    run = cli("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy",
+              "0.2", "-o", str(out))  # fmt: skip
     assert run.returncode == 0, run.stderr
     doc = json.loads(out.read_text())
     assert doc["noise"]["floor_known"] is True
@@ -77,8 +77,8 @@ def test_the_calibrate_warning_inside_diagnose_uses_the_stated_accuracy(
     above 20 x that; the warning compares it with the stated 0.0020 mm, not an assumed
     0.0100 mm."""
     cal, held = backlash_bags
-    run = robot_calib("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy",
-                      "0.002", "-o", str(tmp_path / "d.json"))  # fmt: skip
+    run = cli("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy",
+              "0.002", "-o", str(tmp_path / "d.json"))  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert "(0.0020 mm, stated tracker accuracy (--tracker-accuracy))" in run.stderr
     assert "assumed tracker noise" not in run.stderr
@@ -90,11 +90,11 @@ def test_on_a_bag_with_sweeps_a_stated_accuracy_is_never_ignored_without_a_word(
     """paper-test2 (sweeps and repeat poses) with --tracker-accuracy 5: the measured noise
     (about 0.005 mm per axis) is the floor, and a warning names both figures."""
     bag = tmp_path / "sw.mcap"
-    run = robot_calib("simulate", "--plan", "paper-test2", "--effects", "backlash:4", "-o",
-                      str(bag))  # fmt: skip
+    run = cli("simulate", "--plan", "paper-test2", "--effects", "backlash:4", "-o",
+              str(bag))  # fmt: skip
     assert run.returncode == 0, run.stderr
     out = tmp_path / "d.json"
-    run = robot_calib("diagnose", str(bag), "--tracker-accuracy", "5", "-o", str(out))
+    run = cli("diagnose", str(bag), "--tracker-accuracy", "5", "-o", str(out))
     assert run.returncode == 0, run.stderr
     doc = json.loads(out.read_text())
     assert doc["noise"]["sigma_mm"] == pytest.approx(0.0048, rel=0.3)  # the simulated noise
@@ -103,8 +103,8 @@ def test_on_a_bag_with_sweeps_a_stated_accuracy_is_never_ignored_without_a_word(
     assert "x that" in warning and warning in run.stdout
     assert doc["dominant_effect"] == {"effect": "backlash", "joints": [4]}
     # a consistent stated accuracy is a note, still a word
-    run = robot_calib("diagnose", str(bag), "--tracker-accuracy", "0.005", "-o",
-                      str(tmp_path / "ok.json"))  # fmt: skip
+    run = cli("diagnose", str(bag), "--tracker-accuracy", "0.005", "-o",
+              str(tmp_path / "ok.json"))  # fmt: skip
     note = json.loads((tmp_path / "ok.json").read_text())["noise"]["warning"]
     assert note.startswith("note: ") and "not used" in note
 
@@ -115,10 +115,10 @@ def test_three_targets_per_pose_are_no_stream(tmp_path: Path) -> None:
     world = tmp_path / "w3.yaml"
     world.write_text("targets:\n  smr2: [0.0, 0.08, 0.04]\n  smr3: [-0.05, -0.05, 0.06]\n")
     bag = tmp_path / "t3.mcap"
-    run = robot_calib("simulate", "--world", str(world), "--plan", "random", "--n-random",
-                      "36", "-o", str(bag))  # fmt: skip
+    run = cli("simulate", "--world", str(world), "--plan", "random", "--n-random",
+              "36", "-o", str(bag))  # fmt: skip
     assert run.returncode == 0, run.stderr
-    run = robot_calib("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
+    run = cli("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
     assert run.returncode == 0, run.stderr
     assert "targets: 3 (/laser_tracker/point 36" in run.stderr + run.stdout
     assert "stream" not in run.stderr + run.stdout
@@ -131,8 +131,8 @@ def measured_rows(tmp_path_factory: pytest.TempPathFactory) -> list[list[float]]
     from robot_calib.kinematics.loader import load_robot
 
     bag = tmp_path_factory.mktemp("rows") / "r60.mcap"
-    run = robot_calib("simulate", "--plan", "random", "--n-random", "60", "--seed", "3", "-o",
-                      str(bag))  # fmt: skip
+    run = cli("simulate", "--plan", "random", "--n-random", "60", "--seed", "3", "-o",
+              str(bag))  # fmt: skip
     assert run.returncode == 0, run.stderr
     rec = read_recording([bag], load_robot("kr5_sixx_r650"))
     return [[*q, *p] for q, p in zip(rec.poses.q.tolist(), rec.points.tolist())]
@@ -162,16 +162,16 @@ def test_two_halves_of_one_csv_are_calibration_and_hold_out(
     for name, rows in (("a", measured_rows[:30]), ("b", measured_rows[30:])):
         csv = _write_csv(tmp_path / f"{name}.csv", rows, HEADER)
         bags.append(tmp_path / f"{name}.mcap")
-        run = robot_calib("import", str(csv), *COLUMNS, "-o", str(bags[-1]))
+        run = cli("import", str(csv), *COLUMNS, "-o", str(bags[-1]))
         assert run.returncode == 0, run.stderr
-    run = robot_calib("diagnose", str(bags[0]), "--holdout", str(bags[1]), "-o",
-                      str(tmp_path / "d.json"))  # fmt: skip
+    run = cli("diagnose", str(bags[0]), "--holdout", str(bags[1]), "-o",
+              str(tmp_path / "d.json"))  # fmt: skip
     assert run.returncode == 0, run.stderr
     again = tmp_path / "a_again.mcap"
-    run = robot_calib("import", str(tmp_path / "a.csv"), *COLUMNS, "-o", str(again))
+    run = cli("import", str(tmp_path / "a.csv"), *COLUMNS, "-o", str(again))
     assert run.returncode == 0, run.stderr
-    run = robot_calib("diagnose", str(bags[0]), "--holdout", str(again), "-o",
-                      str(tmp_path / "x.json"))  # fmt: skip
+    run = cli("diagnose", str(bags[0]), "--holdout", str(again), "-o",
+              str(tmp_path / "x.json"))  # fmt: skip
     assert run.returncode == 2 and "the same measurements twice" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1 and not (tmp_path / "x.json").exists()
 
@@ -186,7 +186,7 @@ def test_an_absolute_time_column_is_kept(measured_rows: list[list[float]], tmp_p
     for name, time0 in (("abs", epoch), ("rel", 0.0)):
         csv = _write_csv(tmp_path / f"{name}.csv", measured_rows[:10], "t," + HEADER,
                          time0=time0)  # fmt: skip
-        run = robot_calib("import", str(csv), *cols, "-o", str(tmp_path / f"{name}.mcap"))
+        run = cli("import", str(csv), *cols, "-o", str(tmp_path / f"{name}.mcap"))
         assert run.returncode == 0, run.stderr
     with BagReader(tmp_path / "abs.mcap") as reader:
         stamps = sorted(m.log_time_ns for m in reader.messages(["/joint_states"]))
@@ -205,12 +205,12 @@ def test_an_all_numeric_first_row_is_no_header(
     csv = _write_csv(tmp_path / "n.csv", measured_rows[:36], None)
     out = tmp_path / "n.mcap"
     index = ("--joints", "0,1,2,3,4,5", "--point", "6,7,8")
-    run = robot_calib("import", str(csv), *index, "-o", str(out))
+    run = cli("import", str(csv), *index, "-o", str(out))
     assert run.returncode == 2, run.stdout
     assert f"error: {csv}:1: the header row is all numbers" in run.stderr
     assert "--no-header" in run.stderr and len(run.stderr.strip().splitlines()) == 1
     assert not out.exists()
-    run = robot_calib("import", str(csv), *index, "--no-header", "-o", str(out))
+    run = cli("import", str(csv), *index, "--no-header", "-o", str(out))
     assert run.returncode == 0, run.stderr
     assert f"{csv}: 36 rows imported" in run.stdout
 
@@ -222,9 +222,9 @@ def test_a_space_separated_file_gets_the_sep_hint(
     error says --sep ' ', which then reads all 36 rows."""
     csv = _write_csv(tmp_path / "s.csv", measured_rows[:36], HEADER.replace(",", "  "), "  ")
     out = tmp_path / "s.mcap"
-    run = robot_calib("import", str(csv), *COLUMNS, "-o", str(out))
+    run = cli("import", str(csv), *COLUMNS, "-o", str(out))
     assert run.returncode == 2 and "give --sep ' '" in run.stderr, run.stderr
-    run = robot_calib("import", str(csv), *COLUMNS, "--sep", " ", "-o", str(out))
+    run = cli("import", str(csv), *COLUMNS, "--sep", " ", "-o", str(out))
     assert run.returncode == 0, run.stderr
     assert f"{csv}: 36 rows imported" in run.stdout
 
@@ -244,30 +244,30 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
     robot = made / f"my.{kind}"
     robot.write_bytes(source.read_bytes())
     bag, params = made / "u.mcap", made / "p.json"
-    run = robot_calib("simulate", "--robot", str(robot), "--plan", "random", "--n-random", "60",
-                      "-o", str(bag))  # fmt: skip
+    run = cli("simulate", "--robot", str(robot), "--plan", "random", "--n-random", "60",
+              "-o", str(bag))  # fmt: skip
     assert run.returncode == 0, run.stderr
-    run = robot_calib("calibrate", str(bag), "--robot", str(robot), "-o", str(params))
+    run = cli("calibrate", str(bag), "--robot", str(robot), "-o", str(params))
     assert run.returncode == 0, run.stderr
     doc = json.loads(params.read_text())
     assert doc["robot_description"] == {"format": kind, "text": source.read_text()}
     joints = tmp_path / "j.csv"
     joints.write_text("q1,q2,q3,q4,q5,q6\n0.1,-1.2,1.0,0.3,0.5,0.2\n-0.4,-1.6,1.3,0.2,-0.7,0.9\n")
-    before = robot_calib("predict", str(params), "--joints", str(joints), "-o",
-                         str(tmp_path / "before.csv"))  # fmt: skip
+    before = cli("predict", str(params), "--joints", str(joints), "-o",
+                 str(tmp_path / "before.csv"))  # fmt: skip
     assert before.returncode == 0, before.stderr
     old = dict(doc)
     del old["robot_description"]  # a file written before the section: the path still loads
     (made / "old.json").write_text(json.dumps(old))
-    run = robot_calib("predict", str(made / "old.json"), "--joints", str(joints), "-o",
-                      str(tmp_path / "old.csv"))  # fmt: skip
+    run = cli("predict", str(made / "old.json"), "--joints", str(joints), "-o",
+              str(tmp_path / "old.csv"))  # fmt: skip
     assert run.returncode == 0, run.stderr
     (moved / "p.json").write_bytes(params.read_bytes())
     for path in made.iterdir():
         path.unlink()
     made.rmdir()
     at = moved / "p.json"
-    run = robot_calib("predict", str(at), "--joints", str(joints), "-o", str(moved / "x.csv"))
+    run = cli("predict", str(at), "--joints", str(joints), "-o", str(moved / "x.csv"))
     assert run.returncode == 0, run.stderr
 
     def rows(path: Path) -> list[float]:
@@ -276,10 +276,10 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
     assert rows(moved / "x.csv") == pytest.approx(rows(tmp_path / "before.csv"), abs=1e-12)
     assert rows(tmp_path / "old.csv") == pytest.approx(rows(tmp_path / "before.csv"), abs=1e-12)
     for fmt in ("urdf", "dh", "json"):
-        run = robot_calib("export", str(at), "--format", fmt, "-o", str(moved / f"e.{fmt}"))
+        run = cli("export", str(at), "--format", fmt, "-o", str(moved / f"e.{fmt}"))
         assert run.returncode == 0, run.stderr
-    run = robot_calib("compensate", str(at), "--joints", str(joints), "-o",
-                      str(moved / "c.csv"))  # fmt: skip
+    run = cli("compensate", str(at), "--joints", str(joints), "-o",
+              str(moved / "c.csv"))  # fmt: skip
     assert run.returncode == 0, run.stderr
     # the section is the description: edited, the file is refused (fingerprint), exit 2
     edited = json.loads(at.read_text())
@@ -287,8 +287,8 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
     edited["robot_description"]["text"] = text.replace("-0.612", "-0.613")  # a2 of the UR10
     assert edited["robot_description"]["text"] != doc["robot_description"]["text"]
     (moved / "edited.json").write_text(json.dumps(edited))
-    run = robot_calib("predict", str(moved / "edited.json"), "--joints", str(joints), "-o",
-                      str(moved / "y.csv"))  # fmt: skip
+    run = cli("predict", str(moved / "edited.json"), "--joints", str(joints), "-o",
+              str(moved / "y.csv"))  # fmt: skip
     assert run.returncode == 2 and "is not the one it was calibrated with" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1
 
@@ -301,9 +301,9 @@ def test_cpa_parameters_carry_a_real_one_sigma(tmp_path: Path) -> None:
     values, sigmas = [], []
     for seed in range(11, 17):
         bag, out = tmp_path / f"s{seed}.mcap", tmp_path / f"c{seed}.json"
-        run = robot_calib("simulate", "--plan", "paper-test2", "--seed", str(seed), "-o", str(bag))
+        run = cli("simulate", "--plan", "paper-test2", "--seed", str(seed), "-o", str(bag))
         assert run.returncode == 0, run.stderr
-        run = robot_calib("calibrate", str(bag), "--model", "cpa", "-o", str(out))
+        run = cli("calibrate", str(bag), "--model", "cpa", "-o", str(out))
         assert run.returncode == 0, run.stderr
         records = json.loads(out.read_text())["parameters"]
         assert all((r["std"] > 0) == r["free"] for r in records), records

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Duration
-from cli_runner import robot_calib
+from cli_runner import cli
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -152,8 +152,8 @@ def test_compensate_flags_commands_beyond_the_limits(tmp_path: Path, params_file
     q[2, 1] = np.radians(10.0)
     joints = tmp_path / "j.csv"
     np.savetxt(joints, q, delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
-    proc = robot_calib("compensate", str(params_file), "--joints", str(joints), "-o", "out.csv",
-                       cwd=tmp_path)  # fmt: skip
+    proc = cli("compensate", str(params_file), "--joints", str(joints), "-o", "out.csv",
+               cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     with (tmp_path / "out.csv").open() as handle:
         status = [row["status"] for row in csv.DictReader(handle)]

@@ -10,7 +10,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 
 BAG = Path(__file__).resolve().parents[1] / "bags" / "paper_test3.mcap"
 
@@ -28,14 +28,14 @@ def test_repair_replaces_an_output_only_with_force(tmp_path: Path) -> None:
     shutil.copyfile(BAG, source)
     output = tmp_path / "fixed.mcap"
     output.write_text("old")
-    refused = robot_calib("repair", str(source), "-o", str(output))
+    refused = cli("repair", str(source), "-o", str(output))
     one_line_error(refused, "exists; will not overwrite it (use --force)")
     assert output.read_text() == "old"
-    forced = robot_calib("repair", str(source), "-o", str(output), "--force")
+    forced = cli("repair", str(source), "-o", str(output), "--force")
     assert forced.returncode == 0, forced.stderr
     assert output.read_bytes() != b"old" and output.stat().st_size > 1000
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
-    same = robot_calib("repair", str(source), "-o", str(source), "--force")  # the input: never
+    same = cli("repair", str(source), "-o", str(source), "--force")  # the input: never
     one_line_error(same, "is the bag to repair")
     assert source.read_bytes() == BAG.read_bytes()
 
@@ -51,21 +51,21 @@ def test_repair_replaces_an_output_only_with_force(tmp_path: Path) -> None:
 def test_plan_refuses_a_wrong_format_or_a_floor_in_mm(
     tmp_path: Path, args: list[str], needle: str
 ) -> None:
-    proc = robot_calib("plan", "--poses", "12", "--candidates", "200", *args, cwd=tmp_path)
+    proc = cli("plan", "--poses", "12", "--candidates", "200", *args, cwd=tmp_path)
     one_line_error(proc, needle)
     assert list(tmp_path.iterdir()) == []
 
 
 def test_plan_takes_a_plausible_floor(tmp_path: Path) -> None:
-    proc = robot_calib("plan", "--poses", "12", "--candidates", "200", "--floor-z", "-0.5",
-                       "-o", "p.yml", cwd=tmp_path)  # fmt: skip
+    proc = cli("plan", "--poses", "12", "--candidates", "200", "--floor-z", "-0.5",
+               "-o", "p.yml", cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "poses:" in (tmp_path / "p.yml").read_text()
 
 
 def test_run_into_a_path_through_a_file_is_one_line(tmp_path: Path) -> None:
     (tmp_path / "afile").write_text("x")
-    proc = robot_calib("run", "-o", "afile/out", cwd=tmp_path)
+    proc = cli("run", "-o", "afile/out", cwd=tmp_path)
     one_line_error(proc, "afile/out: afile exists and is not a folder")
 
 
@@ -74,9 +74,9 @@ def test_run_into_a_read_only_folder_is_one_line(tmp_path: Path) -> None:
     folder = tmp_path / "ro"
     folder.mkdir(mode=0o555)
     try:
-        proc = robot_calib("run", "-o", "ro", cwd=tmp_path)
+        proc = cli("run", "-o", "ro", cwd=tmp_path)
         one_line_error(proc, "ro: folder not writable")
-        nested = robot_calib("run", "-o", "ro/out", cwd=tmp_path)
+        nested = cli("run", "-o", "ro/out", cwd=tmp_path)
         one_line_error(nested, "ro/out: cannot create the output folder (Permission denied)")
     finally:
         folder.chmod(0o755)

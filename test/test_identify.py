@@ -8,12 +8,11 @@ does (noise floor); eccentricity needs general poses to be identified, and says 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import cli
 
 from robot_calib.accuracy import accuracy, pairwise_errors
 from robot_calib.effects import make_effect
@@ -181,9 +180,7 @@ def test_pairwise_criterion_is_frame_free_and_matches_brute_force() -> None:
 def test_calibrate_and_predict_commands(tmp_path: Path) -> None:
     bag = ROOT / "bags" / "paper_test3.mcap"
     params = tmp_path / "params.json"
-    run = [sys.executable, "-m", "robot_calib"]
-    proc = subprocess.run([*run, "calibrate", str(bag), "--model", "geometric", "-o", str(params)],
-                          capture_output=True, text=True, check=False)  # fmt: skip
+    proc = cli("calibrate", str(bag), "--model", "geometric", "-o", str(params))
     assert proc.returncode == 0, proc.stderr
     assert "beta2 [deg]" in proc.stdout and "seed criterion" in proc.stdout
     doc = json.loads(params.read_text())
@@ -198,9 +195,8 @@ def test_calibrate_and_predict_commands(tmp_path: Path) -> None:
     rows = [f"{t},{','.join(repr(float(v)) for v in q)}" for t, q in zip(h_poses.time, h_poses.q)]
     joints.write_text(header + "\n" + "\n".join(rows) + "\n")
     points = tmp_path / "points.csv"
-    predict = [*run, "predict", str(params), "--joints"]
-    proc = subprocess.run([*predict, str(joints), "-o", str(points)],
-                          capture_output=True, text=True, check=False)  # fmt: skip
+    predict = ["predict", str(params), "--joints"]
+    proc = cli(*predict, str(joints), "-o", str(points))
     assert proc.returncode == 0, proc.stderr
     predicted = np.loadtxt(points, delimiter=",", skiprows=1)
     assert points.read_text().startswith("x,y,z\n") and predicted.shape == (200, 3)
@@ -211,11 +207,9 @@ def test_calibrate_and_predict_commands(tmp_path: Path) -> None:
 
     bad = tmp_path / "bad.csv"
     bad.write_text("q1,q2,q3\n1,2,3\n")
-    proc = subprocess.run([*predict, str(bad), "-o", str(points)],
-                          capture_output=True, text=True, check=False)  # fmt: skip
+    proc = cli(*predict, str(bad), "-o", str(points))
     assert proc.returncode == 2 and "bad.csv: header lacks ['q4', 'q5', 'q6']" in proc.stderr
-    proc = subprocess.run([*run, "calibrate", str(bag), "--model", "geometric+wobble", "-o", "x"],
-                          capture_output=True, text=True, check=False)  # fmt: skip
+    proc = cli("calibrate", str(bag), "--model", "geometric+wobble", "-o", "x")
     assert proc.returncode == 2 and "unknown effect 'wobble'" in proc.stderr
 
 

@@ -5,11 +5,11 @@ calibrated through the same path as simulated data."""
 from __future__ import annotations
 
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import cli
 from rosbags.highlevel import AnyReader
 
 from robot_calib.accuracy import accuracy
@@ -23,11 +23,10 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "datasets" / "ur5_jacobi2025"
 GRID = DATA / "3D_UR5_uncalibrated_grid_cleaned.csv"
 RANDOM = DATA / "3D_UR5_uncalibrated_random_cleaned.csv"
-RUN = [sys.executable, "-m", "robot_calib"]
 
 
 def run(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([*RUN, *args], capture_output=True, text=True, check=False)
+    return cli(*args)
 
 
 def test_ur5_dataset_calibrates_far_below_nominal(tmp_path: Path) -> None:

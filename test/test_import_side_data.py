@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from cli_runner import robot_calib
+from cli_runner import cli
 
 from robot_calib.bag import BagReader
 from robot_calib.bag.read import read_recording
@@ -26,9 +26,9 @@ def test_a_temperature_column_is_imported_onto_its_topic(tmp_path: Path) -> None
         cells = [*q[k], *points[k], 10.0 * k, celsius[k]]
         rows.append(";".join(f"{v:.9f}".replace(".", ",") for v in cells))
     (tmp_path / "in.csv").write_text("\n".join(rows) + "\n")
-    proc = robot_calib("import", "in.csv", "--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z",
-                       "--time", "t", "--temperature", "temp", "--sep", ";", "--decimal-comma",
-                       "-o", "out.mcap", cwd=tmp_path)  # fmt: skip
+    proc = cli("import", "in.csv", "--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z",
+               "--time", "t", "--temperature", "temp", "--sep", ";", "--decimal-comma",
+               "-o", "out.mcap", cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     bag = tmp_path / "out.mcap"
     with BagReader(bag) as reader:
@@ -43,7 +43,7 @@ def test_a_temperature_column_is_imported_onto_its_topic(tmp_path: Path) -> None
     np.testing.assert_allclose(recording.poses.q, q, atol=1e-9)
     np.testing.assert_allclose(recording.poses.time, 10.0 * np.arange(n), atol=1e-9)
     # `split` carries each pose's temperature into the bag its pose goes to
-    proc = robot_calib("split", "out.mcap", "--holdout", "0.3", "--seed", "1", cwd=tmp_path)
+    proc = cli("split", "out.mcap", "--holdout", "0.3", "--seed", "1", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     by_stamp = {stamp_to_ns(m.header.stamp): m.temperature for m in side}
     total = 0

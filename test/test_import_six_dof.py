@@ -9,12 +9,11 @@ from __future__ import annotations
 
 import signal
 import subprocess
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 from scipy.spatial.transform import Rotation
 
 from robot_calib.bag.read import read_recording
@@ -111,9 +110,9 @@ def expected_six_dof() -> tuple[np.ndarray, np.ndarray]:
 
 
 def run_all(*commands: tuple[str, ...]) -> list[subprocess.CompletedProcess[str]]:
-    """Several `robot-calib` processes at once (each is mostly Python start-up)."""
-    with ThreadPoolExecutor(4) as pool:
-        return list(pool.map(lambda args: robot_calib(*args), commands))
+    """Several `robot-calib` commands, one after another in this process (cli: main() is
+    not thread-safe: it redirects this process's stdout/stderr and working directory)."""
+    return [cli(*args) for args in commands]
 
 
 def test_quaternion_and_rpy_columns_round_trip_and_calibrate(tmp_path: Path) -> None:
@@ -168,9 +167,9 @@ def test_a_further_target_takes_its_own_orientation_and_sigma(
         columns[c][point_only] = np.nan  # seen, but the orientation not measured
     csv = export(tmp_path / "two.csv", columns)
     bag = tmp_path / "two.mcap"
-    proc = robot_calib("import", str(csv), *CSV_OPTIONS, "--target", "smr2:X2,Y2,Z2",
-                       "--orientation-rpy", "smr2:R2,P2,W2", "--sigma", "smr2:S2",
-                       "-o", str(bag))  # fmt: skip
+    proc = cli("import", str(csv), *CSV_OPTIONS, "--target", "smr2:X2,Y2,Z2",
+               "--orientation-rpy", "smr2:R2,P2,W2", "--sigma", "smr2:S2",
+               "-o", str(bag))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "target smr2: 18 orientations, 19 rows with stated" in proc.stdout
     recording = read_recording([bag], ROBOT)
@@ -262,7 +261,7 @@ def test_bad_six_dof_input_is_one_line_exit_2_and_no_bag(
         assert {f.suffix for f in tmp_path.iterdir()} == {".csv"}  # nothing written, staged
     # and as a process of its own
     csv, options, message = cases[0]
-    proc = robot_calib("import", csv, *CSV_OPTIONS, *options, "-o", str(out))
+    proc = cli("import", csv, *CSV_OPTIONS, *options, "-o", str(out))
     assert proc.returncode == 2 and message in proc.stderr, proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
 
@@ -274,8 +273,8 @@ def test_implausible_sigmas_and_empty_orientations_get_warnings(tmp_path: Path) 
     for c in ("QW", "QX", "QY", "QZ"):
         columns[c][:] = np.nan
     csv = export(tmp_path / "um.csv", columns)
-    proc = robot_calib("import", str(csv), *CSV_OPTIONS, "--orientation", "QX,QY,QZ,QW",
-                       "--sigma", "SP", "-o", str(tmp_path / "um.mcap"))  # fmt: skip
+    proc = cli("import", str(csv), *CSV_OPTIONS, "--orientation", "QX,QY,QZ,QW",
+               "--sigma", "SP", "-o", str(tmp_path / "um.mcap"))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "position standard deviations SP of the first target have a median of 0.0048" in (
         proc.stderr

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 
 from robot_calib.accuracy import accuracy
 from robot_calib.errors import RobotDescriptionError
@@ -52,7 +52,7 @@ def coupled_yaml(folder: Path, mapping: str = MAPPING) -> Path:
 
 
 def run(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return robot_calib(*args, cwd=cwd)
+    return cli(*args, cwd=cwd)
 
 
 def test_the_mapping_is_diag_sign_plus_coupling(tmp_path: Path) -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 
 from robot_calib.accuracy import Accuracy
 from robot_calib.bag.csv_format import PRESETS, CsvFormat
@@ -54,7 +54,7 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
                           six_dof={"": (poses.rotation, np.full((40, 2), np.nan))})  # fmt: skip
     for args in (["ur10.mcap", "--robot", "ur10", "-o", "p10.json"],
                  [str(SAMPLE), "-o", "p5.json"]):  # fmt: skip
-        proc = robot_calib("calibrate", *args, cwd=folder)
+        proc = cli("calibrate", *args, cwd=folder)
         assert proc.returncode == 0, proc.stderr
     return folder
 
@@ -63,8 +63,8 @@ def test_score_flags_another_robot_in_every_output(work: Path) -> None:
     """The user's case: a UR10 bag scored with KR5 parameters (its joints renamed) gave
     1082 mm and no word; now stderr, stdout and the per-point table each say it, and that
     the bag's orientations are not scored (the KR5 calibration has no probe)."""
-    proc = robot_calib("score", "p5.json", "ur10.mcap", "--joint-names", UR_NAMES,
-                       "--points-csv", "points.csv", cwd=work)  # fmt: skip
+    proc = cli("score", "p5.json", "ur10.mcap", "--joint-names", UR_NAMES,
+               "--points-csv", "points.csv", cwd=work)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     implausible = [x for x in proc.stderr.splitlines() if IMPLAUSIBLE_HINT in x]
     assert len(implausible) == 1 and implausible[0].startswith("warning: ur10.mcap: absolute")
@@ -76,7 +76,7 @@ def test_score_flags_another_robot_in_every_output(work: Path) -> None:
         rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
     assert len(rows) == 40 and float(rows[0]["error_m"]) > 0.01
     # The other way round: the probe calibration on a bag of points only.
-    proc = robot_calib("score", "p10.json", str(SAMPLE), "--joint-names", KR5_NAMES, cwd=work)
+    proc = cli("score", "p10.json", str(SAMPLE), "--joint-names", KR5_NAMES, cwd=work)
     assert proc.returncode == 0 and IMPLAUSIBLE_HINT in proc.stdout, proc.stderr
     assert "no 6-DoF orientations at /laser_tracker/point, where the calibration has a probe" in (
         proc.stderr
@@ -111,7 +111,7 @@ def test_predict_refuses_degrees_and_another_robot(work: Path) -> None:
     header = ",".join(f"q{j}" for j in range(1, 7))
     np.savetxt(work / "deg.csv", q, delimiter=",", fmt="%.3f", header=header, comments="")
     k, j = np.argwhere(np.abs(q) > 1.5 * 2 * np.pi)[0]  # UR10 joints turn +-360 deg
-    proc = robot_calib("predict", "p10.json", "--joints", "deg.csv", "-o", "out.csv", cwd=work)
+    proc = cli("predict", "p10.json", "--joints", "deg.csv", "-o", "out.csv", cwd=work)
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert f"deg.csv:{k + 2}: column q{j + 1} (field {j + 1}) = {q[k, j]:g} is beyond" in (
         proc.stderr
@@ -125,7 +125,7 @@ def test_predict_refuses_degrees_and_another_robot(work: Path) -> None:
     # --robot is checked against the calibration's robot, the default robot's name too.
     for verb in (["predict", "p10.json", "--joints", "rad.csv", "-o", "out.csv"],
                  ["score", "p10.json", "ur10.mcap"]):  # fmt: skip
-        proc = robot_calib(*verb, "--robot", "kr5_sixx_r650", cwd=work)
+        proc = cli(*verb, "--robot", "kr5_sixx_r650", cwd=work)
         assert proc.returncode == 2, proc.stderr
         assert "p10.json: identified for robot ur10, not --robot kr5_sixx_r650" in proc.stderr
     assert not (work / "out.csv").exists()
@@ -180,9 +180,9 @@ def test_import_says_which_column_makes_a_row_bad(tmp_path: Path) -> None:
                                "only row: no usable row)")  # fmt: skip
     # one bad row of three: "1 bad row", not "1 bad rows"
     path.write_text("\n".join(ROWS[:3]) + "\n" + ROWS[1].replace("0.0;", "3.0;", 1) + "\n")
-    proc = robot_calib("import", str(path), "--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z",
-                       "--time", "t", "--sep", ";", "--length-unit", "mm", "-o",
-                       str(tmp_path / "e.mcap"))  # fmt: skip
+    proc = cli("import", str(path), "--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z",
+               "--time", "t", "--sep", ";", "--length-unit", "mm", "-o",
+               str(tmp_path / "e.mcap"))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert f"{path}: 2 rows imported, 1 bad row skipped" in proc.stdout
     assert f"warning: {path}:3: columns q2, y are empty: row skipped" in proc.stderr
@@ -200,14 +200,14 @@ def test_a_header_of_one_column_suggests_the_separator(
     assert str(info.value).endswith(f"(separator ','): give {hint}")
     # the hint works: tab spelt 'tab' on the command line
     args = ["--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z", "--length-unit", "mm"]
-    proc = robot_calib("import", str(path), *args, "--sep", hint.split()[1].strip("'"),
-                       "-o", str(tmp_path / "e.mcap"))  # fmt: skip
+    proc = cli("import", str(path), *args, "--sep", hint.split()[1].strip("'"),
+               "-o", str(tmp_path / "e.mcap"))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
 
 
 def test_a_separator_of_two_characters_is_a_usage_error(tmp_path: Path) -> None:
-    proc = robot_calib("import", "e.csv", "--sep", ";;", "--joints", "a", "--point", "x,y,z",
-                       "-o", "e.mcap", cwd=tmp_path)  # fmt: skip
+    proc = cli("import", "e.csv", "--sep", ";;", "--joints", "a", "--point", "x,y,z",
+               "-o", "e.mcap", cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 2 and "argument --sep: ';;': one character" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
 

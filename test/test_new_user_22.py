@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 
 from robot_calib.bag.write import write_measurement_bag
 from robot_calib.kinematics.loader import load_robot
@@ -43,7 +43,7 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
     _bag(folder / "cal.mcap", 1, 60)
     _bag(folder / "ho.mcap", 2, 30)
     _bag(folder / "moved.mcap", 2, 30, shift_m=1.0)
-    proc = robot_calib("calibrate", "cal.mcap", "--robot", "ur10", "-o", "p.json", cwd=folder)
+    proc = cli("calibrate", "cal.mcap", "--robot", "ur10", "-o", "p.json", cwd=folder)
     assert proc.returncode == 0, proc.stderr
     return folder
 
@@ -56,8 +56,8 @@ def test_a_hold_out_bag_of_elsewhere_is_implausible(work: Path, accuracy: list[s
     model's PARAMS.json is `plausible: false` with that reason (item 6) and `export`
     refuses it."""
     out = f"d{len(accuracy)}.json"
-    proc = robot_calib("diagnose", "cal.mcap", "--holdout", "moved.mcap", "--robot", "ur10",
-                       *accuracy, "-o", out, cwd=work)  # fmt: skip
+    proc = cli("diagnose", "cal.mcap", "--holdout", "moved.mcap", "--robot", "ur10",
+               *accuracy, "-o", out, cwd=work)  # fmt: skip
     assert proc.returncode == 3, proc.stderr
     last = proc.stderr.strip().splitlines()[-1]
     assert "Traceback" not in proc.stderr
@@ -75,16 +75,16 @@ def test_a_hold_out_bag_of_elsewhere_is_implausible(work: Path, accuracy: list[s
     assert "<h1>IMPLAUSIBLE: " in (work / f"{stem}.html").read_text()
     best = json.loads((work / f"{stem}.params_best.json").read_text())
     assert best["plausible"] is False and reason in best["implausible"]
-    proc = robot_calib("export", f"{stem}.params_best.json", "--format", "dh", "-o", "x.csv",
-                       cwd=work)  # fmt: skip
+    proc = cli("export", f"{stem}.params_best.json", "--format", "dh", "-o", "x.csv",
+               cwd=work)  # fmt: skip
     assert proc.returncode == 2 and "do not belong" in proc.stderr
     assert not (work / "x.csv").exists()
 
 
 def test_a_hold_out_bag_that_belongs_is_not_flagged(work: Path) -> None:
     """The same poses where the tracker stood: plausible, exit 0, params_best plausible."""
-    proc = robot_calib("diagnose", "cal.mcap", "--holdout", "ho.mcap", "--robot", "ur10",
-                       "--tracker-accuracy", "0.005", "-o", "ok.json", cwd=work)  # fmt: skip
+    proc = cli("diagnose", "cal.mcap", "--holdout", "ho.mcap", "--robot", "ur10",
+               "--tracker-accuracy", "0.005", "-o", "ok.json", cwd=work)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert json.loads((work / "ok.json").read_text())["implausible"] == []
     assert json.loads((work / "ok.params_best.json").read_text())["plausible"] is True
@@ -117,22 +117,22 @@ def test_a_hand_edited_geometry_is_rechecked_on_reading(work: Path, plausible: o
         "export": ["--format", "dh", "-o", "dh.csv"],
     }
     for verb, rest in verbs.items():
-        proc = robot_calib(verb, name, *rest, cwd=work)
+        proc = cli(verb, name, *rest, cwd=work)
         assert proc.returncode == 2, (verb, proc.stderr)
         line = proc.stderr.strip()
         assert len(line.splitlines()) == 1 and name in line and "a2 +5000." in line, line
         assert "--force" in line and not (work / rest[-1]).exists()
-    proc = robot_calib("score", name, "ho.mcap", cwd=work)  # inspecting it: scored, warned
+    proc = cli("score", name, "ho.mcap", cwd=work)  # inspecting it: scored, warned
     assert proc.returncode == 0 and "a2 +5000." in proc.stderr, proc.stderr
     # --force: used with the warning; compensate reaches nothing: no exit 0
-    proc = robot_calib("compensate", name, *verbs["compensate"], "--force", cwd=work)
+    proc = cli("compensate", name, *verbs["compensate"], "--force", cwd=work)
     assert proc.returncode == 3, proc.stderr
     assert "nothing reached" in proc.stderr and "none of its 10 rows" in proc.stderr
     assert (work / "comp.csv").exists()  # written for inspection
     (work / "comp.csv").unlink()
     _edited(work, "a2_10mm.json", 0.010, plausible)
     for verb, rest in verbs.items():
-        proc = robot_calib(verb, "a2_10mm.json", *rest, "--force", cwd=work)
+        proc = cli(verb, "a2_10mm.json", *rest, "--force", cwd=work)
         assert proc.returncode == 0 and "implausible" not in proc.stderr, (verb, proc.stderr)
         (work / rest[-1]).unlink()
 
@@ -162,9 +162,9 @@ def test_score_judges_a_hybrid_by_its_own_in_sample_rms(tmp_path: Path) -> None:
     for name, shift in (("ho.mcap", 0.0), ("moved.mcap", 0.002)):
         write_measurement_bag(tmp_path / name, held.poses.q, held.points + [shift, 0.0, 0.0],
                               robot.joint_names, held.poses.time)  # fmt: skip
-    proc = robot_calib("score", "h.json", "ho.mcap", cwd=tmp_path)
+    proc = cli("score", "h.json", "ho.mcap", cwd=tmp_path)
     assert proc.returncode == 0 and IMPLAUSIBLE_HINT not in proc.stderr, proc.stderr
-    proc = robot_calib("score", "h.json", "moved.mcap", cwd=tmp_path)
+    proc = cli("score", "h.json", "moved.mcap", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     (line,) = [x for x in proc.stderr.splitlines() if IMPLAUSIBLE_HINT in x]
     assert f"the hybrid model's in-sample rms {own:.4f} mm" in line, line
@@ -183,7 +183,7 @@ def test_score_judges_a_hybrid_by_its_own_in_sample_rms(tmp_path: Path) -> None:
         ("five.json", five, ["inducing_q_rad has 5 columns"]),
     ):
         write_json_atomic(bad, tmp_path / name)
-        proc = robot_calib("predict", name, "--joints", "j.csv", "-o", "p.csv", cwd=tmp_path)
+        proc = cli("predict", name, "--joints", "j.csv", "-o", "p.csv", cwd=tmp_path)
         assert proc.returncode == 2 and all(x in proc.stderr for x in said), proc.stderr
         assert name in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
 
@@ -193,16 +193,16 @@ def test_model_terms_say_their_defaults_and_repeats(work: Path) -> None:
     joint) every joint without a word; a repeated term said 'duplicate parameter names'
     without naming --model. Now the log says each default, the error names both terms."""
     model = "geometric+joint_harmonics:2+joint_harmonics:orders=11"
-    proc = robot_calib("calibrate", "cal.mcap", "--robot", "ur10", "--model", model,
-                       "-o", "jh.json", cwd=work)  # fmt: skip
+    proc = cli("calibrate", "cal.mcap", "--robot", "ur10", "--model", model,
+               "-o", "jh.json", cwd=work)  # fmt: skip
     assert proc.returncode in (0, 3), proc.stderr
     assert "joint_harmonics:2 is joint_harmonics:2:orders=2 (the default order 2" in proc.stderr
     assert "joint_harmonics:orders=11 is joint_harmonics:1,2,3,4,5,6:orders=11 (every joint" in (
         proc.stderr
     )
     model = "geometric+joint_harmonics:2:orders=11,27+joint_harmonics:2:orders=11"
-    proc = robot_calib("calibrate", "cal.mcap", "--robot", "ur10", "--model", model,
-                       "-o", "dup.json", cwd=work)  # fmt: skip
+    proc = cli("calibrate", "cal.mcap", "--robot", "ur10", "--model", model,
+               "-o", "dup.json", cwd=work)  # fmt: skip
     assert proc.returncode == 2 and not (work / "dup.json").exists()
     (line,) = proc.stderr.strip().splitlines()
     assert line.startswith(f"robot-calib calibrate: error: --model {model}: terms ")
@@ -250,12 +250,12 @@ def test_force_replaces_the_whole_output_set(work: Path) -> None:
     folder = work / "st"
     folder.mkdir()
     sample = Path(__file__).resolve().parents[1] / "bags" / "paper_test3.mcap"  # sweeps
-    proc = robot_calib("diagnose", str(sample), "-o", "st/d.json", cwd=work)
+    proc = cli("diagnose", str(sample), "-o", "st/d.json", cwd=work)
     assert proc.returncode == 0, proc.stderr
     assert (folder / "d_angle.png").exists()
     (folder / "d_x_angle.png").write_bytes(b"another set")
-    proc = robot_calib("diagnose", "cal.mcap", "--robot", "ur10", "-o", "st/d.json", "--force",
-                       cwd=work)  # fmt: skip
+    proc = cli("diagnose", "cal.mcap", "--robot", "ur10", "-o", "st/d.json", "--force",
+               cwd=work)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert not (folder / "d_angle.png").exists()
     report = (folder / "d.md").read_text()

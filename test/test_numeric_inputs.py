@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -22,8 +22,8 @@ def sim(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[list[float
     from robot_calib.kinematics.loader import load_robot
 
     bag = tmp_path_factory.mktemp("sim") / "r60.mcap"
-    run = robot_calib("simulate", "--plan", "random", "--n-random", "60", "--seed", "3",
-                      "-o", str(bag))  # fmt: skip
+    run = cli("simulate", "--plan", "random", "--n-random", "60", "--seed", "3",
+              "-o", str(bag))  # fmt: skip
     assert run.returncode == 0, run.stderr
     rec = read_recording([bag], load_robot("kr5_sixx_r650"))
     return bag, [[*q, *p] for q, p in zip(rec.poses.q.tolist(), rec.points.tolist())]
@@ -79,16 +79,16 @@ def test_a_csv_given_twice_or_copied_rows_are_refused(
     _, rows = sim
     a = _csv(tmp_path / "a.csv", rows)
     out = tmp_path / "aa.mcap"
-    _one_line_error(robot_calib("import", str(a), str(a), *COLUMNS, "-o", str(out)),
+    _one_line_error(cli("import", str(a), str(a), *COLUMNS, "-o", str(out)),
                     "a.csv", "given twice")  # fmt: skip
     x10 = _csv(tmp_path / "x10.csv", [r for r in rows for _ in range(10)])
-    _one_line_error(robot_calib("import", str(x10), *COLUMNS, "-o", str(out)),
+    _one_line_error(cli("import", str(x10), *COLUMNS, "-o", str(out)),
                     "x10.csv:3", "x10.csv:2", "540 of 600 rows")  # fmt: skip
     assert not out.exists()
     # the tracker measuring again (a new point at the same readings) is a repeat, kept
     again = [r[:6] + [v + 2e-6 for v in r[6:]] for r in rows[:5]]
-    run = robot_calib("import", str(a), str(_csv(tmp_path / "b.csv", again)), *COLUMNS,
-                      "-o", str(out))  # fmt: skip
+    run = cli("import", str(a), str(_csv(tmp_path / "b.csv", again)), *COLUMNS,
+              "-o", str(out))  # fmt: skip
     assert run.returncode == 0, run.stderr
 
 
@@ -98,7 +98,7 @@ def test_copies_in_a_bag_count_once_with_a_warning(
     """Item 1: a bag of 60 measurements x10 fitted 600 points without a word."""
     _, rows = sim
     bag = _bag(tmp_path / "x10.mcap", [r for r in rows for _ in range(10)])
-    run = robot_calib("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
+    run = cli("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
     assert run.returncode == 0, run.stderr
     assert "540 of 600 measurements are copies" in run.stderr
     assert "(60 points)" in run.stdout + run.stderr
@@ -112,11 +112,11 @@ def test_stamps_going_backwards_are_said(
     order = list(range(len(rows)))
     order[10], order[11] = order[11], order[10]
     bag = _bag(tmp_path / "back.mcap", rows, order)
-    run = robot_calib("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
+    run = cli("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
     assert run.returncode == 0, run.stderr
     assert re.search(r"back\.mcap: /joint_states: 1 of 60 stamps go backwards", run.stderr)
-    ok = robot_calib("calibrate", str(_bag(tmp_path / "ok.mcap", rows)), "-o",
-                     str(tmp_path / "q.json"))  # fmt: skip
+    ok = cli("calibrate", str(_bag(tmp_path / "ok.mcap", rows)), "-o",
+             str(tmp_path / "q.json"))  # fmt: skip
     assert ok.returncode == 0 and "backwards" not in ok.stderr
 
 
@@ -170,7 +170,7 @@ def test_a_corrupt_number_in_a_bag_is_refused(
     bad[5][column] = 1e300
     bag = _bag(tmp_path / "bad.mcap", bad)
     topic = "/joint_states" if column < 6 else "/laser_tracker/point"
-    run = robot_calib("calibrate", str(bag), "-o", str(tmp_path / "p.json"), timeout=120)
+    run = cli("calibrate", str(bag), "-o", str(tmp_path / "p.json"), timeout=120)
     _one_line_error(run, "bad.mcap", f"{topic} message 6", "1e+300")
     assert not (tmp_path / "p.json").exists()
 
@@ -182,7 +182,7 @@ def test_one_point_measured_on_every_pose_is_refused(
     _, rows = sim
     bag = _bag(tmp_path / "same.mcap", [r[:6] + [v + 1e-7 * k for v in rows[0][6:]]
                                         for k, r in enumerate(rows)])  # fmt: skip
-    run = robot_calib("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
+    run = cli("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
     _one_line_error(run, "same.mcap", "tracker points stay within", "measured one point")
     assert not (tmp_path / "p.json").exists()
 
@@ -198,8 +198,8 @@ def test_duplicate_columns_are_refused(
     """Item 5: `--joints q1,q1,...` and a header with two x columns were read silently."""
     _, rows = sim
     csv = _csv(tmp_path / "d.csv", rows, header)
-    run = robot_calib("import", str(csv), "--joints", joints, "--point", "x,y,z", "-o",
-                      str(tmp_path / "d.mcap"))  # fmt: skip
+    run = cli("import", str(csv), "--joints", joints, "--point", "x,y,z", "-o",
+              str(tmp_path / "d.mcap"))  # fmt: skip
     _one_line_error(run, "d.csv", needle)
     assert not (tmp_path / "d.mcap").exists()
 
@@ -248,6 +248,6 @@ def test_every_option_of_the_units_table_refuses_out_of_range(
                   f"{out}.h.mcap"],
         "score": [str(tmp_path / "missing.json"), str(bag)],
     }[verb]  # fmt: skip
-    run = robot_calib(verb, *base, f"{option}={value}", timeout=120)
+    run = cli(verb, *base, f"{option}={value}", timeout=120)
     _one_line_error(run, option)
     assert not list(tmp_path.iterdir())

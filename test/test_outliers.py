@@ -6,12 +6,11 @@ effect of the robot."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import cli
 from test_recording import write_measurements
 
 from robot_calib.accuracy import accuracy
@@ -116,8 +115,7 @@ def test_the_calibration_command_lists_outliers(tmp_path: Path) -> None:
     bag = tmp_path / "blunder.mcap"
     write_measurements(bag, recording.poses.q, points)
     out = tmp_path / "params.json"
-    proc = subprocess.run([sys.executable, "-m", "robot_calib", "calibrate", str(bag), "-o",
-                           str(out)], capture_output=True, text=True, check=False)  # fmt: skip
+    proc = cli("calibrate", str(bag), "-o", str(out))
     assert proc.returncode == 0, proc.stderr
     assert f"{bag} point 100" in proc.stdout and "5.00" in proc.stdout
     (outlier,) = json.loads(out.read_text())["outliers"]
@@ -164,9 +162,7 @@ def test_too_few_measurements_is_exit_2_naming_how_many(
     bag = tmp_path / "few.mcap"
     write_measurements(bag, q, points)
     out = tmp_path / "p.json"
-    proc = subprocess.run([sys.executable, "-m", "robot_calib", "calibrate", str(bag),
-                           "--model", model, "-o", str(out)],
-                          capture_output=True, text=True, check=False)  # fmt: skip
+    proc = cli("calibrate", str(bag), "--model", model, "-o", str(out))
     assert proc.returncode == 2, proc.stderr
     assert f"at least {needed} distinct poses are needed" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and not out.exists()

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from cli_runner import robot_calib
+from cli_runner import cli
 
 from robot_calib.cli import main
 from robot_calib.errors import InputError
@@ -70,19 +70,19 @@ def test_predicted_sigma_matches_the_spread_of_simulated_calibrations(problem) -
 
 def test_plan_file_round_trip_through_simulate_and_run(tmp_path: Path) -> None:
     plan = tmp_path / "plan.yaml"
-    made = robot_calib("plan", "--poses", "20", "--candidates", "300", "--trials", "0",
-                       "-o", str(plan))  # fmt: skip
+    made = cli("plan", "--poses", "20", "--candidates", "300", "--trials", "0",
+               "-o", str(plan))  # fmt: skip
     assert made.returncode == 0, made.stderr
     assert "x smaller than random poses at equal N" in made.stdout
     q = load_plan(plan, WORLD.model.robot).q
     assert q.shape == (20, 6)
-    sim = robot_calib("simulate", "--plan", str(plan), "-o", str(tmp_path / "p.mcap"))
+    sim = cli("simulate", "--plan", str(plan), "-o", str(tmp_path / "p.mcap"))
     assert sim.returncode == 0, sim.stderr
     from robot_calib.flows.bags import read_bags
 
     recorded = read_bags([tmp_path / "p.mcap"], WORLD.model.robot)
     np.testing.assert_allclose(recorded.poses.q, q, atol=1e-12)  # visited in the order listed
-    run = robot_calib("run", "--plan", str(plan), "--holdout", "30", "-o", str(tmp_path / "out"))
+    run = cli("run", "--plan", str(plan), "--holdout", "30", "-o", str(tmp_path / "out"))
     assert run.returncode == 0, run.stderr
     assert "no cpa: the plan has no circle sweep" in run.stdout
     assert list((tmp_path / "out").glob("run-*/params_geometric.json"))

@@ -114,14 +114,14 @@ def test_calibrate_of_readings_in_degrees_exits_3_and_the_file_is_refused(tmp_pa
     """The CLI: calibrate writes PARAMS.json marked plausible false and exits 3 with one
     'fitted, implausible' line; predict and export refuse that file (exit 2, naming it and
     the reason) unless --force, which warns instead."""
-    from cli_runner import robot_calib
+    from cli_runner import cli
 
     from robot_calib.bag.write import write_measurement_bag
 
     q = np.degrees(paper_test_plan(3).q)
     points = physical_points(WORLD, Poses.from_readings(np.radians(q)), np.random.default_rng(5))
     write_measurement_bag(tmp_path / "deg.mcap", q, points, ROBOT.joint_names)
-    proc = robot_calib("calibrate", "deg.mcap", "-o", "p.json", cwd=tmp_path)
+    proc = cli("calibrate", "deg.mcap", "-o", "p.json", cwd=tmp_path)
     assert proc.returncode == 3, proc.stderr
     said = [line for line in proc.stderr.splitlines() if line.startswith("robot-calib")]
     assert len(said) == 1 and said[0].startswith(
@@ -135,12 +135,12 @@ def test_calibrate_of_readings_in_degrees_exits_3_and_the_file_is_refused(tmp_pa
         ["predict", "p.json", "--joints", "j.csv"],
         ["export", "p.json", "--format", "dh"],
     ):
-        proc = robot_calib(*verb, "-o", "out", cwd=tmp_path)
+        proc = cli(*verb, "-o", "out", cwd=tmp_path)
         assert proc.returncode == 2 and not (tmp_path / "out").exists(), proc.stderr
         assert "p.json: fitted, implausible (readings of joint(s) 1 (" in proc.stderr
         assert "--force to use it anyway" in proc.stderr
-    proc = robot_calib("predict", "p.json", "--joints", "j.csv", "--force", "-o", "out.csv",
-                       cwd=tmp_path)  # fmt: skip
+    proc = cli("predict", "p.json", "--joints", "j.csv", "--force", "-o", "out.csv",
+               cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 0 and (tmp_path / "out.csv").exists(), proc.stderr
     assert "warning: p.json: fitted, implausible (" in proc.stderr
 
@@ -164,7 +164,7 @@ def test_diagnose_of_readings_in_degrees_exits_3_without_a_traceback(tmp_path: P
     """The diagnosis of a UR10 bag whose readings are in degrees (the geometric fit then
     has almost nothing free: the frequency scan once crashed reshaping an empty Jacobian)
     writes DIAGNOSIS.json with the reasons and exits 3 with one line."""
-    from cli_runner import robot_calib
+    from cli_runner import cli
 
     from robot_calib.bag.write import write_measurement_bag
     from robot_calib.sim.scenarios import ur10_random
@@ -174,7 +174,7 @@ def test_diagnose_of_readings_in_degrees_exits_3_without_a_traceback(tmp_path: P
     robot = scenario.world.model.robot
     write_measurement_bag(tmp_path / "deg.mcap", np.degrees(rec.poses.q), rec.points,
                           robot.joint_names)  # fmt: skip
-    proc = robot_calib("diagnose", "deg.mcap", "--robot", "ur10", "-o", "d.json", cwd=tmp_path)
+    proc = cli("diagnose", "deg.mcap", "--robot", "ur10", "-o", "d.json", cwd=tmp_path)
     assert proc.returncode == 3, proc.stderr
     assert "Traceback" not in proc.stderr
     said = [line for line in proc.stderr.splitlines() if line.startswith("robot-calib")]
@@ -187,7 +187,7 @@ def test_diagnose_with_hold_out_readings_in_degrees_exits_3(tmp_path: Path) -> N
     """Calibration bag in rad, hold-out bag in degrees: every held-out figure is nonsense;
     it once ended with exit 0 and a null verdict. Now DIAGNOSIS.json names the reason and
     the verb exits 3."""
-    from cli_runner import robot_calib
+    from cli_runner import cli
 
     from robot_calib.bag.write import START_NS, STEP_NS, write_measurements
     from robot_calib.sim.scenarios import ur10_random
@@ -199,8 +199,8 @@ def test_diagnose_with_hold_out_readings_in_degrees_exits_3(tmp_path: Path) -> N
                        stamps[: len(cal)])  # fmt: skip
     write_measurements(tmp_path / "deg.mcap", np.degrees(held.poses.q), held.points,
                        robot.joint_names, stamps[len(cal) :])  # fmt: skip
-    proc = robot_calib("diagnose", "cal.mcap", "--holdout", "deg.mcap", "--robot", "ur10",
-                       "-o", "d.json", cwd=tmp_path)  # fmt: skip
+    proc = cli("diagnose", "cal.mcap", "--holdout", "deg.mcap", "--robot", "ur10",
+               "-o", "d.json", cwd=tmp_path)  # fmt: skip
     assert proc.returncode == 3, proc.stderr
     doc = json.loads((tmp_path / "d.json").read_text())
     assert any("hold-out readings" in r and "degrees" in r for r in doc["implausible"])

@@ -3,13 +3,12 @@ errors for bad input (real MCAP files written with our writer and rclpy serialis
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import cli
 from geometry_msgs.msg import PointStamped
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
@@ -150,12 +149,7 @@ def test_bad_bags_give_one_line_errors(tmp_path: Path, case: str, message: str) 
     assert "\n" not in str(err.value)
     # The command line says the same in one line with exit status 2 and writes nothing.
     out = tmp_path / f"{case}.json"
-    proc = subprocess.run(
-        [sys.executable, "-m", "robot_calib", "calibrate", str(path), "-o", str(out)],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
+    proc = cli("calibrate", str(path), "-o", str(out))
     assert proc.returncode == 2, proc.stderr
     assert message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
     assert not out.exists()
@@ -185,11 +179,8 @@ def test_joint_names_map_another_naming(tmp_path: Path) -> None:
         (s.joint, s.index.tolist()) for s in expected.sweeps
     ]
     out = tmp_path / "p.json"
-    proc = subprocess.run(
-        [sys.executable, "-m", "robot_calib", "calibrate", str(other), "--model", "nominal",
-         "--joint-names", ",".join(names), "-o", str(out)],
-        capture_output=True, text=True, check=False,
-    )  # fmt: skip
+    proc = cli("calibrate", str(other), "--model", "nominal", "--joint-names", ",".join(names),
+               "-o", str(out))  # fmt: skip
     assert proc.returncode == 0 and out.exists(), proc.stderr
     # The calibration is of the same robot: score and predict read it (names aside).
     joints = tmp_path / "joints.csv"
@@ -198,8 +189,7 @@ def test_joint_names_map_another_naming(tmp_path: Path) -> None:
         ["score", str(out), str(other), "--joint-names", ",".join(names)],
         ["predict", str(out), "--joints", str(joints), "-o", str(tmp_path / "x.csv")],
     ):
-        proc = subprocess.run([sys.executable, "-m", "robot_calib", *args],
-                              capture_output=True, text=True, check=False)  # fmt: skip
+        proc = cli(*args)
         assert proc.returncode == 0, (args[0], proc.stderr)
 
 

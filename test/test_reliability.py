@@ -1,8 +1,10 @@
 """Faulty inputs, files and interruptions through the real command line (issue 12).
 
 Every case is one line of CASES: an input maker (writes files into the case's folder),
-the command (run there as `python -m robot_calib ...`; {sample} is the sample bag,
-{params} a PARAMS.json calibrated once per session), the expected exit status, a message
+the command (run there by the command line's main() in the test process, cli_runner.cli,
+or as `python -m robot_calib ...` in a process of its own where it has a file-size limit or
+a signal; {sample} is the sample bag, {params} a PARAMS.json calibrated once per session),
+the expected exit status, a message
 fragment (for failures: in the one line on stderr that starts with 'robot-calib'; for
 successes: anywhere in the output), files that must not exist afterwards and files that
 must not change. The table's lines are long on purpose (one case, one line: noqa E501).
@@ -12,8 +14,8 @@ Extra columns: `fsize` runs the command with that many bytes as its file-size li
 (RLIMIT_FSIZE, SIGXFSZ ignored: writes fail as on a full disk); `interrupt` sends that
 signal once the simulation reports progress; `present` lists files that must exist.
 
-The cases run concurrently (the simulations one at a time: they share a ROS domain) in one
-module fixture; each case is then its own test.
+The cases run in one module fixture (the processes two at a time, their simulations one at
+a time; the in-process cases one after another meanwhile); each case is then its own test.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from cli_runner import cli
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "bags" / "paper_test3.mcap"
@@ -357,6 +360,12 @@ class Outcome:
     skipped: str = ""
 
 
+def _needs_a_process(case: Case) -> bool:
+    """A file-size limit or a signal: the case runs as a process of its own; the others run
+    the command's main() in the test process (cli_runner.cli), one at a time."""
+    return case.fsize is not None or case.interrupt is not None
+
+
 def _run(case: Case, folder: Path, shared: Path) -> Outcome:
     folder.mkdir()
     if case.make is not None:
@@ -375,7 +384,10 @@ def _run(case: Case, folder: Path, shared: Path) -> Outcome:
         **os.environ,
         "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
     }
-    if case.interrupt is None:
+    if not _needs_a_process(case):  # the command's main() here: no Python start-up
+        proc = cli(*args, cwd=folder)
+        out, err, status = proc.stdout, proc.stderr, proc.returncode
+    elif case.interrupt is None:
         proc = subprocess.run(
             command, cwd=folder, capture_output=True, text=True, check=False, env=env, timeout=120
         )
@@ -401,23 +413,27 @@ def _run(case: Case, folder: Path, shared: Path) -> Outcome:
 
 @pytest.fixture(scope="module")
 def outcomes(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Outcome, Path]]:
-    """Every case run once: the simulations one after another, the rest 4 at a time."""
+    """Every case run once: the cases that need a process of their own (limits, signals) in
+    a pool, their simulations one after another, the rest meanwhile in this thread, one
+    after another (main() is not thread-safe: it redirects this process's output)."""
     base = tmp_path_factory.mktemp("reliability")
     shared = base / "shared"
     shared.mkdir()
     calibrated_params(shared)
     sample_measurements()
     folders = {case.name: base / f"case{k}" for k, case in enumerate(CASES)}
-    ros = [c for c in CASES if c.command.startswith("simulate")]
-    others = [c for c in CASES if c not in ros]
+    processes = [c for c in CASES if _needs_a_process(c)]
+    ros = [c for c in processes if c.command.startswith("simulate")]
+    others = [c for c in processes if c not in ros]
 
     def serial() -> dict[str, Outcome]:
         return {c.name: _run(c, folders[c.name], shared) for c in ros}
 
-    with ThreadPoolExecutor(4) as pool:
+    with ThreadPoolExecutor(2) as pool:
         sims = pool.submit(serial)
         rest = {c.name: pool.submit(_run, c, folders[c.name], shared) for c in others}
-        results = {name: f.result() for name, f in rest.items()} | sims.result()
+        here = {c.name: _run(c, folders[c.name], shared) for c in CASES if c not in processes}
+        results = here | {name: f.result() for name, f in rest.items()} | sims.result()
     return {name: (outcome, folders[name]) for name, outcome in results.items()}
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from cli_runner import robot_calib
+from cli_runner import cli as main_cli
 from mcap.reader import make_reader
 from rclpy.context import Context
 from rclpy.node import Node
@@ -69,7 +69,7 @@ def source(context: Context) -> Iterator[Node]:
 
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return robot_calib(*args, cwd=REPO, timeout=120)
+    return main_cli(*args, cwd=REPO, timeout=120)
 
 
 def killed_writer_bag(path: Path, n: int) -> int:

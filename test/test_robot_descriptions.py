@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from cli_runner import cli
 
 from robot_calib.errors import RobotDescriptionError
 from robot_calib.kinematics.description import JOINT_KEYS, ROBOT_KEYS, ROBOTS_DIR, available_robots
@@ -86,21 +85,7 @@ def test_unknown_robot() -> None:
 @pytest.mark.parametrize("robot", ["kr6_nonexistent", "{tmp}/broken.yaml"])
 def test_cli_bad_robot_exits_2_with_one_line(tmp_path: Path, robot: str) -> None:
     (tmp_path / "broken.yaml").write_text("joints: [1")
-    result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "robot_calib",
-            "run",
-            "-o",
-            str(tmp_path / "out"),
-            "--robot",
-            robot.format(tmp=tmp_path),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
+    result = cli("run", "-o", str(tmp_path / "out"), "--robot", robot.format(tmp=tmp_path))
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "error" in lines[0]
@@ -171,21 +156,13 @@ def test_cli_unknown_robot_key_exits_2_with_one_line(tmp_path: Path) -> None:
     bad = tmp_path / "BAD.yaml"
     bad.write_text("name: two_link\njoints:\n" + TWO_JOINTS % ", mas: 3")
     out = tmp_path / "x.json"
-    result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "robot_calib",
-            "calibrate",
-            str(REPO / "bags/paper_test3.mcap"),
-            "--robot",
-            str(bad),
-            "-o",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
+    result = cli(
+        "calibrate",
+        str(REPO / "bags/paper_test3.mcap"),
+        "--robot",
+        str(bad),
+        "-o",
+        str(out),
         cwd=tmp_path,
     )
     assert result.returncode == 2, result.stderr

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 from rosbags.highlevel import AnyReader
 from scipy.spatial.transform import Rotation
 
@@ -210,22 +210,22 @@ def test_split_calibrate_and_score_keep_the_orientations(tmp_path: Path) -> None
     write_measurement_bag(
         bag, poses.q, points, ROBOT.joint_names, poses.time, six_dof={"": (poses.rotation, sigma)}
     )
-    assert robot_calib("split", str(bag), "--holdout", "0.3", "--seed", "2").returncode == 0
+    assert cli("split", str(bag), "--holdout", "0.3", "--seed", "2").returncode == 0
     parts = [read_recording([tmp_path / f"probe.{p}.mcap"], ROBOT) for p in ("cal", "holdout")]
     assert sum(len(p) for p in parts) == len(poses)
     for part in parts:
         assert part.poses.oriented.all() and part.poses.sigma is not None
         np.testing.assert_allclose(part.poses.sigma, sigma[: len(part)])
     params = tmp_path / "p.json"
-    proc = robot_calib("calibrate", str(tmp_path / "probe.cal.mcap"), "-o", str(params))
+    proc = cli("calibrate", str(tmp_path / "probe.cal.mcap"), "-o", str(params))
     assert proc.returncode == 0, proc.stderr
     assert "residuals (in-sample): orientation error angle mean" in proc.stdout
     doc = json.loads(params.read_text())
     assert doc["targets"][0]["six_dof"] is True
     assert doc["orientation_residuals"]["n_measurements"] == len(parts[0])
     table = tmp_path / "points.csv"
-    proc = robot_calib("score", str(params), str(tmp_path / "probe.holdout.mcap"),
-                       "--points-csv", str(table))  # fmt: skip
+    proc = cli("score", str(params), str(tmp_path / "probe.holdout.mcap"),
+               "--points-csv", str(table))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     line = next(x for x in proc.stdout.splitlines() if "orientation error angle" in x)
     rms_urad = float(line.split("per axis rms ")[1].split(" ")[0])
@@ -239,7 +239,7 @@ def test_split_calibrate_and_score_keep_the_orientations(tmp_path: Path) -> None
     np.savetxt(joints, q_cal, delimiter=",", comments="",
                header=",".join(f"q{j + 1}" for j in range(6)))  # fmt: skip
     out = tmp_path / "points_out.csv"
-    proc = robot_calib("predict", str(params), "--joints", str(joints), "-o", str(out))
+    proc = cli("predict", str(params), "--joints", str(joints), "-o", str(out))
     assert proc.returncode == 0 and "qx,qy,qz,qw" in proc.stdout, proc.stderr
     predicted = np.loadtxt(out, delimiter=",", skiprows=1)
     truth = WORLD.model.probe_orientations(WORLD.truth, Poses.from_readings(q_cal))

@@ -5,12 +5,11 @@ a score is the calibration's error on a bag it was not fitted on."""
 from __future__ import annotations
 
 import csv
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import cli
 
 from robot_calib.accuracy import accuracy
 from robot_calib.bag.read import read_recording
@@ -20,11 +19,6 @@ from robot_calib.kinematics.loader import load_robot
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "bags" / "paper_test3.mcap"
 ROBOT = load_robot("kr5_sixx_r650")
-
-
-def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "robot_calib", *args], capture_output=True,
-                          text=True, check=False)  # fmt: skip
 
 
 @pytest.mark.parametrize("by", ["random", "order", "time"])
@@ -86,7 +80,6 @@ def test_score_is_the_error_on_a_bag_not_fitted(tmp_path: Path) -> None:
     ],
 )  # fmt: skip
 def test_bad_split_and_score_inputs(tmp_path: Path, args: list[str], message: str) -> None:
-    proc = subprocess.run([sys.executable, "-m", "robot_calib", *args], capture_output=True,
-                          text=True, check=False, cwd=tmp_path)  # fmt: skip
+    proc = cli(*args, cwd=tmp_path)
     assert proc.returncode == 2 and message in proc.stderr, proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and list(tmp_path.iterdir()) == []

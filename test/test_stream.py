@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 
 from robot_calib.bag.read import read_bag, read_stream
 from robot_calib.bag.write import write_stream_bag
@@ -123,7 +123,7 @@ def test_stream_bag_round_trip_hint_and_cli(simulated: SimulatedStream, tmp_path
     paired = read_bag(bag, robot)
     assert any("--stream" in w for w in paired.warnings)
     out = tmp_path / "PARAMS.json"
-    run = robot_calib(
+    run = cli(
         "calibrate", str(bag), "--stream", "--latency", "0.002", "--stream-max-points", "500",
         "-o", str(out),
     )  # fmt: skip
@@ -132,6 +132,6 @@ def test_stream_bag_round_trip_hint_and_cli(simulated: SimulatedStream, tmp_path
     doc = json.loads(out.read_text())
     assert doc["stream"]["latency_s"] == pytest.approx(0.002, abs=1e-12)
     assert doc["stream"]["points"] == int(short.sum())
-    bad = robot_calib("calibrate", str(bag), "--latency", "0.002", "-o", str(tmp_path / "x"))
+    bad = cli("calibrate", str(bag), "--latency", "0.002", "-o", str(tmp_path / "x"))
     assert bad.returncode == 2 and "--latency applies with --stream only" in bad.stderr
     assert len(bad.stderr.strip().splitlines()) == 1

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_runner import robot_calib
+from cli_runner import cli
 
 from robot_calib.bag.mcap_reader import BagReader
 from robot_calib.bag.read import read_recording
@@ -122,7 +122,7 @@ def test_bag_round_trip_keeps_the_contract_topic_and_adds_one_per_target(tmp_pat
     np.testing.assert_allclose(by_target[1], extra["smr2"], atol=1e-12)
     # Repeat measurements of one pose compare the same target only; poses fold together.
     params = tmp_path / "p.json"
-    proc = robot_calib("calibrate", str(bag), "-o", str(params))
+    proc = cli("calibrate", str(bag), "-o", str(params))
     assert proc.returncode == 0, proc.stderr
     assert "targets: 3 (/laser_tracker/point" in proc.stderr + proc.stdout
     doc = json.loads(params.read_text())
@@ -136,14 +136,14 @@ def test_bag_round_trip_keeps_the_contract_topic_and_adds_one_per_target(tmp_pat
     assert abs(fitted["target_smr3_z"] - truth["target_smr3_z"]) < 1e-5
     # split keeps each pose's targets together; score uses every target.
     cal, hold = tmp_path / "cal.mcap", tmp_path / "hold.mcap"
-    proc = robot_calib("split", str(bag), "--holdout", "0.3", "--calibration-out", str(cal),
-                       "--holdout-out", str(hold))  # fmt: skip
+    proc = cli("split", str(bag), "--holdout", "0.3", "--calibration-out", str(cal),
+               "--holdout-out", str(hold))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     parts = [read_recording([p], ROBOT) for p in (cal, hold)]
     assert sum(len(p) for p in parts) == len(recording)
     assert all(p.target_names == ("", "smr2", "smr3") for p in parts)
     table = tmp_path / "points.csv"
-    proc = robot_calib("score", str(params), str(hold), "--points-csv", str(table))
+    proc = cli("score", str(params), str(hold), "--points-csv", str(table))
     assert proc.returncode == 0, proc.stderr
     with table.open() as handle:
         rows = list(csv.DictReader(handle))
@@ -166,10 +166,10 @@ def test_import_takes_one_column_triple_per_target(tmp_path: Path) -> None:
         lines.append(";".join(c.replace(".", ",") for c in cells))
     path.write_text("\n".join(lines) + "\n")
     bag = tmp_path / "imported.mcap"
-    proc = robot_calib("import", str(path), "--sep", ";", "--decimal-comma", "--angle-unit",
-                       "deg", "--length-unit", "mm", "--joints", "q1,q2,q3,q4,q5,q6",
-                       "--point", "x,y,z", "--target", "smr2:x2,y2,z2", "--target",
-                       "smr3:x3,y3,z3", "-o", str(bag))  # fmt: skip
+    proc = cli("import", str(path), "--sep", ";", "--decimal-comma", "--angle-unit",
+               "deg", "--length-unit", "mm", "--joints", "q1,q2,q3,q4,q5,q6",
+               "--point", "x,y,z", "--target", "smr2:x2,y2,z2", "--target",
+               "smr3:x3,y3,z3", "-o", str(bag))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     recording = read_recording([bag], ROBOT)
     assert recording.target_names == ("", "smr2", "smr3") and len(recording) == 119
@@ -189,9 +189,9 @@ def test_import_takes_one_column_triple_per_target(tmp_path: Path) -> None:
         ((str(path), "--target", "smr2:x2,y2"), "expected NAME:X,Y,Z"),
         ((str(path), "--target", "smr2:x2,y2,nope"), "no column 'nope'"),
     ]:  # fmt: skip
-        proc = robot_calib("import", *args, "--sep", ";", "--decimal-comma", "--angle-unit",
-                           "deg", "--length-unit", "mm", "--joints", "q1,q2,q3,q4,q5,q6",
-                           "--point", "x,y,z", "-o", str(tmp_path / "x.mcap"))  # fmt: skip
+        proc = cli("import", *args, "--sep", ";", "--decimal-comma", "--angle-unit",
+                   "deg", "--length-unit", "mm", "--joints", "q1,q2,q3,q4,q5,q6",
+                   "--point", "x,y,z", "-o", str(tmp_path / "x.mcap"))  # fmt: skip
         assert proc.returncode == 2 and message in proc.stderr, proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
         assert not (tmp_path / "x.mcap").exists()
@@ -216,14 +216,14 @@ def test_predict_takes_the_target_of_a_several_target_calibration(tmp_path: Path
     for name in ("", "smr3"):
         out = tmp_path / f"points{name}.csv"
         args = ("--target", name) if name else ()
-        proc = robot_calib("predict", str(params), "--joints", str(joints), "-o", str(out), *args)
+        proc = cli("predict", str(params), "--joints", str(joints), "-o", str(out), *args)
         assert proc.returncode == 0, proc.stderr
         predicted = np.loadtxt(out, delimiter=",", skiprows=1)
         k = WORLD.model.targets.index(name)
         measured = recording.points[recording.poses.target_index == k][: len(q)]
         assert np.abs(predicted - measured).max() < 5e-5  # the noise, not another target
-    proc = robot_calib("predict", str(params), "--joints", str(joints), "-o",
-                       str(tmp_path / "x.csv"), "--target", "smr9")  # fmt: skip
+    proc = cli("predict", str(params), "--joints", str(joints), "-o",
+               str(tmp_path / "x.csv"), "--target", "smr9")  # fmt: skip
     assert proc.returncode == 2 and "no target 'smr9'" in proc.stderr
 
 

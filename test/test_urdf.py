@@ -10,13 +10,12 @@ shares nothing with the loader but the file.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_runner import cli
 
 from robot_calib.errors import RobotDescriptionError
 from robot_calib.kinematics.description import RobotDescription
@@ -268,32 +267,25 @@ def test_bad_urdf_is_one_error_naming_the_file(
 def test_cli_calibrate_then_predict_with_a_urdf(tmp_path: Path) -> None:
     """`--robot x.urdf` through calibrate; PARAMS.json keeps the URDF reference, so predict
     reloads it; a broken URDF is one line and exit 2."""
-    run = [sys.executable, "-m", "robot_calib"]
     urdf = DATA / "kr5_sixx_r650.urdf"
     params = tmp_path / "params.json"
-    proc = subprocess.run(
-        [*run, "calibrate", str(ROOT / "bags" / "paper_test3.mcap"), "--model", "cpa",
-         "--robot", str(urdf), "--tip-link", "tool0", "-o", str(params)],
-        capture_output=True, text=True, check=False,
-    )  # fmt: skip
+    proc = cli("calibrate", str(ROOT / "bags" / "paper_test3.mcap"), "--model", "cpa",
+               "--robot", str(urdf), "--tip-link", "tool0", "-o", str(params))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     reference = json.loads(params.read_text())["robot"]
     assert reference == f"{urdf}#base_link=base_link&tip_link=tool0"
     joints = tmp_path / "joints.csv"
     joints.write_text("q1,q2,q3,q4,q5,q6\n0,-1.5,1.5,0,0.5,0\n")
     points = tmp_path / "points.csv"
-    proc = subprocess.run([*run, "predict", str(params), "--joints", str(joints), "-o",
-                           str(points)], capture_output=True, text=True, check=False)  # fmt: skip
+    proc = cli("predict", str(params), "--joints", str(joints), "-o", str(points))
     assert proc.returncode == 0, proc.stderr
     assert np.loadtxt(points, delimiter=",", skiprows=1).shape == (3,)
 
     bad = _write(tmp_path, "<link")
-    proc = subprocess.run([*run, "calibrate", "x.mcap", "--robot", str(bad), "-o", "p.json"],
-                          capture_output=True, text=True, check=False)  # fmt: skip
+    proc = cli("calibrate", "x.mcap", "--robot", str(bad), "-o", "p.json")
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
     assert "bad.urdf: not a valid URDF" in proc.stderr
-    proc = subprocess.run([*run, "calibrate", "x.mcap", "--base-link", "base", "-o", "p.json"],
-                          capture_output=True, text=True, check=False)  # fmt: skip
+    proc = cli("calibrate", "x.mcap", "--base-link", "base", "-o", "p.json")
     assert proc.returncode == 2 and "--base-link/--tip-link need --robot FILE.urdf" in proc.stderr
 
 
