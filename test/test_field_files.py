@@ -518,11 +518,11 @@ def test_a_set_killed_between_its_renames_is_found_by_the_next_write(tmp_path: P
     assert partial and len(journals) == 1, (partial, leftovers(tmp_path))
     listed = set((tmp_path / journals[0]).read_text().split()[1:])
     assert partial < listed  # part of the set, not all of it
-    again = robot_calib("diagnose", str(SAMPLE), "-o", "d.json", cwd=tmp_path)
+    again = cli("diagnose", str(SAMPLE), "-o", "d.json", cwd=tmp_path)
     assert again.returncode == 2, again.stderr
     err = again.stderr.strip()
     assert len(err.splitlines()) == 1 and "killed between the renames" in err, err
-    forced = robot_calib("diagnose", str(SAMPLE), "-o", "d.json", "--force", cwd=tmp_path)
+    forced = cli("diagnose", str(SAMPLE), "-o", "d.json", "--force", cwd=tmp_path)
     assert forced.returncode == 0, forced.stderr
     assert set(diagnose_set(tmp_path)) == listed
     assert [n for n in leftovers(tmp_path) if not n.startswith(".robot-calib-ros")] == []

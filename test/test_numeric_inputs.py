@@ -130,7 +130,7 @@ def test_approach_sides_follow_the_receive_order(tmp_path: Path) -> None:
     from robot_calib.kinematics.loader import load_robot
 
     clean = tmp_path / "clean.mcap"
-    run = robot_calib("simulate", "--plan", "random", "--n-random", "120", "--seed", "5",
+    run = cli("simulate", "--plan", "random", "--n-random", "120", "--seed", "5",
                       "--effects", "backlash:4", "-o", str(clean))  # fmt: skip
     assert run.returncode == 0, run.stderr
     robot = load_robot("kr5_sixx_r650")
@@ -149,7 +149,7 @@ def test_approach_sides_follow_the_receive_order(tmp_path: Path) -> None:
     fits = []
     for name, source in (("a", same), ("b", bag)):
         out = tmp_path / f"{name}.json"
-        run = robot_calib("calibrate", str(source), "--model", "geometric+backlash:4", "-o",
+        run = cli("calibrate", str(source), "--model", "geometric+backlash:4", "-o",
                           str(out))  # fmt: skip
         assert run.returncode == 0, run.stderr
         found = re.search(r"absolute mean ([0-9.]+) / max", run.stdout)
