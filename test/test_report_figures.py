@@ -10,6 +10,7 @@ import html
 import json
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -251,3 +252,35 @@ def test_joint_4_backlash_is_said_removed_by_the_best_model(tmp_path: Path) -> N
     assert '<td class="text"><span class="model">geometric+<wbr>backlash:4</span></td>' in page
     assert ".model{overflow-wrap:normal;word-break:keep-all" in page
     assert "anywhere" not in page  # no text cell breaks inside a word
+
+
+def test_figures_drawn_aside_are_the_figures_drawn_here() -> None:
+    """FigureCache.draw_aside: a forked child draws some figures while this process goes
+    on; their PNG bytes equal those drawn here, and a figure the child could not send (it
+    failed there) is drawn here when asked."""
+    import os
+
+    from robot_calib.diagnose.figures import FigureCache, pyplot
+
+    parent = os.getpid()
+
+    def line(k: int) -> Any:  # noqa: ANN401 - a matplotlib Figure
+        fig, ax = pyplot().subplots(figsize=(3, 2))
+        ax.plot(np.arange(10), np.arange(10) ** (1 + k / 10), label=f"k = {k}")
+        ax.legend()
+        return fig
+
+    def fails_in_a_child() -> Any:  # noqa: ANN401
+        if os.getpid() != parent:
+            raise RuntimeError("only in the child")
+        return line(9)
+
+    here = FigureCache()
+    expected = {f"f{k}": here.png(f"f{k}", lambda k=k: line(k)) for k in range(3)}
+    aside = FigureCache()
+    aside.draw_aside([*((f"f{k}", lambda k=k: line(k)) for k in range(3)),
+                      ("bad", fails_in_a_child)])  # fmt: skip
+    got = {f"f{k}": aside.png(f"f{k}", lambda: None) for k in range(3)}  # never drawn here
+    assert got == expected and all(got.values())
+    assert aside.png("bad", fails_in_a_child) == here.png("bad", fails_in_a_child)
+    aside.close()

@@ -62,24 +62,102 @@ def insample_residuals(rung: Rung, recording: Recording) -> Array:
 
 class FigureCache:
     """PNG bytes of the figures of one report set, each drawn once: the Markdown report
-    and the HTML page show the same figures (drawing them twice cost seconds)."""
+    and the HTML page show the same figures (drawing them twice cost seconds).
+
+    `draw_aside` draws some of them in a forked child process while this one draws the
+    others (matplotlib is single-threaded: a second process is the only way to use the
+    second core; half of a diagnosis of 2773 poses was figures). The child sends each PNG
+    as it is done; `png` of a figure drawn aside waits for it, and draws it here if the
+    child could not (it died, or fork is not available): the bytes are the same."""
 
     def __init__(self, dpi: int = 100) -> None:
         self.dpi = dpi
         self._png: dict[str, bytes | None] = {}
+        self._aside: set[str] = set()  # keys the child draws
+        self._child: tuple[int, Any] | None = None  # its pid and the pipe it writes
 
     def png(self, key: str, draw: Callable[[], Figure | None]) -> bytes | None:
         """The PNG of figure `key`, drawn by `draw` the first time (None: no figure)."""
+        while key not in self._png and key in self._aside and self._receive():
+            pass
         if key not in self._png:
-            fig = draw()
-            if fig is None:
-                self._png[key] = None
-            else:
-                buffer = io.BytesIO()
-                fig.savefig(buffer, format="png", dpi=self.dpi)
-                pyplot().close(fig)
-                self._png[key] = buffer.getvalue()
+            self._png[key] = self._render(draw)
         return self._png[key]
+
+    def _render(self, draw: Callable[[], Figure | None]) -> bytes | None:
+        fig = draw()
+        if fig is None:
+            return None
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format="png", dpi=self.dpi)
+        pyplot().close(fig)
+        return buffer.getvalue()
+
+    def draw_aside(self, draws: Sequence[tuple[str, Callable[[], Figure | None]]]) -> None:
+        """Draw the figures `draws` ((key, draw) each, as `png` takes them) in a forked
+        child while the caller goes on (nothing without os.fork, or once a child runs)."""
+        import os
+
+        todo = [(key, draw) for key, draw in draws if key not in self._png]
+        if not todo or self._child is not None or not hasattr(os, "fork"):
+            return
+        _warm_up(pyplot())  # imported and its fonts loaded before the fork: both inherit them
+        read, write = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: draw, send, and leave without running any exit handler
+            code = 0
+            try:
+                os.close(read)
+                with os.fdopen(write, "wb") as pipe:
+                    for key, draw in todo:
+                        _send(pipe, key, self._render(draw))
+            except BaseException:  # noqa: BLE001 - the parent draws what did not come
+                code = 1
+            finally:
+                os._exit(code)
+        os.close(write)
+        self._aside = {key for key, _ in todo}
+        self._child = (pid, os.fdopen(read, "rb"))
+
+    def _receive(self) -> bool:
+        """One PNG from the child into the cache; False (the child reaped) at its end."""
+        import os
+        import pickle
+
+        if self._child is None:
+            return False
+        pid, pipe = self._child
+        head = pipe.read(8)
+        if len(head) == 8:
+            body = pipe.read(int.from_bytes(head, "little"))
+            key, png = pickle.loads(body)  # noqa: S301 - our own child's bytes
+            self._png[key] = png
+            return True
+        pipe.close()
+        os.waitpid(pid, 0)
+        self._child, self._aside = None, set()
+        return False
+
+    def close(self) -> None:
+        """Wait for a child still drawing (its figures unused) and reap it."""
+        while self._receive():
+            pass
+
+
+def _warm_up(plt: Any) -> None:  # noqa: ANN401 - the matplotlib.pyplot module
+    """Draw a tiny figure with text: matplotlib loads its fonts and caches glyphs once."""
+    fig, ax = plt.subplots(figsize=(1, 1))
+    ax.set_title("0.1 mm")
+    fig.savefig(io.BytesIO(), format="png", dpi=20)
+    plt.close(fig)
+
+
+def _send(pipe: Any, key: str, png: bytes | None) -> None:  # noqa: ANN401 - a binary file
+    import pickle
+
+    body = pickle.dumps((key, png))
+    pipe.write(len(body).to_bytes(8, "little") + body)
+    pipe.flush()
 
 
 def compared_rungs(ladder: Ladder) -> tuple[Rung, ...]:

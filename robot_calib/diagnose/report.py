@@ -3,7 +3,9 @@ joint angle split by approach direction, residual against time), readable withou
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport, percent
 from robot_calib.diagnose.figures import (
@@ -26,6 +28,9 @@ from robot_calib.diagnose.signatures import (
 from robot_calib.identify.outliers import OUTLIER_K
 from robot_calib.measurements import Recording
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 #: the figures' file name suffixes: `<stem>_<suffix>.png` (a figure with nothing to show is
 #: not written)
 PLOT_SUFFIXES = ("ladder", "angle", "map", "time")
@@ -36,22 +41,28 @@ def plot_paths(stem: Path) -> list[Path]:
     return [stem.with_name(f"{stem.name}_{suffix}.png") for suffix in PLOT_SUFFIXES]
 
 
+def report_figures(ladder: Ladder, recording: Recording, floor_mm: float | None
+                   ) -> list[tuple[str, str, str, Callable[[], Figure | None]]]:  # fmt: skip
+    """The Markdown report's figures: (suffix of its PNG, cache key, title, draw) each."""
+    return [
+        ("ladder", "ladder", "The ladder: held-out error of each model",
+         lambda: ladder_figure(ladder, floor_mm)),
+        ("angle", "angle_urad", "Residual against each joint angle, by approach direction",
+         lambda: angle_figure(ladder, recording, "urad")),
+        ("map", "map", "Residual maps: against reach, height and every joint's reading",
+         lambda: residual_map_figure(ladder, recording)),
+        ("time", "time", "Residual against time (in-sample)",
+         lambda: time_figure(ladder, recording)),
+    ]  # fmt: skip
+
+
 def _plots(ladder: Ladder, recording: Recording, stem: Path, floor_mm: float | None,
            figures: FigureCache) -> list[tuple[str, str]]:  # fmt: skip
     """The figures (figures.py) saved as PNGs `<stem>_*.png`: (title, file name) each;
     drawn once in `figures` (the HTML page shows them too)."""
-    drawn = [
-        ("ladder", "The ladder: held-out error of each model",
-         lambda: ladder_figure(ladder, floor_mm)),
-        ("angle", "Residual against each joint angle, by approach direction",
-         lambda: angle_figure(ladder, recording, "urad")),
-        ("map", "Residual maps: against reach, height and every joint's reading",
-         lambda: residual_map_figure(ladder, recording)),
-        ("time", "Residual against time (in-sample)", lambda: time_figure(ladder, recording)),
-    ]  # fmt: skip
     out = []
-    for suffix, title, draw in drawn:
-        png = figures.png(suffix if suffix != "angle" else "angle_urad", draw)
+    for suffix, key, title, draw in report_figures(ladder, recording, floor_mm):
+        png = figures.png(key, draw)
         if png is None:
             continue
         path = stem.with_name(f"{stem.name}_{suffix}.png")

@@ -140,7 +140,7 @@ def write_diagnosis(
     from robot_calib.atomic import staged_outputs
     from robot_calib.diagnose.figures import FigureCache
     from robot_calib.diagnose.html_report import compare_models, html_report
-    from robot_calib.diagnose.report import plot_paths, write_report
+    from robot_calib.diagnose.report import plot_paths, report_figures, write_report
     from robot_calib.identify.params_file import write_json_atomic
 
     output = Path(output)
@@ -153,13 +153,22 @@ def write_diagnosis(
         write_json_atomic(diagnosis.to_dict(), stage / output.name)
         fitted = ladder.recording if ladder.recording is not None else recording  # no outliers
         figures = FigureCache()  # each figure drawn once for both reports
-        write_report(diagnosis, ladder, fitted, stage / report.name, figures)
-        if compared is None:
-            compared = compare_models(ladder, calibrations)
-        (stage / page.name).write_text(
-            html_report(diagnosis, ladder, fitted, compared, recommended,
-                        recommended_file.name, warnings, figures)
-        )  # fmt: skip
+        # the Markdown report's figures drawn by a second process meanwhile the HTML page
+        # draws its own (the shared ones it takes from there)
+        floor_mm = diagnosis.noise.floor_abs_rms_mm
+        # (the ladder, drawn first, here: the child would start it late)
+        aside = report_figures(ladder, fitted, floor_mm)[1:]
+        figures.draw_aside([(key, draw) for _, key, _, draw in aside])
+        try:
+            if compared is None:
+                compared = compare_models(ladder, calibrations)
+            (stage / page.name).write_text(
+                html_report(diagnosis, ladder, fitted, compared, recommended,
+                            recommended_file.name, warnings, figures)
+            )  # fmt: skip
+            write_report(diagnosis, ladder, fitted, stage / report.name, figures)
+        finally:
+            figures.close()
         if best is None:  # run writes its own params_best.json: one best model per folder
             scores = {r.model: r.heldout.absolute_rms_mm for r in ladder.rungs}
             write_json_atomic(
