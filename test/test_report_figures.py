@@ -10,7 +10,6 @@ import html
 import json
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
 
 import numpy as np
 import pytest
@@ -254,33 +253,55 @@ def test_joint_4_backlash_is_said_removed_by_the_best_model(tmp_path: Path) -> N
     assert "anywhere" not in page  # no text cell breaks inside a word
 
 
+ASIDE_CHECK = """
+import os, signal
+import numpy as np
+from robot_calib.diagnose.figures import FigureCache, pyplot
+
+parent = os.getpid()
+
+def line(k):
+    fig, ax = pyplot().subplots(figsize=(3, 2))
+    ax.plot(np.arange(10), np.arange(10) ** (1 + k / 10), label=f"k = {k}")
+    ax.legend()
+    return fig
+
+def fails_in_a_child():
+    if os.getpid() != parent:
+        raise RuntimeError("only in the child")
+    return line(9)
+
+def killed_in_a_child():  # the child dies mid-way (SIGKILL)
+    if os.getpid() != parent:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return line(7)
+
+here = FigureCache()
+expected = {f"f{k}": here.png(f"f{k}", lambda k=k: line(k)) for k in range(3)}
+aside = FigureCache()
+aside.draw_aside([*((f"f{k}", lambda k=k: line(k)) for k in range(3)), ("bad", fails_in_a_child)])
+got = {f"f{k}": aside.png(f"f{k}", lambda: None) for k in range(3)}  # never drawn here
+assert got == expected and all(got.values())
+assert aside.png("bad", fails_in_a_child) == here.png("bad", fails_in_a_child)
+aside.close()
+dying = FigureCache()
+dying.draw_aside([("f0", lambda: line(0)), ("dies", killed_in_a_child), ("f1", lambda: line(1))])
+assert dying.png("f0", lambda: None) == expected["f0"]  # sent before it died
+assert dying.png("dies", killed_in_a_child) == here.png("dies", killed_in_a_child)
+assert dying.png("f1", lambda: line(1)) == expected["f1"]  # drawn here instead
+dying.close()
+print("OK")
+"""
+
+
 def test_figures_drawn_aside_are_the_figures_drawn_here() -> None:
-    """FigureCache.draw_aside: a forked child draws some figures while this process goes
-    on; their PNG bytes equal those drawn here, and a figure the child could not send (it
-    failed there) is drawn here when asked."""
-    import os
+    """FigureCache.draw_aside, in a fresh interpreter (it forks only a process without other
+    threads; pytest has some): a forked child draws some figures while the process goes
+    on; their PNG bytes equal those drawn here; a figure the child failed on, or did not
+    send because it was killed mid-way, is drawn here when asked."""
+    import subprocess
+    import sys
 
-    from robot_calib.diagnose.figures import FigureCache, pyplot
-
-    parent = os.getpid()
-
-    def line(k: int) -> Any:  # noqa: ANN401 - a matplotlib Figure
-        fig, ax = pyplot().subplots(figsize=(3, 2))
-        ax.plot(np.arange(10), np.arange(10) ** (1 + k / 10), label=f"k = {k}")
-        ax.legend()
-        return fig
-
-    def fails_in_a_child() -> Any:  # noqa: ANN401
-        if os.getpid() != parent:
-            raise RuntimeError("only in the child")
-        return line(9)
-
-    here = FigureCache()
-    expected = {f"f{k}": here.png(f"f{k}", lambda k=k: line(k)) for k in range(3)}
-    aside = FigureCache()
-    aside.draw_aside([*((f"f{k}", lambda k=k: line(k)) for k in range(3)),
-                      ("bad", fails_in_a_child)])  # fmt: skip
-    got = {f"f{k}": aside.png(f"f{k}", lambda: None) for k in range(3)}  # never drawn here
-    assert got == expected and all(got.values())
-    assert aside.png("bad", fails_in_a_child) == here.png("bad", fails_in_a_child)
-    aside.close()
+    done = subprocess.run([sys.executable, "-c", ASIDE_CHECK], capture_output=True, text=True,
+                          timeout=120, check=False)  # fmt: skip
+    assert done.returncode == 0 and done.stdout.strip() == "OK", done.stderr[-2000:]

@@ -6,6 +6,7 @@ Matplotlib is imported inside `pyplot()`, with the Agg backend (no display)."""
 
 from __future__ import annotations
 
+import contextlib
 import io
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
@@ -97,9 +98,13 @@ class FigureCache:
         """Draw the figures `draws` ((key, draw) each, as `png` takes them) in a forked
         child while the caller goes on (nothing without os.fork, or once a child runs)."""
         import os
+        import threading
 
         todo = [(key, draw) for key, draw in draws if key not in self._png]
-        if not todo or self._child is not None or not hasattr(os, "fork"):
+        # a fork copies only this thread: with others running (an rclpy executor, DDS) a
+        # lock they hold would stay held in the child forever; then no child
+        alone = threading.active_count() == 1
+        if not todo or self._child is not None or not hasattr(os, "fork") or not alone:
             return
         _warm_up(pyplot())  # imported and its fonts loaded before the fork: both inherit them
         read, write = os.pipe()
@@ -120,28 +125,53 @@ class FigureCache:
         self._child = (pid, os.fdopen(read, "rb"))
 
     def _receive(self) -> bool:
-        """One PNG from the child into the cache; False (the child reaped) at its end."""
-        import os
+        """One PNG from the child into the cache; False (the child reaped) at its end, or
+        when it sends nothing within ASIDE_TIMEOUT_S or a message cut short (it died): the
+        figures it did not send are then drawn here."""
         import pickle
+        import select
 
         if self._child is None:
             return False
+        _, pipe = self._child
+        if select.select([pipe], [], [], ASIDE_TIMEOUT_S)[0]:
+            head = pipe.read(8)
+            if len(head) == 8:
+                size = int.from_bytes(head, "little")
+                body = pipe.read(size)
+                try:
+                    key, png = pickle.loads(body) if len(body) == size else (None, None)
+                except (pickle.UnpicklingError, EOFError, ValueError):
+                    key = None
+                if key is not None:
+                    self._png[key] = png
+                    return True
+        self.close(abort=True)
+        return False
+
+    def close(self, abort: bool = False) -> None:
+        """Reap the child: after its last figure, or at once (`abort`: killed, on an error
+        or an interruption here, its figures unused)."""
+        import os
+        import signal
+
+        if self._child is None:
+            return
         pid, pipe = self._child
-        head = pipe.read(8)
-        if len(head) == 8:
-            body = pipe.read(int.from_bytes(head, "little"))
-            key, png = pickle.loads(body)  # noqa: S301 - our own child's bytes
-            self._png[key] = png
-            return True
+        if abort:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        else:
+            while pipe.read(1 << 16):  # what it still sends: unused
+                pass
         pipe.close()
         os.waitpid(pid, 0)
         self._child, self._aside = None, set()
-        return False
 
-    def close(self) -> None:
-        """Wait for a child still drawing (its figures unused) and reap it."""
-        while self._receive():
-            pass
+
+#: seconds a figure drawn aside may take at most (they take tenths): then the child is
+#: killed and the figures it did not send are drawn here
+ASIDE_TIMEOUT_S = 60.0
 
 
 def _warm_up(plt: Any) -> None:  # noqa: ANN401 - the matplotlib.pyplot module

@@ -167,8 +167,10 @@ def write_diagnosis(
                             recommended_file.name, warnings, figures)
             )  # fmt: skip
             write_report(diagnosis, ladder, fitted, stage / report.name, figures)
-        finally:
-            figures.close()
+        except BaseException:
+            figures.close(abort=True)  # an error or Ctrl-C here: the child goes at once
+            raise
+        figures.close()
         if best is None:  # run writes its own params_best.json: one best model per folder
             scores = {r.model: r.heldout.absolute_rms_mm for r in ladder.rungs}
             write_json_atomic(

@@ -105,7 +105,7 @@ def _chain_planes(dh: DHTable) -> Array:
     def joint_major(v: Array) -> Array:
         """(J, n) contiguous where `v` varies with the pose, else (J, 1)."""
         v = np.asarray(v, dtype=float)
-        if v.ndim == 2 and v.shape[0] == n and n > 1:
+        if v.ndim == 2 and v.shape[0] == n and n != 1:  # (0, J) too: no poses
             return np.ascontiguousarray(np.broadcast_to(v, shape).T)
         return np.broadcast_to(v, (1, joints)).T.copy()
 

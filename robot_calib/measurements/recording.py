@@ -584,6 +584,9 @@ def recording_from_stream(
         )
     q, velocity = q[pick[ok]], velocity_sign[pick[ok]]
     # the visiting order: the joint states' arrival where known, else their stamps'
+    if received is not None and np.shape(received) != np.shape(js_order):
+        raise InputError(f"{source}: {np.shape(received)} arrival ranks for "
+                         f"{len(js_order)} joint states")  # fmt: skip
     arrival = np.arange(len(js_order)) if received is None else np.asarray(received)[js_order]
     direction = np.where(velocity != 0, velocity,
                          _approach_in_receive_order(q, arrival[keep][pick[ok]]))  # fmt: skip
