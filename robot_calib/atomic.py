@@ -22,6 +22,7 @@ import contextlib
 import os
 import shutil
 import signal
+import socket
 import tempfile
 import threading
 import time
@@ -97,14 +98,16 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
     folder = Path(folder)
     try:
         stage = Path(tempfile.mkdtemp(prefix=".robot-calib-", suffix=".partial", dir=folder))
+        (stage / OWNER_FILE).write_text(_writer_id())  # who stages here (not moved in)
     except OSError as exc:
         raise InputError(f"{folder}: cannot write there: {exc.strerror or exc}") from None
+    _remove_dead_stages(folder, stage)
     moved: list[Path] = []
     deferred = False
     journal = folder / f"{JOURNAL_PREFIX}{stage.name}.txt"
     try:
         yield stage
-        files = sorted(stage.iterdir())
+        files = sorted(f for f in stage.iterdir() if f.name != OWNER_FILE)
         stale = _interrupted_sets(folder, {f.name for f in files})
         if not force:
             _refuse_incomplete(folder, stale)
@@ -117,7 +120,7 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
         deferred = _defer_signals(True)  # the set moves in as one: no signal between renames
         # what a SIGKILL between the renames (which no handler can hold) would leave part of:
         # the next write of any of these names finds it and says so
-        journal.write_text(f"{os.getpid()}\n" + "".join(f"{f.name}\n" for f in files))
+        write_text_atomic(journal, f"{_writer_id()}\n" + "".join(f"{f.name}\n" for f in files))
         for staged in files:
             target = folder / staged.name
             if force:
@@ -161,12 +164,11 @@ def _interrupted_sets(folder: Path, names: set[str]) -> dict[Path, list[str]]:
     out: dict[Path, list[str]] = {}
     for journal in folder.glob(f"{JOURNAL_PREFIX}*.txt"):
         try:
-            pid, *listed = journal.read_text().split("\n")
-            alive = _running(int(pid))
-        except (OSError, ValueError):
+            writer, *listed = journal.read_text().split("\n")
+        except OSError:
             continue
         listed = [name for name in listed if name]
-        if not alive and names.intersection(listed):
+        if _gone(writer) and names.intersection(listed):
             out[journal] = [name for name in listed if (folder / name).exists()]
     return out
 
@@ -187,6 +189,50 @@ def _refuse_incomplete(folder: Path, stale: dict[Path, list[str]]) -> None:
                 f"renames of its files (journal {journal.name}): an incomplete set; use "
                 "--force to replace it"
             )
+
+
+#: in a staging folder: who stages there (`_writer_id`); never moved in
+OWNER_FILE = ".owner"
+
+
+def _writer_id() -> str:
+    """'host pid start': this process, told apart from a later one given the same pid (its
+    start time in clock ticks since boot, where /proc has it)."""
+    return f"{socket.gethostname()} {os.getpid()} {_start_time(os.getpid())}"
+
+
+def _start_time(pid: int) -> str:
+    """Process `pid`'s start time (/proc/<pid>/stat field 22), '' where not known."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19]
+    except (OSError, IndexError):
+        return ""
+
+
+def _gone(writer: str) -> bool:
+    """True when the writer `_writer_id` gave is surely no longer running: on this host,
+    its pid runs no more or runs a process started at another time. A writer of another
+    host (a shared folder) or an unreadable id counts as running: nothing of it is
+    removed or called incomplete."""
+    host, _, rest = writer.partition(" ")
+    pid, _, start = rest.partition(" ")
+    if host != socket.gethostname() or not pid.isdigit():
+        return False
+    if not _running(int(pid)):
+        return True
+    return bool(start) and _start_time(int(pid)) not in ("", start)
+
+
+def _remove_dead_stages(folder: Path, own: Path) -> None:
+    """Remove the staging folders in `folder` (not `own`) whose writer is gone (killed
+    before it moved its set in: nothing of them reached the folder's outputs)."""
+    for stage in folder.glob(".robot-calib-*.partial"):
+        owner = stage / OWNER_FILE
+        if stage == own or not stage.is_dir() or not owner.is_file():
+            continue
+        with contextlib.suppress(OSError):
+            if _gone(owner.read_text()):
+                shutil.rmtree(stage, ignore_errors=True)
 
 
 def _running(pid: int) -> bool:

@@ -516,7 +516,7 @@ def test_a_set_killed_between_its_renames_is_found_by_the_next_write(tmp_path: P
     partial = set(diagnose_set(tmp_path))
     journals = [name for name in leftovers(tmp_path) if name.startswith(".robot-calib-set-")]
     assert partial and len(journals) == 1, (partial, leftovers(tmp_path))
-    listed = set((tmp_path / journals[0]).read_text().split()[1:])
+    listed = set((tmp_path / journals[0]).read_text().splitlines()[1:])
     assert partial < listed  # part of the set, not all of it
     again = cli("diagnose", str(SAMPLE), "-o", "d.json", cwd=tmp_path)
     assert again.returncode == 2, again.stderr
@@ -556,3 +556,37 @@ def test_the_docs_cite_the_projects_own_specification_not_a_missing_file() -> No
     cited += ["README.md"] * ("CONTRACT" in (ROOT / "README.md").read_text())
     assert cited == []
     assert "(specification.md)" in (ROOT / "msgs_doc" / "README.md").read_text()
+
+
+def test_a_staging_folder_of_a_killed_writer_goes_with_the_next_write(tmp_path: Path) -> None:
+    """A writer killed while it staged (before its renames: no journal) left its hidden
+    staging folder for good; the next write into the folder removes the staging folders
+    of writers that are gone (on this host; a pid now running another process counts as
+    gone), and keeps a live writer's and one of another host."""
+    import socket
+
+    from robot_calib.atomic import OWNER_FILE, staged_outputs
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True).stdout.strip()  # fmt: skip
+    host = socket.gethostname()
+    me = os.getpid()
+    owners = {
+        ".robot-calib-dead.partial": f"{host} {dead} 1",
+        ".robot-calib-reused.partial": f"{host} {me} 1",  # our pid, another start time
+        ".robot-calib-other.partial": f"elsewhere {dead} 1",  # a shared folder's writer
+        ".robot-calib-live.partial": None,  # a writer staging now (this process)
+    }
+    for name in owners:
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "d.json").write_text("{}")
+    with staged_outputs(tmp_path) as live:
+        (live / "x.txt").write_text("x")
+        for name, owner in owners.items():
+            text = (live / OWNER_FILE).read_text() if owner is None else owner
+            (tmp_path / name / OWNER_FILE).write_text(text)
+        with staged_outputs(tmp_path) as second:
+            (second / "y.txt").write_text("y")
+    left = sorted(p.name for p in tmp_path.iterdir())
+    assert left == [".robot-calib-live.partial", ".robot-calib-other.partial", "x.txt",
+                    "y.txt"], left  # fmt: skip
