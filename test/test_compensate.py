@@ -200,6 +200,27 @@ def test_targets_of_poses_within_the_limits_are_reached_within_them() -> None:
     assert found.reached.all() and inside.all(), (found.reached.sum(), inside.sum())
 
 
+def test_a_path_behind_the_robot_stays_on_one_branch() -> None:
+    """Position targets along a path the arm reaches over backwards (joint 1 near 0, the
+    tool behind the base; from the home pose facing them the IK takes another branch for
+    some): every target reached within the limits, and the commands move smoothly from
+    one row to the next (no switch of branch: at most 0.2 rad per step; 3.1 rad before)."""
+    cal, _ = calibrated()
+    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
+    tool = first_tool2flange(cal.model, cal.parameters)
+    a = np.array([-0.015, -1.827, -1.646, -1.615, 0.513, -1.581])
+    b = np.array([0.10, -1.75, -1.55, -1.50, 0.60, -1.40])
+    q = a + np.linspace(0.0, 1.0, 20)[:, None] * (b - a)  # steps of < 0.01 rad
+    goal = tool2base(nominal, nominal_params, Poses.from_readings(q), tool)
+    found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params,
+                               targets_of(goal, False, None), goal)  # fmt: skip
+    limits = ROBOT.limits
+    commands = found.compensated.q
+    assert found.reached.all()
+    assert np.all((commands >= limits[:, 0]) & (commands <= limits[:, 1]))
+    assert np.abs(np.diff(commands, axis=0)).max() < 0.2
+
+
 def test_a_target_at_no_finite_distance_is_not_reached() -> None:
     """The nominal inverse kinematics retries a target it missed from its nearest reached
     neighbour; a target at 1e300 m (a caller past the CSV reader's check) has none: it is

@@ -259,6 +259,49 @@ def _nominal_ik(
     return IKSolution(**fields)
 
 
+#: a change of any joint by more than this between consecutive rows of a program [rad]
+#: is a switch of branch when another solution within the limits moves less
+BRANCH_JUMP_RAD = 0.5
+
+
+def _follow_the_rows(
+    nominal: KinematicModel,
+    nominal_params: ParameterVector,
+    start: Poses,
+    goal2base: Array,
+    tool: Array,
+    oriented: NDArray[np.bool_],
+    found: IKSolution,
+) -> IKSolution:
+    """`found` (the nominal IK of the rows of a program, solved each on its own) with every
+    row that jumps more than BRANCH_JUMP_RAD from the row before solved again from that
+    row's solution, kept where it converges within the limits and moves less: a program
+    of close targets stays on one branch (elbow up or down, reaching forwards or over
+    backwards) instead of switching between them from one target to the next."""
+    limits = nominal.robot.limits
+    q = found.q.copy()
+    fields = {name: getattr(found, name).copy()
+              for name in ("q", "error_m", "error_rad", "iterations", "converged")}  # fmt: skip
+    ok = found.converged & np.all((q >= limits[:, 0]) & (q <= limits[:, 1]), axis=1)
+    for i in range(1, len(q)):
+        jump = float(np.abs(q[i] - q[i - 1]).max())
+        if not (ok[i] and ok[i - 1]) or jump <= BRANCH_JUMP_RAD:
+            continue
+        row = np.array([i])
+        again = solve_ik(nominal, nominal_params, replace(start.subset(row), q=q[i - 1 : i]),
+                         goal2base[row], tool, oriented[row],
+                         max_iterations=NOMINAL_ITERATIONS)  # fmt: skip
+        turned = wrap_into_limits(again.q, limits)[0]
+        inside = bool(np.all((turned >= limits[:, 0]) & (turned <= limits[:, 1])))
+        if again.converged[0] and inside and np.abs(turned - q[i - 1]).max() < jump:
+            q[i] = turned
+            for name in ("error_m", "error_rad", "converged"):
+                fields[name][i] = getattr(again, name)[0]
+            fields["iterations"][i] += again.iterations[0]
+    fields["q"] = q
+    return IKSolution(**fields)
+
+
 #: where in each joint's range the branch seeds put joints 2, 3 and 5 (joint 1 facing the
 #: target, then facing away: reaching over backwards; 4 and 6 at zero): elbow up and down,
 #: wrist flipped or not
@@ -336,6 +379,9 @@ def compensate_targets(
     ones = np.ones_like(seed)
     start = Poses(seed, ones, targets.time, temperature=targets.temperature)
     first = _nominal_ik(nominal, nominal_params, start, goal2base, tool, oriented)
+    if targets.seed is None:  # rows of a program: no switch of branch between rows
+        first = _follow_the_rows(nominal, nominal_params, start, goal2base, tool, oriented,
+                                 first)  # fmt: skip
     direction = approach_directions(first.q) if targets.direction is None else targets.direction
     poses = replace(start, q=first.q, direction=direction)
     result = solve_corrected(calibrated, params, poses, goal2base, tool, oriented, correction)
