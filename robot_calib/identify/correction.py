@@ -534,13 +534,13 @@ class FittedCorrection:
 
     correction : the fitted ResidualCorrection
     fitted : shape (n, 3), its predicted residual at the fitted poses [m, tracker frame]
-    kernel : shape (n, n), the signal kernel of the fitted poses [1] (exact fits; None
-        for a subset of regressors): `exact_holdout` slices it instead of recomputing it
+    phi : shape (n, F), the fitted poses' scaled features (`_phi`; exact fits; None for a
+        subset of regressors): what `exact_holdout` builds the halves' kernels from
     """
 
     correction: ResidualCorrection
     fitted: Array
-    kernel: Array | None
+    phi: Array | None
 
 
 def fit_correction(
@@ -606,13 +606,14 @@ def fit_correction_at(
     learned = f"hyperparameters by marginal likelihood on {min(n, max_learn)} poses"
     if n <= max_points:
         inducing: IntArray = np.arange(n)
-        phi = _phi(q, target, hyper, n_targets)
-        kernel: Array | None = _kernel(phi, phi, hyper)
-        assert kernel is not None
-        with_noise = kernel.copy()
+        phi: Array | None = _phi(q, target, hyper, n_targets)
+        assert phi is not None
+        with_noise = _kernel(phi, phi, hyper)  # factored in place: one n x n array at most
         with_noise.flat[:: n + 1] += hyper.noise_variance
         dual = cho_solve(cho_factor(with_noise, lower=True, overwrite_a=True), y)
-        fitted = (kernel @ dual) * scale + mean
+        del with_noise
+        # K dual = (K + s^2 I) dual - s^2 dual = y - s^2 dual: the fitted values without K
+        fitted = (y - hyper.noise_variance * dual) * scale + mean
         how = f"exact on all {n} poses"
     else:
         inducing = _subset(n, min(max_points, INDUCING), rng)
@@ -629,7 +630,7 @@ def fit_correction_at(
         except LinAlgError:  # numerically singular: the least-squares solution
             dual = np.linalg.lstsq(gram, rhs, rcond=None)[0]
         how = f"subset of regressors on {m} of {n} poses"
-        kernel = None
+        phi = None
     method = (
         "Gaussian process of the residuals (squared-exponential kernel on sin/cos of the "
         "joint readings, one length scale per joint, white noise; "
@@ -637,25 +638,26 @@ def fit_correction_at(
     )
     correction = ResidualCorrection(q[inducing].copy(), target[inducing].copy(), dual, hyper,
                                     mean, scale, n_targets, n, 0.0, method, warnings)  # fmt: skip
-    if kernel is None:
+    if phi is None:
         fitted = correction.predict(poses)
     size = np.linalg.norm(fitted, axis=1)
     correction = replace(correction, rms_m=float(np.sqrt(np.mean(size**2))))
-    return FittedCorrection(correction, fitted, kernel)
+    return FittedCorrection(correction, fitted, phi)
 
 
-def exact_holdout(kernel: Array, residuals: Array, train: NDArray[np.bool_],
-                  noise_variance: float) -> Array:  # fmt: skip
-    """The exact process of `kernel` (n, n) (the signal kernel of n poses, `FittedCorrection`)
-    and white noise `noise_variance` fitted on `residuals[train]` ((n, 3) [m]) and
-    predicting at the other poses: shape (n - train.sum(), 3) [m]. The same as
-    `fit_correction` of the training poses with these hyperparameters, then its `predict`
-    at the others, without computing the kernel again."""
+def exact_holdout(phi: Array, hyper: Hyperparameters, residuals: Array,
+                  train: NDArray[np.bool_]) -> Array:  # fmt: skip
+    """The exact process of `hyper` on the poses of scaled features `phi` (n, F)
+    (`FittedCorrection`) fitted on `residuals[train]` ((n, 3) [m]) and predicting at the
+    other poses: shape (n - train.sum(), 3) [m]. The same as `fit_correction` of the
+    training poses with these hyperparameters, then its `predict` at the others, from the
+    features already scaled (two half-size kernels, one at a time)."""
     from scipy.linalg import cho_factor, cho_solve
 
     mean, scale = _scaling(residuals[train])
     y = (residuals[train] - mean) / scale
-    with_noise = kernel[np.ix_(train, train)]  # a copy
-    with_noise.flat[:: len(y) + 1] += noise_variance
+    with_noise = _kernel(phi[train], phi[train], hyper)
+    with_noise.flat[:: len(y) + 1] += hyper.noise_variance
     dual = cho_solve(cho_factor(with_noise, lower=True, overwrite_a=True), y)
-    return (kernel[np.ix_(~train, train)] @ dual) * scale + mean
+    del with_noise
+    return (_kernel(phi[~train], phi[train], hyper) @ dual) * scale + mean

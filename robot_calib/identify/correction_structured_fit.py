@@ -176,8 +176,8 @@ def _process_generalises(fitted: FittedCorrection, poses: Poses, left: Array) ->
     half = np.random.default_rng(1).permutation(n) < n // 2
     before, after = 0.0, 0.0
     for train in (half, ~half):
-        if fitted.kernel is not None:
-            predicted = exact_holdout(fitted.kernel, left, train, process.hyper.noise_variance)
+        if fitted.phi is not None:
+            predicted = exact_holdout(fitted.phi, process.hyper, left, train)
         else:
             local = fit_correction(poses.subset(train), left[train], process.n_targets,
                                    hyper=process.hyper)  # fmt: skip
