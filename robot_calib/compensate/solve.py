@@ -54,7 +54,7 @@ from robot_calib.ik import (
     tool2base,
 )
 from robot_calib.kinematics.description import RobotDescription
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses, approach_directions
@@ -210,6 +210,25 @@ def wrap_into_limits(q: Array, limits: Array) -> Array:
     return np.where((low <= limits[:, 1]) & ((q < limits[:, 0]) | (q > limits[:, 1])), low, q)
 
 
+def _inside(q: Array, limits: Array) -> NDArray[np.bool_]:
+    """(n,) readings q (n, J) [rad] within the joint limits (J, 2) [rad], exactly."""
+    return np.all((q >= limits[:, 0]) & (q <= limits[:, 1]), axis=1)
+
+
+def _merged(found: IKSolution, rows: IntArray, again: IKSolution, better: NDArray[np.bool_],
+            spent: IntArray) -> IKSolution:  # fmt: skip
+    """`found` with its rows `rows` solved again (`again`, one row each): readings, errors
+    and convergence taken where `better` (len(rows),), and `spent` (len(rows),) steps of
+    the new attempt added to those rows' iterations."""
+    out = {name: getattr(found, name).copy() for name in ("q", "error_m", "error_rad",
+                                                          "converged")}  # fmt: skip
+    for name, values in out.items():
+        values[rows[better]] = getattr(again, name)[better]
+    iterations = found.iterations.copy()
+    iterations[rows] += spent
+    return replace(found, iterations=iterations, **out)
+
+
 def _nominal_ik(
     nominal: KinematicModel,
     nominal_params: ParameterVector,
@@ -217,10 +236,13 @@ def _nominal_ik(
     goal2base: Array,
     tool: Array,
     oriented: NDArray[np.bool_],
+    program: bool,
 ) -> IKSolution:
     """The nominal inverse kinematics from `start`'s readings, shifted into the joint limits
     by whole turns; targets it does not reach (or only beyond the limits) are tried once more
-    from the solution of the nearest target (tool point) it reached within them."""
+    from the solution of the nearest target (tool point) it reached within them, then from
+    seeds on the arm's other branches (`_other_branches`); with `program` (rows of a
+    program, no seeds given) the rows are kept on one branch (`_follow_the_rows`)."""
     limits = nominal.robot.limits
 
     def solve(poses: Poses, goal: Array, which: NDArray[np.bool_]) -> IKSolution:
@@ -228,35 +250,25 @@ def _nominal_ik(
                          max_iterations=NOMINAL_ITERATIONS)  # fmt: skip
         return replace(found, q=wrap_into_limits(found.q, limits))
 
-    def within(q: Array) -> NDArray[np.bool_]:
-        return np.all((q >= limits[:, 0]) & (q <= limits[:, 1]), axis=1)
-
     first = solve(start, goal2base, oriented)
-    good = first.converged & within(first.q)
+    good = first.converged & _inside(first.q, limits)
     if not good.all():  # another branch: from seeds spread over the arm's joint ranges
-        first = _other_branches(first, start, goal2base, oriented, solve, within, limits)
-        good = first.converged & within(first.q)
-    if good.all() or not good.any():
-        return first
-    retry, done = np.flatnonzero(~good), np.flatnonzero(good)
-    from scipy.spatial import cKDTree  # nearest neighbours of thousands in milliseconds
+        first = _other_branches(first, start, goal2base, oriented, solve, limits)
+        good = first.converged & _inside(first.q, limits)
+    if not good.all() and good.any():
+        retry, done = np.flatnonzero(~good), np.flatnonzero(good)
+        from scipy.spatial import cKDTree  # nearest neighbours of thousands in milliseconds
 
-    points = goal2base[:, :3, 3]
-    distance, nearest = cKDTree(points[done]).query(points[retry])
-    retry = retry[np.isfinite(distance)]  # no neighbour (a point at infinity): as it was
-    if not retry.size:
-        return first
-    seeds = first.q[done[nearest[np.isfinite(distance)]]]
-    again = solve(replace(start.subset(retry), q=seeds), goal2base[retry], oriented[retry])
-    better = again.converged
-    fields = {}
-    for name in ("q", "error_m", "error_rad", "iterations", "converged"):
-        merged = getattr(first, name).copy()
-        merged[retry[better]] = getattr(again, name)[better]
-        if name == "iterations":
-            merged[retry] += np.where(better, getattr(first, name)[retry], 0)
-        fields[name] = merged
-    return IKSolution(**fields)
+        points = goal2base[:, :3, 3]
+        distance, nearest = cKDTree(points[done]).query(points[retry])
+        retry = retry[np.isfinite(distance)]  # no neighbour (a point at infinity): as it was
+        if retry.size:
+            seeds = first.q[done[nearest[np.isfinite(distance)]]]
+            again = solve(replace(start.subset(retry), q=seeds), goal2base[retry],
+                          oriented[retry])  # fmt: skip
+            first = _merged(first, retry, again, again.converged,
+                            np.where(again.converged, again.iterations, 0))  # fmt: skip
+    return _follow_the_rows(first, start, goal2base, oriented, solve, limits) if program else first
 
 
 #: a change of any joint by more than this between consecutive rows of a program [rad]
@@ -265,41 +277,36 @@ BRANCH_JUMP_RAD = 0.5
 
 
 def _follow_the_rows(
-    nominal: KinematicModel,
-    nominal_params: ParameterVector,
+    found: IKSolution,
     start: Poses,
     goal2base: Array,
-    tool: Array,
     oriented: NDArray[np.bool_],
-    found: IKSolution,
+    solve: Callable[[Poses, Array, NDArray[np.bool_]], IKSolution],
+    limits: Array,
 ) -> IKSolution:
     """`found` (the nominal IK of the rows of a program, solved each on its own) with every
     row that jumps more than BRANCH_JUMP_RAD from the row before solved again from that
-    row's solution, kept where it converges within the limits and moves less: a program
-    of close targets stays on one branch (elbow up or down, reaching forwards or over
-    backwards) instead of switching between them from one target to the next."""
-    limits = nominal.robot.limits
+    row's solution (`solve`), kept where it converges within the limits and moves less: a
+    program of close targets stays on one branch (elbow up or down, reaching forwards or
+    over backwards) instead of switching between them from one target to the next. Row by
+    row in place: each row starts from the row before as it ends."""
     q = found.q.copy()
     fields = {name: getattr(found, name).copy()
-              for name in ("q", "error_m", "error_rad", "iterations", "converged")}  # fmt: skip
-    ok = found.converged & np.all((q >= limits[:, 0]) & (q <= limits[:, 1]), axis=1)
+              for name in ("error_m", "error_rad", "iterations", "converged")}  # fmt: skip
+    ok = found.converged & _inside(q, limits)
     for i in range(1, len(q)):
         jump = float(np.abs(q[i] - q[i - 1]).max())
         if not (ok[i] and ok[i - 1]) or jump <= BRANCH_JUMP_RAD:
             continue
         row = np.array([i])
-        again = solve_ik(nominal, nominal_params, replace(start.subset(row), q=q[i - 1 : i]),
-                         goal2base[row], tool, oriented[row],
-                         max_iterations=NOMINAL_ITERATIONS)  # fmt: skip
-        turned = wrap_into_limits(again.q, limits)[0]
-        inside = bool(np.all((turned >= limits[:, 0]) & (turned <= limits[:, 1])))
-        if again.converged[0] and inside and np.abs(turned - q[i - 1]).max() < jump:
-            q[i] = turned
+        again = solve(replace(start.subset(row), q=q[i - 1 : i]), goal2base[row], oriented[row])
+        if (again.converged[0] and _inside(again.q, limits)[0]
+                and np.abs(again.q[0] - q[i - 1]).max() < jump):  # fmt: skip
+            q[i] = again.q[0]
             for name in ("error_m", "error_rad", "converged"):
                 fields[name][i] = getattr(again, name)[0]
             fields["iterations"][i] += again.iterations[0]
-    fields["q"] = q
-    return IKSolution(**fields)
+    return replace(found, q=q, **fields)
 
 
 #: where in each joint's range the branch seeds put joints 2, 3 and 5 (joint 1 facing the
@@ -317,7 +324,6 @@ def _other_branches(
     goal2base: Array,
     oriented: NDArray[np.bool_],
     solve: Callable[[Poses, Array, NDArray[np.bool_]], IKSolution],
-    within: Callable[[Array], NDArray[np.bool_]],
     limits: Array,
 ) -> IKSolution:
     """`found` with the targets it did not reach within the joint limits (a position target
@@ -325,12 +331,10 @@ def _other_branches(
     branch behind the robot, beyond joint 1's limits) solved again from BRANCH_SHARES seeds,
     joint 1 facing the target and then away from it, until one converges within the
     limits."""
-    out = {name: getattr(found, name).copy()
-           for name in ("q", "error_m", "error_rad", "iterations", "converged")}  # fmt: skip
-    if out["q"].shape[1] < 5:
+    if found.q.shape[1] < 5:
         return found
     for turn, shares in ((t, s) for t in (0.0, np.pi) for s in BRANCH_SHARES):
-        left = np.flatnonzero(~(out["converged"] & within(out["q"])))
+        left = np.flatnonzero(~(found.converged & _inside(found.q, limits)))
         if not left.size:
             break
         seed = start.q[left].copy()
@@ -339,11 +343,9 @@ def _other_branches(
         for joint, share in zip((1, 2, 4), shares):
             seed[:, joint] = limits[joint, 0] + share * (limits[joint, 1] - limits[joint, 0])
         again = solve(replace(start.subset(left), q=seed), goal2base[left], oriented[left])
-        better = again.converged & within(again.q)
-        for name in ("q", "error_m", "error_rad", "converged"):
-            out[name][left[better]] = getattr(again, name)[better]
-        out["iterations"][left] += again.iterations
-    return IKSolution(**out)
+        found = _merged(found, left, again, again.converged & _inside(again.q, limits),
+                        again.iterations)  # fmt: skip
+    return found
 
 
 def compensate_targets(
@@ -378,10 +380,9 @@ def compensate_targets(
     )
     ones = np.ones_like(seed)
     start = Poses(seed, ones, targets.time, temperature=targets.temperature)
-    first = _nominal_ik(nominal, nominal_params, start, goal2base, tool, oriented)
-    if targets.seed is None:  # rows of a program: no switch of branch between rows
-        first = _follow_the_rows(nominal, nominal_params, start, goal2base, tool, oriented,
-                                 first)  # fmt: skip
+    # without seeds: rows of a program, kept on one branch
+    first = _nominal_ik(nominal, nominal_params, start, goal2base, tool, oriented,
+                        program=targets.seed is None)  # fmt: skip
     direction = approach_directions(first.q) if targets.direction is None else targets.direction
     poses = replace(start, q=first.q, direction=direction)
     result = solve_corrected(calibrated, params, poses, goal2base, tool, oriented, correction)
