@@ -181,24 +181,23 @@ def corrected_heldout(
         train = np.flatnonzero(fold != f)
         train_rows.append(train[fitting_rows(len(train))])
 
-    def residuals_of(k: int) -> Array:
-        return cal.model.target_points(fold_parameters[folds[k]], poses) - points
-
-    def structure(k: int) -> StructuredPart:
-        """Fold folds[k]'s load-driven geometry (no hyperparameter needed)."""
+    def structure(k: int) -> tuple[StructuredPart, Array]:
+        """Fold folds[k]'s load-driven geometry (no hyperparameter needed), and its
+        parameters' residuals (n, 3) [m] at every pose, which it is fitted on."""
         train = train_rows[k]
+        fitted = cal.model.target_points(fold_parameters[folds[k]], poses) - points
         return fit_structured_part(cal.model, fold_parameters[folds[k]], poses.subset(train),
-                                   residuals_of(k)[train])  # fmt: skip
+                                   fitted[train]), fitted  # fmt: skip
 
-    def one(k: int, part: Future[StructuredPart]) -> StructuredCorrection:
+    def one(k: int, structured: Future[tuple[StructuredPart, Array]]) -> StructuredCorrection:
         """Fold folds[k]: its correction learned on its training poses; `after` filled."""
         f, train = folds[k], train_rows[k]
         test = fold == f
-        fitted = residuals_of(k)
+        part, fitted = structured.result()
         local = fit_structured(cal.model, fold_parameters[f], poses.subset(train),
                                fitted[train], np.random.default_rng(seeds[k]), start=start,
                                max_learn=MAX_LEARN if start is None else WARM_LEARN,
-                               part=part.result())  # fmt: skip
+                               part=part)  # fmt: skip
         before[test] = fitted[test]
         after[test] = fitted[test] - local.predict(poses.subset(test))
         return local
