@@ -30,7 +30,7 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "robot-calib = robot_calib.cli:main",
+            "robot-calib = robot_calib.cli:run",
             *[f"{node} = robot_calib.nodes.{node}:main" for node in NODES],
         ],
     },

@@ -20,15 +20,12 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see robot_ca
 
 import argparse
 import json
-import resource
 import statistics
-import subprocess
-import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+from measure import robot_calib
 
 from robot_calib.bag.write import START_NS, STEP_NS, write_measurements
 from robot_calib.measurements import Recording
@@ -46,23 +43,13 @@ def _bag(path: Path, recording: Recording, names: tuple[str, ...], first: int = 
 
 
 def _run(args: list[str]) -> tuple[float, float, float]:
-    """Wall [s], CPU [s] and peak RSS [MiB] of `robot-calib diagnose ARGS` in a child
-    (the child reports its own peak: RUSAGE_CHILDREN would give the largest child's)."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    started = time.perf_counter()
-    code = [sys.executable, "-c", "import resource, sys; from robot_calib.cli import main; "
-            "code = main(sys.argv[1:]); print('PEAK_KIB', resource.getrusage("
-            "resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); sys.exit(code)",
-            "diagnose", *args]  # fmt: skip
-    done = subprocess.run(code, capture_output=True, text=True, check=False)
-    wall = time.perf_counter() - started
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if done.returncode != 0:
-        raise SystemExit(f"diagnose failed ({done.returncode}): {done.stderr.strip()}")
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    peak = next(int(line.split()[1]) for line in done.stderr.splitlines()
-                if line.startswith("PEAK_KIB"))  # fmt: skip
-    return wall, cpu, peak / 1024.0
+    """Wall [s], CPU [s], peak RSS [MiB] of `robot-calib ARGS` as a user runs it
+    (`measure.robot_calib`); its failure ends the benchmark."""
+    run = robot_calib(args)
+    if run.status not in (0, 3):
+        raise SystemExit(f"robot-calib {' '.join(args)} failed ({run.status}): "
+                         f"{run.stderr.strip()[-400:]}")  # fmt: skip
+    return run.wall_s, run.cpu_s, run.peak_mib
 
 
 def main() -> int:

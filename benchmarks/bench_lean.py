@@ -29,7 +29,6 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: see robot_calib/__init__.py
 
 import argparse
-import resource
 import subprocess
 import sys
 import tempfile
@@ -37,17 +36,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from measure import robot_calib
 
 from robot_calib.bag.write import START_NS, STEP_NS, write_measurements
 from robot_calib.sim.scenarios import ur10_random
 
 PEER_RSS_MIB = {10_000: 171, 50_000: 351, 100_000: 508}  # robotkinecal, issue 23
 DIAGNOSE_GOAL = {2773: (5.0, None), 100_000: (30.0, 600.0)}  # s, MiB
-CHILD = (
-    "import resource, sys; from robot_calib.cli import main; code = main(sys.argv[1:]); "
-    "print('PEAK_KIB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); "
-    "sys.exit(code)"
-)
 
 
 def _bag(folder: Path, n: int) -> Path:
@@ -62,20 +57,13 @@ def _bag(folder: Path, n: int) -> Path:
 
 
 def _cli(args: list[str]) -> tuple[float, float, float]:
-    """Wall [s], CPU [s], peak RSS [MiB] of `robot-calib ARGS` in a child process."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    started = time.perf_counter()
-    done = subprocess.run([sys.executable, "-c", CHILD, *args], capture_output=True,
-                          text=True, check=False)  # fmt: skip
-    wall = time.perf_counter() - started
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if done.returncode not in (0, 3):
-        raise SystemExit(f"robot-calib {' '.join(args)} failed ({done.returncode}): "
-                         f"{done.stderr.strip()[-400:]}")  # fmt: skip
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    peak = next(int(line.split()[1]) for line in done.stderr.splitlines()
-                if line.startswith("PEAK_KIB"))  # fmt: skip
-    return wall, cpu, peak / 1024.0
+    """Wall [s], CPU [s], peak RSS [MiB] of `robot-calib ARGS` as a user runs it
+    (`measure.robot_calib`); its failure ends the benchmark."""
+    run = robot_calib(args)
+    if run.status not in (0, 3):
+        raise SystemExit(f"robot-calib {' '.join(args)} failed ({run.status}): "
+                         f"{run.stderr.strip()[-400:]}")  # fmt: skip
+    return run.wall_s, run.cpu_s, run.peak_mib
 
 
 def numpy_limit(q: np.ndarray, d: np.ndarray, a: np.ndarray, alpha: np.ndarray,

@@ -6,9 +6,9 @@ Matplotlib is imported inside `pyplot()`, with the Agg backend (no display)."""
 
 from __future__ import annotations
 
-import contextlib
 import io
 from collections.abc import Callable, Sequence
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -16,6 +16,7 @@ import numpy as np
 from robot_calib.diagnose.ladder import Ladder, Rung
 from robot_calib.diagnose.names import wrap_name
 from robot_calib.diagnose.signatures import arc_angle_errors
+from robot_calib.forked import Aside, can_fork
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording
 
@@ -66,23 +67,22 @@ class FigureCache:
     and the HTML page show the same figures (drawing them twice cost seconds).
 
     `draw_aside` draws some of them in a forked child process while this one draws the
-    others (matplotlib is single-threaded: a second process is the only way to use the
-    second core; half of a diagnosis of 2773 poses was figures). The child sends each PNG
-    as it is done; `png` of a figure drawn aside waits for it, and draws it here if the
-    child could not (it died, or fork is not available): the bytes are the same."""
+    others (`robot_calib.forked.Aside`: matplotlib is single-threaded, a second process is
+    the only way to use the second core; half of a diagnosis of 2773 poses was figures).
+    `png` of a figure drawn aside waits for it, and draws it here if the child could not
+    (it died, or fork is not available): the bytes are the same."""
 
     def __init__(self, dpi: int = 100) -> None:
         self.dpi = dpi
         self._png: dict[str, bytes | None] = {}
-        self._aside: set[str] = set()  # keys the child draws
-        self._child: tuple[int, Any] | None = None  # its pid and the pipe it writes
+        self._aside: Aside[bytes | None] | None = None  # the figures a child draws
 
     def png(self, key: str, draw: Callable[[], Figure | None]) -> bytes | None:
         """The PNG of figure `key`, drawn by `draw` the first time (None: no figure)."""
-        while key not in self._png and key in self._aside and self._receive():
-            pass
         if key not in self._png:
-            self._png[key] = self._render(draw)
+            aside = self._aside
+            self._png[key] = (aside.result(key) if aside is not None and key in aside
+                              else self._render(draw))  # fmt: skip
         return self._png[key]
 
     def _render(self, draw: Callable[[], Figure | None]) -> bytes | None:
@@ -96,77 +96,21 @@ class FigureCache:
 
     def draw_aside(self, draws: Sequence[tuple[str, Callable[[], Figure | None]]]) -> None:
         """Draw the figures `draws` ((key, draw) each, as `png` takes them) in a forked
-        child while the caller goes on (nothing without os.fork, or once a child runs)."""
-        import os
-        import threading
-
+        child while the caller goes on (drawn here when asked without a child: no fork,
+        other threads running; nothing once a child runs)."""
         todo = [(key, draw) for key, draw in draws if key not in self._png]
-        # a fork copies only this thread: with others running (an rclpy executor, DDS) a
-        # lock they hold would stay held in the child forever; then no child
-        alone = threading.active_count() == 1
-        if not todo or self._child is not None or not hasattr(os, "fork") or not alone:
+        if not todo or self._aside is not None or not can_fork():
             return
         _warm_up(pyplot())  # imported and its fonts loaded before the fork: both inherit them
-        read, write = os.pipe()
-        pid = os.fork()
-        if pid == 0:  # the child: draw, send, and leave without running any exit handler
-            code = 0
-            try:
-                os.close(read)
-                with os.fdopen(write, "wb") as pipe:
-                    for key, draw in todo:
-                        _send(pipe, key, self._render(draw))
-            except BaseException:  # noqa: BLE001 - the parent draws what did not come
-                code = 1
-            finally:
-                os._exit(code)
-        os.close(write)
-        self._aside = {key for key, _ in todo}
-        self._child = (pid, os.fdopen(read, "rb"))
-
-    def _receive(self) -> bool:
-        """One PNG from the child into the cache; False (the child reaped) at its end, or
-        when it sends nothing within ASIDE_TIMEOUT_S or a message cut short (it died): the
-        figures it did not send are then drawn here."""
-        import pickle
-        import select
-
-        if self._child is None:
-            return False
-        _, pipe = self._child
-        if select.select([pipe], [], [], ASIDE_TIMEOUT_S)[0]:
-            head = pipe.read(8)
-            if len(head) == 8:
-                size = int.from_bytes(head, "little")
-                body = pipe.read(size)
-                try:
-                    key, png = pickle.loads(body) if len(body) == size else (None, None)
-                except (pickle.UnpicklingError, EOFError, ValueError):
-                    key = None
-                if key is not None:
-                    self._png[key] = png
-                    return True
-        self.close(abort=True)
-        return False
+        self._aside = Aside([(key, partial(self._render, draw)) for key, draw in todo],
+                            timeout_s=ASIDE_TIMEOUT_S)  # fmt: skip
 
     def close(self, abort: bool = False) -> None:
         """Reap the child: after its last figure, or at once (`abort`: killed, on an error
         or an interruption here, its figures unused)."""
-        import os
-        import signal
-
-        if self._child is None:
-            return
-        pid, pipe = self._child
-        if abort:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
-        else:
-            while pipe.read(1 << 16):  # what it still sends: unused
-                pass
-        pipe.close()
-        os.waitpid(pid, 0)
-        self._child, self._aside = None, set()
+        if self._aside is not None:
+            self._aside.close(abort)
+            self._aside = None
 
 
 #: seconds a figure drawn aside may take at most (they take tenths): then the child is
@@ -180,14 +124,6 @@ def _warm_up(plt: Any) -> None:  # noqa: ANN401 - the matplotlib.pyplot module
     ax.set_title("0.1 mm")
     fig.savefig(io.BytesIO(), format="png", dpi=20)
     plt.close(fig)
-
-
-def _send(pipe: Any, key: str, png: bytes | None) -> None:  # noqa: ANN401 - a binary file
-    import pickle
-
-    body = pickle.dumps((key, png))
-    pipe.write(len(body).to_bytes(8, "little") + body)
-    pipe.flush()
 
 
 def compared_rungs(ladder: Ladder) -> tuple[Rung, ...]:

@@ -32,11 +32,12 @@ fitted on every calibration residual, is the learned part of the hybrid model
 from __future__ import annotations
 
 from collections.abc import Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
+from robot_calib.forked import Aside
 from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.correction import (
     INDUCING,
@@ -70,8 +71,6 @@ METHOD = (
 #: poses a fold after the first learns its hyperparameters on, warm-started from the first
 #: fold's (the search only refines them: 300 poses cost a quarter of MAX_LEARN's)
 WARM_LEARN = 300
-#: threads fitting the folds after the first (the machine's two cores)
-FOLD_THREADS = 2
 #: the bound must beat geometric by this share of its held-out rms to count as structure
 MIN_LEARNABLE_SHARE = 0.05
 
@@ -175,7 +174,6 @@ def corrected_heldout(
     before, after = np.zeros_like(points), np.zeros_like(points)
     folds = list(fold_parameters)
     seeds = rng.integers(0, 2**63, size=len(folds))  # each fold its own stream: any order
-    start: Hyperparameters | None = None
     train_rows: list[IntArray] = []
     for f in folds:
         train = np.flatnonzero(fold != f)
@@ -189,38 +187,58 @@ def corrected_heldout(
         return fit_structured_part(cal.model, fold_parameters[folds[k]], poses.subset(train),
                                    fitted[train]), fitted  # fmt: skip
 
-    def one(k: int, structured: Future[tuple[StructuredPart, Array]]) -> StructuredCorrection:
-        """Fold folds[k]: its correction learned on its training poses; `after` filled."""
-        f, train = folds[k], train_rows[k]
-        test = fold == f
-        part, fitted = structured.result()
-        local = fit_structured(cal.model, fold_parameters[f], poses.subset(train),
-                               fitted[train], np.random.default_rng(seeds[k]), start=start,
-                               max_learn=MAX_LEARN if start is None else WARM_LEARN,
-                               part=part)  # fmt: skip
-        before[test] = fitted[test]
-        after[test] = fitted[test] - local.predict(poses.subset(test))
-        return local
+    def one(k: int, structured: tuple[StructuredPart, Array], start: Hyperparameters | None
+            ) -> tuple[StructuredCorrection, Array]:  # fmt: skip
+        """Fold folds[k]'s correction learned on its training poses (its hyperparameters
+        searched from `start`, else cold), and its prediction at the fold's poses (m, 3)
+        [m] (recording order)."""
+        train, test = train_rows[k], fold == folds[k]
+        part, fitted = structured
+        local = fit_structured(cal.model, fold_parameters[folds[k]], poses.subset(train),
+                               fitted[train], np.random.default_rng(seeds[k]),
+                               start=start, max_learn=MAX_LEARN if start is None else
+                               WARM_LEARN, part=part)  # fmt: skip
+        return local, local.predict(poses.subset(test))
 
-    learned: list[StructuredCorrection] = []  # one per fold, in the order of `folds`
+    def rest(k: int, structured: tuple[StructuredPart, Array],
+             start: Hyperparameters) -> tuple[tuple[str, ...], Array]:  # fmt: skip
+        """`one`'s warnings and prediction: what the caller needs, light to send."""
+        local, predicted = one(k, structured, start)
+        return local.warnings, predicted
+
+    warned: list[tuple[str, ...]] = []  # each fold's warnings, in the order of `folds`
+    learned: StructuredCorrection | None = None  # the first fold's correction
     if folds:
         # the folds are independent but for the process's hyperparameters, the first
-        # fold's starting the others' search: the pool fits every fold's load-driven
-        # geometry (first fold's first) while this thread searches the first fold's
-        # hyperparameters, then the other folds' processes (numpy's linear algebra
-        # releases the GIL; each fold writes only its own rows)
-        with ThreadPoolExecutor(max_workers=FOLD_THREADS) as pool:
-            parts = [pool.submit(structure, k) for k in range(len(folds))]
-            learned.append(one(0, parts[0]))
-            start = learned[0].hyper
-            learned += pool.map(one, range(1, len(folds)), parts[1:])
-    warnings = [f"{w} (fold {f})" for f, c in zip(folds, learned) for w in c.warnings]
+        # fold's starting the others' search. Two processes (`forked.Aside`: threads ran
+        # at 1.1 cores): a child fits the other folds' load-driven geometry while this one
+        # fits the first fold whole (its cold search); then a child fits half of the
+        # other folds while this one fits the rest. Results are the same either way.
+        parts: dict[int, tuple[StructuredPart, Array]] = {}
+        with Aside([(k, partial(structure, k)) for k in range(1, len(folds))]) as aside:
+            parts[0] = structure(0)
+            learned, predicted = one(0, parts[0], None)
+            outcomes = {0: (learned.warnings, predicted)}
+            parts.update((k, aside.result(k)) for k in range(1, len(folds)))
+        start = learned.hyper
+        others = list(range(1, len(folds)))
+        theirs = others[: (len(others) + 1) // 2]
+        with Aside([(k, partial(rest, k, parts[k], start)) for k in theirs]) as half:
+            outcomes.update((k, rest(k, parts[k], start)) for k in others if k not in theirs)
+            outcomes.update((k, half.result(k)) for k in theirs)
+        for k, f in enumerate(folds):
+            test = fold == f
+            before[test] = parts[k][1][test]
+            after[test] = parts[k][1][test] - outcomes[k][1]
+            warned.append(outcomes[k][0])
+    warnings = [f"{w} (fold {f})" for f, ws in zip(folds, warned) for w in ws]
     scored = np.isin(fold, folds)
-    if not final and learned:
-        return before[scored], after[scored], replace(learned[0], warnings=tuple(warnings))
+    if not final and learned is not None:
+        return before[scored], after[scored], replace(learned, warnings=tuple(warnings))
     # all calibration residuals, with the first fold's hyperparameters (learned on most of
     # the same calibration poses: a search again would change them by its noise)
-    return before[scored], after[scored], _fitted_on_all(cal, recording, start, warnings)
+    hyper = None if learned is None else learned.hyper
+    return before[scored], after[scored], _fitted_on_all(cal, recording, hyper, warnings)
 
 
 def final_correction(

@@ -1,0 +1,157 @@
+"""Work done by a forked child process on the machine's other core while this process goes
+on: the only way to use a second core for Python-heavy work (matplotlib's figures, the
+hyperparameter searches and fits of a k-fold's folds: threads share one interpreter lock,
+and two threads of those ran at 1.1 cores).
+
+`Aside` forks one child that computes its tasks in order and writes each result (pickled)
+to a file of a private temporary folder as it is done, then its number to a pipe (a
+result through the pipe itself would block the child as soon as it passed the pipe's
+64 KiB until this process read it: the child stood idle). `result(key)` waits for the
+child's; a task
+the child could not deliver (it raised, died, sent a cut message or nothing within the
+timeout) or an `Aside` that could not fork (no os.fork, other Python threads running, the
+tasks run here at once) is computed here when asked: the caller gets the same value either
+way, only later. The child leaves with os._exit: no exit handler, no buffered output of
+this process written twice.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import pickle
+import select
+import shutil
+import signal
+import tempfile
+import threading
+from collections.abc import Callable, Hashable, Sequence
+from types import TracebackType
+from typing import IO, Generic, TypeVar
+
+T = TypeVar("T")
+
+#: seconds the child may take for one task (they take tenths to seconds): then it is
+#: killed and what it did not send is computed here
+TIMEOUT_S = 120.0
+
+
+def can_fork() -> bool:
+    """True when a forked child is safe and useful: os.fork exists and this is the only
+    Python thread (a fork copies only the calling thread: a lock another thread holds, an
+    rclpy executor's or a thread pool's, would stay held in the child for ever)."""
+    return hasattr(os, "fork") and threading.active_count() == 1
+
+
+class Aside(Generic[T]):
+    """`tasks` ((key, zero-argument callable) each; the results picklable) computed in
+    order by a forked child while the caller goes on; `result(key)` gives each. Use as a
+    context manager (or call `close`): leaving reaps the child, killed at once when an
+    exception (Ctrl-C included) leaves the block.
+
+    A task is computed twice at most (in the child, then here when the child did not send
+    it), so tasks must not change the state they share with the caller: the child's
+    changes are lost, the result is what counts."""
+
+    def __init__(self, tasks: Sequence[tuple[Hashable, Callable[[], T]]],
+                 timeout_s: float = TIMEOUT_S) -> None:  # fmt: skip
+        self._tasks = dict(tasks)
+        self._results: dict[Hashable, T] = {}
+        self._timeout_s = timeout_s
+        self._received = 0
+        self._keys = [key for key, _ in tasks]
+        self._child: tuple[int, IO[bytes], str] | None = None  # pid, pipe, folder
+        if self._tasks and can_fork():
+            self._fork(list(tasks))
+
+    def _fork(self, tasks: list[tuple[Hashable, Callable[[], T]]]) -> None:
+        folder = tempfile.mkdtemp(prefix="robot_calib-aside-")
+        read, write = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: compute, send, and leave without running any exit handler
+            code = 0
+            try:
+                os.close(read)
+                with os.fdopen(write, "wb") as pipe:
+                    for number, (_, task) in enumerate(tasks):
+                        with open(os.path.join(folder, str(number)), "wb") as file:
+                            pickle.dump(task(), file, protocol=pickle.HIGHEST_PROTOCOL)
+                        pipe.write(number.to_bytes(8, "little"))
+                        pipe.flush()
+            except BaseException:  # noqa: BLE001 - the parent computes what did not come
+                code = 1
+            finally:
+                os._exit(code)
+        os.close(write)
+        self._child = (pid, os.fdopen(read, "rb"), folder)
+
+    @property
+    def forked(self) -> bool:
+        """True while a child computes the tasks not yet received."""
+        return self._child is not None
+
+    @property
+    def received(self) -> int:
+        """How many results came from the child so far."""
+        return self._received
+
+    def __contains__(self, key: Hashable) -> bool:
+        return key in self._tasks
+
+    def result(self, key: Hashable) -> T:
+        """The result of task `key`: the child's when it sends it, else computed here."""
+        while key not in self._results and self._receive():
+            pass
+        if key not in self._results:
+            self._results[key] = self._tasks[key]()
+        return self._results[key]
+
+    def _receive(self) -> bool:
+        """One result from the child; False (the child reaped) at its end, or when it sends
+        nothing within the timeout or a message cut short (it died)."""
+        if self._child is None:
+            return False
+        _, pipe, folder = self._child
+        if select.select([pipe], [], [], self._timeout_s)[0]:
+            head = pipe.read(8)
+            number = int.from_bytes(head, "little") if len(head) == 8 else len(self._keys)
+            if number < len(self._keys):
+                path = os.path.join(folder, str(number))
+                try:
+                    with open(path, "rb") as file:
+                        self._results[self._keys[number]] = pickle.load(file)
+                    self._received += 1
+                    return True
+                except (OSError, pickle.UnpicklingError, EOFError, ValueError, AttributeError):
+                    pass
+                finally:
+                    with contextlib.suppress(OSError):
+                        os.unlink(path)
+        self.close(abort=True)
+        return False
+
+    def close(self, abort: bool = False) -> None:
+        """Reap the child: after its last result, or at once (`abort`: killed, what it did
+        not send yet computed here when asked)."""
+        if self._child is None:
+            return
+        pid, pipe, folder = self._child
+        self._child = None
+        try:
+            if abort:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+            else:
+                while chunk := pipe.read(1 << 16):  # what it still sends: unused
+                    del chunk
+            pipe.close()
+            os.waitpid(pid, 0)
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
+
+    def __enter__(self) -> Aside[T]:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:  # fmt: skip
+        self.close(abort=kind is not None)
