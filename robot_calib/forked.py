@@ -13,6 +13,11 @@ timeout) or an `Aside` that could not fork (no os.fork, other Python threads run
 tasks run here at once) is computed here when asked: the caller gets the same value either
 way, only later. The child leaves with os._exit: no exit handler, no buffered output of
 this process written twice.
+
+`Helper` forks its child early, before the tasks exist: it gets ready meanwhile (imports
+matplotlib and loads its fonts, 0.4 s on the core this process leaves idle while it reads
+and fits) and then takes one batch of tasks, pickled (so only module-level functions and
+partials of them), for an `Aside`.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from typing import IO, Generic, TypeVar
 
 T = TypeVar("T")
 
+FOLDER_PREFIX = "robot_calib-aside-"  # the private temporary folders' names start so
 #: seconds the child may take for one task (they take tenths to seconds): then it is
 #: killed and what it did not send is computed here
 TIMEOUT_S = 120.0
@@ -51,37 +57,38 @@ class Aside(Generic[T]):
 
     A task is computed twice at most (in the child, then here when the child did not send
     it), so tasks must not change the state they share with the caller: the child's
-    changes are lost, the result is what counts."""
+    changes are lost, the result is what counts. With a `helper` (`Helper`, not yet used)
+    its child computes the tasks instead of a new fork, when they can be pickled."""
 
     def __init__(self, tasks: Sequence[tuple[Hashable, Callable[[], T]]],
-                 timeout_s: float = TIMEOUT_S) -> None:  # fmt: skip
+                 timeout_s: float = TIMEOUT_S, helper: Helper | None = None) -> None:  # fmt: skip
         self._tasks = dict(tasks)
         self._results: dict[Hashable, T] = {}
         self._timeout_s = timeout_s
         self._received = 0
         self._keys = [key for key, _ in tasks]
         self._child: tuple[int, IO[bytes], str] | None = None  # pid, pipe, folder
-        if self._tasks and can_fork():
+        if not self._tasks:
+            return
+        if helper is not None:
+            self._child = helper.take(list(tasks))
+        if self._child is None and can_fork():
             self._fork(list(tasks))
 
     def _fork(self, tasks: list[tuple[Hashable, Callable[[], T]]]) -> None:
-        folder = tempfile.mkdtemp(prefix="robot_calib-aside-")
+        folder = tempfile.mkdtemp(prefix=FOLDER_PREFIX)
         read, write = os.pipe()
+        parent = os.getpid()
         pid = os.fork()
         if pid == 0:  # the child: compute, send, and leave without running any exit handler
             code = 0
             try:
                 os.close(read)
-                with os.fdopen(write, "wb") as pipe:
-                    for number, (_, task) in enumerate(tasks):
-                        with open(os.path.join(folder, str(number)), "wb") as file:
-                            pickle.dump(task(), file, protocol=pickle.HIGHEST_PROTOCOL)
-                        pipe.write(number.to_bytes(8, "little"))
-                        pipe.flush()
+                _compute(tasks, folder, write)
             except BaseException:  # noqa: BLE001 - the parent computes what did not come
                 code = 1
             finally:
-                os._exit(code)
+                _leave(code, parent, folder)
         os.close(write)
         self._child = (pid, os.fdopen(read, "rb"), folder)
 
@@ -155,3 +162,111 @@ class Aside(Generic[T]):
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
                  trace: TracebackType | None) -> None:  # fmt: skip
         self.close(abort=kind is not None)
+
+
+def _leave(code: int, parent: int, folder: str) -> None:
+    """A child's end: its folder removed when the process that forked it is gone (killed:
+    nobody else will), then os._exit (no exit handler of the parent's runs twice)."""
+    try:
+        if os.getppid() != parent:
+            shutil.rmtree(folder, ignore_errors=True)
+    finally:
+        os._exit(code)
+
+
+def _compute(tasks: Sequence[tuple[Hashable, Callable[[], object]]], folder: str,
+             write: int) -> None:  # fmt: skip
+    """In a child: each task's result pickled to `folder`/<its number>, then its number
+    (8 bytes, written at once: a pipe never splits so few) to the pipe `write`."""
+    with os.fdopen(write, "wb") as pipe:
+        for number, (_, task) in enumerate(tasks):
+            with open(os.path.join(folder, str(number)), "wb") as file:
+                pickle.dump(task(), file, protocol=pickle.HIGHEST_PROTOCOL)
+            pipe.write(number.to_bytes(8, "little"))
+            pipe.flush()
+
+
+class Helper:
+    """A child forked now (when `can_fork`) that runs `prepare` (e.g. imports) while this
+    process goes on, then waits for one batch of tasks (`take`, by an `Aside`); after
+    `after`'s (a helper started before) has prepared, so that two helpers never compete
+    with this process for two cores. The batch goes through a file of the helper's
+    private folder (the pipe only signals it), so `take` never blocks.
+
+    A helper never given a batch must be closed (`close`): it is killed and reaped. One
+    that outlives this process (killed) ends when its batch pipe reads end-of-file."""
+
+    def __init__(self, prepare: Callable[[], object], after: Helper | None = None) -> None:
+        self._child: tuple[int, int, int, str] | None = None  # pid, results, batch, folder
+        self._ready = -1  # this process's end of the pipe closed when the child is ready
+        if not can_fork():
+            return
+        folder = tempfile.mkdtemp(prefix=FOLDER_PREFIX)
+        results, batch, ready = os.pipe(), os.pipe(), os.pipe()
+        wait = after._ready if after is not None else -1
+        parent = os.getpid()
+        pid = os.fork()
+        if pid == 0:  # the child
+            code = 0
+            try:
+                for fd in (results[0], batch[1], ready[0]):
+                    os.close(fd)
+                if wait >= 0:
+                    os.read(wait, 1)  # the helper before ready (end of file) or gone
+                try:
+                    prepare()
+                finally:
+                    os.close(ready[1])
+                if os.read(batch[0], 1):  # end of file: this process ended without a batch
+                    with open(os.path.join(folder, "batch"), "rb") as file:
+                        tasks = pickle.load(file)
+                    _compute(tasks, folder, results[1])
+            except BaseException:  # noqa: BLE001 - the parent computes what did not come
+                code = 1
+            finally:
+                _leave(code, parent, folder)
+        for fd in (results[1], batch[0], ready[1]):
+            os.close(fd)
+        if after is not None:
+            after._release_ready()
+        self._ready = ready[0]
+        self._child = (pid, results[0], batch[1], folder)
+
+    def _release_ready(self) -> None:
+        if self._ready >= 0:
+            os.close(self._ready)
+            self._ready = -1
+
+    def take(self, tasks: Sequence[tuple[Hashable, Callable[[], T]]]
+             ) -> tuple[int, IO[bytes], str] | None:  # fmt: skip
+        """Hand `tasks` to the child: its pid, results pipe and folder (for `Aside`), or
+        None when it cannot (no child, already given a batch, tasks not picklable: it is
+        then closed)."""
+        if self._child is None:
+            return None
+        pid, results, batch, folder = self._child
+        try:
+            with open(os.path.join(folder, "batch"), "wb") as file:
+                pickle.dump(list(tasks), file, protocol=pickle.HIGHEST_PROTOCOL)
+            os.write(batch, b"1")
+        except (pickle.PicklingError, AttributeError, TypeError, OSError):
+            self.close()
+            return None
+        os.close(batch)
+        self._release_ready()
+        self._child = None
+        return pid, os.fdopen(results, "rb"), folder
+
+    def close(self) -> None:
+        """Kill and reap the child if it never took a batch; remove its folder."""
+        self._release_ready()
+        if self._child is None:
+            return
+        pid, results, batch, folder = self._child
+        self._child = None
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        os.close(results)
+        os.close(batch)
+        os.waitpid(pid, 0)
+        shutil.rmtree(folder, ignore_errors=True)

@@ -66,6 +66,44 @@ print("OK")
 """
 
 
+HELPER_CHECK = """
+import os, time, glob, tempfile, functools
+import numpy as np
+from robot_calib.forked import Aside, Helper
+
+parent = os.getpid()
+folders = lambda: set(glob.glob(os.path.join(tempfile.gettempdir(), "robot_calib-aside-*")))
+before = folders()
+marks = os.path.join(tempfile.mkdtemp(), "ready")
+
+def prepare(name):  # slow, as importing matplotlib is; says when it ran
+    time.sleep(0.3)
+    with open(marks, "a") as f:
+        f.write(f"{name} {time.monotonic()}\\n")
+
+first = Helper(functools.partial(prepare, "first"))
+second = Helper(functools.partial(prepare, "second"), after=first)
+third = Helper(functools.partial(prepare, "third"))
+idle = Helper(functools.partial(prepare, "idle"))
+tasks = [(k, functools.partial(np.arange, k)) for k in (3, 5)]  # picklable
+with Aside(tasks, helper=first) as aside:
+    assert aside.forked
+    assert [aside.result(k).tolist() for k in (5, 3)] == [list(range(5)), list(range(3))]
+    assert aside.received == 2
+with Aside([("pid", os.getpid)], helper=second) as aside:
+    assert aside.result("pid") not in (parent, None) and aside.received == 1
+with Aside([("lambda", lambda: os.getpid())], helper=third) as aside:  # not picklable:
+    assert aside.result("lambda") != parent  # a child forked for it instead
+with Aside([("again", functools.partial(int, 7))], helper=first) as aside:  # used: forks anew
+    assert aside.result("again") == 7
+idle.close()  # never given a batch: killed and reaped
+times = dict(line.split() for line in open(marks))
+assert float(times["second"]) >= float(times["first"]) + 0.25, times  # one after the other
+assert folders() == before, folders() - before
+print("OK")
+"""
+
+
 def _fresh(code: str) -> str:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=300, check=False)  # fmt: skip
@@ -78,6 +116,14 @@ def test_results_aside_are_the_results_here_whatever_the_child_does() -> None:
     or died in, and those after it, are computed here; Ctrl-C in the block kills the
     child; with another thread running nothing is forked; no temporary folder is left."""
     assert _fresh(ASIDE_CHECK) == "OK"
+
+
+def test_a_helper_prepared_early_computes_the_batch_it_is_given_later() -> None:
+    """`Helper`: its child prepares while the caller goes on (a second one only after the
+    first), then computes the picklable batch an Aside hands it (any order of results);
+    unpicklable tasks or a used helper: the Aside forks a child of its own; an unused
+    helper is killed; no temporary folder left."""
+    assert _fresh(HELPER_CHECK) == "OK"
 
 
 KFOLD_CHECK = """

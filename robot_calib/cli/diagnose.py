@@ -59,6 +59,7 @@ def main(args: argparse.Namespace) -> int:
         diagnose_bags,
         html_report_path,
         report_path,
+        started_figures,
         write_diagnosis,
     )
 
@@ -74,14 +75,16 @@ def main(args: argparse.Namespace) -> int:
     if accuracy is not None and not (math.isfinite(accuracy) and 1e-4 <= accuracy < 10):
         raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, 0.0001 (0.1 um) "
                          "to 10")  # fmt: skip
-    diagnosis, ladder, recording = diagnose_bags(
-        args.bags, robot, args.holdout or (), args.pair_tolerance, log,
-        None if accuracy is None else accuracy * 1e-3,
-    )  # fmt: skip
-    compared, warnings = compare_before_after(ladder)
-    diagnosis = dataclasses.replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
-    report = write_diagnosis(diagnosis, ladder, recording, output, args.force,
-                             warnings=warnings, compared=compared)  # fmt: skip
+    with started_figures() as figures:  # its helpers get ready while the diagnosis runs
+        diagnosis, ladder, recording = diagnose_bags(
+            args.bags, robot, args.holdout or (), args.pair_tolerance, log,
+            None if accuracy is None else accuracy * 1e-3,
+        )  # fmt: skip
+        compared, warnings = compare_before_after(ladder)
+        diagnosis = dataclasses.replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
+        report = write_diagnosis(diagnosis, ladder, recording, output, args.force,
+                                 warnings=warnings, compared=compared,
+                                 figures=figures)  # fmt: skip
     print_diagnosis(diagnosis, output, report, time.perf_counter() - started)
     for warning in warnings:
         print(warning)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 from collections.abc import Callable, Sequence
 from functools import partial
+from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -16,7 +17,7 @@ import numpy as np
 from robot_calib.diagnose.ladder import Ladder, Rung
 from robot_calib.diagnose.names import wrap_name
 from robot_calib.diagnose.signatures import arc_angle_errors
-from robot_calib.forked import Aside, can_fork
+from robot_calib.forked import Aside, Helper, can_fork
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording
 
@@ -66,51 +67,91 @@ class FigureCache:
     """PNG bytes of the figures of one report set, each drawn once: the Markdown report
     and the HTML page show the same figures (drawing them twice cost seconds).
 
-    `draw_aside` draws some of them in a forked child process while this one draws the
-    others (`robot_calib.forked.Aside`: matplotlib is single-threaded, a second process is
-    the only way to use the second core; half of a diagnosis of 2773 poses was figures).
-    `png` of a figure drawn aside waits for it, and draws it here if the child could not
-    (it died, or fork is not available): the bytes are the same."""
+    `draw_aside` draws them in other processes while this one writes the reports
+    (`robot_calib.forked`: matplotlib is single-threaded, a second process is the only
+    way to use the second core; half of a diagnosis of 2773 poses was figures): in the
+    helpers of `started` (forked when the run began, matplotlib imported and its fonts
+    loaded by the time the figures are asked for), else in a child forked then. `png` of
+    a figure drawn aside waits for it, and draws it here if no other process could (it
+    died, or fork is not available): the bytes are the same."""
 
-    def __init__(self, dpi: int = 100) -> None:
+    def __init__(self, dpi: int = 100, helpers: Sequence[Helper] = ()) -> None:
         self.dpi = dpi
         self._png: dict[str, bytes | None] = {}
-        self._aside: Aside[bytes | None] | None = None  # the figures a child draws
+        self._asides: list[Aside[bytes | None]] = []  # the processes drawing figures
+        self._helpers = list(helpers)
+
+    @classmethod
+    def started(cls, prepare: Callable[[], object], dpi: int = 100) -> FigureCache:
+        """A cache whose two helper processes start now, one after the other, running
+        `prepare` (the imports of the modules whose objects the figures are drawn from:
+        they come pickled), then importing matplotlib and loading its fonts (no helper
+        without fork: then drawn as `draw_aside` says). Close it (`close`), or use it as a
+        context manager."""
+        ready = partial(_get_ready, prepare)
+        first = Helper(ready)
+        return cls(dpi, [first, Helper(ready, after=first)])
 
     def png(self, key: str, draw: Callable[[], Figure | None]) -> bytes | None:
         """The PNG of figure `key`, drawn by `draw` the first time (None: no figure)."""
         if key not in self._png:
-            aside = self._aside
-            self._png[key] = (aside.result(key) if aside is not None and key in aside
-                              else self._render(draw))  # fmt: skip
+            aside = next((a for a in self._asides if key in a), None)
+            self._png[key] = (aside.result(key) if aside is not None
+                              else render_png(draw, self.dpi))  # fmt: skip
         return self._png[key]
 
-    def _render(self, draw: Callable[[], Figure | None]) -> bytes | None:
-        fig = draw()
-        if fig is None:
-            return None
-        buffer = io.BytesIO()
-        fig.savefig(buffer, format="png", dpi=self.dpi)
-        pyplot().close(fig)
-        return buffer.getvalue()
-
-    def draw_aside(self, draws: Sequence[tuple[str, Callable[[], Figure | None]]]) -> None:
-        """Draw the figures `draws` ((key, draw) each, as `png` takes them) in a forked
-        child while the caller goes on (drawn here when asked without a child: no fork,
-        other threads running; nothing once a child runs)."""
-        todo = [(key, draw) for key, draw in draws if key not in self._png]
-        if not todo or self._aside is not None or not can_fork():
+    def draw_aside(self, *groups: Sequence[tuple[str, Callable[[], Figure | None]]]) -> None:
+        """Draw the figures of `groups` ((key, draw) each, as `png` takes them) in other
+        processes while the caller goes on: each group in a helper of `started` (their
+        draws picklable: module-level functions and partials), else the first group in a
+        child forked now and the others here when asked. Once only."""
+        if self._asides:
             return
-        _warm_up(pyplot())  # imported and its fonts loaded before the fork: both inherit them
-        self._aside = Aside([(key, partial(self._render, draw)) for key, draw in todo],
-                            timeout_s=ASIDE_TIMEOUT_S)  # fmt: skip
+        helpers, self._helpers = self._helpers, []
+        for k, group in enumerate(groups):
+            tasks = [(key, partial(render_png, draw, self.dpi)) for key, draw in group
+                     if key not in self._png]  # fmt: skip
+            if tasks and k < len(helpers):
+                self._asides.append(Aside(tasks, ASIDE_TIMEOUT_S, helper=helpers[k]))
+            elif tasks and k == 0 and can_fork():
+                _warm_up(pyplot())  # imported and fonts loaded before the fork: both inherit
+                self._asides.append(Aside(tasks, ASIDE_TIMEOUT_S))
+        for helper in helpers:
+            helper.close()  # unused (one that took its batch: nothing to do)
 
     def close(self, abort: bool = False) -> None:
-        """Reap the child: after its last figure, or at once (`abort`: killed, on an error
-        or an interruption here, its figures unused)."""
-        if self._aside is not None:
-            self._aside.close(abort)
-            self._aside = None
+        """Reap the processes drawing: after their last figure, or at once (`abort`:
+        killed, on an error or an interruption here, their figures unused); unused helpers
+        are killed."""
+        for aside in self._asides:
+            aside.close(abort)
+        for helper in self._helpers:
+            helper.close()
+        self._asides, self._helpers = [], []
+
+    def __enter__(self) -> FigureCache:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:  # fmt: skip
+        self.close(abort=kind is not None)
+
+
+def render_png(draw: Callable[[], Figure | None], dpi: int) -> bytes | None:
+    """The PNG bytes of the figure `draw` makes (None: no figure), at `dpi`."""
+    fig = draw()
+    if fig is None:
+        return None
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi)
+    pyplot().close(fig)
+    return buffer.getvalue()
+
+
+def _get_ready(prepare: Callable[[], object]) -> None:
+    """A helper's preparation: `prepare`, then matplotlib imported, its fonts loaded."""
+    prepare()
+    _warm_up(pyplot())
 
 
 #: seconds a figure drawn aside may take at most (they take tenths): then the child is

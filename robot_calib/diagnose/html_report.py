@@ -17,8 +17,9 @@ from __future__ import annotations
 import base64
 import html
 import io
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -357,7 +358,8 @@ def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibr
             f"<pre><code>{_e(commands)}</code></pre></section>")  # fmt: skip
 
 
-def _accuracy(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: str) -> str:
+def _accuracy(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: str,
+              figures: FigureCache, histogram: Callable[[], Figure | None]) -> str:  # fmt: skip
     rows = [
         [_model(m.model), m.role, m.scored_on, m.accuracy.n_points,
          f"{m.accuracy.pairwise_mean_mm:.4f} / {m.accuracy.pairwise_max_mm:.4f}",
@@ -372,11 +374,9 @@ def _accuracy(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: str) 
     note = ("" if scored == ["hold-out bags"] else
             "<p class='muted'>Not all rows are held out: in-sample rows are optimistic; "
             "k-fold rows are each fold predicted by the model fitted without it.</p>")  # fmt: skip
-    hist = error_histogram_figure([(m.model, m.errors_mm) for m in compared],
-                                  " / ".join(scored))  # fmt: skip
     return (_table(head, rows, classes, text_columns=3) + note
-            + _img(hist, "Per-point error of each model (absolute distance, tracker frame); "
-                   "dotted: each model's rms"))  # fmt: skip
+            + _img(figures.png("histogram", histogram), "Per-point error of each model "
+                   "(absolute distance, tracker frame); dotted: each model's rms"))  # fmt: skip
 
 
 def _ladder(diagnosis: Diagnosis, ladder: Ladder, figures: FigureCache) -> str:
@@ -501,7 +501,7 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
     return "".join(out)
 
 
-def _vectors(ladder: Ladder, recording: Recording) -> str:
+def vectors_figure(ladder: Ladder, recording: Recording) -> Figure:
     """3D residual vectors of geometric and the best rung at the points they are scored on."""
     held = ladder.holdout
     points = held.points if held is not None else recording.points
@@ -509,13 +509,18 @@ def _vectors(ladder: Ladder, recording: Recording) -> str:
     rows = rungs[-1].scored_rows  # a subset scored (100k poses): both panels on it
     residuals = [(r.model, r.heldout_residuals if r.scored_rows is not None or rows is None
                   else r.heldout_residuals[rows]) for r in rungs]  # fmt: skip
-    fig = quiver_figure(ladder, rungs[-1].scored(points) if held is None else points,
-                        residuals, ladder.scored_on)  # fmt: skip
-    return _img(
-        fig,
-        "Residual vectors (predicted - measured) at the measured points, robot "
-        "base frame; one scale for all panels (in the title); colour: |residual|",
-    )
+    return quiver_figure(ladder, rungs[-1].scored(points) if held is None else points,
+                         residuals, ladder.scored_on)  # fmt: skip
+
+
+def page_figures(ladder: Ladder, recording: Recording, compared: Sequence[ModelErrors]
+                 ) -> list[tuple[str, Callable[[], Figure | None]]]:  # fmt: skip
+    """The HTML page's own figures (the Markdown report's, `report.report_figures`, it
+    shows too): (cache key, draw) each, the draws picklable (`FigureCache.draw_aside`)."""
+    scored = " / ".join(sorted({m.scored_on for m in compared}))
+    errors = [(m.model, m.errors_mm) for m in compared]
+    return [("histogram", partial(error_histogram_figure, errors, scored)),
+            ("vectors", partial(vectors_figure, ladder, recording))]  # fmt: skip
 
 
 def _iso(diagnosis: Diagnosis) -> str:
@@ -579,15 +584,19 @@ def html_report(
     warning of the run (the recording's and the diagnosis' are added here); `figures`:
     the figures already drawn for the Markdown report (default: none yet)."""
     figures = FigureCache() if figures is None else figures
+    own = dict(page_figures(ladder, recording, compared))
     every = list(dict.fromkeys([*recording.warnings, *diagnosis.warnings, *warnings]))
     held = f" ({', '.join(diagnosis.holdout)})" if diagnosis.holdout else ""
     sections = [
-        ("accuracy", "Accuracy before and after calibration", _accuracy(diagnosis, compared,
-                                                                        best.label)),
+        ("accuracy", "Accuracy before and after calibration",
+         _accuracy(diagnosis, compared, best.label, figures, own["histogram"])),
         ("ladder", "The ladder: which effects, and each one's share",
          _ladder(diagnosis, ladder, figures)),
         ("where", "Where the residual lies", _where(diagnosis, ladder, recording, figures)),
-        ("vectors", "3D residual vectors", _vectors(ladder, recording)),
+        ("vectors", "3D residual vectors", _img(
+            figures.png("vectors", own["vectors"]),
+            "Residual vectors (predicted - measured) at the measured points, robot base "
+            "frame; one scale for all panels (in the title); colour: |residual|")),
         ("iso9283", "ISO 9283 pose accuracy and repeatability", _iso(diagnosis)),
         ("parameters", f"Parameters of the best model ({best.label})", _parameters(best)),
         ("warnings", "Warnings and flagged outliers", _problems(diagnosis, every)),

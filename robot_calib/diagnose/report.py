@@ -4,6 +4,7 @@ joint angle split by approach direction, residual against time), readable withou
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -43,16 +44,17 @@ def plot_paths(stem: Path) -> list[Path]:
 
 def report_figures(ladder: Ladder, recording: Recording, floor_mm: float | None
                    ) -> list[tuple[str, str, str, Callable[[], Figure | None]]]:  # fmt: skip
-    """The Markdown report's figures: (suffix of its PNG, cache key, title, draw) each."""
+    """The Markdown report's figures: (suffix of its PNG, cache key, title, draw) each,
+    the draws picklable (`FigureCache.draw_aside`)."""
     return [
         ("ladder", "ladder", "The ladder: held-out error of each model",
-         lambda: ladder_figure(ladder, floor_mm)),
+         partial(ladder_figure, ladder, floor_mm)),
         ("angle", "angle_urad", "Residual against each joint angle, by approach direction",
-         lambda: angle_figure(ladder, recording, "urad")),
+         partial(angle_figure, ladder, recording, "urad")),
         ("map", "map", "Residual maps: against reach, height and every joint's reading",
-         lambda: residual_map_figure(ladder, recording)),
+         partial(residual_map_figure, ladder, recording)),
         ("time", "time", "Residual against time (in-sample)",
-         lambda: time_figure(ladder, recording)),
+         partial(time_figure, ladder, recording)),
     ]  # fmt: skip
 
 

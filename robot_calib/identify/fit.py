@@ -22,7 +22,6 @@ from typing import cast
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 
 from robot_calib.errors import InputError
 from robot_calib.identify.identifiability import (
@@ -116,7 +115,11 @@ def _solve(
     """Minimise the problem's residuals from x0: Levenberg-Marquardt for least squares
     (MINPACK: fast and exact for small dense problems), or trust-region reflective with a
     soft-L1 loss of `robust_scale` [m] (LM supports no robust loss). x_scale='jac': the
-    parameters mix metres and radians, the Jacobian's columns give their natural scales."""
+    parameters mix metres and radians, the Jacobian's columns give their natural scales.
+    scipy.optimize is imported here, at the first fit: importing it costs 0.5 s, which a
+    process that only reads calibrations (the report helpers, predict, export) saves."""
+    from scipy.optimize import least_squares
+
     if not len(x0):
         return _Solved(x0, 0, "no free parameters", 0, 0, 0.0)
     last_report = [time.monotonic()]
