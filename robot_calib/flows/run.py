@@ -30,6 +30,7 @@ from robot_calib.flows.diagnose import (
     html_report_path,
     marked_implausible,
     selected_document,
+    started_figures,
     write_diagnosis,
 )
 from robot_calib.flows.simulate import Simulation, simulate, simulation_world
@@ -216,20 +217,21 @@ def _run_in(
         f"[3/{steps}] calibrate: {', '.join(names)}"
         + ("" if swept else " (no cpa: the plan has no circle sweep of every joint)")
     )
-    models = {}
-    for name in names:
-        cal = calibrate_recording(recording, description, name, log=log)
-        write_json_atomic(cal.to_dict(recording), folder / f"params_{name}.json")
-        models[name] = ModelScore(cal, accuracy(held.points, cal.predict(held.poses)))
-    say(f"[4/{steps}] diagnose the sim-to-real gap (hold-out: {holdout.name})")
-    diagnosis, ladder = diagnose_recordings(recording, description, held, log)
-    best, warnings = _best_model(models, ladder)
-    diagnosis = replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
-    report = write_diagnosis(
-        diagnosis, ladder, recording, folder / "diagnosis.json",
-        calibrations={n: m.calibration for n, m in models.items()},
-        best=(best, folder / "params_best.json"), warnings=warnings,
-    )  # fmt: skip
+    with started_figures() as figures:  # its helpers get ready while the models are fitted
+        models = {}
+        for name in names:
+            cal = calibrate_recording(recording, description, name, log=log)
+            write_json_atomic(cal.to_dict(recording), folder / f"params_{name}.json")
+            models[name] = ModelScore(cal, accuracy(held.points, cal.predict(held.poses)))
+        say(f"[4/{steps}] diagnose the sim-to-real gap (hold-out: {holdout.name})")
+        diagnosis, ladder = diagnose_recordings(recording, description, held, log)
+        best, warnings = _best_model(models, ladder)
+        diagnosis = replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
+        report = write_diagnosis(
+            diagnosis, ladder, recording, folder / "diagnosis.json",
+            calibrations={n: m.calibration for n, m in models.items()},
+            best=(best, folder / "params_best.json"), warnings=warnings, figures=figures,
+        )  # fmt: skip
     scores = {n: m.holdout.absolute_rms_mm for n, m in models.items()}
     scores.update({r.model: r.heldout.absolute_rms_mm for r in ladder.rungs})
     write_json_atomic(
