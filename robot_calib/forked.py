@@ -17,7 +17,7 @@ this process written twice.
 `Helper` forks its child early, before the tasks exist: it gets ready meanwhile (imports
 matplotlib and loads its fonts, 0.4 s on the core this process leaves idle while it reads
 and fits) and then takes one batch of tasks, pickled (so only module-level functions and
-partials of them), for an `Aside`.
+partials of them), for an `Aside`, sharing it with a twin it forks then.
 """
 
 from __future__ import annotations
@@ -58,10 +58,15 @@ class Aside(Generic[T]):
     A task is computed twice at most (in the child, then here when the child did not send
     it), so tasks must not change the state they share with the caller: the child's
     changes are lost, the result is what counts. With a `helper` (`Helper`, not yet used)
-    its child computes the tasks instead of a new fork, when they can be pickled."""
+    its child computes the tasks instead of a new fork, when they can be pickled; `split`:
+    the tasks from that index on by a twin it forks (both cores), the others by itself.
+
+    Every child leads a process group of its own (a helper's twin belongs to it), which an
+    abort kills whole; so Ctrl-C at the terminal reaches this process only, which ends them."""
 
     def __init__(self, tasks: Sequence[tuple[Hashable, Callable[[], T]]],
-                 timeout_s: float = TIMEOUT_S, helper: Helper | None = None) -> None:  # fmt: skip
+                 timeout_s: float = TIMEOUT_S, helper: Helper | None = None,
+                 split: int | None = None) -> None:  # fmt: skip
         self._tasks = dict(tasks)
         self._results: dict[Hashable, T] = {}
         self._timeout_s = timeout_s
@@ -71,7 +76,7 @@ class Aside(Generic[T]):
         if not self._tasks:
             return
         if helper is not None:
-            self._child = helper.take(list(tasks))
+            self._child = helper.take(list(tasks), split)
         if self._child is None and can_fork():
             self._fork(list(tasks))
 
@@ -83,8 +88,9 @@ class Aside(Generic[T]):
         if pid == 0:  # the child: compute, send, and leave without running any exit handler
             code = 0
             try:
+                os.setpgid(0, 0)
                 os.close(read)
-                _compute(tasks, folder, write)
+                _compute(list(enumerate(tasks)), folder, write)
             except BaseException:  # noqa: BLE001 - the parent computes what did not come
                 code = 1
             finally:
@@ -146,8 +152,7 @@ class Aside(Generic[T]):
         self._child = None
         try:
             if abort:
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(pid, signal.SIGKILL)
+                _kill(pid)
             else:
                 while chunk := pipe.read(1 << 16):  # what it still sends: unused
                     del chunk
@@ -174,12 +179,21 @@ def _leave(code: int, parent: int, folder: str) -> None:
         os._exit(code)
 
 
-def _compute(tasks: Sequence[tuple[Hashable, Callable[[], object]]], folder: str,
+def _kill(pid: int) -> None:
+    """SIGKILL to the process group `pid` leads (a child and its twin), else to `pid`."""
+    with contextlib.suppress(ProcessLookupError):
+        try:
+            os.killpg(pid, signal.SIGKILL)
+        except ProcessLookupError:  # not (yet) leading a group: the process itself
+            os.kill(pid, signal.SIGKILL)
+
+
+def _compute(tasks: Sequence[tuple[int, tuple[Hashable, Callable[[], object]]]], folder: str,
              write: int) -> None:  # fmt: skip
-    """In a child: each task's result pickled to `folder`/<its number>, then its number
-    (8 bytes, written at once: a pipe never splits so few) to the pipe `write`."""
+    """In a child: each (number, task)'s result pickled to `folder`/<number>, then the
+    number (8 bytes, written at once: a pipe never splits so few) to the pipe `write`."""
     with os.fdopen(write, "wb") as pipe:
-        for number, (_, task) in enumerate(tasks):
+        for number, (_, task) in tasks:
             with open(os.path.join(folder, str(number)), "wb") as file:
                 pickle.dump(task(), file, protocol=pickle.HIGHEST_PROTOCOL)
             pipe.write(number.to_bytes(8, "little"))
@@ -188,85 +202,90 @@ def _compute(tasks: Sequence[tuple[Hashable, Callable[[], object]]], folder: str
 
 class Helper:
     """A child forked now (when `can_fork`) that runs `prepare` (e.g. imports) while this
-    process goes on, then waits for one batch of tasks (`take`, by an `Aside`); after
-    `after`'s (a helper started before) has prepared, so that two helpers never compete
-    with this process for two cores. The batch goes through a file of the helper's
-    private folder (the pipe only signals it), so `take` never blocks.
+    process goes on, then waits for one batch of tasks (`take`, by an `Aside`), which it
+    may share with a twin it forks then (both prepared: the preparation is paid once).
+    The batch goes through a file of the helper's private folder (the pipe only signals
+    it), so `take` never blocks.
 
     A helper never given a batch must be closed (`close`): it is killed and reaped. One
     that outlives this process (killed) ends when its batch pipe reads end-of-file."""
 
-    def __init__(self, prepare: Callable[[], object], after: Helper | None = None) -> None:
+    def __init__(self, prepare: Callable[[], object]) -> None:
         self._child: tuple[int, int, int, str] | None = None  # pid, results, batch, folder
-        self._ready = -1  # this process's end of the pipe closed when the child is ready
         if not can_fork():
             return
         folder = tempfile.mkdtemp(prefix=FOLDER_PREFIX)
-        results, batch, ready = os.pipe(), os.pipe(), os.pipe()
-        wait = after._ready if after is not None else -1
+        results, batch = os.pipe(), os.pipe()
         parent = os.getpid()
         pid = os.fork()
         if pid == 0:  # the child
             code = 0
             try:
-                for fd in (results[0], batch[1], ready[0]):
-                    os.close(fd)
-                if wait >= 0:
-                    os.read(wait, 1)  # the helper before ready (end of file) or gone
-                try:
-                    prepare()
-                finally:
-                    os.close(ready[1])
+                os.setpgid(0, 0)
+                os.close(results[0])
+                os.close(batch[1])
+                prepare()
                 if os.read(batch[0], 1):  # end of file: this process ended without a batch
                     with open(os.path.join(folder, "batch"), "rb") as file:
-                        tasks = pickle.load(file)
-                    _compute(tasks, folder, results[1])
+                        tasks, split = pickle.load(file)
+                    _share(list(enumerate(tasks)), split, folder, results[1])
             except BaseException:  # noqa: BLE001 - the parent computes what did not come
                 code = 1
             finally:
                 _leave(code, parent, folder)
-        for fd in (results[1], batch[0], ready[1]):
-            os.close(fd)
-        if after is not None:
-            after._release_ready()
-        self._ready = ready[0]
+        os.close(results[1])
+        os.close(batch[0])
         self._child = (pid, results[0], batch[1], folder)
 
-    def _release_ready(self) -> None:
-        if self._ready >= 0:
-            os.close(self._ready)
-            self._ready = -1
-
-    def take(self, tasks: Sequence[tuple[Hashable, Callable[[], T]]]
+    def take(self, tasks: Sequence[tuple[Hashable, Callable[[], T]]], split: int | None = None
              ) -> tuple[int, IO[bytes], str] | None:  # fmt: skip
-        """Hand `tasks` to the child: its pid, results pipe and folder (for `Aside`), or
-        None when it cannot (no child, already given a batch, tasks not picklable: it is
-        then closed)."""
+        """Hand `tasks` to the child (from index `split` on to its twin): its pid, results
+        pipe and folder (for `Aside`), or None when it cannot (no child, already given a
+        batch, tasks not picklable: it is then closed)."""
         if self._child is None:
             return None
         pid, results, batch, folder = self._child
         try:
             with open(os.path.join(folder, "batch"), "wb") as file:
-                pickle.dump(list(tasks), file, protocol=pickle.HIGHEST_PROTOCOL)
+                pickle.dump((list(tasks), split), file, protocol=pickle.HIGHEST_PROTOCOL)
             os.write(batch, b"1")
         except (pickle.PicklingError, AttributeError, TypeError, OSError):
             self.close()
             return None
         os.close(batch)
-        self._release_ready()
         self._child = None
         return pid, os.fdopen(results, "rb"), folder
 
     def close(self) -> None:
         """Kill and reap the child if it never took a batch; remove its folder."""
-        self._release_ready()
         if self._child is None:
             return
         pid, results, batch, folder = self._child
         self._child = None
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
+        _kill(pid)
         os.close(results)
         os.close(batch)
         os.waitpid(pid, 0)
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def _share(tasks: list[tuple[int, tuple[Hashable, Callable[[], object]]]], split: int | None,
+           folder: str, write: int) -> None:  # fmt: skip
+    """In a helper: `tasks` computed (`_compute`), those from index `split` on by a twin
+    forked now (it writes to the same pipe and folder; reaped here before returning)."""
+    if split is None or not 0 < split < len(tasks):
+        _compute(tasks, folder, write)
+        return
+    twin = os.fork()
+    if twin == 0:
+        code = 0
+        try:
+            _compute(tasks[split:], folder, write)
+        except BaseException:  # noqa: BLE001 - the parent computes what did not come
+            code = 1
+        finally:
+            os._exit(code)
+    try:
+        _compute(tasks[:split], folder, write)
+    finally:
+        os.waitpid(twin, 0)

@@ -74,31 +74,42 @@ from robot_calib.forked import Aside, Helper
 parent = os.getpid()
 folders = lambda: set(glob.glob(os.path.join(tempfile.gettempdir(), "robot_calib-aside-*")))
 before = folders()
-marks = os.path.join(tempfile.mkdtemp(), "ready")
+PREPARED = []
 
-def prepare(name):  # slow, as importing matplotlib is; says when it ran
+def prepare():  # slow, as importing matplotlib is: paid once, the twin inherits it
     time.sleep(0.3)
-    with open(marks, "a") as f:
-        f.write(f"{name} {time.monotonic()}\\n")
+    PREPARED.append(os.getpid())
 
-first = Helper(functools.partial(prepare, "first"))
-second = Helper(functools.partial(prepare, "second"), after=first)
-third = Helper(functools.partial(prepare, "third"))
-idle = Helper(functools.partial(prepare, "idle"))
-tasks = [(k, functools.partial(np.arange, k)) for k in (3, 5)]  # picklable
-with Aside(tasks, helper=first) as aside:
+def who(k):
+    return k, os.getpid(), list(PREPARED)
+
+first = Helper(prepare)
+second = Helper(prepare)
+third = Helper(prepare)
+idle = Helper(prepare)
+tasks = [(k, functools.partial(who, k)) for k in range(4)]  # picklable
+with Aside(tasks, helper=first, split=2) as aside:
     assert aside.forked
-    assert [aside.result(k).tolist() for k in (5, 3)] == [list(range(5)), list(range(3))]
-    assert aside.received == 2
-with Aside([("pid", os.getpid)], helper=second) as aside:
-    assert aside.result("pid") not in (parent, None) and aside.received == 1
+    got = [aside.result(k) for k in (3, 0, 2, 1)]  # any order
+    assert aside.received == 4
+assert [k for k, _, _ in got] == [3, 0, 2, 1]
+pids = {k: pid for k, pid, _ in got}
+assert pids[0] == pids[1] != pids[2] == pids[3] and parent not in pids.values()  # helper, twin
+assert all(prepared == [pids[0]] for _, _, prepared in got)  # prepared once, by the helper
+with Aside([("n", functools.partial(np.arange, 3))], helper=second) as aside:
+    assert aside.result("n").tolist() == [0, 1, 2] and aside.received == 1
 with Aside([("lambda", lambda: os.getpid())], helper=third) as aside:  # not picklable:
     assert aside.result("lambda") != parent  # a child forked for it instead
 with Aside([("again", functools.partial(int, 7))], helper=first) as aside:  # used: forks anew
     assert aside.result("again") == 7
 idle.close()  # never given a batch: killed and reaped
-times = dict(line.split() for line in open(marks))
-assert float(times["second"]) >= float(times["first"]) + 0.25, times  # one after the other
+try:
+    with Aside([(k, functools.partial(time.sleep, 30)) for k in range(2)],
+               helper=Helper(prepare), split=1) as aside:
+        time.sleep(0.5)
+        raise KeyboardInterrupt  # the helper and its twin killed at once
+except KeyboardInterrupt:
+    pass
 assert folders() == before, folders() - before
 print("OK")
 """
@@ -119,10 +130,10 @@ def test_results_aside_are_the_results_here_whatever_the_child_does() -> None:
 
 
 def test_a_helper_prepared_early_computes_the_batch_it_is_given_later() -> None:
-    """`Helper`: its child prepares while the caller goes on (a second one only after the
-    first), then computes the picklable batch an Aside hands it (any order of results);
-    unpicklable tasks or a used helper: the Aside forks a child of its own; an unused
-    helper is killed; no temporary folder left."""
+    """`Helper`: its child prepares while the caller goes on, then computes the picklable
+    batch an Aside hands it, the second part by a twin that inherits the preparation (any
+    order of results); unpicklable tasks or a used helper: the Aside forks a child of its
+    own; an unused helper is killed, an aborted one with its twin; no folder left."""
     assert _fresh(HELPER_CHECK) == "OK"
 
 

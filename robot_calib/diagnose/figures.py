@@ -83,14 +83,12 @@ class FigureCache:
 
     @classmethod
     def started(cls, prepare: Callable[[], object], dpi: int = 100) -> FigureCache:
-        """A cache whose two helper processes start now, one after the other, running
-        `prepare` (the imports of the modules whose objects the figures are drawn from:
-        they come pickled), then importing matplotlib and loading its fonts (no helper
-        without fork: then drawn as `draw_aside` says). Close it (`close`), or use it as a
-        context manager."""
-        ready = partial(_get_ready, prepare)
-        first = Helper(ready)
-        return cls(dpi, [first, Helper(ready, after=first)])
+        """A cache whose helper process starts now, running `prepare` (the imports of the
+        modules whose objects the figures are drawn from: they come pickled), then
+        importing matplotlib and loading its fonts; it draws with a twin it forks then (no
+        helper without fork: then drawn as `draw_aside` says). Close it (`close`), or use
+        it as a context manager."""
+        return cls(dpi, [Helper(partial(_get_ready, prepare))])
 
     def png(self, key: str, draw: Callable[[], Figure | None]) -> bytes | None:
         """The PNG of figure `key`, drawn by `draw` the first time (None: no figure)."""
@@ -102,20 +100,22 @@ class FigureCache:
 
     def draw_aside(self, *groups: Sequence[tuple[str, Callable[[], Figure | None]]]) -> None:
         """Draw the figures of `groups` ((key, draw) each, as `png` takes them) in other
-        processes while the caller goes on: each group in a helper of `started` (their
-        draws picklable: module-level functions and partials), else the first group in a
-        child forked now and the others here when asked. Once only."""
+        processes while the caller goes on: the first two groups by the helper of `started`
+        and its twin (their draws picklable: module-level functions and partials), any
+        other here when asked; without a helper the first group in a child forked now, the
+        others here when asked. Once only."""
         if self._asides:
             return
         helpers, self._helpers = self._helpers, []
-        for k, group in enumerate(groups):
-            tasks = [(key, partial(render_png, draw, self.dpi)) for key, draw in group
-                     if key not in self._png]  # fmt: skip
-            if tasks and k < len(helpers):
-                self._asides.append(Aside(tasks, ASIDE_TIMEOUT_S, helper=helpers[k]))
-            elif tasks and k == 0 and can_fork():
-                _warm_up(pyplot())  # imported and fonts loaded before the fork: both inherit
-                self._asides.append(Aside(tasks, ASIDE_TIMEOUT_S))
+        tasks = [[(key, partial(render_png, draw, self.dpi)) for key, draw in group
+                  if key not in self._png] for group in groups]  # fmt: skip
+        if helpers and tasks:
+            both = tasks[0] + (tasks[1] if len(tasks) > 1 else [])
+            self._asides.append(Aside(both, ASIDE_TIMEOUT_S, helper=helpers[0],
+                                      split=len(tasks[0])))  # fmt: skip
+        elif tasks and tasks[0] and can_fork():
+            _warm_up(pyplot())  # imported and fonts loaded before the fork: both inherit
+            self._asides.append(Aside(tasks[0], ASIDE_TIMEOUT_S))
         for helper in helpers:
             helper.close()  # unused (one that took its batch: nothing to do)
 

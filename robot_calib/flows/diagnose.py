@@ -76,15 +76,15 @@ def diagnose_bags(
     return diagnosis, ladder, recording
 
 
-#: the figures one helper draws (the other draws the rest): about half the drawing time
+#: the figures the helper draws (its twin draws the rest): about half the drawing time
 ASIDE_FIRST = ("histogram", "map", "angle_urad")
 
 
 def started_figures() -> FigureCache:
-    """A figure cache for `write_diagnosis` whose two helper processes start now (when
-    this process runs no other thread) and import what the figures need while the
-    diagnosis runs: call it before reading the bags; close it on every way out (a
-    context manager)."""
+    """A figure cache for `write_diagnosis` whose helper process starts now (when this
+    process runs no other thread) and imports what the figures need while the diagnosis
+    runs (`FigureCache.started`): call it before reading the bags; close it on every way
+    out (a context manager)."""
     from robot_calib.diagnose.figures import FigureCache
 
     return FigureCache.started(_ready_to_draw)
@@ -184,8 +184,9 @@ def write_diagnosis(
             floor_mm = diagnosis.noise.floor_abs_rms_mm
             shown = {key: draw for _, key, _, draw in report_figures(ladder, fitted, floor_mm)}
             shown.update(page_figures(ladder, fitted, compared))
-            # drawn by other processes while this one writes: two groups of about equal
-            # cost (2773 poses: 0.6-0.8 s each), each in the order the HTML page asks
+            # drawn by other processes while this one writes (the helper and its twin):
+            # two groups of about equal cost (2773 poses: 0.6-0.8 s each), each in the
+            # order the HTML page asks for them
             rest = [key for key in shown if key not in ASIDE_FIRST]
             figures.draw_aside([(key, shown[key]) for key in ASIDE_FIRST],
                                [(key, shown[key]) for key in rest])  # fmt: skip
