@@ -6,10 +6,11 @@ which needs no common frame, and the absolute point error where the tracker pose
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.records import Record
 
 _PAIR_BLOCK = 2048  # rows per block: memory O(block * N), time O(N^2)
@@ -47,13 +48,10 @@ def pairwise_errors(measured: Array, predicted: Array) -> tuple[float, float]:
     if n < 2:
         return 0.0, 0.0
     if n > MAX_EXACT_POINTS:  # O(N^2) pairs: a fixed random sample (the max is then a bound)
-        rng = np.random.default_rng(0)
-        i, j = rng.integers(0, n, (2, SAMPLED_PAIRS))
-        keep = i != j
-        diff = np.abs(
-            np.linalg.norm(measured[i[keep]] - measured[j[keep]], axis=1)
-            - np.linalg.norm(predicted[i[keep]] - predicted[j[keep]], axis=1)
-        )
+        i, j = _sampled_pairs(n)
+        points = np.ascontiguousarray(measured, dtype=float)  # the bytes as _distances reads
+        between = _distances(points.tobytes(), points.shape)  # the same data: cached
+        diff = np.abs(between - np.linalg.norm(predicted[i] - predicted[j], axis=1))
         return float(diff.mean()), float(diff.max())
     total, worst, count = 0.0, 0.0, 0
     for start in range(0, n - 1, _PAIR_BLOCK):
@@ -66,6 +64,28 @@ def pairwise_errors(measured: Array, predicted: Array) -> tuple[float, float]:
         worst = max(worst, float(diff[upper].max()))
         count += int(upper.sum())
     return total / count, worst
+
+
+@lru_cache(maxsize=4)
+def _sampled_pairs(n: int) -> tuple[IntArray, IntArray]:
+    """The SAMPLED_PAIRS random pairs (i, j), i != j, of n points: the same for every n
+    (seed 0), read-only (a ladder scores dozens of models on the same points)."""
+    i, j = np.random.default_rng(0).integers(0, n, (2, SAMPLED_PAIRS))
+    keep = i != j
+    i, j = i[keep], j[keep]
+    i.flags.writeable = j.flags.writeable = False
+    return i, j
+
+
+@lru_cache(maxsize=4)
+def _distances(points: bytes, shape: tuple[int, ...]) -> Array:
+    """|p_i - p_j| [m] over `_sampled_pairs` of the points (their bytes and shape (n, 3):
+    a key by value, never by identity), read-only."""
+    values = np.frombuffer(points, dtype=float).reshape(shape)
+    i, j = _sampled_pairs(shape[0])
+    out = np.linalg.norm(values[i] - values[j], axis=1)
+    out.flags.writeable = False
+    return out
 
 
 def accuracy(measured: Array, predicted: Array) -> Accuracy:

@@ -57,7 +57,8 @@ class Aside(Generic[T]):
 
     A task is computed twice at most (in the child, then here when the child did not send
     it), so tasks must not change the state they share with the caller: the child's
-    changes are lost, the result is what counts. With a `helper` (`Helper`, not yet used)
+    changes are lost, the result is what counts. A `mailbox` (`Mailbox`) carries one value
+    this process finds later to the child's tasks. With a `helper` (`Helper`, not yet used)
     its child computes the tasks instead of a new fork, when they can be pickled; `split`:
     the tasks from that index on by a twin it forks (both cores), the others by itself.
 
@@ -66,7 +67,7 @@ class Aside(Generic[T]):
 
     def __init__(self, tasks: Sequence[tuple[Hashable, Callable[[], T]]],
                  timeout_s: float = TIMEOUT_S, helper: Helper | None = None,
-                 split: int | None = None) -> None:  # fmt: skip
+                 split: int | None = None, mailbox: Mailbox | None = None) -> None:  # fmt: skip
         self._tasks = dict(tasks)
         self._results: dict[Hashable, T] = {}
         self._timeout_s = timeout_s
@@ -78,9 +79,10 @@ class Aside(Generic[T]):
         if helper is not None:
             self._child = helper.take(list(tasks), split)
         if self._child is None and can_fork():
-            self._fork(list(tasks))
+            self._fork(list(tasks), mailbox)
 
-    def _fork(self, tasks: list[tuple[Hashable, Callable[[], T]]]) -> None:
+    def _fork(self, tasks: list[tuple[Hashable, Callable[[], T]]],
+              mailbox: Mailbox | None) -> None:  # fmt: skip
         folder = tempfile.mkdtemp(prefix=FOLDER_PREFIX)
         read, write = os.pipe()
         parent = os.getpid()
@@ -90,12 +92,16 @@ class Aside(Generic[T]):
             try:
                 os.setpgid(0, 0)
                 os.close(read)
+                if mailbox is not None:
+                    mailbox.forked()
                 _compute(list(enumerate(tasks)), folder, write)
             except BaseException:  # noqa: BLE001 - the parent computes what did not come
                 code = 1
             finally:
                 _leave(code, parent, folder)
         os.close(write)
+        if mailbox is not None:
+            mailbox.forking_done()
         self._child = (pid, os.fdopen(read, "rb"), folder)
 
     @property
@@ -167,6 +173,66 @@ class Aside(Generic[T]):
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
                  trace: TracebackType | None) -> None:  # fmt: skip
         self.close(abort=kind is not None)
+
+
+class Mailbox:
+    """One value this process sends, once it has it, to the tasks of an `Aside` (made
+    with this mailbox): `put` here, `get` in a task, which waits for it in the child and
+    has it at once here (a task the child could not deliver runs here after the `put`).
+    The value is pickled through a pipe (keep it small: a pipe holds 64 KiB unread)."""
+
+    _UNSET = object()
+
+    def __init__(self) -> None:
+        self._creator = os.getpid()
+        self._read, self._write = os.pipe()
+        self._value: object = self._UNSET
+
+    def forked(self) -> None:
+        """In the Aside's child: only the reading end kept (this process gone: end of file)."""
+        os.close(self._write)
+        self._write = -1
+
+    def forking_done(self) -> None:
+        """Here, once the child is forked: only the writing end kept."""
+        os.close(self._read)
+        self._read = -1
+
+    def put(self, value: object) -> None:
+        """Send `value` (here, once)."""
+        self._value = value
+        if self._write >= 0:
+            body = pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+            with contextlib.suppress(BrokenPipeError):  # the child died: computed here
+                os.write(self._write, len(body).to_bytes(8, "little") + body)
+            os.close(self._write)
+            self._write = -1
+
+    def get(self) -> object:
+        """The value put: here at once (after `put`), in the child when it comes."""
+        if self._value is self._UNSET and os.getpid() != self._creator:
+            with os.fdopen(self._read, "rb", closefd=False) as pipe:
+                head = pipe.read(8)
+                if len(head) != 8:
+                    raise EOFError("the mailbox was closed before a value was put")
+                self._value = pickle.loads(pipe.read(int.from_bytes(head, "little")))
+        if self._value is self._UNSET:
+            raise RuntimeError("Mailbox.get before put")
+        return self._value
+
+    def close(self) -> None:
+        """Close what is left of the pipe here."""
+        for fd in (self._read, self._write):
+            if fd >= 0:
+                os.close(fd)
+        self._read = self._write = -1
+
+    def __enter__(self) -> Mailbox:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:  # fmt: skip
+        self.close()
 
 
 def _leave(code: int, parent: int, folder: str) -> None:

@@ -31,13 +31,14 @@ fitted on every calibration residual, is the learned part of the hybrid model
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import partial
+from typing import Any
 
 import numpy as np
 
-from robot_calib.forked import Aside
+from robot_calib.forked import Aside, Mailbox
 from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.correction import (
     INDUCING,
@@ -187,23 +188,33 @@ def corrected_heldout(
         return fit_structured_part(cal.model, fold_parameters[folds[k]], poses.subset(train),
                                    fitted[train]), fitted  # fmt: skip
 
-    def one(k: int, structured: tuple[StructuredPart, Array], start: Hyperparameters | None
+    def one(k: int, structured: tuple[StructuredPart, Array], start: Hyperparameters | None,
+            on_learned: Callable[[Hyperparameters], object] | None = None,
             ) -> tuple[StructuredCorrection, Array]:  # fmt: skip
         """Fold folds[k]'s correction learned on its training poses (its hyperparameters
-        searched from `start`, else cold), and its prediction at the fold's poses (m, 3)
-        [m] (recording order)."""
+        searched from `start`, else cold; `on_learned` called with them at once), and its
+        prediction at the fold's poses (m, 3) [m] (recording order)."""
         train, test = train_rows[k], fold == folds[k]
         part, fitted = structured
         local = fit_structured(cal.model, fold_parameters[folds[k]], poses.subset(train),
                                fitted[train], np.random.default_rng(seeds[k]),
                                start=start, max_learn=MAX_LEARN if start is None else
-                               WARM_LEARN, part=part)  # fmt: skip
+                               WARM_LEARN, part=part, on_learned=on_learned)  # fmt: skip
         return local, local.predict(poses.subset(test))
 
-    def rest(k: int, structured: tuple[StructuredPart, Array],
-             start: Hyperparameters) -> tuple[tuple[str, ...], Array]:  # fmt: skip
-        """`one`'s warnings and prediction: what the caller needs, light to send."""
-        local, predicted = one(k, structured, start)
+    computed: dict[int, tuple[StructuredPart, Array]] = {}  # each process's own
+
+    def part(k: int) -> tuple[StructuredPart, Array]:
+        if k not in computed:
+            computed[k] = structure(k)
+        return computed[k]
+
+    def rest(k: int, box: Mailbox) -> tuple[tuple[str, ...], Array]:
+        """Fold folds[k] from the first fold's hyperparameters (`box`): `one`'s warnings
+        and prediction, what the caller needs (light to send)."""
+        start = box.get()
+        assert isinstance(start, Hyperparameters)
+        local, predicted = one(k, part(k), start)
         return local.warnings, predicted
 
     warned: list[tuple[str, ...]] = []  # each fold's warnings, in the order of `folds`
@@ -212,24 +223,25 @@ def corrected_heldout(
         # the folds are independent but for the process's hyperparameters, the first
         # fold's starting the others' search. Two processes (`forked.Aside`: threads ran
         # at 1.1 cores): a child fits the other folds' load-driven geometry while this one
-        # fits the first fold whole (its cold search); then a child fits half of the
-        # other folds while this one fits the rest. Results are the same either way.
-        parts: dict[int, tuple[StructuredPart, Array]] = {}
-        with Aside([(k, partial(structure, k)) for k in range(1, len(folds))]) as aside:
-            parts[0] = structure(0)
-            learned, predicted = one(0, parts[0], None)
-            outcomes = {0: (learned.warnings, predicted)}
-            parts.update((k, aside.result(k)) for k in range(1, len(folds)))
-        start = learned.hyper
+        # learns the first fold's hyperparameters, then (they come through `box` as soon as
+        # they are learned) half of the other folds while this one fits the first fold and
+        # the rest. Results are the same either way.
         others = list(range(1, len(folds)))
         theirs = others[: (len(others) + 1) // 2]
-        with Aside([(k, partial(rest, k, parts[k], start)) for k in theirs]) as half:
-            outcomes.update((k, rest(k, parts[k], start)) for k in others if k not in theirs)
-            outcomes.update((k, half.result(k)) for k in theirs)
+        tasks: list[tuple[Hashable, Callable[[], Any]]]  # the parts, then the folds
+        tasks = [(("part", k), partial(part, k)) for k in others]
+        with Mailbox() as box:
+            tasks += [(("fold", k), partial(rest, k, box)) for k in theirs]
+            with Aside(tasks, mailbox=box) as aside:
+                learned, predicted = one(0, part(0), None, on_learned=box.put)
+                outcomes = {0: (learned.warnings, predicted)}
+                computed.update((k, aside.result(("part", k))) for k in others)
+                outcomes.update((k, rest(k, box)) for k in others if k not in theirs)
+                outcomes.update((k, aside.result(("fold", k))) for k in theirs)
         for k, f in enumerate(folds):
             test = fold == f
-            before[test] = parts[k][1][test]
-            after[test] = parts[k][1][test] - outcomes[k][1]
+            before[test] = computed[k][1][test]
+            after[test] = computed[k][1][test] - outcomes[k][1]
             warned.append(outcomes[k][0])
     warnings = [f"{w} (fold {f})" for f, ws in zip(folds, warned) for w in ws]
     scored = np.isin(fold, folds)

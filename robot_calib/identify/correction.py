@@ -37,7 +37,7 @@ arrays for PARAMS.json; `predict` is pure numpy (reading a parameter file needs 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -585,10 +585,12 @@ def fit_correction_at(
     min_length_scale_rad: float = MIN_LENGTH_SCALE_RAD,
     max_points: int = MAX_POINTS,
     max_learn: int = MAX_LEARN,
+    on_learned: Callable[[Hyperparameters], object] | None = None,
 ) -> FittedCorrection:
     """`fit_correction`, with its predictions at the fitted poses and (exact fits) the
     kernel of those poses, which it computes anyway (a caller needing them saves one or
-    more n x n kernels)."""
+    more n x n kernels); `on_learned` is called with the hyperparameters as soon as they
+    are learned (before the fit: another process can start from them meanwhile)."""
     from scipy.linalg import LinAlgError, cho_factor, cho_solve, solve
 
     rng = np.random.default_rng(0) if rng is None else rng
@@ -600,6 +602,8 @@ def fit_correction_at(
     if hyper is None:
         hyper, warnings = learn_hyperparameters(poses, residuals, n_targets, rng, start,
                                                 min_length_scale_rad, max_learn)  # fmt: skip
+        if on_learned is not None:
+            on_learned(hyper)
     mean, scale = _scaling(residuals)
     y = (residuals - mean) / scale
     q, target = poses.q, poses.target_index

@@ -7,6 +7,7 @@ kept only when it generalises in a 2-fold check on the fitted poses.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -129,19 +130,20 @@ def fit_structured(
     start: Hyperparameters | None = None,
     max_learn: int = MAX_LEARN,
     part: StructuredPart | None = None,
+    on_learned: Callable[[Hyperparameters], object] | None = None,
 ) -> StructuredCorrection:
     """The hybrid correction of `residuals` (n, 3) [m, tracker frame, predicted -
     measured] of `model` at `parameters` at `poses`: the load-driven geometry
     (`fit_structured_part`, or `part` already fitted on these same arguments), then the
     Gaussian process of the rest (`fit_correction` with `rng`, `hyper`, `start`,
-    `max_learn`)."""
+    `max_learn`, `on_learned`)."""
     rng = np.random.default_rng(0) if rng is None else rng
     if part is None:
         part = fit_structured_part(model, parameters, poses, residuals)
     structured, fit = part.structured, part.fit
     left = residuals - structured
     fitted = fit_correction_at(poses, left, len(model.targets), rng, hyper=hyper, start=start,
-                               max_learn=max_learn)  # fmt: skip
+                               max_learn=max_learn, on_learned=on_learned)  # fmt: skip
     process, process_fitted = fitted.correction, fitted.fitted
     if not _process_generalises(fitted, poses, left):
         process_fitted = np.zeros_like(left)
