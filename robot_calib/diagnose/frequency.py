@@ -25,12 +25,14 @@ says what an order usually means).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
 from robot_calib.diagnose.projection import MIN_LEFT, MIN_LEVER_M, model_span
 from robot_calib.effects import Effect
 from robot_calib.effects.joint_harmonics import JointHarmonics, meaning
+from robot_calib.forked import Aside
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
@@ -41,6 +43,8 @@ MAX_SCAN_ORDER = 64
 MAX_PICKS = 6  # orders picked per joint and round
 PICK_SIGNIFICANCE = 6.0  # sqrt(chi^2 explained) / scatter an order needs to be picked
 SCAN_POSES = 4000  # measurements scanned (a seeded random subset above)
+#: from this many measurements on, half of the joints are scanned by a forked child
+ASIDE_POSES = 500
 #: a harmonic whose amplitude alone would exceed this is no gear error [rad] (the weak
 #: prior's sigma of a joint-angle term): a column the model nearly absorbs, or an alias
 MAX_AMPLITUDE_RAD = 2e-3
@@ -134,13 +138,12 @@ def joint_spectra(
     r = span.project_off(res.reshape(-1))
     scatter = float(np.sqrt(np.mean(r**2))) or 1.0
     orders = np.arange(1, max_order + 1)
-    out = []
-    for j in range(model.robot.n_joints):
+
+    def joint(j: int) -> JointSpectrum:
+        """The scan of joint j + 1 (0-based j)."""
         lever = float(span.lever_m[j])
         if lever < MIN_LEVER_M:
-            out.append(JointSpectrum(j + 1, False, lever * 1e3, [0.0] * max_order, [], [], [],
-                                     []))  # fmt: skip
-            continue
+            return JointSpectrum(j + 1, False, lever * 1e3, [0.0] * max_order, [], [], [], [])
         angle = poses.q[:, j, None] * orders  # (n, K)
         trig = np.stack([np.cos(angle), np.sin(angle)], axis=-1)  # (n, K, 2)
         cols = (motion[:, j, :, None, None] * trig[:, None]).reshape(-1, max_order, 2)
@@ -162,9 +165,16 @@ def joint_spectra(
             amps = [float(np.hypot(*c) * 1e6) for c in together]
         values = [float(s) for s in significance]
         why = [meaning(k) for k in picked]
-        out.append(JointSpectrum(j + 1, True, lever * 1e3, values, picked, amps, picked_z, why,
-                                 resolvable))  # fmt: skip
-    return out
+        return JointSpectrum(j + 1, True, lever * 1e3, values, picked, amps, picked_z, why,
+                             resolvable)  # fmt: skip
+
+    # the joints are independent: the second half scanned by a forked child meanwhile
+    # (`forked.Aside`; the same numbers either way) when the scan is large enough to pay
+    joints = list(range(model.robot.n_joints))
+    theirs = joints[len(joints) // 2 :] if n >= ASIDE_POSES else []
+    with Aside([(j, partial(joint, j)) for j in theirs]) as aside:
+        mine = {j: joint(j) for j in joints if j not in theirs}
+        return [mine[j] if j in mine else aside.result(j) for j in joints]
 
 
 def _pick(cols: Array, r: Array, usable: Array, scatter: float) -> tuple[list[int], list[float]]:

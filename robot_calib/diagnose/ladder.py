@@ -31,6 +31,7 @@ from robot_calib.diagnose.learnable import (
 )
 from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
+from robot_calib.forked import Aside
 from robot_calib.identify.calibrate import calibrate, model_name
 from robot_calib.identify.calibration import LEARNED_SUFFIX, Calibration
 from robot_calib.identify.fit import BLOCK_POSES, PRIOR_ROW, weighted_rows
@@ -150,6 +151,8 @@ SCORED_POSES = 20000
 #: above): its linearised figures only order the candidates, the refits and their k-fold
 #: scores use every pose (a screening round of 100k poses and ~150 columns took 20 s)
 SCREEN_POSES = 20000
+#: from this many calibration poses on, a forked child sums half of a screening's rows
+ASIDE_POSES = 500
 
 
 Screened = tuple[Effect, float, float]  # candidate, linearised held-out, in-sample rms [m]
@@ -242,11 +245,12 @@ class LinearScreen:
         n_cols = len(params)
         fold = pose_folds(recording)
 
-        def sums(rec: Recording, which: IntArray | None) -> dict[int, _Sums]:
+        def sums(rec: Recording, which: IntArray | None, first: int = 0,
+                 end: int | None = None) -> dict[int, _Sums]:  # fmt: skip
             out: dict[int, _Sums] = {}
-            n = len(rec)
-            for start in range(0, n, BLOCK_POSES):
-                rows = slice(start, min(start + BLOCK_POSES, n))
+            end = len(rec) if end is None else end
+            for start in range(first, end, BLOCK_POSES):
+                rows = slice(start, min(start + BLOCK_POSES, end))
                 predicted, jac = model.jacobian(params, rec.poses.subset(rows))
                 residual = predicted - rec.points[rows]
                 labels = np.zeros(len(residual), dtype=int) if which is None else which[rows]
@@ -256,9 +260,17 @@ class LinearScreen:
                     out[int(f)] = block if int(f) not in out else out[int(f)].plus(block)
             return out
 
-        held = None if holdout is None else sums(holdout, None).get(0)
-        return cls(sums(recording, fold), held, len(recording),
-                   0 if holdout is None else len(holdout))  # fmt: skip
+        # the calibration poses' second half summed by a forked child meanwhile
+        # (`forked.Aside`) when there are enough of them to pay
+        n = len(recording)
+        half = n // 2 if n >= ASIDE_POSES else n
+        with Aside([("rest", partial(sums, recording, fold, half))] if half < n else []) as aside:
+            own = sums(recording, fold, 0, half)
+            held = None if holdout is None else sums(holdout, None).get(0)
+            if half < n:
+                for f, part in aside.result("rest").items():
+                    own[f] = own[f].plus(part) if f in own else part
+        return cls(own, held, n, 0 if holdout is None else len(holdout))
 
     @staticmethod
     def _step(normal: _Sums, cols: list[int]) -> Array:
