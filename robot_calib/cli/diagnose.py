@@ -8,6 +8,7 @@ import argparse
 import dataclasses
 import math
 import time
+from typing import TYPE_CHECKING
 
 from robot_calib.cli.common import log, print_diagnosis, robot_of
 from robot_calib.cli.options import (
@@ -18,6 +19,11 @@ from robot_calib.cli.options import (
     add_payload,
 )
 from robot_calib.errors import ImplausibleError, InputError
+
+if TYPE_CHECKING:
+    from robot_calib.diagnose.html_report import ModelErrors
+    from robot_calib.diagnose.ladder import Ladder
+    from robot_calib.measurements import Recording
 
 NAME = "diagnose"
 HELP = "sim-to-real gap diagnosis -> DIAGNOSIS.json + report"
@@ -57,6 +63,7 @@ def main(args: argparse.Namespace) -> int:
         best_params_path,
         compare_before_after,
         diagnose_bags,
+        draw_figures,
         html_report_path,
         report_path,
         started_figures,
@@ -75,12 +82,19 @@ def main(args: argparse.Namespace) -> int:
     if accuracy is not None and not (math.isfinite(accuracy) and 1e-4 <= accuracy < 10):
         raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, 0.0001 (0.1 um) "
                          "to 10")  # fmt: skip
-    with started_figures() as figures:  # its helpers get ready while the diagnosis runs
+    with started_figures() as figures:  # its helper gets ready while the diagnosis runs
+        before_after: list[tuple[list[ModelErrors], list[str]]] = []
+
+        def draw(ladder: Ladder, fitted: Recording, floor_mm: float | None) -> None:
+            """The figures drawn aside while the diagnosis is written up."""
+            before_after.append(compare_before_after(ladder))
+            draw_figures(figures, ladder, fitted, floor_mm, before_after[0][0])
+
         diagnosis, ladder, recording = diagnose_bags(
             args.bags, robot, args.holdout or (), args.pair_tolerance, log,
-            None if accuracy is None else accuracy * 1e-3,
+            None if accuracy is None else accuracy * 1e-3, on_ladder=draw,
         )  # fmt: skip
-        compared, warnings = compare_before_after(ladder)
+        compared, warnings = before_after[0] if before_after else compare_before_after(ladder)
         diagnosis = dataclasses.replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
         report = write_diagnosis(diagnosis, ladder, recording, output, args.force,
                                  warnings=warnings, compared=compared,

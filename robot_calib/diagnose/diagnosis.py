@@ -339,11 +339,14 @@ def diagnose(
     holdout: Recording | None = None,
     log: Callable[[str], None] | None = None,
     tracker_sigma_m: float | None = None,
+    on_ladder: Callable[[Ladder, Recording, float | None], object] | None = None,
 ) -> tuple[Diagnosis, Ladder]:
     """The sim-to-real gap diagnosis of `recording`: the model ladder (geometric, then the
     effects that lower the held-out error), scored on `holdout` (None: k-fold over poses);
     the noise floor from the data, else `tracker_sigma_m` (a stated 1-sigma per axis [m]),
-    else unknown.
+    else unknown. `on_ladder` is called as soon as the ladder is climbed, with it, the
+    measurements it was fitted on (outliers left out) and the noise floor [mm] (None:
+    unknown; as `Diagnosis.noise.floor_abs_rms_mm`): the reports' figures can start.
 
     Returns
     -------
@@ -378,17 +381,19 @@ def diagnose(
     recording = ladder.recording if ladder.recording is not None else recording  # no outliers
     best = ladder.rungs[-1]  # the chosen model: the hybrid when it won
     physical = physical_rungs(ladder)
+    last = physical[-1]  # where its residual lies: the physical model's
+    noise = refine_with_model(ladder.noise, last.calibration.residuals,
+                              int(last.calibration.parameters.free.sum()))  # fmt: skip
+    floor_mm = noise.floor_rms_m * 1e3 if noise.independent else None
+    if on_ladder is not None:
+        on_ladder(ladder, recording, floor_mm)
     geo = ladder.rungs[0].calibration
     where = where_it_lies(geo.model, geo.parameters, recording, geo.residuals,
                           ladder.noise.sigma_m, ladder.spectra.get("geometric"))  # fmt: skip
-    last = physical[-1]  # where its residual lies: the physical model's
     after = where if len(physical) == 1 else where_it_lies(
         last.calibration.model, last.calibration.parameters, recording,
         last.calibration.residuals, ladder.noise.sigma_m, ladder.spectra.get(last.model),
     )  # fmt: skip
-    noise = refine_with_model(ladder.noise, last.calibration.residuals,
-                              int(last.calibration.parameters.free.sum()))  # fmt: skip
-    floor_mm = noise.floor_rms_m * 1e3 if noise.independent else None
     ratio = None if floor_mm is None else best.heldout.absolute_rms_mm / floor_mm
     learnable = ladder.learnable
     foreign = foreign_holdout(ladder, geo.accuracy.absolute_rms_mm, floor_mm)

@@ -5,7 +5,7 @@ model's PARAMS.json), written together (`robot-calib diagnose`, the calibrator n
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -31,9 +31,11 @@ def diagnose_recordings(
     holdout: Recording | None = None,
     log: Log | None = None,
     tracker_sigma_m: float | None = None,
+    on_ladder: Callable[[Ladder, Recording, float | None], object] | None = None,
 ) -> tuple[Diagnosis, Ladder]:
     """The sim-to-real gap diagnosis of `recording`, scored on `holdout` (else k-fold);
-    `tracker_sigma_m`: a stated 1-sigma per axis [m], the floor when the data give none.
+    `tracker_sigma_m`: a stated 1-sigma per axis [m], the floor when the data give none;
+    `on_ladder`: called once the ladder is climbed (`diagnose`'s).
 
     Returns
     -------
@@ -46,7 +48,8 @@ def diagnose_recordings(
 
     if holdout is not None:  # index the hold-out's targets as the calibration's
         holdout = holdout.with_targets(recording.target_names)
-    return diagnose(recording, robot, holdout, log=log, tracker_sigma_m=tracker_sigma_m)
+    return diagnose(recording, robot, holdout, log=log, tracker_sigma_m=tracker_sigma_m,
+                    on_ladder=on_ladder)  # fmt: skip
 
 
 def diagnose_bags(
@@ -56,9 +59,10 @@ def diagnose_bags(
     pair_tolerance: float = PAIR_TOLERANCE_S,
     log: Log | None = None,
     tracker_sigma_m: float | None = None,
+    on_ladder: Callable[[Ladder, Recording, float | None], object] | None = None,
 ) -> tuple[Diagnosis, Ladder, Recording]:
     """The diagnosis of `bags` scored on the `holdout` bags (none: k-fold CV over poses);
-    `tracker_sigma_m` as in `diagnose_recordings`.
+    `tracker_sigma_m`, `on_ladder` as in `diagnose_recordings`.
 
     Returns
     -------
@@ -72,12 +76,13 @@ def diagnose_bags(
     held = read_bags(holdout, robot, pair_tolerance, log) if holdout else None
     if held is not None:
         check_distinct_recordings(recording, held)
-    diagnosis, ladder = diagnose_recordings(recording, robot, held, log, tracker_sigma_m)
+    diagnosis, ladder = diagnose_recordings(recording, robot, held, log, tracker_sigma_m,
+                                            on_ladder)  # fmt: skip
     return diagnosis, ladder, recording
 
 
 #: the figures the helper draws (its twin draws the rest): about half the drawing time
-ASIDE_FIRST = ("histogram", "map", "angle_urad")
+ASIDE_FIRST = ("histogram", "map")
 
 
 def started_figures() -> FigureCache:
@@ -88,6 +93,23 @@ def started_figures() -> FigureCache:
     from robot_calib.diagnose.figures import FigureCache
 
     return FigureCache.started(_ready_to_draw)
+
+
+def draw_figures(figures: FigureCache, ladder: Ladder, fitted: Recording,
+                 floor_mm: float | None, compared: Sequence[ModelErrors]) -> None:  # fmt: skip
+    """Start drawing every figure of both reports (`report_figures`, `page_figures`) in
+    other processes (`FigureCache.draw_aside`: the helper and its twin, two groups of
+    about equal cost, 2773 poses: 0.6-0.8 s each, each in the order the HTML page asks
+    for them); `fitted`: the measurements the ladder was fitted on, `floor_mm` the noise
+    floor [mm] (None: unknown), `compared` the before/after models. Once per cache."""
+    from robot_calib.diagnose.html_report import page_figures
+    from robot_calib.diagnose.report import report_figures
+
+    shown = {key: draw for _, key, _, draw in report_figures(ladder, fitted, floor_mm)}
+    shown.update(page_figures(ladder, fitted, compared))
+    rest = [key for key in shown if key not in ASIDE_FIRST]
+    figures.draw_aside([(key, shown[key]) for key in ASIDE_FIRST],
+                       [(key, shown[key]) for key in rest])  # fmt: skip
 
 
 def _ready_to_draw() -> None:
@@ -164,8 +186,8 @@ def write_diagnosis(
     """
     from robot_calib.atomic import staged_outputs
     from robot_calib.diagnose.figures import FigureCache
-    from robot_calib.diagnose.html_report import compare_models, html_report, page_figures
-    from robot_calib.diagnose.report import plot_paths, report_figures, write_report
+    from robot_calib.diagnose.html_report import compare_models, html_report
+    from robot_calib.diagnose.report import plot_paths, write_report
     from robot_calib.identify.params_file import write_json_atomic
 
     output = Path(output)
@@ -181,15 +203,7 @@ def write_diagnosis(
         try:
             if compared is None:
                 compared = compare_models(ladder, calibrations)
-            floor_mm = diagnosis.noise.floor_abs_rms_mm
-            shown = {key: draw for _, key, _, draw in report_figures(ladder, fitted, floor_mm)}
-            shown.update(page_figures(ladder, fitted, compared))
-            # drawn by other processes while this one writes (the helper and its twin):
-            # two groups of about equal cost (2773 poses: 0.6-0.8 s each), each in the
-            # order the HTML page asks for them
-            rest = [key for key in shown if key not in ASIDE_FIRST]
-            figures.draw_aside([(key, shown[key]) for key in ASIDE_FIRST],
-                               [(key, shown[key]) for key in rest])  # fmt: skip
+            draw_figures(figures, ladder, fitted, diagnosis.noise.floor_abs_rms_mm, compared)
             (stage / page.name).write_text(
                 html_report(diagnosis, ladder, fitted, compared, recommended,
                             recommended_file.name, warnings, figures)
