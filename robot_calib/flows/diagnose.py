@@ -87,12 +87,16 @@ ASIDE_FIRST = ("histogram", "map")
 
 def started_figures() -> FigureCache:
     """A figure cache for `write_diagnosis` whose helper process starts now (when this
-    process runs no other thread) and imports what the figures need while the diagnosis
-    runs (`FigureCache.started`): call it before reading the bags; close it on every way
-    out (a context manager)."""
+    process runs no other thread) and gets matplotlib ready while the diagnosis runs
+    (`FigureCache.started`): call it before reading the bags; close it on every way out
+    (a context manager). The modules of the diagnosis and its reports are imported here
+    first (this process needs them anyway): the helper inherits them instead of importing
+    them again (0.45 s)."""
+    import robot_calib.diagnose.html_report  # noqa: F401 - inherited by the helper
+    import robot_calib.diagnose.report  # noqa: F401 - inherited by the helper
     from robot_calib.diagnose.figures import FigureCache
 
-    return FigureCache.started(_ready_to_draw)
+    return FigureCache.started(lambda: None)
 
 
 def draw_figures(figures: FigureCache, ladder: Ladder, fitted: Recording,
@@ -110,13 +114,6 @@ def draw_figures(figures: FigureCache, ladder: Ladder, fitted: Recording,
     rest = [key for key in shown if key not in ASIDE_FIRST]
     figures.draw_aside([(key, shown[key]) for key in ASIDE_FIRST],
                        [(key, shown[key]) for key in rest])  # fmt: skip
-
-
-def _ready_to_draw() -> None:
-    """The modules a helper needs to unpickle and draw the figures (scipy included, 0.5 s:
-    the diagnosis modules import it)."""
-    import robot_calib.diagnose.html_report  # noqa: F401
-    import robot_calib.diagnose.report  # noqa: F401
 
 
 def report_path(output: str | Path) -> Path:
