@@ -1,8 +1,9 @@
-"""Work done aside by a forked child (`robot_calib.forked.Aside`): the same results as
-computed here, whatever the child does (raises, dies, sends large results, is never
-forked because another thread runs); nothing left behind. The fork happens only in a
-process without other threads, so each check runs in a fresh interpreter (pytest's
-workers have threads)."""
+"""Work done aside by a forked child (`robot_calib.forked`): the same results as computed
+here, whatever the child does (raises, dies, sends large results, is never forked because
+another thread runs); a result is handed over as soon as it is sent; a value sent later
+through a Mailbox; nothing left behind, not even when this process is killed. Each check
+runs in a fresh interpreter, whose only thread is its own (the fork path; `pytest -n 0`
+has a thread of pytest-rerunfailures, xdist workers have none)."""
 
 from __future__ import annotations
 
@@ -135,6 +136,93 @@ def test_a_helper_prepared_early_computes_the_batch_it_is_given_later() -> None:
     order of results); unpicklable tasks or a used helper: the Aside forks a child of its
     own; an unused helper is killed, an aborted one with its twin; no folder left."""
     assert _fresh(HELPER_CHECK) == "OK"
+
+
+MAILBOX_CHECK = """
+import os, threading, time
+from robot_calib.forked import Aside, Mailbox
+
+parent = os.getpid()
+# a result sent is handed over at once, not when the child sends the next one
+def slow():
+    time.sleep(600)
+with Aside([("a", os.getpid), ("b", os.getpid), ("c", slow)], timeout_s=20) as aside:
+    assert aside.result("a") != parent
+    started = time.monotonic()
+    assert aside.result("b") != parent  # the child's: not computed here after a timeout
+    assert time.monotonic() - started < 10
+# a value found later reaches the child's tasks; leaving without putting does not hang
+with Mailbox() as box:
+    with Aside([("twice", lambda: (box.get() * 2, os.getpid()))], mailbox=box) as aside:
+        time.sleep(0.2)
+        box.put(21)
+        value, pid = aside.result("twice")
+        assert value == 42 and pid != parent
+with Mailbox() as box:
+    with Aside([("never", box.get)], mailbox=box) as aside:
+        assert aside.forked  # left without a value: the waiting child is killed
+stop = threading.Event()
+other = threading.Thread(target=stop.wait)
+other.start()
+with Mailbox() as box:  # no fork beside a thread: computed here after the put
+    with Aside([("twice", lambda: box.get() * 2)], mailbox=box) as aside:
+        assert not aside.forked
+        box.put(big := "x" * 200_000)  # more than a pipe holds: never written to one
+        assert aside.result("twice") == big * 2
+stop.set()
+other.join()
+print("OK")
+"""
+
+KILLED_CHECK = """
+import os, sys, time, functools
+from robot_calib.forked import Aside, Helper
+
+helper = Helper(functools.partial(time.sleep, 0.1))
+aside = Aside([("slow", functools.partial(time.sleep, 2))])
+print(aside._child[0], helper._child[0], aside._child[2], helper._child[3], flush=True)
+time.sleep(60)  # killed here
+"""
+
+
+def test_a_result_is_handed_over_at_once_and_a_mailbox_carries_a_later_value() -> None:
+    """A result the child sent is taken at once (was: it waited in a read buffer until the
+    child's next one, here never: the timeout, then computed here); a Mailbox value put
+    after the fork reaches the child's task; an Aside left before the put ends its
+    waiting child; without a fork the value (even beyond a pipe's 64 KiB) is used here."""
+    assert _fresh(MAILBOX_CHECK) == "OK"
+
+
+def test_children_of_a_killed_process_end_and_remove_their_folders() -> None:
+    """SIGKILL of the process: its Aside child finishes, finds it gone and removes its
+    folder; its idle helper reads end-of-file (no other child holds its batch pipe) and
+    does the same; no process, no folder is left."""
+    import os
+    import signal
+    import time
+    from pathlib import Path
+
+    run = subprocess.Popen([sys.executable, "-c", KILLED_CHECK], stdout=subprocess.PIPE,
+                           text=True)  # fmt: skip
+    assert run.stdout is not None
+    fields = run.stdout.readline().split()
+    children, folders = [int(p) for p in fields[:2]], [Path(f) for f in fields[2:]]
+    assert all(f.is_dir() for f in folders)
+    run.send_signal(signal.SIGKILL)
+    run.wait(timeout=30)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and (any(f.exists() for f in folders) or any(
+            Path(f"/proc/{p}").exists() and "Z" not in Path(f"/proc/{p}/stat").read_text()
+            .split(")")[-1].split()[:1] for p in children)):  # fmt: skip
+        time.sleep(0.2)
+    assert not any(f.exists() for f in folders), folders
+    for pid in children:
+        try:
+            os.kill(pid, 0)
+            state = Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+            assert state == "Z", (pid, state)  # ended (a zombie until init reaps it)
+        except (ProcessLookupError, FileNotFoundError):
+            pass
 
 
 KFOLD_CHECK = """

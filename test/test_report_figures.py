@@ -290,15 +290,24 @@ assert dying.png("f0", lambda: None) == expected["f0"]  # sent before it died
 assert dying.png("dies", killed_in_a_child) == here.png("dies", killed_in_a_child)
 assert dying.png("f1", lambda: line(1)) == expected["f1"]  # drawn here instead
 dying.close()
+from functools import partial
+started = FigureCache.started(lambda: None)  # the helper and its twin (pickled draws)
+started.draw_aside([("f0", partial(line, 0)), ("f1", partial(line, 1))],
+                   [("f2", partial(line, 2))])
+assert started._asides and started._asides[0].forked
+assert {k: started.png(k, lambda: None) for k in expected} == expected
+assert started._asides[0].received == 3
+started.close()
 print("OK")
 """
 
 
 def test_figures_drawn_aside_are_the_figures_drawn_here() -> None:
     """FigureCache.draw_aside, in a fresh interpreter (it forks only a process without other
-    threads; pytest has some): a forked child draws some figures while the process goes
-    on; their PNG bytes equal those drawn here; a figure the child failed on, or did not
-    send because it was killed mid-way, is drawn here when asked."""
+    threads): a forked child draws some figures while the process goes on, or the helper
+    of `FigureCache.started` and its twin; their PNG bytes equal those drawn here; a
+    figure the child failed on, or did not send because it was killed mid-way, is drawn
+    here when asked."""
     import subprocess
     import sys
 

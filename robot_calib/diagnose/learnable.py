@@ -209,12 +209,10 @@ def corrected_heldout(
             computed[k] = structure(k)
         return computed[k]
 
-    def rest(k: int, box: Mailbox) -> tuple[tuple[str, ...], Array]:
+    def rest(k: int, box: Mailbox[Hyperparameters]) -> tuple[tuple[str, ...], Array]:
         """Fold folds[k] from the first fold's hyperparameters (`box`): `one`'s warnings
         and prediction, what the caller needs (light to send)."""
-        start = box.get()
-        assert isinstance(start, Hyperparameters)
-        local, predicted = one(k, part(k), start)
+        local, predicted = one(k, part(k), box.get())
         return local.warnings, predicted
 
     warned: list[tuple[str, ...]] = []  # each fold's warnings, in the order of `folds`
@@ -230,7 +228,7 @@ def corrected_heldout(
         theirs = others[: (len(others) + 1) // 2]
         tasks: list[tuple[Hashable, Callable[[], Any]]]  # the parts, then the folds
         tasks = [(("part", k), partial(part, k)) for k in others]
-        with Mailbox() as box:
+        with Mailbox[Hyperparameters]() as box:
             tasks += [(("fold", k), partial(rest, k, box)) for k in theirs]
             with Aside(tasks, mailbox=box) as aside:
                 learned, predicted = one(0, part(0), None, on_learned=box.put)
