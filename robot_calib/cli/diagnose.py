@@ -8,7 +8,6 @@ import argparse
 import dataclasses
 import math
 import time
-from typing import TYPE_CHECKING
 
 from robot_calib.cli.common import log, print_diagnosis, robot_of
 from robot_calib.cli.options import (
@@ -19,11 +18,6 @@ from robot_calib.cli.options import (
     add_payload,
 )
 from robot_calib.errors import ImplausibleError, InputError
-
-if TYPE_CHECKING:
-    from robot_calib.diagnose.html_report import ModelErrors
-    from robot_calib.diagnose.ladder import Ladder
-    from robot_calib.measurements import Recording
 
 NAME = "diagnose"
 HELP = "sim-to-real gap diagnosis -> DIAGNOSIS.json + report"
@@ -60,10 +54,9 @@ def main(args: argparse.Namespace) -> int:
     self-contained HTML report."""
     from robot_calib.atomic import output_path
     from robot_calib.flows.diagnose import (
+        FiguresWhenClimbed,
         best_params_path,
-        compare_before_after,
         diagnose_bags,
-        draw_figures,
         html_report_path,
         report_path,
         started_figures,
@@ -83,18 +76,12 @@ def main(args: argparse.Namespace) -> int:
         raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, 0.0001 (0.1 um) "
                          "to 10")  # fmt: skip
     with started_figures() as figures:  # its helper gets ready while the diagnosis runs
-        before_after: list[tuple[list[ModelErrors], list[str]]] = []
-
-        def draw(ladder: Ladder, fitted: Recording, floor_mm: float | None) -> None:
-            """The figures drawn aside while the diagnosis is written up."""
-            before_after.append(compare_before_after(ladder))
-            draw_figures(figures, ladder, fitted, floor_mm, before_after[0][0])
-
+        early = FiguresWhenClimbed(figures)  # drawn while the diagnosis is written up
         diagnosis, ladder, recording = diagnose_bags(
             args.bags, robot, args.holdout or (), args.pair_tolerance, log,
-            None if accuracy is None else accuracy * 1e-3, on_ladder=draw,
+            None if accuracy is None else accuracy * 1e-3, on_ladder=early,
         )  # fmt: skip
-        compared, warnings = before_after[0] if before_after else compare_before_after(ladder)
+        compared, warnings = early.before_after(ladder)
         diagnosis = dataclasses.replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
         report = write_diagnosis(diagnosis, ladder, recording, output, args.force,
                                  warnings=warnings, compared=compared,

@@ -69,9 +69,10 @@ class FigureCache:
 
     `draw_aside` draws them in other processes while this one writes the reports
     (`robot_calib.forked`: matplotlib is single-threaded, a second process is the only
-    way to use the second core; half of a diagnosis of 2773 poses was figures): in the
-    helpers of `started` (forked when the run began, matplotlib imported and its fonts
-    loaded by the time the figures are asked for), else in a child forked then. `png` of
+    way to use the second core; half of a diagnosis of 2773 poses was figures): by the
+    helper of `started` (forked when the run began, matplotlib imported and its fonts
+    loaded by the time the figures are asked for) and the twin it forks then, else by a
+    child forked then. `png` of
     a figure drawn aside waits for it, and draws it here if no other process could (it
     died, or fork is not available): the bytes are the same."""
 

@@ -43,7 +43,9 @@ MAX_SCAN_ORDER = 64
 MAX_PICKS = 6  # orders picked per joint and round
 PICK_SIGNIFICANCE = 6.0  # sqrt(chi^2 explained) / scatter an order needs to be picked
 SCAN_POSES = 4000  # measurements scanned (a seeded random subset above)
-#: from this many measurements on, half of the joints are scanned by a forked child
+#: from this many measurements on, the ladder's scans and screenings share their work with
+#: a forked child (`forked.Aside`: half of the joints, half of the rows); below, the fork
+#: costs more than it saves
 ASIDE_POSES = 500
 #: a harmonic whose amplitude alone would exceed this is no gear error [rad] (the weak
 #: prior's sigma of a joint-angle term): a column the model nearly absorbs, or an alias

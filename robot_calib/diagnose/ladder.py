@@ -22,7 +22,12 @@ from functools import partial
 import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
-from robot_calib.diagnose.frequency import JointSpectrum, harmonic_candidates, joint_spectra
+from robot_calib.diagnose.frequency import (
+    ASIDE_POSES,
+    JointSpectrum,
+    harmonic_candidates,
+    joint_spectra,
+)
 from robot_calib.diagnose.learnable import (
     LearnableBound,
     bound_of,
@@ -151,8 +156,6 @@ SCORED_POSES = 20000
 #: above): its linearised figures only order the candidates, the refits and their k-fold
 #: scores use every pose (a screening round of 100k poses and ~150 columns took 20 s)
 SCREEN_POSES = 20000
-#: from this many calibration poses on, a forked child sums half of a screening's rows
-ASIDE_POSES = 500
 
 
 Screened = tuple[Effect, float, float]  # candidate, linearised held-out, in-sample rms [m]

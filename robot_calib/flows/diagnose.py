@@ -116,6 +116,28 @@ def draw_figures(figures: FigureCache, ladder: Ladder, fitted: Recording,
                        [(key, shown[key]) for key in rest])  # fmt: skip
 
 
+class FiguresWhenClimbed:
+    """The `on_ladder` hook of `diagnose_bags` / `diagnose_recordings` that starts every
+    figure of the reports in `figures` (`draw_figures`) as soon as the ladder is climbed,
+    with the before/after comparison they show (`compare_before_after` of the ladder and
+    `calibrations`), kept for `write_diagnosis` (`before_after`)."""
+
+    def __init__(self, figures: FigureCache,
+                 calibrations: Mapping[str, Calibration] | None = None) -> None:  # fmt: skip
+        self.figures, self.calibrations = figures, calibrations
+        self._before_after: tuple[list[ModelErrors], list[str]] | None = None
+
+    def __call__(self, ladder: Ladder, fitted: Recording, floor_mm: float | None) -> None:
+        self._before_after = compare_before_after(ladder, self.calibrations)
+        draw_figures(self.figures, ladder, fitted, floor_mm, self._before_after[0])
+
+    def before_after(self, ladder: Ladder) -> tuple[list[ModelErrors], list[str]]:
+        """`compare_before_after` of `ladder`: the one the hook made, else made now."""
+        if self._before_after is None:
+            self._before_after = compare_before_after(ladder, self.calibrations)
+        return self._before_after
+
+
 def report_path(output: str | Path) -> Path:
     """The Markdown report of DIAGNOSIS.json `output`: beside it, suffix '.md' (its plots
     `<stem>_*.png`). `output` itself may not end in '.md', so the two never collide.

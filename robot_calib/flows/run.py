@@ -25,6 +25,7 @@ from robot_calib.flows import (
 from robot_calib.flows.bags import read_bags
 from robot_calib.flows.calibrate import calibrate_recording
 from robot_calib.flows.diagnose import (
+    FiguresWhenClimbed,
     diagnose_recordings,
     generalisation_warnings,
     html_report_path,
@@ -224,13 +225,16 @@ def _run_in(
             write_json_atomic(cal.to_dict(recording), folder / f"params_{name}.json")
             models[name] = ModelScore(cal, accuracy(held.points, cal.predict(held.poses)))
         say(f"[4/{steps}] diagnose the sim-to-real gap (hold-out: {holdout.name})")
-        diagnosis, ladder = diagnose_recordings(recording, description, held, log)
+        calibrations = {n: m.calibration for n, m in models.items()}
+        early = FiguresWhenClimbed(figures, calibrations)  # drawn while written up
+        diagnosis, ladder = diagnose_recordings(recording, description, held, log,
+                                                on_ladder=early)  # fmt: skip
         best, warnings = _best_model(models, ladder)
         diagnosis = replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
         report = write_diagnosis(
             diagnosis, ladder, recording, folder / "diagnosis.json",
-            calibrations={n: m.calibration for n, m in models.items()},
-            best=(best, folder / "params_best.json"), warnings=warnings, figures=figures,
+            calibrations=calibrations, best=(best, folder / "params_best.json"),
+            warnings=warnings, compared=early.before_after(ladder)[0], figures=figures,
         )  # fmt: skip
     scores = {n: m.holdout.absolute_rms_mm for n, m in models.items()}
     scores.update({r.model: r.heldout.absolute_rms_mm for r in ladder.rungs})
