@@ -33,6 +33,17 @@ from typing import Any
 from robot_calib.errors import InputError
 
 _NEW: set[Path] = set()
+#: the interrupting signals a command received (its handler notes them here, `cli`): one
+#: that a C extension's call back into Python swallowed (scipy's MINPACK around a fit
+#: function, say) must still keep the outputs out, so every final rename checks this first
+INTERRUPTS: list[int] = []
+
+
+def _refuse_if_interrupted() -> None:
+    """KeyboardInterrupt if the command was interrupted (`INTERRUPTS`): outputs of an
+    interrupted command are never moved in, even when the interruption was swallowed."""
+    if INTERRUPTS:
+        raise KeyboardInterrupt
 """Targets checked to be new (absolute): created exclusively, never replaced."""
 
 
@@ -63,6 +74,7 @@ def write_text_atomic(path: str | Path, text: str, *, rewrite: bool = False) -> 
         with os.fdopen(fd, "w") as file:
             file.write(text)
         os.chmod(tmp, 0o666 & ~_umask())
+        _refuse_if_interrupted()
         if must_be_new(path) and not rewrite:
             _move_new(tmp, path)
         else:
@@ -118,6 +130,7 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
                         f"{folder / staged.name}: exists; will not overwrite it (use --force)"
                     )
         deferred = _defer_signals(True)  # the set moves in as one: no signal between renames
+        _refuse_if_interrupted()
         # what a SIGKILL between the renames (which no handler can hold) would leave part of:
         # the next write of any of these names finds it and says so
         write_text_atomic(journal, f"{_writer_id()}\n" + "".join(f"{f.name}\n" for f in files))

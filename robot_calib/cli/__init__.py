@@ -15,13 +15,16 @@ import sys
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
+from robot_calib.atomic import INTERRUPTS
 from robot_calib.cli.options import OVERWRITE_POLICY
 from robot_calib.cli.registry import build_parser
 from robot_calib.errors import RobotCalibError
 
 __all__ = ["OVERWRITE_POLICY", "build_parser", "main", "run"]
 
-_SIGNALLED: list[int] = []  # signals received (SIGINT, SIGTERM, SIGHUP) while a verb runs
+# signals received (SIGINT, SIGTERM, SIGHUP) while a verb runs: the list every final rename
+# of an output checks first (`atomic.INTERRUPTS`)
+_SIGNALLED = INTERRUPTS
 
 
 def _interrupt(signum: int, _frame: object) -> NoReturn:
