@@ -236,10 +236,26 @@ def _gone(writer: str) -> bool:
     return bool(start) and _start_time(int(pid)) not in ("", start)
 
 
+def owned_folder(parent: str | Path, prefix: str) -> Path:
+    """A new private folder `parent/<prefix>XXXX` naming its writer (`OWNER_FILE`), after
+    the folders of that prefix whose writers are gone (killed before they could remove
+    theirs) are removed (`remove_dead_folders`)."""
+    folder = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
+    (folder / OWNER_FILE).write_text(_writer_id())
+    remove_dead_folders(Path(parent), f"{prefix}*", folder)
+    return folder
+
+
 def _remove_dead_stages(folder: Path, own: Path) -> None:
     """Remove the staging folders in `folder` (not `own`) whose writer is gone (killed
     before it moved its set in: nothing of them reached the folder's outputs)."""
-    for stage in folder.glob(".robot-calib-*.partial"):
+    remove_dead_folders(folder, ".robot-calib-*.partial", own)
+
+
+def remove_dead_folders(folder: Path, pattern: str, own: Path) -> None:
+    """Remove the folders `pattern` in `folder` (not `own`) that name a writer
+    (`OWNER_FILE`) no longer running (`_gone`)."""
+    for stage in folder.glob(pattern):
         owner = stage / OWNER_FILE
         if stage == own or not stage.is_dir() or not owner.is_file():
             continue
@@ -313,6 +329,14 @@ def _move_new(staged: Path, target: Path) -> None:
     staged.unlink()
 
 
+def refuse_input(path: Path, inputs: Sequence[str | Path]) -> None:
+    """InputError if `path` is one of `inputs` (an existing file, any spelling or link)."""
+    if path.exists() and any(
+        Path(p).exists() and path.resolve() == Path(p).resolve() for p in inputs
+    ):
+        raise InputError(f"{path}: is an input of this command; will not overwrite it")
+
+
 def output_path(
     raw: str | Path, what: str, inputs: Sequence[str | Path] = (), force: bool = False
 ) -> Path:
@@ -331,10 +355,7 @@ def output_path(
         raise InputError(f"{path.parent}: no such folder for {what}")
     if path.is_dir():
         raise InputError(f"{path}: is a folder; give a file name for {what}")
-    if path.exists() and any(
-        Path(p).exists() and path.resolve() == Path(p).resolve() for p in inputs
-    ):
-        raise InputError(f"{path}: is an input of this command; will not overwrite it")
+    refuse_input(path, inputs)
     if not os.access(path.parent, os.W_OK | os.X_OK):
         raise InputError(f"{path.parent}: folder not writable; cannot write {what} there")
     if not force:

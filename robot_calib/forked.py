@@ -21,7 +21,9 @@ carries one value this process finds later to the tasks of an `Aside`'s child.
 
 Every child leads a process group of its own (a helper's twin belongs to its helper's),
 which an abort kills whole: Ctrl-C at the terminal reaches this process only, which ends
-them. A child whose parent was killed removes its folder itself.
+them. A child whose parent was killed removes its folder itself; a folder whose child
+ended before its parent was killed is removed by the next process making one (it names
+its writer).
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ import threading
 from collections.abc import Callable, Hashable, Sequence
 from types import TracebackType
 from typing import Any, Generic, TypeVar
+
+from robot_calib.atomic import owned_folder
 
 T = TypeVar("T")
 V = TypeVar("V")
@@ -60,6 +64,12 @@ def _close_helper_fds() -> None:
 
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_close_helper_fds)
+
+
+def _private_folder() -> str:
+    """A new private folder for a child's results in the temporary directory, naming this
+    process as its writer: the next one removes it if this process was killed first."""
+    return str(owned_folder(tempfile.gettempdir(), FOLDER_PREFIX))
 
 
 def can_fork() -> bool:
@@ -225,7 +235,7 @@ class Aside(Generic[T]):
 
     def _fork(self, tasks: list[tuple[Hashable, Callable[[], T]]],
               mailbox: Mailbox[Any] | None) -> None:  # fmt: skip
-        folder = tempfile.mkdtemp(prefix=FOLDER_PREFIX)
+        folder = _private_folder()
         read, write = os.pipe()
 
         def body() -> None:
@@ -332,7 +342,7 @@ class Helper:
         self._child: tuple[int, int, int, str] | None = None  # pid, results, batch, folder
         if not can_fork():
             return
-        folder = tempfile.mkdtemp(prefix=FOLDER_PREFIX)
+        folder = _private_folder()
         results, batch = os.pipe(), os.pipe()
 
         def body() -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 ASIDE_CHECK = """
 import os, signal, tempfile, threading, glob
@@ -200,7 +201,6 @@ def test_children_of_a_killed_process_end_and_remove_their_folders() -> None:
     import os
     import signal
     import time
-    from pathlib import Path
 
     run = subprocess.Popen([sys.executable, "-c", KILLED_CHECK], stdout=subprocess.PIPE,
                            text=True)  # fmt: skip
@@ -269,3 +269,25 @@ def test_the_k_folds_fitted_aside_equal_the_folds_fitted_here() -> None:
     and warnings of the same k-fold computed in one process (to 1e-12 m), and learns the
     compliance the geometry lacks (held-out rms well below geometric's ~0.9 mm)."""
     assert float(_fresh(KFOLD_CHECK)) < 0.3
+
+
+def test_a_folder_left_by_a_killed_process_is_removed_by_the_next(tmp_path: Path) -> None:
+    """A child that ended before its parent was killed leaves its folder (nobody removes
+    it then): the next private folder made there removes every folder whose writer is
+    gone, never one of a running process."""
+    import socket
+
+    from robot_calib import atomic
+    from robot_calib.forked import FOLDER_PREFIX
+
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                           capture_output=True, text=True, check=True)  # fmt: skip
+    left = tmp_path / f"{FOLDER_PREFIX}left"
+    left.mkdir()
+    (left / atomic.OWNER_FILE).write_text(f"{socket.gethostname()} {ended.stdout.strip()} 1")
+    (left / "0").write_bytes(b"a result never read")
+    running = tmp_path / f"{FOLDER_PREFIX}running"
+    running.mkdir()
+    (running / atomic.OWNER_FILE).write_text(atomic._writer_id())
+    new = atomic.owned_folder(tmp_path, FOLDER_PREFIX)
+    assert not left.exists() and running.exists() and new.is_dir()

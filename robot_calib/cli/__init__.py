@@ -81,12 +81,66 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def run() -> NoReturn:
     """The `robot-calib` program (console script, `python -m robot_calib`): `main` on the
-    program's arguments, then exit with its status. Everything this process made is then
-    frozen for the garbage collector (`gc.freeze`): the interpreter's tear-down of
-    scipy's and matplotlib's modules otherwise took 0.3-0.4 s of every run, after the
-    files were written. Not in `main`, which callers run in-process (the tests)."""
+    program's arguments, then exit with its status (141 when the reader of its standard
+    output went away, `| head`; 2 with one line when standard output cannot be written,
+    a full disk). Everything this process made is then frozen for the garbage collector
+    (`gc.freeze`): the interpreter's tear-down of scipy's and matplotlib's modules
+    otherwise took 0.3-0.4 s of every run, after the files were written. Not in `main`,
+    which callers run in-process (the tests)."""
     import gc
 
-    status = main()
+    sys.stdout = _Stdout(sys.stdout)
+    try:
+        status = main()
+        sys.stdout.flush()
+    except _StdoutLost as lost:
+        _drop_stdout()
+        if isinstance(lost.error, BrokenPipeError):  # `| head`: the shell's status for it
+            status = 128 + signal.SIGPIPE
+        else:
+            print(f"robot-calib: cannot write its output: {lost.error.strerror or lost.error}",
+                  file=sys.stderr)  # fmt: skip
+            status = 2
     gc.freeze()
     sys.exit(status)
+
+
+class _StdoutLost(Exception):
+    """Standard output failed (`error`): not an error of the command's files."""
+
+    def __init__(self, error: OSError) -> None:
+        super().__init__(str(error))
+        self.error = error
+
+
+class _Stdout:
+    """Standard output whose write and flush failures are `_StdoutLost` (told apart from
+    the OSErrors of the files a command writes)."""
+
+    def __init__(self, stream: Any) -> None:  # noqa: ANN401 - a text stream
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return int(self._stream.write(text))
+        except OSError as exc:
+            raise _StdoutLost(exc) from None
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except OSError as exc:
+            raise _StdoutLost(exc) from None
+
+    def __getattr__(self, name: str) -> Any:  # noqa: ANN401 - the stream's own attributes
+        return getattr(self._stream, name)
+
+
+def _drop_stdout() -> None:
+    """Standard output to /dev/null: what is still buffered, and the interpreter's flush at
+    exit, go nowhere instead of failing again ('Exception ignored ...')."""
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.__stdout__.fileno() if sys.__stdout__ else 1)
+    os.close(devnull)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from robot_calib.cli.common import log, robot_of
+from robot_calib.cli.common import log, robot_files, robot_of
 from robot_calib.cli.options import (
     add_force,
     add_joint_names,
@@ -63,7 +63,8 @@ def main(args: argparse.Namespace) -> int:
     from robot_calib.identify.params_file import write_json_atomic
 
     robot = robot_of(args)
-    output = output_path(args.output, "PARAMS.json", args.bags, args.force)
+    output = output_path(args.output, "PARAMS.json", [*args.bags, *robot_files(args)],
+                         args.force)  # fmt: skip
     check_model_terms(args.model, robot, args.ecc_order)
     started = time.perf_counter()
     if args.stream:

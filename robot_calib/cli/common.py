@@ -41,6 +41,13 @@ def progress() -> Callable[[str, int, int], None]:
     return show
 
 
+def robot_files(args: argparse.Namespace) -> list[str]:
+    """The robot description file --robot names (a YAML, or a URDF without its #links), an
+    input of the command that no output may overwrite; none for a built-in robot."""
+    text = str(getattr(args, "robot", None) or "").partition("#")[0]
+    return [text] if text and Path(text).is_file() else []
+
+
 def robot_of(args: argparse.Namespace, name: str | None = None) -> RobotDescription:
     """--robot (or `name`) loaded, its joints renamed by --joint-names where given."""
     robot = load_robot(args.robot if name is None else name)

@@ -10,7 +10,7 @@ import sys
 
 import numpy as np
 
-from robot_calib.cli.common import calibration_of, correction_of, plausible_or_forced
+from robot_calib.cli.common import calibration_of, correction_of, plausible_or_forced, robot_files
 from robot_calib.cli.options import CALIBRATION_ROBOT, add_force, add_output
 from robot_calib.errors import InputError, RobotCalibError
 
@@ -72,7 +72,9 @@ def main(args: argparse.Namespace) -> int:
     correction = correction_of(doc, model, params, args)
     n_joints, limits = model.robot.n_joints, model.robot.limits
     source = args.joints or args.targets
-    inputs = [args.params, source] + ([args.seed_joints] if args.seed_joints else [])
+    inputs = [args.params, source, *robot_files(args)] + (
+        [args.seed_joints] if args.seed_joints else []
+    )
     nominal, nominal_params = nominal_counterpart(model, params)
     if args.joints:
         for option in ("seed_joints", "frame", "unit"):

@@ -9,7 +9,7 @@ import dataclasses
 import math
 import time
 
-from robot_calib.cli.common import log, print_diagnosis, robot_of
+from robot_calib.cli.common import log, print_diagnosis, robot_files, robot_of
 from robot_calib.cli.options import (
     add_force,
     add_joint_names,
@@ -52,7 +52,8 @@ def add_arguments(diag: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots + a
     self-contained HTML report."""
-    from robot_calib.atomic import output_path
+    from robot_calib.atomic import output_path, refuse_input
+    from robot_calib.diagnose.report import plot_paths
     from robot_calib.flows.diagnose import (
         FiguresWhenClimbed,
         best_params_path,
@@ -64,10 +65,12 @@ def main(args: argparse.Namespace) -> int:
     )
 
     robot = robot_of(args)
-    inputs = [*args.bags, *(args.holdout or ())]
+    inputs = [*args.bags, *(args.holdout or ()), *robot_files(args)]
     output = output_path(args.output, "DIAGNOSIS.json", inputs, args.force)
-    output_path(report_path(output), "the report", inputs, args.force)
+    report = output_path(report_path(output), "the report", inputs, args.force)
     output_path(html_report_path(output), "the HTML report", inputs, args.force)
+    for figure in plot_paths(report.with_suffix("")):  # written with --force: never an input
+        refuse_input(figure, inputs)
     best = output_path(best_params_path(output), "the best model's PARAMS.json", inputs,
                        args.force)  # fmt: skip
     started = time.perf_counter()

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import argparse
 
-from robot_calib.cli.common import log, plausible_or_forced
+from robot_calib.cli.common import log, plausible_or_forced, robot_files
 from robot_calib.cli.options import CALIBRATION_ROBOT, add_force, add_output
 from robot_calib.errors import InputError
 from robot_calib.kinematics.loader import load_robot
@@ -49,7 +49,7 @@ def main(args: argparse.Namespace) -> int:
             f"{args.params}: identified for robot {robot.name}, not --robot {args.robot}"
         )
     exporter = FORMATS[args.format]
-    inputs = [args.params] + ([args.nominal_urdf] if args.nominal_urdf else [])
+    inputs = [args.params, *robot_files(args)] + ([args.nominal_urdf] if args.nominal_urdf else [])
     output = output_path(args.output, f"the {args.format} export", inputs, args.force)
     if args.nominal_urdf is not None:
         from robot_calib.export.urdf_nominal import render_on_nominal

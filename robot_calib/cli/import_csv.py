@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from robot_calib.cli.common import log, robot_of
+from robot_calib.cli.common import log, robot_files, robot_of
 from robot_calib.cli.options import add_force, add_joint_names, add_output, separator
 from robot_calib.errors import InputError
 from robot_calib.flows import DEFAULT_ROBOT
@@ -127,7 +127,7 @@ def main(args: argparse.Namespace) -> int:
     if robot_name is None:
         robot_name = preset.robot if preset is not None and preset.robot else DEFAULT_ROBOT
     robot = robot_of(args, robot_name)
-    output = output_path(args.output, "the bag", args.csv, args.force)
+    output = output_path(args.output, "the bag", [*args.csv, *robot_files(args)], args.force)
     if args.preset:
         if args.preset not in PRESETS:
             raise InputError(f"--preset {args.preset}: known presets: {', '.join(PRESETS)}")

@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 
-from robot_calib.cli.common import calibration_of, correction_of, plausible_or_forced
+from robot_calib.cli.common import calibration_of, correction_of, plausible_or_forced, robot_files
 from robot_calib.cli.options import CALIBRATION_ROBOT, add_force, add_output
 from robot_calib.errors import InputError
 
@@ -50,7 +50,8 @@ def main(args: argparse.Namespace) -> int:
     poses = read_joints_csv(args.joints, model.robot.n_joints, model.robot.limits)
     index = np.full(len(poses), model.targets.index(args.target))
     poses = dataclasses.replace(poses, target=index)
-    output = output_path(args.output, "POINTS.csv", [args.params, args.joints], args.force)
+    output = output_path(args.output, "POINTS.csv", [args.params, args.joints, *robot_files(args)],
+                         args.force)  # fmt: skip
     quaternions = None
     if args.target in model.oriented:  # a 6-DoF probe: its frame too (msgs_doc/six_dof.md)
         from scipy.spatial.transform import Rotation

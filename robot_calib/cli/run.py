@@ -13,7 +13,7 @@ import numpy as np
 
 from robot_calib.cli.common import log, print_diagnosis, progress
 from robot_calib.cli.options import count, positive
-from robot_calib.errors import InputError
+from robot_calib.errors import ImplausibleError, InputError
 from robot_calib.flows import RUN_HOLDOUT_POSES, RUN_PLAN
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.loader import load_robot
@@ -83,6 +83,9 @@ def main(args: argparse.Namespace) -> int:
     print(f"best model (lowest held-out error): {result.best} -> "
           f"{result.folder / 'params_best.json'}")  # fmt: skip
     print(f"done: {result.folder} (report: {result.report})")
+    if result.diagnosis.implausible:  # written (to be read), but no exit 0 with nonsense
+        raise ImplausibleError(f"{'; '.join(result.diagnosis.implausible)} ({result.folder}: "
+                               "implausible, written to be read)")  # fmt: skip
     return 0
 
 

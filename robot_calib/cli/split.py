@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_calib.cli.common import log, robot_of
+from robot_calib.cli.common import log, robot_files, robot_of
 from robot_calib.cli.options import add_force, add_joint_names, add_pair_tolerance, count
 from robot_calib.errors import InputError
 
@@ -49,7 +49,7 @@ def main(args: argparse.Namespace) -> int:
     outputs = [Path(args.calibration_out or f"{stem}.cal.mcap"),
                Path(args.holdout_out or f"{stem}.holdout.mcap")]  # fmt: skip
     for out in outputs:
-        output_path(out, "the split bag", [source], args.force)
+        output_path(out, "the split bag", [source, *robot_files(args)], args.force)
     if outputs[0].resolve() == outputs[1].resolve():
         raise InputError(f"{outputs[1]}: --calibration-out and --holdout-out name one file")
     if outputs[0].resolve().parent != outputs[1].resolve().parent:

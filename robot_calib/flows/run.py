@@ -4,6 +4,7 @@ in a new folder, built hidden and renamed when complete."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import tempfile
@@ -44,6 +45,11 @@ if TYPE_CHECKING:
     from robot_calib.identify.calibration import Calibration
     from robot_calib.measurements import Recording
     from robot_calib.sim.world import World
+
+
+#: hold-out poses `run` simulates at most (a campaign of 100k poses takes ~30 s and ~0.5
+#: GB; 1e8 took 14 GB before this limit)
+MAX_HOLDOUT_POSES = 100_000
 
 
 def _quiet(_message: str) -> None:
@@ -121,26 +127,38 @@ def run(
 
     description = load_robot(robot)  # every input checked before anything is written
     check_plan(plan, description)
-    if n_holdout < 1 or seed < 0:
-        raise InputError(f"--holdout {n_holdout}, --seed {seed}: need >= 1 poses, seed >= 0")
+    if not 1 <= n_holdout <= MAX_HOLDOUT_POSES or seed < 0:
+        raise InputError(f"--holdout {n_holdout}, --seed {seed}: need 1 to "
+                         f"{MAX_HOLDOUT_POSES} poses, seed >= 0")  # fmt: skip
     effects = MAIN_JOB_EFFECTS if effects is None else effects
     world = simulation_world(None, robot, effects, seed)
     if Path(output_dir).exists() and not Path(output_dir).is_dir():
         raise InputError(f"{output_dir}: exists and is not a folder")
-    final = Path(output_dir) / time.strftime("run-%Y%m%d-%H%M%S")
-    if final.exists():
-        raise InputError(f"{final}: exists (a run started the same second); run again")
-    final.parent.mkdir(parents=True, exist_ok=True)
-    # built in a hidden folder beside it and renamed when complete: an interrupted or failed
-    # run leaves nothing (msgs_doc: the overwrite and partial-output policy)
-    folder = Path(tempfile.mkdtemp(prefix=".run-", suffix=".partial", dir=final.parent))
+    parent = Path(output_dir)
+    created = not parent.exists()
     try:
-        result = _run_in(folder, final, description, plan, world, seed, n_holdout,
-                         robot, say, log, progress)  # fmt: skip
-        _name_final_paths(folder, final)
-        os.rename(folder, final)
+        parent.mkdir(parents=True, exist_ok=True)
+        final = _reserve(parent / time.strftime("run-%Y%m%d-%H%M%S"))
+    except OSError as exc:
+        raise InputError(f"{output_dir}: cannot write there: {exc.strerror or exc}") from None
+    # built in a hidden folder beside it and renamed when complete: an interrupted or failed
+    # run leaves nothing (msgs_doc: the overwrite and partial-output policy); the final name
+    # is reserved at once (an empty folder), so two runs of one second never collide
+    try:
+        folder = Path(tempfile.mkdtemp(prefix=".run-", suffix=".partial", dir=parent))
+        try:
+            result = _run_in(folder, final, description, plan, world, seed, n_holdout,
+                             robot, say, log, progress)  # fmt: skip
+            _name_final_paths(folder, final)
+            os.rename(folder, final)  # onto the empty reserved folder
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise
     except BaseException:
-        shutil.rmtree(folder, ignore_errors=True)
+        with contextlib.suppress(OSError):
+            final.rmdir()  # the reservation (empty)
+            if created:
+                parent.rmdir()  # a folder this run made, left empty
         raise
 
     def moved(path: Path) -> Path:
@@ -156,6 +174,19 @@ def run(
         report=moved(result.report),
         html=None if result.html is None else moved(result.html),
     )  # fmt: skip
+
+
+def _reserve(name: Path) -> Path:
+    """`name`, else `name-2`, `name-3`, ...: the first that did not exist, created empty
+    (os.mkdir: atomic, so two runs never take one name)."""
+    for k in range(1, 1000):
+        candidate = name if k == 1 else name.with_name(f"{name.name}-{k}")
+        try:
+            candidate.mkdir()
+            return candidate
+        except FileExistsError:
+            continue
+    raise InputError(f"{name}: a thousand runs of that second exist already")
 
 
 def _name_final_paths(folder: Path, final: Path) -> None:
