@@ -50,6 +50,9 @@ FOLDER_PREFIX = "robot_calib-aside-"  # the private temporary folders' names sta
 #: killed and what it did not send is computed here
 TIMEOUT_S = 120.0
 
+#: a helper prepares (and draws) at this niceness: the cores go first to this process and
+#: the children it forks to share its work
+HELPER_NICENESS = 10
 #: this process's ends of its helpers' pipes: closed in every child forked after them (a
 #: child holding a helper's batch pipe open would keep an orphaned helper waiting)
 _HELPER_FDS: set[int] = set()
@@ -348,6 +351,7 @@ class Helper:
         def body() -> None:
             os.close(results[0])
             os.close(batch[1])
+            os.nice(HELPER_NICENESS)  # prepared in the gaps of this process's work
             prepare()
             if _read_exactly(batch[0], 1):  # end of file: this process ended without a batch
                 with open(os.path.join(folder, "batch"), "rb") as file:
