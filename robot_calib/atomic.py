@@ -33,6 +33,8 @@ from typing import Any
 from robot_calib.errors import InputError
 
 _NEW: set[Path] = set()
+"""Targets checked to be new (absolute): created exclusively, never replaced."""
+
 #: the interrupting signals a command received (its handler notes them here, `cli`): one
 #: that a C extension's call back into Python swallowed (scipy's MINPACK around a fit
 #: function, say) must still keep the outputs out, so every final rename checks this first
@@ -44,7 +46,6 @@ def _refuse_if_interrupted() -> None:
     interrupted command are never moved in, even when the interruption was swallowed."""
     if INTERRUPTS:
         raise KeyboardInterrupt
-"""Targets checked to be new (absolute): created exclusively, never replaced."""
 
 
 def claim_new(path: str | Path) -> None:

@@ -294,7 +294,8 @@ def test_a_joints_file_that_is_no_csv_is_one_line(
 
 def test_an_interrupted_run_leaves_no_half_folder(tmp_path: Path) -> None:
     """The new user's Ctrl-C during `run` left a half-filled run folder: the run is built in
-    a hidden folder and renamed when complete; interrupted, nothing of it stays."""
+    a hidden folder and renamed when complete; interrupted, nothing of it stays (not even
+    the output folder, when the run made it)."""
     from robot_calib.flows.run import run
 
     calls = []
@@ -307,4 +308,9 @@ def test_an_interrupted_run_leaves_no_half_folder(tmp_path: Path) -> None:
     with pytest.raises(KeyboardInterrupt):
         run(tmp_path / "o", plan="paper-test1", n_holdout=20, progress=interrupt,
             say=lambda text: None)  # fmt: skip
-    assert "random" in calls and list((tmp_path / "o").iterdir()) == []
+    assert "random" in calls and not (tmp_path / "o").exists()  # the folder it made: gone
+    (tmp_path / "mine").mkdir()  # a folder the user made stays, empty
+    with pytest.raises(KeyboardInterrupt):
+        run(tmp_path / "mine", plan="paper-test1", n_holdout=20, progress=interrupt,
+            say=lambda text: None)  # fmt: skip
+    assert list((tmp_path / "mine").iterdir()) == []
