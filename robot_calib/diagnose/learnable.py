@@ -228,16 +228,23 @@ def corrected_heldout(
         # the rest. Results are the same either way.
         others = list(range(1, len(folds)))
         theirs = others[: (len(others) + 1) // 2]
-        tasks: list[tuple[Hashable, Callable[[], Any]]]  # the parts, then the folds
-        tasks = [(("part", k), partial(part, k)) for k in others]
+        mine = [k for k in others if k not in theirs]
+        # the child: first the geometry of this process's folds (wanted soonest), then
+        # each of its own folds' geometry and process (its results sent as they are done)
+        tasks: list[tuple[Hashable, Callable[[], Any]]]
+        tasks = [(("part", k), partial(part, k)) for k in mine]
         with Mailbox[Hyperparameters]() as box:
-            tasks += [(("fold", k), partial(rest, k, box)) for k in theirs]
+            for k in theirs:
+                tasks += [(("part", k), partial(part, k)), (("fold", k), partial(rest, k, box))]
             with Aside(tasks, mailbox=box) as aside:
                 learned, predicted = one(0, part(0), None, on_learned=box.put)
                 outcomes = {0: (learned.warnings, predicted)}
-                computed.update((k, aside.result(("part", k))) for k in others)
-                outcomes.update((k, rest(k, box)) for k in others if k not in theirs)
-                outcomes.update((k, aside.result(("fold", k))) for k in theirs)
+                for k in mine:
+                    computed[k] = aside.result(("part", k))
+                    outcomes[k] = rest(k, box)
+                for k in theirs:
+                    computed[k] = aside.result(("part", k))
+                    outcomes[k] = aside.result(("fold", k))
         for k, f in enumerate(folds):
             test = fold == f
             before[test] = computed[k][1][test]

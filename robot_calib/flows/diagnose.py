@@ -82,7 +82,7 @@ def diagnose_bags(
 
 
 #: the figures the helper draws (its twin draws the rest): about half the drawing time
-ASIDE_FIRST = ("histogram", "map")
+ASIDE_FIRST = ("histogram", "map", "time")
 
 
 def started_figures() -> FigureCache:
