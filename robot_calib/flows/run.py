@@ -144,11 +144,19 @@ def run(
     # built in a hidden folder beside it and renamed when complete: an interrupted or failed
     # run leaves nothing (msgs_doc: the overwrite and partial-output policy); the final name
     # is reserved at once (an empty folder), so two runs of one second never collide
+    folder = parent / ".run-unset.partial"
+
+    def final_paths(message: str) -> str:
+        """`message` naming the final folder, not the hidden one the run is built in."""
+        return message.replace(str(folder), str(final))
+
     try:
         folder = Path(tempfile.mkdtemp(prefix=".run-", suffix=".partial", dir=parent))
         try:
+            log_final = None if log is None else (lambda m: log(final_paths(m)))
             result = _run_in(folder, final, description, plan, world, seed, n_holdout,
-                             robot, say, log, progress)  # fmt: skip
+                             robot, lambda m: say(final_paths(m)), log_final,
+                             progress)  # fmt: skip
             _name_final_paths(folder, final)
             os.rename(folder, final)  # onto the empty reserved folder
         except BaseException:
@@ -164,8 +172,12 @@ def run(
     def moved(path: Path) -> Path:
         return final / path.relative_to(folder)
 
+    diagnosis = result.diagnosis
+    diagnosis = replace(diagnosis, implausible=[final_paths(m) for m in diagnosis.implausible],
+                        warnings=[final_paths(m) for m in diagnosis.warnings])  # fmt: skip
     return replace(
         result,
+        diagnosis=diagnosis,
         folder=final,
         calibration_bag=replace(result.calibration_bag, bag=moved(result.calibration_bag.bag),
                                 world_file=moved(result.calibration_bag.world_file)),
