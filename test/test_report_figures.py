@@ -291,7 +291,7 @@ assert dying.png("dies", killed_in_a_child) == here.png("dies", killed_in_a_chil
 assert dying.png("f1", lambda: line(1)) == expected["f1"]  # drawn here instead
 dying.close()
 from functools import partial
-started = FigureCache.started(lambda: None)  # the helper and its twin (pickled draws)
+started = FigureCache.started()  # the helper and its twin (pickled draws)
 started.draw_aside([("f0", partial(line, 0)), ("f1", partial(line, 1))],
                    [("f2", partial(line, 2))])
 assert started._asides and started._asides[0].forked

@@ -72,9 +72,8 @@ class FigureCache:
     way to use the second core; half of a diagnosis of 2773 poses was figures): by the
     helper of `started` (forked when the run began, matplotlib imported and its fonts
     loaded by the time the figures are asked for) and the twin it forks then, else by a
-    child forked then. `png` of
-    a figure drawn aside waits for it, and draws it here if no other process could (it
-    died, or fork is not available): the bytes are the same."""
+    child forked then. `png` of a figure drawn aside waits for it, and draws it here if no
+    other process could (it died, or fork is not available): the bytes are the same."""
 
     def __init__(self, dpi: int = 100, helpers: Sequence[Helper] = ()) -> None:
         self.dpi = dpi
@@ -83,13 +82,12 @@ class FigureCache:
         self._helpers = list(helpers)
 
     @classmethod
-    def started(cls, prepare: Callable[[], object], dpi: int = 100) -> FigureCache:
-        """A cache whose helper process starts now, running `prepare` (the imports of the
-        modules whose objects the figures are drawn from: they come pickled), then
-        importing matplotlib and loading its fonts; it draws with a twin it forks then (no
-        helper without fork: then drawn as `draw_aside` says). Close it (`close`), or use
-        it as a context manager."""
-        return cls(dpi, [Helper(partial(_get_ready, prepare))])
+    def started(cls, dpi: int = 100) -> FigureCache:
+        """A cache whose helper process starts now, importing matplotlib and loading its
+        fonts (`_warm_up`; the modules the pickled figures need it inherits: import them
+        before); it draws with a twin it forks then (no helper without fork: then drawn as
+        `draw_aside` says). Close it (`close`), or use it as a context manager."""
+        return cls(dpi, [Helper(_get_ready)])
 
     def png(self, key: str, draw: Callable[[], Figure | None]) -> bytes | None:
         """The PNG of figure `key`, drawn by `draw` the first time (None: no figure)."""
@@ -149,9 +147,8 @@ def render_png(draw: Callable[[], Figure | None], dpi: int) -> bytes | None:
     return buffer.getvalue()
 
 
-def _get_ready(prepare: Callable[[], object]) -> None:
-    """A helper's preparation: `prepare`, then matplotlib imported, its fonts loaded."""
-    prepare()
+def _get_ready() -> None:
+    """A helper's preparation: matplotlib imported, its fonts loaded."""
     _warm_up(pyplot())
 
 

@@ -96,7 +96,7 @@ def started_figures() -> FigureCache:
     import robot_calib.diagnose.report  # noqa: F401 - inherited by the helper
     from robot_calib.diagnose.figures import FigureCache
 
-    return FigureCache.started(lambda: None)
+    return FigureCache.started()
 
 
 def draw_figures(figures: FigureCache, ladder: Ladder, fitted: Recording,

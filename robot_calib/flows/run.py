@@ -144,14 +144,13 @@ def run(
     # built in a hidden folder beside it and renamed when complete: an interrupted or failed
     # run leaves nothing (msgs_doc: the overwrite and partial-output policy); the final name
     # is reserved at once (an empty folder), so two runs of one second never collide
-    folder = parent / ".run-unset.partial"
-
-    def final_paths(message: str) -> str:
-        """`message` naming the final folder, not the hidden one the run is built in."""
-        return message.replace(str(folder), str(final))
-
     try:
         folder = Path(tempfile.mkdtemp(prefix=".run-", suffix=".partial", dir=parent))
+
+        def final_paths(message: str) -> str:
+            """`message` naming the final folder, not the hidden one the run is built in."""
+            return message.replace(str(folder), str(final))
+
         try:
             log_final = None if log is None else (lambda m: log(final_paths(m)))
             result = _run_in(folder, final, description, plan, world, seed, n_holdout,
