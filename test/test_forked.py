@@ -118,8 +118,15 @@ print("OK")
 
 
 def _fresh(code: str) -> str:
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=300, check=False)  # fmt: skip
+    """`code` run by a fresh interpreter with a temporary directory of its own (the
+    folders it finds there are its own, not those of tests running beside it)."""
+    import os
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as own:
+        env = {**os.environ, "TMPDIR": own}
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                              timeout=300, check=False, env=env)  # fmt: skip
     assert done.returncode == 0, done.stderr[-3000:]
     return done.stdout.strip()
 
