@@ -247,6 +247,7 @@ def test_every_option_of_the_units_table_refuses_out_of_range(
         "split": [str(bag), "--calibration-out", f"{out}.c.mcap", "--holdout-out",
                   f"{out}.h.mcap"],
         "score": [str(tmp_path / "missing.json"), str(bag)],
+        "run": ["-o", str(out)],
     }[verb]  # fmt: skip
     run = cli(verb, *base, f"{option}={value}", timeout=120)
     _one_line_error(run, option)
