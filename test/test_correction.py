@@ -72,6 +72,38 @@ def test_smooth_structure_is_recovered_and_the_other_joints_found_irrelevant() -
     assert "exact on all 300 poses" in correction.method
 
 
+@pytest.mark.parametrize("n_targets", [1, 3])
+def test_the_likelihood_and_its_gradient_are_those_of_the_distance_form(n_targets: int) -> None:
+    """The marginal likelihood from the features (no (G, n, n) distances) equals the one
+    written with the squared distances 2 - 2 cos(q_a - q_b) (and 2 [t_a != t_b]) it stands
+    for, and its analytic gradient matches central finite differences."""
+    from scipy.optimize import approx_fprime
+
+    from robot_calib.identify.correction import _features, _negative_log_likelihood
+
+    rng = np.random.default_rng(3)
+    n, n_joints = 120, 6
+    q = rng.uniform(-3.0, 3.0, (n, n_joints))
+    target = rng.integers(0, n_targets, n)
+    y = rng.normal(size=(n, 3))
+    inputs = _features(q, target, n_targets)
+    groups = n_joints + (n_targets > 1)
+    theta = np.r_[rng.uniform(0.2, 3.0, groups), 0.1, np.log(0.05)]
+    value, grad = _negative_log_likelihood(theta, inputs, y, n_joints)
+    dist = [2.0 - 2.0 * np.cos(q[:, None, j] - q[None, :, j]) for j in range(n_joints)]
+    if n_targets > 1:
+        dist.append(2.0 * (target[:, None] != target[None, :]))
+    k = np.exp(theta[-2]) * np.exp(-0.5 * np.tensordot(theta[:-2] ** 2, np.stack(dist), 1))
+    k += np.exp(theta[-1]) * np.eye(n)
+    expected = 0.5 * float(np.sum(y * np.linalg.solve(k, y))) + 3 * float(
+        np.sum(np.log(np.diag(np.linalg.cholesky(k))))
+    )
+    assert value == pytest.approx(expected, rel=1e-12)
+    numeric = approx_fprime(theta, lambda t: _negative_log_likelihood(t, inputs, y, n_joints)[0],
+                            1e-6)  # fmt: skip
+    assert np.max(np.abs(grad - numeric)) < 1e-4 * np.max(np.abs(numeric))
+
+
 def test_subset_of_regressors_above_max_points_predicts_like_the_exact_fit() -> None:
     """Above `max_points` the model is built on that many inducing poses; every pose still
     counts, and the prediction is close to the exact fit's."""
