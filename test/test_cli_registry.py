@@ -34,3 +34,22 @@ def test_each_verb_has_the_interface_and_runs_its_own_main() -> None:
         assert sub.description == verb.HELP
         # every verb has the robot options, first
         assert [a.dest for a in sub._actions[1:4]] == ["robot", "base_link", "tip_link"]  # noqa: SLF001
+
+
+def test_a_parser_built_for_one_verb_gives_that_verb_the_same_options() -> None:
+    """`main` builds only the named verb's options (the others' imports are not paid): that
+    verb's sub-parser is the full parser's, the others carry their name and help only."""
+    full = build_parser()._subparsers._group_actions[0].choices  # noqa: SLF001
+    for verb in VERBS:
+        alone = build_parser(verb.NAME)._subparsers._group_actions[0].choices  # noqa: SLF001
+        assert list(alone) == list(full)
+        for name, sub in alone.items():
+            actions = [(a.dest, tuple(a.option_strings), a.default, a.nargs)
+                       for a in sub._actions]  # fmt: skip  # noqa: SLF001
+            if name == verb.NAME:
+                assert actions == [(a.dest, tuple(a.option_strings), a.default, a.nargs)
+                                   for a in full[name]._actions]  # fmt: skip  # noqa: SLF001
+                assert len(actions) > 4
+            else:
+                assert [dest for dest, *_ in actions] == ["help"]
+                assert sub.get_default("func") is full[name].get_default("func")

@@ -17,10 +17,12 @@ from typing import Any, NoReturn
 
 from robot_calib.atomic import INTERRUPTS
 from robot_calib.cli.options import OVERWRITE_POLICY
-from robot_calib.cli.registry import build_parser
+from robot_calib.cli.registry import VERBS, build_parser
 from robot_calib.errors import RobotCalibError
 
 __all__ = ["OVERWRITE_POLICY", "build_parser", "main", "run"]
+
+VERB_NAMES = frozenset(verb.NAME for verb in VERBS)
 
 # signals received (SIGINT, SIGTERM, SIGHUP) while a verb runs: the list every final rename
 # of an output checks first (`atomic.INTERRUPTS`)
@@ -48,7 +50,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     package error (RobotCalibError) as one line and its status, an interruption as 130."""
     from robot_calib import _interrupted_while_starting
 
-    args = build_parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    named = argv[0] if argv and argv[0] in VERB_NAMES else None  # only its options built
+    args = build_parser(named).parse_args(argv)
     signal.signal(signal.SIGTERM, _interrupt)
     if signal.getsignal(signal.SIGHUP) is signal.SIG_DFL:  # not under nohup (ignored)
         signal.signal(signal.SIGHUP, _interrupt)
