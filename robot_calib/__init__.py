@@ -36,7 +36,28 @@ def _console_program() -> bool:
     return as_module or os.path.basename(program) == "robot-calib"
 
 
+def _keep_freed_memory() -> None:
+    """glibc's malloc: blocks up to 16 MB from the heap, and up to 64 MB of freed heap kept
+    for reuse rather than handed back to the system, unless the user's MALLOC_* settings
+    say otherwise. numpy's temporaries of a few MB (a Jacobian of 2773 poses: 3 MB) were
+    otherwise mapped and unmapped at every step, each page faulted in and zeroed again: a
+    diagnosis of 2773 poses took 210k page faults (0.9 s of system time), 165k with this.
+    Peak memory stays about the same (the peak is the heap's high-water mark either way).
+    Nothing on other C libraries (no mallopt)."""
+    if any(name.startswith("MALLOC_") for name in os.environ):
+        return
+    try:
+        import ctypes
+
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return
+    mallopt(-3, 16 << 20)  # M_MMAP_THRESHOLD
+    mallopt(-1, 64 << 20)  # M_TRIM_THRESHOLD
+
+
 if _console_program():  # before the heavy imports of robot_calib.cli (numpy, ...: ~0.3 s)
+    _keep_freed_memory()
     if _signal.getsignal(_signal.SIGINT) is _signal.default_int_handler:
         _signal.signal(_signal.SIGINT, _interrupted_while_starting)
     if _signal.getsignal(_signal.SIGTERM) == _signal.SIG_DFL:
