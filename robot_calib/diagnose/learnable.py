@@ -229,13 +229,16 @@ def corrected_heldout(
         others = list(range(1, len(folds)))
         theirs = others[: (len(others) + 1) // 2]
         mine = [k for k in others if k not in theirs]
-        # the child: first the geometry of this process's folds (wanted soonest), then
-        # each of its own folds' geometry and process (its results sent as they are done)
+        # the child: first the geometry of every other fold (this process's folds' first:
+        # wanted soonest), all while this one learns (the hyperparameters come at about
+        # the time the child is done with them), then its own folds' processes (its
+        # results sent as they are done): 0.1 s sooner than each fold's geometry just
+        # before its process (the child waited for the hyperparameters in between)
         tasks: list[tuple[Hashable, Callable[[], Any]]]
         tasks = [(("part", k), partial(part, k)) for k in mine]
         with Mailbox[Hyperparameters]() as box:
-            for k in theirs:
-                tasks += [(("part", k), partial(part, k)), (("fold", k), partial(rest, k, box))]
+            tasks += [(("part", k), partial(part, k)) for k in theirs]
+            tasks += [(("fold", k), partial(rest, k, box)) for k in theirs]
             with Aside(tasks, mailbox=box) as aside:
                 learned, predicted = one(0, part(0), None, on_learned=box.put)
                 outcomes = {0: (learned.warnings, predicted)}
