@@ -8,6 +8,7 @@ import argparse
 import dataclasses
 import math
 import time
+from typing import TYPE_CHECKING
 
 from robot_calib.cli.common import log, print_diagnosis, robot_files, robot_of
 from robot_calib.cli.options import (
@@ -18,6 +19,11 @@ from robot_calib.cli.options import (
     add_payload,
 )
 from robot_calib.errors import ImplausibleError, InputError
+
+if TYPE_CHECKING:
+    from robot_calib.flows.bags import ReadBags
+    from robot_calib.forked import Aside
+    from robot_calib.kinematics.description import RobotDescription
 
 NAME = "diagnose"
 HELP = "sim-to-real gap diagnosis -> DIAGNOSIS.json + report"
@@ -52,6 +58,21 @@ def add_arguments(diag: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots + a
     self-contained HTML report."""
+    from functools import partial
+
+    from robot_calib.flows.bags import read_inputs
+    from robot_calib.forked import Aside
+
+    robot = robot_of(args)
+    # the bags read by a child while this process loads the diagnosis' modules (0.4 s):
+    # the same result, or the same error, as reading them here
+    read = partial(read_inputs, args.bags, args.holdout or (), robot, args.pair_tolerance)
+    with Aside([("read", read)]) as reading:
+        return _diagnose(args, robot, reading)
+
+
+def _diagnose(args: argparse.Namespace, robot: RobotDescription,
+              reading: Aside[ReadBags]) -> int:  # fmt: skip
     from robot_calib.atomic import output_path, refuse_input
     from robot_calib.diagnose.report import plot_paths
     from robot_calib.flows.diagnose import (
@@ -64,7 +85,6 @@ def main(args: argparse.Namespace) -> int:
         write_diagnosis,
     )
 
-    robot = robot_of(args)
     inputs = [*args.bags, *(args.holdout or ()), *robot_files(args)]
     output = output_path(args.output, "DIAGNOSIS.json", inputs, args.force)
     report = output_path(report_path(output), "the report", inputs, args.force)
@@ -78,11 +98,13 @@ def main(args: argparse.Namespace) -> int:
     if accuracy is not None and not (math.isfinite(accuracy) and 1e-4 <= accuracy < 10):
         raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, 0.0001 (0.1 um) "
                          "to 10")  # fmt: skip
+    read = reading.result("read")
+    reading.close()
     with started_figures() as figures:  # its helper gets ready while the diagnosis runs
         early = FiguresWhenClimbed(figures)  # drawn while the diagnosis is written up
         diagnosis, ladder, recording = diagnose_bags(
             args.bags, robot, args.holdout or (), args.pair_tolerance, log,
-            None if accuracy is None else accuracy * 1e-3, on_ladder=early,
+            None if accuracy is None else accuracy * 1e-3, on_ladder=early, read=read,
         )  # fmt: skip
         compared, warnings = early.before_after(ladder)
         diagnosis = dataclasses.replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -40,6 +41,39 @@ def read_bags(
     recording = read_recording(bags, robot, pair_tolerance, log=log)
     check_distinct_recordings(recording)
     return recording
+
+
+@dataclass(frozen=True)
+class ReadBags:
+    """The measurements of calibration bags and hold-out bags (`read_inputs`), and the
+    lines their reading logged (warnings), in order."""
+
+    recording: Recording
+    holdout: Recording | None
+    lines: tuple[str, ...]
+
+    def replay(self, log: Log | None) -> None:
+        """Log the reading's lines (a reading done in another process: `read_inputs`)."""
+        if log is not None:
+            for line in self.lines:
+                log(line)
+
+
+def read_inputs(bags: Sequence[str | Path], holdout: Sequence[str | Path],
+                robot: RobotDescription, pair_tolerance: float = PAIR_TOLERANCE_S,
+                ) -> ReadBags:  # fmt: skip
+    """The paired measurements of `bags` and of the `holdout` bags (none: None), each bag
+    given once and each measurement recorded once (`check_distinct_bags`,
+    `check_distinct_recordings`), their log lines kept (`ReadBags.replay`): picklable
+    arguments and result, for a reading in another process while this one loads its
+    modules (`forked.Aside`)."""
+    lines: list[str] = []
+    check_distinct_bags(bags, holdout)
+    recording = read_bags(bags, robot, pair_tolerance, lines.append)
+    held = read_bags(holdout, robot, pair_tolerance, lines.append) if holdout else None
+    if held is not None:
+        check_distinct_recordings(recording, held)
+    return ReadBags(recording, held, tuple(lines))
 
 
 def check_distinct_bags(bags: Sequence[str | Path], holdout: Sequence[str | Path] = ()) -> None:

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 from robot_calib.errors import InputError
 from robot_calib.flows import Log
-from robot_calib.flows.bags import check_distinct_bags, check_distinct_recordings, read_bags
+from robot_calib.flows.bags import ReadBags, read_inputs
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import PAIR_TOLERANCE_S
 
@@ -60,9 +60,11 @@ def diagnose_bags(
     log: Log | None = None,
     tracker_sigma_m: float | None = None,
     on_ladder: Callable[[Ladder, Recording, float | None], object] | None = None,
+    read: ReadBags | None = None,
 ) -> tuple[Diagnosis, Ladder, Recording]:
     """The diagnosis of `bags` scored on the `holdout` bags (none: k-fold CV over poses);
-    `tracker_sigma_m`, `on_ladder` as in `diagnose_recordings`.
+    `tracker_sigma_m`, `on_ladder` as in `diagnose_recordings`; `read`: the bags already
+    read (`read_inputs` of these arguments, e.g. in another process), else read here.
 
     Returns
     -------
@@ -71,14 +73,11 @@ def diagnose_bags(
     recording : Recording
         The paired measurements of `bags` (as `read_bags`); the hold-out's are not kept.
     """
-    check_distinct_bags(bags, holdout)
-    recording = read_bags(bags, robot, pair_tolerance, log)
-    held = read_bags(holdout, robot, pair_tolerance, log) if holdout else None
-    if held is not None:
-        check_distinct_recordings(recording, held)
-    diagnosis, ladder = diagnose_recordings(recording, robot, held, log, tracker_sigma_m,
-                                            on_ladder)  # fmt: skip
-    return diagnosis, ladder, recording
+    read = read_inputs(bags, holdout, robot, pair_tolerance) if read is None else read
+    read.replay(log)
+    diagnosis, ladder = diagnose_recordings(read.recording, robot, read.holdout, log,
+                                            tracker_sigma_m, on_ladder)  # fmt: skip
+    return diagnosis, ladder, read.recording
 
 
 #: the figures the helper draws (its twin draws the rest): about half the drawing time
