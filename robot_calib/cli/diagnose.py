@@ -8,7 +8,9 @@ import argparse
 import dataclasses
 import math
 import time
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from functools import partial
+from typing import TYPE_CHECKING, Any
 
 from robot_calib.cli.common import log, print_diagnosis, robot_files, robot_of
 from robot_calib.cli.options import (
@@ -23,6 +25,7 @@ from robot_calib.errors import ImplausibleError, InputError
 if TYPE_CHECKING:
     from robot_calib.flows.bags import ReadBags
     from robot_calib.forked import Aside
+    from robot_calib.identify.calibration import Calibration
     from robot_calib.kinematics.description import RobotDescription
 
 NAME = "diagnose"
@@ -58,21 +61,33 @@ def add_arguments(diag: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots + a
     self-contained HTML report."""
-    from functools import partial
+    from functools import cache
 
     from robot_calib.flows.bags import read_inputs
     from robot_calib.forked import Aside
 
     robot = robot_of(args)
-    # the bags read by a child while this process loads the diagnosis' modules (0.4 s):
-    # the same result, or the same error, as reading them here
-    read = partial(read_inputs, args.bags, args.holdout or (), robot, args.pair_tolerance)
-    with Aside([("read", read)]) as reading:
+    # the bags read by a child while this process loads the diagnosis' modules (0.4 s),
+    # then the report's before-models of their recording identified there while the
+    # ladder is climbed here: the same results, or the same error, as computed here
+    read = cache(partial(read_inputs, args.bags, args.holdout or (), robot, args.pair_tolerance))
+    tasks: list[tuple[str, Callable[[], Any]]] = [
+        ("read", read),
+        ("before", partial(_before, read, robot)),
+    ]
+    with Aside(tasks) as reading:
         return _diagnose(args, robot, reading)
 
 
+def _before(read: Callable[[], ReadBags], robot: RobotDescription) -> dict[str, Calibration]:
+    """The report's BEFORE models of the calibration recording `read` gives."""
+    from robot_calib.diagnose.html_report import before_models
+
+    return before_models(read().recording, robot)
+
+
 def _diagnose(args: argparse.Namespace, robot: RobotDescription,
-              reading: Aside[ReadBags]) -> int:  # fmt: skip
+              reading: Aside[Any]) -> int:  # fmt: skip
     from robot_calib.atomic import output_path, refuse_input
     from robot_calib.diagnose.report import plot_paths
     from robot_calib.flows.diagnose import (
@@ -98,10 +113,11 @@ def _diagnose(args: argparse.Namespace, robot: RobotDescription,
     if accuracy is not None and not (math.isfinite(accuracy) and 1e-4 <= accuracy < 10):
         raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, 0.0001 (0.1 um) "
                          "to 10")  # fmt: skip
-    read = reading.result("read")
-    reading.close()
+    read: ReadBags = reading.result("read")
     with started_figures() as figures:  # its helper gets ready while the diagnosis runs
-        early = FiguresWhenClimbed(figures)  # drawn while the diagnosis is written up
+        before = partial(reading.result, "before")
+        early = FiguresWhenClimbed(figures, before=(read.recording, before))  # drawn while
+        # the diagnosis is written up
         diagnosis, ladder, recording = diagnose_bags(
             args.bags, robot, args.holdout or (), args.pair_tolerance, log,
             None if accuracy is None else accuracy * 1e-3, on_ladder=early, read=read,

@@ -60,6 +60,8 @@ from robot_calib.measurements import Recording
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
+    from robot_calib.kinematics.description import RobotDescription
+
 DEG_PER_URAD = ANGLE_UNITS["deg"] * 1e-6
 #: the per-joint tables' last column: what of that joint the best model removed
 BEST_MODEL_COLUMN = "best model"
@@ -91,6 +93,27 @@ class ModelErrors:
         return np.asarray(np.linalg.norm(self.residuals, axis=1) * 1e3)
 
 
+#: the models of the before/after comparison fitted on the recording itself (`before_models`)
+BEFORE = (("nominal", "before calibration"), ("cpa", "circle point analysis"))
+
+
+def before_models(recording: Recording, robot: RobotDescription,
+                  given: Mapping[str, Calibration] | None = None,
+                  ) -> dict[str, Calibration]:  # fmt: skip
+    """The BEFORE models of `recording` (tracker blunders left out) that `compare_models`
+    shows: `given` ones, the others identified here (without outlier screening; `cpa`
+    left out without the circle sweeps of every joint it needs). Needs no ladder: a
+    process that has the recording can identify them while the ladder is climbed."""
+    out = dict(given or {})
+    for name, _ in BEFORE:
+        if name not in out:
+            try:
+                out[name] = calibrate(recording, robot, name, screen_outliers=False)
+            except InputError:
+                continue
+    return out
+
+
 def compare_models(
     ladder: Ladder, calibrations: Mapping[str, Calibration] | None = None
 ) -> list[ModelErrors]:
@@ -101,19 +124,16 @@ def compare_models(
     CV and nominal and CPA in-sample (they fit no more than the tracker pose and target
     besides what the circles give). `calibrations`: already identified nominal / cpa
     models of the same recording (else identified here, each well under a second)."""
-    given = dict(calibrations or {})
     recording = ladder.recording
     holdout = ladder.holdout
     geo = ladder.rungs[0].calibration
     out = []
     if recording is not None:
-        for name, role in (("nominal", "before calibration"), ("cpa", "circle point analysis")):
+        given = before_models(recording, geo.model.robot, calibrations)
+        for name, role in BEFORE:
             cal = given.get(name)
             if cal is None:
-                try:
-                    cal = calibrate(recording, geo.model.robot, name, screen_outliers=False)
-                except InputError:
-                    continue  # no circle sweeps of every joint: CPA impossible, not shown
+                continue  # no circle sweeps of every joint: CPA impossible, not shown
             if holdout is not None:
                 residuals = cal.predict(holdout.poses) - holdout.points
                 out.append(_scored(cal.name, role, "hold-out bags", residuals, holdout.points))

@@ -120,15 +120,24 @@ class FiguresWhenClimbed:
     """The `on_ladder` hook of `diagnose_bags` / `diagnose_recordings` that starts every
     figure of the reports in `figures` (`draw_figures`) as soon as the ladder is climbed,
     with the before/after comparison they show (`compare_before_after` of the ladder and
-    `calibrations`), kept for `write_diagnosis` (`before_after`)."""
+    `calibrations`), kept for `write_diagnosis` (`before_after`).
+
+    `before`: a recording and a callable giving its BEFORE models (`before_models`, e.g.
+    identified by another process meanwhile): used when the ladder was fitted on that very
+    recording (no tracker blunder left out), else identified again."""
 
     def __init__(self, figures: FigureCache,
-                 calibrations: Mapping[str, Calibration] | None = None) -> None:  # fmt: skip
-        self.figures, self.calibrations = figures, calibrations
+                 calibrations: Mapping[str, Calibration] | None = None,
+                 before: tuple[Recording, Callable[[], Mapping[str, Calibration]]] | None = None,
+                 ) -> None:  # fmt: skip
+        self.figures, self.calibrations, self.before = figures, calibrations, before
         self._before_after: tuple[list[ModelErrors], list[str]] | None = None
 
     def __call__(self, ladder: Ladder, fitted: Recording, floor_mm: float | None) -> None:
-        self._before_after = compare_before_after(ladder, self.calibrations)
+        calibrations = self.calibrations
+        if self.before is not None and ladder.recording is self.before[0]:
+            calibrations = {**self.before[1](), **(calibrations or {})}
+        self._before_after = compare_before_after(ladder, calibrations)
         draw_figures(self.figures, ladder, fitted, floor_mm, self._before_after[0])
 
     def before_after(self, ladder: Ladder) -> tuple[list[ModelErrors], list[str]]:
