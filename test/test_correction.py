@@ -76,7 +76,7 @@ def test_smooth_structure_is_recovered_and_the_other_joints_found_irrelevant() -
 def test_the_likelihood_and_its_gradient_are_those_of_the_distance_form(n_targets: int) -> None:
     """The marginal likelihood from the features (no (G, n, n) distances) equals the one
     written with the squared distances 2 - 2 cos(q_a - q_b) (and 2 [t_a != t_b]) it stands
-    for, and its analytic gradient matches central finite differences."""
+    for, and its analytic gradient matches forward finite differences."""
     from scipy.optimize import approx_fprime
 
     from robot_calib.identify.correction import _features, _negative_log_likelihood

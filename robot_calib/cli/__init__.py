@@ -17,12 +17,10 @@ from typing import Any, NoReturn
 
 from robot_calib.atomic import INTERRUPTS
 from robot_calib.cli.options import OVERWRITE_POLICY
-from robot_calib.cli.registry import VERBS, build_parser
+from robot_calib.cli.registry import VERB_NAMES, build_parser
 from robot_calib.errors import RobotCalibError
 
 __all__ = ["OVERWRITE_POLICY", "build_parser", "main", "run"]
-
-VERB_NAMES = frozenset(verb.NAME for verb in VERBS)
 
 # signals received (SIGINT, SIGTERM, SIGHUP) while a verb runs: the list every final rename
 # of an output checks first (`atomic.INTERRUPTS`)

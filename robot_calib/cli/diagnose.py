@@ -8,9 +8,7 @@ import argparse
 import dataclasses
 import math
 import time
-from collections.abc import Callable
-from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from robot_calib.cli.common import log, print_diagnosis, robot_files, robot_of
 from robot_calib.cli.options import (
@@ -23,9 +21,7 @@ from robot_calib.cli.options import (
 from robot_calib.errors import ImplausibleError, InputError
 
 if TYPE_CHECKING:
-    from robot_calib.flows.bags import ReadBags
-    from robot_calib.forked import Aside
-    from robot_calib.identify.calibration import Calibration
+    from robot_calib.flows.diagnose import ReadAside
     from robot_calib.kinematics.description import RobotDescription
 
 NAME = "diagnose"
@@ -61,39 +57,21 @@ def add_arguments(diag: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots + a
     self-contained HTML report."""
-    from functools import cache
-
-    from robot_calib.flows.bags import read_inputs
-    from robot_calib.forked import Aside
+    from robot_calib.flows.diagnose import ReadAside
 
     robot = robot_of(args)
-    # the bags read by a child while this process loads the diagnosis' modules (0.4 s),
-    # then the report's before-models of their recording identified there while the
-    # ladder is climbed here: the same results, or the same error, as computed here
-    read = cache(partial(read_inputs, args.bags, args.holdout or (), robot, args.pair_tolerance))
-    tasks: list[tuple[str, Callable[[], Any]]] = [
-        ("read", read),
-        ("before", partial(_before, read, robot)),
-    ]
-    with Aside(tasks) as reading:
+    # the bags read by a child while this process loads the diagnosis' modules
+    with ReadAside(args.bags, args.holdout or (), robot, args.pair_tolerance, log) as reading:
         return _diagnose(args, robot, reading)
 
 
-def _before(read: Callable[[], ReadBags], robot: RobotDescription) -> dict[str, Calibration]:
-    """The report's BEFORE models of the calibration recording `read` gives."""
-    from robot_calib.diagnose.html_report import before_models
-
-    return before_models(read().recording, robot)
-
-
-def _diagnose(args: argparse.Namespace, robot: RobotDescription,
-              reading: Aside[Any]) -> int:  # fmt: skip
+def _diagnose(args: argparse.Namespace, robot: RobotDescription, reading: ReadAside) -> int:
     from robot_calib.atomic import output_path, refuse_input
     from robot_calib.diagnose.report import plot_paths
     from robot_calib.flows.diagnose import (
         FiguresWhenClimbed,
         best_params_path,
-        diagnose_bags,
+        diagnose_read,
         html_report_path,
         report_path,
         started_figures,
@@ -113,14 +91,12 @@ def _diagnose(args: argparse.Namespace, robot: RobotDescription,
     if accuracy is not None and not (math.isfinite(accuracy) and 1e-4 <= accuracy < 10):
         raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, 0.0001 (0.1 um) "
                          "to 10")  # fmt: skip
-    read: ReadBags = reading.result("read")
+    read = reading.read()
     with started_figures() as figures:  # its helper gets ready while the diagnosis runs
-        before = partial(reading.result, "before")
-        early = FiguresWhenClimbed(figures, before=(read.recording, before))  # drawn while
-        # the diagnosis is written up
-        diagnosis, ladder, recording = diagnose_bags(
-            args.bags, robot, args.holdout or (), args.pair_tolerance, log,
-            None if accuracy is None else accuracy * 1e-3, on_ladder=early, read=read,
+        # drawn while the diagnosis is written up; the reference models from `reading`
+        early = FiguresWhenClimbed(figures, references=reading.references)
+        diagnosis, ladder, recording = diagnose_read(
+            read, robot, log, None if accuracy is None else accuracy * 1e-3, on_ladder=early
         )  # fmt: skip
         compared, warnings = early.before_after(ladder)
         diagnosis = dataclasses.replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])

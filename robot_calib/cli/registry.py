@@ -46,6 +46,8 @@ VERBS: tuple[ModuleType, ...] = (
     run,
 )
 
+VERB_NAMES = frozenset(module.NAME for module in VERBS)
+
 
 def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     """`robot-calib`'s parser: --version and one sub-parser per verb of VERBS, each with the
@@ -64,7 +66,6 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
 
     parser.add_argument("--version", action="version", version=f"robot-calib {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    only = verb
     for module in VERBS:
         p = sub.add_parser(
             module.NAME,
@@ -73,7 +74,7 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
             epilog=OVERWRITE_POLICY,
             formatter_class=RequiredHelpFormatter,
         )
-        if only in (None, module.NAME):
+        if verb in (None, module.NAME):
             add_robot(p, module.ROBOT)
             module.add_arguments(p)
         main: Callable[[argparse.Namespace], int] = module.main

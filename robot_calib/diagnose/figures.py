@@ -352,6 +352,10 @@ def error_histogram_figure(errors_mm: Sequence[tuple[str, Array]], scored_on: st
     return fig
 
 
+#: the height of the quiver figure's suptitle and of a line of its panel titles [in]
+SUPTITLE_IN, TITLE_LINE_IN = 0.35, 0.17
+
+
 def quiver_figure(ladder: Ladder, points: Array, residuals: Sequence[tuple[str, Array]],
                   scored_on: str) -> Figure:  # fmt: skip
     """3D residual vectors, one panel per (model, residuals (n, 3) [m], predicted -
@@ -401,13 +405,9 @@ def quiver_figure(ladder: Ladder, points: Array, residuals: Sequence[tuple[str, 
     # the suptitle and the longest panel title (TITLE_LINE_IN per line).
     lines = max(wrap_name(model, 40).count("\n") for model, _ in residuals) + 2
     lines += narrow.count("\n")  # the suptitle's second line
-    fig.subplots_adjust(left=0.0, right=0.97, bottom=0.03, wspace=0.08,
-                        top=1.0 - (SUPTITLE_IN + TITLE_LINE_IN * lines) / 5.0)  # fmt: skip
+    top = 1.0 - (SUPTITLE_IN + TITLE_LINE_IN * lines) / fig.get_figheight()
+    fig.subplots_adjust(left=0.0, right=0.97, bottom=0.03, wspace=0.08, top=top)
     return fig
-
-
-#: the height of the quiver figure's suptitle and of a line of its panel titles [in]
-SUPTITLE_IN, TITLE_LINE_IN = 0.35, 0.17
 
 
 def _round_scale(scale: float) -> float:

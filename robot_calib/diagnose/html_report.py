@@ -50,8 +50,7 @@ from robot_calib.diagnose.signatures import (
     scan_order_note,
     signature_removed,
 )
-from robot_calib.errors import InputError
-from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.calibrate import REFERENCE_MODELS, reference_models
 from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.params_file import fixed_reasons
 from robot_calib.kinematics.frames import Array
@@ -59,8 +58,6 @@ from robot_calib.measurements import Recording
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
-
-    from robot_calib.kinematics.description import RobotDescription
 
 DEG_PER_URAD = ANGLE_UNITS["deg"] * 1e-6
 #: the per-joint tables' last column: what of that joint the best model removed
@@ -93,25 +90,8 @@ class ModelErrors:
         return np.asarray(np.linalg.norm(self.residuals, axis=1) * 1e3)
 
 
-#: the models of the before/after comparison fitted on the recording itself (`before_models`)
-BEFORE = (("nominal", "before calibration"), ("cpa", "circle point analysis"))
-
-
-def before_models(recording: Recording, robot: RobotDescription,
-                  given: Mapping[str, Calibration] | None = None,
-                  ) -> dict[str, Calibration]:  # fmt: skip
-    """The BEFORE models of `recording` (tracker blunders left out) that `compare_models`
-    shows: `given` ones, the others identified here (without outlier screening; `cpa`
-    left out without the circle sweeps of every joint it needs). Needs no ladder: a
-    process that has the recording can identify them while the ladder is climbed."""
-    out = dict(given or {})
-    for name, _ in BEFORE:
-        if name not in out:
-            try:
-                out[name] = calibrate(recording, robot, name, screen_outliers=False)
-            except InputError:
-                continue
-    return out
+#: what each reference model (`identify.calibrate.reference_models`) stands for in the table
+REFERENCE_ROLES = {"nominal": "before calibration", "cpa": "circle point analysis"}
 
 
 def compare_models(
@@ -129,9 +109,9 @@ def compare_models(
     geo = ladder.rungs[0].calibration
     out = []
     if recording is not None:
-        given = before_models(recording, geo.model.robot, calibrations)
-        for name, role in BEFORE:
-            cal = given.get(name)
+        given = reference_models(recording, geo.model.robot, calibrations)
+        for name in REFERENCE_MODELS:
+            cal, role = given.get(name), REFERENCE_ROLES[name]
             if cal is None:
                 continue  # no circle sweeps of every joint: CPA impossible, not shown
             if holdout is not None:

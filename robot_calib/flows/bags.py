@@ -46,14 +46,14 @@ def read_bags(
 @dataclass(frozen=True)
 class ReadBags:
     """The measurements of calibration bags and hold-out bags (`read_inputs`), and the
-    lines their reading logged (warnings), in order."""
+    lines their reading logged (warnings) when they were kept rather than logged."""
 
     recording: Recording
     holdout: Recording | None
-    lines: tuple[str, ...]
+    lines: tuple[str, ...] = ()
 
     def replay(self, log: Log | None) -> None:
-        """Log the reading's lines (a reading done in another process: `read_inputs`)."""
+        """Log the kept lines (a reading done in another process: `read_inputs`)."""
         if log is not None:
             for line in self.lines:
                 log(line)
@@ -61,19 +61,20 @@ class ReadBags:
 
 def read_inputs(bags: Sequence[str | Path], holdout: Sequence[str | Path],
                 robot: RobotDescription, pair_tolerance: float = PAIR_TOLERANCE_S,
-                ) -> ReadBags:  # fmt: skip
+                log: Log | None = None) -> ReadBags:  # fmt: skip
     """The paired measurements of `bags` and of the `holdout` bags (none: None), each bag
     given once and each measurement recorded once (`check_distinct_bags`,
-    `check_distinct_recordings`), their log lines kept (`ReadBags.replay`): picklable
-    arguments and result, for a reading in another process while this one loads its
-    modules (`forked.Aside`)."""
-    lines: list[str] = []
+    `check_distinct_recordings`). The reading's lines (warnings) go to `log` as they come;
+    without one they are kept (`ReadBags.lines`, `ReadBags.replay`): for a reading in
+    another process whose output is not this one's."""
+    kept: list[str] = []
+    say = kept.append if log is None else log
     check_distinct_bags(bags, holdout)
-    recording = read_bags(bags, robot, pair_tolerance, lines.append)
-    held = read_bags(holdout, robot, pair_tolerance, lines.append) if holdout else None
+    recording = read_bags(bags, robot, pair_tolerance, say)
+    held = read_bags(holdout, robot, pair_tolerance, say) if holdout else None
     if held is not None:
         check_distinct_recordings(recording, held)
-    return ReadBags(recording, held, tuple(lines))
+    return ReadBags(recording, held, tuple(kept))
 
 
 def check_distinct_bags(bags: Sequence[str | Path], holdout: Sequence[str | Path] = ()) -> None:

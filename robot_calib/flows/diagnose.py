@@ -5,9 +5,11 @@ model's PARAMS.json), written together (`robot-calib diagnose`, the calibrator n
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
+from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 from robot_calib.errors import InputError
@@ -60,11 +62,9 @@ def diagnose_bags(
     log: Log | None = None,
     tracker_sigma_m: float | None = None,
     on_ladder: Callable[[Ladder, Recording, float | None], object] | None = None,
-    read: ReadBags | None = None,
 ) -> tuple[Diagnosis, Ladder, Recording]:
     """The diagnosis of `bags` scored on the `holdout` bags (none: k-fold CV over poses);
-    `tracker_sigma_m`, `on_ladder` as in `diagnose_recordings`; `read`: the bags already
-    read (`read_inputs` of these arguments, e.g. in another process), else read here.
+    `tracker_sigma_m`, `on_ladder` as in `diagnose_recordings`.
 
     Returns
     -------
@@ -73,11 +73,87 @@ def diagnose_bags(
     recording : Recording
         The paired measurements of `bags` (as `read_bags`); the hold-out's are not kept.
     """
-    read = read_inputs(bags, holdout, robot, pair_tolerance) if read is None else read
+    read = read_inputs(bags, holdout, robot, pair_tolerance, log)
+    return diagnose_read(read, robot, log, tracker_sigma_m, on_ladder)
+
+
+def diagnose_read(
+    read: ReadBags,
+    robot: RobotDescription,
+    log: Log | None = None,
+    tracker_sigma_m: float | None = None,
+    on_ladder: Callable[[Ladder, Recording, float | None], object] | None = None,
+) -> tuple[Diagnosis, Ladder, Recording]:
+    """`diagnose_bags` of bags already read (`read_inputs`, `ReadAside.read`): the lines
+    their reading kept are logged first."""
     read.replay(log)
     diagnosis, ladder = diagnose_recordings(read.recording, robot, read.holdout, log,
                                             tracker_sigma_m, on_ladder)  # fmt: skip
     return diagnosis, ladder, read.recording
+
+
+#: seconds the reading child may take for the bags, then for the reference models (a
+#: huge bag on slow storage is read here only after this, a second time)
+READ_TIMEOUT_S = 3600.0
+
+
+class ReadAside:
+    """The bags of a diagnosis read by a forked child (`forked.Aside`) while this process
+    loads the diagnosis' modules (0.4 s of every start), then the reference models of
+    their calibration recording (`identify.calibrate.reference_models`) identified there
+    while this process climbs the ladder. The results are those computed here, which is
+    what happens when the child fails: the reading's warnings are then logged as they
+    come and its error raised here, as a reading here always did. Use it as a context
+    manager: the child is ended on the way out."""
+
+    def __init__(self, bags: Sequence[str | Path], holdout: Sequence[str | Path],
+                 robot: RobotDescription, pair_tolerance: float = PAIR_TOLERANCE_S,
+                 log: Log | None = None) -> None:  # fmt: skip
+        from robot_calib.forked import Aside
+
+        self._creator = os.getpid()
+        self._args = (tuple(bags), tuple(holdout), robot, pair_tolerance)
+        self._log = log
+        self._read_in_this_process: ReadBags | None = None
+        tasks: list[tuple[str, Callable[[], Any]]] = [
+            ("read", self._read),
+            ("references", self._references),
+        ]
+        self._aside = Aside(tasks, READ_TIMEOUT_S)
+
+    def _read(self) -> ReadBags:
+        """The reading, once per process: in the child its lines kept (its output is not
+        this process's), here logged as they come."""
+        if self._read_in_this_process is None:
+            here = os.getpid() == self._creator
+            self._read_in_this_process = read_inputs(*self._args,
+                                                     log=self._log if here else None)  # fmt: skip
+        return self._read_in_this_process
+
+    def _references(self) -> dict[str, Calibration]:
+        from robot_calib.identify.calibrate import reference_models
+
+        return reference_models(self.read().recording, self._args[2])
+
+    def read(self) -> ReadBags:
+        """The bags read (`read_inputs`; an error of theirs raised here)."""
+        value: ReadBags = self._aside.result("read")
+        return value
+
+    def references(self, recording: Recording) -> dict[str, Calibration] | None:
+        """The reference models of `recording` when it is the calibration recording read
+        (the ladder left no tracker blunder out), else None (to be identified on it)."""
+        if recording is not self.read().recording:
+            return None
+        value: dict[str, Calibration] = self._aside.result("references")
+        return value
+
+    def __enter__(self) -> ReadAside:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:  # fmt: skip
+        self._aside.close(abort=kind is not None)
 
 
 #: the figures the helper draws (its twin draws the rest): about half the drawing time
@@ -122,21 +198,22 @@ class FiguresWhenClimbed:
     with the before/after comparison they show (`compare_before_after` of the ladder and
     `calibrations`), kept for `write_diagnosis` (`before_after`).
 
-    `before`: a recording and a callable giving its BEFORE models (`before_models`, e.g.
-    identified by another process meanwhile): used when the ladder was fitted on that very
-    recording (no tracker blunder left out), else identified again."""
+    `references`: the reference models (`reference_models`) of a recording, identified
+    meanwhile (`ReadAside.references`; None: not of that recording): used when they are
+    of the ladder's, else identified again."""
 
     def __init__(self, figures: FigureCache,
                  calibrations: Mapping[str, Calibration] | None = None,
-                 before: tuple[Recording, Callable[[], Mapping[str, Calibration]]] | None = None,
+                 references: Callable[[Recording], Mapping[str, Calibration] | None] | None = None,
                  ) -> None:  # fmt: skip
-        self.figures, self.calibrations, self.before = figures, calibrations, before
+        self.figures, self.calibrations, self.references = figures, calibrations, references
         self._before_after: tuple[list[ModelErrors], list[str]] | None = None
 
     def __call__(self, ladder: Ladder, fitted: Recording, floor_mm: float | None) -> None:
         calibrations = self.calibrations
-        if self.before is not None and ladder.recording is self.before[0]:
-            calibrations = {**self.before[1](), **(calibrations or {})}
+        if self.references is not None and ladder.recording is not None:
+            found = self.references(ladder.recording)
+            calibrations = {**found, **(calibrations or {})} if found else calibrations
         self._before_after = compare_before_after(ladder, calibrations)
         draw_figures(self.figures, ladder, fitted, floor_mm, self._before_after[0])
 

@@ -65,6 +65,8 @@ from robot_calib.model import KinematicModel, target_parameters
 from robot_calib.poses import JOINT_CHANGE_TOLERANCE, Poses
 
 BASE_MODELS = ("nominal", "cpa", "geometric")
+#: the models a calibration is compared with that need no ladder (`reference_models`)
+REFERENCE_MODELS = ("nominal", "cpa")
 OBJECTIVES = ("absolute", "seed")
 SEED_ANCHORS = (1, 3, 5)  # the seed fixes the cloud on the centres of circles 1, 3 and 5
 MAX_OUTLIER_ROUNDS = 4  # refits without the flagged points until the set is stable
@@ -482,3 +484,21 @@ def _objective(name: str, cpa: CPAResult | None) -> Objective:
 def model_name(effects: tuple[Effect, ...] | list[Effect]) -> str:
     """The `--model` name of the geometric model plus `effects`."""
     return "+".join(["geometric", *(e.spec for e in effects)])
+
+
+def reference_models(recording: Recording, robot: RobotDescription,
+                     given: Mapping[str, Calibration] | None = None,
+                     ) -> dict[str, Calibration]:  # fmt: skip
+    """The REFERENCE_MODELS of `recording` (tracker blunders left out) a report compares
+    its calibration with: `given` ones, the others identified here, without outlier
+    screening (`cpa` left out without the circle sweeps of every joint it needs). They
+    need the recording only: a process that has it can identify them while another climbs
+    the ladder (`flows.diagnose.ReadAside`)."""
+    out = dict(given or {})
+    for name in REFERENCE_MODELS:
+        if name not in out:
+            try:
+                out[name] = calibrate(recording, robot, name, screen_outliers=False)
+            except InputError:
+                continue
+    return out
