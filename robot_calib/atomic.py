@@ -110,8 +110,7 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
     """
     folder = Path(folder)
     try:
-        stage = Path(tempfile.mkdtemp(prefix=".robot-calib-", suffix=".partial", dir=folder))
-        (stage / OWNER_FILE).write_text(_writer_id())  # who stages here (not moved in)
+        stage = _named_folder(folder, ".robot-calib-", ".partial")  # who stages here
     except OSError as exc:
         raise InputError(f"{folder}: cannot write there: {exc.strerror or exc}") from None
     _remove_dead_stages(folder, stage)
@@ -241,9 +240,32 @@ def owned_folder(parent: str | Path, prefix: str) -> Path:
     """A new private folder `parent/<prefix>XXXX` naming its writer (`OWNER_FILE`), after
     the folders of that prefix whose writers are gone (killed before they could remove
     theirs) are removed (`remove_dead_folders`)."""
-    folder = Path(tempfile.mkdtemp(prefix=prefix, dir=parent))
-    (folder / OWNER_FILE).write_text(_writer_id())
+    folder = _named_folder(parent, prefix)
     remove_dead_folders(Path(parent), f"{prefix}*", folder)
+    return folder
+
+
+#: the signals an interruption arrives by (held while a folder gets its writer's name)
+_HELD = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def _named_folder(parent: str | Path, prefix: str, suffix: str = "") -> Path:
+    """A new folder `parent/<prefix>XXXX<suffix>` with its writer's name in it
+    (`OWNER_FILE`), made with Ctrl-C, SIGTERM and SIGHUP held until both are done (they
+    are handled right after): a folder without its writer's name is never swept, and one
+    interrupted between the two stayed for ever."""
+    hold = hasattr(signal, "pthread_sigmask")
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD) if hold else set()
+    try:
+        folder = Path(tempfile.mkdtemp(prefix=prefix, suffix=suffix, dir=parent))
+        try:
+            (folder / OWNER_FILE).write_text(_writer_id())
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise
+    finally:
+        if hold:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
     return folder
 
 
