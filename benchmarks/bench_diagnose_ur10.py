@@ -81,7 +81,8 @@ def main() -> int:
             out = folder / f"{label.split(',')[0].replace(' ', '_').replace('/', '_')}.json"
             times, cpus, rss = [], [], 0.0
             for _ in range(args.repeat):
-                wall, cpu, peak = _run([*bags, "--robot", "ur10", "-o", str(out), "--force"])
+                wall, cpu, peak = _run(["diagnose", *bags, "--robot", "ur10", "-o", str(out),
+                                        "--force"])  # fmt: skip
                 times.append(wall)
                 cpus.append(cpu)
                 rss = max(rss, peak)
