@@ -188,10 +188,7 @@ def _negative_log_likelihood(theta: Array, inputs: Array, y: Array,
     n, n_outputs = y.shape
     u, signal, noise = theta[:-2], np.exp(theta[-2]), np.exp(theta[-1])
     phi = inputs * _feature_scale(u, n_joints, inputs.shape[1])
-    k_signal = phi @ phi.T  # in place from here (no n x n temporaries)
-    k_signal -= float(np.sum(u**2))
-    np.exp(k_signal, out=k_signal)
-    k_signal *= signal
+    k_signal = _kernel(phi, phi, Hyperparameters(u, signal, noise))  # in place from here
     k = k_signal.copy()
     k.flat[:: n + 1] += noise
     factor, info = lapack.dpotrf(k, lower=1)  # clean: the upper triangle zero
