@@ -62,8 +62,9 @@ def _keep_freed_memory() -> None:
 
 
 if _console_program():  # before the heavy imports of robot_calib.cli (numpy, ...: ~0.3 s)
-    _keep_freed_memory()
+    # the handlers first: a Ctrl-C during any import after them (ctypes below) is one line
     if _signal.getsignal(_signal.SIGINT) is _signal.default_int_handler:
         _signal.signal(_signal.SIGINT, _interrupted_while_starting)
     if _signal.getsignal(_signal.SIGTERM) == _signal.SIG_DFL:
         _signal.signal(_signal.SIGTERM, _interrupted_while_starting)
+    _keep_freed_memory()
