@@ -91,7 +91,9 @@ def run() -> NoReturn:
     which callers run in-process (the tests)."""
     import gc
 
+    _open_standard_streams()
     sys.stdout = _Stdout(sys.stdout)
+    sys.stderr = _Stderr(sys.stderr)
     try:
         status = main()
         sys.stdout.flush()
@@ -105,6 +107,26 @@ def run() -> NoReturn:
             status = 2
     gc.freeze()
     sys.exit(status)
+
+
+def _open_standard_streams() -> None:
+    """Standard input, output and error that the caller closed (`>&-`, `2>&-`) become
+    /dev/null: what the program prints goes nowhere (was: a traceback, exit 120), and no file
+    it opens later gets descriptor 1 or 2 and the printed lines written into it."""
+    import os
+
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            devnull = os.open(os.devnull, os.O_RDWR)
+            if devnull != fd:
+                os.dup2(devnull, fd)
+                os.close(devnull)
+    if sys.stdout is None:
+        sys.stdout = open(1, "w", closefd=False)  # noqa: SIM115 - the program's own stdout
+    if sys.stderr is None:
+        sys.stderr = open(2, "w", closefd=False, errors="backslashreplace")  # noqa: SIM115
 
 
 class _StdoutLost(Exception):
@@ -136,6 +158,44 @@ class _Stdout:
 
     def __getattr__(self, name: str) -> Any:  # noqa: ANN401 - the stream's own attributes
         return getattr(self._stream, name)
+
+
+class _Stderr:
+    """Standard error whose failures (`2>/dev/full`, a reader gone: `2>&1 | head -1`) drop it
+    to /dev/null: the messages cannot be read anywhere, the command's work and exit status
+    stay its own (was: a traceback nobody could see, exit 1)."""
+
+    def __init__(self, stream: Any) -> None:  # noqa: ANN401 - a text stream
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            self._stream.write(text)
+        except OSError:
+            _drop_stderr(self._stream)
+        return len(text)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except OSError:
+            _drop_stderr(self._stream)
+
+    def __getattr__(self, name: str) -> Any:  # noqa: ANN401 - the stream's own attributes
+        return getattr(self._stream, name)
+
+
+def _drop_stderr(stream: Any) -> None:  # noqa: ANN401 - a text stream
+    """Standard error to /dev/null, its buffer emptied (a failed line stays buffered and
+    failed again at every flush and at exit)."""
+    import contextlib
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 2)
+    os.close(devnull)
+    with contextlib.suppress(OSError):
+        stream.flush()  # the buffered text now goes to /dev/null
 
 
 def _drop_stdout() -> None:

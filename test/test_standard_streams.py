@@ -1,0 +1,76 @@
+"""The program's standard output and error as a shell can leave them: closed (`>&-`,
+`2>&-`), full (`/dev/full`) or read by a program that quits early (`2>&1 | head -1`). The
+command's work and exit status stay its own, and never a traceback (each ran the real
+program, `python -m robot_calib`, in a shell)."""
+
+from __future__ import annotations
+
+import json
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "bags" / "paper_test3.mcap"
+
+
+def shell(line: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    """`line` in bash with `RC` standing for the program; its exit status is the program's
+    (pipefail off: PIPESTATUS[0] is printed last on stdout as `status=N`)."""
+    program = f"{shlex.quote(sys.executable)} -m robot_calib"
+    script = line.replace("RC", program) + '; echo "status=${PIPESTATUS[0]}"'
+    return subprocess.run(["bash", "-c", script], cwd=cwd, capture_output=True, text=True,
+                          timeout=120)  # fmt: skip
+
+
+def status(result: subprocess.CompletedProcess[str]) -> int:
+    return int(result.stdout.strip().splitlines()[-1].removeprefix("status="))
+
+
+def test_closed_stdout_writes_the_result_and_exits_0(tmp_path: Path) -> None:
+    """`>&-` was an AttributeError traceback and exit 120 (no sys.stdout at all)."""
+    result = shell(f"RC calibrate {SAMPLE} -o a.json >&- 2>err.txt", tmp_path)
+    assert status(result) == 0, (tmp_path / "err.txt").read_text()
+    assert "Traceback" not in (tmp_path / "err.txt").read_text()
+    assert json.loads((tmp_path / "a.json").read_text())["plausible"] is True
+
+
+def test_closed_stderr_is_not_printed_into_stdout(tmp_path: Path) -> None:
+    """`2>&-`: the progress lines (stderr's) were printed into standard output among the
+    results (print to a missing sys.stderr prints to sys.stdout), and descriptor 2 was free
+    for the first file the program opened; now /dev/null holds it and takes them."""
+    result = shell(f"RC calibrate {SAMPLE} -o a.json >out.txt 2>&-", tmp_path)
+    assert status(result) == 0
+    assert json.loads((tmp_path / "a.json").read_text())["plausible"] is True
+    out = (tmp_path / "out.txt").read_text()
+    assert "identifiability:" in out and "Levenberg-Marquardt" not in out, out
+
+
+def test_full_stderr_keeps_the_verbs_exit_status(tmp_path: Path) -> None:
+    """`2>/dev/full`: a bad input was exit 1 (a traceback nobody could read, of the failed
+    error line); it is the verb's 2, and a good run's 0 with its file written."""
+    bad = shell("RC calibrate missing.mcap -o b.json 2>/dev/full", tmp_path)
+    assert status(bad) == 2
+    assert not (tmp_path / "b.json").exists()
+    good = shell(f"RC calibrate {SAMPLE} -o c.json 2>/dev/full >/dev/null", tmp_path)
+    assert status(good) == 0
+    assert json.loads((tmp_path / "c.json").read_text())["plausible"] is True
+
+
+def test_a_reader_gone_from_both_streams_is_sigpipes_status(tmp_path: Path) -> None:
+    """`2>&1 | head -1`: the first progress line read, then both streams' reader gone: the
+    shell's status for a broken pipe (141), no traceback in what was read, no output kept."""
+    result = shell(f"RC calibrate {SAMPLE} -o d.json 2>&1 | head -1", tmp_path)
+    assert status(result) == 141
+    lines = result.stdout.strip().splitlines()
+    assert len(lines) == 2 and "Traceback" not in lines[0], lines
+    assert not (tmp_path / "d.json").exists()
+
+
+def test_full_stdout_is_one_line_and_2(tmp_path: Path) -> None:
+    result = shell(f"RC calibrate {SAMPLE} -o e.json >/dev/full", tmp_path)
+    assert status(result) == 2
+    assert result.stderr.strip().splitlines()[-1].startswith("robot-calib: cannot write its")
+    assert "Traceback" not in result.stderr
+    assert not (tmp_path / "e.json").exists()
