@@ -144,11 +144,11 @@ def solve_ik(
         if not active.size:
             break
         q_a, error_a = q[active], error[active]
-        jac = np.empty((active.size, 6, n_joints))
-        for k in range(n_joints):
-            moved = q_a.copy()
-            moved[:, k] += STEP_RAD
-            jac[:, :, k] = (errors(active, moved) - error_a) / STEP_RAD
+        # every joint's step in one batch (J x m poses: one forward model call, not J)
+        moved = np.repeat(q_a[None], n_joints, axis=0)  # (J, m, J): joint k stepped in [k]
+        moved[np.arange(n_joints), :, np.arange(n_joints)] += STEP_RAD
+        stepped = errors(np.tile(active, n_joints), moved.reshape(-1, n_joints))
+        jac = ((stepped.reshape(n_joints, active.size, 6) - error_a) / STEP_RAD).transpose(1, 2, 0)
         normal = np.einsum("nak,nal->nkl", jac, jac)
         eye = np.eye(n_joints)
         normal += damping[active, None, None] * (eye + eye * normal)
