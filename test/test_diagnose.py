@@ -6,10 +6,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from cli_runner import cli
 
-from robot_calib.diagnose.diagnosis import Diagnosis, DominantEffect, diagnose
+from robot_calib.diagnose.diagnosis import Diagnosis, DominantEffect, diagnose, small_holdout
+from robot_calib.diagnose.report import write_report
 from robot_calib.identify.params_file import load_params
 from robot_calib.sim.blind import judge, make_case, run_case
 from robot_calib.sim.world import load_world
@@ -112,3 +114,21 @@ def test_too_few_poses_for_any_effect_keep_geometric() -> None:
     diagnosis, ladder = diagnose(scenario.calibration, scenario.world.model.robot)
     assert [r.model for r in ladder.rungs if not r.learned] == ["geometric"]
     assert diagnosis.dominant_effect is None or diagnosis.dominant_effect.effect == "unknown"
+
+
+def test_a_hold_out_of_few_poses_is_said_in_every_output(tmp_path: Path) -> None:
+    """5 hold-out poses scored a model as confidently as 200 (was: no word; 1 pose gave a
+    confident wrong effect): the warning goes to the log, DIAGNOSIS.json's warnings and the
+    Markdown report, with the uncertainty of a held-out rms over 5 poses (~18 %); 200 poses
+    say nothing."""
+    case = make_case("backlash", 4)
+    few = case.holdout.subset(np.arange(len(case.holdout)) < 5)
+    said: list[str] = []
+    diagnosis, ladder = diagnose(case.calibration, ROBOT, few, log=said.append)
+    (warning,) = [w for w in diagnosis.warnings if "5 pose(s), fewer than" in w]
+    assert "18 %" in warning and warning in said
+    assert warning in json.loads(json.dumps(diagnosis.to_dict()))["warnings"]
+    report = tmp_path / "d.md"
+    write_report(diagnosis, ladder, case.calibration, report)
+    assert "5 pose(s), fewer than" in report.read_text()
+    assert small_holdout(case.holdout) == ""  # 200 poses

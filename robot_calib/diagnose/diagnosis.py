@@ -62,6 +62,10 @@ STRUCTURE_SHARE = 0.1
 FOREIGN_HOLDOUT_FACTOR = 1000.0
 #: ... and than this [mm] (1 um: below any tracker; noise-free simulations fit to ~1e-10 mm)
 FOREIGN_HOLDOUT_MIN_MM = 1e-3
+#: hold-out bags of fewer poses than this: their held-out rms (each uncertain by about
+#: 1 / sqrt(6 n): 7 % at 30, 41 % at 1) and the model chosen on them are said to rest on too
+#: few poses (`small_holdout`, in every output)
+MIN_HOLDOUT_POSES = 30
 
 
 @dataclass(frozen=True)
@@ -377,6 +381,9 @@ def diagnose(
         level used [m] and the candidates of every round (model, score [m]).
     """
     ladder = run_ladder(recording, robot, holdout, log, tracker_sigma_m)
+    few = small_holdout(ladder.holdout)
+    if few and log is not None:
+        log(few)
     sources, holdout_sources = list(recording.sources), holdout
     recording = ladder.recording if ladder.recording is not None else recording  # no outliers
     best = ladder.rungs[-1]  # the chosen model: the hybrid when it won
@@ -460,7 +467,8 @@ def diagnose(
         recordings=sources,
         holdout=[] if holdout_sources is None else list(holdout_sources.sources),
         outliers=list(ladder.outliers),
-        warnings=list(geo.warnings) + ([ladder.noise.warning] if ladder.noise.warning else []),
+        warnings=list(geo.warnings) + ([ladder.noise.warning] if ladder.noise.warning else [])
+        + ([few] if few else []),
         learnable=learnable,
         outside_vocabulary=outside,
         iso9283=_iso9283(ladder, recording, robot),
@@ -544,6 +552,22 @@ def foreign_holdout(ladder: Ladder, insample_mm: float, floor_mm: float | None) 
         f"bags ({', '.join(ladder.holdout.sources)}) do not belong to this calibration "
         "(another robot, joint names or order mapped wrongly, another tracker placement?): "
         "every held-out figure is meaningless"
+    )
+
+
+def small_holdout(holdout: Recording | None) -> str:
+    """The warning for hold-out bags of fewer than MIN_HOLDOUT_POSES poses (a rung's
+    held-out rms over n poses is uncertain by about 1 / sqrt(6 n) of itself: half the
+    variance of 3 n squared components); '' for more, or without hold-out bags (k-fold)."""
+    if holdout is None or len(holdout) >= MIN_HOLDOUT_POSES:
+        return ""
+    n = len(holdout)
+    return (
+        f"warning: the hold-out bags ({', '.join(holdout.sources)}) hold {n} pose(s), fewer "
+        f"than {MIN_HOLDOUT_POSES}: each held-out rms is uncertain by about "
+        f"{100 / np.sqrt(6 * n):.0f} % and the model chosen on them (the dominant effect "
+        "included) may be chance; record more hold-out poses, or omit --holdout (k-fold "
+        "over the calibration's poses)"
     )
 
 

@@ -8,7 +8,7 @@ from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport, percent
+from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport, percent, small_holdout
 from robot_calib.diagnose.figures import (
     FigureCache,
     angle_figure,
@@ -171,6 +171,11 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         + (f" ({', '.join(diagnosis.holdout)})" if diagnosis.holdout else "")
         + ".",
         "",
+        *(
+            [f"**{few[0].upper()}{few[1:]}.**", ""]
+            if (few := small_holdout(ladder.holdout))
+            else []
+        ),  # fmt: skip
         f"**Verdict** — {verdict}.",
         "",
         *(
