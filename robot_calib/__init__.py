@@ -23,8 +23,26 @@ def _interrupted_while_starting(signum: int, _frame: object) -> None:
     own handlers): nothing is written yet, so one line and exit 130 at once (was a
     KeyboardInterrupt traceback of whatever import was in progress)."""
     verb = next((a for a in sys.argv[1:2] if not a.startswith("-")), "")
-    os.write(2, f"robot-calib{' ' + verb if verb else ''}: interrupted\n".encode())
+    try:  # noqa: SIM105 - no contextlib import this early
+        os.write(2, f"robot-calib{' ' + verb if verb else ''}: interrupted\n".encode())
+    except OSError:  # stderr full or gone (`2>/dev/full`): the status still says it
+        pass
     os._exit(130)
+
+
+def _open_closed_descriptors() -> None:
+    """Standard input, output and error that the caller closed (`>&-`, `2>&-`) become
+    /dev/null before anything is imported or opened: no file the program opens gets
+    descriptor 1 or 2 with the printed lines written into it (`cli.run` gives Python's
+    missing sys.stdout / sys.stderr streams on them)."""
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            devnull = os.open(os.devnull, os.O_RDWR)
+            if devnull != fd:
+                os.dup2(devnull, fd)
+                os.close(devnull)
 
 
 def _console_program() -> bool:
@@ -62,6 +80,7 @@ def _keep_freed_memory() -> None:
 
 
 if _console_program():  # before the heavy imports of robot_calib.cli (numpy, ...: ~0.3 s)
+    _open_closed_descriptors()
     # the handlers first: a Ctrl-C during any import after them (ctypes below) is one line
     if _signal.getsignal(_signal.SIGINT) is _signal.default_int_handler:
         _signal.signal(_signal.SIGINT, _interrupted_while_starting)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import functools
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -14,13 +15,13 @@ import pytest
 from cli_runner import cli
 
 from robot_calib.compensate import compensate_commands, compensate_targets
-from robot_calib.compensate.solve import nominal_counterpart
+from robot_calib.compensate.solve import BRANCH_JUMP_RAD, _follow_the_rows, nominal_counterpart
 from robot_calib.compensate.targets import Targets, goals_in_base
 from robot_calib.effects import parse_effect
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.params_file import write_json_atomic
-from robot_calib.ik import first_tool2flange, tool2base
+from robot_calib.ik import IKSolution, first_tool2flange, tool2base
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.poses import Poses, approach_directions
 from robot_calib.sim.measure import measure_every_target
@@ -290,3 +291,62 @@ def test_the_compensate_command_with_targets(tmp_path: Path) -> None:
     message = refused("--targets", str(targets), "--unit", "mm")
     assert "t.csv:3: target x,y,z" in message and "beyond +-10000 m" in message, message
     assert len(message.strip().splitlines()) == 1, message
+
+
+def row_by_row(
+    found: IKSolution,
+    start: Poses,
+    goal2base: np.ndarray,
+    oriented: np.ndarray,
+    solve: Callable[..., IKSolution],
+    limits: np.ndarray,
+) -> np.ndarray:
+    """The rule of `_follow_the_rows` as it reads, one row after another (the known
+    answer): each row that jumps more than BRANCH_JUMP_RAD from the row before as it
+    finally stands is solved from it, and kept where it converges within the limits and
+    moves less."""
+    q = found.q.copy()
+    ok = found.converged & np.all((q >= limits[:, 0]) & (q <= limits[:, 1]), axis=1)
+    for i in range(1, len(q)):
+        jump = np.abs(q[i] - q[i - 1]).max()
+        if not (ok[i] and ok[i - 1]) or jump <= BRANCH_JUMP_RAD:
+            continue
+        again = solve(replace(start.subset(np.array([i])), q=q[i - 1 : i]), goal2base[[i]],
+                      oriented[[i]])  # fmt: skip
+        inside = np.all((again.q >= limits[:, 0]) & (again.q <= limits[:, 1]))
+        if again.converged[0] and inside and np.abs(again.q[0] - q[i - 1]).max() < jump:
+            q[i] = again.q[0]
+    return q
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_rows_of_a_program_follow_the_row_by_row_rule(seed: int) -> None:
+    """`_follow_the_rows` decides its rows in batched rounds (was one solve per row: 11
+    target poses/s); its result is the row-by-row rule's exactly, on an arm of two joints
+    whose every target has three branches (the solver lands on the one nearest its seed,
+    some beyond the limits) along 200 rows: scattered, and a path with branch switches
+    (a first batched version kept rows decided against a row before that then changed)."""
+    rng = np.random.default_rng(seed)
+    n, limits = 200, np.array([[-3.0, 3.0], [-3.0, 3.0]])
+    path = np.cumsum(rng.normal(0.0, 0.05, (n, 2)), axis=0)
+    centre = path if seed % 2 else rng.uniform(-2.0, 2.0, (n, 2))
+    branches = centre[:, None, :] + np.array([[0.0, 0.0], [1.2, -1.4], [-2.5, 2.2]])  # (n, 3, 2)
+    goal2base = np.tile(np.eye(4), (n, 1, 1))
+    goal2base[:, 0, 3] = np.arange(n)  # the row's index: which target
+
+    def solve(poses: Poses, goal: np.ndarray, which: np.ndarray) -> IKSolution:
+        rows = goal[:, 0, 3].astype(int)
+        nearest = np.argmin(np.abs(branches[rows] - poses.q[:, None, :]).max(axis=2), axis=1)
+        q = branches[rows, nearest]
+        zero = np.zeros(len(rows))
+        return IKSolution(q, zero, zero, np.ones(len(rows), dtype=np.int64),
+                          np.ones(len(rows), dtype=bool))  # fmt: skip
+
+    seeds = branches[np.arange(n), rng.integers(0, 3, n)]  # each row alone: any branch
+    start = Poses(seeds, np.ones_like(seeds), np.zeros(n))
+    oriented = np.zeros(n, dtype=bool)
+    found = solve(start, goal2base, oriented)
+    batched = _follow_the_rows(found, start, goal2base, oriented, solve, limits)
+    expected = row_by_row(found, start, goal2base, oriented, solve, limits)
+    assert not np.array_equal(expected, found.q)  # the rule changed rows
+    np.testing.assert_array_equal(batched.q, expected)

@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import json
 import shlex
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,3 +76,20 @@ def test_full_stdout_is_one_line_and_2(tmp_path: Path) -> None:
     assert result.stderr.strip().splitlines()[-1].startswith("robot-calib: cannot write its")
     assert "Traceback" not in result.stderr
     assert not (tmp_path / "e.json").exists()
+
+
+def test_ctrl_c_while_starting_with_a_full_stderr_is_130(tmp_path: Path) -> None:
+    """SIGINT during start-up with stderr on /dev/full: the start-up handler's one line
+    failed inside the handler (OSError), the import in progress got it: exit 1, or the
+    Ctrl-C swallowed; now 130 (or killed by the signal before Python had a handler)."""
+    for i in range(8):
+        with open("/dev/full", "w") as full:
+            run = subprocess.Popen(
+                [sys.executable, "-m", "robot_calib", "calibrate", str(SAMPLE), "-o", f"{i}.json"],
+                cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=full,
+                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+            )  # fmt: skip
+            time.sleep(0.03 + 0.02 * i)
+            run.send_signal(signal.SIGINT)
+            assert run.wait(timeout=120) in (130, -signal.SIGINT), (i, run.returncode)
+        assert not (tmp_path / f"{i}.json").exists()

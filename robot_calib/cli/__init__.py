@@ -110,19 +110,9 @@ def run() -> NoReturn:
 
 
 def _open_standard_streams() -> None:
-    """Standard input, output and error that the caller closed (`>&-`, `2>&-`) become
-    /dev/null: what the program prints goes nowhere (was: a traceback, exit 120), and no file
-    it opens later gets descriptor 1 or 2 and the printed lines written into it."""
-    import os
-
-    for fd in (0, 1, 2):
-        try:
-            os.fstat(fd)
-        except OSError:
-            devnull = os.open(os.devnull, os.O_RDWR)
-            if devnull != fd:
-                os.dup2(devnull, fd)
-                os.close(devnull)
+    """Python's streams for standard output and error the caller closed (`>&-`, `2>&-`:
+    None, was an AttributeError traceback and exit 120, and stderr's lines printed into
+    stdout), on the /dev/null that `robot_calib._open_closed_descriptors` put there."""
     if sys.stdout is None:
         sys.stdout = open(1, "w", closefd=False)  # noqa: SIM115 - the program's own stdout
     if sys.stderr is None:

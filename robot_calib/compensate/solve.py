@@ -288,31 +288,44 @@ def _follow_the_rows(
     row that jumps more than BRANCH_JUMP_RAD from the row before solved again from that
     row's solution (`solve`), kept where it converges within the limits and moves less: a
     program of close targets stays on one branch (elbow up or down, reaching forwards or
-    over backwards) instead of switching between them from one target to the next. In
-    rounds: every such row at once from the row before as it stands, then the rows after
-    one that changed, until none changes (a branch switch carried down a path of n rows
-    takes n rounds of one row; 300 scattered targets a few rounds of many: was one solve
-    per row, 22 s for 300)."""
+    over backwards) instead of switching between them from one target to the next.
+
+    The row-by-row rule (each row decided from the row before as it finally stands, from its
+    own solution in `found`) in batched rounds: every candidate row starts over from `found`,
+    those that jump are solved at once from the row before as it stands, and the rows after
+    those that changed are the next round's candidates, until none changes. A row decided
+    from a row before that later changes is decided again, so the result is the row-by-row
+    one (was one solve per row: 917 s for 10000 scattered targets; now 9.9 s)."""
+    names = ("error_m", "error_rad", "iterations", "converged")
     q = found.q.copy()
-    fields = {name: getattr(found, name).copy()
-              for name in ("error_m", "error_rad", "iterations", "converged")}  # fmt: skip
-    ok = found.converged & _inside(q, limits)
+    fields = {name: getattr(found, name).copy() for name in names}
+    ok = found.converged & _inside(found.q, limits)
     candidates = np.arange(1, len(q))
     while candidates.size:
+        before = q[candidates].copy()
+        q[candidates] = found.q[candidates]  # start over: the row before may have changed
+        for name in names:
+            fields[name][candidates] = getattr(found, name)[candidates]
         jump = np.abs(q[candidates] - q[candidates - 1]).max(axis=1)
-        rows = candidates[ok[candidates] & ok[candidates - 1] & (jump > BRANCH_JUMP_RAD)]
-        if not rows.size:
-            break
-        jump = np.abs(q[rows] - q[rows - 1]).max(axis=1)
-        again = solve(replace(start.subset(rows), q=q[rows - 1]), goal2base[rows], oriented[rows])
-        better = (again.converged & _inside(again.q, limits)
-                  & (np.abs(again.q - q[rows - 1]).max(axis=1) < jump))  # fmt: skip
-        changed = rows[better]  # each round's first row lies after the last's: <= n rounds
-        q[changed] = again.q[better]
-        fields["iterations"][changed] += again.iterations[better]
-        for name in ("error_m", "error_rad", "converged"):
-            fields[name][changed] = getattr(again, name)[better]
-        candidates = changed[changed + 1 < len(q)] + 1
+        jumps = ok[candidates] & ok[candidates - 1] & (jump > BRANCH_JUMP_RAD)
+        rows = candidates[jumps]
+        if rows.size:
+            again = solve(replace(start.subset(rows), q=q[rows - 1]), goal2base[rows],
+                          oriented[rows])  # fmt: skip
+            better = (again.converged & _inside(again.q, limits)
+                      & (np.abs(again.q - q[rows - 1]).max(axis=1) < jump[jumps]))  # fmt: skip
+            kept = rows[better]
+            q[kept] = again.q[better]
+            for name in ("error_m", "error_rad", "converged"):
+                fields[name][kept] = getattr(again, name)[better]
+            fields["iterations"][kept] += again.iterations[better]
+        # decided again: the rows after a row that now differs from what they were decided
+        # against (its value before this round, or the start-over value this round's
+        # decisions used); the first candidate moves down each round: at most n rounds
+        now = q[candidates]
+        moved = candidates[np.any(now != before, axis=1)
+                           | np.any(now != found.q[candidates], axis=1)]  # fmt: skip
+        candidates = moved[moved + 1 < len(q)] + 1
     return replace(found, q=q, **fields)
 
 
