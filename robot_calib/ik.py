@@ -82,9 +82,12 @@ def tool2base(
 
 
 def pose_error(actual2base: Array, goal2base: Array) -> Array:
-    """(n, 6): position error [m] and orientation error (small-angle vector of
-    goal^T actual) [rad] times ORIENTATION_LEVER_M, of tool frames actual2base and
-    goal2base (n, 4, 4) in the robot base frame."""
+    """(n, 6): position error [m] and orientation error (the rotation vector of
+    goal^T actual: its angle [rad] about its axis, up to pi) times ORIENTATION_LEVER_M, of
+    tool frames actual2base and goal2base (n, 4, 4) in the robot base frame. The rotation
+    vector, not the small-angle vector of the antisymmetric part: that one is zero at a
+    half turn, where the solver stopped and called a tool pointing the opposite way
+    reached (0 urad)."""
     turn = np.einsum("nba,nbc->nac", goal2base[:, :3, :3], actual2base[:, :3, :3])
     vee = 0.5 * np.stack(
         [
@@ -93,8 +96,17 @@ def pose_error(actual2base: Array, goal2base: Array) -> Array:
             turn[:, 1, 0] - turn[:, 0, 1],
         ],
         axis=1,
-    )
-    return np.hstack([actual2base[:, :3, 3] - goal2base[:, :3, 3], ORIENTATION_LEVER_M * vee])
+    )  # sin(angle) x axis
+    sine = np.linalg.norm(vee, axis=1)
+    cosine = 0.5 * (np.trace(turn, axis1=1, axis2=2) - 1.0)
+    angle = np.arctan2(sine, cosine)
+    vector = vee * np.where(sine > 1e-12, angle / np.maximum(sine, 1e-12), 1.0)[:, None]
+    near_half_turn = (cosine < 0.0) & (sine < 1e-6)  # the axis from the symmetric part
+    if near_half_turn.any():
+        from scipy.spatial.transform import Rotation
+
+        vector[near_half_turn] = Rotation.from_matrix(turn[near_half_turn]).as_rotvec()
+    return np.hstack([actual2base[:, :3, 3] - goal2base[:, :3, 3], ORIENTATION_LEVER_M * vector])
 
 
 def solve_ik(
