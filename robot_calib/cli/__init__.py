@@ -10,6 +10,7 @@ SIGTERM or SIGHUP in "interrupted" and exit status 130, nothing left behind.
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import sys
 from collections.abc import Sequence
@@ -83,26 +84,28 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def run() -> NoReturn:
     """The `robot-calib` program (console script, `python -m robot_calib`): `main` on the
-    program's arguments, then exit with its status (141 when the reader of its standard
-    output went away, `| head`; 2 with one line when standard output cannot be written,
-    a full disk). Everything this process made is then frozen for the garbage collector
+    program's arguments, then exit with its status. Standard output failing never stops the
+    work (its files are written): the status is then 141 when its reader went away
+    (`| head`), 2 with one line when it cannot be written (a full disk), unless the verb's
+    own is an error. Everything this process made is then frozen for the garbage collector
     (`gc.freeze`): the interpreter's tear-down of scipy's and matplotlib's modules
     otherwise took 0.3-0.4 s of every run, after the files were written. Not in `main`,
     which callers run in-process (the tests)."""
     import gc
 
     _open_standard_streams()
-    sys.stdout = _Stdout(sys.stdout)
+    stdout = _Stdout(sys.stdout)
+    sys.stdout = stdout
     sys.stderr = _Stderr(sys.stderr)
-    try:
-        status = main()
-        sys.stdout.flush()
-    except _StdoutLost as lost:
-        _drop_stdout()
-        if isinstance(lost.error, BrokenPipeError):  # `| head`: the shell's status for it
+    status = main()
+    stdout.flush()
+    if stdout.lost is not None and status == 0:
+        if isinstance(stdout.lost, BrokenPipeError):  # `| head`: the shell's status for it
             status = 128 + signal.SIGPIPE
         else:
-            print(f"robot-calib: cannot write its output: {lost.error.strerror or lost.error}",
+            verb = next((a for a in sys.argv[1:2] if not a.startswith("-")), "")
+            print(f"robot-calib{' ' + verb if verb else ''}: cannot write to standard output: "
+                  f"{stdout.lost.strerror or stdout.lost} (its files are written)",
                   file=sys.stderr)  # fmt: skip
             status = 2
     gc.freeze()
@@ -119,32 +122,34 @@ def _open_standard_streams() -> None:
         sys.stderr = open(2, "w", closefd=False, errors="backslashreplace")  # noqa: SIM115
 
 
-class _StdoutLost(Exception):
-    """Standard output failed (`error`): not an error of the command's files."""
-
-    def __init__(self, error: OSError) -> None:
-        super().__init__(str(error))
-        self.error = error
-
-
 class _Stdout:
-    """Standard output whose write and flush failures are `_StdoutLost` (told apart from
-    the OSErrors of the files a command writes)."""
+    """Standard output that, when a write or flush fails (`| head` gone, a full disk),
+    remembers the first error (`lost`) and goes to /dev/null: the command runs on and
+    writes its files (was: stopped where it printed, calibrate and run wrote nothing)."""
 
     def __init__(self, stream: Any) -> None:  # noqa: ANN401 - a text stream
         self._stream = stream
+        self.lost: OSError | None = None
 
     def write(self, text: str) -> int:
         try:
-            return int(self._stream.write(text))
+            self._stream.write(text)
         except OSError as exc:
-            raise _StdoutLost(exc) from None
+            self._drop(exc)
+        return len(text)
 
     def flush(self) -> None:
         try:
             self._stream.flush()
         except OSError as exc:
-            raise _StdoutLost(exc) from None
+            self._drop(exc)
+
+    def _drop(self, error: OSError) -> None:
+        if self.lost is None:
+            self.lost = error
+        _drop_stdout()
+        with contextlib.suppress(OSError):
+            self._stream.flush()  # the buffered text now goes to /dev/null
 
     def __getattr__(self, name: str) -> Any:  # noqa: ANN401 - the stream's own attributes
         return getattr(self._stream, name)
@@ -178,7 +183,6 @@ class _Stderr:
 def _drop_stderr(stream: Any) -> None:  # noqa: ANN401 - a text stream
     """Standard error to /dev/null, its buffer emptied (a failed line stays buffered and
     failed again at every flush and at exit)."""
-    import contextlib
     import os
 
     devnull = os.open(os.devnull, os.O_WRONLY)
