@@ -18,13 +18,19 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 __version__ = "0.1.0"
 
 
+def program_and_verb() -> str:
+    """'robot-calib VERB' of this program's arguments (the verb: the first, unless an
+    option): how its one-line messages begin before the verb's parser has run."""
+    verb = next((a for a in sys.argv[1:2] if not a.startswith("-")), "")
+    return f"robot-calib{' ' + verb if verb else ''}"
+
+
 def _interrupted_while_starting(signum: int, _frame: object) -> None:
     """Ctrl-C / SIGTERM while `robot-calib` loads its modules (before `cli.main` installs its
     own handlers): nothing is written yet, so one line and exit 130 at once (was a
     KeyboardInterrupt traceback of whatever import was in progress)."""
-    verb = next((a for a in sys.argv[1:2] if not a.startswith("-")), "")
     try:  # noqa: SIM105 - no contextlib import this early
-        os.write(2, f"robot-calib{' ' + verb if verb else ''}: interrupted\n".encode())
+        os.write(2, f"{program_and_verb()}: interrupted\n".encode())
     except OSError:  # stderr full or gone (`2>/dev/full`): the status still says it
         pass
     os._exit(130)

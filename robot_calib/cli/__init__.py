@@ -11,11 +11,13 @@ SIGTERM or SIGHUP in "interrupted" and exit status 130, nothing left behind.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
+from robot_calib import program_and_verb
 from robot_calib.atomic import INTERRUPTS
 from robot_calib.cli.options import OVERWRITE_POLICY
 from robot_calib.cli.registry import VERB_NAMES, build_parser
@@ -94,17 +96,16 @@ def run() -> NoReturn:
     import gc
 
     _open_standard_streams()
-    stdout = _Stdout(sys.stdout)
+    stdout = _Guarded(sys.stdout, 1)
     sys.stdout = stdout
-    sys.stderr = _Stderr(sys.stderr)
+    sys.stderr = _Guarded(sys.stderr, 2)
     status = main()
     stdout.flush()
     if stdout.lost is not None and status == 0:
         if isinstance(stdout.lost, BrokenPipeError):  # `| head`: the shell's status for it
             status = 128 + signal.SIGPIPE
         else:
-            verb = next((a for a in sys.argv[1:2] if not a.startswith("-")), "")
-            print(f"robot-calib{' ' + verb if verb else ''}: cannot write to standard output: "
+            print(f"{program_and_verb()}: cannot write to standard output: "
                   f"{stdout.lost.strerror or stdout.lost} (its files are written)",
                   file=sys.stderr)  # fmt: skip
             status = 2
@@ -122,13 +123,17 @@ def _open_standard_streams() -> None:
         sys.stderr = open(2, "w", closefd=False, errors="backslashreplace")  # noqa: SIM115
 
 
-class _Stdout:
-    """Standard output that, when a write or flush fails (`| head` gone, a full disk),
-    remembers the first error (`lost`) and goes to /dev/null: the command runs on and
-    writes its files (was: stopped where it printed, calibrate and run wrote nothing)."""
+class _Guarded:
+    """Standard output or error (`stream` on descriptor `fd`) whose write or flush failure
+    (`| head` gone, a full disk, `2>/dev/full`) is remembered (`lost`: the first) and sends
+    the descriptor to /dev/null, the buffer emptied there (a failed line stays buffered and
+    failed again at every flush and at exit): the command runs on and writes its files
+    (was: a failing stdout stopped it where it printed, calibrate and run wrote nothing; a
+    failing stderr was a traceback nobody could see, exit 1). `run` turns stdout's `lost`
+    into its exit status; stderr's messages cannot be read anywhere."""
 
-    def __init__(self, stream: Any) -> None:  # noqa: ANN401 - a text stream
-        self._stream = stream
+    def __init__(self, stream: Any, fd: int) -> None:  # noqa: ANN401 - a text stream
+        self._stream, self._fd = stream, fd
         self.lost: OSError | None = None
 
     def write(self, text: str) -> int:
@@ -147,56 +152,11 @@ class _Stdout:
     def _drop(self, error: OSError) -> None:
         if self.lost is None:
             self.lost = error
-        _drop_stdout()
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, self._fd)
+        os.close(devnull)
         with contextlib.suppress(OSError):
             self._stream.flush()  # the buffered text now goes to /dev/null
 
     def __getattr__(self, name: str) -> Any:  # noqa: ANN401 - the stream's own attributes
         return getattr(self._stream, name)
-
-
-class _Stderr:
-    """Standard error whose failures (`2>/dev/full`, a reader gone: `2>&1 | head -1`) drop it
-    to /dev/null: the messages cannot be read anywhere, the command's work and exit status
-    stay its own (was: a traceback nobody could see, exit 1)."""
-
-    def __init__(self, stream: Any) -> None:  # noqa: ANN401 - a text stream
-        self._stream = stream
-
-    def write(self, text: str) -> int:
-        try:
-            self._stream.write(text)
-        except OSError:
-            _drop_stderr(self._stream)
-        return len(text)
-
-    def flush(self) -> None:
-        try:
-            self._stream.flush()
-        except OSError:
-            _drop_stderr(self._stream)
-
-    def __getattr__(self, name: str) -> Any:  # noqa: ANN401 - the stream's own attributes
-        return getattr(self._stream, name)
-
-
-def _drop_stderr(stream: Any) -> None:  # noqa: ANN401 - a text stream
-    """Standard error to /dev/null, its buffer emptied (a failed line stays buffered and
-    failed again at every flush and at exit)."""
-    import os
-
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, 2)
-    os.close(devnull)
-    with contextlib.suppress(OSError):
-        stream.flush()  # the buffered text now goes to /dev/null
-
-
-def _drop_stdout() -> None:
-    """Standard output to /dev/null: what is still buffered, and the interpreter's flush at
-    exit, go nowhere instead of failing again ('Exception ignored ...')."""
-    import os
-
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, sys.__stdout__.fileno() if sys.__stdout__ else 1)
-    os.close(devnull)
