@@ -87,7 +87,10 @@ def pose_error(actual2base: Array, goal2base: Array) -> Array:
     tool frames actual2base and goal2base (n, 4, 4) in the robot base frame. The rotation
     vector, not the small-angle vector of the antisymmetric part: that one is zero at a
     half turn, where the solver stopped and called a tool pointing the opposite way
-    reached (0 urad)."""
+    reached (0 urad). Formed from that small-angle vector (its length is sin(angle)):
+    scipy's Rotation.as_rotvec agrees to 1e-11 but takes 2.5-4 x as long in the solver's
+    loop (3000 poses: 4.3 vs 1.1 ms); it is used only within 1e-6 of a half turn, where
+    the axis must come from the symmetric part."""
     turn = np.einsum("nba,nbc->nac", goal2base[:, :3, :3], actual2base[:, :3, :3])
     vee = 0.5 * np.stack(
         [
