@@ -27,6 +27,14 @@ class ImplausibleError(RobotCalibError):
     kind = "fitted, implausible"
 
 
+class WrittenFileError(RobotCalibError):
+    """A file this tool was about to write that its own reader refuses (a bug, not bad
+    input): exit status 1, nothing written."""
+
+    exit_status = 1
+    kind = "internal error (please report it)"
+
+
 class RobotDescriptionError(RobotCalibError):
     """Unknown robot name, unreadable or malformed robot YAML."""
 

@@ -132,3 +132,43 @@ def test_the_structured_correction_round_trips_through_params_json() -> None:
         bad["correction"].update(change)
         with pytest.raises(InputError, match=f"^bad.json: correction: .*{said}"):
             load(bad)
+
+
+def test_a_correction_measures_its_stored_rms_as_its_loader_does() -> None:
+    """The stored rms (structured.rms_m, rms_m) are what the loader measures at the
+    readings as stored (rounded to 1e-12 rad), not at the fitted readings: a structured
+    part whose coefficients cancel (a ridge of 1e-12 lets them) would otherwise carry the
+    rounding into its rms and be refused by predict and score (params_best.json of a real
+    ABB arm: 'structured.rms_m 0.2738 mm, it predicts 0.2738 mm rms')."""
+    from robot_calib.identify.load_features import structured_design
+    from robot_calib.poses import Poses
+
+    scenario = ur10_out_of_vocabulary("link_bending", seed=0, n=300)
+    recording = scenario.calibration
+    geo = calibrate(recording, scenario.world.model.robot, "geometric")
+    fitted = geo.with_learned_correction(recording).correction
+    assert isinstance(fitted, StructuredCorrection)
+    gp = fitted.gp
+    assert len(gp.inducing_q) == fitted.n_fitted  # every fitted pose is an inducing pose
+    # readings off the 1e-12 rad grid the file stores them on
+    off_grid = replace(gp, inducing_q=gp.inducing_q + 4.3e-13)
+    poses = replace(Poses.from_readings(off_grid.inducing_q), target=gp.inducing_target)
+    design = structured_design(fitted.model, fitted.parameters, fitted.columns,
+                               fitted.step_tau, poses).reshape(-1, len(fitted.coefficients))
+    _, singular, directions = np.linalg.svd(design, full_matrices=False)
+    weak = int(np.flatnonzero(singular > 1e-10 * singular[0])[-1])  # weakest, not null
+    # coefficients along it that predict 0.1 mm rms: huge, cancelling one another
+    size = 1e-4 * np.sqrt(len(poses)) / singular[weak]
+    cancelling = replace(fitted, gp=off_grid, ridge=1e-12,
+                         coefficients=fitted.coefficients + size * directions[weak])
+    own = cancelling.with_own_rms()
+    stored = own.structured(replace(poses, q=np.round(poses.q, 12)))
+    measured = float(np.sqrt(np.mean(np.sum(stored**2, axis=1))))
+    assert abs(own.structured_rms_m - measured) <= 1e-12 * measured
+    assert 0.05e-3 < own.structured_rms_m < 0.2e-3  # the 0.1 mm it was given
+    cal = replace(geo, correction=own)
+    doc = json.loads(json.dumps(cal.to_dict(recording)))
+    back = Calibration.from_dict(doc, "cancelling.json")  # no InputError
+    assert back.correction is not None
+    held = scenario.holdout.poses
+    assert np.allclose(back.predict(held), cal.predict(held), rtol=0, atol=1e-9)

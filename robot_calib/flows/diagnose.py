@@ -326,12 +326,42 @@ def write_diagnosis(
                                   scores),
                 stage / best_file.name,
             )  # fmt: skip
+            check_loads(stage / best_file.name, best_file, chosen.calibration, fitted)
         written = {p.name for p in stage.iterdir()}
     if force:  # replaced whole: no figure of the old set that the new report does not have
         for stale in plot_paths(report.with_suffix("")):
             if stale.name not in written:
                 stale.unlink(missing_ok=True)
     return report
+
+
+def check_loads(path: Path, name: Path, cal: Calibration, recording: Recording) -> None:
+    """Read the PARAMS.json at `path` (to be moved to `name`) back as predict, score and
+    compensate read it (its model, parameters and learned correction, checked), and compare
+    what it predicts at `recording`'s poses with `cal`'s: a WrittenFileError when it does
+    not load or predicts otherwise (a writer whose reader refuses its output is a bug)."""
+    from robot_calib.errors import RobotCalibError, WrittenFileError
+    from robot_calib.identify.params_file import correction_of, load_params
+
+    import numpy as np
+
+    try:
+        model, params, doc = load_params(path)
+        correction = correction_of(doc, model, params, name)
+    except RobotCalibError as exc:
+        raise WrittenFileError(f"{name} would not load: {exc}") from None
+    poses = recording.poses
+    points = model.target_points(params, poses)
+    if correction is not None:
+        points = points - correction.predict(poses)
+    gap = float(np.max(np.abs(points - cal.predict(poses)), initial=0.0))
+    if not gap <= WRITTEN_TOLERANCE_M:
+        raise WrittenFileError(f"{name} would predict {gap * 1e3:.3g} mm from the model it "
+                               "holds at the calibration poses")  # fmt: skip
+
+
+#: what a written PARAMS.json may predict away from the model it was written from [m]
+WRITTEN_TOLERANCE_M = 1e-9
 
 
 def marked_implausible(cal: Calibration, diagnosis: Diagnosis) -> Calibration:

@@ -27,6 +27,7 @@ from robot_calib.flows.bags import read_bags
 from robot_calib.flows.calibrate import calibrate_recording
 from robot_calib.flows.diagnose import (
     FiguresWhenClimbed,
+    check_loads,
     diagnose_recordings,
     generalisation_warnings,
     html_report_path,
@@ -286,6 +287,7 @@ def _run_in(
                           "the diagnosis ladder's rungs", "hold-out bag", scores),
         folder / "params_best.json",
     )  # fmt: skip
+    check_loads(folder / "params_best.json", Path("params_best.json"), best, recording)
     return RunResult(folder, first, second, recording, models, diagnosis, report, best.label,
                      tuple(warnings), html_report_path(folder / "diagnosis.json"))  # fmt: skip
 

@@ -100,6 +100,13 @@ JITTER = 1e-10  # relative diagonal added where a Cholesky factor needs it
 EDGE = 1e-3  # relative distance to an edge that counts as "at" it
 
 
+def stored_readings(q: Array) -> Array:
+    """Joint readings (m, J) [rad] as PARAMS.json stores a correction's inducing poses:
+    rounded to 1e-12 rad (far below any encoder). What a correction is checked against
+    when it is loaded is computed at these, at fit time as at load time."""
+    return np.round(q, 12)
+
+
 def features(poses: Poses, n_targets: int) -> Array:
     """The inputs of residual models of `poses`: shape (n, 2J [+ T]), sin q_j of every
     joint reading, then cos q_j, then the target's one-hot code when there are several
@@ -459,7 +466,7 @@ class ResidualCorrection(Record):
             "noise_variance": self.hyper.noise_variance,
             "mean_m": [float(v) for v in self.mean_m],
             "scale_m": self.scale_m,
-            "inducing_q_rad": np.round(self.inducing_q, 12).tolist(),
+            "inducing_q_rad": stored_readings(self.inducing_q).tolist(),
             "inducing_target": [int(t) for t in self.inducing_target],
             "dual": self.dual.tolist(),
             "warnings": list(self.warnings),

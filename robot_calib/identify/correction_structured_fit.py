@@ -162,7 +162,7 @@ def fit_structured(
         model, parameters, part.columns, part.step_tau, fit.coefficients, fit.ridge, fit.dof,
         rms_norm(structured), process, 0.0, method, part.warnings + process.warnings,
     )  # fmt: skip
-    return replace(out, rms_m=rms_norm(structured + process_fitted))  # = out._raw(poses)
+    return replace(out, rms_m=rms_norm(structured + process_fitted)).with_own_rms()
 
 
 def _process_generalises(fitted: FittedCorrection, poses: Poses, left: Array) -> bool:
