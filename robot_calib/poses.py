@@ -206,3 +206,22 @@ class Poses:
             self.q[index], self.direction[index], self.time[index], target, rotation, sigma,
             temperature,
         )  # fmt: skip
+
+
+#: joint readings closer than this in every joint are one pose [rad] (a re-read of the
+#: tracker without moving the robot; a repeat of a commanded pose): far below any planned
+#: step, far above an export's rounding
+SAME_READINGS_RAD = 1e-6
+
+
+def reading_groups(q: Array) -> IntArray:
+    """(n,) 0-based group of each row of readings q (n, J) [rad]: rows at the same readings
+    (within SAME_READINGS_RAD) share a group, numbered in order of first appearance. The
+    measurements of one pose (several targets, re-reads, repeats) belong together in any
+    split of the data into fitted and held-out parts."""
+    if len(q) == 0:
+        return np.zeros(0, dtype=np.int64)
+    key = np.round(np.asarray(q, dtype=float) / SAME_READINGS_RAD).astype(np.int64)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(np.argsort(first, kind="stable"), kind="stable")
+    return order[inverse.reshape(-1)].astype(np.int64)

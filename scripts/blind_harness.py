@@ -36,6 +36,7 @@ def main() -> int:
     parser.add_argument("--json", help="write every case's verdict to this file")
     args = parser.parse_args()
     results = []
+    false_rows = free_rows = missed = joints = strongest_wrong = 0
     for effect in args.classes:
         hits = named = 0
         to_right: list[float] = []
@@ -45,6 +46,11 @@ def main() -> int:
             results.append(r)
             hits += r["hit"]
             named += r["named"]
+            false_rows += len(r["false_rows"])
+            free_rows += r["free_rows"]
+            missed += len(r["missed"])
+            joints += len(r["joints"])
+            strongest_wrong += not r["strongest_ok"]
             if r["ratio_to_right"] is not None:
                 to_right.append(r["ratio_to_right"])
             mark = "hit " if r["hit"] else "MISS"
@@ -57,6 +63,10 @@ def main() -> int:
                  f"{max(to_right):.2f}" if to_right else "")  # fmt: skip
         print(f"{effect:<38} hit rate {hits}/{args.cases}  (named {named}/{args.cases})  "
               f"{right}  {per_case:.1f} s per case", flush=True)  # fmt: skip
+    print(f"evidence: effect-free joints' rows at >= 5 x {false_rows} of {free_rows} "
+          f"({100 * false_rows / max(free_rows, 1):.1f} %); effect joints missed {missed} of "
+          f"{joints}; strongest structure elsewhere in {strongest_wrong} of {len(results)} "
+          "cases")  # fmt: skip
     if args.json:
         with open(args.json, "w") as handle:
             json.dump(results, handle, indent=1)

@@ -153,14 +153,19 @@ def test_a_correction_measures_its_stored_rms_as_its_loader_does() -> None:
     # readings off the 1e-12 rad grid the file stores them on
     off_grid = replace(gp, inducing_q=gp.inducing_q + 4.3e-13)
     poses = replace(Poses.from_readings(off_grid.inducing_q), target=gp.inducing_target)
-    design = structured_design(fitted.model, fitted.parameters, fitted.columns,
-                               fitted.step_tau, poses).reshape(-1, len(fitted.coefficients))
+    design = structured_design(
+        fitted.model, fitted.parameters, fitted.columns, fitted.step_tau, poses
+    ).reshape(-1, len(fitted.coefficients))
     _, singular, directions = np.linalg.svd(design, full_matrices=False)
     weak = int(np.flatnonzero(singular > 1e-10 * singular[0])[-1])  # weakest, not null
     # coefficients along it that predict 0.1 mm rms: huge, cancelling one another
     size = 1e-4 * np.sqrt(len(poses)) / singular[weak]
-    cancelling = replace(fitted, gp=off_grid, ridge=1e-12,
-                         coefficients=fitted.coefficients + size * directions[weak])
+    cancelling = replace(
+        fitted,
+        gp=off_grid,
+        ridge=1e-12,
+        coefficients=fitted.coefficients + size * directions[weak],
+    )
     own = cancelling.with_own_rms()
     stored = own.structured(replace(poses, q=np.round(poses.q, 12)))
     measured = float(np.sqrt(np.mean(np.sum(stored**2, axis=1))))

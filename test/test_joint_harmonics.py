@@ -103,10 +103,11 @@ def test_signatures_give_no_figure_for_columns_the_model_has(scenario) -> None: 
     terms = joint_terms(cal.model, cal.parameters, scenario.calibration, cal.residuals, 5e-6)
     joint2 = terms[1]
     assert joint2.harmonics_urad is not None
-    # skipped columns are reported as the literal 0.0 (no figure), not a computed value
-    assert all(a == 0.0 for a in joint2.harmonics_urad), joint2.harmonics_urad
+    # the model's own orders are no candidates: no figure (None), not a computed value
+    assert all(a is None for a in joint2.harmonics_urad), joint2.harmonics_urad
+    assert joint2.harmonics_significance == [0.0] * 4
     for t in terms:
-        assert all(a < 1e6 for a in (t.harmonics_urad or [])), t
+        assert all(a is None or a < 1e6 for a in (t.harmonics_urad or [])), t
 
 
 def test_refits_are_judged_like_with_like_when_the_holdout_is_easier(scenario) -> None:  # type: ignore[no-untyped-def]

@@ -26,6 +26,7 @@ import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
 from robot_calib.diagnose.diagnosis import Diagnosis, percent
+from robot_calib.diagnose.evidence import ordinal
 from robot_calib.diagnose.figures import (
     ANGLE_UNITS,
     FigureCache,
@@ -40,12 +41,11 @@ from robot_calib.diagnose.figures import (
 from robot_calib.diagnose.ladder import Ladder
 from robot_calib.diagnose.names import MODEL_CLASS, MODEL_CSS, with_breaks
 from robot_calib.diagnose.noise import noise_basis
-from robot_calib.diagnose.report import unobservable
+from robot_calib.diagnose.report import NOT_RESOLVED, unobservable
 from robot_calib.diagnose.signatures import (
     FAMILIES,
     ArcSignature,
     JointTerms,
-    ordinal,
     removed_note,
     scan_order_note,
     signature_removed,
@@ -235,7 +235,7 @@ def _harmonics_deg(entry: ArcSignature | JointTerms) -> str:
     if entry.harmonics_urad is None or entry.harmonics_significance is None:
         return unobservable(entry)
     pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
-    return ", ".join(_deg(a, s) for a, s in pairs)
+    return ", ".join(NOT_RESOLVED if a is None else _deg(a, s) for a, s in pairs)
 
 
 def _strongest(diagnosis: Diagnosis) -> str:
@@ -243,11 +243,14 @@ def _strongest(diagnosis: Diagnosis) -> str:
     sig = diagnosis.where.strongest_signature
     if sig is None:
         return "none (no joint observable from every pose)"
-    noise = f"{sig.significance:.0f} x its noise"
+    noise = f"{sig.significance:.0f} x its uncertainty"
     if sig.harmonic is not None:
         return (f"{ordinal(sig.harmonic)} harmonic of joint "
                 f"{sig.joint}: {_deg(sig.value)} deg of joint-angle error, {noise}")  # fmt: skip
-    terms = next(t for t in diagnosis.where.joints_from_all_poses if t.joint == sig.joint)
+    terms = next((t for t in diagnosis.where.joints_from_all_poses if t.joint == sig.joint),
+                 None)  # fmt: skip
+    if terms is None:  # a drift with time: no joint
+        return sig.text
     for key, sig_key, words, _ in FAMILIES:
         if getattr(terms, sig_key) == sig.significance:
             value = {"direction_urad": f"{_deg(sig.value)} deg",
@@ -433,15 +436,17 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
                  _mm(j.slope_vs_angle_urad_per_rad, 1), _mm(j.gravity_torque_correlation, 2),
                  _note(removed_note(removed, j.joint))]
                 for j in where.joints]  # fmt: skip
-        out.append(_table(["joint", "rms [deg]", "harmonics 1-4 [deg] (x noise)",
+        out.append(_table(["joint", "rms [deg]", "harmonics 1-4 [deg] (x uncertainty)",
                            "forth-back split [deg]", "slope vs angle [ppm]",
                            "corr. with gravity torque", BEST_MODEL_COLUMN], rows))  # fmt: skip
     else:
         out.append("<p>No circle sweeps in the recording (no run of poses in which one "
                    "joint moves alone): no per-joint arc figures.</p>")  # fmt: skip
     out.append(
-        "<h3>Per joint, from every pose</h3><p>Joint-angle error terms, each tested "
-        "alone against what the geometry absorbs (in brackets: x their noise).</p>"
+        "<h3>Per joint, from every pose</h3><p>Joint-angle error terms, all fitted together "
+        "with the model's own parameters (what they absorb does not count); in brackets: x "
+        "their own uncertainty, 0 where a term does not lower the error of poses left out "
+        f"(k-fold); {NOT_RESOLVED}: not resolvable from these poses.</p>"
     )
     rows = [[t.joint, _harmonics_deg(t),
              _deg(t.direction_urad, t.direction_significance) if t.observable
@@ -478,7 +483,7 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
             )
         ]
         out.append(_table(["joint", "order [per turn]", "amplitude [deg]",
-                           "x the residual's scatter", "usually", BEST_MODEL_COLUMN],
+                           "x its uncertainty (joint fit)", "usually", BEST_MODEL_COLUMN],
                           rows))  # fmt: skip
     quartiles = ", ".join(f"{v:.4f}" for v in where.time.rms_by_quartile_mm)
     reach = ", ".join(f"{v:.4f}" for v in where.workspace.rms_by_reach_tertile_mm)

@@ -78,7 +78,11 @@ def _harmonics(entry: ArcSignature | JointTerms) -> str:
     if entry.harmonics_urad is None or entry.harmonics_significance is None:
         return unobservable(entry)
     pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
-    return ", ".join(f"{a:.1f} ({s:.0f}x)" for a, s in pairs)
+    return ", ".join(NOT_RESOLVED if a is None else f"{a:.1f} ({s:.0f}x)" for a, s in pairs)
+
+
+#: an amplitude the poses do not resolve (`signatures.ArcSignature`, `JointTerms`)
+NOT_RESOLVED = "n.r."
 
 
 def unobservable(entry: ArcSignature | JointTerms) -> str:
@@ -89,7 +93,7 @@ def unobservable(entry: ArcSignature | JointTerms) -> str:
 
 def _value(value: float | None, digits: int, significance: float | None = None) -> str:
     if value is None:
-        return "-"
+        return "-" if significance is None else NOT_RESOLVED
     return f"{value:.{digits}f}" + ("" if significance is None else f" ({significance:.0f}x)")
 
 
@@ -128,8 +132,9 @@ def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
         if not found or (title != "geometric" and where is diagnosis.where):
             continue
         out += ["", f"Joint-angle harmonics in the residuals of {title} (frequency scan of "
-                "orders 1-64, beyond what the model absorbs; amplitude, x the residual's "
-                "scatter):", ""]  # fmt: skip
+                "orders 1-64, beyond what the model absorbs; amplitude, x its uncertainty in "
+                "the joint fit of every term, 0 where it does not lower the k-fold error):",
+                ""]  # fmt: skip
         for spectrum in found:
             gone = removed_note(removed, spectrum.joint, spectrum.dominant_orders, ("harmonics",))
             out.append(f"- {spectrum.line()}" + (f" ({gone})" if gone and title == "geometric"
@@ -254,7 +259,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
             "Geometric model, per joint from its sweeps (angle-equivalent error along the "
             "arc; a joint is observable only through targets at least 5 mm from its axis):",
             "",
-            "| joint | rms [urad] | harmonics 1-4 [urad] (x their noise sigma) "
+            "| joint | rms [urad] | harmonics 1-4 [urad] (x their uncertainty) "
             "| forth-back split [urad] | slope vs angle [urad/rad] | corr. with gravity torque "
             "| best model |",
             "|---|---|---|---|---|---|---|",
@@ -273,8 +278,10 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         )
     lines += [
         "",
-        "From every pose, as joint-angle error terms, each tested alone against what the "
-        "geometry can absorb (which does not count; in brackets: x their noise sigma):",
+        "From every pose, as joint-angle error terms, all fitted together with the model's own "
+        "parameters (what they can absorb does not count); in brackets: x their own "
+        "uncertainty, 0 where a term does not lower the error of poses left out (k-fold); "
+        f"{NOT_RESOLVED}: not resolvable from these poses:",
         "",
         "| joint | harmonics 1-4 [urad] | direction (backlash) [urad] "
         "| scale [urad/rad] | gravity [urad/(N m)] | best model |",

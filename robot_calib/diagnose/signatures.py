@@ -11,12 +11,13 @@ signatures of the joint effects.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from robot_calib.diagnose.evidence import Evidence, TermEvidence, joint_evidence
 from robot_calib.diagnose.frequency import JointSpectrum, joint_spectra
-from robot_calib.diagnose.projection import MIN_LEFT, MIN_LEVER_M, model_span
+from robot_calib.diagnose.projection import MIN_LEVER_M
 from robot_calib.effects.base import Effect
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.effects.eccentricity import fourier_basis
@@ -39,8 +40,12 @@ class ArcSignature(Record):
 
     joint: int
     arc_rms_urad: float | None
-    harmonics_urad: list[float] | None  # harmonics 1..HARMONICS of the reading
-    harmonics_significance: list[float] | None  # amplitude / its 1-sigma
+    # harmonics 1..HARMONICS of the reading along the arc; None where the arc does not
+    # resolve the order (its amplitude's 1-sigma over MAX_ARC_AMPLIFICATION times that of
+    # a full, evenly sampled turn: a short arc lets harmonics run to any size)
+    harmonics_urad: list[float | None] | None
+    # each order's significance: the joint fit's (`JointTerms`: one number per term)
+    harmonics_significance: list[float] | None
     direction_split_urad: float | None  # forth minus back (backlash-like)
     slope_vs_angle_urad_per_rad: float | None  # (scale-like)
     gravity_torque_correlation: float | None  # (compliance-like), -1..1
@@ -51,12 +56,14 @@ class ArcSignature(Record):
 @dataclass(frozen=True)
 class JointTerms(Record):
     """What each signature family explains of a joint, from every pose, beyond the
-    geometry: its value and its significance (sqrt of chi^2 explained, in noise units).
-    Not `observable` (values None, significances 0) when most measured points lie within
-    MIN_LEVER_M of the joint's axis (`lever_mm`: their median distance)."""
+    geometry and every other joint's terms (`evidence.joint_evidence`): its value (None:
+    not resolvable from these poses) and its significance (x its own uncertainty in the
+    joint fit; 0 where it does not lower the k-fold error). Not `observable` (values None,
+    significances 0) when most measured points lie within MIN_LEVER_M of the joint's axis
+    (`lever_mm`: their median distance)."""
 
     joint: int
-    harmonics_urad: list[float] | None
+    harmonics_urad: list[float | None] | None
     harmonics_significance: list[float]
     direction_urad: float | None
     direction_significance: float
@@ -82,8 +89,15 @@ class Signature(Record):
 
 @dataclass(frozen=True)
 class TimeTrend(Record):
+    """The residual's size against time: rms by quartile of time [mm], the slope of the
+    residual's norm [mm/h] with its 1-sigma (None: not known, e.g. no time span), and the
+    significance of a drift with time in the joint fit (`evidence`: x its uncertainty, 0
+    where it does not lower the k-fold error)."""
+
     rms_by_quartile_mm: list[float]
     slope_mm_per_h: float
+    slope_sigma_mm_per_h: float | None = None
+    drift_significance: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -101,8 +115,12 @@ class WhereItLies(Record):
     time: TimeTrend
     workspace: Workspace
     noise_sigma_mm: float
-    # the frequency scan (diagnose/frequency.py): dominant joint-angle harmonic orders
+    # the frequency scan (diagnose/frequency.py): dominant joint-angle harmonic orders,
+    # their amplitudes and significances those of the joint fit (`evidence`)
     harmonic_orders: list[JointSpectrum] = field(default_factory=list)
+    # every candidate term of the joint fit (`evidence.joint_evidence`), time included
+    evidence: list[TermEvidence] = field(default_factory=list)
+    evidence_scatter_mm: float | None = None  # what the joint fit leaves, per component
 
 
 def arc_angle_errors(model: KinematicModel, params: ParameterVector, recording: Recording,
@@ -134,66 +152,51 @@ def harmonic_amplitudes(
 
 
 def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recording,
-                residuals: Array, noise_sigma_m: float) -> list[JointTerms]:  # fmt: skip
-    """From every pose (sweeps or not), per joint, what each signature explains of the
-    residual beyond what the model's own free parameters can absorb: a joint-angle error
-    shaped as harmonic k = 1..4 of the reading, as the approach direction (backlash), the
-    reading (scale) or the gravity torque (compliance). Each family is tested on its own
-    against the geometry (so families do not trade huge opposite coefficients): its value,
-    and its significance sqrt(chi^2 explained) in units of the noise."""
-    poses, n_joints = recording.poses, model.robot.n_joints
-    span = model_span(model, params, poses, recording.points + residuals, noise_sigma_m)
-    motion = span.motion
-    r = span.project_off(residuals.reshape(-1) / noise_sigma_m)
-    tau = gravity_torques(model.robot, poses.q)
-
-    def explain(signals: list[Array], j: int) -> tuple[Array, float]:
-        """Coefficients [rad per unit signal] and sqrt(chi^2 explained) of one family;
-        zeros where a column keeps less than MIN_LEFT of its norm once the model's own
-        columns are projected off (collinear with the model: any value would be noise)."""
-        cols = np.stack([(motion[:, j, :] * s[:, None]).reshape(-1) for s in signals], 1)
-        cols = cols / noise_sigma_m
-        norms = np.linalg.norm(cols, axis=0)
-        cols = span.project_off(cols)
-        if np.any(np.linalg.norm(cols, axis=0) < MIN_LEFT * np.maximum(norms, 1e-300)):
-            return np.zeros(len(signals)), 0.0
-        coef = np.linalg.lstsq(cols, r, rcond=1e-10)[0].astype(np.float64, copy=False)
-        return coef, float(np.linalg.norm(cols @ coef))
-
-    def family(signal: Array, j: int) -> tuple[float, float]:
-        """Value [urad per unit signal] and significance of a one-signal family."""
-        if np.ptp(signal) <= 1e-9:
-            return 0.0, 0.0
-        coef, z = explain([signal], j)
-        return float(coef[0] * 1e6), z
-
+                residuals: Array, noise_sigma_m: float,
+                evidence: Evidence | None = None) -> list[JointTerms]:  # fmt: skip
+    """From every pose (sweeps or not), per joint, the evidence of each joint-angle term
+    (`evidence.joint_evidence`: harmonic k = 1..4 of the reading, the approach direction
+    (backlash), the reading (scale), the gravity torque (compliance), all fitted jointly
+    with the model's own parameters and with each other): its value (None where these
+    poses do not resolve it) and its significance (x its own uncertainty; 0 where it does
+    not lower the k-fold error). `noise_sigma_m` only decides nothing here (kept for the
+    callers' signature); `evidence`: already computed on these residuals."""
+    del noise_sigma_m
+    if evidence is None:
+        evidence = joint_evidence(model, params, recording, residuals)
+    origins, axes = model.joint_axes(params, recording.poses)
+    motion = np.cross(axes, recording.points[:, None, :] + residuals[:, None, :] - origins)
+    levers = np.median(np.linalg.norm(motion, axis=2), axis=0)
     out = []
-    for j in range(n_joints):
-        lever = float(span.lever_m[j])
+    for j in range(model.robot.n_joints):
+        lever = float(levers[j])
         if lever < MIN_LEVER_M:
             zeros = [0.0] * HARMONICS
             out.append(JointTerms(j + 1, None, zeros, None, 0.0, None, 0.0, None, 0.0,
                                   False, lever * 1e3))  # fmt: skip
             continue
-        qj = poses.q[:, j]
-        amps, sig = [], []
-        for k in range(1, HARMONICS + 1):
-            coef, z = explain([np.cos(k * qj), np.sin(k * qj)], j)
-            amps.append(float(np.hypot(*coef) * 1e6))
-            sig.append(z)
+
+        harmonics = [_of(evidence, j + 1, "harmonics", k) for k in range(1, HARMONICS + 1)]
         out.append(
             JointTerms(
                 j + 1,
-                amps,
-                sig,
-                *family(poses.direction[:, j], j),
-                *family(qj, j),
-                *family(tau[:, j], j),
+                [v for v, _ in harmonics],
+                [z for _, z in harmonics],
+                *_of(evidence, j + 1, "direction"),
+                *_of(evidence, j + 1, "scale"),
+                *_of(evidence, j + 1, "gravity"),
                 True,
                 lever * 1e3,
             )  # fmt: skip
         )
     return out
+
+
+def _of(evidence: Evidence, joint: int, family: str,
+        order: int | None = None) -> tuple[float | None, float]:  # fmt: skip
+    """(value, significance) of a term of the joint fit; (None, 0) for no such candidate."""
+    term = evidence.term(joint, family, order)
+    return (None, 0.0) if term is None else (term.value, term.significance)
 
 
 FAMILIES = (  # (field of the value, field of the significance, words, unit)
@@ -297,53 +300,54 @@ def signature_removed(sig: Signature | None, removed: Sequence[RemovedSignature]
     return removed_note(removed, sig.joint, orders, (family,))
 
 
-def ordinal(k: int) -> str:
-    """'1st', '2nd', '11th', '21st', ..."""
-    if k % 100 in (11, 12, 13):
-        return f"{k}th"
-    return f"{k}{ {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th') }"
-
-
-def strongest_signature(terms: list[JointTerms]) -> Signature | None:
-    """The most significant family of `joint_terms` over all joints, with a sentence."""
-    best: tuple[float, int, int | None, float, str] | None = None
-    for entry in terms:
-        j = entry.joint
-        if not entry.observable or entry.harmonics_urad is None:
-            continue
-        pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
-        for k, (amp, sig) in enumerate(pairs, start=1):
-            text = (f"{ordinal(k)} harmonic of joint {j} ({amp:.1f} urad of "
-                    f"joint-angle error, {sig:.0f} x its noise)")  # fmt: skip
-            if best is None or sig > best[0]:
-                best = (sig, j, k, amp, text)
-        for key, sig_key, words, unit in FAMILIES:
-            sig, value = getattr(entry, sig_key), getattr(entry, key)
-            if best is None or sig > best[0]:
-                text = (f"joint {j} error following its {words}: {value:.1f} {unit}, "
-                        f"{sig:.0f} x its noise")  # fmt: skip
-                best = (sig, j, None, value, text)
+def strongest_signature(evidence: Evidence) -> Signature | None:
+    """The term of the highest significance in the joint fit (`evidence`), with a sentence;
+    None when no term counts. A drift with time is joint 0."""
+    best = evidence.strongest()
     if best is None:
         return None
-    sig, j, harmonic, value, text = best
-    return Signature(j, harmonic, value, sig, text)
+    return Signature(best.joint, best.order, float(best.value or 0.0), best.significance,
+                     signature_text(best))  # fmt: skip
 
 
-def _strongest(signature: Signature | None, spectra: list[JointSpectrum]) -> Signature | None:
-    """The stronger of the families' strongest `signature` and the frequency scan's most
-    significant picked order (its significance is in units of the residual's scatter,
-    never above the noise units of the families for the same structure)."""
-    best = signature
+def signature_text(term: TermEvidence) -> str:
+    """'2nd harmonic of joint 3 (41.0 urad of joint-angle error, 12 x its uncertainty)',
+    'a drift with time (0.021 mm rms over the recording, 9 x its uncertainty)', ..."""
+    z = f"{term.significance:.0f} x its uncertainty"
+    together = "" if term.separable else f"; {INSEPARABLE}"
+    if term.value is None:
+        return f"{term.words()} ({z}{together})"
+    if term.family == "time":
+        return f"{term.words()} ({term.value:.4f} mm rms over the recording, {z})"
+    if term.family == "harmonics":
+        return f"{term.words()} ({term.value:.1f} urad of joint-angle error, {z}{together})"
+    for _, _, words, unit in FAMILIES:
+        if words in term.words():
+            return f"{term.words()}: {term.value:.1f} {unit}, {z}{together}"
+    return f"{term.words()} ({z})"
+
+
+#: said of a term the poses do not tell apart from other terms of its joint
+INSEPARABLE = "these poses do not tell it from its joint's other terms"
+
+
+def _spectra_of(spectra: list[JointSpectrum], evidence: Evidence) -> list[JointSpectrum]:
+    """The scan's picked orders with the joint fit's amplitude and significance of each
+    (one number per term wherever it is shown; the scan's own figures pick the orders)."""
+    out = []
     for spectrum in spectra:
-        for k, amp, z, why in zip(spectrum.dominant_orders, spectrum.dominant_urad,
-                                  spectrum.dominant_significance, spectrum.meaning):  # fmt: skip
-            if best is None or z > best.significance:
-                text = (
-                    f"{ordinal(k)} harmonic of joint {spectrum.joint} "
-                    f"({amp:.1f} urad of joint-angle error, {z:.0f} x its noise; {why})"
-                )
-                best = Signature(spectrum.joint, k, amp, z, text)
-    return best
+        amps, zs = [], []
+        for k, amp in zip(spectrum.dominant_orders, spectrum.dominant_urad):
+            term = evidence.term(spectrum.joint, "harmonics", k)
+            amps.append(amp if term is None or term.value is None else float(term.value))
+            zs.append(0.0 if term is None else float(term.significance))
+        out.append(replace(spectrum, dominant_urad=amps, dominant_significance=zs))
+    return out
+
+
+#: an arc's harmonic amplitude is shown only where its 1-sigma is at most this many times
+#: that of the same order over a full, evenly sampled turn of as many points
+MAX_ARC_AMPLIFICATION = 10.0
 
 
 #: poses the signatures are computed on at most (a fixed random subset above)
@@ -355,10 +359,16 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
                   spectra: list[JointSpectrum] | None = None) -> WhereItLies:  # fmt: skip
     """Where the residual lies (units in the field names); `spectra`: the frequency scan
     of these residuals when already made (else it is made here). Above WHERE_POSES poses
-    from a fixed random subset of them (statistics whose precision 20k poses give)."""
+    from a fixed random subset of them (statistics whose precision 20k poses give). Every
+    term's significance is that of the joint fit (`evidence.joint_evidence`, with the
+    scan's picked orders among its terms), wherever it is shown."""
     keep = recording.sample_mask(WHERE_POSES)
     if keep is not None:
         recording, residuals = recording.subset(keep), residuals[keep]
+    if spectra is None:
+        spectra = joint_spectra(model, params, recording, residuals)
+    orders = {s.joint: [k for k in s.dominant_orders if k > HARMONICS] for s in spectra}
+    evidence = joint_evidence(model, params, recording, residuals, orders)
     q, direction = recording.poses.q, recording.poses.direction
     joints = []
     tau = gravity_torques(model.robot, q)
@@ -379,13 +389,22 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
         slope = float(np.polyfit(qj, err, 1)[0]) if np.ptp(qj) > 0 else 0.0
         t = tau[idx, j - 1]
         corr = float(np.corrcoef(t, err)[0, 1]) if np.ptp(t) > 1e-3 else 0.0
-        amps, amp_sigma = harmonic_amplitudes(qj, err, noise_sigma_m / lever)
+        amps, amp_sigma = harmonic_amplitudes(qj, err, 1.0)
+        full_turn = np.sqrt(2.0 / len(qj))  # an order's 1-sigma over a full, even turn
+        shown: list[float | None] = [
+            float(a * 1e6) if sd <= MAX_ARC_AMPLIFICATION * full_turn else None
+            for a, sd in zip(amps, amp_sigma)
+        ]
+        significance = []
+        for k in range(1, HARMONICS + 1):
+            term = evidence.term(j, "harmonics", k)
+            significance.append(0.0 if term is None else term.significance)
         joints.append(
             ArcSignature(
                 j,
                 float(np.sqrt(np.mean(err**2)) * 1e6),
-                [float(a * 1e6) for a in amps],
-                [float(a / s) for a, s in zip(amps, amp_sigma)],
+                shown,
+                significance,
                 split * 1e6,
                 slope * 1e6,
                 corr,
@@ -398,18 +417,31 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
     quartiles = np.array_split(np.argsort(time, kind="stable"), 4)
     reach = np.linalg.norm((recording.points - recording.points.mean(axis=0))[:, :2], axis=1)
     tertiles = np.array_split(np.argsort(reach, kind="stable"), 3)
-    all_poses = joint_terms(model, params, recording, residuals, noise_sigma_m)
-    if spectra is None:
-        spectra = joint_spectra(model, params, recording, residuals)
+    all_poses = joint_terms(model, params, recording, residuals, noise_sigma_m, evidence)
+    drift = evidence.term(0, "time")
     return WhereItLies(
         joints,
         all_poses,
-        _strongest(strongest_signature(all_poses), spectra),
+        strongest_signature(evidence),
         TimeTrend(
             [float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in quartiles],
-            float(np.polyfit(time, norm, 1)[0] * 3.6e6) if np.ptp(time) > 0 else 0.0,
+            *_trend(time, norm),
+            0.0 if drift is None else drift.significance,
         ),
         Workspace([float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in tertiles]),
         noise_sigma_m * 1e3,
-        spectra,
+        _spectra_of(spectra, evidence),
+        evidence.terms,
+        evidence.scatter_m * 1e3,
     )
+
+
+def _trend(time: Array, norm: Array) -> tuple[float, float | None]:
+    """The slope of the residual's norm `norm` (n,) [m] against `time` (n,) [s], [mm/h],
+    and its 1-sigma from the line's own scatter (None with fewer than 3 distinct times)."""
+    if np.ptp(time) <= 0 or len(time) < 3:
+        return 0.0, None
+    coef, cov = np.polyfit(time, norm, 1, cov="unscaled")
+    fitted = np.polyval(coef, time)
+    scatter2 = float(np.sum((norm - fitted) ** 2)) / max(len(time) - 2, 1)
+    return float(coef[0] * 3.6e6), float(np.sqrt(cov[0, 0] * scatter2) * 3.6e6)

@@ -340,10 +340,10 @@ def check_loads(path: Path, name: Path, cal: Calibration, recording: Recording) 
     compensate read it (its model, parameters and learned correction, checked), and compare
     what it predicts at `recording`'s poses with `cal`'s: a WrittenFileError when it does
     not load or predicts otherwise (a writer whose reader refuses its output is a bug)."""
+    import numpy as np
+
     from robot_calib.errors import RobotCalibError, WrittenFileError
     from robot_calib.identify.params_file import correction_of, load_params
-
-    import numpy as np
 
     try:
         model, params, doc = load_params(path)

@@ -49,6 +49,7 @@ import numpy as np
 
 from robot_calib.accuracy import accuracy
 from robot_calib.diagnose.diagnosis import Diagnosis, diagnose
+from robot_calib.diagnose.signatures import ArcSignature, JointTerms, WhereItLies
 from robot_calib.effects import EFFECTS, Effect, effect_class, parse_effect
 from robot_calib.effects.base import signed_uniform
 from robot_calib.effects.compliance import Compliance
@@ -66,6 +67,7 @@ from robot_calib.kinematics.description import RobotDescription, with_payload
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import Recording
 from robot_calib.model import KinematicModel
+from robot_calib.records import Record
 from robot_calib.sim.measure import record_plan
 from robot_calib.sim.plans import Plan, paper_test_plan, random_plan
 from robot_calib.sim.scenarios import UR10_HARMONICS, UR10_ROBOT, Scenario, ur10_random
@@ -286,7 +288,9 @@ def judge(case: Case, diagnosis: Diagnosis, right_rms_mm: float | None = None) -
         named = named and _options_found(case.withheld, terms, robot)
     at_floor = ratio is not None and ratio <= FLOOR_FACTOR
     chosen = diagnosis.ladder[-1].holdout_abs_rms_mm
+    evidence = judge_evidence(case, diagnosis.where)
     return {
+        **evidence.to_dict(),
         "effect": case.effect,
         "joints": list(case.joints),
         "answer": None if dom is None else dom.to_dict(),
@@ -300,6 +304,52 @@ def judge(case: Case, diagnosis: Diagnosis, right_rms_mm: float | None = None) -
         "right_rms_mm": right_rms_mm,
         "ratio_to_right": None if right_rms_mm is None else chosen / right_rms_mm,
     }
+
+
+@dataclass(frozen=True)
+class EvidenceVerdict(Record):
+    """How true the per-joint evidence of a case's geometric residuals is (`where`):
+    false_rows: the effect-free joints (not in any withheld effect's `diagnosed_joints`)
+    with a term at >= EVIDENCE_Z, of free_rows; missed: the withheld effects' joints
+    without one; strongest_ok: the strongest structure is on a withheld effect's joint, or
+    on time for a thermal effect, or there is none (>= EVIDENCE_Z) without effects."""
+
+    false_rows: list[int]
+    free_rows: int
+    missed: list[int]
+    strongest_ok: bool
+
+
+#: the significance at which a term counts as structure in `judge_evidence`
+EVIDENCE_Z = 5.0
+#: effects whose structure is time, not a joint
+TIME_EFFECTS = ("thermal_drift", "thermal_warmup", "thermal_temperature")
+
+
+def judge_evidence(case: Case, where: WhereItLies) -> EvidenceVerdict:
+    """`EvidenceVerdict` of `where` (a diagnosis's, of the geometric model's residuals) on
+    `case`: the rows of both per-joint tables (`joints`, `joints_from_all_poses`)."""
+    allowed = {j for e in case.withheld for j in e.diagnosed_joints()}
+    shown: dict[int, float] = {}
+    rows: list[ArcSignature | JointTerms] = [*where.joints, *where.joints_from_all_poses]
+    for row in rows:
+        values = [*(row.harmonics_significance or [])]
+        if isinstance(row, JointTerms):
+            values += [row.direction_significance, row.scale_significance,
+                       row.gravity_significance]  # fmt: skip
+        shown[row.joint] = max([shown.get(row.joint, 0.0), *values])
+    n_joints = case.world.model.robot.n_joints
+    free = [j for j in range(1, n_joints + 1) if j not in allowed]
+    false = [j for j in free if shown.get(j, 0.0) >= EVIDENCE_Z]
+    missed = [j for j in case.joints if shown.get(j, 0.0) < EVIDENCE_Z]
+    timed = case.effect == "drift_exponential" or any(e.name in TIME_EFFECTS
+                                                      for e in case.withheld)  # fmt: skip
+    sig = where.strongest_signature
+    if sig is None or sig.significance < EVIDENCE_Z:
+        ok = not case.withheld or (not case.joints and not timed)
+    else:
+        ok = sig.joint in allowed or (sig.joint == 0 and timed)
+    return EvidenceVerdict(false, len(free), missed, ok)
 
 
 def _rung_terms(diagnosis: Diagnosis, n_joints: int) -> list[Effect]:
