@@ -35,7 +35,7 @@ from robot_calib.identify.ridge import Ridge, gcv_ridge
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
-from robot_calib.poses import Poses
+from robot_calib.poses import Poses, reading_groups
 
 #: rows (3 per pose) per column below which the structured part is not fitted
 MIN_ROWS_PER_COLUMN = 1.0
@@ -166,7 +166,8 @@ def fit_structured(
 
 
 def _process_generalises(fitted: FittedCorrection, poses: Poses, left: Array) -> bool:
-    """True when the process (its hyperparameters) fitted on either half of the poses
+    """True when the process (its hyperparameters) fitted on either half of the poses (the
+    measurements at one pose's readings on one side)
     brings the other half's `left` residuals (n, 3) [m] below (1 - MIN_PROCESS_GAIN) of
     their rms, over both halves: else what the structure leaves is noise to it (a process
     that interpolates noise roughens the correction for nothing). An exact fit's kernel
@@ -175,7 +176,11 @@ def _process_generalises(fitted: FittedCorrection, poses: Poses, left: Array) ->
     if n < 2 * CHECK_MIN_POSES:
         return True
     process = fitted.correction
-    half = np.random.default_rng(1).permutation(n) < n // 2
+    group = reading_groups(poses.q)  # the reads of one pose on one side
+    n_groups = int(group.max()) + 1
+    if n_groups < 2 * CHECK_MIN_POSES:
+        return True
+    half = np.random.default_rng(1).permutation(n_groups)[group] < n_groups // 2
     before, after = 0.0, 0.0
     for train in (half, ~half):
         if fitted.phi is not None:
