@@ -29,14 +29,18 @@ def test_split_keeps_every_measurement_once_with_its_direction(tmp_path: Path, b
     assert proc.returncode == 0, proc.stderr
     whole = read_recording([SAMPLE], ROBOT)
     parts = [read_recording([path], ROBOT) for path in (cal, hold)]
-    assert [len(p) for p in parts] == [203, 87]
+    # about 30 %, in whole poses: the sample repeats some poses, whose every measurement
+    # goes with the one chosen (a repeat on the other side would be a fitted copy)
+    assert len(parts[0]) + len(parts[1]) == len(whole) and 87 <= len(parts[1]) <= 95
+    groups = [{tuple(np.round(q, 6)) for q in part.poses.q} for part in parts]
+    assert not groups[0] & groups[1]
     rows = {tuple(np.round(p, 12)): i for i, p in enumerate(whole.points)}
     for part in parts:
         index = [rows[tuple(np.round(p, 12))] for p in part.points]
         np.testing.assert_array_equal(part.poses.q, whole.poses.q[index])
         np.testing.assert_array_equal(part.poses.direction, whole.poses.direction[index])
-        if by != "random":  # the last 30 % in order (= in time here)
-            assert (part is parts[1]) == (min(index) >= 203)
+        if by != "random" and part is parts[0]:  # the last 30 % in order (= in time here)
+            assert max(index) < 203
     assert len({tuple(np.round(p, 12)) for part in parts for p in part.points}) == len(whole)
     # The original stamps: the halves share none, so they can be used together.
     stamps = [set(part.stamp_ns.tolist()) for part in parts]

@@ -334,7 +334,8 @@ def dominant_effect(
         return None  # floor unknown, nothing learnable and no signature: no evidence
     if outside is not None and outside.motions:  # what the learned correction found
         return DominantEffect(UNKNOWN, [outside.motions[0].joint])
-    return DominantEffect(UNKNOWN, [strongest.joint] if strongest else [])
+    # a drift with time (joint 0) names no joint
+    return DominantEffect(UNKNOWN, [strongest.joint] if strongest and strongest.joint else [])
 
 
 def diagnose(

@@ -65,6 +65,7 @@ CHECK_Z = 3.0
 #: same 3 of 57 effect joints missed
 CONFIRM_Z = 2.0
 N_FOLDS = 5
+MAX_Z = 1e6  # a held-out z where every pose gains exactly the same
 FAMILIES = ("harmonics", "direction", "scale", "gravity", "time")
 UNITS = {"harmonics": "urad", "direction": "urad", "scale": "urad/rad",
          "gravity": "urad/(N m)", "time": "mm"}  # fmt: skip
@@ -169,8 +170,10 @@ def _signals(model: KinematicModel, recording: Recording, levers: Array,
         if levers[j - 1] < MIN_LEVER_M:
             continue
         modelled = set(modelled_orders(model.effects, j))  # the model's own: not candidates
+        moves = np.ptp(poses.q[:, j - 1]) > 1e-9  # at rest: its harmonics are an offset
         for k in sorted({*range(1, HARMONICS + 1), *orders.get(j, [])} - modelled):
-            out.append((j, "harmonics", k, signal(j, "harmonics", k)))
+            if moves:
+                out.append((j, "harmonics", k, signal(j, "harmonics", k)))
         for family in ("direction", "scale", "gravity"):
             sig = signal(j, family, None)
             if np.ptp(sig[0]) > 1e-9:
@@ -274,6 +277,8 @@ def joint_evidence(
         frequency scan's picks)
     """
     orders = orders or {}
+    if len(recording) == 0:
+        return Evidence([], 0.0)
     time = recording.poses.time
     span_t = float(np.ptp(time)) if len(time) else 0.0
     time_scale = (float(np.mean(time)), span_t) if span_t > 0 else None
@@ -381,8 +386,8 @@ def paired_z(gain: Array) -> float:
         return 0.0
     spread = float(np.std(gain, ddof=1))
     mean = float(np.mean(gain))
-    if spread <= 0:
-        return 0.0 if mean <= 0 else float("inf")
+    if spread <= 0:  # every pose gains the same: sure when it is a gain (finite for JSON)
+        return 0.0 if mean <= 0 else MAX_Z
     return mean / (spread / np.sqrt(len(gain)))
 
 

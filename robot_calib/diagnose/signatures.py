@@ -439,7 +439,7 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
 def _trend(time: Array, norm: Array) -> tuple[float, float | None]:
     """The slope of the residual's norm `norm` (n,) [m] against `time` (n,) [s], [mm/h],
     and its 1-sigma from the line's own scatter (None with fewer than 3 distinct times)."""
-    if np.ptp(time) <= 0 or len(time) < 3:
+    if len(time) < 3 or np.ptp(time) <= 0:
         return 0.0, None
     coef, cov = np.polyfit(time, norm, 1, cov="unscaled")
     fitted = np.polyval(coef, time)
