@@ -150,8 +150,9 @@ def test_a_correction_measures_its_stored_rms_as_its_loader_does() -> None:
     assert isinstance(fitted, StructuredCorrection)
     gp = fitted.gp
     assert len(gp.inducing_q) == fitted.n_fitted  # every fitted pose is an inducing pose
-    # readings off the 1e-12 rad grid the file stores them on
+    # readings off the 1e-12 rad grid the file stores them on: held as stored
     off_grid = replace(gp, inducing_q=gp.inducing_q + 4.3e-13)
+    assert np.array_equal(off_grid.inducing_q, np.round(gp.inducing_q + 4.3e-13, 12))
     poses = replace(Poses.from_readings(off_grid.inducing_q), target=gp.inducing_target)
     design = structured_design(
         fitted.model, fitted.parameters, fitted.columns, fitted.step_tau, poses

@@ -336,25 +336,23 @@ def write_diagnosis(
 
 
 def check_loads(path: Path, name: Path, cal: Calibration, recording: Recording) -> None:
-    """Read the PARAMS.json at `path` (to be moved to `name`) back as predict, score and
-    compensate read it (its model, parameters and learned correction, checked), and compare
-    what it predicts at `recording`'s poses with `cal`'s: a WrittenFileError when it does
-    not load or predicts otherwise (a writer whose reader refuses its output is a bug)."""
+    """Read the PARAMS.json at `path` (to be moved to `name`) back as predict, score,
+    compensate and export read it (its model, parameters and learned correction, checked:
+    `Calibration.from_dict`), and compare what it predicts at `recording`'s poses with
+    `cal`'s: a WrittenFileError when it does not load or predicts otherwise (a writer whose
+    reader refuses its output is a bug)."""
     import numpy as np
 
     from robot_calib.errors import RobotCalibError, WrittenFileError
-    from robot_calib.identify.params_file import correction_of, load_params
+    from robot_calib.identify.calibration import Calibration
+    from robot_calib.identify.params_file import read_document
 
     try:
-        model, params, doc = load_params(path)
-        correction = correction_of(doc, model, params, name)
+        back = Calibration.from_dict(read_document(path), str(name))
     except RobotCalibError as exc:
         raise WrittenFileError(f"{name} would not load: {exc}") from None
     poses = recording.poses
-    points = model.target_points(params, poses)
-    if correction is not None:
-        points = points - correction.predict(poses)
-    gap = float(np.max(np.abs(points - cal.predict(poses)), initial=0.0))
+    gap = float(np.max(np.abs(back.predict(poses) - cal.predict(poses)), initial=0.0))
     if not gap <= WRITTEN_TOLERANCE_M:
         raise WrittenFileError(f"{name} would predict {gap * 1e3:.3g} mm from the model it "
                                "holds at the calibration poses")  # fmt: skip

@@ -379,7 +379,9 @@ class ResidualCorrection(Record):
     """A fitted residual correction: what it predicts needs only these arrays.
 
     inducing_q : shape (m, J), the joint readings of the poses the prediction is built on
-        [rad] (every fitted pose up to MAX_POINTS, else a random INDUCING of them)
+        [rad] (every fitted pose up to MAX_POINTS, else a random INDUCING of them), held
+        as PARAMS.json stores them (`stored_readings`): what it predicts in memory is what
+        its file predicts
     inducing_target : shape (m,), their targets (indices into the calibration's targets)
     dual : shape (m, 3), the dual coefficients of the scaled residuals [1]
     hyper : the kernel's hyperparameters (for residuals scaled to unit rms)
@@ -403,6 +405,9 @@ class ResidualCorrection(Record):
     rms_m: float
     method: str
     warnings: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "inducing_q", stored_readings(self.inducing_q))
 
     @property
     def n_joints(self) -> int:

@@ -76,7 +76,6 @@ from robot_calib.identify.correction import (
     MAX_CORRECTION_M,
     Hyperparameters,
     ResidualCorrection,
-    stored_readings,
 )
 from robot_calib.identify.load_features import (
     FEATURES,
@@ -393,21 +392,21 @@ class StructuredCorrection:
         return out
 
     def _at_own_poses(self) -> tuple[Poses, Array, Array]:
-        """Its process's inducing poses at their readings as the file stores them
-        (`stored_readings`), and what it predicts there (n, 3) [m]: the structured part and
-        the whole, uncapped (not finite where it is broken)."""
+        """Its process's inducing poses (their readings as the file stores them) and what
+        it predicts there (n, 3) [m]: the structured part and the whole, uncapped (not
+        finite where it is broken)."""
         gp = self.gp
-        q = stored_readings(gp.inducing_q)
-        poses = replace(Poses.from_readings(q), target=gp.inducing_target)
+        poses = replace(Poses.from_readings(gp.inducing_q), target=gp.inducing_target)
         with np.errstate(all="ignore"):
             return poses, self.structured(poses), self._raw(poses)
 
     def with_own_rms(self) -> StructuredCorrection:
         """This correction with its stored rms (structured.rms_m, rms_m) measured as the
         loader checks them, when its inducing poses are all its fitted poses: at the
-        readings as stored (rounded), so that a file this writes passes its own check
-        whatever the conditioning of the structured part (a ridge of 1e-12 amplifies the
-        1e-12 rad rounding of the readings far above a relative 1e-6)."""
+        readings as stored (rounded, `ResidualCorrection.inducing_q`), not at the fitted
+        ones, so that a file this writes passes its own check whatever the conditioning of
+        the structured part (a ridge of 1e-12 amplifies the 1e-12 rad rounding of the
+        readings far above a relative 1e-6)."""
         if len(self.gp.inducing_q) != self.n_fitted:
             return self
         _, structured, total = self._at_own_poses()
