@@ -100,7 +100,7 @@ def test_signatures_give_no_figure_for_columns_the_model_has(scenario) -> None: 
 
     robot = scenario.world.model.robot
     cal = calibrate(scenario.calibration, robot, "geometric+transmission_error:2:order=4")
-    terms = joint_terms(cal.model, cal.parameters, scenario.calibration, cal.residuals, 5e-6)
+    terms = joint_terms(cal.model, cal.parameters, scenario.calibration, cal.residuals)
     joint2 = terms[1]
     assert joint2.harmonics_urad is not None
     # the model's own orders are no candidates: no figure (None), not a computed value

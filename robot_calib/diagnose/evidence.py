@@ -42,12 +42,13 @@ import numpy as np
 from scipy import stats
 
 from robot_calib.diagnose.frequency import modelled_orders
-from robot_calib.diagnose.projection import MIN_LEVER_M
+from robot_calib.diagnose.projection import MIN_LEVER_M, joint_motion
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.identify.fit import blocked_jacobian
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
+from robot_calib.measurements.split import N_FOLDS, pose_folds
 from robot_calib.model import KinematicModel
 from robot_calib.poses import reading_groups
 from robot_calib.records import Record
@@ -64,7 +65,6 @@ CHECK_Z = 3.0
 #: 0 (any lowering) gave 6.6 % of effect-free joints' rows at >= 5, 2 gave 4.4 % with the
 #: same 3 of 57 effect joints missed
 CONFIRM_Z = 2.0
-N_FOLDS = 5
 MAX_Z = 1e6  # a held-out z where every pose gains exactly the same
 FAMILIES = ("harmonics", "direction", "scale", "gravity", "time")
 UNITS = {"harmonics": "urad", "direction": "urad", "scale": "urad/rad",
@@ -118,10 +118,12 @@ def ordinal(k: int) -> str:
 @dataclass(frozen=True)
 class Evidence:
     """Every candidate term's evidence; scatter_m: what the joint fit leaves, per component
-    [m] (the scale of every term's uncertainty)."""
+    [m] (the scale of every term's uncertainty); levers_m: per joint, the median distance
+    [m] of the points from its axis (a joint below MIN_LEVER_M has no candidate)."""
 
     terms: list[TermEvidence]
     scatter_m: float
+    levers_m: list[float]
 
     def term(self, joint: int, family: str, order: int | None = None) -> TermEvidence | None:
         """The term of `joint`, `family` (and harmonic `order`), None when not a candidate."""
@@ -146,38 +148,25 @@ class _Term:
 
 def _signals(model: KinematicModel, recording: Recording, levers: Array,
              orders: dict[int, list[int]], time_scale: tuple[float, float] | None,
-             same_as: list[_Term] | None = None,
              ) -> tuple[list[tuple[int, str, int | None, list[Array]]], list[Array]]:  # fmt: skip
     """The candidate terms (joint, family, order, signals (n,) each) and the time signals
     (t, t^2 normalised: one column per axis each), for the joints of lever >= MIN_LEVER_M
-    (of the signals that vary); `same_as`: exactly those terms (a hold-out's columns)."""
+    (of the signals that vary)."""
     poses = recording.poses
     tau = gravity_torques(model.robot, poses.q)
-
-    def signal(joint: int, family: str, order: int | None) -> list[Array]:
-        qj = poses.q[:, joint - 1]
-        if family == "harmonics":
-            k = int(order or 0)
-            return [np.cos(k * qj), np.sin(k * qj)]
-        return [{"direction": poses.direction[:, joint - 1], "scale": qj,
-                 "gravity": tau[:, joint - 1]}[family]]  # fmt: skip
-
-    if same_as is not None:
-        wanted = [(t.joint, t.family, t.order) for t in same_as if t.family != "time"]
-        return [(j, f, k, signal(j, f, k)) for j, f, k in wanted], []
     out: list[tuple[int, str, int | None, list[Array]]] = []
     for j in range(1, model.robot.n_joints + 1):
         if levers[j - 1] < MIN_LEVER_M:
             continue
-        modelled = set(modelled_orders(model.effects, j))  # the model's own: not candidates
-        moves = np.ptp(poses.q[:, j - 1]) > 1e-9  # at rest: its harmonics are an offset
-        for k in sorted({*range(1, HARMONICS + 1), *orders.get(j, [])} - modelled):
-            if moves:
-                out.append((j, "harmonics", k, signal(j, "harmonics", k)))
-        for family in ("direction", "scale", "gravity"):
-            sig = signal(j, family, None)
-            if np.ptp(sig[0]) > 1e-9:
-                out.append((j, family, None, sig))
+        qj = poses.q[:, j - 1]
+        if np.ptp(qj) > 1e-9:  # at rest, a joint's harmonics are an offset
+            modelled = modelled_orders(model.effects, j)  # the model's own: not candidates
+            for k in sorted({*range(1, HARMONICS + 1), *orders.get(j, [])} - modelled):
+                out.append((j, "harmonics", k, [np.cos(k * qj), np.sin(k * qj)]))
+        for family, signal in (("direction", poses.direction[:, j - 1]), ("scale", qj),
+                               ("gravity", tau[:, j - 1])):  # fmt: skip
+            if np.ptp(signal) > 1e-9:
+                out.append((j, family, None, [signal]))
     time: list[Array] = []
     if time_scale is not None:
         mean, span = time_scale
@@ -187,20 +176,17 @@ def _signals(model: KinematicModel, recording: Recording, levers: Array,
 
 
 def _design(model: KinematicModel, params: ParameterVector, recording: Recording,
-            predicted: Array, orders: dict[int, list[int]], levers: Array | None,
-            time_scale: tuple[float, float] | None, same_as: list[_Term] | None = None,
-            ) -> tuple[Array, list[_Term], Array, int]:  # fmt: skip
+            predicted: Array, orders: dict[int, list[int]],
+            time_scale: tuple[float, float] | None,
+            ) -> tuple[Array, list[_Term], Array]:  # fmt: skip
     """X (3n, P + K) [m per unit]: the model's free Jacobian columns, then every candidate
-    term's columns; the terms (their columns' indices into X); the levers (J,) [m]; P."""
+    term's columns; the terms (their columns' indices into X); the joints' levers (J,) [m]."""
     poses = recording.poses
-    origins, axes = model.joint_axes(params, poses)
-    motion = np.cross(axes, predicted[:, None, :] - origins)  # (n, J, 3) [m/rad]
-    if levers is None:
-        levers = np.median(np.linalg.norm(motion, axis=2), axis=0)
+    motion, levers = joint_motion(model, params, poses, predicted)  # (n, J, 3) [m/rad]
     _, jac = blocked_jacobian(model, params, poses)
     geometry = jac[:, :, params.free]  # (n, 3, P)
     del jac
-    signals, time = _signals(model, recording, levers, orders, time_scale, same_as)
+    signals, time = _signals(model, recording, levers, orders, time_scale)
     n, p = len(poses), geometry.shape[2]
     k = sum(len(s) for *_, s in signals) + 3 * len(time)
     x = np.empty((n, 3, p + k))
@@ -219,7 +205,7 @@ def _design(model: KinematicModel, params: ParameterVector, recording: Recording
                 x[:, axis, at] = s
                 at += 1
         terms.append(_Term(0, "time", None, np.arange(start, at)))
-    return x.reshape(3 * n, -1), terms, levers, p
+    return x.reshape(3 * n, -1), terms, levers
 
 
 def normal_z(chi2: float, dof: int) -> float:
@@ -239,12 +225,7 @@ def _fit_without(gram: Array, rhs: Array, drop: IntArray) -> Array:
     """The joint fit's coefficients (P + K,) with the columns `drop` left out (zero there):
     the minimum-norm least-squares solution of the normal equations `gram`, `rhs` of unit-
     norm columns (inseparable terms share what they explain, none is made up)."""
-    keep = np.ones(len(rhs), dtype=bool)
-    keep[drop] = False
-    beta = np.zeros(len(rhs))
-    idx = np.flatnonzero(keep)
-    beta[idx] = np.linalg.pinv(gram[np.ix_(idx, idx)], hermitian=True, rcond=1e-12) @ rhs[idx]
-    return beta
+    return _inverse_without(gram, drop) @ rhs
 
 
 def _sum_of_squares(r2: float, gram: Array, rhs: Array, beta: Array) -> float:
@@ -278,38 +259,38 @@ def joint_evidence(
     """
     orders = orders or {}
     if len(recording) == 0:
-        return Evidence([], 0.0)
+        return Evidence([], 0.0, [0.0] * model.robot.n_joints)
     time = recording.poses.time
     span_t = float(np.ptp(time)) if len(time) else 0.0
     time_scale = (float(np.mean(time)), span_t) if span_t > 0 else None
-    x, terms, levers, p = _design(model, params, recording, recording.points + residuals,
-                                  orders, None, time_scale)  # fmt: skip
+    x, terms, levers = _design(model, params, recording, recording.points + residuals, orders,
+                               time_scale)  # fmt: skip
     r = residuals.reshape(-1)
     norms = np.linalg.norm(x, axis=0)
     norms[norms == 0] = 1.0
     x = x / norms
     gram, rhs, r2 = x.T @ x, x.T @ r, float(r @ r)
-    separable = [bool(v >= MIN_RESOLVED) for v in _kept_share(gram, terms, np.zeros(0, int))]
+    inverses = _Inverses(gram)
     none = np.zeros(0, dtype=np.int64)
+    separable = [bool(v >= MIN_RESOLVED) for v in inverses.kept_share(terms, none)]
     units = []
     for i, term in enumerate(terms):
         siblings = [k for k, t in enumerate(terms) if k != i and not separable[k]
                     and not separable[i] and t.joint == term.joint]  # fmt: skip
         cols = np.concatenate([terms[k].columns for k in siblings]) if siblings else none
         units.append(_Unit(i, term.columns, cols))
-    beta = _fit_without(gram, rhs, none)
-    rss = _sum_of_squares(r2, gram, rhs, beta)
+    rss = _sum_of_squares(r2, gram, rhs, inverses.fit(rhs, none))
     rank = int(np.sum(np.linalg.eigvalsh(gram) > 1e-12 * max(float(np.trace(gram)), 1e-300)))
     scatter2 = rss / max(len(r) - rank, 1)
     fitted: dict[int, tuple[float, float, float]] = {}  # unit -> value, sigma, z
     for u, unit in enumerate(units):
-        if _kept_share(gram, [terms[unit.term]], unit.siblings)[0] < MIN_RESOLVED:
+        if inverses.kept_share([terms[unit.term]], unit.siblings)[0] < MIN_RESOLVED:
             continue  # not resolvable even in its siblings' place
-        kept = _fit_without(gram, rhs, unit.siblings)
+        kept = inverses.fit(rhs, unit.siblings)
         without = _fit_without(gram, rhs, np.concatenate([unit.siblings, unit.columns]))
         chi2 = (_sum_of_squares(r2, gram, rhs, without)
                 - _sum_of_squares(r2, gram, rhs, kept)) / max(scatter2, 1e-300)  # fmt: skip
-        cov = _inverse_without(gram, unit.siblings) * scatter2
+        cov = inverses.without(unit.siblings) * scatter2
         value, sigma = _value(terms[unit.term], kept, cov, x, norms)
         fitted[u] = (value, sigma, normal_z(chi2, len(unit.columns)))
     check = [u for u, (_, _, z) in fitted.items() if z >= CHECK_Z]
@@ -327,7 +308,34 @@ def joint_evidence(
         shown = z if confirmed or z < CHECK_Z else 0.0
         out.append(TermEvidence(term.joint, term.family, term.order, value, sigma, shown, z,
                                 confirmed, True, held_z, separable[unit.term]))  # fmt: skip
-    return Evidence(out, float(np.sqrt(scatter2)))
+    return Evidence(out, float(np.sqrt(scatter2)), [float(v) for v in levers])
+
+
+class _Inverses:
+    """The pseudo-inverse of a normal matrix `gram` with some columns left out, computed
+    once per set of columns left out (every term of one joint's inseparable set leaves out
+    the same siblings but its own: most sets recur)."""
+
+    def __init__(self, gram: Array) -> None:
+        self.gram = gram
+        self._known: dict[tuple[int, ...], Array] = {}
+
+    def without(self, drop: IntArray) -> Array:
+        """`_inverse_without(gram, drop)`, once per `drop`."""
+        key = tuple(sorted(int(c) for c in drop))
+        if key not in self._known:
+            self._known[key] = _inverse_without(self.gram, drop)
+        return self._known[key]
+
+    def fit(self, rhs: Array, drop: IntArray) -> Array:
+        """The joint fit's coefficients without the columns `drop` (`_fit_without`)."""
+        return self.without(drop) @ rhs
+
+    def kept_share(self, terms: list[_Term], drop: IntArray) -> list[float]:
+        """Per term: the smallest share of its (unit-norm) columns' norm left once every
+        other column but `drop` is projected off (1 / sqrt of the inverse's diagonal)."""
+        left = 1.0 / np.sqrt(np.maximum(np.diag(self.without(drop)), 1e-300))
+        return [float(left[t.columns].min()) for t in terms]
 
 
 def _inverse_without(gram: Array, drop: IntArray) -> Array:
@@ -339,20 +347,6 @@ def _inverse_without(gram: Array, drop: IntArray) -> Array:
     out = np.zeros_like(gram)
     out[np.ix_(idx, idx)] = np.linalg.pinv(gram[np.ix_(idx, idx)], hermitian=True, rcond=1e-12)
     return out
-
-
-def _kept_share(gram: Array, terms: list[_Term], drop: IntArray) -> list[float]:
-    """Per term: the smallest share of its (unit-norm) columns' norm left once every other
-    column but `drop` is projected off (1 / sqrt of the inverse normal matrix's diagonal)."""
-    diag = np.diag(_inverse_without(gram, drop))
-    left = 1.0 / np.sqrt(np.maximum(diag, 1e-300))
-    return [float(left[t.columns].min()) for t in terms]
-
-
-def _rank(columns: Array) -> int:
-    """The numerical rank of unit-norm `columns` (3n, c)."""
-    singular = np.linalg.svd(columns, compute_uv=False)
-    return int(np.sum(singular > 1e-6 * max(float(singular[0]), 1e-300))) if len(singular) else 0
 
 
 def _value(term: _Term, beta: Array, cov: Array, x: Array,
@@ -406,8 +400,7 @@ def _held_out_gains(
         return {}
     r = residuals.reshape(-1)
     group = reading_groups(recording.poses.q)
-    fold = np.random.default_rng(0).permutation(int(group.max()) + 1)[group] % N_FOLDS
-    rows = np.repeat(fold, 3)
+    rows = np.repeat(pose_folds(recording), 3)
     total = {u: np.zeros(len(r)) for u in check}  # per row: squared error dropping it
     for f in range(N_FOLDS):
         test = rows == f
@@ -415,9 +408,10 @@ def _held_out_gains(
             continue
         xt, rt = x[test], r[test]
         g, b = gram - xt.T @ xt, rhs - xt.T @ rt
+        inverses = _Inverses(g)
         for u in check:
             unit = units[u]
-            kept = _fit_without(g, b, unit.siblings)
+            kept = inverses.fit(b, unit.siblings)
             without = _fit_without(g, b, np.concatenate([unit.siblings, unit.columns]))
             total[u][test] = (rt - xt @ without) ** 2 - (rt - xt @ kept) ** 2
     return {u: paired_z(_per_pose(d, group)) for u, d in total.items()}

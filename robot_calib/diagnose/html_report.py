@@ -41,11 +41,11 @@ from robot_calib.diagnose.figures import (
 from robot_calib.diagnose.ladder import Ladder
 from robot_calib.diagnose.names import MODEL_CLASS, MODEL_CSS, with_breaks
 from robot_calib.diagnose.noise import noise_basis
-from robot_calib.diagnose.report import NOT_RESOLVED, unobservable
+from robot_calib.diagnose.report import NOT_RESOLVED, blank, harmonic_cells, unobservable
 from robot_calib.diagnose.signatures import (
     FAMILIES,
-    ArcSignature,
     JointTerms,
+    WhereItLies,
     removed_note,
     scan_order_note,
     signature_removed,
@@ -231,11 +231,17 @@ def _deg(urad: float | None, significance: float | None = None) -> str:
     return f"{urad * DEG_PER_URAD:.5f}{sig}"
 
 
-def _harmonics_deg(entry: ArcSignature | JointTerms) -> str:
-    if entry.harmonics_urad is None or entry.harmonics_significance is None:
-        return unobservable(entry)
-    pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
-    return ", ".join(NOT_RESOLVED if a is None else _deg(a, s) for a, s in pairs)
+def _term_deg(where: WhereItLies, t: JointTerms, family: str) -> str:
+    """The cell of `family` (direction, scale, gravity) of row `t` in this report's units
+    (deg, ppm, deg/(N m)) with its significance, else `report.blank`."""
+    value, significance = t.of_family(family)
+    if value is None:
+        return blank(where, t.joint, family)
+    if family == "direction":
+        return _deg(value, significance)
+    if family == "scale":
+        return f"{value:.1f} ({significance:.0f}x)"
+    return f"{value * DEG_PER_URAD:.3g} ({significance:.0f}x)"
 
 
 def _strongest(diagnosis: Diagnosis) -> str:
@@ -432,7 +438,8 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
         out.append("<h3>Per joint, from its circle sweeps (geometric model)</h3>"
                    "<p>Angle-equivalent error along each sweep's arc; a joint is observable "
                    "only through targets at least 5 mm from its axis.</p>")  # fmt: skip
-        rows = [[j.joint, _deg(j.arc_rms_urad), _harmonics_deg(j), _deg(j.direction_split_urad),
+        rows = [[j.joint, _deg(j.arc_rms_urad), harmonic_cells(j, where, _deg),
+                 _deg(j.direction_split_urad),
                  _mm(j.slope_vs_angle_urad_per_rad, 1), _mm(j.gravity_torque_correlation, 2),
                  _note(removed_note(removed, j.joint))]
                 for j in where.joints]  # fmt: skip
@@ -448,13 +455,9 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
         "their own uncertainty, 0 where a term does not lower the error of poses left out "
         f"(k-fold); {NOT_RESOLVED}: not resolvable from these poses.</p>"
     )
-    rows = [[t.joint, _harmonics_deg(t),
-             _deg(t.direction_urad, t.direction_significance) if t.observable
-             else unobservable(t),
-             "-" if t.scale_urad_per_rad is None
-             else f"{t.scale_urad_per_rad:.1f} ({t.scale_significance:.0f}x)",
-             "-" if t.gravity_urad_per_Nm is None
-             else f"{t.gravity_urad_per_Nm * DEG_PER_URAD:.3g} ({t.gravity_significance:.0f}x)",
+    rows = [[t.joint, harmonic_cells(t, where, _deg),
+             _term_deg(where, t, "direction") if t.observable else unobservable(t),
+             _term_deg(where, t, "scale"), _term_deg(where, t, "gravity"),
              _note(removed_note(removed, t.joint))]
             for t in where.joints_from_all_poses]  # fmt: skip
     out.append(_table(["joint", "harmonics 1-4 [deg]", "direction (backlash) [deg]",

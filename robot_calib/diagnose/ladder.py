@@ -50,11 +50,10 @@ from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
+from robot_calib.measurements.split import N_FOLDS, pose_folds
 from robot_calib.model import KinematicModel
-from robot_calib.poses import reading_groups
 from robot_calib.records import Record
 
-N_FOLDS = 5
 MAX_RUNGS = 6
 MIN_GAIN = 0.05  # a candidate must cut the held-out rms by 5 % ...
 AT_FLOOR = 1.2  # ... and the ladder stops once held-out rms <= 1.2 x the noise floor
@@ -130,20 +129,6 @@ def candidates(robot: RobotDescription, recording: Recording, present: tuple[Eff
     pool = ladder_candidates(robot, recording.poses)
     pool += harmonic_candidates(spectra or [], present)
     return [e for e in pool if not any(p.supersedes(e, robot) for p in present)]
-
-
-def folds(n: int, k: int = N_FOLDS, seed: int = 0) -> IntArray:
-    """Fold number (n,) of every pose: a fixed random split into k folds of whole poses."""
-    return np.random.default_rng(seed).permutation(n) % k
-
-
-def pose_folds(recording: Recording) -> IntArray:
-    """Fold number (n,) of every measurement: `folds` of the groups of measurements at the
-    same joint readings (`poses.reading_groups`), so that the targets measured at one pose,
-    its re-reads and its repeats fall in one fold (a re-read in another fold is a copy of
-    a fitted point: the k-fold figure of a campaign of 3 reads per pose was 5 x too good)."""
-    group = reading_groups(recording.poses.q)
-    return folds(int(group.max()) + 1 if len(group) else 0)[group]
 
 
 def _replace(present: tuple[Effect, ...], new: Effect,

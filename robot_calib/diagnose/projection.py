@@ -53,11 +53,19 @@ def model_span(model: KinematicModel, params: ParameterVector, poses: Poses,
     """The span of `model`'s free parameters at `params` on `poses`, its Jacobian divided
     by `scale` (e.g. the noise [m]), and the joints' motion at the `predicted` points
     (n, 3) [m, tracker frame]."""
-    origins, axes = model.joint_axes(params, poses)
-    motion = np.cross(axes, predicted[:, None, :] - origins)  # (n, J, 3) [m/rad]
+    motion, lever = joint_motion(model, params, poses, predicted)
     _, jac = blocked_jacobian(model, params, poses)
     nuisance = jac[:, :, params.free].reshape(3 * len(jac), -1) / scale
     del jac
     basis = np.linalg.qr(nuisance)[0] if nuisance.shape[1] else np.zeros((len(nuisance), 0))
-    lever = np.median(np.linalg.norm(motion, axis=2), axis=0)
     return ModelSpan(motion, basis, lever)
+
+
+def joint_motion(model: KinematicModel, params: ParameterVector, poses: Poses,
+                 predicted: Array) -> tuple[Array, Array]:  # fmt: skip
+    """How each joint's angle error moves each of the `predicted` points (n, 3) [m,
+    tracker frame]: motion (n, J, 3) [m/rad] = axis_j x (point - origin_j), and each
+    joint's lever (J,) [m], the median of |motion_j| over the points."""
+    origins, axes = model.joint_axes(params, poses)
+    motion = np.cross(axes, predicted[:, None, :] - origins)
+    return motion, np.median(np.linalg.norm(motion, axis=2), axis=0)

@@ -22,6 +22,7 @@ from robot_calib.diagnose.noise import noise_basis
 from robot_calib.diagnose.signatures import (
     ArcSignature,
     JointTerms,
+    WhereItLies,
     removed_note,
     scan_order_note,
     signature_removed,
@@ -73,12 +74,29 @@ def _plots(ladder: Ladder, recording: Recording, stem: Path, floor_mm: float | N
     return out
 
 
-def _harmonics(entry: ArcSignature | JointTerms) -> str:
-    """'a1 (s1x), a2 (s2x), ...': harmonic amplitudes [urad] with their significance."""
+def harmonic_cells(entry: ArcSignature | JointTerms, where: WhereItLies,
+                   shown: Callable[[float, float], str]) -> str:  # fmt: skip
+    """A row's harmonics 1-4, each `shown(amplitude [urad], significance)`; an amplitude
+    without a value is NOT_RESOLVED on an arc, and as `blank` says from every pose."""
     if entry.harmonics_urad is None or entry.harmonics_significance is None:
         return unobservable(entry)
+    cells = []
     pairs = zip(entry.harmonics_urad, entry.harmonics_significance)
-    return ", ".join(NOT_RESOLVED if a is None else f"{a:.1f} ({s:.0f}x)" for a, s in pairs)
+    for k, (a, s) in enumerate(pairs, start=1):
+        if a is not None:
+            cells.append(shown(a, s))
+        elif isinstance(entry, ArcSignature):
+            cells.append(NOT_RESOLVED)
+        else:
+            cells.append(blank(where, entry.joint, "harmonics", k))
+    return ", ".join(cells)
+
+
+def blank(where: WhereItLies, joint: int, family: str, order: int | None = None) -> str:
+    """What a per-joint table shows for a term of the joint fit without a value:
+    NOT_RESOLVED where it was a candidate these poses do not resolve, '-' where it was none
+    (an order the model has, a signal that does not vary)."""
+    return NOT_RESOLVED if where.has_term(joint, family, order) else "-"
 
 
 #: an amplitude the poses do not resolve (`signatures.ArcSignature`, `JointTerms`)
@@ -93,8 +111,21 @@ def unobservable(entry: ArcSignature | JointTerms) -> str:
 
 def _value(value: float | None, digits: int, significance: float | None = None) -> str:
     if value is None:
-        return "-" if significance is None else NOT_RESOLVED
+        return "-"
     return f"{value:.{digits}f}" + ("" if significance is None else f" ({significance:.0f}x)")
+
+
+def _urad(amplitude: float, significance: float) -> str:
+    return f"{amplitude:.1f} ({significance:.0f}x)"
+
+
+def _term(where: WhereItLies, t: JointTerms, family: str, digits: int) -> str:
+    """The cell of `family` (direction, scale, gravity) of row `t`: its value with its
+    significance, else `blank`."""
+    value, significance = t.of_family(family)
+    if value is None:
+        return blank(where, t.joint, family)
+    return _value(value, digits, significance)
 
 
 def _floor_sentence(noise: NoiseReport) -> str:
@@ -266,7 +297,8 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         ]
         for j in where.joints:
             lines.append(
-                f"| {j.joint} | {_value(j.arc_rms_urad, 1)} | {_harmonics(j)} | "
+                f"| {j.joint} | {_value(j.arc_rms_urad, 1)} | "
+                f"{harmonic_cells(j, where, _urad)} | "
                 f"{_value(j.direction_split_urad, 1)} | "
                 f"{_value(j.slope_vs_angle_urad_per_rad, 1)} | "
                 f"{_value(j.gravity_torque_correlation, 2)} | {removed_note(removed, j.joint)} |"
@@ -289,10 +321,10 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
     ]
     for t in where.joints_from_all_poses:
         lines.append(
-            f"| {t.joint} | {_harmonics(t)} "
-            f"| {_value(t.direction_urad, 1, t.direction_significance)} "
-            f"| {_value(t.scale_urad_per_rad, 1, t.scale_significance)} "
-            f"| {_value(t.gravity_urad_per_Nm, 2, t.gravity_significance)} "
+            f"| {t.joint} | {harmonic_cells(t, where, _urad)} "
+            f"| {_term(where, t, 'direction', 1)} "
+            f"| {_term(where, t, 'scale', 1)} "
+            f"| {_term(where, t, 'gravity', 2)} "
             f"| {removed_note(removed, t.joint)} |"
         )
     if where.strongest_signature:

@@ -15,7 +15,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from robot_calib.diagnose.evidence import Evidence, TermEvidence, joint_evidence
+from robot_calib.diagnose.evidence import (
+    FAMILY_WORDS,
+    UNITS,
+    Evidence,
+    TermEvidence,
+    joint_evidence,
+)
 from robot_calib.diagnose.frequency import JointSpectrum, joint_spectra
 from robot_calib.diagnose.projection import MIN_LEVER_M
 from robot_calib.effects.base import Effect
@@ -74,6 +80,10 @@ class JointTerms(Record):
     observable: bool = True
     lever_mm: float | None = None
 
+    def of_family(self, family: str) -> tuple[float | None, float]:
+        """(value, significance) of a one-signal family (a key of FAMILY_FIELDS)."""
+        return getattr(self, FAMILY_FIELDS[family]), getattr(self, f"{family}_significance")
+
 
 @dataclass(frozen=True)
 class Signature(Record):
@@ -122,6 +132,11 @@ class WhereItLies(Record):
     evidence: list[TermEvidence] = field(default_factory=list)
     evidence_scatter_mm: float | None = None  # what the joint fit leaves, per component
 
+    def has_term(self, joint: int, family: str, order: int | None = None) -> bool:
+        """True when the joint fit had this term as a candidate (`evidence`)."""
+        return any(t.joint == joint and t.family == family and t.order == order
+                   for t in self.evidence)  # fmt: skip
+
 
 def arc_angle_errors(model: KinematicModel, params: ParameterVector, recording: Recording,
                      residuals: Array) -> dict[int, tuple[IntArray, Array, Array]]:  # fmt: skip
@@ -152,24 +167,19 @@ def harmonic_amplitudes(
 
 
 def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recording,
-                residuals: Array, noise_sigma_m: float,
+                residuals: Array,
                 evidence: Evidence | None = None) -> list[JointTerms]:  # fmt: skip
     """From every pose (sweeps or not), per joint, the evidence of each joint-angle term
     (`evidence.joint_evidence`: harmonic k = 1..4 of the reading, the approach direction
     (backlash), the reading (scale), the gravity torque (compliance), all fitted jointly
     with the model's own parameters and with each other): its value (None where these
     poses do not resolve it) and its significance (x its own uncertainty; 0 where it does
-    not lower the k-fold error). `noise_sigma_m` only decides nothing here (kept for the
-    callers' signature); `evidence`: already computed on these residuals."""
-    del noise_sigma_m
+    not lower the k-fold error). `evidence`: already computed on these residuals."""
     if evidence is None:
         evidence = joint_evidence(model, params, recording, residuals)
-    origins, axes = model.joint_axes(params, recording.poses)
-    motion = np.cross(axes, recording.points[:, None, :] + residuals[:, None, :] - origins)
-    levers = np.median(np.linalg.norm(motion, axis=2), axis=0)
     out = []
     for j in range(model.robot.n_joints):
-        lever = float(levers[j])
+        lever = evidence.levers_m[j]
         if lever < MIN_LEVER_M:
             zeros = [0.0] * HARMONICS
             out.append(JointTerms(j + 1, None, zeros, None, 0.0, None, 0.0, None, 0.0,
@@ -199,12 +209,13 @@ def _of(evidence: Evidence, joint: int, family: str,
     return (None, 0.0) if term is None else (term.value, term.significance)
 
 
-FAMILIES = (  # (field of the value, field of the significance, words, unit)
-    ("direction_urad", "direction_significance", "approach direction (backlash-like)", "urad"),
-    ("scale_urad_per_rad", "scale_significance", "reading (scale-like)", "urad/rad"),
-    ("gravity_urad_per_Nm", "gravity_significance", "gravity torque (compliance-like)",
-     "urad/(N m)"),
-)  # fmt: skip
+#: the one-signal families of `JointTerms`: family -> the field of its value
+FAMILY_FIELDS = {"direction": "direction_urad", "scale": "scale_urad_per_rad",
+                 "gravity": "gravity_urad_per_Nm"}  # fmt: skip
+FAMILIES = tuple(  # (field of the value, field of the significance, words, unit)
+    (field_name, f"{family}_significance", FAMILY_WORDS[family], UNITS[family])
+    for family, field_name in FAMILY_FIELDS.items()
+)
 
 
 #: the per-joint signature families: the harmonics, then one per FAMILIES entry, in order
@@ -321,10 +332,7 @@ def signature_text(term: TermEvidence) -> str:
         return f"{term.words()} ({term.value:.4f} mm rms over the recording, {z})"
     if term.family == "harmonics":
         return f"{term.words()} ({term.value:.1f} urad of joint-angle error, {z}{together})"
-    for _, _, words, unit in FAMILIES:
-        if words in term.words():
-            return f"{term.words()}: {term.value:.1f} {unit}, {z}{together}"
-    return f"{term.words()} ({z})"
+    return f"{term.words()}: {term.value:.1f} {UNITS[term.family]}, {z}{together}"
 
 
 #: said of a term the poses do not tell apart from other terms of its joint
@@ -417,7 +425,7 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
     quartiles = np.array_split(np.argsort(time, kind="stable"), 4)
     reach = np.linalg.norm((recording.points - recording.points.mean(axis=0))[:, :2], axis=1)
     tertiles = np.array_split(np.argsort(reach, kind="stable"), 3)
-    all_poses = joint_terms(model, params, recording, residuals, noise_sigma_m, evidence)
+    all_poses = joint_terms(model, params, recording, residuals, evidence)
     drift = evidence.term(0, "time")
     return WhereItLies(
         joints,

@@ -7,10 +7,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot_calib.errors import InputError
+from robot_calib.kinematics.frames import IntArray
 from robot_calib.measurements.recording import Recording
 from robot_calib.poses import reading_groups
 
 SPLITS = ("random", "order", "time")
+N_FOLDS = 5  # the folds of every k-fold over poses (the ladder's, the evidence's)
 
 
 def holdout_mask(
@@ -42,3 +44,17 @@ def holdout_mask(
         raise InputError(f"--holdout {fraction}: every measurement is of a pose held out "
                          "(its other reads): nothing left to fit")  # fmt: skip
     return mask
+
+
+def folds(n: int, k: int = N_FOLDS, seed: int = 0) -> IntArray:
+    """Fold number (n,) of every pose: a fixed random split into k folds of whole poses."""
+    return np.random.default_rng(seed).permutation(n) % k
+
+
+def pose_folds(recording: Recording) -> IntArray:
+    """Fold number (n,) of every measurement: `folds` of the groups of measurements at the
+    same joint readings (`poses.reading_groups`), so that the targets measured at one pose,
+    its re-reads and its repeats fall in one fold (a re-read in another fold is a copy of
+    a fitted point: the k-fold figure of a campaign of 3 reads per pose was 5 x too good)."""
+    group = reading_groups(recording.poses.q)
+    return folds(int(group.max()) + 1 if len(group) else 0)[group]
