@@ -488,12 +488,11 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
         out.append(_table(["joint", "order [per turn]", "amplitude [deg]",
                            "x its uncertainty (joint fit)", "usually", BEST_MODEL_COLUMN],
                           rows))  # fmt: skip
-    quartiles = ", ".join(f"{v:.4f}" for v in where.time.rms_by_quartile_mm)
     reach = ", ".join(f"{v:.4f}" for v in where.workspace.rms_by_reach_tertile_mm)
     gone = signature_removed(where.strongest_signature, removed)
     strongest = _strongest(diagnosis) + (f" ({gone})" if gone else "")
     out.append(f"<p><b>Strongest structure</b>: {_e(strongest)}. Against time: "
-               f"rms by quartile {quartiles} mm, trend {where.time.slope_mm_per_h:.3f} mm/h. "
+               f"{_e(where.time.line())}. "
                f"By reach (near to far): {reach} mm.</p>")  # fmt: skip
     out.append(_img(angle_figure(ladder, recording, "deg"),
                     "Geometric model: arc error against each joint's reading, by approach "

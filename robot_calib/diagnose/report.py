@@ -332,11 +332,9 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         lines += ["", f"Strongest structure: {where.strongest_signature.text}"
                   + (f" ({gone})." if gone else ".")]  # fmt: skip
     lines += _harmonic_lines(diagnosis)
-    quartiles = ", ".join(f"{v:.4f}" for v in where.time.rms_by_quartile_mm)
     lines += [
         "",
-        f"Against time: rms by quartile {quartiles}"
-        f" mm, trend {where.time.slope_mm_per_h:.3f} mm/h. By reach (near to far): "
+        f"Against time: {where.time.line()}. By reach (near to far): "
         + ", ".join(f"{v:.4f}" for v in where.workspace.rms_by_reach_tertile_mm)
         + " mm.",
         "",

@@ -100,14 +100,21 @@ class Signature(Record):
 @dataclass(frozen=True)
 class TimeTrend(Record):
     """The residual's size against time: rms by quartile of time [mm], the slope of the
-    residual's norm [mm/h] with its 1-sigma (None: not known, e.g. no time span), and the
-    significance of a drift with time in the joint fit (`evidence`: x its uncertainty, 0
-    where it does not lower the k-fold error)."""
+    residual's norm [mm/h] (a description: in a campaign of sweeps the residual's size
+    follows the joints swept, not time), and the significance of a drift with time in the
+    joint fit (`evidence`: x its uncertainty beside every joint term, 0 where it does not
+    lower the k-fold error): whether time itself explains anything."""
 
     rms_by_quartile_mm: list[float]
     slope_mm_per_h: float
-    slope_sigma_mm_per_h: float | None = None
     drift_significance: float = 0.0
+
+    def line(self) -> str:
+        """'rms by quartile a, b, c, d mm, trend 0.172 mm/h (a drift with time: 1 x its
+        uncertainty)'."""
+        quartiles = ", ".join(f"{v:.4f}" for v in self.rms_by_quartile_mm)
+        return (f"rms by quartile {quartiles} mm, trend {self.slope_mm_per_h:.3f} mm/h (a "
+                f"drift with time: {self.drift_significance:.0f} x its uncertainty)")  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -433,7 +440,7 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
         strongest_signature(evidence),
         TimeTrend(
             [float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in quartiles],
-            *_trend(time, norm),
+            _slope_mm_per_h(time, norm),
             0.0 if drift is None else drift.significance,
         ),
         Workspace([float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in tertiles]),
@@ -444,12 +451,9 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
     )
 
 
-def _trend(time: Array, norm: Array) -> tuple[float, float | None]:
-    """The slope of the residual's norm `norm` (n,) [m] against `time` (n,) [s], [mm/h],
-    and its 1-sigma from the line's own scatter (None with fewer than 3 distinct times)."""
-    if len(time) < 3 or np.ptp(time) <= 0:
-        return 0.0, None
-    coef, cov = np.polyfit(time, norm, 1, cov="unscaled")
-    fitted = np.polyval(coef, time)
-    scatter2 = float(np.sum((norm - fitted) ** 2)) / max(len(time) - 2, 1)
-    return float(coef[0] * 3.6e6), float(np.sqrt(cov[0, 0] * scatter2) * 3.6e6)
+def _slope_mm_per_h(time: Array, norm: Array) -> float:
+    """The slope of the residual's norm `norm` (n,) [m] against `time` (n,) [s], [mm/h]
+    (0 without a time span)."""
+    if len(time) < 2 or np.ptp(time) <= 0:
+        return 0.0
+    return float(np.polyfit(time, norm, 1)[0] * 3.6e6)
