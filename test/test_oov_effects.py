@@ -292,7 +292,7 @@ def diagnosis(joints: list[int] | None, model: str, effect: str = "unknown") -> 
     return cast(Diagnosis, SimpleNamespace(
         dominant_effect=dominant, ladder=[rung], outliers=[], physical_model=model,
         unexplained=SimpleNamespace(ratio_to_noise_floor=1.2),
-        where=SimpleNamespace(joints=[], joints_from_all_poses=[], strongest_signature=None),
+        where=SimpleNamespace(evidence=[], strongest_signature=None),
     ))  # fmt: skip
 
 

@@ -39,7 +39,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
 from robot_calib.diagnose.frequency import modelled_orders
 from robot_calib.diagnose.projection import MIN_LEVER_M, joint_motion
@@ -210,14 +210,15 @@ def _design(model: KinematicModel, params: ParameterVector, recording: Recording
 
 def normal_z(chi2: float, dof: int) -> float:
     """The normal z of the same upper tail as chi^2 with `dof` degrees of freedom (1 dof:
-    sqrt(chi^2)); for tails beyond double precision, the asymptotic sqrt(chi^2 - dof + 1)."""
+    sqrt(chi^2)); for tails beyond double precision, the asymptotic sqrt(chi^2 - dof + 1).
+    (scipy.special's distribution functions: scipy.stats costs 0.7 s to import.)"""
     if chi2 <= 0:
         return 0.0
     if dof == 1:
         return float(np.sqrt(chi2))
-    log_tail = float(stats.chi2.logsf(chi2, dof))
-    if log_tail > -700:
-        return max(float(stats.norm.isf(np.exp(log_tail))), 0.0)
+    tail = float(special.chdtrc(dof, chi2))
+    if tail > 1e-300:
+        return max(-float(special.ndtri(tail)), 0.0)
     return float(np.sqrt(max(chi2 - dof + 1, 0.0)))
 
 

@@ -49,7 +49,7 @@ import numpy as np
 
 from robot_calib.accuracy import accuracy
 from robot_calib.diagnose.diagnosis import Diagnosis, diagnose
-from robot_calib.diagnose.signatures import ArcSignature, JointTerms, WhereItLies
+from robot_calib.diagnose.signatures import WhereItLies
 from robot_calib.effects import EFFECTS, Effect, effect_class, parse_effect
 from robot_calib.effects.base import signed_uniform
 from robot_calib.effects.compliance import Compliance
@@ -328,16 +328,12 @@ TIME_EFFECTS = ("thermal_drift", "thermal_warmup", "thermal_temperature")
 
 def judge_evidence(case: Case, where: WhereItLies) -> EvidenceVerdict:
     """`EvidenceVerdict` of `where` (a diagnosis's, of the geometric model's residuals) on
-    `case`: the rows of both per-joint tables (`joints`, `joints_from_all_poses`)."""
+    `case`: every term a joint shows anywhere (both per-joint tables and the frequency
+    scan's orders carry the joint fit's numbers, `where.evidence`)."""
     allowed = {j for e in case.withheld for j in e.diagnosed_joints()}
     shown: dict[int, float] = {}
-    rows: list[ArcSignature | JointTerms] = [*where.joints, *where.joints_from_all_poses]
-    for row in rows:
-        values = [*(row.harmonics_significance or [])]
-        if isinstance(row, JointTerms):
-            values += [row.direction_significance, row.scale_significance,
-                       row.gravity_significance]  # fmt: skip
-        shown[row.joint] = max([shown.get(row.joint, 0.0), *values])
+    for term in where.evidence:
+        shown[term.joint] = max(shown.get(term.joint, 0.0), term.significance)
     n_joints = case.world.model.robot.n_joints
     free = [j for j in range(1, n_joints + 1) if j not in allowed]
     false = [j for j in free if shown.get(j, 0.0) >= EVIDENCE_Z]
