@@ -25,7 +25,7 @@ from robot_calib.diagnose.ladder import (
     run_ladder,
 )
 from robot_calib.diagnose.learnable import MIN_LEARNABLE_SHARE, LearnableBound
-from robot_calib.diagnose.noise import STATED, NoiseLevel, refine_with_model
+from robot_calib.diagnose.noise import STATED, NoiseLevel
 from robot_calib.diagnose.outside import OutsideVocabulary, outside_vocabulary
 from robot_calib.diagnose.signatures import (
     RemovedSignature,
@@ -390,8 +390,7 @@ def diagnose(
     best = ladder.rungs[-1]  # the chosen model: the hybrid when it won
     physical = physical_rungs(ladder)
     last = physical[-1]  # where its residual lies: the physical model's
-    noise = refine_with_model(ladder.noise, last.calibration.residuals,
-                              int(last.calibration.parameters.free.sum()))  # fmt: skip
+    noise = ladder.noise  # the verdict's floor: independent evidence only, never a residual
     floor_mm = noise.floor_rms_m * 1e3 if noise.independent else None
     if on_ladder is not None:
         on_ladder(ladder, recording, floor_mm)

@@ -14,8 +14,11 @@
 4. Else the floor is unknown: the in-sample residual of a fitted model with its degrees of
    freedom serves the ladder's internal tests only (`NoiseLevel.independent` is False), and
    every output says the floor is unknown.
-The final verdict pools the independent estimate with the best model's in-sample residual
-where they agree (`refine_with_model`).
+The verdict's floor is the independent estimate alone (1-3): a model's own residual, even
+where it agrees, is no evidence of the floor it is judged against.
+Repeat poses are told from re-reads (`moved_between`): a pose measured again after the
+robot left it holds the robot's repeatability, a still pose read again only the tracker's
+noise; re-reads serve only where no pose was repeated, and the source says so.
 
 A stated accuracy is checked against the evidence (`NoiseLevel.warning`, issue 24): not
 used beside repeat poses or circle fits (said so, naming both figures); FAR_ABOVE x or more
@@ -29,14 +32,17 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import NDArray
 
 from robot_calib.identify.circles import fit_circle
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording
-from robot_calib.poses import JOINT_CHANGE_TOLERANCE
+from robot_calib.poses import JOINT_CHANGE_TOLERANCE, reading_groups
 
 MIN_REPEATS = 3
 STATED = "stated tracker accuracy"
+#: the source of a floor from re-reads of still poses: the tracker's noise only
+REREADS = "re-reads of still poses (the tracker alone, not the robot's repeatability)"
 MAX_REPEAT_GAP_S = 60.0  # repeats farther apart in time may include drift, not only noise
 MAX_REPEAT_LAG = 50  # rows between a pose and its repeat, at most
 AGREE = 1.5  # circle-fit noise within this factor of the repeat-pose noise: pool them
@@ -94,6 +100,18 @@ def _circle_noise(recording: Recording) -> NoiseLevel | None:
         total += float(np.sum(circle.plane_residuals**2 + circle.radial_residuals**2))
         dof += 2 * s.n_poses - 6
     return NoiseLevel(float(np.sqrt(total / dof)), "circle fits", dof) if dof > 0 else None
+
+
+def moved_between(recording: Recording, pairs: IntArray) -> NDArray[np.bool_]:
+    """(k,) per repeat pair [a, b] of `repeat_pairs`: True when the robot left the pose
+    between the two (a measurement at other readings lies between them: a repeat, which
+    holds the robot's repeatability), False for re-reads of a still pose (the tracker's
+    noise alone)."""
+    if not len(pairs):
+        return np.zeros(0, dtype=bool)
+    group = reading_groups(recording.poses.q)
+    changes = np.concatenate([[0], np.cumsum(group[1:] != group[:-1])])
+    return changes[pairs[:, 1]] > changes[pairs[:, 0]]
 
 
 def repeat_pairs(recording: Recording) -> IntArray:
@@ -157,14 +175,19 @@ def estimate_noise(
 def _measured_noise(recording: Recording) -> NoiseLevel | None:
     """The noise measured without a model: repeat poses, circle fits, both pooled, or None."""
     pairs = repeat_pairs(recording)
+    moved = moved_between(recording, pairs)
     repeat = None
+    if int(moved.sum()) >= MIN_REPEATS:  # the robot came back: repeatability and noise
+        pairs, source = pairs[moved], "repeat poses"
+    else:  # re-reads of still poses only: the tracker's noise, not the robot's repeatability
+        source = REREADS
     if len(pairs) >= MIN_REPEATS:
         diff = recording.points[pairs[:, 0]] - recording.points[pairs[:, 1]]
-        repeat = NoiseLevel(float(np.sqrt(np.mean(diff**2) / 2.0)), "repeat poses", 3 * len(pairs))
+        repeat = NoiseLevel(float(np.sqrt(np.mean(diff**2) / 2.0)), source, 3 * len(pairs))
     circles = _circle_noise(recording)
     if repeat is not None and circles is not None:
         if circles.sigma_m <= AGREE * repeat.sigma_m:  # circles not bent by effects: pool
-            return _pooled(repeat, circles, "repeat poses + circle fits")
+            return _pooled(repeat, circles, f"{repeat.source} + circle fits")
         return repeat
     return repeat if repeat is not None else circles
 
@@ -215,16 +238,3 @@ def _pooled(a: NoiseLevel, b: NoiseLevel, source: str) -> NoiseLevel:
     dof = a.n + b.n
     var = (a.n * a.sigma_m**2 + b.n * b.sigma_m**2) / dof
     return NoiseLevel(float(np.sqrt(var)), source, dof)
-
-
-def refine_with_model(noise: NoiseLevel, residuals: Array, n_free: int) -> NoiseLevel:
-    """Pool an independent estimate with a fitted model's in-sample residual (n, 3) [m]
-    when the two agree (within AGREE): the model then leaves only noise, and its thousands of
-    degrees of freedom steady an estimate from a handful of repeat poses. Unchanged when
-    they disagree (the model misses structure) or when `noise` is not independent."""
-    if not noise.independent or residuals.size - n_free <= 0 or noise.source.startswith(STATED):
-        return noise  # a stated accuracy is the user's word: not pooled with a residual
-    model = _model_noise(residuals, n_free)
-    if model.sigma_m > AGREE * noise.sigma_m:
-        return noise
-    return _pooled(noise, model, f"{noise.source} + final model residual")
