@@ -191,3 +191,22 @@ def test_version_and_the_summary_of_frames() -> None:
     assert frame.split()[3:5] == ["-", "-"]
     joint = next(line for line in lines if line.startswith("a2 [mm]"))
     assert len(joint.split()) == 6 and joint.split()[3] != "-"
+
+
+def test_a_python_warning_is_one_line_naming_the_verb(capsys: pytest.CaptureFixture[str]) -> None:
+    """A warning raised while a verb runs (numpy's, scipy's, a capped learned correction's
+    RuntimeWarning) reaches the user as 'robot-calib VERB: warning: ...' on one line, never
+    with a file path and source line; `main` leaves Python's own warning display as it was."""
+    import warnings
+
+    from robot_calib import cli as cli_package
+
+    before = warnings.showwarning
+    cli_package._warning_line("predict", RuntimeWarning("learned correction: 3 of 9 poses\n"
+                                                        "predicted beyond 10 mm"), RuntimeWarning,
+                              "/x/correction_structured.py", 220)  # fmt: skip
+    err = capsys.readouterr().err
+    assert err == ("robot-calib predict: warning: learned correction: 3 of 9 poses predicted "
+                   "beyond 10 mm\n")  # fmt: skip
+    assert cli_package.main(["score", "no_such_file.json", "no_such.mcap"]) == 2
+    assert warnings.showwarning is before

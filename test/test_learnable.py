@@ -115,3 +115,18 @@ def test_a_share_never_prints_as_minus_zero() -> None:
     assert percent(-0.004) == "0 %"
     assert percent(0.996) == "100 %"
     assert percent(-0.25) == "-25 %"
+
+
+def test_a_residual_model_worse_than_geometric_bounds_nothing() -> None:
+    """A residual model that does worse held out than geometric alone did not fit: its
+    figure is no bound (a '10.0150 mm bound' was printed beside a 0.155 mm geometric
+    error), neither in the line nor in the ladder's picture."""
+    from robot_calib.diagnose.learnable import LearnableBound
+
+    worse = LearnableBound("method", "hold-out bags", 0.155, 0.14, 10.015, 9.0, -63.6)
+    assert not worse.bounds
+    line = worse.line()
+    assert line.startswith("learnable bound: none: the residual model did not fit")
+    assert "10.0150 mm with it" in line and "learnable" not in line.split(":", 2)[2]
+    better = LearnableBound("method", "hold-out bags", 0.155, 0.14, 0.010, 0.009, 0.93)
+    assert better.bounds and "93 % of geometric's error is learnable" in better.line()

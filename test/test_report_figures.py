@@ -60,7 +60,9 @@ def fake_ladder(heldout_mm: list[float], bound_mm: float | None) -> SimpleNamesp
         )
         for k, value in enumerate(heldout_mm)
     ]
-    learnable = None if bound_mm is None else SimpleNamespace(holdout_abs_rms_mm=bound_mm)
+    learnable = (
+        None if bound_mm is None else SimpleNamespace(holdout_abs_rms_mm=bound_mm, bounds=True)
+    )
     return SimpleNamespace(rungs=rungs, learnable=learnable, scored_on="hold-out bags")
 
 

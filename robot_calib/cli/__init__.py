@@ -10,11 +10,14 @@ SIGTERM or SIGHUP in "interrupted" and exit status 130, nothing left behind.
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import os
 import signal
 import sys
+import warnings
 from collections.abc import Sequence
+from functools import partial
 from typing import Any, NoReturn
 
 from robot_calib import program_and_verb
@@ -63,6 +66,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     ):
         signal.signal(signal.SIGINT, _interrupt)
     sys.unraisablehook = _ignore_interrupt_in_callback
+    with warnings.catch_warnings():  # restored after the verb: callers run `main` in-process
+        warnings.showwarning = partial(_warning_line, args.command)
+        return _run_verb(args)
+
+
+def _warning_line(verb: str, message: Warning | str, category: type[Warning], *_: Any,
+                  **__: Any) -> None:  # fmt: skip
+    """A Python warning (numpy's, scipy's, the package's RuntimeWarning) as one line
+    'robot-calib VERB: warning: MESSAGE', never a source line or a file path."""
+    text = " ".join(str(message).split())
+    print(f"robot-calib {verb}: warning: {text}", file=sys.stderr)
+
+
+def _run_verb(args: argparse.Namespace) -> int:
+    """The verb of `args`: its exit status (see `main`)."""
     try:
         if args.base_link or args.tip_link:  # carried in the robot reference (PARAMS.json)
             from robot_calib.kinematics.urdf import urdf_reference

@@ -213,7 +213,7 @@ def ladder_figure(ladder: Ladder, floor_mm: float | None) -> Figure:
     names = [wrap_name(r.model, 20) for r in ladder.rungs]
     heights = [r.heldout.absolute_rms_mm for r in ladder.rungs]
     lines = [] if floor_mm is None else [(floor_mm, "noise floor", "k", "--")]
-    if ladder.learnable is not None:
+    if ladder.learnable is not None and ladder.learnable.bounds:
         lines.append((ladder.learnable.holdout_abs_rms_mm, "learnable bound\n(residual model)",
                       COLOURS[1], ":"))  # fmt: skip
     rows = max(name.count("\n") + 1 for name in names)

@@ -108,7 +108,22 @@ class LearnableBound(Record):
         """True when the residual model beats geometric by MIN_LEARNABLE_SHARE or more."""
         return self.learnable_share >= MIN_LEARNABLE_SHARE
 
+    @property
+    def bounds(self) -> bool:
+        """False when the residual model did worse held out than geometric alone: it did
+        not fit (it learned the calibration poses, not the robot), so its figure bounds
+        nothing (a '10.0150 mm bound' beside a 0.155 mm geometric error)."""
+        return self.holdout_abs_rms_mm <= self.geometric_abs_rms_mm
+
     def line(self) -> str:
+        if not self.bounds:
+            edge = f"; {len(self.warnings)} warning(s)" if self.warnings else ""
+            return (
+                f"learnable bound: none: the residual model did not fit (geometric "
+                f"{self.geometric_abs_rms_mm:.4f} mm rms held-out, "
+                f"{self.holdout_abs_rms_mm:.4f} mm with it: it learned the calibration "
+                f"poses, not the robot; {self.scored_on}{edge})"
+            )
         share = (f"{100 * self.learnable_share:.0f} % of geometric's error is learnable"
                  if self.learnable_share > 0 else "it learns nothing")  # fmt: skip
         edge = f"; {len(self.warnings)} warning(s)" if self.warnings else ""
