@@ -138,6 +138,26 @@ def test_the_report_is_self_contained_and_says_what_happened(report: Path) -> No
     assert "urad" not in text and "[deg]" in text and "[mm]" in text
 
 
+def test_the_markdown_report_says_what_the_html_says(report: Path) -> None:
+    """The warnings, the nominal 'before' row, the parameter table and ISO 9283 are in the
+    Markdown report as in the HTML one, with the same figures."""
+    html = report.read_text()
+    markdown = report.with_suffix(".md").read_text()
+    assert "<script>alert(1)</script> & co" in markdown  # the caller's warning, as given
+    assert "generalises worse" in html and "generalises worse" in markdown
+    accuracy = markdown[markdown.index("## Accuracy before and after calibration") :]
+    for model in ("nominal", "cpa", "geometric", "geometric+<wbr>backlash:4"):
+        assert f"| {model} |" in accuracy
+    nominal = next(line for line in accuracy.splitlines() if line.startswith("| nominal |"))
+    assert "before calibration" in nominal and "hold-out bags" in nominal
+    rms = nominal.split("|")[4].split("/")[1].strip()  # the same figure as the HTML's
+    assert rms in html
+    parameters = markdown[markdown.index("## Parameters of the best model") :]
+    backlash = next(line for line in parameters.splitlines() if line.startswith("| backlash4 |"))
+    assert "| deg |" in backlash and backlash.split("|")[3].strip() in html
+    assert "ISO 9283" in markdown and "AP nominal" in markdown
+
+
 def _browser() -> str:
     for name in ("chromium", "chromium-browser", "google-chrome"):
         path = shutil.which(name)

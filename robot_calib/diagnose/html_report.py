@@ -41,7 +41,15 @@ from robot_calib.diagnose.figures import (
 from robot_calib.diagnose.ladder import Ladder
 from robot_calib.diagnose.names import MODEL_CLASS, MODEL_CSS, with_breaks
 from robot_calib.diagnose.noise import noise_basis
-from robot_calib.diagnose.report import NOT_RESOLVED, blank, harmonic_cells, unobservable
+from robot_calib.diagnose.report import (
+    NOT_RESOLVED,
+    PARAMETER_COLUMNS,
+    blank,
+    harmonic_cells,
+    iso_pose_table,
+    parameter_rows,
+    unobservable,
+)
 from robot_calib.diagnose.signatures import (
     FAMILIES,
     JointTerms,
@@ -63,13 +71,6 @@ DEG_PER_URAD = ANGLE_UNITS["deg"] * 1e-6
 #: the per-joint tables' last column: what of that joint the best model removed
 BEST_MODEL_COLUMN = "best model"
 #: SI unit -> (factor, the unit people read); a unit not listed is shown as it is
-HUMAN_UNITS = {
-    "m": (1e3, "mm"),
-    "rad": (ANGLE_UNITS["deg"], "deg"),
-    "1": (1e6, "ppm"),
-    "rad/m": (ANGLE_UNITS["deg"], "deg/m"),
-    "rad/(N m)": (ANGLE_UNITS["deg"], "deg/(N m)"),
-}
 
 
 @dataclass(frozen=True)
@@ -266,28 +267,12 @@ def _strongest(diagnosis: Diagnosis) -> str:
     return f"joint {sig.joint}, {noise}"
 
 
-def _human(unit: str, value: float) -> float:
-    return value * HUMAN_UNITS.get(unit, (1.0, unit))[0]
-
-
 def _parameters(cal: Calibration) -> str:
     """The parameter table of `cal` (values, nominal, deviation, 1-sigma in mm / deg / ppm)
     and the fixed parameters by reason."""
-    rows, classes = [], []
-    for p, value, std in zip(cal.parameters.parameters, cal.parameters.values, cal.std):
-        if p.group not in ("geometric", "frames") and not p.free:
-            continue  # effect terms the data fixed: listed by reason below
-        unit = HUMAN_UNITS.get(p.unit, (1.0, p.unit))[1]
-        frame = p.group == "frames"  # the tracker pose and target offsets: no nominal
-        deviation = "-" if frame else f"{_human(p.unit, value - p.nominal):.5f}"
-        rows.append([
-            p.name, unit, f"{_human(p.unit, value):.5f}",
-            "-" if frame else f"{_human(p.unit, p.nominal):.5f}", deviation,
-            f"{_human(p.unit, std):.2g}" if p.free else "fixed",
-        ])  # fmt: skip
-        classes.append("" if p.free else "fixed")
-    out = [_table(["parameter", "unit", "value", "nominal", "deviation", "1-sigma"], rows,
-                  classes, text_columns=2)]  # fmt: skip
+    rows = parameter_rows(cal)
+    classes = ["fixed" if row[-1] == "fixed" else "" for row in rows]
+    out = [_table(list(PARAMETER_COLUMNS), rows, classes, text_columns=2)]
     ident = cal.identifiability
     if ident is not None:
         out.append(
@@ -540,20 +525,7 @@ def _iso(diagnosis: Diagnosis) -> str:
     out = [f"<p>Pose accuracy AP and repeatability RP (positions), {_e(figures[0].scored_on)}, "
            "before (nominal) and after calibration.</p>",
            _table(["model", "repeated poses", "AP max [mm]", "RP max [mm]"], rows)]  # fmt: skip
-    per_pose = [[k + 1, p.first_index, p.n] + [f"{f.poses[k].ap_mm:.4f}" for f in figures]
-                + [f"{p.rp_mm:.4f}"] for k, p in enumerate(figures[0].poses)]  # fmt: skip
-    out.append(
-        _table(
-            [
-                "pose",
-                "first measurement",
-                "n",
-                *(f"AP {f.model} [mm]" for f in figures),
-                "RP [mm]",
-            ],
-            per_pose,
-        )
-    )
+    out.append(_table(*iso_pose_table(figures)))
     return "".join(out)
 
 

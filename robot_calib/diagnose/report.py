@@ -3,13 +3,14 @@ joint angle split by approach direction, residual against time), readable withou
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport, percent, small_holdout
 from robot_calib.diagnose.figures import (
+    ANGLE_UNITS,
     FigureCache,
     angle_figure,
     ladder_figure,
@@ -32,6 +33,10 @@ from robot_calib.measurements import Recording
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
+
+    from robot_calib.diagnose.html_report import ModelErrors
+    from robot_calib.diagnose.iso9283 import Iso9283
+    from robot_calib.identify.calibration import Calibration
 
 #: the figures' file name suffixes: `<stem>_<suffix>.png` (a figure with nothing to show is
 #: not written)
@@ -186,10 +191,92 @@ def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
     return out
 
 
+#: how a parameter unit is shown to people: factor from SI, unit
+HUMAN_UNITS = {
+    "m": (1e3, "mm"),
+    "rad": (ANGLE_UNITS["deg"], "deg"),
+    "1": (1e6, "ppm"),
+    "rad/m": (ANGLE_UNITS["deg"], "deg/m"),
+    "rad/(N m)": (ANGLE_UNITS["deg"], "deg/(N m)"),
+}
+PARAMETER_COLUMNS = ("parameter", "unit", "value", "nominal", "deviation", "1-sigma")
+
+
+def human(unit: str, value: float) -> float:
+    """`value` in the SI `unit` as HUMAN_UNITS shows it (mm, deg, ppm)."""
+    return value * HUMAN_UNITS.get(unit, (1.0, unit))[0]
+
+
+def parameter_rows(cal: Calibration) -> list[list[str]]:
+    """The parameter table of `cal` (PARAMETER_COLUMNS: value, nominal, deviation, 1-sigma
+    in mm / deg / ppm; the 1-sigma 'fixed' for a fixed one), both reports': the geometry,
+    the frames and the free effect terms (effect terms the data fixed are listed by
+    reason)."""
+    rows = []
+    for p, value, std in zip(cal.parameters.parameters, cal.parameters.values, cal.std):
+        if p.group not in ("geometric", "frames") and not p.free:
+            continue
+        frame = p.group == "frames"  # the tracker pose and target offsets: no nominal
+        rows.append([
+            p.name, HUMAN_UNITS.get(p.unit, (1.0, p.unit))[1], f"{human(p.unit, value):.5f}",
+            "-" if frame else f"{human(p.unit, p.nominal):.5f}",
+            "-" if frame else f"{human(p.unit, value - p.nominal):.5f}",
+            f"{human(p.unit, std):.2g}" if p.free else "fixed",
+        ])  # fmt: skip
+    return rows
+
+
+def iso_pose_table(figures: Sequence[Iso9283]) -> tuple[list[str], list[list[object]]]:
+    """ISO 9283 per repeated pose (both reports): the header and a row per pose (its
+    first measurement, n, the AP of every model of `figures`, the RP) [mm]."""
+    header = ["pose", "first measurement", "n", *(f"AP {f.model} [mm]" for f in figures),
+              "RP [mm]"]  # fmt: skip
+    rows: list[list[object]] = [
+        [k + 1, p.first_index, p.n, *(f"{f.poses[k].ap_mm:.4f}" for f in figures),
+         f"{p.rp_mm:.4f}"]
+        for k, p in enumerate(figures[0].poses)
+    ]  # fmt: skip
+    return header, rows
+
+
+def _markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> list[str]:
+    """A Markdown table's lines."""
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header),
+            *("| " + " | ".join(str(c) for c in row) + " |" for row in rows)]  # fmt: skip
+
+
+def _extra_sections(compared: Sequence[ModelErrors], best: Calibration | None,
+                    warnings: Sequence[str]) -> list[str]:  # fmt: skip
+    """What the HTML report says besides: accuracy before and after calibration (the
+    nominal 'before' row included), the best model's parameters, every warning."""
+    lines: list[str] = []
+    if compared:
+        lines += ["", "## Accuracy before and after calibration", "",
+                  *_markdown_table(
+                      ["model", "role", "scored on", "absolute mean / rms / max [mm]",
+                       "seed criterion mean / max [mm]"],
+                      [[with_breaks(m.model), m.role, m.scored_on,
+                        f"{m.accuracy.absolute_mean_mm:.4f} / {m.accuracy.absolute_rms_mm:.4f}"
+                        f" / {m.accuracy.absolute_max_mm:.4f}",
+                        f"{m.accuracy.pairwise_mean_mm:.4f} / {m.accuracy.pairwise_max_mm:.4f}"]
+                       for m in compared])]  # fmt: skip
+    if best is not None:
+        lines += ["", f"## Parameters of the best model ({best.label})", "",
+                  *_markdown_table(PARAMETER_COLUMNS, parameter_rows(best))]  # fmt: skip
+    lines += ["", "## Warnings", ""]
+    lines += [f"- {w}" for w in warnings] if warnings else ["No warnings."]
+    return lines
+
+
 def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, path: Path,
-                 figures: FigureCache | None = None) -> None:  # fmt: skip
+                 figures: FigureCache | None = None, compared: Sequence[ModelErrors] = (),
+                 best: Calibration | None = None,
+                 warnings: Sequence[str] = ()) -> None:  # fmt: skip
     """Markdown report `path` (+ PNGs beside it named after it); `figures`: where the
-    figures are drawn once for both reports (default: a new one)."""
+    figures are drawn once for both reports (default: a new one); `compared`, `best`,
+    `warnings`: as the HTML report's (`html_report`): the accuracy before and after
+    calibration, the parameters of the model chosen, the caller's warnings (the
+    recording's and the diagnosis' are added here)."""
     noise, where = diagnosis.noise, diagnosis.where
     removed = diagnosis.removed_by_best_model
     figures = FigureCache() if figures is None else figures
@@ -273,6 +360,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
             f"| {with_breaks(f.model)} | {len(f.poses)} | {f.ap_max_mm:.4f} | {f.rp_max_mm:.4f} |"
             for f in diagnosis.iso9283
         ]
+        lines += ["", *_markdown_table(*iso_pose_table(diagnosis.iso9283))]
     if diagnosis.outliers:
         lines += [
             "",
@@ -341,4 +429,6 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
     ]
     for title, name in plots:
         lines += [f"### {title}", "", f"![{title}]({name})", ""]
-    path.write_text("\n".join(lines))
+    every = list(dict.fromkeys([*recording.warnings, *diagnosis.warnings, *warnings]))
+    lines += _extra_sections(compared, best, every)
+    path.write_text("\n".join(lines) + "\n")

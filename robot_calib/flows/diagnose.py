@@ -313,7 +313,8 @@ def write_diagnosis(
                 html_report(diagnosis, ladder, fitted, compared, recommended,
                             recommended_file.name, warnings, figures)
             )  # fmt: skip
-            write_report(diagnosis, ladder, fitted, stage / report.name, figures)
+            write_report(diagnosis, ladder, fitted, stage / report.name, figures, compared,
+                         recommended, warnings)  # fmt: skip
         except BaseException:
             figures.close(abort=True)  # an error or Ctrl-C here: the children go at once
             raise
