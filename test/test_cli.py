@@ -195,8 +195,9 @@ def test_version_and_the_summary_of_frames() -> None:
 
 def test_a_python_warning_is_one_line_naming_the_verb(capsys: pytest.CaptureFixture[str]) -> None:
     """A warning raised while a verb runs (numpy's, scipy's, a capped learned correction's
-    RuntimeWarning) reaches the user as 'robot-calib VERB: warning: ...' on one line, never
-    with a file path and source line; `main` leaves Python's own warning display as it was."""
+    RuntimeWarning) reaches the user as 'warning: ...' on one line, as the verb's own
+    warnings, never with a file path and source line; `main` leaves Python's own warning
+    display as it was."""
     import warnings
 
     from robot_calib import cli as cli_package
@@ -206,7 +207,6 @@ def test_a_python_warning_is_one_line_naming_the_verb(capsys: pytest.CaptureFixt
                                                         "predicted beyond 10 mm"), RuntimeWarning,
                               "/x/correction_structured.py", 220)  # fmt: skip
     err = capsys.readouterr().err
-    assert err == ("robot-calib predict: warning: learned correction: 3 of 9 poses predicted "
-                   "beyond 10 mm\n")  # fmt: skip
+    assert err == "warning: learned correction: 3 of 9 poses predicted beyond 10 mm\n"
     assert cli_package.main(["score", "no_such_file.json", "no_such.mcap"]) == 2
     assert warnings.showwarning is before

@@ -74,9 +74,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _warning_line(verb: str, message: Warning | str, category: type[Warning], *_: Any,
                   **__: Any) -> None:  # fmt: skip
     """A Python warning (numpy's, scipy's, the package's RuntimeWarning) as one line
-    'robot-calib VERB: warning: MESSAGE', never a source line or a file path."""
+    'warning: MESSAGE' like the verb's own warnings (`verb`: kept for the signature),
+    never a source line or a file path ('robot-calib VERB: ...' is the line of an error)."""
+    del verb
     text = " ".join(str(message).split())
-    print(f"robot-calib {verb}: warning: {text}", file=sys.stderr)
+    print(f"warning: {text}", file=sys.stderr)
 
 
 def _run_verb(args: argparse.Namespace) -> int:

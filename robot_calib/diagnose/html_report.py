@@ -18,13 +18,10 @@ import base64
 import html
 import io
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from functools import partial
 from typing import TYPE_CHECKING
 
-import numpy as np
-
-from robot_calib.accuracy import Accuracy, accuracy
+from robot_calib.accuracy import accuracy
 from robot_calib.diagnose.diagnosis import Diagnosis, percent
 from robot_calib.diagnose.evidence import ordinal
 from robot_calib.diagnose.figures import (
@@ -44,6 +41,7 @@ from robot_calib.diagnose.noise import noise_basis
 from robot_calib.diagnose.report import (
     NOT_RESOLVED,
     PARAMETER_COLUMNS,
+    ModelErrors,
     blank,
     harmonic_cells,
     iso_pose_table,
@@ -71,24 +69,6 @@ DEG_PER_URAD = ANGLE_UNITS["deg"] * 1e-6
 #: the per-joint tables' last column: what of that joint the best model removed
 BEST_MODEL_COLUMN = "best model"
 #: SI unit -> (factor, the unit people read); a unit not listed is shown as it is
-
-
-@dataclass(frozen=True)
-class ModelErrors:
-    """One model of the before/after comparison and its error on the points it is scored
-    on: `residuals` (m, 3) predicted - measured [m] in the tracker frame, their accuracy
-    figures [mm] and what they are (`scored_on`: hold-out bags, k-fold CV or in-sample)."""
-
-    model: str
-    role: str  # why it is in the table: before calibration, CPA, geometric, the best
-    scored_on: str
-    residuals: Array
-    accuracy: Accuracy
-
-    @property
-    def errors_mm(self) -> Array:
-        """Per-point error |predicted - measured| (m,) [mm]."""
-        return np.asarray(np.linalg.norm(self.residuals, axis=1) * 1e3)
 
 
 #: what each reference model (`identify.calibrate.reference_models`) stands for in the table

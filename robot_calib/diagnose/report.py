@@ -4,10 +4,14 @@ joint angle split by approach direction, residual against time), readable withou
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
+from robot_calib.accuracy import Accuracy
 from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport, percent, small_holdout
 from robot_calib.diagnose.figures import (
     ANGLE_UNITS,
@@ -29,12 +33,12 @@ from robot_calib.diagnose.signatures import (
     signature_removed,
 )
 from robot_calib.identify.outliers import OUTLIER_K
+from robot_calib.kinematics.frames import Array
 from robot_calib.measurements import Recording
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from robot_calib.diagnose.html_report import ModelErrors
     from robot_calib.diagnose.iso9283 import Iso9283
     from robot_calib.identify.calibration import Calibration
 
@@ -189,6 +193,24 @@ def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
             out.append(f"| {with_breaks(r.model)} | {r.linearised_mm:.4f} "
                        f"| {r.insample_rms_mm:.4f} | {held} | {outcome} |")  # fmt: skip
     return out
+
+
+@dataclass(frozen=True)
+class ModelErrors:
+    """One model of the before/after comparison and its error on the points it is scored
+    on: `residuals` (m, 3) predicted - measured [m] in the tracker frame, their accuracy
+    figures [mm] and what they are (`scored_on`: hold-out bags, k-fold CV or in-sample)."""
+
+    model: str
+    role: str  # why it is in the table: before calibration, CPA, geometric, the best
+    scored_on: str
+    residuals: Array
+    accuracy: Accuracy
+
+    @property
+    def errors_mm(self) -> Array:
+        """Per-point error |predicted - measured| (m,) [mm]."""
+        return np.asarray(np.linalg.norm(self.residuals, axis=1) * 1e3)
 
 
 #: how a parameter unit is shown to people: factor from SI, unit
