@@ -21,8 +21,8 @@ from robot_calib.measurements import PAIR_TOLERANCE_S
 if TYPE_CHECKING:
     from robot_calib.diagnose.diagnosis import Diagnosis
     from robot_calib.diagnose.figures import FigureCache
-    from robot_calib.diagnose.report import ModelErrors
     from robot_calib.diagnose.ladder import Ladder
+    from robot_calib.diagnose.report import ModelErrors
     from robot_calib.identify.calibration import Calibration
     from robot_calib.measurements import Recording
 
