@@ -36,7 +36,7 @@ def main() -> int:
     parser.add_argument("--json", help="write every case's verdict to this file")
     args = parser.parse_args()
     results = []
-    false_rows = free_rows = missed = joints = strongest_wrong = 0
+    false_rows = free_rows = missed = joints = strongest_wrong = not_loading = 0
     for effect in args.classes:
         hits = named = 0
         to_right: list[float] = []
@@ -51,6 +51,10 @@ def main() -> int:
             missed += len(r["missed"])
             joints += len(r["joints"])
             strongest_wrong += not r["strongest_ok"]
+            if r["best_loads"]:
+                not_loading += 1
+                print(f"  params_best.json of {effect} seed {1000 + seed}: {r['best_loads']}",
+                      file=sys.stderr)  # fmt: skip
             if r["ratio_to_right"] is not None:
                 to_right.append(r["ratio_to_right"])
             mark = "hit " if r["hit"] else "MISS"
@@ -67,6 +71,7 @@ def main() -> int:
           f"({100 * false_rows / max(free_rows, 1):.1f} %); effect joints missed {missed} of "
           f"{joints}; strongest structure elsewhere in {strongest_wrong} of {len(results)} "
           "cases")  # fmt: skip
+    print(f"params_best.json that does not load: {not_loading} of {len(results)} cases")
     if args.json:
         with open(args.json, "w") as handle:
             json.dump(results, handle, indent=1)
