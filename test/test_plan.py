@@ -76,6 +76,9 @@ def test_plan_file_round_trip_through_simulate_and_run(tmp_path: Path) -> None:
     assert "x smaller than random poses at equal N" in made.stdout
     q = load_plan(plan, WORLD.model.robot).q
     assert q.shape == (20, 6)
+    # 20 distinct readings of every joint resolve orders 1-9 at once (19 unknowns + mean)
+    assert ("joint-angle harmonics the plan resolves (distinct readings per joint): joint 1 "
+            "up to order 9, joint 2 up to order 9") in made.stdout  # fmt: skip
     sim = cli("simulate", "--plan", str(plan), "-o", str(tmp_path / "p.mcap"))
     assert sim.returncode == 0, sim.stderr
     from robot_calib.flows.bags import read_bags

@@ -17,6 +17,7 @@ from robot_calib.cli.options import (
 )
 from robot_calib.errors import InputError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
+from robot_calib.kinematics.frames import Array
 
 NAME = "plan"
 HELP = "choose measurement poses for a model (D-optimal) -> PLAN.yaml"
@@ -88,6 +89,18 @@ def add_arguments(pla: argparse.ArgumentParser) -> None:
     add_force(pla)
 
 
+def resolved_orders_line(q: Array) -> str:
+    """'joint-angle harmonics the plan resolves (distinct readings per joint): joint 1 up
+    to order 29, ...': the highest order `diagnose` can tell apart on each joint's
+    readings q (n, J) [rad] (`frequency.resolvable_order`: half the distinct readings less
+    one; every order at once needs that many, and above it an order is aliased)."""
+    from robot_calib.diagnose.frequency import resolvable_order
+
+    orders = ", ".join(f"joint {j + 1} up to order {resolvable_order(q[:, j])}"
+                       for j in range(q.shape[1]))  # fmt: skip
+    return f"joint-angle harmonics the plan resolves (distinct readings per joint): {orders}"
+
+
 def main(args: argparse.Namespace) -> int:
     """Plan N measurement poses for a model (D-optimal), print what they promise against
     random poses at equal N, write PLAN.yaml."""
@@ -135,6 +148,7 @@ def main(args: argparse.Namespace) -> int:
               f"{fig.hours * 60:.1f} min")  # fmt: skip
     ratio = rand.rms_m.max() / planned.rms_m.max()
     print(f"worst predicted 1-sigma: {ratio:.2f} x smaller than random poses at equal N")
+    print(resolved_orders_line(c.planned.plan.q))
     write_text_atomic(output, campaign_yaml(c, args.floor_z))
     print(f"{output}: {args.poses} poses (msgs_doc/plan.md)")
     return 0
