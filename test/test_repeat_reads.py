@@ -89,3 +89,14 @@ def test_the_verdict_floor_is_independent_evidence_only() -> None:
     assert "model residual" not in diagnosis.noise.source, diagnosis.noise.source
     assert diagnosis.noise.sigma_mm is not None
     assert abs(diagnosis.noise.sigma_mm - ladder.noise.sigma_m * 1e3) < 1e-12
+
+
+def test_a_hold_out_is_counted_in_poses_not_reads() -> None:
+    """5 poses read 3 times each are 5 hold-out poses (the uncertainty of a held-out rms
+    over them: 18 %), not 15."""
+    from robot_calib.diagnose.diagnosis import small_holdout
+
+    scenario = ur10_out_of_vocabulary("link_bending", seed=0, n=20)
+    five = scenario.holdout.subset(np.arange(len(scenario.holdout)) < 5)
+    warning = small_holdout(reread(five, READS, seed=7))
+    assert "hold 5 pose(s)" in warning and "18 %" in warning, warning

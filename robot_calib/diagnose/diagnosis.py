@@ -41,6 +41,7 @@ from robot_calib.identify.outliers import Outlier
 from robot_calib.identify.plausibility import degrees_reason
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import Recording
+from robot_calib.poses import reading_groups
 from robot_calib.records import Record
 
 FORMAT = "robot_calib.diagnosis/1"
@@ -558,10 +559,13 @@ def foreign_holdout(ladder: Ladder, insample_mm: float, floor_mm: float | None) 
 def small_holdout(holdout: Recording | None) -> str:
     """The warning for hold-out bags of fewer than MIN_HOLDOUT_POSES poses (a rung's
     held-out rms over n poses is uncertain by about 1 / sqrt(6 n) of itself: half the
-    variance of 3 n squared components); '' for more, or without hold-out bags (k-fold)."""
-    if holdout is None or len(holdout) >= MIN_HOLDOUT_POSES:
+    variance of 3 n squared components); '' for more, or without hold-out bags (k-fold).
+    Poses, not measurements: re-reads and targets of one pose (`reading_groups`) are one."""
+    if holdout is None or len(holdout) == 0:
         return ""
-    n = len(holdout)
+    n = int(reading_groups(holdout.poses.q).max()) + 1
+    if n >= MIN_HOLDOUT_POSES:
+        return ""
     return (
         f"warning: the hold-out bags ({', '.join(holdout.sources)}) hold {n} pose(s), fewer "
         f"than {MIN_HOLDOUT_POSES}: each held-out rms is uncertain by about "
