@@ -6,6 +6,7 @@ better than on new poses)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from robot_calib.accuracy import accuracy
 from robot_calib.diagnose.diagnosis import diagnose
@@ -100,3 +101,33 @@ def test_a_hold_out_is_counted_in_poses_not_reads() -> None:
     five = scenario.holdout.subset(np.arange(len(scenario.holdout)) < 5)
     warning = small_holdout(reread(five, READS, seed=7))
     assert "hold 5 pose(s)" in warning and "18 %" in warning, warning
+
+
+@pytest.mark.parametrize("by", ["random", "order", "time"])
+def test_split_holds_out_the_share_asked_for_when_poses_repeat(by: str) -> None:
+    """Two passes over the same 50 poses: the last 30 % in order are repeats of the first
+    pass; holding out their whole poses took 80 % of the bag. Poses first measured last (or
+    at random) are held out instead: 30 % of the measurements, whole poses."""
+    first = ur10_out_of_vocabulary("link_bending", seed=0, n=100).calibration
+    rows = np.concatenate([np.arange(50), np.arange(50)])
+    twice = recording_from_arrays(first.poses.q[rows], first.points[rows],
+                                  np.arange(len(rows), dtype=float))  # fmt: skip
+    mask = holdout_mask(twice, 0.3, by)
+    assert 0.29 <= mask.mean() <= 0.32, mask.mean()
+    group = reading_groups(twice.poses.q)
+    assert set(group[mask].tolist()).isdisjoint(group[~mask].tolist())
+
+
+def test_re_reads_far_beyond_any_tracker_are_no_floor() -> None:
+    """Each pose read twice, the second point 5 mm off (a knocked target): 3 mm 'noise'
+    made the verdict 'at the noise level'. Such re-reads are not the floor, and said so."""
+    first = ur10_out_of_vocabulary("link_bending", seed=0, n=100).calibration
+    rows = np.repeat(np.arange(40), 2)
+    points = first.points[rows].copy()
+    points[1::2, 0] += 5e-3
+    noise = estimate_noise(recording_from_arrays(first.poses.q[rows], points,
+                                                 np.arange(len(rows), dtype=float)))  # fmt: skip
+    assert noise.source == "unknown", noise  # no other evidence here: the floor is unknown
+    # 5 mm along x between the reads: sqrt(25 / 6) = 2.041 mm per axis
+    assert noise.warning.startswith("warning: re-reads of still poses differ by 2.041 mm")
+    assert "not used as the noise floor" in noise.warning

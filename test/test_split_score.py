@@ -35,12 +35,17 @@ def test_split_keeps_every_measurement_once_with_its_direction(tmp_path: Path, b
     groups = [{tuple(np.round(q, 6)) for q in part.poses.q} for part in parts]
     assert not groups[0] & groups[1]
     rows = {tuple(np.round(p, 12)): i for i, p in enumerate(whole.points)}
+    firsts = []  # per part: the first measurement of each of its poses, in the whole bag
     for part in parts:
         index = [rows[tuple(np.round(p, 12))] for p in part.points]
         np.testing.assert_array_equal(part.poses.q, whole.poses.q[index])
         np.testing.assert_array_equal(part.poses.direction, whole.poses.direction[index])
-        if by != "random" and part is parts[0]:  # the last 30 % in order (= in time here)
-            assert max(index) < 203
+        first: dict[tuple[float, ...], int] = {}
+        for i in sorted(index):
+            first.setdefault(tuple(np.round(whole.poses.q[i], 6)), i)
+        firsts.append(sorted(first.values()))
+    if by != "random":  # the poses first measured last in order (= in time here)
+        assert firsts[0][-1] < firsts[1][0]
     assert len({tuple(np.round(p, 12)) for part in parts for p in part.points}) == len(whole)
     # The original stamps: the halves share none, so they can be used together.
     stamps = [set(part.stamp_ns.tolist()) for part in parts]

@@ -42,6 +42,7 @@ def main(args: argparse.Namespace) -> int:
     from robot_calib.bag.write import START_NS, write_measurements
     from robot_calib.flows.bags import read_bags
     from robot_calib.measurements.split import holdout_mask
+    from robot_calib.poses import reading_groups
 
     robot = robot_of(args)
     source = Path(args.bag)
@@ -93,7 +94,11 @@ def main(args: argparse.Namespace) -> int:
             )  # fmt: skip
             for out, rows in zip(outputs, (~held, held))
         ]
-    for out, role, written in zip(outputs, ("calibration", "hold-out"), counts):
-        print(f"{out}: {written[next(iter(written))]} poses ({role}, split {args.by}; the "
-              "original stamps and approach directions)")  # fmt: skip
+    group = reading_groups(poses.poses.q)
+    for out, role, written, rows in zip(outputs, ("calibration", "hold-out"), counts,
+                                        (~held, held)):  # fmt: skip
+        share = f"; {100 * rows.mean():.0f} % of the measurements" if rows is held else ""
+        print(f"{out}: {written[next(iter(written))]} measurements at "
+              f"{len(np.unique(group[rows]))} distinct poses ({role}, split {args.by}{share}; "
+              "the original stamps and approach directions)")  # fmt: skip
     return 0

@@ -221,10 +221,10 @@ class Diagnosis(Record):
     def bound_note(self) -> str | None:
         """Where the learnable bound of the shares comes from when it is not the kernel
         ridge's (`learnable_gap`: the lower of the two): the best rung's, else None."""
-        if self.learnable is None or not self.ladder:
-            return None
+        if self.learnable is None or not self.ladder or not self.learnable.bounds:
+            return None  # no bound at all: its figure is not quoted
         best = min(r.holdout_abs_rms_mm for r in self.ladder if not r.learned)
-        if best >= self.learnable.holdout_abs_rms_mm * (1.0 - 1e-9):  # ties are no news
+        if round(best, 4) >= round(self.learnable.holdout_abs_rms_mm, 4):  # ties as shown
             return None
         return (
             f"the shares' bound is the best rung's {best:.4f} mm, below the learned correction's "
@@ -561,11 +561,14 @@ def small_holdout(holdout: Recording | None) -> str:
     held-out rms over n poses is uncertain by about 1 / sqrt(6 n) of itself: half the
     variance of 3 n squared components); '' for more, or without hold-out bags (k-fold).
     Poses, not measurements: re-reads and targets of one pose (`reading_groups`) are one."""
-    if holdout is None or len(holdout) == 0:
+    if holdout is None:
         return ""
-    n = int(reading_groups(holdout.poses.q).max()) + 1
+    n = int(reading_groups(holdout.poses.q).max()) + 1 if len(holdout) else 0
     if n >= MIN_HOLDOUT_POSES:
         return ""
+    if n == 0:
+        return (f"warning: the hold-out bags ({', '.join(holdout.sources)}) hold no pose: "
+                "nothing is scored on them")  # fmt: skip
     return (
         f"warning: the hold-out bags ({', '.join(holdout.sources)}) hold {n} pose(s), fewer "
         f"than {MIN_HOLDOUT_POSES}: each held-out rms is uncertain by about "

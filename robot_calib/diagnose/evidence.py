@@ -66,6 +66,8 @@ CHECK_Z = 3.0
 #: same 3 of 57 effect joints missed
 CONFIRM_Z = 2.0
 MAX_Z = 1e6  # a held-out z where every pose gains exactly the same
+#: a term at this significance or more is structure (the reports' and the harness' figure)
+STRUCTURE_Z = 5.0
 FAMILIES = ("harmonics", "direction", "scale", "gravity", "time")
 UNITS = {"harmonics": "urad", "direction": "urad", "scale": "urad/rad",
          "gravity": "urad/(N m)", "time": "mm"}  # fmt: skip

@@ -37,11 +37,14 @@ from numpy.typing import NDArray
 from robot_calib.identify.circles import fit_circle
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording
-from robot_calib.poses import JOINT_CHANGE_TOLERANCE, reading_groups
+from robot_calib.poses import JOINT_CHANGE_TOLERANCE
 
 MIN_REPEATS = 3
 STATED = "stated tracker accuracy"
 #: the source of a floor from re-reads of still poses: the tracker's noise only
+#: re-reads of a still target scattering more than this per axis [m] are no tracker's noise
+#: (laser trackers re-read a still SMR to a few um; 0.1 mm is far beyond any)
+MAX_REREAD_SIGMA_M = 1e-4
 REREADS = "re-reads of still poses (the tracker alone, not the robot's repeatability)"
 MAX_REPEAT_GAP_S = 60.0  # repeats farther apart in time may include drift, not only noise
 MAX_REPEAT_LAG = 50  # rows between a pose and its repeat, at most
@@ -104,14 +107,17 @@ def _circle_noise(recording: Recording) -> NoiseLevel | None:
 
 def moved_between(recording: Recording, pairs: IntArray) -> NDArray[np.bool_]:
     """(k,) per repeat pair [a, b] of `repeat_pairs`: True when the robot left the pose
-    between the two (a measurement at other readings lies between them: a repeat, which
-    holds the robot's repeatability), False for re-reads of a still pose (the tracker's
-    noise alone)."""
+    between the two (a step of some joint by more than JOINT_CHANGE_TOLERANCE from one
+    measurement to the next in between: a repeat, which holds the robot's repeatability),
+    False for re-reads of a still pose (the tracker's noise alone; encoder jitter below the
+    tolerance is no move)."""
     if not len(pairs):
         return np.zeros(0, dtype=bool)
-    group = reading_groups(recording.poses.q)
-    changes = np.concatenate([[0], np.cumsum(group[1:] != group[:-1])])
-    return changes[pairs[:, 1]] > changes[pairs[:, 0]]
+    q = recording.poses.q
+    step = np.zeros(len(q), dtype=np.int64)
+    step[1:] = np.max(np.abs(np.diff(q, axis=0)), axis=1) > JOINT_CHANGE_TOLERANCE
+    moves = np.cumsum(step)  # moves[i]: steps up to and including the one into row i
+    return moves[pairs[:, 1]] > moves[pairs[:, 0]]
 
 
 def repeat_pairs(recording: Recording) -> IntArray:
@@ -146,7 +152,18 @@ def estimate_noise(
     """The noise level of `recording` (see the module docstring for the order of methods);
     fallback_residuals (n, 3) [m] of a fitted model with `fallback_dof` free parameters;
     stated_sigma_m: the tracker's accuracy as the user states it (1-sigma per axis [m]).
-    A stated accuracy the evidence contradicts leaves a `warning` (module docstring)."""
+    A stated accuracy the evidence contradicts leaves a `warning` (module docstring), as
+    do re-reads that scatter beyond any tracker (`_reread_check`)."""
+    level = _estimate(recording, fallback_residuals, fallback_dof, stated_sigma_m)
+    refused = _reread_check(recording)
+    if not refused:
+        return level
+    return replace(level, warning="; ".join(w for w in (refused, level.warning) if w))
+
+
+def _estimate(recording: Recording, fallback_residuals: Array | None, fallback_dof: int,
+              stated_sigma_m: float | None) -> NoiseLevel:  # fmt: skip
+    """`estimate_noise` without the re-read check."""
     measured = _measured_noise(recording)
     stated = _stated(recording, stated_sigma_m)
     if measured is not None:
@@ -179,17 +196,43 @@ def _measured_noise(recording: Recording) -> NoiseLevel | None:
     repeat = None
     if int(moved.sum()) >= MIN_REPEATS:  # the robot came back: repeatability and noise
         pairs, source = pairs[moved], "repeat poses"
-    else:  # re-reads of still poses only: the tracker's noise, not the robot's repeatability
-        source = REREADS
+    else:  # re-reads of still poses: the tracker's noise, not the robot's repeatability
+        pairs, source = pairs[~moved], REREADS
     if len(pairs) >= MIN_REPEATS:
-        diff = recording.points[pairs[:, 0]] - recording.points[pairs[:, 1]]
-        repeat = NoiseLevel(float(np.sqrt(np.mean(diff**2) / 2.0)), source, 3 * len(pairs))
+        repeat = _pair_noise(recording, pairs, source)
+        if source == REREADS and repeat.sigma_m > MAX_REREAD_SIGMA_M:
+            repeat = None  # no tracker's noise (`_reread_check` says so)
     circles = _circle_noise(recording)
     if repeat is not None and circles is not None:
         if circles.sigma_m <= AGREE * repeat.sigma_m:  # circles not bent by effects: pool
             return _pooled(repeat, circles, f"{repeat.source} + circle fits")
         return repeat
     return repeat if repeat is not None else circles
+
+
+def _pair_noise(recording: Recording, pairs: IntArray, source: str) -> NoiseLevel:
+    """The noise per axis [m] of the pairs [a, b] of measurements that differ by noise only:
+    sigma^2 = mean |p_a - p_b|^2 / 6."""
+    diff = recording.points[pairs[:, 0]] - recording.points[pairs[:, 1]]
+    return NoiseLevel(float(np.sqrt(np.mean(diff**2) / 2.0)), source, 3 * len(pairs))
+
+
+def _reread_check(recording: Recording) -> str:
+    """A warning when the re-reads of still poses (`repeat_pairs` not `moved_between`)
+    scatter by more than MAX_REREAD_SIGMA_M per axis: no tracker re-measuring a still
+    target does (a target knocked between reads, blunders, readings that moved): they are
+    not used as the noise floor; '' otherwise (or with fewer than MIN_REPEATS re-reads)."""
+    pairs = repeat_pairs(recording)
+    still = pairs[~moved_between(recording, pairs)]
+    if len(still) < MIN_REPEATS:
+        return ""
+    level = _pair_noise(recording, still, REREADS)
+    if level.sigma_m <= MAX_REREAD_SIGMA_M:
+        return ""
+    return (f"warning: re-reads of still poses differ by {level.sigma_m * 1e3:.4g} mm per axis "
+            f"(1-sigma, {len(still)} pairs): far beyond any tracker re-measuring a still target "
+            f"({MAX_REREAD_SIGMA_M * 1e3:g} mm): a target knocked between reads, blunders, or "
+            "readings that moved? They are not used as the noise floor")  # fmt: skip
 
 
 def _ratio(stated: float, evidence: float) -> float:

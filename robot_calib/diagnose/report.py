@@ -432,7 +432,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
     for t in where.joints_from_all_poses:
         lines.append(
             f"| {t.joint} | {harmonic_cells(t, where, _urad)} "
-            f"| {_term(where, t, 'direction', 1)} "
+            f"| {_term(where, t, 'direction', 1) if t.observable else unobservable(t)} "
             f"| {_term(where, t, 'scale', 1)} "
             f"| {_term(where, t, 'gravity', 2)} "
             f"| {removed_note(removed, t.joint)} |"

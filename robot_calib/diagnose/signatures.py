@@ -17,6 +17,7 @@ import numpy as np
 
 from robot_calib.diagnose.evidence import (
     FAMILY_WORDS,
+    STRUCTURE_Z,
     UNITS,
     Evidence,
     TermEvidence,
@@ -107,14 +108,19 @@ class TimeTrend(Record):
 
     rms_by_quartile_mm: list[float]
     slope_mm_per_h: float
-    drift_significance: float = 0.0
+    drift_significance: float | None = None  # None: no time span, no drift term
 
     def line(self) -> str:
         """'rms by quartile a, b, c, d mm, trend 0.172 mm/h (a drift with time: 1 x its
-        uncertainty)'."""
+        uncertainty)'; without a drift term, no word of it."""
         quartiles = ", ".join(f"{v:.4f}" for v in self.rms_by_quartile_mm)
-        return (f"rms by quartile {quartiles} mm, trend {self.slope_mm_per_h:.3f} mm/h (a "
-                f"drift with time: {self.drift_significance:.0f} x its uncertainty)")  # fmt: skip
+        z = self.drift_significance
+        drift = (
+            "" if z is None
+            else f" (a drift with time: {z:.0f} x its uncertainty)" if z >= STRUCTURE_Z
+            else f" (no drift with time beyond its uncertainty: {z:.0f} x)"
+        )  # fmt: skip
+        return f"rms by quartile {quartiles} mm, trend {self.slope_mm_per_h:.3f} mm/h{drift}"
 
 
 @dataclass(frozen=True)
@@ -441,7 +447,7 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
         TimeTrend(
             [float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in quartiles],
             _slope_mm_per_h(time, norm),
-            0.0 if drift is None else drift.significance,
+            None if drift is None else drift.significance,
         ),
         Workspace([float(np.sqrt(np.mean(norm[i] ** 2)) * 1e3) for i in tertiles]),
         noise_sigma_m * 1e3,

@@ -18,11 +18,12 @@ N_FOLDS = 5  # the folds of every k-fold over poses (the ladder's, the evidence'
 def holdout_mask(
     recording: Recording, fraction: float, by: str = "random", seed: int = 0
 ) -> NDArray[np.bool_]:
-    """(n,) True for the measurements held out: about `fraction` (0 < f < 1) of them, at
-    random (`seed`), or the last ones in visiting order or in time, always whole poses (every
-    measurement at the readings of a held-out one: its targets, re-reads and repeats, which
-    would otherwise be fitted copies of held-out points). InputError when either set would
-    be empty."""
+    """(n,) True for the measurements held out: `fraction` (0 < f < 1) of them (up to the
+    last pose's measurements), whole poses (every measurement at the readings of a
+    held-out one: its targets, re-reads and repeats, which would otherwise be fitted copies
+    of held-out points): poses at random (`seed`), or those first measured last in visiting
+    order or in time (a pose revisited at the end stays with its first visit). InputError
+    when either set would be empty."""
     if by not in SPLITS:
         raise InputError(f"--by {by}: expected one of {', '.join(SPLITS)}")
     if not 0.0 < fraction < 1.0:
@@ -32,14 +33,18 @@ def holdout_mask(
     if not 0 < k < n:
         raise InputError(f"--holdout {fraction} of {n} measurements leaves a set empty")
     group = reading_groups(recording.poses.q)  # one pose's reads and targets together
+    n_groups = int(group.max()) + 1
     if by == "random":
-        order = np.random.default_rng(seed).permutation(int(group.max()) + 1)[group]
-        order = np.argsort(order, kind="stable")
-    elif by == "order":
-        order = np.arange(n)[::-1]
-    else:
-        order = np.argsort(-recording.poses.time, kind="stable")
-    mask = np.isin(group, group[order[:k]])  # whole poses: about `fraction` of them
+        key = np.random.default_rng(seed).permutation(n_groups).astype(float)
+    else:  # the poses first measured last (a pose revisited late stays with its first visit)
+        when = np.arange(n, dtype=float) if by == "order" else recording.poses.time
+        first = np.full(n_groups, np.inf)
+        np.minimum.at(first, group, when)
+        key = -first
+    picked = np.argsort(key, kind="stable")
+    sizes = np.bincount(group, minlength=n_groups)[picked]
+    taken = picked[: int(np.searchsorted(np.cumsum(sizes), k)) + 1]  # whole poses, >= k
+    mask = np.isin(group, taken)
     if mask.all():
         raise InputError(f"--holdout {fraction}: every measurement is of a pose held out "
                          "(its other reads): nothing left to fit")  # fmt: skip

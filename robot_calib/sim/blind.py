@@ -49,6 +49,7 @@ import numpy as np
 
 from robot_calib.accuracy import accuracy
 from robot_calib.diagnose.diagnosis import Diagnosis, diagnose
+from robot_calib.diagnose.evidence import STRUCTURE_Z
 from robot_calib.diagnose.ladder import Ladder
 from robot_calib.diagnose.signatures import WhereItLies
 from robot_calib.effects import EFFECTS, Effect, effect_class, parse_effect
@@ -322,7 +323,7 @@ class EvidenceVerdict(Record):
 
 
 #: the significance at which a term counts as structure in `judge_evidence`
-EVIDENCE_Z = 5.0
+EVIDENCE_Z = STRUCTURE_Z
 #: effects whose structure is time, not a joint
 TIME_EFFECTS = ("thermal_drift", "thermal_warmup", "thermal_temperature")
 
