@@ -18,6 +18,7 @@ from robot_calib.cli.options import (
 from robot_calib.errors import InputError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.kinematics.frames import Array
+from robot_calib.measurements.aliasing import MAX_ORDER
 
 NAME = "plan"
 HELP = "choose measurement poses for a model (D-optimal) -> PLAN.yaml"
@@ -33,7 +34,22 @@ def add_arguments(pla: argparse.ArgumentParser) -> None:
         default=DEFAULT_MODEL,
         help=f"geometric[+EFFECT[:joints]...] to plan for (default {DEFAULT_MODEL})",
     )
-    pla.add_argument("--poses", type=positive, required=True, help="N: poses to plan")
+    pla.add_argument(
+        "--poses", type=positive, help="N: poses to plan (D-optimal; required unless --sweeps)"
+    )
+    pla.add_argument(
+        "--sweeps",
+        metavar="paper-testN",
+        help="instead of --poses: the seed's circle sweeps of Table 2 test N (1-6) in "
+        "irregular steps, so that the sweeps alone tell joint-angle harmonic orders up to "
+        "--max-order apart (regular steps alias them; default: none, D-optimal --poses)",
+    )
+    pla.add_argument(
+        "--max-order",
+        type=positive,
+        default=MAX_ORDER,
+        help=f"with --sweeps: the highest harmonic order to tell apart (default {MAX_ORDER})",
+    )
     pla.add_argument(
         "--candidates",
         type=bounded_count(MAX_CANDIDATES),
@@ -89,16 +105,58 @@ def add_arguments(pla: argparse.ArgumentParser) -> None:
     add_force(pla)
 
 
-def resolved_orders_line(q: Array) -> str:
-    """'joint-angle harmonics the plan resolves (distinct readings per joint): joint 1 up
-    to order 29, ...': the highest order `diagnose` can tell apart on each joint's
-    readings q (n, J) [rad] (`frequency.resolvable_order`: half the distinct readings less
-    one; every order at once needs that many, and above it an order is aliased)."""
-    from robot_calib.diagnose.frequency import resolvable_order
+def resolved_orders_line(q: Array, label: str = "the plan") -> str:
+    """'joint-angle harmonics the plan tells apart (...): joint 1 up to order 29 (29 at
+    once), ...': per joint of readings q (n, J) [rad], the highest order `diagnose` can
+    tell apart (`measurements.aliasing.resolvable_order`: above it some order is an alias
+    of a lower one) and how many orders its distinct readings fit together
+    (`orders_at_once`)."""
+    from robot_calib.measurements.aliasing import orders_at_once, resolvable_order
 
-    orders = ", ".join(f"joint {j + 1} up to order {resolvable_order(q[:, j])}"
+    orders = ", ".join(f"joint {j + 1} up to order {resolvable_order(q[:, j])} "
+                       f"({orders_at_once(q[:, j])} at once)"
                        for j in range(q.shape[1]))  # fmt: skip
-    return f"joint-angle harmonics the plan resolves (distinct readings per joint): {orders}"
+    return (f"joint-angle harmonics {label} tells apart (which order a harmonic has; how "
+            f"many orders its distinct readings fit together): {orders}")  # fmt: skip
+
+
+def sweeps_main(args: argparse.Namespace) -> int:
+    """`plan --sweeps paper-testN`: the seed's sweeps in irregular steps (`plan.sweeps`),
+    what they and the seed's regular steps tell apart, written as PLAN.yaml."""
+    from robot_calib.atomic import output_path, write_text_atomic
+    from robot_calib.flows.simulate import simulation_inputs, simulation_world
+    from robot_calib.plan.plan_file import plan_text
+    from robot_calib.plan.sweeps import DESIGN_TRIALS, irregular_sweeps
+    from robot_calib.sim.plans import paper_test_plan
+
+    name = args.sweeps
+    test = name[len("paper-test") :] if name.startswith("paper-test") else ""
+    if not test.isdigit():
+        raise InputError(f"--sweeps {name}: one of paper-test1 .. paper-test6 (seed Table 2)")
+    if args.max_order > MAX_ORDER:
+        raise InputError(f"--max-order {args.max_order}: at most {MAX_ORDER}")
+    world = simulation_world(args.world, args.robot, (), args.seed)
+    robot = world.model.robot
+    output = output_path(args.output, "PLAN.yaml", simulation_inputs(world), args.force)
+    if output.suffix.lower() not in (".yaml", ".yml"):  # after the input check: never an input
+        raise InputError(f"{output}: a plan is written as YAML: give a .yaml or .yml name")
+    plan = irregular_sweeps(int(test), args.max_order, args.seed)
+    regular = paper_test_plan(int(test))
+    q = robot.readings(plan.q)
+    robot.check_joints(q, f"--sweeps {name} on {robot.name}")
+    print(resolved_orders_line(robot.readings(regular.q), f"{name} in regular steps"))
+    print(resolved_orders_line(q, f"{name} in irregular steps"))
+    design = {
+        "criterion": f"the seed's {name} sweeps (same start, end and points per pass) in "
+        "irregular steps: the forward pass's inner readings jittered, the way back between "
+        f"them; the draw of {DESIGN_TRIALS} that tells the most harmonic orders apart",
+        "max_order": int(args.max_order),
+        "seed": int(args.seed),
+    }
+    write_text_atomic(output, plan_text(robot, "cpa", q, plan.speed_fraction, design, {}))
+    print(f"{output}: {len(q)} poses, {len(set(plan.sweep.tolist()))} circle sweeps "
+          "(msgs_doc/plan.md)")  # fmt: skip
+    return 0
 
 
 def main(args: argparse.Namespace) -> int:
@@ -109,6 +167,11 @@ def main(args: argparse.Namespace) -> int:
     from robot_calib.plan.campaign import campaign_yaml, plan_campaign
     from robot_calib.plan.evaluate import human
 
+    if (args.poses is None) == (args.sweeps is None):
+        raise InputError("give either --poses N (D-optimal poses) or --sweeps paper-testN "
+                         "(the seed's sweeps in irregular steps)")  # fmt: skip
+    if args.sweeps is not None:
+        return sweeps_main(args)
     noise = args.noise_mm
     if noise is not None and not (math.isfinite(noise) and 0 < noise < 10):
         raise InputError(f"--noise-mm {noise}: a 1-sigma per coordinate in mm, > 0 and < 10")

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.diagnose.frequency import MAX_SCAN_ORDER
+from robot_calib.diagnose.frequency import MAX_SCAN_ORDER, alias_warnings
 from robot_calib.diagnose.iso9283 import Iso9283, iso9283, repeat_groups
 from robot_calib.diagnose.ladder import (
     AT_FLOOR,
@@ -469,7 +469,7 @@ def diagnose(
         holdout=[] if holdout_sources is None else list(holdout_sources.sources),
         outliers=list(ladder.outliers),
         warnings=list(geo.warnings) + ([ladder.noise.warning] if ladder.noise.warning else [])
-        + ([few] if few else []),
+        + ([few] if few else []) + alias_warnings(last.effects, recording, ladder.holdout),
         learnable=learnable,
         outside_vocabulary=outside,
         iso9283=_iso9283(ladder, recording, robot),

@@ -14,17 +14,20 @@ significant of the rest once it is explained, and so on while the significance s
 PICK_SIGNIFICANCE or more (a picked order's side lobes vanish with it: over a partial
 turn neighbouring orders are nearly collinear). A pair whose columns keep less than
 MIN_LEFT of their norm after the projection is collinear with the model and is skipped,
-never reported with a meaningless amplitude; so is an order above what the joint's
-distinct readings resolve (`resolvable_order`: single-joint sweeps of a few steps alias
-every high order onto anything), and one whose amplitude alone would exceed
-MAX_AMPLITUDE_RAD (no gear error is that large). The picked orders become the ladder's
-`joint_harmonics` candidates and the report's dominant orders (`effects.joint_harmonics`
-says what an order usually means).
+never reported with a meaningless amplitude; so is one whose amplitude alone would exceed
+MAX_AMPLITUDE_RAD (no gear error is that large). Regular single-joint sweeps alias orders:
+on a full turn in n equal steps order k and n - k coincide, over a partial turn they nearly
+do (`order_correlation`); a picked order lists the orders the readings cannot tell it from
+(`measurements.aliasing`), the ladder tries each of them against the held-out data, and
+`resolvable_order` is the highest order below which no two orders are aliases (random
+poses and irregular sweeps, `plan --sweeps`, resolve every scanned order). The picked
+orders become the ladder's `joint_harmonics` candidates and the report's dominant orders
+(`effects.joint_harmonics` says what an order usually means).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 
 import numpy as np
@@ -36,10 +39,17 @@ from robot_calib.forked import Aside
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
+from robot_calib.measurements.aliasing import (
+    ALIAS_CORRELATION,
+    MAX_ORDER,
+    aliases,
+    order_correlation,
+    resolvable,
+)
 from robot_calib.model import KinematicModel
 from robot_calib.records import Record
 
-MAX_SCAN_ORDER = 64
+MAX_SCAN_ORDER = MAX_ORDER
 MAX_PICKS = 6  # orders picked per joint and round
 PICK_SIGNIFICANCE = 6.0  # sqrt(chi^2 explained) / scatter an order needs to be picked
 SCAN_POSES = 4000  # measurements scanned (a seeded random subset above)
@@ -50,15 +60,6 @@ ASIDE_POSES = 500
 #: a harmonic whose amplitude alone would exceed this is no gear error [rad] (the weak
 #: prior's sigma of a joint-angle term): a column the model nearly absorbs, or an alias
 MAX_AMPLITUDE_RAD = 2e-3
-READING_RESOLUTION_RAD = 1e-4  # readings closer than this count as one (joint at rest)
-
-
-def resolvable_order(q: Array) -> int:
-    """The highest order a harmonic of readings q (n,) [rad] can be told apart at: half the
-    number of distinct readings less one (a sweep of 10 steps resolves order 4; above, an
-    order is aliased on the readings it was sampled at and fits anything)."""
-    distinct = len(np.unique(np.round(q / READING_RESOLUTION_RAD)))
-    return max((distinct - 1) // 2, 0)
 
 
 @dataclass(frozen=True)
@@ -78,26 +79,44 @@ class JointSpectrum(Record):
     dominant_significance: list[float]
     meaning: list[str]
     # the highest order the joint's distinct readings resolve (`resolvable_order`): single-
-    # joint sweeps of a few dozen steps alias every order above it; None: not scanned
+    # joint sweeps of a few dozen regular steps alias orders above it; None: not scanned
     resolvable_order: int | None = None
+    # per dominant order, the scanned orders these readings cannot tell it from (`aliases`):
+    # the robot may have any of them (the ladder tries each on the held-out data)
+    dominant_aliases: list[list[int]] = field(default_factory=list)
+
+    def aliases_of(self, order: int) -> list[int]:
+        """The aliases of dominant order `order` on the scanned readings ([] if none)."""
+        for k, alias in zip(self.dominant_orders, self.dominant_aliases):
+            if k == order:
+                return alias
+        return []
 
     def line(self) -> str:
         """One human line, e.g. 'joint 2: orders 11 (212 urad, 40 x), 27 (...)'."""
         limit = ""
         if self.resolvable_order is not None and self.resolvable_order < len(self.significance):
             limit = (
-                f" (its readings resolve orders up to {self.resolvable_order} only: "
-                "measure random poses for higher ones)"
+                f" (its readings tell orders apart up to {self.resolvable_order} only: "
+                "random poses or irregular sweeps tell the higher ones)"
             )
         if not self.dominant_orders:
             return f"joint {self.joint}: no harmonic stands out{limit}"
         parts = [
-            f"{k} ({a:.0f} urad, {s:.0f} x)"
+            f"{k} ({a:.0f} urad, {s:.0f} x{_alias_clause(self.aliases_of(k))})"
             for k, a, s in zip(
                 self.dominant_orders, self.dominant_urad, self.dominant_significance
             )  # fmt: skip
         ]
         return f"joint {self.joint}: orders " + ", ".join(parts) + limit
+
+
+def _alias_clause(alias: list[int]) -> str:
+    """'; or its alias 43 on these readings' (aliases 43, 44), '' for none."""
+    if not alias:
+        return ""
+    word = "alias" if len(alias) == 1 else "aliases"
+    return f"; or its {word} {', '.join(map(str, alias))} on these readings"
 
 
 def modelled_orders(effects: tuple[Effect, ...], joint: int) -> set[int]:
@@ -154,8 +173,7 @@ def joint_spectra(
         left = np.linalg.norm(cols, axis=0) / np.where(norms > 0, norms, 1.0)
         usable = np.all(left >= MIN_LEFT, axis=1)
         usable[[k - 1 for k in modelled_orders(model.effects, j + 1) if k <= max_order]] = False
-        resolvable = resolvable_order(poses.q[:, j])
-        usable[orders > resolvable] = False  # aliased on these readings
+        correlation = order_correlation(poses.q[:, j], max_order)
         chi2, coef = _pair_explained(cols, r)
         usable &= np.hypot(coef[:, 0], coef[:, 1]) <= MAX_AMPLITUDE_RAD  # beyond physics
         significance = np.where(usable, np.sqrt(np.maximum(chi2, 0.0)) / scatter, 0.0)
@@ -167,8 +185,10 @@ def joint_spectra(
             amps = [float(np.hypot(*c) * 1e6) for c in together]
         values = [float(s) for s in significance]
         why = [meaning(k) for k in picked]
+        modelled = modelled_orders(model.effects, j + 1)
+        alias = [[m for m in aliases(correlation, k) if m not in modelled] for k in picked]
         return JointSpectrum(j + 1, True, lever * 1e3, values, picked, amps, picked_z, why,
-                             resolvable)  # fmt: skip
+                             resolvable(correlation), alias)  # fmt: skip
 
     # the joints are independent: the second half scanned by a forked child meanwhile
     # (`forked.Aside`; the same numbers either way) when the scan is large enough to pay
@@ -212,7 +232,8 @@ def _pick(cols: Array, r: Array, usable: Array, scatter: float) -> tuple[list[in
 def harmonic_candidates(spectra: list[JointSpectrum], present: tuple[Effect, ...]) -> list[Effect]:
     """The ladder's joint_harmonics candidates: per joint with dominant orders, the joint's
     present harmonics plus the first 1, 2, ... of them (nested, the screening picks how
-    many)."""
+    many), and each of those with the last order added replaced by one of its aliases (the
+    readings cannot tell them apart: the held-out data may)."""
     out: list[Effect] = []
     for spectrum in spectra:
         new = spectrum.dominant_orders
@@ -222,5 +243,37 @@ def harmonic_candidates(spectra: list[JointSpectrum], present: tuple[Effect, ...
         have = next((e for e in present if isinstance(e, JointHarmonics) and j in e.joints), None)
         base = set(have.orders) if have is not None else set()
         for m in range(1, len(new) + 1):
-            out.append(JointHarmonics(joints=(j,), orders=tuple(sorted(base | set(new[:m])))))
+            for last in (new[m - 1], *spectrum.aliases_of(new[m - 1])):
+                orders = base | set(new[: m - 1]) | {last}
+                if len(orders) == len(base) + m:  # an alias already among the orders: not new
+                    out.append(JointHarmonics(joints=(j,), orders=tuple(sorted(orders))))
+    return out
+
+
+def alias_warnings(effects: tuple[Effect, ...], recording: Recording,
+                   holdout: Recording | None) -> list[str]:  # fmt: skip
+    """One line per joint-angle harmonic of `effects` (a chosen model) that the readings
+    of `recording` cannot tell from another scanned order (`aliases`) and that `holdout`
+    (its own readings) does not settle either: the robot may have that order instead."""
+    out: list[str] = []
+    for effect in effects:
+        if not isinstance(effect, JointHarmonics):
+            continue
+        for j in effect.joints:
+            q = recording.poses.q[:, j - 1]
+            corr = order_correlation(q)
+            held = None if holdout is None else order_correlation(holdout.poses.q[:, j - 1])
+            for k in effect.orders:
+                if k > MAX_SCAN_ORDER:
+                    continue
+                left = [m for m in aliases(corr, k) if m not in effect.orders
+                        and (held is None or held[k - 1, m - 1] >= ALIAS_CORRELATION)]  # fmt: skip
+                if left:
+                    word = "order" if len(left) == 1 else "orders"
+                    out.append(
+                        f"joint {j}'s harmonic of order {k} is not told from {word} "
+                        f"{', '.join(map(str, left))} by these poses (regular sweeps alias "
+                        "them): the robot may have either; measure random general poses, or "
+                        "sweeps of irregular steps (robot-calib plan --sweeps), to tell"
+                    )
     return out

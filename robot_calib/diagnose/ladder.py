@@ -157,12 +157,14 @@ def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
     recording = recording.at_most(SCREEN_POSES)  # a ranking: a random subset above
     holdout = None if holdout is None else holdout.at_most(SCREEN_POSES)
     every = cal.model.effects + tuple(pool)
-    widest: list[Effect] = []  # every effect that no other covers (e.g. the highest order)
+    widest: list[Effect] = []  # every effect merged with those it shares parameters with
     for e in every:
-        covered = [k for k, w in enumerate(widest) if e.covers(w, robot)]
-        if covered:
-            widest[covered[0]] = e  # in place: the parameter order stays that of `every`
-        elif not any(w.covers(e, robot) for w in widest):
+        for k, w in enumerate(widest):
+            merged = w.union(e, robot) if type(w) is type(e) else None
+            if merged is not None:
+                widest[k] = merged  # in place: the parameter order stays about that of `every`
+                break
+        else:
             widest.append(e)
     superset = KinematicModel(robot, tuple(widest), cal.model.targets, cal.model.oriented)
     params = superset.parameters().with_values(

@@ -166,6 +166,16 @@ class Effect(ABC):
             return False
         return set(other.parameter_names(robot)) <= set(self.parameter_names(robot))
 
+    def union(self, other: Effect, robot: RobotDescription) -> Effect | None:
+        """One effect holding this one's parameters and `other`'s, when one can (the
+        ladder's screening fits every candidate as columns of one superset model): the one
+        that covers the other, else None (default)."""
+        if self.covers(other, robot):
+            return self
+        if other.covers(self, robot):
+            return other
+        return None
+
     def fit_starts(self, robot: RobotDescription) -> list[dict[str, float]]:
         """Values to start a fit from where the nominal ones would stall it: one fit per
         entry, the best kept (default: the nominal values only). An effect nonlinear in its

@@ -78,6 +78,13 @@ class JointHarmonics(Effect):
             raise InputError(f"joint_harmonics: orders {list(orders)} outside 1..{MAX_ORDER}")
         object.__setattr__(self, "orders", orders)
 
+    def union(self, other: Effect, robot: RobotDescription) -> Effect | None:
+        """Harmonics of the same joints: one effect of both sets of orders (two sets of
+        aliases, neither covering the other, share their common orders' parameters)."""
+        if isinstance(other, JointHarmonics) and other.joints == self.joints:
+            return JointHarmonics(joints=self.joints, orders=tuple({*self.orders, *other.orders}))
+        return super().union(other, robot)
+
     @staticmethod
     def term(joint: int, kind: str, k: int) -> str:
         """Parameter name, e.g. term(2, 's', 27) = 'jh2_s27'."""

@@ -14,7 +14,10 @@ Case classes (`classes()`):
   the simulator's joint_ripple: no single order of the ladder's transmission_error, 1, 2,
   3, 4, 6, is it, order 6 holds it; judged by its joint, as effects outside the vocabulary),
   `harmonics_high` (issue 22's gear harmonics: joint_harmonics of orders 11 and 27 on
-  joint 2 and 17 on joint 1, 50-300 urad each, random phases).
+  joint 2 and 17 on joint 1, 50-300 urad each, random phases), `harmonics_aliased` (orders
+  17 on joint 1, 23 on joint 2 and 11 on joint 3, calibrated on the sweeps alone: the
+  sweeps' regular steps alias 23 with 43 and 44, 11 with 57; the hold-out's general poses
+  tell them apart).
 Calibration poses: the Test 2 sweeps; the classes of GENERAL_POSE_CLASSES add
 GENERAL_POSES random general poses, because the sweeps alone do not show their effects:
 the sweeps step by 5.3-6.2 deg, so a joint harmonic above order ~30 (joint_harmonics draws
@@ -82,9 +85,13 @@ COMBINATIONS = (
     "transmission_error+gravity_compliance",
     "backlash+eccentricity+thermal_warmup",
 )
-FORMS = ("compliance_payload", "drift_exponential", "ripple_order5", "harmonics_high")
-#: harmonics_high's joint-angle harmonics: joint -> orders (issue 22's example)
-HIGH_HARMONICS = {2: (11, 27), 1: (17,)}
+FORMS = ("compliance_payload", "drift_exponential", "ripple_order5", "harmonics_high",
+         "harmonics_aliased")  # fmt: skip
+#: the joint-angle harmonics of harmonics_high and harmonics_aliased: joint -> orders
+HIGH_HARMONICS: dict[str, dict[int, tuple[int, ...]]] = {
+    "harmonics_high": {2: (11, 27), 1: (17,)},
+    "harmonics_aliased": {1: (17,), 2: (23,), 3: (11,)},
+}
 #: classes calibrated on the sweeps plus GENERAL_POSES random general poses (docstring)
 GENERAL_POSE_CLASSES = ("joint_harmonics", "harmonics_high", "gravity_backlash", "link_bending")
 GENERAL_POSES = 300
@@ -159,8 +166,8 @@ def _withheld(name: str, world: World, rng: np.random.Generator) -> Withheld:
             effect, values = Compliance.draw(robot, rng, joint)
         elif name == "drift_exponential":
             effect, values = ThermalWarmup.draw(robot, rng, joint)
-        elif name == "harmonics_high":
-            return _high_harmonics(world, rng)
+        elif name in HIGH_HARMONICS:
+            return _high_harmonics(world, HIGH_HARMONICS[name], rng)
         else:
             effect = JointRipple(joints=(joint,), order=5)
             values = {f"ripple_sin{joint}": float(rng.uniform(*RIPPLE_RANGE))}
@@ -183,12 +190,13 @@ def _withheld(name: str, world: World, rng: np.random.Generator) -> Withheld:
     return world, effects, values
 
 
-def _high_harmonics(world: World, rng: np.random.Generator) -> Withheld:
-    """The world with harmonics_high's joint harmonics (HIGH_HARMONICS), each of a random
+def _high_harmonics(world: World, harmonics: dict[int, tuple[int, ...]],
+                    rng: np.random.Generator) -> Withheld:  # fmt: skip
+    """The world with joint harmonics (`harmonics`: joint -> orders), each of a random
     amplitude in joint_harmonics' DRAW_RANGE (50-300 urad) and a random phase."""
     effects: list[Effect] = []
     values: dict[str, float] = {}
-    for joint, orders in HIGH_HARMONICS.items():
+    for joint, orders in harmonics.items():
         effect = JointHarmonics(joints=(joint,), orders=orders)
         mine = {}
         for k in orders:
