@@ -22,6 +22,7 @@ from robot_calib.sim.world import load_world
     ("compliance", 1000),  # joint 3: seen on a short arc as its gravity, reading, 1st harmonic
     ("thermal_drift", 1000),  # time, no joint
     ("none", 1000),
+    ("link_bending", 1000),  # link 2 twisting under an unknown tool: joint 3's housing turns
 ])  # fmt: skip
 def test_structure_only_where_the_world_has_it(effect: str, seed: int) -> None:
     case = make_case(effect, seed)
@@ -36,6 +37,11 @@ def test_structure_only_where_the_world_has_it(effect: str, seed: int) -> None:
     if effect == "thermal_drift":
         assert sig is not None and sig.joint == 0 and "time" in sig.text
         assert where.time.drift_significance >= EVIDENCE_Z
+    if effect == "link_bending":  # once read as joint 5's gravity term (no twist term then)
+        assert sig is not None and sig.family == "twist" and sig.joint == 3, sig
+        assert [t.joint for t in where.twists()] == [3], where.twists()
+    else:
+        assert where.twists() == [], where.twists()
     # one number per term: the arc table's harmonics are the joint fit's
     for arc, terms in zip(where.joints, where.joints_from_all_poses):
         assert arc.harmonics_significance == terms.harmonics_significance

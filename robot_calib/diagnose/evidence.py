@@ -44,13 +44,15 @@ from scipy import special
 from robot_calib.diagnose.frequency import modelled_orders
 from robot_calib.diagnose.projection import MIN_LEVER_M, joint_motion
 from robot_calib.effects.compliance import gravity_torques
+from robot_calib.effects.link_bending import twist_alignment, twist_axis
 from robot_calib.identify.fit import blocked_jacobian
+from robot_calib.identify.load_features import frame_loads, point_motions
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
 from robot_calib.measurements.split import N_FOLDS, pose_folds
 from robot_calib.model import KinematicModel
-from robot_calib.poses import reading_groups
+from robot_calib.poses import Poses, reading_groups
 from robot_calib.records import Record
 
 HARMONICS = 4  # harmonic orders 1..HARMONICS of every joint are candidates
@@ -68,9 +70,9 @@ CONFIRM_Z = 2.0
 MAX_Z = 1e6  # a held-out z where every pose gains exactly the same
 #: a term at this significance or more is structure (the reports' and the harness' figure)
 STRUCTURE_Z = 5.0
-FAMILIES = ("harmonics", "direction", "scale", "gravity", "time")
+FAMILIES = ("harmonics", "direction", "scale", "gravity", "twist", "time")
 UNITS = {"harmonics": "urad", "direction": "urad", "scale": "urad/rad",
-         "gravity": "urad/(N m)", "time": "mm"}  # fmt: skip
+         "gravity": "urad/(N m)", "twist": "mm", "time": "mm"}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -102,6 +104,9 @@ class TermEvidence(Record):
             return "a drift with time"
         if self.family == "harmonics":
             return f"{ordinal(int(self.order or 0))} harmonic of joint {self.joint}"
+        if self.family == "twist":
+            return (f"joint {self.joint}'s housing turning with the load about link "
+                    f"{self.joint - 1}'s axis (the link twisting)")  # fmt: skip
         return f"joint {self.joint} error following its {FAMILY_WORDS[self.family]}"
 
 
@@ -177,6 +182,44 @@ def _signals(model: KinematicModel, recording: Recording, levers: Array,
     return out, time
 
 
+#: a link whose twist axis is within about 60 deg of its own joint's axis (|cos| above
+#: this) twists the way that joint turns: a joint-angle term, not a twist
+MAX_TWIST_ALIGNMENT = 0.5
+
+
+def _twists(model: KinematicModel, params: ParameterVector, poses: Poses,
+            geometry: Array) -> list[tuple[int, list[Array]]]:  # fmt: skip
+    """The twist terms: per link J - 1 that can twist (`link_bending.twist_axis`) about an
+    axis across its joint's (MAX_TWIST_ALIGNMENT), joint J's housing turning about that
+    axis by the load's moment about it (the robot's own links beyond, an unknown payload's
+    mass and its first moments: `load_features`), as (J, its columns (n, 3) [m per unit,
+    tracker frame]): those that keep MIN_RESOLVED of their norm once the model's free
+    columns `geometry` (n, 3, P) are projected off (a constant moment turns the housing by
+    a constant: geometry, whose remainder is rounding that would absorb anything)."""
+    robot = model.robot
+    motions = point_motions(model, params, poses)  # (n, 3, J, 6)
+    loads = frame_loads(robot, poses.q)  # (n, J, 15): M, P, C_x, C_y, C_z about frame j
+    basis, _ = np.linalg.qr(geometry.reshape(-1, geometry.shape[2]))
+    out = []
+    for link in range(1, robot.n_joints):
+        axis = twist_axis(robot, link)
+        if not axis.any() or twist_alignment(robot, link) > MAX_TWIST_ALIGNMENT:
+            continue
+        turn = motions[:, :, link, 3:] @ axis  # (n, 3) [m/rad] about the link's axis
+        if np.median(np.linalg.norm(turn, axis=1)) < MIN_LEVER_M:
+            continue
+        cols = []
+        for k in range(5):
+            col = turn * (loads[:, link, 3 * k : 3 * k + 3] @ axis)[:, None]
+            flat = col.reshape(-1)
+            norm = float(np.linalg.norm(flat))
+            if norm > 0 and np.linalg.norm(flat - basis @ (basis.T @ flat)) >= MIN_RESOLVED * norm:
+                cols.append(col)
+        if cols:
+            out.append((link + 1, cols))
+    return out
+
+
 def _design(model: KinematicModel, params: ParameterVector, recording: Recording,
             predicted: Array, orders: dict[int, list[int]],
             time_scale: tuple[float, float] | None,
@@ -189,16 +232,20 @@ def _design(model: KinematicModel, params: ParameterVector, recording: Recording
     geometry = jac[:, :, params.free]  # (n, 3, P)
     del jac
     signals, time = _signals(model, recording, levers, orders, time_scale)
+    columns = [(joint, family, order, [motion[:, joint - 1, :] * s[:, None] for s in sigs])
+               for joint, family, order, sigs in signals]  # fmt: skip
+    twists = _twists(model, params, poses, geometry)
+    columns += [(joint, "twist", None, cols) for joint, cols in twists]
     n, p = len(poses), geometry.shape[2]
-    k = sum(len(s) for *_, s in signals) + 3 * len(time)
+    k = sum(len(c) for *_, c in columns) + 3 * len(time)
     x = np.empty((n, 3, p + k))
     x[:, :, :p] = geometry
     terms, at = [], p
-    for joint, family, order, sigs in signals:
-        for s in sigs:
-            x[:, :, at] = motion[:, joint - 1, :] * s[:, None]
+    for joint, family, order, cols in columns:
+        for c in cols:
+            x[:, :, at] = c
             at += 1
-        terms.append(_Term(joint, family, order, np.arange(at - len(sigs), at)))
+        terms.append(_Term(joint, family, order, np.arange(at - len(cols), at)))
     if time:
         start = at
         for s in time:
@@ -358,7 +405,7 @@ def _value(term: _Term, beta: Array, cov: Array, x: Array,
     cols = term.columns
     coef = beta[cols] / norms[cols]
     var = np.diag(cov)[cols] / norms[cols] ** 2
-    if term.family == "time":
+    if term.family in ("time", "twist"):
         drift = (x[:, cols] @ beta[cols]).reshape(-1, 3)  # [m]
         value = float(np.sqrt(np.mean(np.sum(drift**2, axis=1))))
         block = cov[np.ix_(cols, cols)]

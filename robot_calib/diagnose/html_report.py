@@ -55,6 +55,7 @@ from robot_calib.diagnose.signatures import (
     removed_note,
     scan_order_note,
     signature_removed,
+    signature_text,
 )
 from robot_calib.identify.calibrate import REFERENCE_MODELS, reference_models
 from robot_calib.identify.calibration import Calibration
@@ -236,7 +237,7 @@ def _strongest(diagnosis: Diagnosis) -> str:
                 f"{sig.joint}: {_deg(sig.value)} deg of joint-angle error, {noise}")  # fmt: skip
     terms = next((t for t in diagnosis.where.joints_from_all_poses if t.joint == sig.joint),
                  None)  # fmt: skip
-    if terms is None:  # a drift with time: no joint
+    if terms is None or sig.family in ("time", "twist"):  # in mm: the sentence as it is
         return sig.text
     for key, sig_key, words, _ in FAMILIES:
         if getattr(terms, sig_key) == sig.significance:
@@ -459,6 +460,10 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
     out.append(f"<p><b>Strongest structure</b>: {_e(strongest)}. Against time: "
                f"{_e(where.time.line())}. "
                f"By reach (near to far): {reach} mm.</p>")  # fmt: skip
+    if where.twists():
+        out.append("<p><b>Links twisting under the load</b>:</p><ul>"
+                   + "".join(f"<li>{_e(signature_text(t))}</li>" for t in where.twists())
+                   + "</ul>")  # fmt: skip
     out.append(_img(angle_figure(ladder, recording, "deg"),
                     "Geometric model: arc error against each joint's reading, by approach "
                     "direction"))  # fmt: skip

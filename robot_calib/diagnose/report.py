@@ -31,6 +31,7 @@ from robot_calib.diagnose.signatures import (
     removed_note,
     scan_order_note,
     signature_removed,
+    signature_text,
 )
 from robot_calib.identify.outliers import OUTLIER_K
 from robot_calib.kinematics.frames import Array
@@ -441,6 +442,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         gone = signature_removed(where.strongest_signature, removed)
         lines += ["", f"Strongest structure: {where.strongest_signature.text}"
                   + (f" ({gone})." if gone else ".")]  # fmt: skip
+    lines += [f"- {signature_text(t)}" for t in where.twists()]
     lines += _harmonic_lines(diagnosis)
     lines += [
         "",

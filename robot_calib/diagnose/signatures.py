@@ -89,13 +89,16 @@ class JointTerms(Record):
 @dataclass(frozen=True)
 class Signature(Record):
     """The most significant signature: its joint, harmonic (None for the other families),
-    value (urad, urad/rad or urad/(N m)), significance and a sentence."""
+    value (in `evidence.UNITS` of its family: urad, urad/rad, urad/(N m), or mm for a twist
+    or a drift with time), significance and a sentence; `family` its evidence family
+    ('' in documents written before it was recorded)."""
 
     joint: int
     harmonic: int | None
     value: float
     significance: float
     text: str
+    family: str = ""
 
 
 @dataclass(frozen=True)
@@ -144,6 +147,12 @@ class WhereItLies(Record):
     # every candidate term of the joint fit (`evidence.joint_evidence`), time included
     evidence: list[TermEvidence] = field(default_factory=list)
     evidence_scatter_mm: float | None = None  # what the joint fit leaves, per component
+
+    def twists(self) -> list[TermEvidence]:
+        """The links twisting under the load (`evidence` terms of family 'twist' at
+        STRUCTURE_Z or more), strongest first: no per-joint table has them."""
+        found = [t for t in self.evidence if t.family == "twist" and t.significance >= STRUCTURE_Z]
+        return sorted(found, key=lambda t: -t.significance)
 
     def has_term(self, joint: int, family: str, order: int | None = None) -> bool:
         """True when the joint fit had this term as a candidate (`evidence`)."""
@@ -331,7 +340,7 @@ def strongest_signature(evidence: Evidence) -> Signature | None:
     if best is None:
         return None
     return Signature(best.joint, best.order, float(best.value or 0.0), best.significance,
-                     signature_text(best))  # fmt: skip
+                     signature_text(best), best.family)  # fmt: skip
 
 
 def signature_text(term: TermEvidence) -> str:
@@ -341,8 +350,8 @@ def signature_text(term: TermEvidence) -> str:
     together = "" if term.separable else f"; {INSEPARABLE}"
     if term.value is None:
         return f"{term.words()} ({z}{together})"
-    if term.family == "time":
-        return f"{term.words()} ({term.value:.4f} mm rms over the recording, {z})"
+    if term.family in ("time", "twist"):
+        return f"{term.words()} ({term.value:.4f} mm rms over the recording, {z}{together})"
     if term.family == "harmonics":
         return f"{term.words()} ({term.value:.1f} urad of joint-angle error, {z}{together})"
     return f"{term.words()}: {term.value:.1f} {UNITS[term.family]}, {z}{together}"

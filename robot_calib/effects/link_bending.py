@@ -99,6 +99,15 @@ def twist_axis(robot: RobotDescription, link: int) -> Array:
     return span / norm if norm > MIN_SPAN_M else np.zeros(3)
 
 
+def twist_alignment(robot: RobotDescription, link: int) -> float:
+    """|cos| of the angle between link `link`'s twist axis (`twist_axis`) and its own joint's
+    axis (joint `link`'s, z of frame link - 1): near 1, a twist turns the housing the way
+    the joint turns (a joint-angle error, no twist); 0 for a link that cannot twist."""
+    frames = _frames(robot, np.zeros((1, robot.n_joints)))[0]
+    own = frames[link, :3, :3].T @ frames[link - 1, :3, 2]
+    return abs(float(twist_axis(robot, link) @ own))
+
+
 def housing_per_unit(robot: RobotDescription, q: Array, link: int) -> Array:
     """Housing error motions (n, 5) [m, m, m, rad, rad per rad/(N m)] of joint link + 1 per
     unit compliance of link `link` (1-based): 0, 0, 0 and the twist's ex, ey."""

@@ -321,7 +321,8 @@ class EvidenceVerdict(Record):
     """How true the per-joint evidence of a case's geometric residuals is (`where`):
     false_rows: the effect-free joints (not in any withheld effect's `diagnosed_joints`)
     with a term at >= EVIDENCE_Z, of free_rows; missed: the withheld effects' joints
-    without one; strongest_ok: the strongest structure is on a withheld effect's joint, or
+    without one (an effect diagnosed on other joints, `Effect.diagnosed_joints`: without one
+    on any of them); strongest_ok: the strongest structure is on a withheld effect's joint, or
     on time for a thermal effect, or there is none (>= EVIDENCE_Z) without effects."""
 
     false_rows: list[int]
@@ -347,7 +348,13 @@ def judge_evidence(case: Case, where: WhereItLies) -> EvidenceVerdict:
     n_joints = case.world.model.robot.n_joints
     free = [j for j in range(1, n_joints + 1) if j not in allowed]
     false = [j for j in free if shown.get(j, 0.0) >= EVIDENCE_Z]
-    missed = [j for j in case.joints if shown.get(j, 0.0) < EVIDENCE_Z]
+    missed = []  # an effect diagnosed on other joints than its own (a link's twist shows
+    for e in case.withheld:  # on the housing it turns): found on any of them
+        if tuple(e.diagnosed_joints()) == tuple(e.joints):
+            missed += [j for j in e.joints if shown.get(j, 0.0) < EVIDENCE_Z]
+        elif all(shown.get(j, 0.0) < EVIDENCE_Z for j in e.diagnosed_joints()):
+            missed += list(e.joints)
+    missed = sorted(set(missed))
     timed = case.effect == "drift_exponential" or any(e.name in TIME_EFFECTS
                                                       for e in case.withheld)  # fmt: skip
     sig = where.strongest_signature
