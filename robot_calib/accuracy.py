@@ -32,9 +32,24 @@ class Accuracy(Record):
     absolute_rms_mm: float
     absolute_max_mm: float
 
+    def pairwise_text(self, width: int = 0) -> str:
+        """'0.0123 / 0.0456' (the seed criterion's mean / max [mm], each right-aligned to
+        `width`), or 'n/a (no pair)' for fewer than 2 points: the 0 the figures hold then
+        measures nothing."""
+        if self.n_points < 2:
+            return f"{'n/a (no pair)':>{2 * width + 3}}"
+        return f"{self.pairwise_mean_mm:>{width}.4f} / {self.pairwise_max_mm:<{width}.4f}"
+
+    def seed_text(self) -> str:
+        """'seed criterion mean 0.0123 / max 0.0456 mm', or '... n/a (no pair)'."""
+        if self.n_points < 2:
+            return "seed criterion n/a (no pair of points)"
+        mean, worst = self.pairwise_mean_mm, self.pairwise_max_mm
+        return f"seed criterion mean {mean:.4f} / max {worst:.4f} mm"
+
     def line(self) -> str:
         return (
-            f"seed criterion mean {self.pairwise_mean_mm:.4f} / max {self.pairwise_max_mm:.4f} mm"
+            f"{self.seed_text()}"
             f", absolute mean {self.absolute_mean_mm:.4f} / max {self.absolute_max_mm:.4f} mm"
             f" ({self.n_points} points)"
         )

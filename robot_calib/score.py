@@ -55,9 +55,8 @@ class Score:
         acc = self.accuracy
         out = [
             f"{where}: {acc.n_points} points, absolute error mean {acc.absolute_mean_mm:.4f} / "
-            f"rms {acc.absolute_rms_mm:.4f} / max {acc.absolute_max_mm:.4f} mm; seed criterion "
-            f"(pairwise distances) mean {acc.pairwise_mean_mm:.4f} / max "
-            f"{acc.pairwise_max_mm:.4f} mm"
+            f"rms {acc.absolute_rms_mm:.4f} / max {acc.absolute_max_mm:.4f} mm; "
+            + acc.seed_text().replace("criterion", "criterion (pairwise distances)")
         ]
         if self.orientation is not None:
             out.append(f"{where}: {self.orientation.line()}")

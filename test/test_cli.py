@@ -56,6 +56,8 @@ def one_line_error(proc: subprocess.CompletedProcess[str], text: str) -> None:
         (["run", "-o", "out", "--effects", "foo:1"], "unknown effect 'foo'"),
         (["run", "-o", "out", "--plan", "nosuch"], "--plan nosuch: unknown plan"),
         (["run", "-o", "out", "--holdout", "0"], "0 < 1"),
+        # a --holdout without a bag once meant k-fold without a word
+        (["diagnose", "x.mcap", "--holdout", "-o", "d.json"], "--holdout: expected at least one"),
     ],
 )  # fmt: skip
 def test_bad_arguments_are_one_line_and_write_nothing(

@@ -92,3 +92,15 @@ def test_bad_split_and_score_inputs(tmp_path: Path, args: list[str], message: st
     proc = cli(*args, cwd=tmp_path)
     assert proc.returncode == 2 and message in proc.stderr, proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and list(tmp_path.iterdir()) == []
+
+
+def test_no_seed_criterion_without_a_pair_of_points() -> None:
+    """The seed criterion compares distances between pairs of points: one point has none,
+    and its 0.0000 / 0.0000 measured nothing; every report says n/a instead."""
+    from robot_calib.accuracy import accuracy
+
+    one = accuracy(np.zeros((1, 3)), np.full((1, 3), 1e-4))
+    assert "seed criterion n/a" in one.line() and "0.0000 / " not in one.line()
+    assert one.pairwise_text().strip().startswith("n/a")
+    two = accuracy(np.array([[0.0, 0, 0], [1.0, 0, 0]]), np.array([[0.0, 0, 0], [1.001, 0, 0]]))
+    assert "seed criterion mean 1.0000 / max 1.0000 mm" in two.line(), two.line()

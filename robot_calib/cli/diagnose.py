@@ -32,7 +32,7 @@ ROBOT = None  # --robot's default: DEFAULT_ROBOT
 def add_arguments(diag: argparse.ArgumentParser) -> None:
     diag.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
     diag.add_argument(
-        "--holdout", nargs="*", metavar="BAG",
+        "--holdout", nargs="+", metavar="BAG",
         help="hold-out bag(s): scored only (default: none; the calibration bags' k-fold)",
     )  # fmt: skip
     add_pair_tolerance(diag)

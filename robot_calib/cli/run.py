@@ -73,7 +73,7 @@ def main(args: argparse.Namespace) -> int:
         fit, test = score.calibration.accuracy, score.holdout
         print(
             f"{name:<12}{fit.pairwise_mean_mm:>15.4f} / {fit.pairwise_max_mm:<8.4f}"
-            f"{test.pairwise_mean_mm:>15.4f} / {test.pairwise_max_mm:<8.4f}"
+            f"{test.pairwise_text(8):>26}"
             f"{test.absolute_mean_mm:>17.4f}"
         )
     for warning in result.warnings:

@@ -4,6 +4,7 @@ seed criterion; robot_calib/score.py)."""
 from __future__ import annotations
 
 import argparse
+import sys
 
 from robot_calib.cli.common import calibration_of, correction_of, log
 from robot_calib.cli.options import (
@@ -65,7 +66,8 @@ def main(args: argparse.Namespace) -> int:
             judged_by = ("the physical model's in-sample rms (the file has no "
                          "hybrid_residuals: written before them)")  # fmt: skip
     result = score(model, params, recording, in_sample, fitted, correction, judged_by)
-    for warning in result.warnings:  # also in stdout and the per-point table
+    terminal = sys.stdout.isatty() and sys.stderr.isatty()  # both on one screen: once
+    for warning in [] if terminal else result.warnings:  # also in stdout and the table
         log(warning)
     for line in result.lines(", ".join(args.bags)):
         print(line)

@@ -199,7 +199,8 @@ def _twists(model: KinematicModel, params: ParameterVector, poses: Poses,
     robot = model.robot
     motions = point_motions(model, params, poses)  # (n, 3, J, 6)
     loads = frame_loads(robot, poses.q)  # (n, J, 15): M, P, C_x, C_y, C_z about frame j
-    basis, _ = np.linalg.qr(geometry.reshape(-1, geometry.shape[2]))
+    n, _, n_free = geometry.shape
+    basis = np.linalg.qr(geometry.reshape(3 * n, n_free))[0] if n_free else np.zeros((3 * n, 0))
     out = []
     for link in range(1, robot.n_joints):
         axis = twist_axis(robot, link)

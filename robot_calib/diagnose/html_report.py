@@ -337,7 +337,7 @@ def _accuracy(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: str,
               figures: FigureCache, histogram: Callable[[], Figure | None]) -> str:  # fmt: skip
     rows = [
         [_model(m.model), m.role, m.scored_on, m.accuracy.n_points,
-         f"{m.accuracy.pairwise_mean_mm:.4f} / {m.accuracy.pairwise_max_mm:.4f}",
+         m.accuracy.pairwise_text(),
          f"{m.accuracy.absolute_mean_mm:.4f}", f"{m.accuracy.absolute_rms_mm:.4f}",
          f"{m.accuracy.absolute_max_mm:.4f}", _times_floor(m.accuracy.absolute_rms_mm, diagnosis)]
         for m in compared

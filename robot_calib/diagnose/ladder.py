@@ -349,7 +349,8 @@ def kfold_parameters(
     """The folds (n,) of `recording` (`pose_folds`) and, per fold, the parameters of `cal`'s
     model refitted without that fold's measurements: one Gauss-Newton step from the full
     solution on the other folds' rows (weighted as the fit weighs them, the weak prior
-    included, columns scaled to unit norm, damped by SCREEN_DAMPING). At a converged
+    included, columns scaled to unit norm, damped by SCREEN_DAMPING), less the step all
+    the rows would take (none at a converged fit). At a converged
     least-squares solution that step is the refit to first order (exact for a model
     linear in its parameters); it costs one Jacobian instead of five Levenberg-Marquardt
     solves (issue 22: 105 s of a 138 s diagnosis were k-fold refits)."""
@@ -368,12 +369,16 @@ def kfold_parameters(
     norms = np.sqrt(np.maximum(np.diag(data.gram), 0.0))  # the data's columns set the scale
     scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
     total = data.plus(_Sums.of(jac[prior], residual[prior])).scaled(scale)
+    damping = SCREEN_DAMPING * np.eye(len(x))
+    # the step the whole data would take from `cal`'s solution: 0 at a converged fit; where
+    # a nonlinear parameter (a warm-up's time constant) stopped short of it, every fold
+    # would take it too, and a fold's refit differs from the whole fit by the rest only
+    whole = -np.linalg.solve(total.gram + damping, total.rhs) * scale
     fitted = {}
     for f, sums in own.items():
         train = total.minus(sums.scaled(scale))
-        gram = train.gram + SCREEN_DAMPING * np.eye(len(x))
-        step = -np.linalg.solve(gram, train.rhs) * scale
-        fitted[f] = params.unpack(x + step)
+        step = -np.linalg.solve(train.gram + damping, train.rhs) * scale
+        fitted[f] = params.unpack(x + step - whole)
     return fold, fitted
 
 
@@ -531,7 +536,7 @@ def _try_rung(
         return None, RefitOutcome(name, lin_score * 1e3, insample, None, False, reason)
     acc, res, score = score_rung(cal, recording, holdout)
     say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, refitted "
-        f"{score * 1e3:.4f} mm (current {current.score_m * 1e3:.4f})")  # fmt: skip
+        f"{score * 1e3:.4f} mm ({current.model}: {current.score_m * 1e3:.4f})")  # fmt: skip
     good = score <= (1.0 - MIN_GAIN) * current.score_m
     outcome = RefitOutcome(
         name, lin_score * 1e3, insample, score * 1e3, good,
@@ -569,7 +574,10 @@ def _climb(
     spectra: dict[str, list[JointSpectrum]] = {}
     try_rung = partial(_try_rung, recording=recording, holdout=holdout, say=say)
     say(f"  geometric: held-out rms {acc.absolute_rms_mm:.4f} mm"
-        + (f" (floor {noise.floor_rms_m * 1e3:.4f})" if noise.independent else ""))  # fmt: skip
+        + (f" (floor {noise.floor_rms_m * 1e3:.4f})" if noise.independent else "")
+        + (f"; selection score {score * 1e3:.4f} mm (the k-fold's and the hold-out's rms "
+           "together, each counting equally: the rungs below are scored by it)"
+           if holdout is not None else ""))  # fmt: skip
     while len(rungs) <= MAX_RUNGS:
         current = rungs[-1]
         at_floor = current.heldout.absolute_rms_mm <= AT_FLOOR * noise.floor_rms_m * 1e3

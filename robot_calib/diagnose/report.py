@@ -281,7 +281,7 @@ def _extra_sections(compared: Sequence[ModelErrors], best: Calibration | None,
                       [[with_breaks(m.model), m.role, m.scored_on,
                         f"{m.accuracy.absolute_mean_mm:.4f} / {m.accuracy.absolute_rms_mm:.4f}"
                         f" / {m.accuracy.absolute_max_mm:.4f}",
-                        f"{m.accuracy.pairwise_mean_mm:.4f} / {m.accuracy.pairwise_max_mm:.4f}"]
+                        m.accuracy.pairwise_text()]
                        for m in compared])]  # fmt: skip
     if best is not None:
         lines += ["", f"## Parameters of the best model ({best.label})", "",
