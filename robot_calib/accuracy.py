@@ -33,19 +33,20 @@ class Accuracy(Record):
     absolute_max_mm: float
 
     def pairwise_text(self, width: int = 0) -> str:
-        """'0.0123 / 0.0456' (the seed criterion's mean / max [mm], each right-aligned to
-        `width`), or 'n/a (no pair)' for fewer than 2 points: the 0 the figures hold then
-        measures nothing."""
+        """'0.0123 / 0.0456' (the seed criterion's mean / max [mm]; the mean right- and the
+        max left-aligned to `width`, a table's column), or 'n/a (no pair)' for fewer than 2
+        points: the 0 the figures hold then measures nothing."""
         if self.n_points < 2:
             return f"{'n/a (no pair)':>{2 * width + 3}}"
         return f"{self.pairwise_mean_mm:>{width}.4f} / {self.pairwise_max_mm:<{width}.4f}"
 
-    def seed_text(self) -> str:
-        """'seed criterion mean 0.0123 / max 0.0456 mm', or '... n/a (no pair)'."""
+    def seed_text(self, label: str = "seed criterion") -> str:
+        """'seed criterion mean 0.0123 / max 0.0456 mm', or '... n/a (no pair of points)'
+        (`label` names the criterion)."""
         if self.n_points < 2:
-            return "seed criterion n/a (no pair of points)"
+            return f"{label} n/a (no pair of points)"
         mean, worst = self.pairwise_mean_mm, self.pairwise_max_mm
-        return f"seed criterion mean {mean:.4f} / max {worst:.4f} mm"
+        return f"{label} mean {mean:.4f} / max {worst:.4f} mm"
 
     def line(self) -> str:
         return (

@@ -56,7 +56,7 @@ class Score:
         out = [
             f"{where}: {acc.n_points} points, absolute error mean {acc.absolute_mean_mm:.4f} / "
             f"rms {acc.absolute_rms_mm:.4f} / max {acc.absolute_max_mm:.4f} mm; "
-            + acc.seed_text().replace("criterion", "criterion (pairwise distances)")
+            + acc.seed_text("seed criterion (pairwise distances)")
         ]
         if self.orientation is not None:
             out.append(f"{where}: {self.orientation.line()}")

@@ -212,3 +212,12 @@ def test_a_python_warning_is_one_line_naming_the_verb(capsys: pytest.CaptureFixt
     assert err == "warning: learned correction: 3 of 9 poses predicted beyond 10 mm\n"
     assert cli_package.main(["score", "no_such_file.json", "no_such.mcap"]) == 2
     assert warnings.showwarning is before
+
+
+def test_a_bag_where_the_parameter_file_belongs_is_named(tmp_path: Path) -> None:
+    """`score BAG PARAMS.json` (the arguments swapped) once said 'not valid JSON ('utf-8'
+    codec can't decode byte 0x89 ...)'; it says which comes first."""
+    (tmp_path / "hold.mcap").write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)))
+    (tmp_path / "p.json").write_text("{}")
+    one_line_error(run("score", "hold.mcap", "p.json", cwd=tmp_path),
+                   "hold.mcap: a bag, not a parameter file")  # fmt: skip

@@ -43,24 +43,3 @@ def test_repeats_far_apart_in_time_are_not_used() -> None:
     recording = recording_from_arrays(q, np.zeros((len(q), 3)), time)
     assert repeat_pairs(recording).tolist() == []
     assert pytest.approx(600.0) == time[20] - time[0]
-
-
-def test_slow_iso_cycles_give_a_floor_labelled_with_their_gap() -> None:
-    """ISO 9283 cycles of slow moves come back to each pose more than a minute later: with
-    nothing nearer to measure the noise, those repeats give the floor (said to hold any
-    drift between them) instead of 'unknown' beside the report's own ISO repeatability; a
-    stated accuracy is preferred to them."""
-    from dataclasses import replace
-
-    from robot_calib.sim.measure import record_plan
-    from robot_calib.sim.plans import iso9283_plan
-
-    plan = iso9283_plan(WORLD.model, WORLD.model.parameters(), cycles=10)
-    recording = record_plan(WORLD, replace(plan, speed_fraction=0.005),
-                            np.random.default_rng(0))  # fmt: skip
-    assert repeat_pairs(recording).tolist() == []  # none within a minute
-    noise = estimate_noise(recording)
-    assert "min apart (any drift between them included" in noise.source, noise.source
-    assert noise.independent and 4e-6 < noise.sigma_m < 8e-6, noise
-    stated = estimate_noise(recording, stated_sigma_m=5e-6)
-    assert stated.source.startswith("stated tracker accuracy")

@@ -77,8 +77,8 @@ def test_plan_file_round_trip_through_simulate_and_run(tmp_path: Path) -> None:
     q = load_plan(plan, WORLD.model.robot).q
     assert q.shape == (20, 6)
     # 20 distinct readings of every joint fit orders 1-9 at once (19 unknowns + mean)
-    assert "joint-angle harmonics the plan tells apart" in made.stdout
-    assert made.stdout.count("(9 at once)") == 6, made.stdout
+    assert "joint-angle harmonics the plan resolves per joint" in made.stdout
+    assert made.stdout.count("(9 together") == 6, made.stdout
     sim = cli("simulate", "--plan", str(plan), "-o", str(tmp_path / "p.mcap"))
     assert sim.returncode == 0, sim.stderr
     from robot_calib.flows.bags import read_bags
@@ -102,17 +102,25 @@ def test_sweeps_in_irregular_steps_tell_every_order_apart(tmp_path: Path) -> Non
     plan = tmp_path / "sweeps.yaml"
     made = cli("plan", "--sweeps", "paper-test2", "-o", str(plan))
     assert made.returncode == 0, made.stderr
-    regular, irregular = [line for line in made.stdout.splitlines() if "tells apart" in line]
+    regular, irregular = [line for line in made.stdout.splitlines() if "resolves per" in line]
     assert "joint 4 up to order 30 (" in regular, regular
     assert irregular.count("up to order 64") == 6, irregular
     q = load_plan(plan, WORLD.model.robot).q
     assert q.shape == (580, 6)
     assert [resolvable_order(q[:, j]) for j in range(6)] == [64] * 6
     assert sorted(s.joint for s in find_sweeps(q)) == [1, 2, 3, 4, 5, 6]
-    for bad, words in ((["--sweeps", "paper-test9"], "tests 1-6"),
+    # the seed's sweeps reach below the KR5's mounting plane: said, and kept in the file
+    assert "poses put a joint centre, the flange or the target below z = 0 m" in made.stdout
+    assert "below z = 0 m" in plan.read_text()
+    clear = cli("plan", "--sweeps", "paper-test2", "--floor-z=-inf",
+                "-o", str(tmp_path / "c.yaml"))  # fmt: skip
+    assert clear.returncode == 0 and "warning" not in clear.stdout, clear.stdout
+    for bad, words in ((["--sweeps", "paper-test9"], "--sweeps paper-test9: not one of"),
                        (["--sweeps", "test2"], "--sweeps test2"),
                        (["--sweeps", "paper-test2", "--max-order", "65"], "--max-order 65"),
                        (["--sweeps", "paper-test2", "--poses", "20"], "either --poses"),
+                       (["--sweeps", "paper-test2", "--candidates", "5"], "--candidates belong"),
+                       (["--poses", "20", "--max-order", "10"], "--max-order belongs"),
                        ([], "either --poses")):  # fmt: skip
         out = cli("plan", *bad, "-o", str(tmp_path / "x.yaml"))
         assert out.returncode == 2 and words in out.stderr, (bad, out.stderr)

@@ -127,7 +127,7 @@ def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: f
 
     print(f"{'model':<40}{'held-out mean/max [mm]':>24}{'abs rms [mm]':>14}")
     for rung in diagnosis.ladder:
-        print(f"{rung.model:<40}{rung.holdout_mean_mm:>11.4f} / {rung.holdout_max_mm:<9.4f}"
+        print(f"{rung.model:<40}{rung.holdout_seed_text():>22} "
               f"{rung.holdout_abs_rms_mm:>14.4f}")  # fmt: skip
     floor = diagnosis.noise.floor_abs_rms_mm
     unknown = "unknown (no repeat poses, circle sweeps or stated accuracy; --tracker-accuracy)"
@@ -158,5 +158,8 @@ def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: f
     print(f"unexplained: {diagnosis.unexplained.note}")
     for line in outlier_lines(diagnosis.outliers):
         print(line)
+    for warning in diagnosis.warnings:  # as the reports list them (the floor's: above)
+        if warning != diagnosis.noise.warning:
+            print(warning if warning.startswith(("warning", "note")) else f"warning: {warning}")
     print(f"{output}, {report} in {seconds:.1f} s")
     print(f"HTML report (self-contained, open in a browser): {html_report_path(output)}")

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from robot_calib.cli.common import log
 from robot_calib.cli.options import (
@@ -20,12 +23,18 @@ from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements.aliasing import MAX_ORDER
 
+if TYPE_CHECKING:
+    from robot_calib.sim.world import World
+
 NAME = "plan"
 HELP = "choose measurement poses for a model (D-optimal) -> PLAN.yaml"
 ROBOT = WORLD_ROBOT  # --robot's default, in words
 
 MAX_FLOOR_Z_M = 10.0  # --floor-z: no robot reaches a floor 10 m from its base (mm as m?)
 MAX_CANDIDATES = 100_000  # --candidates: ~1.5 GB of Jacobian rows for geometric
+# the defaults of the D-optimal options (as plan.campaign's, which this light module does
+# not import at start-up)
+CANDIDATES, TRIALS, HOLDOUT = 2000, 1, 200
 
 
 def add_arguments(pla: argparse.ArgumentParser) -> None:
@@ -53,7 +62,7 @@ def add_arguments(pla: argparse.ArgumentParser) -> None:
     pla.add_argument(
         "--candidates",
         type=bounded_count(MAX_CANDIDATES),
-        default=2000,
+        default=CANDIDATES,
         help=f"M: random candidate poses to choose from (default 2000, at most {MAX_CANDIDATES})",
     )
     pla.add_argument(
@@ -62,7 +71,8 @@ def add_arguments(pla: argparse.ArgumentParser) -> None:
         default=0.0,
         metavar="M",
         help="flange and target stay at or above z = M [m] of the robot base frame "
-        f"(default 0.0: the base's mounting plane; -inf: no floor; within +-{MAX_FLOOR_Z_M:g})",
+        "(default 0.0: the base's mounting plane; --floor-z=-inf: no floor; within "
+        f"+-{MAX_FLOOR_Z_M:g})",
     )
     pla.add_argument(
         "--noise-mm",
@@ -85,14 +95,14 @@ def add_arguments(pla: argparse.ArgumentParser) -> None:
     pla.add_argument(
         "--trials",
         type=count,
-        default=1,
+        default=TRIALS,
         help="simulated calibrations (random true robots) per plan for the "
         "held-out error (default 1; 0: none)",
     )
     pla.add_argument(
         "--holdout",
         type=positive,
-        default=200,
+        default=HOLDOUT,
         help="random held-out poses per simulated calibration (default 200)",
     )
     pla.add_argument(
@@ -106,18 +116,29 @@ def add_arguments(pla: argparse.ArgumentParser) -> None:
 
 
 def resolved_orders_line(q: Array, label: str = "the plan") -> str:
-    """'joint-angle harmonics the plan tells apart (...): joint 1 up to order 29 (29 at
-    once), ...': per joint of readings q (n, J) [rad], the highest order `diagnose` can
-    tell apart (`measurements.aliasing.resolvable_order`: above it some order is an alias
-    of a lower one) and how many orders its distinct readings fit together
-    (`orders_at_once`)."""
-    from robot_calib.measurements.aliasing import orders_at_once, resolvable_order
+    """'joint-angle harmonics the plan resolves per joint (...): joint 1 up to order 29 (29
+    together), joint 2 up to order 32 (14 together; orders 1 apart alike on its 157 deg
+    arc), ...': per joint of readings q (n, J) [rad], the highest order below which its
+    readings alias none (`measurements.aliasing`), how many orders its distinct readings
+    fit together (`orders_at_once`) and, on a partial turn, how far apart orders may be
+    that its arc itself makes alike (`OrderSimilarity.overlap`)."""
+    from robot_calib.measurements.aliasing import (
+        distinct_readings,
+        order_similarity,
+        orders_at_once,
+    )
 
-    orders = ", ".join(f"joint {j + 1} up to order {resolvable_order(q[:, j])} "
-                       f"({orders_at_once(q[:, j])} at once)"
-                       for j in range(q.shape[1]))  # fmt: skip
-    return (f"joint-angle harmonics {label} tells apart (which order a harmonic has; how "
-            f"many orders its distinct readings fit together): {orders}")  # fmt: skip
+    parts = []
+    for j in range(q.shape[1]):
+        similarity = order_similarity(q[:, j])
+        overlap = similarity.overlap()
+        arc = np.degrees(np.ptp(distinct_readings(q[:, j])))
+        alike = f"; orders {overlap} apart alike on its {arc:.0f} deg arc" if overlap else ""
+        parts.append(f"joint {j + 1} up to order {similarity.resolvable()} "
+                     f"({orders_at_once(q[:, j])} together{alike})")  # fmt: skip
+    return (f"joint-angle harmonics {label} resolves per joint (the highest order its readings "
+            "never alias with another; in brackets, how many orders its distinct readings can "
+            f"fit together): {', '.join(parts)}")  # fmt: skip
 
 
 def sweeps_main(args: argparse.Namespace) -> int:
@@ -127,23 +148,31 @@ def sweeps_main(args: argparse.Namespace) -> int:
     from robot_calib.flows.simulate import simulation_inputs, simulation_world
     from robot_calib.plan.plan_file import plan_text
     from robot_calib.plan.sweeps import DESIGN_TRIALS, irregular_sweeps
-    from robot_calib.sim.plans import paper_test_plan
+    from robot_calib.sim.plans import paper_test_number, paper_test_plan
 
     name = args.sweeps
-    test = name[len("paper-test") :] if name.startswith("paper-test") else ""
-    if not test.isdigit():
-        raise InputError(f"--sweeps {name}: one of paper-test1 .. paper-test6 (seed Table 2)")
-    if args.max_order > MAX_ORDER:
-        raise InputError(f"--max-order {args.max_order}: at most {MAX_ORDER}")
+    optimal_only = {"--model": (args.model, DEFAULT_MODEL), "--noise-mm": (args.noise_mm, None),
+                    "--candidates": (args.candidates, CANDIDATES),
+                    "--trials": (args.trials, TRIALS), "--holdout": (args.holdout, HOLDOUT),
+                    "--ecc-order": (args.ecc_order, DEFAULT_ECC_ORDER)}  # fmt: skip
+    given = [flag for flag, (value, default) in optimal_only.items() if value != default]
+    if given:
+        raise InputError(f"--sweeps {name}: {', '.join(given)} belong to D-optimal poses "
+                         "(--poses), not to the seed's sweeps")  # fmt: skip
+    try:
+        test = paper_test_number(name)
+    except InputError as exc:
+        raise InputError(f"--sweeps {exc}") from None
     world = simulation_world(args.world, args.robot, (), args.seed)
     robot = world.model.robot
     output = output_path(args.output, "PLAN.yaml", simulation_inputs(world), args.force)
     if output.suffix.lower() not in (".yaml", ".yml"):  # after the input check: never an input
         raise InputError(f"{output}: a plan is written as YAML: give a .yaml or .yml name")
-    plan = irregular_sweeps(int(test), args.max_order, args.seed)
-    regular = paper_test_plan(int(test))
+    plan = irregular_sweeps(test, args.max_order, args.seed)
+    regular = paper_test_plan(test)
     q = robot.readings(plan.q)
     robot.check_joints(q, f"--sweeps {name} on {robot.name}")
+    floor = _below_floor(world, q, args.floor_z)
     print(resolved_orders_line(robot.readings(regular.q), f"{name} in regular steps"))
     print(resolved_orders_line(q, f"{name} in irregular steps"))
     design = {
@@ -152,11 +181,31 @@ def sweeps_main(args: argparse.Namespace) -> int:
         f"them; the draw of {DESIGN_TRIALS} that tells the most harmonic orders apart",
         "max_order": int(args.max_order),
         "seed": int(args.seed),
+        "floor_z_m": float(args.floor_z),
     }
+    if floor:
+        print(f"warning: {floor}")
+        design["warning"] = floor
     write_text_atomic(output, plan_text(robot, "cpa", q, plan.speed_fraction, design, {}))
     print(f"{output}: {len(q)} poses, {len(set(plan.sweep.tolist()))} circle sweeps "
           "(msgs_doc/plan.md)")  # fmt: skip
     return 0
+
+
+def _below_floor(world: World, q: Array, floor_z_m: float) -> str:
+    """'' when every pose of readings q (n, J) [rad] keeps the joint centres, flange and
+    target at or above z = floor_z_m [m] of the robot base (nominal geometry), else how many
+    do not and how low they go (the seed's sweeps are fixed: they are not moved up)."""
+    from robot_calib.plan.design import FLOOR_SLACK_M, clearance_z
+
+    lowest = clearance_z(world.model, world.model.parameters(), q).min(axis=1)
+    below = lowest < floor_z_m - FLOOR_SLACK_M
+    if not below.any():
+        return ""
+    return (f"{int(below.sum())} of {len(q)} poses put a joint centre, the flange or the "
+            f"target below z = {floor_z_m:g} m of the robot base (lowest {lowest.min():.3f} m): "
+            "the seed's sweeps assume a robot on a pedestal; check the clearance before "
+            "running them (--floor-z sets the plane checked)")  # fmt: skip
 
 
 def main(args: argparse.Namespace) -> int:
@@ -172,6 +221,9 @@ def main(args: argparse.Namespace) -> int:
                          "(the seed's sweeps in irregular steps)")  # fmt: skip
     if args.sweeps is not None:
         return sweeps_main(args)
+    if args.max_order != MAX_ORDER:
+        raise InputError("--max-order belongs to --sweeps (D-optimal poses resolve what "
+                         "their random readings do)")  # fmt: skip
     noise = args.noise_mm
     if noise is not None and not (math.isfinite(noise) and 0 < noise < 10):
         raise InputError(f"--noise-mm {noise}: a 1-sigma per coordinate in mm, > 0 and < 10")

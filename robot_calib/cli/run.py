@@ -65,7 +65,10 @@ def main(args: argparse.Namespace) -> int:
         say=print, log=log, progress=progress(),
     )  # fmt: skip
     geometric = result.models["geometric"].calibration
-    print(summary(geometric, result.recording))
+    text = summary(geometric, result.recording)
+    for source in result.recording.sources:  # read while staged: named where it now lies
+        text = text.replace(str(Path(source).parent), str(result.folder))
+    print(text)
     print("accuracy (seed criterion: pairwise distance errors; absolute: tracker frame)")
     print(f"{'model':<12}{'in-sample mean/max [mm]':>26}{'hold-out mean/max [mm]':>26}"
           f"{'hold-out abs mean [mm]':>25}")  # fmt: skip

@@ -102,6 +102,15 @@ class RungScore(Record):
     learnable_gap_share: float | None = None
     # the hybrid rung (a physical rung plus a learned correction): no effect of its own
     learned: bool = False
+    # points the held-out figures are of (None: a document written before it was stored)
+    holdout_points: int | None = None
+
+    def holdout_seed_text(self, sep: str = " / ") -> str:
+        """The held-out seed criterion 'mean / max' [mm], 'n/a (no pair)' when fewer than
+        two points were held out: the 0 stored then measures nothing."""
+        if self.holdout_points is not None and self.holdout_points < 2:
+            return "n/a (no pair)"
+        return f"{self.holdout_mean_mm:.4f}{sep}{self.holdout_max_mm:.4f}"
 
     @classmethod
     def of(cls, rung: Rung, gap: tuple[float, float] | None = None) -> RungScore:
@@ -117,7 +126,7 @@ class RungScore(Record):
             rung.model, held.pairwise_mean_mm, held.pairwise_max_mm, held.absolute_mean_mm,
             held.absolute_max_mm, held.absolute_rms_mm, fit.pairwise_mean_mm,
             fit.absolute_rms_mm, int(rung.calibration.parameters.free.sum()), share,
-            rung.learned,
+            rung.learned, held.n_points,
         )  # fmt: skip
 
 
@@ -265,9 +274,7 @@ class Diagnosis(Record):
     def summary(self) -> str:
         """A few human lines: the verdict, the ladder (held-out, seed criterion), what
         remains."""
-        rungs = "; ".join(
-            f"{r.model} {r.holdout_mean_mm:.4f}/{r.holdout_max_mm:.4f} mm" for r in self.ladder
-        )
+        rungs = "; ".join(f"{r.model} {r.holdout_seed_text(sep='/')} mm" for r in self.ladder)
         blunders = (
             f" {len(self.outliers)} measurement(s) left out as tracker blunders: "
             + "; ".join(o.line() for o in self.outliers) + "."

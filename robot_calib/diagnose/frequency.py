@@ -17,9 +17,9 @@ MIN_LEFT of their norm after the projection is collinear with the model and is s
 never reported with a meaningless amplitude; so is one whose amplitude alone would exceed
 MAX_AMPLITUDE_RAD (no gear error is that large). Regular single-joint sweeps alias orders:
 on a full turn in n equal steps order k and n - k coincide, over a partial turn they nearly
-do (`order_correlation`); a picked order lists the orders the readings cannot tell it from
-(`measurements.aliasing`), the ladder tries each of them against the held-out data, and
-`resolvable_order` is the highest order below which no two orders are aliases (random
+do (`measurements.aliasing`); a picked order lists the orders the readings alone cannot
+tell it from, the ladder tries each of them against the held-out data, and the spectrum's
+`resolvable_order` is the highest order below which no two orders look alike (random
 poses and irregular sweeps, `plan --sweeps`, resolve every scanned order). The picked
 orders become the ladder's `joint_harmonics` candidates and the report's dominant orders
 (`effects.joint_harmonics` says what an order usually means).
@@ -39,13 +39,7 @@ from robot_calib.forked import Aside
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
-from robot_calib.measurements.aliasing import (
-    ALIAS_CORRELATION,
-    MAX_ORDER,
-    aliases,
-    order_correlation,
-    resolvable,
-)
+from robot_calib.measurements.aliasing import ALIAS_CORRELATION, MAX_ORDER, order_similarity
 from robot_calib.model import KinematicModel
 from robot_calib.records import Record
 
@@ -103,7 +97,9 @@ class JointSpectrum(Record):
         if not self.dominant_orders:
             return f"joint {self.joint}: no harmonic stands out{limit}"
         parts = [
-            f"{k} ({a:.0f} urad, {s:.0f} x{_alias_clause(self.aliases_of(k))})"
+            f"{k} ({a:.0f} urad, "
+            + (f"{s:.0f} x" if s > 0 else "not confirmed by the k-fold of the calibration poses")
+            + f"{_alias_clause(self.aliases_of(k))})"
             for k, a, s in zip(
                 self.dominant_orders, self.dominant_urad, self.dominant_significance
             )  # fmt: skip
@@ -173,7 +169,7 @@ def joint_spectra(
         left = np.linalg.norm(cols, axis=0) / np.where(norms > 0, norms, 1.0)
         usable = np.all(left >= MIN_LEFT, axis=1)
         usable[[k - 1 for k in modelled_orders(model.effects, j + 1) if k <= max_order]] = False
-        correlation = order_correlation(poses.q[:, j], max_order)
+        similarity = order_similarity(poses.q[:, j], max_order)
         chi2, coef = _pair_explained(cols, r)
         usable &= np.hypot(coef[:, 0], coef[:, 1]) <= MAX_AMPLITUDE_RAD  # beyond physics
         significance = np.where(usable, np.sqrt(np.maximum(chi2, 0.0)) / scatter, 0.0)
@@ -186,9 +182,9 @@ def joint_spectra(
         values = [float(s) for s in significance]
         why = [meaning(k) for k in picked]
         modelled = modelled_orders(model.effects, j + 1)
-        alias = [[m for m in aliases(correlation, k) if m not in modelled] for k in picked]
+        alias = [[m for m in similarity.aliases(k) if m not in modelled] for k in picked]
         return JointSpectrum(j + 1, True, lever * 1e3, values, picked, amps, picked_z, why,
-                             resolvable(correlation), alias)  # fmt: skip
+                             similarity.resolvable(), alias)  # fmt: skip
 
     # the joints are independent: the second half scanned by a forked child meanwhile
     # (`forked.Aside`; the same numbers either way) when the scan is large enough to pay
@@ -261,13 +257,17 @@ def alias_warnings(effects: tuple[Effect, ...], recording: Recording,
             continue
         for j in effect.joints:
             q = recording.poses.q[:, j - 1]
-            corr = order_correlation(q)
-            held = None if holdout is None else order_correlation(holdout.poses.q[:, j - 1])
+            similar = order_similarity(q)
+            held = None if holdout is None else order_similarity(holdout.poses.q[:, j - 1])
             for k in effect.orders:
                 if k > MAX_SCAN_ORDER:
                     continue
-                left = [m for m in aliases(corr, k) if m not in effect.orders
-                        and (held is None or held[k - 1, m - 1] >= ALIAS_CORRELATION)]  # fmt: skip
+                left = [
+                    m
+                    for m in similar.aliases(k)
+                    if m not in effect.orders
+                    and (held is None or held.on_readings[k - 1, m - 1] >= ALIAS_CORRELATION)
+                ]
                 if left:
                     word = "order" if len(left) == 1 else "orders"
                     out.append(

@@ -360,7 +360,7 @@ def _ladder(diagnosis: Diagnosis, ladder: Ladder, figures: FigureCache) -> str:
         share = rung.learnable_gap_share
         rows.append([
             _model(rung.model), rung.free_parameters,
-            f"{rung.holdout_mean_mm:.4f} / {rung.holdout_max_mm:.4f}",
+            f"{rung.holdout_seed_text()}",
             f"{rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f}",
             _times_floor(rung.holdout_abs_rms_mm, diagnosis),
             "-" if share is None else percent(share),

@@ -350,10 +350,10 @@ def kfold_parameters(
     model refitted without that fold's measurements: one Gauss-Newton step from the full
     solution on the other folds' rows (weighted as the fit weighs them, the weak prior
     included, columns scaled to unit norm, damped by SCREEN_DAMPING), less the step all
-    the rows would take (none at a converged fit). At a converged
-    least-squares solution that step is the refit to first order (exact for a model
-    linear in its parameters); it costs one Jacobian instead of five Levenberg-Marquardt
-    solves (issue 22: 105 s of a 138 s diagnosis were k-fold refits)."""
+    the rows would take (none at a converged fit). That is the refit to first order (exact
+    for a model linear in its parameters fitted to convergence); it costs one Jacobian
+    instead of five Levenberg-Marquardt solves (105 s of a 138 s diagnosis were k-fold
+    refits)."""
     fold = pose_folds(recording)
     params = cal.parameters
     residual, jac, owner = weighted_rows(cal.model, params, recording.poses, recording.points)

@@ -4,8 +4,7 @@
    anywhere in the recording but at most MAX_REPEAT_GAP_S apart (e.g. the turn-around of a
    forth-and-back sweep, or a pose revisited a few rows later), differ only by noise:
    sigma^2 = mean |p_a - p_b|^2 / 6 per axis. (Farther apart in time, a warming robot
-   would add its drift to the noise: such repeats serve only where nothing else measures
-   it and no accuracy is stated, labelled so.)
+   would add its drift to the noise.)
 2. Circle sweeps: each circle fit leaves 2 of the 3 noise components (plane, radial):
    sigma^2 = sum(residual^2) / (2 n - 6 per sweep) (an upper bound if effects bend circles).
    Where both exist and agree (circles within 1.5 x), they are pooled by degrees of freedom
@@ -121,10 +120,10 @@ def moved_between(recording: Recording, pairs: IntArray) -> NDArray[np.bool_]:
     return moves[pairs[:, 1]] > moves[pairs[:, 0]]
 
 
-def repeat_pairs(recording: Recording, max_gap_s: float = MAX_REPEAT_GAP_S) -> IntArray:
+def repeat_pairs(recording: Recording) -> IntArray:
     """Index pairs (k, 2) [a, b], a < b: each measurement with the next one of the same bag
     and target at equal readings (within JOINT_CHANGE_TOLERANCE) and approach directions, at most
-    `max_gap_s` later (and at most MAX_REPEAT_LAG rows on)."""
+    MAX_REPEAT_GAP_S later (and at most MAX_REPEAT_LAG rows on)."""
     q, d, t = recording.poses.q, recording.poses.direction, recording.poses.time
     target = recording.poses.target_index
     n = len(q)
@@ -137,7 +136,7 @@ def repeat_pairs(recording: Recording, max_gap_s: float = MAX_REPEAT_GAP_S) -> I
         same &= np.all(d[b] == d[a], axis=1)
         same &= recording.bag_index[b] == recording.bag_index[a]
         same &= target[b] == target[a]
-        same &= np.abs(t[b] - t[a]) <= max_gap_s
+        same &= np.abs(t[b] - t[a]) <= MAX_REPEAT_GAP_S
         same &= partner[a] < 0  # the nearest repeat only
         partner[a[same]] = b[same]
     first = np.flatnonzero(partner >= 0)
@@ -185,9 +184,6 @@ def _estimate(recording: Recording, fallback_residuals: Array | None, fallback_d
         return replace(stated, warning=(
             f"warning: {figures}: the noise floor and the verdict rest on the stated accuracy "
             f"alone (no repeat poses or circle sweeps to check it); {UNIT_HINT}"))  # fmt: skip
-    distant = _distant_repeats(recording)
-    if distant is not None:
-        return distant
     if model is not None:
         return model
     return NoiseLevel(float("nan"), "unknown", 0)
@@ -212,21 +208,6 @@ def _measured_noise(recording: Recording) -> NoiseLevel | None:
             return _pooled(repeat, circles, f"{repeat.source} + circle fits")
         return repeat
     return repeat if repeat is not None else circles
-
-
-def _distant_repeats(recording: Recording) -> NoiseLevel | None:
-    """Where nothing nearer measures the noise: poses the robot came back to more than
-    MAX_REPEAT_GAP_S later (an ISO 9283 cycle of slow moves), labelled as holding any drift
-    in between (a floor on the high side: the verdict's ratio then on the low side); None
-    with fewer than MIN_REPEATS."""
-    pairs = repeat_pairs(recording, np.inf)
-    pairs = pairs[moved_between(recording, pairs)]
-    if len(pairs) < MIN_REPEATS:
-        return None
-    t = recording.poses.time
-    gap = float(np.max(np.abs(t[pairs[:, 1]] - t[pairs[:, 0]])))
-    return _pair_noise(recording, pairs, f"repeat poses up to {gap / 60:.1f} min apart (any "
-                       "drift between them included: the floor may be high)")  # fmt: skip
 
 
 def _pair_noise(recording: Recording, pairs: IntArray, source: str) -> NoiseLevel:

@@ -352,7 +352,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         share = rung.learnable_gap_share
         lines.append(
             f"| {with_breaks(rung.model)} "
-            f"| {rung.holdout_mean_mm:.4f} / {rung.holdout_max_mm:.4f} "
+            f"| {rung.holdout_seed_text()} "
             f"| {rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f} "
             f"| {_times_floor(rung.holdout_abs_rms_mm, noise.floor_abs_rms_mm)} "
             f"| {'-' if share is None else percent(share)} |"
@@ -442,7 +442,9 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         gone = signature_removed(where.strongest_signature, removed)
         lines += ["", f"Strongest structure: {where.strongest_signature.text}"
                   + (f" ({gone})." if gone else ".")]  # fmt: skip
-    lines += [f"- {signature_text(t)}" for t in where.twists()]
+    if where.twists():
+        lines += ["", "Links twisting under the load:", "",
+                  *(f"- {signature_text(t)}" for t in where.twists())]  # fmt: skip
     lines += _harmonic_lines(diagnosis)
     lines += [
         "",

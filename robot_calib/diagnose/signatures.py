@@ -411,14 +411,16 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
         idx, err, lever = idx[seen], err[seen], lever[seen]
         qj = q[idx, j - 1]
         forth = direction[idx, j - 1] > 0
+        # None where the sweeps do not measure it: one approach direction only, a reading
+        # that does not change, a gravity torque that does not (a vertical axis: none)
         split = (
-            float(err[forth].mean() - err[~forth].mean())
+            float(err[forth].mean() - err[~forth].mean()) * 1e6
             if forth.any() and (~forth).any()
-            else 0.0
+            else None
         )
-        slope = float(np.polyfit(qj, err, 1)[0]) if np.ptp(qj) > 0 else 0.0
+        slope = float(np.polyfit(qj, err, 1)[0]) * 1e6 if np.ptp(qj) > 0 else None
         t = tau[idx, j - 1]
-        corr = float(np.corrcoef(t, err)[0, 1]) if np.ptp(t) > 1e-3 else 0.0
+        corr = float(np.corrcoef(t, err)[0, 1]) if np.ptp(t) > 1e-3 else None
         amps, amp_sigma = harmonic_amplitudes(qj, err, 1.0)
         full_turn = np.sqrt(2.0 / len(qj))  # an order's 1-sigma over a full, even turn
         shown: list[float | None] = [
@@ -435,8 +437,8 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
                 float(np.sqrt(np.mean(err**2)) * 1e6),
                 shown,
                 significance,
-                split * 1e6,
-                slope * 1e6,
+                split,
+                slope,
                 corr,
                 True,
                 float(np.median(lever) * 1e3),

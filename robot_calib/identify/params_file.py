@@ -70,6 +70,9 @@ def read_document(path: Path) -> dict[str, Any]:
     try:
         doc = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        if Path(path).suffix.lower() in (".mcap", ".db3"):  # arguments swapped
+            raise InputError(f"{path}: a bag, not a parameter file: the parameter file "
+                             "(PARAMS.json) comes first, then the bags") from None  # fmt: skip
         raise InputError(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise InputError(f"{path}: not a robot_calib parameter file (format {FORMAT})")

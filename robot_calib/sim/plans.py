@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -82,20 +83,42 @@ class Plan:
         return int(self.q.shape[0])
 
 
-def paper_test_plan(test: int, home_deg: tuple[float, ...] = HOME_DEG) -> Plan:
-    """The seed's Table 2 test `test` (1-6) for a 6-joint robot."""
-    if test not in PAPER_TESTS:
-        raise InputError(f"paper-test{test}: the seed's Table 2 has tests 1-6")
+def paper_test_number(name: str) -> int:
+    """N of a plan name 'paper-testN' (1-6, the seed's Table 2); InputError otherwise."""
+    test = name[len("paper-test") :] if name.startswith("paper-test") else ""
+    if not test.isdigit() or int(test) not in PAPER_TESTS:
+        raise InputError(f"{name}: not one of paper-test1 .. paper-test6 (the seed's Table 2)")
+    return int(test)
+
+
+def sweep_plan(name: str, test: int, angles: Callable[[int, float, float, int], Array],
+               home_deg: tuple[float, ...] = HOME_DEG) -> Plan:  # fmt: skip
+    """Table 2 test `test`'s single-joint sweeps, each joint in turn through the readings
+    `angles(joint, start, end, points)` ((m,) [deg], in visiting order) of its row, the other
+    joints at `home_deg`; the plan `name` of joint variables [rad], rows labelled with the
+    joint they sweep, at the test's speed."""
     sweeps, speed = PAPER_TESTS[test]
     rows, labels = [], []
     for j, (start, end, points) in enumerate(sweeps, start=1):
-        forth = np.linspace(start, end, points)
-        for angle in np.concatenate([forth, forth[::-1]]):
+        for angle in angles(j, start, end, points):
             q = np.array(home_deg, dtype=float)
             q[j - 1] = angle
             rows.append(q)
             labels.append(j)
-    return Plan(f"paper-test{test}", np.radians(rows), np.array(labels), speed)
+    return Plan(name, np.radians(rows), np.array(labels), speed)
+
+
+def paper_test_plan(test: int, home_deg: tuple[float, ...] = HOME_DEG) -> Plan:
+    """The seed's Table 2 test `test` (1-6) for a 6-joint robot: each sweep `points` regular
+    steps from Start to End and back over the same readings."""
+    if test not in PAPER_TESTS:
+        raise InputError(f"paper-test{test}: the seed's Table 2 has tests 1-6")
+
+    def forth_and_back(_joint: int, start: float, end: float, points: int) -> Array:
+        forth = np.linspace(start, end, points)
+        return np.concatenate([forth, forth[::-1]])
+
+    return sweep_plan(f"paper-test{test}", test, forth_and_back, home_deg)
 
 
 def random_plan(
@@ -180,7 +203,7 @@ def make_plan(
         planned = load_plan(name, model.robot)
         return Plan(name, planned.q, np.zeros(len(planned.q), dtype=int), planned.speed_fraction)
     if name.startswith("paper-test") and name[10:].isdigit():
-        plan = paper_test_plan(int(name[10:]))
+        plan = paper_test_plan(paper_test_number(name))
         # Table 2's angles are joint variables: single-joint sweeps of the DH joints, which
         # a robot with coupled readings (reading_to_joint) reads as two readings changing.
         return replace(plan, q=model.robot.readings(plan.q))
