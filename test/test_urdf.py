@@ -299,3 +299,70 @@ def test_a_typo_inside_a_joint_is_an_error(tmp_path: Path) -> None:
     bad.write_text(text)
     with pytest.raises(RobotDescriptionError, match='Unknown tag "axs"'):
         load_robot(str(bad))
+
+
+def test_a_urdf_as_it_ships_loads_as_ros_loads_it(tmp_path: Path) -> None:
+    """A URDF as one ships (the ABB IRB 120's of a public repository): a blank line before
+    the XML declaration, `<material>` and `<inertial>` inside `<collision>`. urdfdom, and so
+    robot_state_publisher and RViz, take it; so does this tool, with one warning naming
+    what it ignores, and the same kinematics and masses as the clean file."""
+    import warnings
+
+    clean = DATA / "irb120_3_58.urdf"
+    text = clean.read_text()
+    collision = (
+        '<collision><geometry><box size="0.1 0.1 0.1"/></geometry>'
+        '<material name="grey"/><inertial><mass value="99"/></inertial></collision>'
+    )
+    for link in ("link_1", "link_4"):
+        text = text.replace(f'<link name="{link}">', f'<link name="{link}">{collision}', 1)
+    text = "\n\n  " + text
+    assert text.lstrip().startswith("<?xml")
+    shipped = tmp_path / "irb120_as_shipped.urdf"
+    shipped.write_text(text)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        robot = load_robot(f"{shipped}#base_link=base&tip_link=tool0")
+    said = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+    assert len(said) == 1 and "4 element(s) inside visual or collision" in said[0], said
+    assert '"material"' in said[0] and '"inertial"' in said[0], said
+    reference = load_urdf(clean, "base", "tool0").description
+    q = random_readings(reference, seed=3)
+    gap = points(model_flange2base(robot, q)) - points(model_flange2base(reference, q))
+    assert np.abs(gap).max() < 1e-12
+    np.testing.assert_array_equal(robot.link_mass, reference.link_mass)  # not the 99 kg
+
+
+def test_a_mass_model_beyond_physics_is_named_and_not_used(tmp_path: Path) -> None:
+    """The shipped IRB 120 URDF puts link 4's centre of mass 500.22 m from its frame (the
+    ROS-Industrial description: 0.22 m); a YAML robot may say 1e6 kg. Each is named in one
+    warning, and its gravity torques are not used (no mass model: the gravity effects have
+    nothing to fit), where before they were taken as given and changed the verdict."""
+    import warnings
+
+    from robot_calib.effects.compliance import gravity_joints
+
+    text = (DATA / "irb120_3_58.urdf").read_text()
+    sane_com = '<origin xyz="0.2247 0.00015 0.00041"/>'
+    text = text.replace(sane_com, sane_com.replace("0.2247", "500.2247"))
+    shipped = tmp_path / "irb120_absurd_com.urdf"
+    shipped.write_text(text)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        robot = load_robot(f"{shipped}#base_link=base&tip_link=tool0")
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1 and "mass model beyond physics" in said[0], said
+    assert "the link of joint_4: centre of mass 499.9 m from its frame" in said[0], said
+    assert not robot.link_mass.any() and gravity_joints(robot) == ()
+    sane = load_robot(f"{DATA / 'irb120_3_58.urdf'}#base_link=base&tip_link=tool0")
+    assert sane.link_mass.any() and gravity_joints(sane)  # the same file, sane: used
+    np.testing.assert_array_equal(robot.a, sane.a)  # the geometry is not touched
+    heavy = tmp_path / "heavy.yaml"
+    doc = (ROOT / "robot_calib/kinematics/robots/kr5_sixx_r650.yaml").read_text()
+    heavy.write_text(doc.replace("mass: 9.0,", "mass: 1000000.0,", 1))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        robot = load_robot(str(heavy))
+    said = [str(w.message) for w in caught]
+    assert len(said) == 1 and "1e+06 kg in all for a reach of 1.15 m" in said[0], said
+    assert not robot.link_mass.any()

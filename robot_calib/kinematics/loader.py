@@ -1,7 +1,8 @@
 """One name for every robot description: a built-in robot, a robot YAML file or a URDF.
 
 The layers below it: `description` (the `RobotDescription` type and robot YAML files) and
-`urdf` (a URDF chain converted into a `RobotDescription`); this module only dispatches.
+`urdf` (a URDF chain converted into a `RobotDescription`); this module only dispatches
+(and checks a YAML file's mass model, as `urdf` checks a URDF's: `masses`).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from robot_calib.kinematics.description import (
     available_robots,
     load_robot_yaml,
 )
+from robot_calib.kinematics.masses import checked_mass_model
 from robot_calib.kinematics.urdf import is_urdf_reference, load_urdf_reference
 
 
@@ -32,4 +34,4 @@ def load_robot(name_or_path: str | Path) -> RobotDescription:
                 f"unknown robot {str(name_or_path)!r} (built-in: {', '.join(available_robots())}"
                 "; or give a YAML file)"
             )
-    return load_robot_yaml(path)
+    return checked_mass_model(load_robot_yaml(path), str(path))

@@ -30,6 +30,7 @@ controller's base frame on UR descriptions). The parser is urdfdom_py's `urdf_pa
 from __future__ import annotations
 
 import contextlib
+import warnings as python_warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -41,6 +42,7 @@ from robot_calib.errors import InputError, RobotDescriptionError
 from robot_calib.kinematics.axes import AxisLine, angle_about, dh_from_axes, link_transform, wrap
 from robot_calib.kinematics.description import RobotDescription, parse_robot
 from robot_calib.kinematics.frames import Array, homogeneous, rpy_to_matrix
+from robot_calib.kinematics.masses import checked_mass_model
 
 URDF_SUFFIX = ".urdf"
 PARALLEL_RAD = np.radians(1.0)  # consecutive axes closer to parallel: a Hayati link
@@ -151,7 +153,7 @@ def description_from_text(kind: str, text: str, reference: str, where: str) -> R
         except yaml.YAMLError as exc:
             first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise RobotDescriptionError(f"{where}: not valid YAML ({first})") from None
-        return replace(parse_robot(data, where), path=reference)
+        return replace(checked_mass_model(parse_robot(data, where), where), path=reference)
     raise RobotDescriptionError(f"{where}: description format {kind!r}: urdf or yaml")
 
 
@@ -218,6 +220,9 @@ def parse_urdf(text: bytes | str, source: str) -> UrdfModel:
 
     from urdf_parser_py.urdf import URDF
 
+    # blank lines before the XML declaration: urdfdom (TinyXML2) skips them, so the
+    # robot_state_publisher and RViz load such a file; lxml would refuse it
+    text = text.lstrip()
     with contextlib.suppress(ET.ParseError):  # if so, the URDF parser says what is wrong
         refuse_xacro(ET.fromstring(text), source, RobotDescriptionError)
 
@@ -227,10 +232,44 @@ def parse_urdf(text: bytes | str, source: str) -> UrdfModel:
     except Exception as exc:  # noqa: BLE001 - the parser raises bare Exception and others
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise RobotDescriptionError(f"{source}: not a valid URDF ({first})") from None
-    typos = [m for m in messages if "/joint[" in m or "/link[" in m]
+    unused = [m for m in messages if _in_unused_element(m)]
+    typos = [m for m in messages if ("/joint[" in m or "/link[" in m) and m not in unused]
     if typos:
         raise RobotDescriptionError(f"{source}: {typos[0]} (a typo? the parser would ignore it)")
+    if unused:
+        python_warnings.warn(
+            f"{source}: {len(unused)} element(s) inside visual or collision geometry ignored, "
+            f"as ROS's URDF parser ignores them (the calibration uses neither): "
+            + "; ".join(_element_words(m) for m in unused[:MAX_LISTED])
+            + ("; ..." if len(unused) > MAX_LISTED else ""),
+            UserWarning, stacklevel=2,
+        )  # fmt: skip
     return _model(urdf, source)
+
+
+#: the elements of a link the calibration never reads: what the URDF parser says of them
+#: (an unknown or misplaced element, e.g. `<material>` inside `<collision>`) is not a typo
+#: that changes the kinematics, so it is ignored with one warning
+UNUSED_ELEMENTS = ("/visual", "/collision")
+MAX_LISTED = 4  # elements named in that warning
+
+
+def _in_unused_element(message: str) -> bool:
+    """True when a parser message is about an element inside a link's visual or collision
+    geometry (`UNUSED_ELEMENTS`)."""
+    where = message.rsplit(" in ", 1)[-1]
+    return any(part in where for part in UNUSED_ELEMENTS)
+
+
+def _element_words(message: str) -> str:
+    """'link base, collision: "material"' of the parser's 'Unknown tag "material" in
+    /robot[@name='q']/link[@name='base']/collision[1]'."""
+    what, _, where = message.rpartition(" in ")
+    tag = what.split()[-1] if what else message
+    parts = [p for p in where.split("/") if p and not p.startswith("robot[")]
+    words = [p.split("[@name='")[0] + " " + p.split("[@name='")[1].rstrip("']")
+             if "[@name='" in p else p.split("[")[0] for p in parts]  # fmt: skip
+    return f"{', '.join(words)}: {tag}"
 
 
 def _pose(origin: Any) -> Array:  # noqa: ANN401 - urdf_parser_py's Pose (untyped)
@@ -386,6 +425,7 @@ def urdf_to_description(
         link_com=com,
         source=f"URDF {Path(source).name}, chain {base} -> {tip}",
     )
+    description = checked_mass_model(description, source)
     return UrdfRobot(description, base, tip, dh02base, np.linalg.inv(flange) @ tip_frame)
 
 
