@@ -252,3 +252,46 @@ def test_every_option_of_the_units_table_refuses_out_of_range(
     run = cli(verb, *base, f"{option}={value}", timeout=120)
     _one_line_error(run, option)
     assert not list(tmp_path.iterdir())
+
+
+def test_rounded_rereads_of_a_still_pose_import_and_a_pasted_block_does_not(
+    sim: tuple[Path, list[list[float]]], tmp_path: Path
+) -> None:
+    """A tracker export rounding to 1 um reads a still pose 3 times; now and then two reads
+    round to the same point (38 of 1134 rows of a real Meca500 export), which `import` once
+    refused as copies. Scattered exact repeats are kept as re-reads (said in one note, and
+    the bag keeps them: one pose in every fold); a block of rows pasted again, or a file
+    of mostly copies, is still refused."""
+    from robot_calib.bag.read import read_recording
+    from robot_calib.kinematics.loader import load_robot
+    from robot_calib.poses import reading_groups
+
+    _, rows = sim
+    rng = np.random.default_rng(0)
+    reads = []
+    for k, r in enumerate(rows):  # 3 reads a pose, 3 um noise, rounded to 1 um
+        for read in range(3):
+            noise = rng.normal(0.0, 3e-6, 3) if not (k % 10 == 0 and read == 2) else 0.0
+            point = np.round((np.array(r[6:]) + (noise if read else 0.0)) * 1e6) / 1e6
+            reads.append(r[:6] + point.tolist())
+    reads = [r if i % 30 != 2 else reads[i - 2] for i, r in enumerate(reads)]  # exact re-reads
+    out = tmp_path / "rereads.mcap"
+    run = cli("import", str(_csv(tmp_path / "rereads.csv", reads)), *COLUMNS, "-o", str(out))
+    assert run.returncode == 0, run.stderr
+    assert "6 of 180 rows repeat an earlier row's joint readings and point exactly" in run.stdout
+    recording = read_recording([out], load_robot("kr5_sixx_r650"))
+    assert len(recording) == 180 and "copies" not in " ".join(recording.warnings)
+    assert len(np.unique(reading_groups(recording.poses.q))) == 60  # 3 reads: one pose
+    pasted = reads[:90] + reads[30:60]  # a block of 30 rows pasted again
+    _one_line_error(
+        cli(
+            "import",
+            str(_csv(tmp_path / "pasted.csv", pasted)),
+            *COLUMNS,
+            "-o",
+            str(tmp_path / "p.mcap"),
+        ),
+        "pasted.csv:121 repeat rows",
+        "33 of 120 rows",
+        "a pasted block",
+    )

@@ -33,7 +33,7 @@ from robot_calib.bag.csv_six_dof import check_six_dof_format, six_dof_columns
 from robot_calib.bag.write import EPOCH_MIN_S
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
-from robot_calib.measurements.recording import COPY_RESOLUTION, copies
+from robot_calib.measurements.recording import are_rereads, copied_rows, copies, pasted_block
 from robot_calib.poses import beyond_reach
 
 __all__ = [
@@ -45,10 +45,13 @@ __all__ = [
 ]
 
 
-def check_no_copies(paths: Sequence[str | Path], tables: Sequence[ImportedTable]) -> None:
-    """InputError when a CSV is given twice, or a row repeats an earlier row's joint
-    readings and point (to 1 nrad / 1 nm, `copies`: the same measurement, not the tracker
-    measuring again), in one file or across the files; names the first copy and how many."""
+def check_no_copies(paths: Sequence[str | Path], tables: Sequence[ImportedTable]) -> str:
+    """InputError when a CSV is given twice, or the rows repeat themselves as a copy would:
+    a block of MIN_PASTED_ROWS or more consecutive rows repeating earlier consecutive rows,
+    or more than MAX_REREAD_SHARE of the rows repeating an earlier row's joint readings and
+    point exactly (to 1 nrad / 1 nm, `copies`), in one file or across the files; names the
+    first copy and how many. Fewer, scattered exact repeats are re-reads of a still pose
+    by a tracker whose export rounds (kept): returned as a note ('' when none)."""
     seen: dict[Path, str] = {}
     for path in paths:
         key = Path(path).resolve()
@@ -57,23 +60,35 @@ def check_no_copies(paths: Sequence[str | Path], tables: Sequence[ImportedTable]
                              "imported twice; give each CSV once")  # fmt: skip
         seen[key] = str(path)
     if not tables:
-        return
+        return ""
     q = np.concatenate([t.q for t in tables])
     points = np.concatenate([t.points for t in tables])
     if all(t.time is not None for t in tables):  # rows logged at other times: kept
         q = np.column_stack([q, np.concatenate([t.time for t in tables if t.time is not None])])
     copied = copies(q, points)
     if not copied.any():
-        return
+        return ""
     where = [f"{p}:{line}" for p, t in zip(paths, tables)
              for line in (t.lines or range(1, len(t.q) + 1))]  # fmt: skip
-    k = int(np.flatnonzero(copied)[0])
-    rows = np.round(np.column_stack([q, points]) / COPY_RESOLUTION)
-    first = int(np.flatnonzero((rows[:k] == rows[k]).all(axis=1))[0])
+    original = copied_rows(q, points)
+    block = pasted_block(original)
+    if are_rereads(original, len(copied)):
+        k = min(original)
+        return (f"note: {int(copied.sum())} of {len(copied)} rows repeat an earlier row's "
+                f"joint readings and point exactly (first {where[k]} = {where[original[k]]}): "
+                "kept as re-reads of a still pose (an export that rounds); they count as one "
+                "pose in every fold and split")  # fmt: skip
+    k = min(original) if block is None else block[0]
+    what = (
+        f"rows {where[k]} .. {where[block[0] + block[1] - 1]} repeat rows "
+        f"{where[original[k]]} .. in the same order ({block[1]} rows: a pasted block)"
+        if block is not None
+        else f"{where[k]}: the same joint readings and point as {where[original[k]]}"
+    )
     raise InputError(
-        f"{where[k]}: the same joint readings and point as {where[first]} (to 1 nrad / 1 nm; "
-        f"{int(copied.sum())} of {len(copied)} rows are such copies): a tracker measuring "
-        "again never repeats a point exactly; give each measurement once"
+        f"{what} (to 1 nrad / 1 nm; {int(copied.sum())} of {len(copied)} rows are such "
+        "copies): a tracker measuring again never repeats a whole run of points; give each "
+        "measurement once"
     )
 
 

@@ -174,7 +174,9 @@ def main(args: argparse.Namespace) -> int:
                   f"orientations, {np.isfinite(sigma).any(axis=1).sum()} rows with stated "
                   "standard deviations")  # fmt: skip
         tables.append(table)
-    check_no_copies(args.csv, tables)
+    note = check_no_copies(args.csv, tables)
+    if note:
+        print(note)
     q = np.concatenate([t.q for t in tables])
     points = np.concatenate([t.points for t in tables])
     times = joined_times([t.time for t in tables])  # absolute Unix times kept as they are

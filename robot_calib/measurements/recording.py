@@ -280,24 +280,75 @@ def copies(q: Array, points: Array, target: IntArray | None = None,
     n = len(points)
     if n < 2:
         return np.zeros(n, dtype=bool)
-    key = np.column_stack(
-        [np.round(np.asarray(q, dtype=float).reshape(n, -1) / COPY_RESOLUTION),
-         np.round(np.asarray(points, dtype=float) / COPY_RESOLUTION),
-         np.zeros(n) if target is None else target,
-         np.zeros((n, 1)) if direction is None else np.sign(direction).reshape(n, -1)]
-    )  # fmt: skip
-    _, first = np.unique(key, axis=0, return_index=True)
+    _, first = np.unique(_copy_key(q, points, target, direction), axis=0, return_index=True)
     out = np.ones(n, dtype=bool)
     out[first] = False
     return out
 
 
+#: a run of this many consecutive rows repeating earlier consecutive rows exactly is a
+#: pasted block, not the tracker reading again
+MIN_PASTED_ROWS = 3
+#: more than this share of rows exact copies of earlier ones is a copied file, not re-reads
+#: (an export rounding to 1 um repeats a still pose's point now and then: 38 of 1134 rows)
+MAX_REREAD_SHARE = 0.25
+
+
+def copied_rows(q: Array, points: Array, target: IntArray | None = None,
+                direction: Array | None = None) -> dict[int, int]:  # fmt: skip
+    """Each copied measurement (`copies`) -> the first earlier one it repeats."""
+    copied = copies(q, points, target, direction)
+    if not copied.any():
+        return {}
+    key = _copy_key(q, points, target, direction)
+    return {int(k): int(np.flatnonzero((key[:k] == key[k]).all(axis=1))[0])
+            for k in np.flatnonzero(copied)}  # fmt: skip
+
+
+def _copy_key(q: Array, points: Array, target: IntArray | None,
+              direction: Array | None) -> Array:  # fmt: skip
+    """(n, K) what makes two measurements the same (`copies`): readings and point rounded
+    to COPY_RESOLUTION, target, side of approach."""
+    n = len(points)
+    return np.column_stack(
+        [np.round(np.asarray(q, dtype=float).reshape(n, -1) / COPY_RESOLUTION),
+         np.round(np.asarray(points, dtype=float) / COPY_RESOLUTION),
+         np.zeros(n) if target is None else target,
+         np.zeros((n, 1)) if direction is None else np.sign(direction).reshape(n, -1)]
+    )  # fmt: skip
+
+
+def pasted_block(original: dict[int, int]) -> tuple[int, int] | None:
+    """(first row, length) of the first run of MIN_PASTED_ROWS or more consecutive copied
+    rows whose originals (`original`: copied row -> the earlier row it repeats) are
+    consecutive too, else None."""
+    start, length = -1, 0
+    for k in sorted(original):
+        if length and k == start + length and original[k] == original[start] + length:
+            length += 1
+        else:
+            if length >= MIN_PASTED_ROWS:
+                return start, length
+            start, length = k, 1
+    return (start, length) if length >= MIN_PASTED_ROWS else None
+
+
+def are_rereads(original: dict[int, int], n: int) -> bool:
+    """True when the copies `original` (`copied_rows`) among n measurements read as a
+    tracker reading a still pose again with an export that rounds: no pasted block
+    (`pasted_block`) and at most MAX_REREAD_SHARE of them; else they are copies."""
+    return pasted_block(original) is None and len(original) <= MAX_REREAD_SHARE * n
+
+
 def without_copies(recording: Recording, source: str) -> Recording:
     """`recording` with each copied measurement (`copies`) kept once, and a warning naming
-    how many were dropped (none: unchanged)."""
+    how many were dropped (none, or re-reads of still poses, `are_rereads`: unchanged)."""
     poses = recording.poses
     copied = copies(poses.q, recording.points, poses.target_index, poses.direction)
     if not copied.any():
+        return recording
+    original = copied_rows(poses.q, recording.points, poses.target_index, poses.direction)
+    if are_rereads(original, len(copied)):
         return recording
     k = int(np.flatnonzero(copied)[0])
     warning = (
