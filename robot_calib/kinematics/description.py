@@ -27,11 +27,21 @@ import yaml
 
 from robot_calib.errors import InputError, RobotDescriptionError, check_keys
 from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.modified_dh import (
+    MAX_BASE_OFFSET,
+    base_offset,
+    com_to_standard,
+    standard_from_modified,
+)
 
 ROBOTS_DIR = Path(__file__).resolve().parent / "robots"
 DH_FIELDS = ("theta", "d", "a", "alpha")
 # top level of a robot YAML file
-ROBOT_KEYS = ("name", "source", "angle_unit", "reading_to_joint", "joints")
+ROBOT_KEYS = ("name", "source", "angle_unit", "convention", "reading_to_joint", "joints")
+#: the DH conventions a robot YAML file may give its table in (`convention`): standard
+#: (theta_i, d_i, a_i, alpha_i) or modified / Craig (alpha_{i-1}, a_{i-1}, theta_i, d_i:
+#: `kinematics.modified_dh`)
+CONVENTIONS = ("dh", "modified_dh")
 JOINT_KEYS = ("name", *DH_FIELDS, "beta", "hayati", "limits", "mass", "com")  # each joint
 MAPPING_KEYS = ("sign", "offset", "coupling")  # the `reading_to_joint` section
 LIMIT_TOLERANCE_RAD = 1e-9
@@ -350,28 +360,45 @@ def parse_robot(data: Any, source: str) -> RobotDescription:
         if not (isinstance(c, list) and len(c) == 3):
             raise RobotDescriptionError(f"{where}: com must be [x, y, z] in m")
         com.append([_number(v, f"{where} com") for v in c])
-        # Default: beta wherever axes j and j+1 are nominally parallel (alpha_j = 0 or pi).
-        parallel = j < len(joints) and abs(np.sin(table["alpha"][-1])) < 1e-9
-        hayati.append(bool(entry.get("hayati", parallel)))
+        hayati.append(entry.get("hayati"))
 
     repeated = sorted({n for n in names if names.count(n) > 1})
     if repeated:
         raise RobotDescriptionError(
             f"{source}: joint names must be distinct; {repeated} given more than once"
         )
+    convention = data.get("convention", "dh")
+    if convention not in CONVENTIONS:
+        raise RobotDescriptionError(
+            f"{source}: convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}"
+        )
+    alpha, a, com_array = np.array(table["alpha"]), np.array(table["a"]), np.array(com)
+    if convention == "modified_dh":
+        alpha0, a0 = base_offset(alpha, a)
+        if abs(alpha0) > MAX_BASE_OFFSET or abs(a0) > MAX_BASE_OFFSET:
+            raise RobotDescriptionError(
+                f"{source}: joint 1's alpha ({alpha0 / to_rad:g}) and a ({a0:g} m) of a "
+                "modified-DH table must be 0: the base frame's z is joint 1's axis (move "
+                "the base frame onto it)"
+            )
+        alpha, a = standard_from_modified(alpha, a)
+        com_array = com_to_standard(com_array, alpha, a)
+    # Default: beta wherever axes j and j+1 are nominally parallel (alpha_j = 0 or pi).
+    hayati = [bool(h) if h is not None else j < len(joints) - 1 and abs(np.sin(alpha[j])) < 1e-9
+              for j, h in enumerate(hayati)]  # fmt: skip
     matrix, offset = _reading_to_joint(data.get("reading_to_joint"), len(joints), to_rad, source)
     return RobotDescription(
         name=str(data.get("name", Path(source).stem)),
         joint_names=tuple(names),
         theta=np.array(table["theta"]),
         d=np.array(table["d"]),
-        a=np.array(table["a"]),
-        alpha=np.array(table["alpha"]),
+        a=a,
+        alpha=alpha,
         beta=np.array(table["beta"]),
         hayati=np.array(hayati, dtype=bool),
         limits=np.array(limits),
         link_mass=np.array(mass),
-        link_com=np.array(com),
+        link_com=com_array,
         source=str(data.get("source", source)),
         reading_matrix=matrix,
         reading_offset=offset,
