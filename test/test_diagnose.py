@@ -154,3 +154,38 @@ def test_kfold_of_a_warm_up_is_not_spoilt_by_its_time_constant() -> None:
         cv[thermal] = score_rung(cal, case.calibration, None)[0].absolute_rms_mm
     assert cv["thermal_warmup"] < 0.95 * cv["thermal_drift"], cv
     assert cv["thermal_warmup"] < 1.5 * 0.0089, cv  # about the noise floor of the world
+
+
+def test_a_block_of_poses_off_together_is_one_stretch_not_blunders() -> None:
+    """A Yaskawa campaign's first 12 poses (joint 1 near -160 deg) sat 5 mm off and nothing
+    pointed at them: here 12 poses first in time, joint 1 near -150 deg, 5 mm off the same
+    way. Each is still flagged as an outlier, and the diagnosis names them once as a
+    stretch: where, when, how far and which way; worlds without one name none."""
+    from dataclasses import replace
+
+    from robot_calib.sim.measure import record_plan
+    from robot_calib.sim.plans import random_plan
+
+    world = load_world()
+    robot = world.model.robot
+    rng = np.random.default_rng(0)
+    plan = random_plan(robot, 300, rng)
+    q = plan.q.copy()
+    q[:12, 0] = np.radians(-150.0 + rng.uniform(-8.0, 8.0, 12))
+    recording = record_plan(world, replace(plan, q=q), rng)
+    points = recording.points.copy()
+    points[:12] += [0.004, -0.003, 0.0]
+    diagnosis, _ = diagnose(replace(recording, points=points), robot)
+    assert len(diagnosis.stretches) == 1, diagnosis.stretches
+    stretch = diagnosis.stretches[0]
+    assert (stretch.first, stretch.last) == (1, 12)
+    assert stretch.mean_mm == pytest.approx(5.0, abs=0.1) and stretch.rest_mean_mm < 0.05
+    np.testing.assert_allclose(stretch.direction, [0.8, -0.6, 0.0], atol=0.01)
+    assert list(stretch.near_deg) == ["joint_a1"]
+    assert stretch.near_deg["joint_a1"] == pytest.approx(-150.0, abs=8.0)
+    again = Diagnosis.from_dict(json.loads(json.dumps(diagnosis.to_dict())))
+    assert again.stretches == diagnosis.stretches
+    for effect, seed in (("backlash", 1002), ("none", 1000), ("thermal_warmup", 1000)):
+        case = make_case(effect, seed)
+        clean, _ = diagnose(case.calibration, robot, case.holdout)
+        assert clean.stretches == [], (effect, clean.stretches)

@@ -158,6 +158,8 @@ def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: f
     print(f"unexplained: {diagnosis.unexplained.note}")
     for line in outlier_lines(diagnosis.outliers):
         print(line)
+    for stretch in diagnosis.stretches:
+        print(f"where the residual concentrates: {stretch.line()}")
     for warning in diagnosis.warnings:  # as the reports list them (the floor's: above)
         if warning != diagnosis.noise.warning:
             print(warning if warning.startswith(("warning", "note")) else f"warning: {warning}")

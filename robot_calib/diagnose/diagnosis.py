@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from robot_calib.diagnose.concentration import Stretch, stretches
 from robot_calib.diagnose.frequency import MAX_SCAN_ORDER, alias_warnings
 from robot_calib.diagnose.iso9283 import Iso9283, iso9283, repeat_groups
 from robot_calib.diagnose.ladder import (
@@ -182,6 +183,9 @@ class Diagnosis(Record):
     recordings: list[str]
     holdout: list[str]
     outliers: list[Outlier] = field(default_factory=list)  # tracker blunders, never fitted
+    # stretches of consecutive measurements far above the rest (`concentration`), every
+    # measurement's residual under the best model, flagged ones included
+    stretches: list[Stretch] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)  # implausible geometric calibration
     learnable: LearnableBound | None = None  # what a residual model reaches held out
     # ISO 9283 AP/RP of the repeated poses: before (nominal) and after (the best rung)
@@ -390,6 +394,7 @@ def diagnose(
         level used [m] and the candidates of every round (model, score [m]).
     """
     ladder = run_ladder(recording, robot, holdout, log, tracker_sigma_m)
+    whole = recording  # every measurement, the ones flagged as blunders included
     few = small_holdout(ladder.holdout)
     if few and log is not None:
         log(few)
@@ -475,6 +480,8 @@ def diagnose(
         recordings=sources,
         holdout=[] if holdout_sources is None else list(holdout_sources.sources),
         outliers=list(ladder.outliers),
+        stretches=stretches(whole, best.calibration.predict(whole.poses) - whole.points,
+                            floor_mm, robot.joint_names),
         warnings=list(geo.warnings) + ([ladder.noise.warning] if ladder.noise.warning else [])
         + ([few] if few else []) + alias_warnings(last.effects, recording, ladder.holdout),
         learnable=learnable,

@@ -529,6 +529,10 @@ def _problems(diagnosis: Diagnosis, warnings: Sequence[str]) -> str:
                            "direction (tracker frame)"], rows))  # fmt: skip
     else:
         out.append("<p>No measurement flagged as an outlier.</p>")
+    if diagnosis.stretches:
+        out.append("<h3>Where the residual concentrates</h3><ul class='tight'>"
+                   + "".join(f"<li>{_e(s.line())}</li>" for s in diagnosis.stretches)
+                   + "</ul>")  # fmt: skip
     return "".join(out)
 
 

@@ -394,6 +394,10 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
             "",
         ]
         lines += [f"- {o.line()}" for o in diagnosis.outliers]  # fmt: skip
+    if diagnosis.stretches:
+        lines += ["", "Where the residual concentrates (every measurement, flagged ones "
+                  "included, under the best model):", "",
+                  *(f"- {s.line()}" for s in diagnosis.stretches)]  # fmt: skip
     lines += ["", f"What remains: {diagnosis.unexplained.note}.", "",
               "## Where the residual lies", ""]  # fmt: skip
     if where.joints:
