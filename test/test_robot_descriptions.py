@@ -102,7 +102,7 @@ TWO_JOINTS = "  - {theta: 0, d: 0.1, a: 0.5, alpha: 0}\n  - {theta: 0, d: 0, a: 
         (
             "name: two_link\nefects: [compliance]\njoints:\n" + TWO_JOINTS % "",
             r"robot\.yaml: unknown key 'efects' \(known: name, source, angle_unit, "
-            r"reading_to_joint, joints\)$",
+            r"convention, reading_to_joint, joints\)$",
         ),
         (
             "nmae: two_link\njoints:\n" + TWO_JOINTS % "",

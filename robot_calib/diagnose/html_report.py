@@ -59,6 +59,7 @@ from robot_calib.diagnose.signatures import (
 )
 from robot_calib.identify.calibrate import REFERENCE_MODELS, reference_models
 from robot_calib.identify.calibration import Calibration
+from robot_calib.identify.outliers import outlier_counts
 from robot_calib.identify.params_file import fixed_reasons
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements import Recording
@@ -519,14 +520,16 @@ def _problems(diagnosis: Diagnosis, warnings: Sequence[str]) -> str:
     if not warnings:
         out = ["<p>No warnings.</p>"]
     if diagnosis.outliers:
-        rows = [[o.bag, o.index, "-" if o.stamp_ns is None else f"{o.stamp_ns * 1e-9:.3f}",
+        rows = [[o.bag, o.index, o.target or "-", o.kind,
+                 "-" if o.stamp_ns is None else f"{o.stamp_ns * 1e-9:.3f}",
                  f"{o.size_m * 1e3:.3f}", f"{o.sigmas:.0f}",
                  ", ".join(f"{c:+.2f}" for c in o.direction)]
                 for o in diagnosis.outliers]  # fmt: skip
-        out.append("<h3>Flagged outliers (tracker blunders; never fitted, never explained as "
-                   "an effect of the robot)</h3>")  # fmt: skip
-        out.append(_table(["bag", "point", "stamp [s]", "size [mm]", "robust sigmas",
-                           "direction (tracker frame)"], rows))  # fmt: skip
+        out.append(f"<h3>Flagged outliers ({_e(outlier_counts(diagnosis.outliers))}; never "
+                   "fitted, never explained as an effect of the robot)</h3>")  # fmt: skip
+        out.append(_table(["bag", "point", "target", "tracker or robot", "stamp [s]",
+                           "size [mm]", "robust sigmas", "direction (tracker frame)"],
+                          rows))  # fmt: skip
     else:
         out.append("<p>No measurement flagged as an outlier.</p>")
     if diagnosis.stretches:

@@ -33,7 +33,7 @@ from robot_calib.diagnose.signatures import (
     signature_removed,
     signature_text,
 )
-from robot_calib.identify.outliers import OUTLIER_K
+from robot_calib.identify.outliers import OUTLIER_K, outlier_counts
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements import Recording
 
@@ -387,7 +387,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
     if diagnosis.outliers:
         lines += [
             "",
-            f"Left out as tracker blunders ({len(diagnosis.outliers)}, beyond {OUTLIER_K:g} "
+            f"Left out of the fit ({outlier_counts(diagnosis.outliers)}; beyond {OUTLIER_K:g} "
             f"robust sigmas of the calibration, {HOLDOUT_K:g} of the hold-out; never "
             "explained as an effect of the robot; an effect outside the vocabulary can look "
             "like one: check them):",

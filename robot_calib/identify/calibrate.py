@@ -277,9 +277,10 @@ def _screened(
                        robust_scale=3.0 * robust_sigma(cal.residuals))  # fmt: skip
     sigmas = group_sigmas(recording, robust.residuals)
     flagged = outlier_mask(robust.residuals, sigmas)
+    group = "their sweep" if recording.sweeps else "the campaign"
     for round_ in range(1, MAX_OUTLIER_ROUNDS + 1):
         say(f"outliers: {int(flagged.sum())} of {len(flagged)} measurements beyond "
-            f"{OUTLIER_K:g} robust sigmas of their sweep: fitted without them")  # fmt: skip
+            f"{OUTLIER_K:g} robust sigmas of {group}: fitted without them")  # fmt: skip
         try:
             cal = identify(recording.subset(~flagged))
         except InputError as exc:

@@ -15,6 +15,7 @@ so it raises the scale rather than standing out: the diagnosis still sees it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +23,7 @@ from numpy.typing import NDArray
 
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements import Recording
+from robot_calib.messages import target_topic
 from robot_calib.records import Record
 
 #: a point whose residual norm exceeds this many robust sigmas (per axis) is a blunder
@@ -83,15 +85,67 @@ class Outlier(Record):
     size_m: float
     direction: list[float]
     sigmas: float
+    # the measured target's point topic where there are several ('' with one target, and in
+    # documents written before it was recorded)
+    target: str = ""
+    # 'tracker': a blunder of the tracker (a lost beam, a reseated target); 'robot': every
+    # target of its pose off together, as one rigid tool (`ROBOT`): the robot (or the whole
+    # set-up) was not where the model puts it there, not the tracker
+    kind: str = "tracker"
 
     def line(self) -> str:
         """One human line, e.g. 'run.mcap point 17 (stamp ...): 5.002 mm off (+x ...)'."""
         stamp = "" if self.stamp_ns is None else f", stamp {self.stamp_ns * 1e-9:.3f} s"
+        target = f" (target {self.target})" if self.target else ""
         d = ", ".join(f"{c:+.2f}" for c in self.direction)
+        why = ("; every target of the pose off together, as one rigid tool: the robot there, "
+               "not the tracker" if self.kind == ROBOT else "")  # fmt: skip
         return (
-            f"{self.bag} point {self.index}{stamp}: {self.size_m * 1e3:.3f} mm off the model "
-            f"({self.sigmas:.0f} sigma; direction {d})"
+            f"{self.bag} point {self.index}{target}{stamp}: {self.size_m * 1e3:.3f} mm off the "
+            f"model ({self.sigmas:.0f} sigma; direction {d}{why})"
         )
+
+
+ROBOT = "robot"  # Outlier.kind of a pose whose targets are all off together
+
+
+def outlier_counts(outliers: Sequence[Outlier]) -> str:
+    """'3 tracker blunders', or '2 tracker blunders, 6 measurements of poses where the
+    robot was off (every target together)'."""
+    robot = sum(o.kind == ROBOT for o in outliers)
+    parts = [f"{len(outliers) - robot} tracker blunder(s)"] if len(outliers) > robot else []
+    if robot:
+        parts.append(f"{robot} measurement(s) of poses where the robot was off (every target "
+                     "together)")  # fmt: skip
+    return ", ".join(parts)
+
+
+#: a pose's flagged targets whose distances to each other are those the model predicts to
+#: within this many robust sigmas moved as one rigid tool
+RIGID_K = 5.0
+
+
+def robot_errors(recording: Recording, mask: NDArray[np.bool_], residuals: Array,
+                 sigma: Array) -> NDArray[np.bool_]:  # fmt: skip
+    """(n,) True for the flagged measurements (mask (n,)) that are a robot error, not a
+    tracker blunder: at a pose (`Recording.pose_index`) with two or more targets, every
+    target flagged and their distances to each other as predicted (to RIGID_K robust
+    `sigma` (n,) [m]): the tool moved as one. residuals (n, 3): predicted - measured [m]."""
+    out = np.zeros(len(mask), dtype=bool)
+    if len(recording.target_names) < 2 or not mask.any():
+        return out
+    pose = recording.pose_index()
+    predicted = recording.points + residuals
+    for p in np.unique(pose[mask]):
+        rows = np.flatnonzero(pose == p)
+        if len(rows) < 2 or not mask[rows].all():
+            continue
+        measured = recording.points[rows]
+        between = np.linalg.norm(measured[:, None] - measured[None], axis=-1)
+        model = np.linalg.norm(predicted[rows][:, None] - predicted[rows][None], axis=-1)
+        if np.abs(between - model).max() <= RIGID_K * float(np.max(sigma[rows])):
+            out[rows] = True
+    return out
 
 
 def describe_outliers(
@@ -101,6 +155,8 @@ def describe_outliers(
     minus measured [m] of the model they were judged against, robust `sigma` [m] (one, or
     one per measurement)."""
     sigmas = np.broadcast_to(np.asarray(sigma, dtype=float), (len(recording),))
+    robot = robot_errors(recording, mask, residuals, sigmas)
+    several = len(recording.target_names) > 1
     out = []
     indices = recording.message_indices()
     for i in np.flatnonzero(mask):
@@ -115,6 +171,10 @@ def describe_outliers(
                 size,
                 [float(c) for c in direction],
                 size / float(sigmas[i]),
+                target_topic(recording.target_names[int(recording.poses.target_index[i])])
+                if several
+                else "",
+                ROBOT if robot[i] else "tracker",
             )
         )
     return tuple(out)
