@@ -295,3 +295,52 @@ def test_rounded_rereads_of_a_still_pose_import_and_a_pasted_block_does_not(
         "33 of 120 rows",
         "a pasted block",
     )
+
+
+def test_reference_reflectors_remove_the_trackers_drift(
+    sim: tuple[Path, list[list[float]]], tmp_path: Path
+) -> None:
+    """Three reflectors fixed on the floor, read with every pose, while the tracker's frame
+    drifts (50 um/h and 20 urad/h about its vertical, over an hour): `import --reference`
+    removes the drift from the tool's points (back to the points the tracker read at the
+    start, but for the noise of the drift's own estimate) and says how far it drifted and
+    how much the references scatter about it (the 12.5 um per axis they were read with)."""
+    import re
+
+    from scipy.spatial.transform import Rotation
+
+    from robot_calib.bag.read import read_recording
+    from robot_calib.kinematics.loader import load_robot
+
+    _, rows = sim
+    rng = np.random.default_rng(4)
+    n = len(rows)
+    hours = np.arange(n) * 60.0 / 3600.0  # a pose a minute
+    rotation = Rotation.from_rotvec(np.outer(hours * 20e-6, [0.0, 0.0, 1.0]))
+    shift = np.outer(hours * 50e-6, [0.6, 0.8, 0.0])
+    truth = np.array([r[6:] for r in rows])
+    fixed = np.array([[2.0, 0.5, -0.8], [2.2, -0.6, -0.8], [1.8, 0.0, -0.2]])
+    read = rotation.apply(truth) + shift
+    refs = [rotation.apply(np.tile(p, (n, 1))) + shift + rng.normal(0, 12.5e-6, (n, 3))
+            for p in fixed]  # fmt: skip
+    table = [[*r[:6], *read[k], hours[k] * 3600.0, *(v for ref in refs for v in ref[k])]
+             for k, r in enumerate(rows)]  # fmt: skip
+    names = ",".join([*(f"q{j}" for j in range(1, 7)), "x", "y", "z", "t",
+                      *(f"{c}{i}" for i in range(3) for c in "uvw")])  # fmt: skip
+    csv = _csv(tmp_path / "refs.csv", table, names)
+    out = tmp_path / "refs.mcap"
+    references = ("--reference", "a:u0,v0,w0", "--reference", "b:u1,v1,w1",
+                  "--reference", "c:u2,v2,w2")  # fmt: skip
+    run = cli("import", str(csv), *COLUMNS, "--time", "t", *references, "-o", str(out))
+    assert run.returncode == 0, run.stderr
+    drifted = float(np.linalg.norm(read - truth, axis=1).max())
+    assert drifted > 50e-6
+    recording = read_recording([out], load_robot("kr5_sixx_r650"))
+    # the drift gone but for its estimate's own noise (60 reads of references 12.5 um apiece)
+    left = float(np.linalg.norm(recording.points - truth, axis=1).max())
+    assert left < 25e-6 and left < 0.25 * drifted, (left, drifted)
+    noise = float(re.search(r"own noise: ([0-9.]+) mm per axis", run.stdout).group(1))
+    assert noise == pytest.approx(0.0125, rel=0.2), run.stdout
+    assert "rotation and translation" in run.stdout
+    bad = cli("import", str(csv), *COLUMNS, "--reference", "a:u0,v0", "-o", str(out) + "x")
+    assert bad.returncode == 2 and "--reference a:u0,v0: expected NAME:X,Y,Z" in bad.stderr

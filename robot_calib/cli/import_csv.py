@@ -15,6 +15,7 @@ from robot_calib.flows import DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from robot_calib.bag.csv_format import OrientationColumns, SigmaColumns
+    from robot_calib.kinematics.frames import Array
 
 NAME = "import"
 HELP = "measurement CSV(s) -> a bag of the contract"
@@ -48,6 +49,13 @@ def add_arguments(imp: argparse.ArgumentParser) -> None:
         help="a further target (SMR) measured at each pose: its name and x,y,z columns, onto "
         "/laser_tracker/NAME/point (repeat per target; an empty cell: not measured there) "
         "(default: none)",
+    )  # fmt: skip
+    imp.add_argument(
+        "--reference", action="append", metavar="NAME:X,Y,Z",
+        help="a reference reflector fixed off the robot (on its base, the floor) read with "
+        "each pose: its name and x,y,z columns (repeat per reflector, 3 or more give the "
+        "tracker's rotation too); the tracker's drift they show is removed from every point "
+        "and their scatter about it reported (default: none)",
     )  # fmt: skip
     imp.add_argument(
         "--temperature",
@@ -136,6 +144,10 @@ def main(args: argparse.Namespace) -> int:
         if not args.joints or not args.point:
             raise InputError("give --preset, or --joints and --point (column names or indices)")
         fmt = CsvFormat(joints=tuple(args.joints.split(",")), point=tuple(args.point.split(",")))
+    references = _target_columns(args.reference or [], "--reference")
+    clash = {n for n, _ in references} & {n for n, _ in _target_columns(args.target or [])}
+    if clash:
+        raise InputError(f"--reference {sorted(clash)[0]}: also given as a --target")
     split = lambda text: None if text is None else tuple(text.split(","))  # noqa: E731
     fmt = with_overrides(
         fmt,
@@ -150,7 +162,7 @@ def main(args: argparse.Namespace) -> int:
         angle_unit=args.angle_unit,
         length_unit=args.length_unit,
         header=False if args.no_header else None,
-        targets=_target_columns(args.target) if args.target else None,
+        targets=(_target_columns(args.target or []) + references) or None,
         orientations=_orientation_columns(args.orientation, args.orientation_rpy),
         sigmas=_sigma_columns(args.sigma),
         orientation_unit=args.orientation_unit,
@@ -186,6 +198,8 @@ def main(args: argparse.Namespace) -> int:
     extra = {
         name: np.concatenate([t.extra_points[name] for t in tables]) for name, _ in fmt.targets
     }
+    if references:
+        points, extra = _without_drift(args.csv, references, times, points, extra)
     for name, xyz in extra.items():
         if not np.isfinite(xyz).all(axis=1).any():
             log(f"warning: {', '.join(args.csv)}: target {name} has no measured point: no "
@@ -208,8 +222,33 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def _target_columns(specs: list[str]) -> tuple[tuple[str, tuple[str, str, str]], ...]:
-    """--target NAME:X,Y,Z (repeated) -> ((NAME, (X, Y, Z)), ...); InputError on a bad one."""
+def _without_drift(
+    csvs: list[str], references: tuple[tuple[str, tuple[str, str, str]], ...],
+    times: Array | None, points: Array, extra: dict[str, Array],
+) -> tuple[Array, dict[str, Array]]:  # fmt: skip
+    """The first target's points (n, 3) and the further targets' `extra` without the
+    tracker's drift the reference reflectors show (`measurements.references`); the
+    references themselves are not written. Prints the drift and the references' scatter."""
+    from robot_calib.measurements.references import estimate_drift
+
+    names = [name for name, _ in references]
+    time_s = np.arange(len(points), dtype=float) if times is None else np.asarray(times)
+    reads = np.stack([extra.pop(name) for name in names])
+    try:
+        drift = estimate_drift(names, time_s, reads)
+    except ValueError as exc:
+        raise InputError(f"{', '.join(csvs)}: --reference: {exc}") from None
+    print(drift.line())
+    print(f"  (the tracker's noise as a floor: diagnose --tracker-accuracy "
+          f"{drift.noise_mm:.4f})")  # fmt: skip
+    return drift.removed(time_s, points), {k: drift.removed(time_s, v) for k, v in extra.items()}
+
+
+def _target_columns(
+    specs: list[str], option: str = "--target"
+) -> tuple[tuple[str, tuple[str, str, str]], ...]:
+    """--target NAME:X,Y,Z (repeated; or `option`) -> ((NAME, (X, Y, Z)), ...); InputError on
+    a bad one."""
     from robot_calib.poses import TARGET_NAME
 
     out: list[tuple[str, tuple[str, str, str]]] = []
@@ -218,11 +257,11 @@ def _target_columns(specs: list[str]) -> tuple[tuple[str, tuple[str, str, str]],
         cols = tuple(columns.split(","))
         if not TARGET_NAME.fullmatch(name) or len(cols) != 3 or not all(cols):
             raise InputError(
-                f"--target {spec}: expected NAME:X,Y,Z (NAME letters, digits, underscores, "
+                f"{option} {spec}: expected NAME:X,Y,Z (NAME letters, digits, underscores, "
                 "starting with a letter; three columns)"
             )
         if name in (n for n, _ in out):
-            raise InputError(f"--target {spec}: target {name} given twice")
+            raise InputError(f"{option} {spec}: {name} given twice")
         out.append((name, (cols[0], cols[1], cols[2])))
     return tuple(out)
 
