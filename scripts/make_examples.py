@@ -12,6 +12,10 @@ commands have something real to import:
   with a 6-DoF probe, 150 random poses; `;`, decimal commas, deg,
   mm, the quaternion w first, the tracker's stated standard deviations (um, mdeg) and the
   air temperature.
+- kr5_references.csv: the KR5 with joint-4 backlash, one SMR, Test 1 sweeps then 60 random
+  poses, 20 s apart (an hour), while the tracker's frame drifts (50 um/h and 20 urad/h
+  about its vertical) and three reference reflectors on the floor are read with every pose
+  (12.5 um per axis); a time column [s] and the tracker's stated 1-sigma per point [um].
 
     .venv/bin/python scripts/make_examples.py [--folder docs/examples]
 
@@ -110,6 +114,29 @@ def probe(folder: Path) -> None:
     write(folder / "ur10_probe.csv", columns, ";", decimals, True)
 
 
+def references(folder: Path) -> None:
+    world = build_world({"seed": 41, "effects": [{"name": "backlash", "joints": [4]}]})
+    robot = world.model.robot
+    q = np.vstack([paper_test_plan(1).q, random_plan(robot, 60, np.random.default_rng(42)).q])
+    points, _ = measure(world, q, seed=43)
+    time = np.arange(len(q)) * 20.0  # s, as `measure`
+    hours = time / 3600.0
+    rotation = Rotation.from_rotvec(np.outer(hours * 20e-6, [0.0, 0.0, 1.0]))
+    shift = np.outer(hours * 50e-6, [0.6, 0.8, 0.0])
+    rng = np.random.default_rng(44)
+    fixed = {"R1": [1.2, 1.4, -0.9], "R2": [1.6, -1.1, -0.9], "R3": [2.6, 0.3, -0.4]}  # m
+    columns = {"t": time} | {f"A{j + 1}": np.degrees(q[:, j]) for j in range(6)}
+    drifted = rotation.apply(points[:, 0]) + shift
+    columns |= {c: drifted[:, k] * 1e3 for k, c in enumerate("XYZ")}
+    columns["U"] = rng.uniform(4.0, 8.0, len(q))  # um: the tracker's stated 1-sigma
+    for name, xyz in fixed.items():
+        read = rotation.apply(np.tile(xyz, (len(q), 1))) + shift
+        read += rng.normal(0.0, 12.5e-6, read.shape)
+        columns |= {f"{c}_{name}": read[:, k] * 1e3 for k, c in enumerate("XYZ")}
+    decimals = {"t": 1, "U": 1} | {c: 4 for c in columns if c[0] in "XYZ"}
+    write(folder / "kr5_references.csv", columns, ",", decimals, False)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--folder", type=Path, default=ROOT / "docs" / "examples")
@@ -118,6 +145,7 @@ def main() -> None:
     single_smr(args.folder)
     three_smr(args.folder)
     probe(args.folder)
+    references(args.folder)
 
 
 if __name__ == "__main__":
