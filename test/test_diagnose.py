@@ -177,14 +177,23 @@ def test_a_block_of_poses_off_together_is_one_stretch_not_blunders() -> None:
     points[:12] += [0.004, -0.003, 0.0]
     diagnosis, _ = diagnose(replace(recording, points=points), robot)
     assert len(diagnosis.stretches) == 1, diagnosis.stretches
+    assert diagnosis.mass_model.startswith("the description's (")  # the KR5's own masses
     stretch = diagnosis.stretches[0]
-    assert (stretch.first, stretch.last) == (1, 12)
+    assert (stretch.first_point, stretch.last_point, stretch.poses) == (0, 11, 12)
     assert stretch.mean_mm == pytest.approx(5.0, abs=0.1) and stretch.rest_mean_mm < 0.05
     np.testing.assert_allclose(stretch.direction, [0.8, -0.6, 0.0], atol=0.01)
     assert list(stretch.near_deg) == ["joint_a1"]
     assert stretch.near_deg["joint_a1"] == pytest.approx(-150.0, abs=8.0)
     again = Diagnosis.from_dict(json.loads(json.dumps(diagnosis.to_dict())))
     assert again.stretches == diagnosis.stretches
+    # the same block at the start of a second bag (each bag counts its own time and points)
+    from robot_calib.measurements import Recording
+
+    first = record_plan(world, random_plan(robot, 100, rng), rng)
+    both = Recording.concatenate([first, replace(recording, points=points)])
+    two, _ = diagnose(both, robot)
+    assert [(s.first_point, s.last_point, s.poses) for s in two.stretches] == [(0, 11, 12)]
+    assert two.stretches[0].bag == both.sources[1]
     for effect, seed in (("backlash", 1002), ("none", 1000), ("thermal_warmup", 1000)):
         case = make_case(effect, seed)
         clean, _ = diagnose(case.calibration, robot, case.holdout)

@@ -84,6 +84,11 @@ def test_the_kr5_written_as_modified_dh_is_the_kr5() -> None:
         row = dict(entry)
         row["alpha"] = joints[i - 1]["alpha"] if i else 0
         row["a"] = joints[i - 1]["a"] if i else 0.0
+        row.pop("hayati", None)
+        row.pop("beta", None)
+        for key in ("hayati", "beta"):  # with the row of the alpha and a they turn
+            if i and key in joints[i - 1]:
+                row[key] = joints[i - 1][key]
         alpha, a = np.radians(entry["alpha"]), entry["a"]  # standard frame i -> modified i
         com = np.array(entry.get("com", [0.0, 0.0, 0.0]))
         c, s = np.cos(alpha), np.sin(alpha)

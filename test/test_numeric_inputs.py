@@ -282,6 +282,14 @@ def test_rounded_rereads_of_a_still_pose_import_and_a_pasted_block_does_not(
     recording = read_recording([out], load_robot("kr5_sixx_r650"))
     assert len(recording) == 180 and "copies" not in " ".join(recording.warnings)
     assert len(np.unique(reading_groups(recording.poses.q))) == 60  # 3 reads: one pose
+    reversed_block = reads[:90] + reads[59:29:-1]  # a block pasted again, reversed
+    _one_line_error(cli("import", str(_csv(tmp_path / "rev.csv", reversed_block)), *COLUMNS,
+                        "-o", str(tmp_path / "r.mcap")), "a pasted block")  # fmt: skip
+    timed = [[*r, float(k)] for k, r in enumerate(reads[:90] + reads[30:60])]  # new times
+    _one_line_error(cli("import", str(_csv(tmp_path / "timed.csv", timed,
+                                           "q1,q2,q3,q4,q5,q6,x,y,z,t")),
+                        *COLUMNS, "--time", "t", "-o", str(tmp_path / "t.mcap")),
+                    "a pasted block")  # fmt: skip
     pasted = reads[:90] + reads[30:60]  # a block of 30 rows pasted again
     _one_line_error(
         cli(
@@ -339,7 +347,9 @@ def test_reference_reflectors_remove_the_trackers_drift(
     # the drift gone but for its estimate's own noise (60 reads of references 12.5 um apiece)
     left = float(np.linalg.norm(recording.points - truth, axis=1).max())
     assert left < 25e-6 and left < 0.25 * drifted, (left, drifted)
-    noise = float(re.search(r"own noise: ([0-9.]+) mm per axis", run.stdout).group(1))
+    found = re.search(r"the robot's\): ([0-9.]+) mm per axis", run.stdout)
+    assert found, run.stdout
+    noise = float(found.group(1))
     assert noise == pytest.approx(0.0125, rel=0.2), run.stdout
     assert "rotation and translation" in run.stdout
     bad = cli("import", str(csv), *COLUMNS, "--reference", "a:u0,v0", "-o", str(out) + "x")

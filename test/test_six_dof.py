@@ -326,9 +326,9 @@ def test_stated_accuracies_far_from_the_residuals_are_flagged() -> None:
     poses, points = measured()
     stated = np.tile([5e-6, ORIENTATION_SIGMA / 10], (len(poses), 1))
     cal = calibrate(as_recording(poses, points, stated), ROBOT, "geometric")
-    warning = next(w for w in cal.warnings if w.startswith("warning: orientation residual"))
+    warning = next(w for w in cal.warnings if "orientation residual" in w)
     assert "x the stated accuracy (5 urad)" in warning
-    assert not any(w.startswith("warning: position residual") for w in cal.warnings)
+    assert not any("position residual" in w for w in cal.warnings)
 
 
 def test_a_probe_pitched_90_deg_has_no_gimbal_lock() -> None:

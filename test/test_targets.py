@@ -247,7 +247,8 @@ def test_a_target_missing_from_the_last_joints_sweep_still_calibrates() -> None:
 
 def test_a_pose_whose_targets_move_together_is_the_robot_not_the_tracker() -> None:
     """3 SMRs on the tool: at 3 poses all three sit 3 mm off the same way (the tool, so the
-    robot, was elsewhere), at 2 others one SMR alone is off (a tracker blunder). Both are
+    robot, was elsewhere), at one the tool turned about its first SMR (that one not off), at
+    2 others one SMR alone is off (a tracker blunder). Both are
     left out of the fit, but only the lone ones are called tracker blunders; every line
     names its target, and says 'sweep' only of a campaign with sweeps."""
     from dataclasses import replace
@@ -264,14 +265,21 @@ def test_a_pose_whose_targets_move_together_is_the_robot_not_the_tracker() -> No
         points[pose == p] += [0.002, 0.002, -0.001]  # every target: a rigid shift
     blunders = [int(np.flatnonzero(pose == p)[1]) for p in lone]
     points[blunders] += [0.0, 0.003, 0.0]
+    turned = np.flatnonzero(pose == 500)  # the tool turned about its first SMR (unflagged)
+    pivot = points[turned[0]].copy()
+    c, s = np.cos(0.03), np.sin(0.03)
+    points[turned] = (points[turned] - pivot) @ np.array(
+        [[c, s, 0], [-s, c, 0], [0, 0, 1]]
+    ) + pivot
+    robot_poses = (*robot_poses, 500)
     cal = calibrate(replace(recording, points=points), ROBOT, "geometric", log=None)
     kinds = {(int(pose[o.index]), o.target): o.kind for o in cal.outliers}
     assert {p for (p, _), k in kinds.items() if k == ROBOT_ERROR} == set(robot_poses), kinds
     assert {p for (p, _), k in kinds.items() if k == "tracker"} == set(lone), kinds
-    assert len(kinds) == 3 * len(robot_poses) + len(lone)
+    assert len(kinds) == 3 * (len(robot_poses) - 1) + 2 + len(lone)
     assert {o.target for o in cal.outliers} <= {target_topic(t) for t in recording.target_names}
-    assert "2 tracker blunder(s), 9 measurement(s) of poses where the robot was off" in (
+    assert "2 tracker blunder(s), 11 measurement(s) of poses where the robot was off" in (
         outlier_counts(cal.outliers)
     )
     robot_line = next(o.line() for o in cal.outliers if o.kind == ROBOT_ERROR)
-    assert "(target " in robot_line and "the robot there, not the tracker" in robot_line
+    assert "(target " in robot_line and "moved as one rigid tool: the robot" in robot_line

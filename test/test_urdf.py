@@ -10,6 +10,7 @@ shares nothing with the loader but the file.
 from __future__ import annotations
 
 import json
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -299,11 +300,16 @@ def test_a_typo_inside_a_joint_is_an_error(tmp_path: Path) -> None:
     bad.write_text(text)
     with pytest.raises(RobotDescriptionError, match='Unknown tag "axs"'):
         load_robot(str(bad))
+    named = tmp_path / "named.urdf"  # a name that looks like a path does not hide it
+    named.write_text(re.sub(r'<robot name="[^"]*"', '<robot name="arm/collision[1]"', text))
+    with pytest.raises(RobotDescriptionError, match='Unknown tag "axs"'):
+        load_robot(str(named))
 
 
 def test_a_urdf_as_it_ships_loads_as_ros_loads_it(tmp_path: Path) -> None:
-    """A URDF as one ships (the ABB IRB 120's of a public repository): a blank line before
-    the XML declaration, `<material>` and `<inertial>` inside `<collision>`. urdfdom, and so
+    """A URDF as one ships (the ABB IRB 120's of a public repository): a byte-order mark and
+    a blank line before the XML declaration, `<material>` and `<inertial>` inside
+    `<collision>`, pybullet's `<contact>` in a link. urdfdom, and so
     robot_state_publisher and RViz, take it; so does this tool, with one warning naming
     what it ignores, and the same kinematics and masses as the clean file."""
     import warnings
@@ -316,15 +322,19 @@ def test_a_urdf_as_it_ships_loads_as_ros_loads_it(tmp_path: Path) -> None:
     )
     for link in ("link_1", "link_4"):
         text = text.replace(f'<link name="{link}">', f'<link name="{link}">{collision}', 1)
-    text = "\n\n  " + text
-    assert text.lstrip().startswith("<?xml")
+    text = "\ufeff\n\n  " + text.replace(
+        '<link name="link_2">',
+        '<link name="link_2"><contact><lateral_friction value="1"/></contact>',
+        1,
+    )
+    assert text.lstrip("\ufeff \n").startswith("<?xml")
     shipped = tmp_path / "irb120_as_shipped.urdf"
     shipped.write_text(text)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         robot = load_robot(f"{shipped}#base_link=base&tip_link=tool0")
     said = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
-    assert len(said) == 1 and "4 element(s) inside visual or collision" in said[0], said
+    assert len(said) == 1 and "5 element(s) of links or of their visual" in said[0], said
     assert '"material"' in said[0] and '"inertial"' in said[0], said
     reference = load_urdf(clean, "base", "tool0").description
     q = random_readings(reference, seed=3)
@@ -354,8 +364,13 @@ def test_a_mass_model_beyond_physics_is_named_and_not_used(tmp_path: Path) -> No
     assert len(said) == 1 and "mass model beyond physics" in said[0], said
     assert "the link of joint_4: centre of mass 499.9 m from its frame" in said[0], said
     assert not robot.link_mass.any() and gravity_joints(robot) == ()
+    from robot_calib.kinematics.masses import mass_model_line
+
+    assert mass_model_line(robot).startswith("none of the description's")
+    assert "centre of mass 499.9 m" in mass_model_line(robot)
     sane = load_robot(f"{DATA / 'irb120_3_58.urdf'}#base_link=base&tip_link=tool0")
     assert sane.link_mass.any() and gravity_joints(sane)  # the same file, sane: used
+    assert mass_model_line(sane).startswith("the description's (URDF irb120_3_58.urdf")
     np.testing.assert_array_equal(robot.a, sane.a)  # the geometry is not touched
     heavy = tmp_path / "heavy.yaml"
     doc = (ROOT / "robot_calib/kinematics/robots/kr5_sixx_r650.yaml").read_text()

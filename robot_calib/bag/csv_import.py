@@ -47,11 +47,12 @@ __all__ = [
 
 def check_no_copies(paths: Sequence[str | Path], tables: Sequence[ImportedTable]) -> str:
     """InputError when a CSV is given twice, or the rows repeat themselves as a copy would:
-    a block of MIN_PASTED_ROWS or more consecutive rows repeating earlier consecutive rows,
-    or more than MAX_REREAD_SHARE of the rows repeating an earlier row's joint readings and
-    point exactly (to 1 nrad / 1 nm, `copies`), in one file or across the files; names the
-    first copy and how many. Fewer, scattered exact repeats are re-reads of a still pose
-    by a tracker whose export rounds (kept): returned as a note ('' when none)."""
+    a block of MIN_PASTED_ROWS or more consecutive rows repeating earlier consecutive rows
+    (in order or reversed), or more than MAX_REREAD_SHARE of the rows repeating an earlier
+    row's joint readings and point exactly (to 1 nrad / 1 nm, `copies`), in one file or
+    across the files; names the first copy and how many. Fewer, scattered exact repeats
+    are re-reads of a still pose by a tracker whose export rounds (kept): returned as a
+    note ('' when none)."""
     seen: dict[Path, str] = {}
     for path in paths:
         key = Path(path).resolve()
@@ -63,8 +64,8 @@ def check_no_copies(paths: Sequence[str | Path], tables: Sequence[ImportedTable]
         return ""
     q = np.concatenate([t.q for t in tables])
     points = np.concatenate([t.points for t in tables])
-    if all(t.time is not None for t in tables):  # rows logged at other times: kept
-        q = np.column_stack([q, np.concatenate([t.time for t in tables if t.time is not None])])
+    # not the time: a block pasted with new times is still a copy, a re-read at a later
+    # time still a re-read (`are_rereads`)
     copied = copies(q, points)
     if not copied.any():
         return ""
@@ -79,16 +80,21 @@ def check_no_copies(paths: Sequence[str | Path], tables: Sequence[ImportedTable]
                 "kept as re-reads of a still pose (an export that rounds); they count as one "
                 "pose in every fold and split")  # fmt: skip
     k = min(original) if block is None else block[0]
-    what = (
-        f"rows {where[k]} .. {where[block[0] + block[1] - 1]} repeat rows "
-        f"{where[original[k]]} .. in the same order ({block[1]} rows: a pasted block)"
-        if block is not None
-        else f"{where[k]}: the same joint readings and point as {where[original[k]]}"
-    )
+    if block is not None:
+        what = (
+            f"rows {where[k]} .. {where[block[0] + block[1] - 1]} repeat rows from "
+            f"{where[original[k]]} on, one by one ({block[1]} rows: a pasted block; a "
+            "tracker measuring again never repeats a run of different points)"
+        )
+    else:
+        what = (
+            f"{where[k]}: the same joint readings and point as {where[original[k]]}, "
+            "and more than half the rows repeat earlier ones exactly (a copied file: "
+            "re-reads of a still pose coincide now and then, not mostly)"
+        )
     raise InputError(
         f"{what} (to 1 nrad / 1 nm; {int(copied.sum())} of {len(copied)} rows are such "
-        "copies): a tracker measuring again never repeats a whole run of points; give each "
-        "measurement once"
+        "copies); give each measurement once"
     )
 
 

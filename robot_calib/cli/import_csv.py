@@ -169,6 +169,13 @@ def main(args: argparse.Namespace) -> int:
         sigma_unit=args.sigma_unit,
         sigma_angle_unit=args.sigma_angle_unit,
     )
+    reference_names = {name for name, _ in references}
+    sides: list[SigmaColumns | OrientationColumns] = [*fmt.sigmas, *fmt.orientations]
+    for side in sides:
+        if side.target in reference_names:
+            raise InputError(f"{side.option}: {side.target} is a --reference, not a target: "
+                             "a reflector off the robot has no stated accuracy or orientation "
+                             "here")  # fmt: skip
     if len(fmt.point) != 3 or (fmt.dif is not None and len(fmt.dif) != 3):
         raise InputError("--point and --dif take three columns: x,y,z")
     tables = []
@@ -239,8 +246,6 @@ def _without_drift(
     except ValueError as exc:
         raise InputError(f"{', '.join(csvs)}: --reference: {exc}") from None
     print(drift.line())
-    print(f"  (the tracker's noise as a floor: diagnose --tracker-accuracy "
-          f"{drift.noise_mm:.4f})")  # fmt: skip
     return drift.removed(time_s, points), {k: drift.removed(time_s, v) for k, v in extra.items()}
 
 

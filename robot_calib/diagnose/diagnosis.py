@@ -41,6 +41,7 @@ from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.outliers import Outlier
 from robot_calib.identify.plausibility import degrees_reason
 from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.masses import mass_model_line
 from robot_calib.measurements import Recording
 from robot_calib.poses import reading_groups
 from robot_calib.records import Record
@@ -186,6 +187,8 @@ class Diagnosis(Record):
     # stretches of consecutive measurements far above the rest (`concentration`), every
     # measurement's residual under the best model, flagged ones included
     stretches: list[Stretch] = field(default_factory=list)
+    # which masses the gravity effects used and where they came from (`masses`)
+    mass_model: str = ""
     warnings: list[str] = field(default_factory=list)  # implausible geometric calibration
     learnable: LearnableBound | None = None  # what a residual model reaches held out
     # ISO 9283 AP/RP of the repeated poses: before (nominal) and after (the best rung)
@@ -482,6 +485,7 @@ def diagnose(
         outliers=list(ladder.outliers),
         stretches=stretches(whole, best.calibration.predict(whole.poses) - whole.points,
                             floor_mm, robot.joint_names),
+        mass_model=mass_model_line(robot),
         warnings=list(geo.warnings) + ([ladder.noise.warning] if ladder.noise.warning else [])
         + ([few] if few else []) + alias_warnings(last.effects, recording, ladder.holdout),
         learnable=learnable,

@@ -532,6 +532,9 @@ def _problems(diagnosis: Diagnosis, warnings: Sequence[str]) -> str:
                           rows))  # fmt: skip
     else:
         out.append("<p>No measurement flagged as an outlier.</p>")
+    if diagnosis.mass_model:
+        out.append(f"<p><b>Mass model of the gravity effects</b>: {_e(diagnosis.mass_model)}"
+                   ".</p>")  # fmt: skip
     if diagnosis.stretches:
         out.append("<h3>Where the residual concentrates</h3><ul class='tight'>"
                    + "".join(f"<li>{_e(s.line())}</li>" for s in diagnosis.stretches)

@@ -398,6 +398,8 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         lines += ["", "Where the residual concentrates (every measurement, flagged ones "
                   "included, under the best model):", "",
                   *(f"- {s.line()}" for s in diagnosis.stretches)]  # fmt: skip
+    if diagnosis.mass_model:
+        lines += ["", f"Mass model of the gravity effects: {diagnosis.mass_model}."]
     lines += ["", f"What remains: {diagnosis.unexplained.note}.", "",
               "## Where the residual lies", ""]  # fmt: skip
     if where.joints:

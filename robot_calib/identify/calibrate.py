@@ -265,7 +265,8 @@ def _screened(
     log: Log | None,
 ) -> Calibration:
     """`cal` (a fit of every measurement), or, when some lie beyond OUTLIER_K robust
-    sigmas of their sweep, the fit without the blunders (`identify` of the rest), with
+    sigmas of their group (`group_sigmas`: their sweep, or their bag's general poses), the
+    fit without the blunders (`identify` of the rest), with
     `outliers` and `inliers`."""
     sigmas = group_sigmas(recording, cal.residuals)
     if not outlier_mask(cal.residuals, sigmas).any():
@@ -277,7 +278,7 @@ def _screened(
                        robust_scale=3.0 * robust_sigma(cal.residuals))  # fmt: skip
     sigmas = group_sigmas(recording, robust.residuals)
     flagged = outlier_mask(robust.residuals, sigmas)
-    group = "their sweep" if recording.sweeps else "the campaign"
+    group = "their sweep (or their bag's general poses)" if recording.sweeps else "the campaign"
     for round_ in range(1, MAX_OUTLIER_ROUNDS + 1):
         say(f"outliers: {int(flagged.sum())} of {len(flagged)} measurements beyond "
             f"{OUTLIER_K:g} robust sigmas of {group}: fitted without them")  # fmt: skip

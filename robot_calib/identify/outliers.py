@@ -98,8 +98,8 @@ class Outlier(Record):
         stamp = "" if self.stamp_ns is None else f", stamp {self.stamp_ns * 1e-9:.3f} s"
         target = f" (target {self.target})" if self.target else ""
         d = ", ".join(f"{c:+.2f}" for c in self.direction)
-        why = ("; every target of the pose off together, as one rigid tool: the robot there, "
-               "not the tracker" if self.kind == ROBOT else "")  # fmt: skip
+        why = ("; the pose's targets moved as one rigid tool: the robot (or the whole set-up) "
+               "there, not a tracker blunder" if self.kind == ROBOT else "")  # fmt: skip
         return (
             f"{self.bag} point {self.index}{target}{stamp}: {self.size_m * 1e3:.3f} mm off the "
             f"model ({self.sigmas:.0f} sigma; direction {d}{why})"
@@ -120,17 +120,21 @@ def outlier_counts(outliers: Sequence[Outlier]) -> str:
     return ", ".join(parts)
 
 
-#: a pose's flagged targets whose distances to each other are those the model predicts to
-#: within this many robust sigmas moved as one rigid tool
+#: the targets of a pose that one rigid motion takes from their predicted points to their
+#: measured ones, to this many robust sigmas, moved as one tool
 RIGID_K = 5.0
 
 
 def robot_errors(recording: Recording, mask: NDArray[np.bool_], residuals: Array,
                  sigma: Array) -> NDArray[np.bool_]:  # fmt: skip
     """(n,) True for the flagged measurements (mask (n,)) that are a robot error, not a
-    tracker blunder: at a pose (`Recording.pose_index`) with two or more targets, every
-    target flagged and their distances to each other as predicted (to RIGID_K robust
-    `sigma` (n,) [m]): the tool moved as one. residuals (n, 3): predicted - measured [m]."""
+    tracker blunder: at a pose (`Recording.pose_index`) with two or more targets, one rigid
+    motion takes every target's predicted point to its measured one, flagged or not, to
+    RIGID_K robust `sigma` (n,) [m] (Kabsch; with two targets, their distance kept): the
+    tool moved as one (a turn about one target leaves that one unflagged). residuals (n, 3):
+    predicted - measured [m]."""
+    from scipy.spatial.transform import Rotation
+
     out = np.zeros(len(mask), dtype=bool)
     if len(recording.target_names) < 2 or not mask.any():
         return out
@@ -138,13 +142,19 @@ def robot_errors(recording: Recording, mask: NDArray[np.bool_], residuals: Array
     predicted = recording.points + residuals
     for p in np.unique(pose[mask]):
         rows = np.flatnonzero(pose == p)
-        if len(rows) < 2 or not mask[rows].all():
+        if len(rows) < 2:
             continue
-        measured = recording.points[rows]
-        between = np.linalg.norm(measured[:, None] - measured[None], axis=-1)
-        model = np.linalg.norm(predicted[rows][:, None] - predicted[rows][None], axis=-1)
-        if np.abs(between - model).max() <= RIGID_K * float(np.max(sigma[rows])):
-            out[rows] = True
+        measured, model = recording.points[rows], predicted[rows]
+        if len(rows) == 2:
+            gap = abs(float(np.linalg.norm(measured[0] - measured[1]))
+                      - float(np.linalg.norm(model[0] - model[1])))  # fmt: skip
+        else:
+            rotation, _ = Rotation.align_vectors(measured - measured.mean(0),
+                                                 model - model.mean(0))  # fmt: skip
+            moved = rotation.apply(model - model.mean(0)) + measured.mean(0)
+            gap = float(np.linalg.norm(moved - measured, axis=1).max())
+        if gap <= RIGID_K * float(np.max(sigma[rows])):
+            out[rows[mask[rows]]] = True
     return out
 
 

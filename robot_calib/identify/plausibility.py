@@ -301,6 +301,10 @@ def stated_accuracy_warnings(cal: Calibration, recording: Recording) -> list[str
     sigma = recording.poses.sigma
     if sigma is None or not len(cal.residuals):
         return []
+    if cal.inliers is not None and len(cal.inliers) == len(sigma):
+        sigma = sigma[cal.inliers]  # the residuals are those of the measurements fitted
+    if len(sigma) != len(cal.residuals):
+        return []
     kinds = [("position", cal.residuals, sigma[:, 0], 1e3, "mm")]
     if cal.orientation_residuals is not None:
         kinds.append(("orientation", cal.orientation_residuals, sigma[:, 1], 1e6, "urad"))
@@ -314,7 +318,8 @@ def stated_accuracy_warnings(cal: Calibration, recording: Recording) -> list[str
         factor = rms / said
         if factor > STATED_FACTOR or factor < 1.0 / STATED_FACTOR:
             out.append(
-                f"warning: {kind} residual {rms * scale:.4g} {unit} per axis is {factor:.2g} x "
+                f"warning: {cal.name}: {kind} residual {rms * scale:.4g} {unit} per axis is "
+                f"{factor:.2g} x "
                 f"the stated accuracy ({said * scale:.4g} {unit}): the weights and 1-sigma "
                 "figures rest on the stated figures; check their units, or the model misses "
                 "something (see `robot-calib diagnose`)"

@@ -140,6 +140,8 @@ class RobotDescription:
     reading_offset: Array | None = None
     payload_kg: float = 0.0
     payload_com_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # why the description's own mass model is not used ('' when it is: `kinematics.masses`)
+    mass_note: str = ""
 
     @property
     def n_joints(self) -> int:
@@ -383,6 +385,10 @@ def parse_robot(data: Any, source: str) -> RobotDescription:
             )
         alpha, a = standard_from_modified(alpha, a)
         com_array = com_to_standard(com_array, alpha, a)
+        # a Hayati beta belongs to the pair of axes whose common normal its row gives:
+        # modified row i + 1 (axes i, i + 1), standard joint i
+        table["beta"] = [*table["beta"][1:], 0.0]
+        hayati = [*hayati[1:], None]
     # Default: beta wherever axes j and j+1 are nominally parallel (alpha_j = 0 or pi).
     hayati = [bool(h) if h is not None else j < len(joints) - 1 and abs(np.sin(alpha[j])) < 1e-9
               for j, h in enumerate(hayati)]  # fmt: skip

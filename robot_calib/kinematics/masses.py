@@ -9,8 +9,9 @@ it predicts). `checked_mass_model` finds them: a link whose centre of mass lies 
 from its DH frame than the arm reaches (`reach_m`), a negative mass, or a whole arm heavier
 than MAX_DENSITY_KG_M3 times its reach cubed (a solid steel cube of that size weighs about
 7800 kg/m^3; real arms weigh 10-200 kg/m^3 of reach cubed). It warns once, naming each link
-and value, and leaves the mass model out (all masses 0: gravity effects then have no torque
-and are left out of the ladder), never uses it.
+and value, and leaves the mass model out (all masses 0: the robot's weight then drives no
+gravity effect; a payload given with --payload still does), never uses it; the reports say
+which mass model the gravity effects used (`mass_model_line`).
 """
 
 from __future__ import annotations
@@ -60,11 +61,30 @@ def checked_mass_model(robot: RobotDescription, source: str) -> RobotDescription
     problems = mass_model_problems(robot)
     if not problems:
         return robot
+    note = f"{source}: mass model beyond physics ({'; '.join(problems)})"
     python_warnings.warn(
-        f"{source}: mass model beyond physics ({'; '.join(problems)}): not used, the gravity "
-        "effects (compliance, gravity_compliance) are left out; fix the masses, or give "
-        "--robot a description with sane ones",
+        f"{note}: not used, so the robot's own weight drives no gravity effect (compliance, "
+        "gravity_compliance; a --payload still does); fix the masses, or give --robot a "
+        "description with sane ones",
         UserWarning, stacklevel=2,
     )  # fmt: skip
     zero = np.zeros_like(robot.link_mass)
-    return replace(robot, link_mass=zero, link_com=np.zeros_like(robot.link_com))
+    return replace(robot, link_mass=zero, link_com=np.zeros_like(robot.link_com),
+                   mass_note=note)  # fmt: skip
+
+
+def mass_model_line(robot: RobotDescription) -> str:
+    """Which masses the gravity effects used and where they came from, for the reports:
+    the description's (its source, the total), none (why), and a payload when given."""
+    payload = robot.payload_kg
+    own = float(np.sum(robot.link_mass)) - payload
+    if robot.mass_note:
+        text = f"none of the description's, {robot.mass_note}"
+    elif own > 0:
+        text = f"the description's ({robot.source or robot.name}), {own:.1f} kg in all"
+    else:
+        text = "none: the description gives no masses (no gravity effect of its own weight)"
+    if payload > 0:
+        com = ", ".join(f"{v:.3f}" for v in robot.payload_com_m)
+        text += f"; a payload of {payload:.2f} kg at ({com}) m of the flange (--payload)"
+    return text

@@ -10,7 +10,9 @@ both chains end in the same frame n (the flange of the table), and they start in
 frame 0 when row 1's alpha_0 and a_0 are 0 (joint 1's axis is the base's z axis, as most
 tables have it; otherwise the base frame is not DH frame 0 and the table is refused). A
 centre of mass given in modified frame i (on joint i's axis) moves into standard frame i:
-c_std = Rx(-alpha_i) (c_mdh - (a_i, 0, 0)).
+c_std = Rx(-alpha_i) (c_mdh - (a_i, 0, 0)). A Hayati `beta` (and `hayati`) moves with its
+row's alpha and a: it turns the common normal of the axes that row joins (modified row
+i + 1, standard joint i).
 """
 
 from __future__ import annotations

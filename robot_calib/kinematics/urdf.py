@@ -30,6 +30,7 @@ controller's base frame on UR descriptions). The parser is urdfdom_py's `urdf_pa
 from __future__ import annotations
 
 import contextlib
+import re
 import warnings as python_warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
@@ -142,10 +143,12 @@ def description_from_text(kind: str, text: str, reference: str, where: str) -> R
 
     if kind == "urdf":
         options = dict(_fragment(reference.partition("#")[2], where))
-        model = parse_urdf(text, where)
-        found = urdf_to_description(
-            model, options.get("base_link"), options.get("tip_link"), where
-        )
+        with python_warnings.catch_warnings():  # said when the file was loaded: not again
+            python_warnings.simplefilter("ignore", UserWarning)
+            model = parse_urdf(text, where)
+            found = urdf_to_description(
+                model, options.get("base_link"), options.get("tip_link"), where
+            )
         return replace(found.description, path=reference)
     if kind == "yaml":
         try:
@@ -153,7 +156,10 @@ def description_from_text(kind: str, text: str, reference: str, where: str) -> R
         except yaml.YAMLError as exc:
             first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise RobotDescriptionError(f"{where}: not valid YAML ({first})") from None
-        return replace(checked_mass_model(parse_robot(data, where), where), path=reference)
+        with python_warnings.catch_warnings():  # said when the file was loaded: not again
+            python_warnings.simplefilter("ignore", UserWarning)
+            robot = checked_mass_model(parse_robot(data, where), where)
+        return replace(robot, path=reference)
     raise RobotDescriptionError(f"{where}: description format {kind!r}: urdf or yaml")
 
 
@@ -223,6 +229,9 @@ def parse_urdf(text: bytes | str, source: str) -> UrdfModel:
     # blank lines before the XML declaration: urdfdom (TinyXML2) skips them, so the
     # robot_state_publisher and RViz load such a file; lxml would refuse it
     text = text.lstrip()
+    bom = b"\xef\xbb\xbf" if isinstance(text, bytes) else "\ufeff"
+    if text.startswith(bom):  # type: ignore[arg-type]  # bytes or str, matched
+        text = text[len(bom) :].lstrip()
     with contextlib.suppress(ET.ParseError):  # if so, the URDF parser says what is wrong
         refuse_xacro(ET.fromstring(text), source, RobotDescriptionError)
 
@@ -238,8 +247,9 @@ def parse_urdf(text: bytes | str, source: str) -> UrdfModel:
         raise RobotDescriptionError(f"{source}: {typos[0]} (a typo? the parser would ignore it)")
     if unused:
         python_warnings.warn(
-            f"{source}: {len(unused)} element(s) inside visual or collision geometry ignored, "
-            f"as ROS's URDF parser ignores them (the calibration uses neither): "
+            f"{source}: {len(unused)} element(s) of links or of their visual or collision "
+            "geometry ignored, as ROS's URDF parser ignores them (the calibration reads only "
+            "a link's inertial): "
             + "; ".join(_element_words(m) for m in unused[:MAX_LISTED])
             + ("; ..." if len(unused) > MAX_LISTED else ""),
             UserWarning, stacklevel=2,
@@ -247,18 +257,19 @@ def parse_urdf(text: bytes | str, source: str) -> UrdfModel:
     return _model(urdf, source)
 
 
-#: the elements of a link the calibration never reads: what the URDF parser says of them
-#: (an unknown or misplaced element, e.g. `<material>` inside `<collision>`) is not a typo
-#: that changes the kinematics, so it is ignored with one warning
-UNUSED_ELEMENTS = ("/visual", "/collision")
+#: what the URDF parser says of a link's own elements (the calibration reads only its
+#: `<inertial>`) or of anything inside its `<visual>` or `<collision>` (an unknown or
+#: misplaced element: `<material>` inside `<collision>`, pybullet's `<contact>`) changes no
+#: kinematics: ignored with one warning, as urdfdom ignores it; inside a joint it is a typo
+UNUSED_ELEMENT = re.compile(r"/link\[@name='[^']*'\](/(visual|collision)\[\d+\].*)?$")
 MAX_LISTED = 4  # elements named in that warning
 
 
 def _in_unused_element(message: str) -> bool:
-    """True when a parser message is about an element inside a link's visual or collision
-    geometry (`UNUSED_ELEMENTS`)."""
+    """True when a parser message is about a link's own element or one inside its visual
+    or collision geometry (`UNUSED_ELEMENT`, matched on the element's path)."""
     where = message.rsplit(" in ", 1)[-1]
-    return any(part in where for part in UNUSED_ELEMENTS)
+    return bool(UNUSED_ELEMENT.search(where))
 
 
 def _element_words(message: str) -> str:

@@ -290,8 +290,9 @@ def copies(q: Array, points: Array, target: IntArray | None = None,
 #: pasted block, not the tracker reading again
 MIN_PASTED_ROWS = 3
 #: more than this share of rows exact copies of earlier ones is a copied file, not re-reads
-#: (an export rounding to 1 um repeats a still pose's point now and then: 38 of 1134 rows)
-MAX_REREAD_SHARE = 0.25
+#: (an export rounding to 1 um repeats a still pose's point now and then, 38 of 1134 rows;
+#: one rounding to 10 um, 3 reads a pose, about a third)
+MAX_REREAD_SHARE = 0.5
 
 
 def copied_rows(q: Array, points: Array, target: IntArray | None = None,
@@ -321,16 +322,17 @@ def _copy_key(q: Array, points: Array, target: IntArray | None,
 def pasted_block(original: dict[int, int]) -> tuple[int, int] | None:
     """(first row, length) of the first run of MIN_PASTED_ROWS or more consecutive copied
     rows whose originals (`original`: copied row -> the earlier row it repeats) are
-    consecutive too, else None."""
-    start, length = -1, 0
-    for k in sorted(original):
-        if length and k == start + length and original[k] == original[start] + length:
-            length += 1
-        else:
+    consecutive too, in the same or the reverse order, else None."""
+    for step in (1, -1):
+        start, length = -1, 0
+        for k in [*sorted(original), -2]:
+            if length and k == start + length and original[k] == original[start] + step * length:
+                length += 1
+                continue
             if length >= MIN_PASTED_ROWS:
                 return start, length
             start, length = k, 1
-    return (start, length) if length >= MIN_PASTED_ROWS else None
+    return None
 
 
 def are_rereads(original: dict[int, int], n: int) -> bool:

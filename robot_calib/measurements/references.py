@@ -50,8 +50,9 @@ class TrackerDrift(Record):
         kind += "" if self.rigid else "references give its rotation too)"
         return (f"reference reflectors {', '.join(self.references)}: the tracker drifted up "
                 f"to {self.max_mm:.4f} mm at them ({self.end_mm:.4f} mm at the end; {kind}), "
-                "removed from every measured point; their scatter about it, the tracker's "
-                f"own noise: {self.noise_mm:.4f} mm per axis")  # fmt: skip
+                "removed from every measured point; their scatter about it (the tracker's "
+                f"noise at fixed reflectors; the tool's points add the SMR's and the robot's): "
+                f"{self.noise_mm:.4f} mm per axis")  # fmt: skip
 
     def motion(self, time_s: Array) -> tuple[Rotation, Array]:
         """The tracker frame's motion at times (n,) [s] since the first read: rotation and
