@@ -354,3 +354,34 @@ def test_reference_reflectors_remove_the_trackers_drift(
     assert "rotation and translation" in run.stdout
     bad = cli("import", str(csv), *COLUMNS, "--reference", "a:u0,v0", "-o", str(out) + "x")
     assert bad.returncode == 2 and "--reference a:u0,v0: expected NAME:X,Y,Z" in bad.stderr
+
+
+def test_stated_accuracy_per_point_weighs_the_fit(
+    sim: tuple[Path, list[list[float]]], tmp_path: Path
+) -> None:
+    """A Leica export's uncertainty column: each point measured at its own accuracy, 1-60
+    um per axis (a third of them at 40-60 um). Imported with `--sigma` the fit weighs each
+    point by it and comes out closer to the points' true places than the same file read
+    without it (where a 60 um point counts as much as a 1 um one)."""
+    from robot_calib.bag.read import read_recording
+    from robot_calib.identify.calibrate import calibrate
+    from robot_calib.kinematics.loader import load_robot
+
+    _, rows = sim
+    robot = load_robot("kr5_sixx_r650")
+    rng = np.random.default_rng(7)
+    sigma = np.where(rng.random(len(rows)) < 1 / 3, rng.uniform(40e-6, 60e-6, len(rows)),
+                     rng.uniform(1e-6, 5e-6, len(rows)))  # fmt: skip
+    truth = np.array([r[6:] for r in rows])
+    noisy = truth + rng.normal(0.0, 1.0, truth.shape) * sigma[:, None]
+    table = [[*r[:6], *noisy[k], sigma[k] * 1e6] for k, r in enumerate(rows)]
+    csv = _csv(tmp_path / "leica.csv", table, "q1,q2,q3,q4,q5,q6,x,y,z,u")
+    errors = {}
+    for name, extra in (("weighted", ("--sigma", "u", "--sigma-unit", "um")), ("plain", ())):
+        out = tmp_path / f"{name}.mcap"
+        run = cli("import", str(csv), *COLUMNS, *extra, "-o", str(out))
+        assert run.returncode == 0, run.stderr
+        recording = read_recording([out], robot)
+        cal = calibrate(recording, robot, "geometric", log=None, screen_outliers=False)
+        errors[name] = float(np.sqrt(np.mean((cal.predict(recording.poses) - truth) ** 2)))
+    assert errors["weighted"] < 0.7 * errors["plain"], errors

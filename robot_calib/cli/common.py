@@ -158,6 +158,8 @@ def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: f
     print(f"unexplained: {diagnosis.unexplained.note}")
     for line in outlier_lines(diagnosis.outliers):
         print(line)
+    if diagnosis.poses and diagnosis.measurements > diagnosis.poses:  # re-reads, targets
+        print(f"calibration data: {diagnosis.reads_line()}")
     if diagnosis.mass_model.startswith("none of the description's"):  # not what was given
         print(f"mass model of the gravity effects: {diagnosis.mass_model}")
     for stretch in diagnosis.stretches:

@@ -189,6 +189,22 @@ class Diagnosis(Record):
     stretches: list[Stretch] = field(default_factory=list)
     # which masses the gravity effects used and where they came from (`masses`)
     mass_model: str = ""
+    # the calibration's measurements and the distinct poses they were read at
+    # (`poses.reading_groups`: re-reads, several targets and repeats of a pose are one);
+    # 0 in documents written before they were recorded
+    measurements: int = 0
+    poses: int = 0
+
+    def reads_line(self) -> str:
+        """'1134 measurements at 378 poses (3.0 per pose: the reads of a pose share a fold
+        in every k-fold and split)', '' for documents without the counts."""
+        if not self.poses:
+            return ""
+        per = self.measurements / self.poses
+        return (f"{self.measurements} measurements at {self.poses} poses ({per:.1f} per pose"
+                + (": the reads of a pose share a fold in every k-fold and split)" if per > 1
+                   else ")"))  # fmt: skip
+
     warnings: list[str] = field(default_factory=list)  # implausible geometric calibration
     learnable: LearnableBound | None = None  # what a residual model reaches held out
     # ISO 9283 AP/RP of the repeated poses: before (nominal) and after (the best rung)
@@ -486,6 +502,8 @@ def diagnose(
         stretches=stretches(whole, best.calibration.predict(whole.poses) - whole.points,
                             floor_mm, robot.joint_names),
         mass_model=mass_model_line(robot),
+        measurements=len(whole),
+        poses=len(np.unique(reading_groups(whole.poses.q))),
         warnings=list(geo.warnings) + ([ladder.noise.warning] if ladder.noise.warning else [])
         + ([few] if few else []) + alias_warnings(last.effects, recording, ladder.holdout),
         learnable=learnable,

@@ -532,6 +532,8 @@ def _problems(diagnosis: Diagnosis, warnings: Sequence[str]) -> str:
                           rows))  # fmt: skip
     else:
         out.append("<p>No measurement flagged as an outlier.</p>")
+    if diagnosis.reads_line():
+        out.append(f"<p><b>Calibration data</b>: {_e(diagnosis.reads_line())}.</p>")
     if diagnosis.mass_model:
         out.append(f"<p><b>Mass model of the gravity effects</b>: {_e(diagnosis.mass_model)}"
                    ".</p>")  # fmt: skip

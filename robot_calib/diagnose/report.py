@@ -400,6 +400,8 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
                   *(f"- {s.line()}" for s in diagnosis.stretches)]  # fmt: skip
     if diagnosis.mass_model:
         lines += ["", f"Mass model of the gravity effects: {diagnosis.mass_model}."]
+    if diagnosis.reads_line():
+        lines += ["", f"Calibration data: {diagnosis.reads_line()}."]
     lines += ["", f"What remains: {diagnosis.unexplained.note}.", "",
               "## Where the residual lies", ""]  # fmt: skip
     if where.joints:
