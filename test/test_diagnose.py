@@ -194,7 +194,33 @@ def test_a_block_of_poses_off_together_is_one_stretch_not_blunders() -> None:
     two, _ = diagnose(both, robot)
     assert [(s.first_point, s.last_point, s.poses) for s in two.stretches] == [(0, 11, 12)]
     assert two.stretches[0].bag == both.sources[1]
+    assert diagnosis.regions == []  # the stretch holds them: not named twice
     for effect, seed in (("backlash", 1002), ("none", 1000), ("thermal_warmup", 1000)):
         case = make_case(effect, seed)
         clean, _ = diagnose(case.calibration, robot, case.holdout)
-        assert clean.stretches == [], (effect, clean.stretches)
+        assert clean.stretches == [] and clean.regions == [], (effect, clean.stretches)
+
+
+def test_a_region_of_joint_space_off_whenever_measured_is_named() -> None:
+    """Poses whose joint 2 reads between -120 and -100 deg sit 1 mm off, whenever they were
+    measured (scattered through the campaign: no stretch in time): named as a region of
+    joint_a2's readings."""
+    from dataclasses import replace
+
+    from robot_calib.sim.measure import record_plan
+    from robot_calib.sim.plans import random_plan
+
+    world = load_world()
+    robot = world.model.robot
+    rng = np.random.default_rng(2)
+    recording = record_plan(world, random_plan(robot, 300, rng), rng)
+    reading = np.degrees(recording.poses.q[:, 1])
+    there = (reading > -120.0) & (reading < -100.0)
+    assert 10 <= there.sum() <= 40 and not there[:5].all()
+    points = recording.points.copy()
+    points[there] += [0.0006, 0.0, 0.0008]
+    diagnosis, _ = diagnose(replace(recording, points=points), robot)
+    assert diagnosis.stretches == [], diagnosis.stretches
+    region = next(r for r in diagnosis.regions if r.joint == "joint_a2")
+    assert region.low_deg > -121.0 and region.high_deg < -99.0, region
+    assert region.high_poses >= 0.8 * there.sum() and region.mean_mm > 0.5, region

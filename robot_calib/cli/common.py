@@ -162,8 +162,8 @@ def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: f
         print(f"calibration data: {diagnosis.reads_line()}")
     if diagnosis.mass_model.startswith("none of the description's"):  # not what was given
         print(f"mass model of the gravity effects: {diagnosis.mass_model}")
-    for stretch in diagnosis.stretches:
-        print(f"where the residual concentrates: {stretch.line()}")
+    for place in diagnosis.concentration_lines():
+        print(f"where the residual concentrates: {place}")
     for warning in diagnosis.warnings:  # as the reports list them (the floor's: above)
         if warning != diagnosis.noise.warning:
             print(warning if warning.startswith(("warning", "note")) else f"warning: {warning}")

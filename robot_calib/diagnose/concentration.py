@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording
 from robot_calib.records import Record
 
@@ -72,6 +72,21 @@ class Stretch(Record):
         )
 
 
+def _per_pose(recording: Recording, norm: Array,
+              floor_mm: float | None) -> tuple[IntArray, Array, float]:  # fmt: skip
+    """Each measurement's pose (n,) (`Recording.pose_index`), each pose's mean residual
+    norm (P,) [m] of the measurement norms (n,) [m], and the level above which a pose is
+    high [m] (HIGH_FACTOR x their median, and x the noise floor when known)."""
+    pose = recording.pose_index()
+    n_poses = int(pose.max()) + 1 if len(pose) else 0
+    count = np.bincount(pose, minlength=n_poses)
+    pose_norm = np.bincount(pose, weights=norm, minlength=n_poses) / np.maximum(count, 1)
+    threshold = HIGH_FACTOR * float(np.median(pose_norm)) if n_poses else 0.0
+    if floor_mm is not None:
+        threshold = max(threshold, HIGH_FACTOR * floor_mm * 1e-3)
+    return pose, pose_norm, threshold
+
+
 def stretches(recording: Recording, residuals: Array, floor_mm: float | None,
               joint_names: Sequence[str]) -> list[Stretch]:  # fmt: skip
     """The stretches (module docstring) of `recording`'s residuals (n, 3) [m] (predicted -
@@ -79,15 +94,10 @@ def stretches(recording: Recording, residuals: Array, floor_mm: float | None,
     [mm]) or None; `joint_names` (J,) the robot's. Poses (`Recording.pose_index`) are
     judged by their measurements' mean residual, each bag in its own time order."""
     norm = np.linalg.norm(residuals, axis=1)
-    pose = recording.pose_index()
-    n_poses = int(pose.max()) + 1 if len(pose) else 0
+    pose, pose_norm, threshold = _per_pose(recording, norm, floor_mm)
+    n_poses = len(pose_norm)
     if n_poses < 2 * MIN_RUN:
         return []
-    count = np.bincount(pose, minlength=n_poses)
-    pose_norm = np.bincount(pose, weights=norm, minlength=n_poses) / np.maximum(count, 1)
-    threshold = HIGH_FACTOR * float(np.median(pose_norm))
-    if floor_mm is not None:
-        threshold = max(threshold, HIGH_FACTOR * floor_mm * 1e-3)
     first_row = np.full(n_poses, -1)
     first_row[pose[::-1]] = np.arange(len(pose))[::-1]  # each pose's first measurement
     bag, time = recording.bag_index[first_row], recording.poses.time[first_row]
@@ -123,3 +133,83 @@ def stretches(recording: Recording, residuals: Array, floor_mm: float | None,
                            [float(v) for v in mean_vec / np.linalg.norm(mean_vec)] if same
                            else [], narrow))  # fmt: skip
     return sorted(out, key=lambda s: -s.mean_mm)[:MAX_STRETCHES]
+
+
+#: a joint-space region: at least this share of the poses whose reading lies in a window
+#: of NARROW of the joint's range is high, and at least MIN_RUN of them
+REGION_SHARE = 0.8
+
+
+@dataclass(frozen=True)
+class Region(Record):
+    """A region of one joint's readings where the poses' residual is far above the rest,
+    whenever they were measured (`regions`): the joint, its readings' range there [deg],
+    how many poses and how many of them high, their mean residual and the rest's [mm]."""
+
+    joint: str
+    low_deg: float
+    high_deg: float
+    poses: int
+    high_poses: int
+    mean_mm: float
+    rest_mean_mm: float
+
+    def line(self) -> str:
+        """'joint_a2 from -120 to -95 deg: 14 poses, 13 of them high, 0.85 mm mean against
+        0.0120 mm elsewhere: a place the model misses (or the set-up there)'."""
+        return (f"{self.joint} from {self.low_deg:.0f} to {self.high_deg:.0f} deg: "
+                f"{self.poses} poses, {self.high_poses} of them high, {self.mean_mm:.2f} mm "
+                f"mean against {self.rest_mean_mm:.4f} mm elsewhere: a place the model "
+                "misses (or the set-up there)")  # fmt: skip
+
+
+def regions(
+    recording: Recording,
+    residuals: Array,
+    floor_mm: float | None,
+    joint_names: Sequence[str],
+    taken: Sequence[Stretch] = (),
+) -> list[Region]:
+    """The regions of joint space whose poses' residual (`_per_pose`, under the best model)
+    is high whenever they were measured: per joint, the window (at most NARROW of its
+    range, from one high pose's reading to another's) holding the most high poses, at
+    least MIN_RUN of them and REGION_SHARE of its poses;
+    poses of the `taken` stretches are left out (named already). The regions of every
+    joint that holds one, most high poses first (MAX_STRETCHES)."""
+    norm = np.linalg.norm(residuals, axis=1)
+    pose, pose_norm, threshold = _per_pose(recording, norm, floor_mm)
+    n_poses = len(pose_norm)
+    if n_poses < 2 * MIN_RUN:
+        return []
+    first_row = np.full(n_poses, -1)
+    first_row[pose[::-1]] = np.arange(len(pose))[::-1]
+    q = recording.poses.q[first_row]  # (P, J)
+    keep = np.ones(n_poses, dtype=bool)
+    message, bag = recording.message_indices(), recording.bag_index
+    for stretch in taken:
+        mine = np.array([recording.sources[int(b)] == stretch.bag for b in bag[first_row]])
+        points = message[first_row]
+        keep &= ~(mine & (points >= stretch.first_point) & (points <= stretch.last_point))
+    high = (pose_norm > threshold) & keep
+    out = []
+    for j in range(q.shape[1]):
+        width = NARROW * float(np.ptp(q[:, j]))
+        if width <= 0 or high.sum() < MIN_RUN:
+            continue
+        best: tuple[int, float, float] | None = None
+        levels = np.unique(q[high, j])
+        for k, start in enumerate(levels):  # windows from one high reading to another
+            end = levels[k:][levels[k:] <= start + width][-1]
+            inside = keep & (q[:, j] >= start) & (q[:, j] <= end)
+            count = int((inside & high).sum())
+            if count >= MIN_RUN and count >= REGION_SHARE * inside.sum() and (
+                    best is None or count > best[0]):  # fmt: skip
+                best = (count, float(start), float(end))
+        if best is None:
+            continue
+        count, lo, hi = best
+        inside = keep & (q[:, j] >= lo) & (q[:, j] <= hi)
+        out.append(Region(joint_names[j], float(np.degrees(lo)), float(np.degrees(hi)),
+                          int(inside.sum()), count, float(pose_norm[inside].mean()) * 1e3,
+                          float(pose_norm[~inside].mean()) * 1e3))  # fmt: skip
+    return sorted(out, key=lambda r: -r.high_poses)[:MAX_STRETCHES]

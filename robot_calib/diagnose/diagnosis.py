@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.diagnose.concentration import Stretch, stretches
+from robot_calib.diagnose.concentration import Region, Stretch, regions, stretches
 from robot_calib.diagnose.frequency import MAX_SCAN_ORDER, alias_warnings
 from robot_calib.diagnose.iso9283 import Iso9283, iso9283, repeat_groups
 from robot_calib.diagnose.ladder import (
@@ -187,6 +187,8 @@ class Diagnosis(Record):
     # stretches of consecutive measurements far above the rest (`concentration`), every
     # measurement's residual under the best model, flagged ones included
     stretches: list[Stretch] = field(default_factory=list)
+    # regions of a joint's readings far above the rest whenever measured (`concentration`)
+    regions: list[Region] = field(default_factory=list)
     # which masses the gravity effects used and where they came from (`masses`)
     mass_model: str = ""
     # the calibration's measurements and the distinct poses they were read at
@@ -194,6 +196,10 @@ class Diagnosis(Record):
     # 0 in documents written before they were recorded
     measurements: int = 0
     poses: int = 0
+
+    def concentration_lines(self) -> list[str]:
+        """Where the residual concentrates, a line each: the stretches, then the regions."""
+        return [s.line() for s in self.stretches] + [r.line() for r in self.regions]
 
     def reads_line(self) -> str:
         """'1134 measurements at 378 poses (3.0 per pose: the reads of a pose share a fold
@@ -468,6 +474,8 @@ def diagnose(
                else "; no effect of the vocabulary reduces it further")
             + structure.replace("strongest structure", "strongest remaining structure")
         )  # fmt: skip
+    misses = best.calibration.predict(whole.poses) - whole.points  # every measurement
+    found = stretches(whole, misses, floor_mm, robot.joint_names)
     diagnosis = Diagnosis(
         dominant_effect=None if foreign else dominant_effect(ladder, where, noise, outside),
         ladder=[RungScore.of(r, learnable_gap(ladder)) for r in ladder.rungs],
@@ -499,8 +507,8 @@ def diagnose(
         recordings=sources,
         holdout=[] if holdout_sources is None else list(holdout_sources.sources),
         outliers=list(ladder.outliers),
-        stretches=stretches(whole, best.calibration.predict(whole.poses) - whole.points,
-                            floor_mm, robot.joint_names),
+        stretches=found,
+        regions=regions(whole, misses, floor_mm, robot.joint_names, found),
         mass_model=mass_model_line(robot),
         measurements=len(whole),
         poses=len(np.unique(reading_groups(whole.poses.q))),

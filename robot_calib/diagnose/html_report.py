@@ -537,9 +537,10 @@ def _problems(diagnosis: Diagnosis, warnings: Sequence[str]) -> str:
     if diagnosis.mass_model:
         out.append(f"<p><b>Mass model of the gravity effects</b>: {_e(diagnosis.mass_model)}"
                    ".</p>")  # fmt: skip
-    if diagnosis.stretches:
+    places = diagnosis.concentration_lines()
+    if places:
         out.append("<h3>Where the residual concentrates</h3><ul class='tight'>"
-                   + "".join(f"<li>{_e(s.line())}</li>" for s in diagnosis.stretches)
+                   + "".join(f"<li>{_e(place)}</li>" for place in places)
                    + "</ul>")  # fmt: skip
     return "".join(out)
 

@@ -394,10 +394,10 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
             "",
         ]
         lines += [f"- {o.line()}" for o in diagnosis.outliers]  # fmt: skip
-    if diagnosis.stretches:
+    places = diagnosis.concentration_lines()
+    if places:
         lines += ["", "Where the residual concentrates (every measurement, flagged ones "
-                  "included, under the best model):", "",
-                  *(f"- {s.line()}" for s in diagnosis.stretches)]  # fmt: skip
+                  "included, under the best model):", "", *(f"- {p}" for p in places)]  # fmt: skip
     if diagnosis.mass_model:
         lines += ["", f"Mass model of the gravity effects: {diagnosis.mass_model}."]
     if diagnosis.reads_line():
