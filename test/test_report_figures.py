@@ -230,8 +230,17 @@ def test_joint_4_backlash_is_said_removed_by_the_best_model(tmp_path: Path) -> N
     assert diagnosis.ladder[-1].model == "geometric+backlash:4"
     compared, warnings = compare_before_after(ladder)
     out = tmp_path / "d.json"
+    # the learned correction's own warnings: counted on the console, listed in the reports
+    from dataclasses import replace
+
+    assert diagnosis.learnable is not None
+    edge = "signal variance at the upper edge of its range (an example)"
+    diagnosis = replace(diagnosis, learnable=replace(diagnosis.learnable, warnings=[edge]))
+    assert "1 warning(s) in the reports" in diagnosis.learnable.line()
     write_diagnosis(diagnosis, ladder, calibration, out, compared=compared,
                     warnings=warnings)  # fmt: skip
+    assert f"learnable bound (learned correction): {edge}" in out.with_suffix(".md").read_text()
+    assert f"learnable bound (learned correction): {edge}" in html_report_path(out).read_text()
     note = f"{REMOVED}: direction (backlash:4)"
     doc = json.loads(out.read_text())
     assert {"joint": 4, "family": "direction", "effect": "backlash:4", "orders": []} in doc[

@@ -197,6 +197,13 @@ class Diagnosis(Record):
     measurements: int = 0
     poses: int = 0
 
+    def learnable_warnings(self) -> list[str]:
+        """The learned correction's own warnings (hyperparameters at an edge), as the
+        reports list them: the console's learnable-bound line only counts them."""
+        if self.learnable is None:
+            return []
+        return [f"learnable bound (learned correction): {w}" for w in self.learnable.warnings]
+
     def concentration_lines(self) -> list[str]:
         """Where the residual concentrates, a line each: the stretches, then the regions."""
         return [s.line() for s in self.stretches] + [r.line() for r in self.regions]

@@ -562,7 +562,8 @@ def html_report(
     the figures already drawn for the Markdown report (default: none yet)."""
     figures = FigureCache() if figures is None else figures
     own = dict(page_figures(ladder, recording, compared))
-    every = list(dict.fromkeys([*recording.warnings, *diagnosis.warnings, *warnings]))
+    every = list(dict.fromkeys([*recording.warnings, *diagnosis.warnings, *warnings,
+                                *diagnosis.learnable_warnings()]))  # fmt: skip
     held = f" ({', '.join(diagnosis.holdout)})" if diagnosis.holdout else ""
     sections = [
         ("accuracy", "Accuracy before and after calibration",

@@ -117,7 +117,7 @@ class LearnableBound(Record):
 
     def line(self) -> str:
         if not self.bounds:
-            edge = f"; {len(self.warnings)} warning(s)" if self.warnings else ""
+            edge = f"; {len(self.warnings)} warning(s) in the reports" if self.warnings else ""
             return (
                 f"learnable bound: none: the residual model did not fit (geometric "
                 f"{self.geometric_abs_rms_mm:.4f} mm rms held-out, "
@@ -126,7 +126,7 @@ class LearnableBound(Record):
             )
         share = (f"{100 * self.learnable_share:.0f} % of geometric's error is learnable"
                  if self.learnable_share > 0 else "it learns nothing")  # fmt: skip
-        edge = f"; {len(self.warnings)} warning(s)" if self.warnings else ""
+        edge = f"; {len(self.warnings)} warning(s) in the reports" if self.warnings else ""
         whose = "its" if self.learned_on == "geometric" else f"{self.learned_on}'s"
         return (
             f"learnable bound: geometric {self.geometric_abs_rms_mm:.4f} mm -> "

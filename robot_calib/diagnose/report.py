@@ -463,6 +463,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
     ]
     for title, name in plots:
         lines += [f"### {title}", "", f"![{title}]({name})", ""]
-    every = list(dict.fromkeys([*recording.warnings, *diagnosis.warnings, *warnings]))
+    every = list(dict.fromkeys([*recording.warnings, *diagnosis.warnings, *warnings,
+                                *diagnosis.learnable_warnings()]))  # fmt: skip
     lines += _extra_sections(compared, best, every)
     path.write_text("\n".join(lines) + "\n")
