@@ -352,6 +352,16 @@ def test_reference_reflectors_remove_the_trackers_drift(
     noise = float(found.group(1))
     assert noise == pytest.approx(0.0125, rel=0.2), run.stdout
     assert "rotation and translation" in run.stdout
+    lines = csv.read_text().splitlines()  # reflector c out of sight at 10 poses: said
+    for k in range(1, 11):
+        cells = lines[k].split(",")
+        lines[k] = ",".join(cells[:-3] + ["", "", ""])
+    hidden = tmp_path / "hidden.csv"
+    hidden.write_text("\n".join(lines) + "\n")
+    run = cli("import", str(hidden), *COLUMNS, "--time", "t", *references,
+              "-o", str(tmp_path / "hidden.mcap"))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert f"read together at {n - 10} of {n} poses" in run.stdout, run.stdout
     bad = cli("import", str(csv), *COLUMNS, "--reference", "a:u0,v0", "-o", str(out) + "x")
     assert bad.returncode == 2 and "--reference a:u0,v0: expected NAME:X,Y,Z" in bad.stderr
 

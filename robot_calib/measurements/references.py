@@ -42,13 +42,18 @@ class TrackerDrift(Record):
     rigid: bool
     coefficients: list[list[float]]
     time_range_s: list[float]
+    reads: int = 0  # poses with every reference read (the drift's data)
+    poses: int = 0  # poses in all
 
     def line(self) -> str:
         """'reference reflectors A, B, C: tracker drift up to 0.059 mm (0.041 at the end)
         ...'."""
         kind = "rotation and translation" if self.rigid else "translation only (3 or more "
         kind += "" if self.rigid else "references give its rotation too)"
-        return (f"reference reflectors {', '.join(self.references)}: the tracker drifted up "
+        seen = (f" (read together at {self.reads} of {self.poses} poses)"
+                if self.reads < self.poses else "")  # fmt: skip
+        return (f"reference reflectors {', '.join(self.references)}{seen}: the tracker "
+                "drifted up "
                 f"to {self.max_mm:.4f} mm at them ({self.end_mm:.4f} mm at the end; {kind}), "
                 "removed from every measured point; their scatter about it (the tracker's "
                 f"noise at fixed reflectors; the tool's points add the SMR's and the robot's): "
@@ -109,4 +114,5 @@ def estimate_drift(names: list[str], time_s: Array, references: Array) -> Tracke
     dof = max(leftover.size - coef.size - start.size, 1)
     noise = float(np.sqrt(np.sum(leftover**2) / dof))
     return TrackerDrift(list(names), float(shift.max()) * 1e3, float(shift[:, -1].max()) * 1e3,
-                        noise * 1e3, rigid, coef.T.tolist(), span)  # fmt: skip
+                        noise * 1e3, rigid, coef.T.tolist(), span, int(read.sum()),
+                        len(read))  # fmt: skip
