@@ -19,6 +19,7 @@ _PAIR_BLOCK = 2048  # rows per block: memory O(block * N), time O(N^2)
 #: (the ladder evaluates accuracy dozens of times; all pairs of 2773 points took 1 s each)
 MAX_EXACT_POINTS = 1500
 SAMPLED_PAIRS = 300_000
+NO_PAIR = "n/a (no pair)"  # the seed criterion of fewer than 2 points: it measures nothing
 
 
 @dataclass(frozen=True)
@@ -37,7 +38,7 @@ class Accuracy(Record):
         max left-aligned to `width`, a table's column), or 'n/a (no pair)' for fewer than 2
         points: the 0 the figures hold then measures nothing."""
         if self.n_points < 2:
-            return f"{'n/a (no pair)':>{2 * width + 3}}"
+            return f"{NO_PAIR:>{2 * width + 3}}"
         return f"{self.pairwise_mean_mm:>{width}.4f} / {self.pairwise_max_mm:<{width}.4f}"
 
     def seed_text(self, label: str = "seed criterion") -> str:

@@ -72,19 +72,38 @@ class Stretch(Record):
         )
 
 
-def _per_pose(recording: Recording, norm: Array,
-              floor_mm: float | None) -> tuple[IntArray, Array, float]:  # fmt: skip
-    """Each measurement's pose (n,) (`Recording.pose_index`), each pose's mean residual
-    norm (P,) [m] of the measurement norms (n,) [m], and the level above which a pose is
-    high [m] (HIGH_FACTOR x their median, and x the noise floor when known)."""
+@dataclass(frozen=True)
+class _PoseResiduals:
+    """The residual norms of every measurement, per pose: `pose` (n,) each measurement's
+    pose (`Recording.pose_index`), `first_row` (P,) each pose's first measurement, `norm`
+    (n,) [m] each measurement's, `pose_norm` (P,) [m] each pose's mean, and `threshold`
+    [m] above which a pose is high (HIGH_FACTOR x their median, and x the noise floor when
+    known)."""
+
+    pose: IntArray
+    first_row: IntArray
+    norm: Array
+    pose_norm: Array
+    threshold: float
+
+
+def _per_pose(recording: Recording, residuals: Array,
+              floor_mm: float | None) -> _PoseResiduals | None:  # fmt: skip
+    """`_PoseResiduals` of `recording`'s residuals (n, 3) [m]; None with fewer than
+    2 x MIN_RUN poses (nothing to stand out from)."""
+    norm = np.linalg.norm(residuals, axis=1)
     pose = recording.pose_index()
     n_poses = int(pose.max()) + 1 if len(pose) else 0
+    if n_poses < 2 * MIN_RUN:
+        return None
     count = np.bincount(pose, minlength=n_poses)
     pose_norm = np.bincount(pose, weights=norm, minlength=n_poses) / np.maximum(count, 1)
-    threshold = HIGH_FACTOR * float(np.median(pose_norm)) if n_poses else 0.0
+    threshold = HIGH_FACTOR * float(np.median(pose_norm))
     if floor_mm is not None:
         threshold = max(threshold, HIGH_FACTOR * floor_mm * 1e-3)
-    return pose, pose_norm, threshold
+    first_row = np.full(n_poses, -1)
+    first_row[pose[::-1]] = np.arange(len(pose))[::-1]  # each pose's first measurement
+    return _PoseResiduals(pose, first_row, norm, pose_norm, threshold)
 
 
 def stretches(recording: Recording, residuals: Array, floor_mm: float | None,
@@ -93,14 +112,11 @@ def stretches(recording: Recording, residuals: Array, floor_mm: float | None,
     measured, every measurement), largest mean first; `floor_mm` the noise floor (abs rms
     [mm]) or None; `joint_names` (J,) the robot's. Poses (`Recording.pose_index`) are
     judged by their measurements' mean residual, each bag in its own time order."""
-    norm = np.linalg.norm(residuals, axis=1)
-    pose, pose_norm, threshold = _per_pose(recording, norm, floor_mm)
-    n_poses = len(pose_norm)
-    if n_poses < 2 * MIN_RUN:
+    per = _per_pose(recording, residuals, floor_mm)
+    if per is None:
         return []
-    first_row = np.full(n_poses, -1)
-    first_row[pose[::-1]] = np.arange(len(pose))[::-1]  # each pose's first measurement
-    bag, time = recording.bag_index[first_row], recording.poses.time[first_row]
+    pose, norm, pose_norm, threshold = per.pose, per.norm, per.pose_norm, per.threshold
+    bag, time = recording.bag_index[per.first_row], recording.poses.time[per.first_row]
     runs = []
     for b in np.unique(bag):
         mine = np.flatnonzero(bag == b)
@@ -176,21 +192,18 @@ def regions(
     least MIN_RUN of them and REGION_SHARE of its poses;
     poses of the `taken` stretches are left out (named already). The regions of every
     joint that holds one, most high poses first (MAX_STRETCHES)."""
-    norm = np.linalg.norm(residuals, axis=1)
-    pose, pose_norm, threshold = _per_pose(recording, norm, floor_mm)
-    n_poses = len(pose_norm)
-    if n_poses < 2 * MIN_RUN:
+    per = _per_pose(recording, residuals, floor_mm)
+    if per is None:
         return []
-    first_row = np.full(n_poses, -1)
-    first_row[pose[::-1]] = np.arange(len(pose))[::-1]
-    q = recording.poses.q[first_row]  # (P, J)
-    keep = np.ones(n_poses, dtype=bool)
-    message, bag = recording.message_indices(), recording.bag_index
+    pose_norm = per.pose_norm
+    q = recording.poses.q[per.first_row]  # (P, J)
+    keep = np.ones(len(pose_norm), dtype=bool)
+    points = recording.message_indices()[per.first_row]
+    sources = [recording.sources[int(b)] for b in recording.bag_index[per.first_row]]
     for stretch in taken:
-        mine = np.array([recording.sources[int(b)] == stretch.bag for b in bag[first_row]])
-        points = message[first_row]
+        mine = np.array([source == stretch.bag for source in sources])
         keep &= ~(mine & (points >= stretch.first_point) & (points <= stretch.last_point))
-    high = (pose_norm > threshold) & keep
+    high = (pose_norm > per.threshold) & keep
     out = []
     for j in range(q.shape[1]):
         width = NARROW * float(np.ptp(q[:, j]))

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from robot_calib.accuracy import NO_PAIR
 from robot_calib.diagnose.concentration import Region, Stretch, regions, stretches
 from robot_calib.diagnose.frequency import MAX_SCAN_ORDER, alias_warnings
 from robot_calib.diagnose.iso9283 import Iso9283, iso9283, repeat_groups
@@ -111,7 +112,7 @@ class RungScore(Record):
         """The held-out seed criterion 'mean / max' [mm], 'n/a (no pair)' when fewer than
         two points were held out: the 0 stored then measures nothing."""
         if self.holdout_points is not None and self.holdout_points < 2:
-            return "n/a (no pair)"
+            return NO_PAIR
         return f"{self.holdout_mean_mm:.4f}{sep}{self.holdout_max_mm:.4f}"
 
     @classmethod

@@ -141,26 +141,21 @@ def description_from_text(kind: str, text: str, reference: str, where: str) -> R
     file's, so it is written back unchanged. Errors name `where`."""
     import yaml
 
-    if kind == "urdf":
-        options = dict(_fragment(reference.partition("#")[2], where))
-        with python_warnings.catch_warnings():  # said when the file was loaded: not again
-            python_warnings.simplefilter("ignore", UserWarning)
-            model = parse_urdf(text, where)
-            found = urdf_to_description(
-                model, options.get("base_link"), options.get("tip_link"), where
-            )
-        return replace(found.description, path=reference)
-    if kind == "yaml":
+    if kind not in ("urdf", "yaml"):
+        raise RobotDescriptionError(f"{where}: description format {kind!r}: urdf or yaml")
+    with python_warnings.catch_warnings():  # said when the file was loaded: not again
+        python_warnings.simplefilter("ignore", UserWarning)
+        if kind == "urdf":
+            options = dict(_fragment(reference.partition("#")[2], where))
+            found = urdf_to_description(parse_urdf(text, where), options.get("base_link"),
+                                        options.get("tip_link"), where)  # fmt: skip
+            return replace(found.description, path=reference)
         try:
             data = yaml.safe_load(text)
         except yaml.YAMLError as exc:
             first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise RobotDescriptionError(f"{where}: not valid YAML ({first})") from None
-        with python_warnings.catch_warnings():  # said when the file was loaded: not again
-            python_warnings.simplefilter("ignore", UserWarning)
-            robot = checked_mass_model(parse_robot(data, where), where)
-        return replace(robot, path=reference)
-    raise RobotDescriptionError(f"{where}: description format {kind!r}: urdf or yaml")
+        return replace(checked_mass_model(parse_robot(data, where), where), path=reference)
 
 
 @contextlib.contextmanager

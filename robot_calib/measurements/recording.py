@@ -298,12 +298,12 @@ MAX_REREAD_SHARE = 0.5
 def copied_rows(q: Array, points: Array, target: IntArray | None = None,
                 direction: Array | None = None) -> dict[int, int]:  # fmt: skip
     """Each copied measurement (`copies`) -> the first earlier one it repeats."""
-    copied = copies(q, points, target, direction)
-    if not copied.any():
+    if len(points) < 2:
         return {}
     key = _copy_key(q, points, target, direction)
-    return {int(k): int(np.flatnonzero((key[:k] == key[k]).all(axis=1))[0])
-            for k in np.flatnonzero(copied)}  # fmt: skip
+    _, first, group = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    original = first[group.reshape(-1)]  # each measurement's first occurrence
+    return {int(k): int(original[k]) for k in np.flatnonzero(original != np.arange(len(key)))}
 
 
 def _copy_key(q: Array, points: Array, target: IntArray | None,

@@ -62,8 +62,7 @@ class TrackerDrift(Record):
     def motion(self, time_s: Array) -> tuple[Rotation, Array]:
         """The tracker frame's motion at times (n,) [s] since the first read: rotation and
         translation (n, 3) [m] taking a point as first read to where it is read then."""
-        values = _time_basis(time_s, self.time_range_s) @ np.asarray(self.coefficients).T
-        return Rotation.from_rotvec(values[:, :3]), values[:, 3:]
+        return _motion(_time_basis(time_s, self.time_range_s) @ np.asarray(self.coefficients).T)
 
     def removed(self, time_s: Array, points: Array) -> Array:
         """Points (n, 3) [m, tracker frame] read at times (n,) [s], as the tracker would
@@ -78,6 +77,12 @@ def _time_basis(time_s: Array, time_range_s: list[float]) -> Array:
     first, last = time_range_s
     u = (np.asarray(time_s, dtype=float) - first) / max(last - first, 1e-9)
     return np.vander(u, DRIFT_DEGREE + 1, increasing=True)
+
+
+def _motion(values: Array) -> tuple[Rotation, Array]:
+    """Rotation and translation (n, 3) [m] of drift values (n, 6): rotation vector [rad],
+    then translation."""
+    return Rotation.from_rotvec(values[:, :3]), values[:, 3:]
 
 
 def estimate_drift(names: list[str], time_s: Array, references: Array) -> TrackerDrift:
@@ -106,8 +111,7 @@ def estimate_drift(names: list[str], time_s: Array, references: Array) -> Tracke
     basis = _time_basis(t, span)
     coef = np.linalg.lstsq(basis, motions, rcond=None)[0]  # (D + 1, 6)
     coef[0] -= (basis[:1] @ coef)[0]  # relative to the first read
-    drift = TrackerDrift(list(names), 0.0, 0.0, 0.0, rigid, coef.T.tolist(), span)
-    rotation, translation = drift.motion(t)
+    rotation, translation = _motion(basis @ coef)
     moved = np.stack([rotation.apply(p) + translation for p in start])  # (R, n, 3)
     shift = np.linalg.norm(moved - start[:, None], axis=2)
     leftover = refs - moved
