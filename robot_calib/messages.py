@@ -28,6 +28,8 @@ POSE_TYPE = "geometry_msgs/msg/PoseStamped"
 POSE_COV_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 POSE_TYPES = (POSE_TYPE, POSE_COV_TYPE)
 TARGET_POSE_TOPIC = re.compile(r"/laser_tracker/(?:([A-Za-z][A-Za-z0-9_]*)/)?pose")
+# reference reflectors fixed off the robot, read with the poses (msgs_doc/references.md)
+REFERENCE_TOPIC = re.compile(r"/laser_tracker/reference/([A-Za-z][A-Za-z0-9_]*)/point")
 QUATERNION_TOLERANCE = 1e-3  # |q| - 1 beyond this is no rotation (a column mix-up)
 
 
@@ -39,6 +41,18 @@ def target_topic(name: str) -> str:
 def target_topic_name(topic: str) -> str | None:
     """The target name of a further target's topic /laser_tracker/NAME/point, else None."""
     match = TARGET_TOPIC.fullmatch(topic)
+    return match.group(1) if match else None
+
+
+def reference_topic(name: str) -> str:
+    """The topic of reference reflector `name` (msgs_doc/references.md)."""
+    return f"/laser_tracker/reference/{name}/point"
+
+
+def reference_topic_name(topic: str) -> str | None:
+    """The reflector name of a reference topic /laser_tracker/reference/NAME/point, else
+    None."""
+    match = REFERENCE_TOPIC.fullmatch(topic)
     return match.group(1) if match else None
 
 

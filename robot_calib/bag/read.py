@@ -35,6 +35,7 @@ from robot_calib.measurements.recording import (
     recording_from_stream,
     without_copies,
 )
+from robot_calib.measurements.references import ReferenceReads
 from robot_calib.measurements.six_dof import PoseReading, StampedMeasurements, join_poses
 from robot_calib.measurements.stream import JointStream, stream_hint
 from robot_calib.messages import (
@@ -51,6 +52,7 @@ from robot_calib.messages import (
     joint_positions,
     pose_measurement,
     pose_topic_name,
+    reference_topic_name,
     stamp_to_ns,
     target_topic,
     target_topic_name,
@@ -465,7 +467,39 @@ def read_bag(
         received=np.arange(len(js_ns)),  # the file's order: as the recorder received them
     )
     rec = without_copies(rec, str(path))
+    references = _reference_reads(path)
+    if references is not None:
+        rec = rec.without_drift(references)
+        if references.drift is None:
+            warnings.append(f"warning: {path}: reference reflectors "
+                            f"{', '.join(references.names)}: {references.note}: the tracker's "
+                            "drift is not removed")  # fmt: skip
     return replace(rec, warnings=tuple(warnings) + rec.warnings)
+
+
+def _reference_reads(path: Path) -> ReferenceReads | None:
+    """The reference reflectors of the bag (msgs_doc/references.md), with the drift they
+    show; None when it has none. BagError for a wrong type or a point not finite."""
+    with BagReader(path) as reader:
+        topics = {t: name for t in sorted(reader.topics)
+                  if (name := reference_topic_name(t)) is not None
+                  and reader.topics[t].message_count}  # fmt: skip
+        if not topics:
+            return None
+        for topic in topics:
+            _check_topic(reader, topic, POINT_TYPE)
+        names = tuple(topics.values())
+        reads: dict[int, Array] = {}
+        for m in reader.messages(list(topics)):
+            msg = m.decode()
+            p = np.array([msg.point.x, msg.point.y, msg.point.z], dtype=float)
+            if not np.all(np.isfinite(p)):
+                raise BagError(f"{path}: {m.topic}: a point that is not finite: {p}")
+            row = reads.setdefault(stamp_to_ns(msg.header.stamp), np.full((len(names), 3), np.nan))
+            row[names.index(topics[m.topic])] = p
+    stamps = np.array(sorted(reads), dtype=np.int64)
+    points = np.stack([reads[int(t)] for t in stamps], axis=1)  # (R, m, 3)
+    return ReferenceReads.estimated(0, names, stamps, points)
 
 
 def _check_values(path: Path, q: Array, stamped: StampedMeasurements, names: list[str]) -> None:
@@ -579,4 +613,5 @@ def other_topics(path: Path) -> list[str]:
             t for t in reader.topics
             if t not in (JOINT_STATES_TOPIC, TEMPERATURE_TOPIC, POINT_TOPIC)
             and target_topic_name(t) is None and pose_topic_name(t) is None
+            and reference_topic_name(t) is None
         ]  # fmt: skip

@@ -33,6 +33,7 @@ from robot_calib.messages import (
     ns_to_sec_nanosec,
     pose_covariance,
     pose_topic,
+    reference_topic,
     target_topic,
 )
 
@@ -50,7 +51,7 @@ def write_measurement_bag(
     output: str | Path, q: Array, points: Array, joint_names: tuple[str, ...],
     time: Array | None = None, force: bool = False, direction: Array | None = None,
     temperature: Array | None = None, extra_points: Mapping[str, Array] | None = None,
-    six_dof: Mapping[str, SixDof] | None = None,
+    six_dof: Mapping[str, SixDof] | None = None, references: Mapping[str, Array] | None = None,
 ) -> dict[str, int]:  # fmt: skip
     """A contract bag: one JointState and one PointStamped per pose, stamped in row order
     (`time` [s]: absolute Unix time from EPOCH_MIN_S on, else from the first pose; without
@@ -69,7 +70,7 @@ def write_measurement_bag(
     with staged_outputs(output.parent, force) as stage:
         return write_measurements(
             stage / output.name, q, points, joint_names, start + offsets, direction,
-            temperature, extra_points, six_dof,
+            temperature, extra_points, six_dof, references,
         )  # fmt: skip
 
 
@@ -77,6 +78,7 @@ def write_measurements(
     path: Path, q: Array, points: Array, joint_names: tuple[str, ...], stamps_ns: IntArray,
     direction: Array | None = None, temperature: Array | None = None,
     extra_points: Mapping[str, Array] | None = None, six_dof: Mapping[str, SixDof] | None = None,
+    references: Mapping[str, Array] | None = None,
 ) -> dict[str, int]:  # fmt: skip
     """Write a contract bag at `path` directly (callers stage it): per pose i a JointState
     (readings q (n, J) [rad] of `joint_names`) and a PointStamped (points (n, 3) [m],
@@ -91,7 +93,10 @@ def write_measurements(
     msgs_doc/targets.md). `six_dof` {NAME: (rotation (n, 3, 3), sigma (n, 2))}: what a 6-DoF
     probe measured at target NAME besides its point, written beside the point as a pose on
     /laser_tracker/(NAME/)pose: a PoseWithCovarianceStamped where standard deviations are
-    stated, else a PoseStamped (msgs_doc/six_dof.md). Returns messages per topic."""
+    stated, else a PoseStamped (msgs_doc/six_dof.md). `references` {NAME: (n, 3) [m]}: the
+    reference reflectors read at each pose as read (the tracker's drift in them), each on
+    /laser_tracker/reference/NAME/point stamped as its pose (msgs_doc/references.md).
+    Returns messages per topic."""
     if len(joint_names) != q.shape[1]:
         raise InputError(f"{q.shape[1]} joint columns for a robot with {len(joint_names)} joints")
     store = typestore(JOINT_STATE_TYPE, POINT_TYPE, TEMPERATURE_TYPE, POSE_TYPE, POSE_COV_TYPE)
@@ -106,7 +111,7 @@ def write_measurements(
             target_topic(k): np.asarray(v, dtype=float)
             for k, v in (extra_points or {}).items()
             if np.isfinite(v).all(axis=1).any()
-        }
+        } | {reference_topic(k): np.asarray(v, dtype=float) for k, v in (references or {}).items()}
         for topic in extra:
             writer.add_topic(topic, POINT_TYPE)
         for pose in poses:

@@ -54,8 +54,9 @@ def add_arguments(imp: argparse.ArgumentParser) -> None:
         "--reference", action="append", metavar="NAME:X,Y,Z",
         help="a reference reflector fixed off the robot (on its base, the floor) read with "
         "each pose: its name and x,y,z columns (repeat per reflector, 3 or more give the "
-        "tracker's rotation too); the tracker's drift they show is removed from every point "
-        "and their scatter about it reported (default: none)",
+        "tracker's rotation too), written to /laser_tracker/reference/NAME/point; the "
+        "tracker's drift they show is removed from every point by the readers and their "
+        "scatter about it reported (default: none)",
     )  # fmt: skip
     imp.add_argument(
         "--temperature",
@@ -205,8 +206,7 @@ def main(args: argparse.Namespace) -> int:
     extra = {
         name: np.concatenate([t.extra_points[name] for t in tables]) for name, _ in fmt.targets
     }
-    if references:
-        points, extra = _without_drift(args.csv, references, times, points, extra)
+    reference_reads = _reference_reads(args.csv, references, times, extra) if references else None
     for name, xyz in extra.items():
         if not np.isfinite(xyz).all(axis=1).any():
             log(f"warning: {', '.join(args.csv)}: target {name} has no measured point: no "
@@ -222,31 +222,33 @@ def main(args: argparse.Namespace) -> int:
                 f"{target_label(o.target)} has no orientation")  # fmt: skip
     counts = write_measurement_bag(
         output, q, points, robot.joint_names, times, args.force, temperature=temperature,
-        extra_points=extra, six_dof=six_dof,
+        extra_points=extra, six_dof=six_dof, references=reference_reads,
     )  # fmt: skip
     print(f"{output}: {', '.join(f'{k}={v}' for k, v in counts.items())} messages "
           f"({robot.name}, {fmt.angle_unit}/{fmt.length_unit} -> rad/m)")  # fmt: skip
     return 0
 
 
-def _without_drift(
+def _reference_reads(
     csvs: list[str], references: tuple[tuple[str, tuple[str, str, str]], ...],
-    times: Array | None, points: Array, extra: dict[str, Array],
-) -> tuple[Array, dict[str, Array]]:  # fmt: skip
-    """The first target's points (n, 3) and the further targets' `extra` without the
-    tracker's drift the reference reflectors show (`measurements.references`); the
-    references themselves are not written. Prints the drift and the references' scatter."""
-    from robot_calib.measurements.references import estimate_drift
+    times: Array | None, extra: dict[str, Array],
+) -> dict[str, Array]:  # fmt: skip
+    """The reference reflectors' reads {NAME: (n, 3) [m]} taken out of the further targets
+    `extra`, written as read (the readers remove the drift they show from every point,
+    msgs_doc/references.md); the drift and the references' scatter printed now, and an
+    InputError when they cannot give a drift."""
+    from robot_calib.measurements.references import TooFewReads, estimate_drift
 
     names = [name for name, _ in references]
-    time_s = np.arange(len(points), dtype=float) if times is None else np.asarray(times)
-    reads = np.stack([extra.pop(name) for name in names])
+    time_s = np.arange(len(next(iter(extra.values()))), dtype=float) if times is None else times
+    reads = {name: extra.pop(name) for name in names}
     try:
-        drift = estimate_drift(names, time_s, reads)
-    except ValueError as exc:
+        drift = estimate_drift(names, np.asarray(time_s, dtype=float),
+                               np.stack(list(reads.values())))  # fmt: skip
+    except TooFewReads as exc:
         raise InputError(f"{', '.join(csvs)}: --reference: {exc}") from None
     print(drift.line())
-    return drift.removed(time_s, points), {k: drift.removed(time_s, v) for k, v in extra.items()}
+    return reads
 
 
 def _target_columns(

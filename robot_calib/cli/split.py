@@ -74,6 +74,11 @@ def main(args: argparse.Namespace) -> int:
     others = other_topics(source)
     if others:
         log(f"warning: {source}: topics {others} are not measurements: not copied")
+    for refs in recording.references:
+        if refs.drift is not None:
+            log(f"note: {source}: the tracker's drift that reference reflectors "
+                f"{', '.join(refs.names)} show ({refs.drift.max_mm:.4f} mm at most) is removed "
+                "from the points written; the references themselves are not copied")  # fmt: skip
     with staged_outputs(outputs[0].resolve().parent, args.force) as stage:
         counts = [
             write_measurements(

@@ -44,6 +44,7 @@ from robot_calib.identify.plausibility import degrees_reason
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.masses import mass_model_line
 from robot_calib.measurements import Recording
+from robot_calib.measurements.references import TrackerDrift
 from robot_calib.poses import reading_groups
 from robot_calib.records import Record
 
@@ -197,6 +198,9 @@ class Diagnosis(Record):
     # 0 in documents written before they were recorded
     measurements: int = 0
     poses: int = 0
+    # the tracker's drift per calibration recording with reference reflectors (removed
+    # from every point before fitting; msgs_doc/references.md)
+    tracker_drift: list[TrackerDrift] = field(default_factory=list)
 
     def learnable_warnings(self) -> list[str]:
         """The learned correction's own warnings (hyperparameters at an edge), as the
@@ -520,6 +524,7 @@ def diagnose(
         mass_model=mass_model_line(robot),
         measurements=len(whole),
         poses=len(np.unique(reading_groups(whole.poses.q))),
+        tracker_drift=[r.drift for r in whole.references if r.drift is not None],
         warnings=list(geo.warnings) + ([ladder.noise.warning] if ladder.noise.warning else [])
         + ([few] if few else []) + alias_warnings(last.effects, recording, ladder.holdout),
         learnable=learnable,

@@ -326,6 +326,33 @@ def time_figure(ladder: Ladder, recording: Recording) -> Figure:
     return fig
 
 
+def drift_figure(recording: Recording) -> Figure | None:
+    """The reference reflectors' displacement from their first place [mm] against time
+    [min] as read (dots) and as the tracker's fitted drift moves them (lines), one colour
+    per reflector, per source with references; None without any."""
+    sources = [r for r in recording.references if r.drift is not None]
+    if not sources:
+        return None
+    plt = pyplot()
+    fig, axes = plt.subplots(1, len(sources), figsize=(7, 3.2), squeeze=False)
+    for ax, refs in zip(axes[0], sources):
+        assert refs.drift is not None
+        seconds = np.asarray(refs.stamp_ns, dtype=np.float64) * 1e-9
+        minutes = (seconds - seconds[0]) / 60.0
+        start = np.asarray(refs.drift.start_m)[:, None]
+        read = np.linalg.norm(refs.points - start, axis=2) * 1e3
+        fitted = np.linalg.norm(refs.drift.expected(seconds) - start, axis=2) * 1e3
+        for k, name in enumerate(refs.names):
+            line = ax.plot(minutes, fitted[k], "-", lw=1.5, label=f"{name} (drift)")[0]
+            ax.plot(minutes, read[k], ".", ms=2, color=line.get_color(), alpha=0.5)
+        ax.set_title(recording.sources[refs.source].rsplit("/", 1)[-1], fontsize=8)
+        ax.set_xlabel("time since the first read [min]")
+        ax.set_ylabel("|reference - first place| [mm]")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
 def error_histogram_figure(errors_mm: Sequence[tuple[str, Array]], scored_on: str) -> Figure:
     """Histograms of the per-point error [mm] of each (model, errors (m,) [mm]) on
     logarithmic bins (models differ by orders of magnitude), with each model's rms; the

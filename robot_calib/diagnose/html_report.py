@@ -28,6 +28,7 @@ from robot_calib.diagnose.figures import (
     ANGLE_UNITS,
     FigureCache,
     angle_figure,
+    drift_figure,
     error_histogram_figure,
     ladder_figure,
     pyplot,
@@ -476,6 +477,13 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
     )
     out.append(_img(figures.png("time", lambda: time_figure(ladder, recording)),
                     "In-sample |residual| against time"))  # fmt: skip
+    if diagnosis.tracker_drift:
+        out.append("<h3>The tracker's drift (reference reflectors)</h3><ul class='tight'>"
+                   + "".join(f"<li>{_e(d.line())}</li>" for d in diagnosis.tracker_drift)
+                   + "</ul>")  # fmt: skip
+        out.append(_img(figures.png("drift", lambda: drift_figure(recording)),
+                        "Reference reflectors: displacement from their first place as read "
+                        "(dots) and as the fitted drift moves them (lines)"))  # fmt: skip
     return "".join(out)
 
 

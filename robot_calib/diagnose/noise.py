@@ -9,9 +9,12 @@
    sigma^2 = sum(residual^2) / (2 n - 6 per sweep) (an upper bound if effects bend circles).
    Where both exist and agree (circles within 1.5 x), they are pooled by degrees of freedom
    (a handful of repeat pairs alone scatters by +-20 %); else the repeat poses win.
-3. Else a stated accuracy: the user's `--tracker-accuracy`, or the median of the
+3. Else reference reflectors (msgs_doc/references.md): their scatter about the tracker's
+   drift is the tracker's own noise at a fixed reflector (the robot's repeatability and the
+   SMR on the tool not in it: a lower bound of the tool's noise, said so in its source).
+4. Else a stated accuracy: the user's `--tracker-accuracy`, or the median of the
    standard deviations the tracker stated per point (msgs_doc/six_dof.md).
-4. Else the floor is unknown: the in-sample residual of a fitted model with its degrees of
+5. Else the floor is unknown: the in-sample residual of a fitted model with its degrees of
    freedom serves the ladder's internal tests only (`NoiseLevel.independent` is False), and
    every output says the floor is unknown.
 The verdict's floor is the independent estimate alone (1-3): a model's own residual, even
@@ -46,6 +49,7 @@ STATED = "stated tracker accuracy"
 #: (laser trackers re-read a still SMR to a few um; 0.1 mm is far beyond any)
 MAX_REREAD_SIGMA_M = 1e-4
 REREADS = "re-reads of still poses (the tracker alone, not the robot's repeatability)"
+REFERENCES = "reference reflectors (the tracker alone, not the robot's repeatability)"
 MAX_REPEAT_GAP_S = 60.0  # repeats farther apart in time may include drift, not only noise
 MAX_REPEAT_LAG = 50  # rows between a pose and its repeat, at most
 AGREE = 1.5  # circle-fit noise within this factor of the repeat-pose noise: pool them
@@ -164,7 +168,7 @@ def estimate_noise(
 def _estimate(recording: Recording, fallback_residuals: Array | None, fallback_dof: int,
               stated_sigma_m: float | None) -> NoiseLevel:  # fmt: skip
     """`estimate_noise` without the re-read check."""
-    measured = _measured_noise(recording)
+    measured = _measured_noise(recording) or _reference_noise(recording)
     stated = _stated(recording, stated_sigma_m)
     if measured is not None:
         return replace(measured, warning=_unused(stated, measured, stated_sigma_m is not None))
@@ -208,6 +212,17 @@ def _measured_noise(recording: Recording) -> NoiseLevel | None:
             return _pooled(repeat, circles, f"{repeat.source} + circle fits")
         return repeat
     return repeat if repeat is not None else circles
+
+
+def _reference_noise(recording: Recording) -> NoiseLevel | None:
+    """The reference reflectors' scatter about the tracker's drift, pooled over the
+    sources that have one (degrees of freedom: 3 per reference read), or None."""
+    drifts = [r.drift for r in recording.references if r.drift is not None]
+    if not drifts:
+        return None
+    dof = [3 * d.reads * len(d.references) for d in drifts]
+    var = sum(n * (d.noise_mm * 1e-3) ** 2 for n, d in zip(dof, drifts)) / sum(dof)
+    return NoiseLevel(float(np.sqrt(var)), REFERENCES, sum(dof))
 
 
 def _pair_noise(recording: Recording, pairs: IntArray, source: str) -> NoiseLevel:

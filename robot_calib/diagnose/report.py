@@ -17,6 +17,7 @@ from robot_calib.diagnose.figures import (
     ANGLE_UNITS,
     FigureCache,
     angle_figure,
+    drift_figure,
     ladder_figure,
     residual_map_figure,
     time_figure,
@@ -45,7 +46,7 @@ if TYPE_CHECKING:
 
 #: the figures' file name suffixes: `<stem>_<suffix>.png` (a figure with nothing to show is
 #: not written)
-PLOT_SUFFIXES = ("ladder", "angle", "map", "time")
+PLOT_SUFFIXES = ("ladder", "angle", "map", "time", "drift")
 
 
 def plot_paths(stem: Path) -> list[Path]:
@@ -66,6 +67,8 @@ def report_figures(ladder: Ladder, recording: Recording, floor_mm: float | None
          partial(residual_map_figure, ladder, recording)),
         ("time", "time", "Residual against time (in-sample)",
          partial(time_figure, ladder, recording)),
+        ("drift", "drift", "The tracker's drift: reference reflectors against time",
+         partial(drift_figure, recording)),
     ]  # fmt: skip
 
 
@@ -402,6 +405,8 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         lines += ["", f"Mass model of the gravity effects: {diagnosis.mass_model}."]
     if diagnosis.reads_line():
         lines += ["", f"Calibration data: {diagnosis.reads_line()}."]
+    for drift in diagnosis.tracker_drift:
+        lines += ["", f"Tracker drift: {drift.line()}."]
     lines += ["", f"What remains: {diagnosis.unexplained.note}.", "",
               "## Where the residual lies", ""]  # fmt: skip
     if where.joints:

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array, IntArray
+from robot_calib.measurements.references import ReferenceReads
 from robot_calib.measurements.sweeps import MIN_SWEEP_POSES, Sweep, usable_sweeps
 from robot_calib.messages import target_topic
 from robot_calib.poses import PRIMARY_TARGET, Poses, approach_directions
@@ -51,6 +52,8 @@ class Recording:
     stamp_ns : (n,) the points' header stamps [ns] (None: unknown, e.g. arrays in memory);
     target_names : the targets measured (several SMRs on one flange, msgs_doc/targets.md);
       `poses.target` indexes them ('' = the contract's single target).
+    references : the reference reflectors read with the poses, per source that has them
+      (msgs_doc/references.md); `points` are without the drift they show (`without_drift`)
     """
 
     sources: tuple[str, ...]
@@ -63,6 +66,7 @@ class Recording:
     point_index: IntArray | None = None
     stamp_ns: IntArray | None = None
     target_names: tuple[str, ...] = (PRIMARY_TARGET,)
+    references: tuple[ReferenceReads, ...] = ()
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -99,6 +103,7 @@ class Recording:
             self.message_indices()[keep],
             None if self.stamp_ns is None else self.stamp_ns[keep],
             self.target_names,
+            self.references,
         )
 
     def at_most(self, limit: int, seed: int = 0) -> Recording:
@@ -246,7 +251,30 @@ class Recording:
             if any(p.stamp_ns is None for p in parts)
             else np.concatenate([p.stamp_ns for p in parts if p.stamp_ns is not None]),
             tuple(names),
+            tuple(
+                replace(r, source=r.source + b) for b, p in enumerate(parts) for r in p.references
+            ),  # fmt: skip
         )
+
+    def without_drift(self, reads: ReferenceReads) -> Recording:
+        """This recording with the reference reflectors `reads` of its source `reads.source`
+        attached, and the tracker's drift they show removed from that source's points (and
+        a 6-DoF probe's frames): as the tracker would have read them at its first read.
+        Needs `stamp_ns`; without a drift (too few reads) only attached."""
+        recording = replace(self, references=self.references + (reads,))
+        if reads.drift is None or self.stamp_ns is None:
+            return recording
+        rows = self.bag_index == reads.source
+        time_s = self.stamp_ns[rows] * 1e-9
+        points = self.points.copy()
+        points[rows] = reads.drift.removed(time_s, points[rows])
+        poses = self.poses
+        if poses.rotation is not None:
+            rotation = poses.rotation.copy()
+            turn, _ = reads.drift.motion(time_s)
+            rotation[rows] = turn.inv().as_matrix() @ rotation[rows]
+            poses = replace(poses, rotation=rotation)
+        return replace(recording, points=points, poses=poses)
 
 
 def check_metres(points: Array, where: str, error: type[Exception] = InputError) -> None:

@@ -13,12 +13,12 @@ tracker's own noise (per axis, degrees of freedom counted): a measured noise flo
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.records import Record
 
 DRIFT_DEGREE = 3  # polynomial degree of each drift component against time
@@ -44,6 +44,8 @@ class TrackerDrift(Record):
     time_range_s: list[float]
     reads: int = 0  # poses with every reference read (the drift's data)
     poses: int = 0  # poses in all
+    # (R, 3) [m, tracker frame] the references' positions at the first read
+    start_m: list[list[float]] = field(default_factory=list)
 
     def line(self) -> str:
         """'reference reflectors A, B, C: tracker drift up to 0.059 mm (0.041 at the end)
@@ -70,6 +72,12 @@ class TrackerDrift(Record):
         rotation, translation = self.motion(time_s)
         return rotation.inv().apply(np.asarray(points, dtype=float) - translation)
 
+    def expected(self, time_s: Array) -> Array:
+        """(R, n, 3) [m, tracker frame] where the drift puts each reference at times (n,)."""
+        rotation, translation = self.motion(time_s)
+        return np.stack([rotation.apply(np.tile(p, (len(translation), 1))) + translation
+                         for p in np.asarray(self.start_m, dtype=float)])  # fmt: skip
+
 
 def _time_basis(time_s: Array, time_range_s: list[float]) -> Array:
     """(n, DRIFT_DEGREE + 1) powers of the times (n,) [s] normalised to the campaign's
@@ -85,15 +93,19 @@ def _motion(values: Array) -> tuple[Rotation, Array]:
     return Rotation.from_rotvec(values[:, :3]), values[:, 3:]
 
 
+class TooFewReads(ValueError):
+    """The references were read together at too few poses for a drift."""
+
+
 def estimate_drift(names: list[str], time_s: Array, references: Array) -> TrackerDrift:
     """The drift (module docstring) of references (R, n, 3) [m, tracker frame] read at
-    times (n,) [s] (NaN where a reference was not read); ValueError with fewer than
+    times (n,) [s] (NaN where a reference was not read); TooFewReads with fewer than
     MIN_READS reads of every reference."""
     refs = np.asarray(references, dtype=float)
     t = np.asarray(time_s, dtype=float)
     read = np.isfinite(refs).all(axis=2).all(axis=0)  # rows with every reference
     if int(read.sum()) < MIN_READS:
-        raise ValueError(f"references read together at {int(read.sum())} poses: a drift needs "
+        raise TooFewReads(f"references read together at {int(read.sum())} poses: a drift needs "
                          f"{MIN_READS}")  # fmt: skip
     refs, t = refs[:, read], t[read]
     rigid = len(names) >= 3
@@ -111,12 +123,59 @@ def estimate_drift(names: list[str], time_s: Array, references: Array) -> Tracke
     basis = _time_basis(t, span)
     coef = np.linalg.lstsq(basis, motions, rcond=None)[0]  # (D + 1, 6)
     coef[0] -= (basis[:1] @ coef)[0]  # relative to the first read
-    rotation, translation = _motion(basis @ coef)
-    moved = np.stack([rotation.apply(p) + translation for p in start])  # (R, n, 3)
+    drift = TrackerDrift(list(names), 0.0, 0.0, 0.0, rigid, coef.T.tolist(), span,
+                         int(read.sum()), len(read), start.tolist())  # fmt: skip
+    moved = drift.expected(t)  # (R, n, 3)
     shift = np.linalg.norm(moved - start[:, None], axis=2)
     leftover = refs - moved
     dof = max(leftover.size - coef.size - start.size, 1)
     noise = float(np.sqrt(np.sum(leftover**2) / dof))
-    return TrackerDrift(list(names), float(shift.max()) * 1e3, float(shift[:, -1].max()) * 1e3,
-                        noise * 1e3, rigid, coef.T.tolist(), span, int(read.sum()),
-                        len(read))  # fmt: skip
+    return replace(drift, max_mm=float(shift.max()) * 1e3, end_mm=float(shift[:, -1].max()) * 1e3,
+                   noise_mm=noise * 1e3)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ReferenceReads:
+    """The reference reflectors of one source as read (msgs_doc/references.md).
+
+    source : the source's index in its recording (`Recording.bag_index`)
+    names : the reflectors' names (R,)
+    stamp_ns : (m,) the stamps of the poses they were read at [ns]
+    points : (R, m, 3) [m, tracker frame] as read (NaN: not read at that pose)
+    drift : the tracker's drift they show (`estimate_drift` on the stamps in seconds), None
+      when they are too few for one (`note` says why)
+    """
+
+    source: int
+    names: tuple[str, ...]
+    stamp_ns: IntArray
+    points: Array
+    drift: TrackerDrift | None
+    note: str = ""
+
+    @classmethod
+    def estimated(cls, source: int, names: tuple[str, ...], stamp_ns: IntArray,
+                  points: Array) -> ReferenceReads:  # fmt: skip
+        """The reads with the drift they show (None with a `note` when they cannot give
+        one)."""
+        try:
+            drift = estimate_drift(list(names), _seconds(stamp_ns), points)
+        except TooFewReads as exc:
+            return cls(source, names, stamp_ns, points, None, str(exc))
+        return cls(source, names, stamp_ns, points, drift)
+
+    def leftover_m(self) -> Array:
+        """(m,) [m] per pose, the largest distance of a reference read there from where the
+        drift puts it (NaN where none was read, or without a drift): a tracker that jumped
+        at one pose moves its references there too."""
+        if self.drift is None:
+            return np.full(len(self.stamp_ns), np.nan)
+        expected: Array = self.drift.expected(_seconds(self.stamp_ns))
+        gap = np.linalg.norm(self.points - expected, axis=2)
+        gap = np.where(np.isfinite(gap), gap, -np.inf).max(axis=0)
+        return np.where(np.isfinite(gap), gap, np.nan)
+
+
+def _seconds(stamp_ns: IntArray) -> Array:
+    """Stamps (n,) [ns] as seconds (n,) [s], float64."""
+    return np.asarray(stamp_ns, dtype=np.float64) * 1e-9

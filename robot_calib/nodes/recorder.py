@@ -41,6 +41,7 @@ from robot_calib.messages import (
     JOINT_STATES_TOPIC,
     POINT_TOPIC,
     POINT_TYPE,
+    reference_topic_name,
     target_topic_name,
 )
 from robot_calib.nodes._common import declare, message_class, overrides, qos_to_record, run_node
@@ -59,7 +60,8 @@ def known_type(topic: str) -> str | None:
     probe's pose topic, PoseStamped or PoseWithCovarianceStamped, msgs_doc/six_dof.md)."""
     if topic in KNOWN_TYPES:
         return KNOWN_TYPES[topic]
-    return POINT_TYPE if target_topic_name(topic) is not None else None
+    known = target_topic_name(topic) is not None or reference_topic_name(topic) is not None
+    return POINT_TYPE if known else None
 
 
 class RecorderNode(Node):

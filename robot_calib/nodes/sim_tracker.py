@@ -35,6 +35,7 @@ from robot_calib.messages import (
     orientation_quaternion,
     pose_covariance,
     pose_topic,
+    reference_topic,
     stamp_to_ns,
     target_topic,
 )
@@ -80,7 +81,13 @@ class SimTrackerNode(Node):
             )
             for t in model.oriented
         }
-        self.all_publishers = [*self.point_publishers, *self.pose_publishers.values()]
+        # and one per reference reflector of the world (msgs_doc/references.md)
+        self.reference_publishers = [
+            self.create_publisher(PointStamped, reference_topic(name), QOS)
+            for name in self.world.references
+        ]
+        self.all_publishers = [*self.point_publishers, *self.pose_publishers.values(),
+                               *self.reference_publishers]  # fmt: skip
         self.triggered = declare(
             self, "triggered", False,
             "measure only on a std_srvs/Trigger call of ~/measure (the latest joint state), "
@@ -228,11 +235,14 @@ class SimTrackerNode(Node):
             if not encoder.check(sec, nanosec, x, y, z):
                 encoder = None
             self._point_encoder = encoder
+        points = [*zip(self.point_publishers, reading.points.tolist())]
+        if reading.references is not None:
+            points += zip(self.reference_publishers, reading.references.tolist())
         if encoder is not None:
-            for publisher, xyz in zip(self.point_publishers, reading.points.tolist()):
+            for publisher, xyz in points:
                 publisher.publish(encoder.encode(sec, nanosec, *xyz))
         else:
-            for publisher, xyz in zip(self.point_publishers, reading.points):
+            for publisher, xyz in points:
                 publisher.publish(PointStamped(header=header, point=point_message(xyz)))
         for k, publisher in self.pose_publishers.items():
             assert reading.frames is not None  # the world has probes

@@ -120,12 +120,16 @@ class TrackerReading:
       target without a probe; None when the world has no probe (msgs_doc/six_dof.md)
     sigma : (T, 2) the standard deviations the tracker states [m, rad] (`stated_accuracy`)
     latency_s : by how much the measurement precedes the joint state's stamp [s]
+    references : (R, 3) the world's reference reflectors read with this pose, tracker frame
+      [m] (None: the world has none; msgs_doc/references.md)
+    The tracker's drift (`TrackerOptions.drift`) is in the points, frames and references.
     """
 
     points: Array
     frames: Array | None
     sigma: Array
     latency_s: float
+    references: Array | None = None
 
 
 @dataclass
@@ -182,7 +186,49 @@ class StreamingTracker:
         )
         self.count += 1
         points, frames = measure_six_dof(self.world, poses, self.rng)
-        return TrackerReading(points, frames, stated_accuracy(self.world.noise, points), latency)
+        sigma = stated_accuracy(self.world.noise, points)
+        noise = self._reference_noise(1)
+        points, frames, refs = self._drifted(
+            np.array([stamp_s - self._t0]),
+            points[None],
+            None if frames is None else frames[None],
+            noise,
+        )
+        return TrackerReading(points[0], None if frames is None else frames[0], sigma, latency,
+                              None if refs is None else refs[0])  # fmt: skip
+
+    def _reference_noise(self, m: int) -> Array | None:
+        """The noise draws (m, R, 3) [m] of the reference reflectors' reads at m poses
+        (tracker and target noise, isotropic; one draw per pose, after the pose's others),
+        None when the world has none."""
+        n_refs = len(self.world.references)
+        if not n_refs:
+            return None
+        noise = self.world.noise
+        sigma = float(np.hypot(noise.tracker_sigma_m, noise.target_sigma_m))
+        return np.stack([self.rng.normal(0.0, sigma, (n_refs, 3)) for _ in range(m)])
+
+    def _drifted(self, time_s: Array, points: Array, frames: Array | None,
+                 ref_noise: Array | None) -> tuple[Array, Array | None, Array | None]:  # fmt: skip
+        """Points (m, T, 3) [m] and frames (m, T, 3, 3) read at times (m,) [s] since the
+        first measurement with the tracker's drift in them, and the references (m, R, 3)
+        read then (with `ref_noise` (m, R, 3); None without references)."""
+        options = self.world.tracker
+        refs = None
+        if ref_noise is not None:
+            refs = np.broadcast_to(self.world.reference_points(), ref_noise.shape).copy()
+        if not options.drifts:
+            return points, frames, None if refs is None or ref_noise is None else refs + ref_noise
+        rotation, translation = options.drift(time_s)
+        m = len(time_s)
+        turn = rotation.as_matrix()  # (m, 3, 3)
+        points = np.einsum("mab,mtb->mta", turn, points) + translation[:, None]
+        if frames is not None:
+            frames = np.einsum("mab,mtbc->mtac", turn, frames)
+        if refs is not None and ref_noise is not None:
+            refs = np.einsum("mab,mrb->mra", turn, refs) + translation[:, None] + ref_noise
+        assert len(points) == m
+        return points, frames, refs
 
     def measure_batch(self, q: Array, stamp_s: Array) -> list[TrackerReading | None]:
         """`measure_all` of each reading q (m, J) stamped stamp_s (m,) [s] in turn, bit for
@@ -253,6 +299,9 @@ class StreamingTracker:
                 pose.append(rng.normal(0.0, noise.tracker_sigma_m, (n_targets, 3)))
             if model.oriented:
                 pose.append(rng.normal(0.0, noise.orientation_sigma_rad, (n_targets, 3)))
+            refs = self._reference_noise(1)
+            if refs is not None:
+                pose.append(refs[0])
             draws.append(pose)
         self.count += len(draws)
         out: list[TrackerReading | None] = [None] * m
@@ -283,15 +332,23 @@ class StreamingTracker:
         frames = None
         if model.oriented:
             frames = model.probe_orientations(world.truth, physical)
-            frames = Rotation.from_rotvec(columns[-1]).as_matrix() @ frames
+            turn = columns[-2 if world.references else -1]
+            frames = Rotation.from_rotvec(turn).as_matrix() @ frames
             probes = [model.targets.index(t) for t in model.oriented]
             frames[~np.isin(physical.target_index, probes)] = np.nan
         sigma = stated_accuracy(noise, points)
+        k = len(rows)
+        ref_noise = columns[-1].reshape(k, -1, 3) if world.references else None
+        drifted, drifted_frames, refs = self._drifted(
+            stamps[rows] - self._t0, points.reshape(k, n_targets, 3),
+            None if frames is None else frames.reshape(k, n_targets, 3, 3), ref_noise,
+        )  # fmt: skip
         for i, row in enumerate(rows.tolist()):
-            pose_rows = slice(i * n_targets, (i + 1) * n_targets)
-            out[row] = TrackerReading(points[pose_rows],
-                                      None if frames is None else frames[pose_rows],
-                                      sigma[pose_rows], float(latency[row]))  # fmt: skip
+            out[row] = TrackerReading(drifted[i],
+                                      None if drifted_frames is None else drifted_frames[i],
+                                      sigma[i * n_targets:(i + 1) * n_targets],
+                                      float(latency[row]),
+                                      None if refs is None else refs[i])  # fmt: skip
         assert n == len(rows) * n_targets
         return out
 
@@ -320,8 +377,12 @@ def _same(a: TrackerReading | None, b: TrackerReading | None) -> bool:
         frames_equal = a.frames is None and b.frames is None
     else:
         frames_equal = np.array_equal(a.frames, b.frames, equal_nan=True)
+    refs_equal = (a.references is None and b.references is None) or (
+        a.references is not None and b.references is not None
+        and np.array_equal(a.references, b.references))  # fmt: skip
     return (
         frames_equal
+        and refs_equal
         and np.array_equal(a.points, b.points)
         and np.array_equal(a.sigma, b.sigma)
         and a.latency_s == b.latency_s

@@ -70,10 +70,29 @@ class NoiseModel:
 @dataclass(frozen=True)
 class TrackerOptions:
     """latency_max_s: the joint-state stamp lags the tracker's measurement by U(0, max) [s];
-    dropout_probability: chance that a point is lost (line of sight) [1]."""
+    dropout_probability: chance that a point is lost (line of sight) [1];
+    drift_m_per_s, drift_rad_per_s: the tracker frame's drift (3,) [m/s], [rad/s] (a
+    translation and a rotation vector growing linearly from the first measurement): a point
+    p of the first read's frame is read at time t as Rotation(drift_rad_per_s t) p +
+    drift_m_per_s t (what reference reflectors show, msgs_doc/references.md; 50 um/h is
+    1.39e-8 m/s)."""
 
     latency_max_s: float = 0.002
     dropout_probability: float = 0.0
+    drift_m_per_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    drift_rad_per_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def drift(self, time_s: Array) -> tuple[Rotation, Array]:
+        """The tracker frame's motion at times (n,) [s] since its first measurement:
+        rotation and translation (n, 3) [m]."""
+        t = np.asarray(time_s, dtype=float)[:, None]
+        return (Rotation.from_rotvec(t * np.asarray(self.drift_rad_per_s)),
+                t * np.asarray(self.drift_m_per_s))  # fmt: skip
+
+    @property
+    def drifts(self) -> bool:
+        """True when the tracker frame drifts."""
+        return any(self.drift_m_per_s) or any(self.drift_rad_per_s)
 
 
 @dataclass(frozen=True)
@@ -123,6 +142,17 @@ class World:
     seed: int = 0
     source: str = "built-in default"
     temperature: TemperatureProfile | None = None  # recorded when given (no effect alone)
+    # reference reflectors fixed off the robot {NAME: (x, y, z) [m, robot base frame]}, read
+    # with every pose (msgs_doc/references.md)
+    references: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+
+    def reference_points(self) -> Array:
+        """(R, 3) [m, tracker frame at the first read] the reference reflectors' places."""
+        if not self.references:
+            return np.zeros((0, 3))
+        base = np.array(list(self.references.values()), dtype=float)
+        b2t = self.model.base2tracker(self.truth)
+        return np.asarray(base @ b2t[:3, :3].T + b2t[:3, 3])
 
     @property
     def effects(self) -> tuple[Effect, ...]:
@@ -132,6 +162,7 @@ class World:
 TOP_KEYS = (
     "robot", "seed", "geometry", "deviations", "base2tracker", "target_in_flange_m", "targets",
     "effects", "truth", "noise", "tracker", "timing", "six_dof", "payload", "temperature",
+    "references",
 )  # fmt: skip
 PAYLOAD_KEYS = ("mass_kg", "com_m")
 FIRST_TARGET_KEY = "first"  # the first target's key in `six_dof` (its name is '')
@@ -211,21 +242,24 @@ def _speeds(value: Any, n_joints: int, where: str) -> tuple[float, ...]:  # noqa
     return tuple(float(v) for v in value)
 
 
-def _targets(value: Any, source: str) -> dict[str, tuple[float, float, float]]:  # noqa: ANN401
+def _targets(value: Any, source: str,  # noqa: ANN401 - YAML
+             key: str = "targets") -> dict[str, tuple[float, float, float]]:  # fmt: skip
     """Further targets on the flange of a world file (`targets: {NAME: [x, y, z]}` [m], each
-    measured on /laser_tracker/NAME/point beside the first, msgs_doc/targets.md)."""
+    measured on /laser_tracker/NAME/point beside the first, msgs_doc/targets.md), or with
+    `key` 'references' the reference reflectors in the robot base frame [m]
+    (/laser_tracker/reference/NAME/point, msgs_doc/references.md)."""
     if value is None:
         return {}
     if not isinstance(value, dict):
-        raise InputError(f"{source}: targets: expected a mapping NAME: [x, y, z], got {value!r}")
+        raise InputError(f"{source}: {key}: expected a mapping NAME: [x, y, z], got {value!r}")
     out = {}
     for name, xyz in value.items():
         if not isinstance(name, str) or not TARGET_NAME.fullmatch(name):
             raise InputError(
-                f"{source}: targets: name {name!r} must be a ROS topic token "
+                f"{source}: {key}: name {name!r} must be a ROS topic token "
                 "(letters, digits, underscores; not starting with a digit)"
             )
-        out[name] = _triple(xyz, f"{source}: targets.{name}")
+        out[name] = _triple(xyz, f"{source}: {key}.{name}")
     return out
 
 
@@ -325,6 +359,12 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
                 source,
             )
         )
+        tracker = replace(
+            tracker,
+            drift_m_per_s=_triple(tracker.drift_m_per_s, f"{source}: tracker.drift_m_per_s"),
+            drift_rad_per_s=_triple(tracker.drift_rad_per_s, f"{source}: tracker.drift_rad_per_s"),
+        )
+        references = _targets(data.get("references"), source, "references")
         if not tracker.dropout_probability < 1.0:
             raise InputError(
                 f"{source}: tracker.dropout_probability {tracker.dropout_probability}: must be "
@@ -363,7 +403,7 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         raise InputError(str(exc) if str(exc).startswith(source) else f"{source}: {exc}") from None
     except (TypeError, KeyError, ValueError) as exc:
         raise InputError(f"{source}: malformed world ({type(exc).__name__}: {exc})") from None
-    return World(model, truth, noise, tracker, timing, seed, source, temperature)
+    return World(model, truth, noise, tracker, timing, seed, source, temperature, references)
 
 
 def world_to_dict(world: World) -> dict[str, Any]:
@@ -392,7 +432,14 @@ def world_to_dict(world: World) -> dict[str, Any]:
         },
         "truth": {n: float(v) for n, v in zip(world.truth.names, world.truth.values)},
         "noise": asdict(world.noise),
-        "tracker": asdict(world.tracker),
+        "tracker": {
+            k: list(v) if isinstance(v, tuple) else v for k, v in asdict(world.tracker).items()
+        },  # fmt: skip
+        **(
+            {"references": {k: list(v) for k, v in world.references.items()}}
+            if world.references
+            else {}
+        ),  # fmt: skip
         "timing": timing,
     }
 

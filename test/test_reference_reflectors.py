@@ -1,0 +1,98 @@
+"""Reference reflectors and a drifting tracker, simulated with a known answer: the
+simulator's tracker frame drifts 50 um/h (and turns 20 urad/h) while three reflectors on
+the floor are read with every pose; the readers find the drift, remove it from the tool's
+points, and take the reflectors' scatter as the measured tracker-noise floor."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robot_calib.bag.read import read_recording
+from robot_calib.diagnose.noise import REFERENCES, estimate_noise
+from robot_calib.flows.simulate import simulate
+from robot_calib.identify.calibrate import calibrate
+from robot_calib.measurements import Recording
+from robot_calib.sim.world import World, build_world
+
+RATE_M_PER_S = 50e-6 / 3600.0  # 50 um/h
+TURN_RAD_PER_S = 20e-6 / 3600.0  # 20 urad/h about the tracker's vertical
+FLOOR = {"r1": [0.6, 0.7, -0.1], "r2": [0.7, -0.6, -0.1], "r3": [-0.4, 0.5, 0.3]}
+
+
+def _world(references: bool = True) -> World:
+    return build_world(
+        {
+            "robot": "kr5_sixx_r650",
+            "seed": 5,
+            "tracker": {"drift_m_per_s": [0.6 * RATE_M_PER_S, 0.8 * RATE_M_PER_S, 0.0],
+                        "drift_rad_per_s": [0.0, 0.0, TURN_RAD_PER_S]},
+            "timing": {"settle_s": 60.0},  # a pose a minute: two hours of drift
+            **({"references": FLOOR} if references else {}),
+        },
+        "drifting tracker",
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def drifting(tmp_path_factory: pytest.TempPathFactory) -> tuple[World, Recording]:
+    world = _world()
+    bag = tmp_path_factory.mktemp("refs") / "drift.mcap"
+    simulate(bag, "random", world, n_random=120)
+    return world, read_recording([bag], world.model.robot)
+
+
+def test_the_drift_found_is_the_simulated_one(drifting: tuple[World, Recording]) -> None:
+    """Where the drift puts each reflector at the last read, against where the simulated
+    tracker frame put it (the truth), to a few um over ~100 um of drift."""
+    world, recording = drifting
+    (refs,) = recording.references
+    assert refs.names == ("r1", "r2", "r3") and refs.drift is not None and refs.drift.rigid
+    seconds = refs.stamp_ns * 1e-9
+    rotation, translation = world.tracker.drift(seconds - seconds[0])
+    start = world.reference_points()
+    true_end = rotation[-1].apply(start) + translation[-1]
+    found_end = refs.drift.expected(seconds)[:, -1]
+    moved = float(np.linalg.norm(true_end - start, axis=1).max())
+    assert moved > 80e-6, moved  # the campaign drifted
+    assert refs.drift.max_mm == pytest.approx(moved * 1e3, rel=0.15)
+    assert float(np.linalg.norm(found_end - true_end, axis=1).max()) < 8e-6
+
+
+def test_the_reflectors_scatter_is_the_floor_and_the_drift_leaves_the_fit(
+    drifting: tuple[World, Recording],
+) -> None:
+    """No repeat poses, no circle sweeps: the floor comes from the reflectors (the
+    simulated tracker and SMR noise, hypot(3.75, 3.0) um per axis); the geometric fit of
+    the points without the drift lies at that noise, the same points with the drift put
+    back (what a tool without references fits) lie far above it."""
+    world, recording = drifting
+    noise = estimate_noise(recording)
+    assert noise.source == REFERENCES
+    expected = float(np.hypot(world.noise.tracker_sigma_m, world.noise.target_sigma_m))
+    assert noise.sigma_m == pytest.approx(expected, rel=0.2)
+    robot = world.model.robot
+    (refs,) = recording.references
+    assert refs.drift is not None and recording.stamp_ns is not None
+    rotation, translation = refs.drift.motion(recording.stamp_ns * 1e-9)
+    drifted = replace(recording, points=rotation.apply(recording.points) + translation)
+    rms = {}
+    for name, rec in (("without drift", recording), ("with drift", drifted)):
+        cal = calibrate(rec, robot, "geometric", log=None, screen_outliers=False)
+        rms[name] = float(np.sqrt(np.mean((cal.predict(rec.poses) - rec.points) ** 2)))
+    # joint repeatability (5 urad at up to ~0.6 m) adds to the tracker's noise at the tool
+    assert rms["without drift"] < 2.0 * expected, rms
+    assert rms["with drift"] > 2.0 * rms["without drift"], rms
+
+
+def test_a_world_without_references_publishes_none(tmp_path: Path) -> None:
+    """The same drifting tracker without reflectors: no reference topic, nothing to remove
+    (the drift stays in the points, as on a real tracker without references)."""
+    world = _world(references=False)
+    bag = tmp_path / "plain.mcap"
+    sim = simulate(bag, "random", world, n_random=20)
+    assert not any("reference" in topic for topic in sim.counts)
+    assert read_recording([bag], world.model.robot).references == ()
