@@ -185,7 +185,9 @@ class Diagnosis(Record):
     candidates: list[list[CandidateScore]]
     recordings: list[str]
     holdout: list[str]
-    outliers: list[Outlier] = field(default_factory=list)  # tracker blunders, never fitted
+    # flagged measurements, never fitted: tracker blunders and poses where the robot was off
+    # (every target together)
+    outliers: list[Outlier] = field(default_factory=list)
     # stretches of consecutive measurements far above the rest (`concentration`), every
     # measurement's residual under the best model, flagged ones included
     stretches: list[Stretch] = field(default_factory=list)

@@ -531,13 +531,14 @@ def _problems(diagnosis: Diagnosis, warnings: Sequence[str]) -> str:
         rows = [[o.bag, o.index, o.target or "-", o.kind,
                  "-" if o.stamp_ns is None else f"{o.stamp_ns * 1e-9:.3f}",
                  f"{o.size_m * 1e3:.3f}", f"{o.sigmas:.0f}",
+                 "-" if o.references_m is None else f"{o.references_m * 1e3:.3f}",
                  ", ".join(f"{c:+.2f}" for c in o.direction)]
                 for o in diagnosis.outliers]  # fmt: skip
         out.append(f"<h3>Flagged outliers ({_e(outlier_counts(diagnosis.outliers))}; never "
                    "fitted, never explained as an effect of the robot)</h3>")  # fmt: skip
         out.append(_table(["bag", "point", "target", "tracker or robot", "stamp [s]",
-                           "size [mm]", "robust sigmas", "direction (tracker frame)"],
-                          rows))  # fmt: skip
+                           "size [mm]", "robust sigmas", "reference reflectors off [mm]",
+                           "direction (tracker frame)"], rows))  # fmt: skip
     else:
         out.append("<p>No measurement flagged as an outlier.</p>")
     if diagnosis.reads_line():

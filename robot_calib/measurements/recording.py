@@ -256,6 +256,25 @@ class Recording:
             ),  # fmt: skip
         )
 
+    def reference_leftover_m(self) -> Array:
+        """(n,) [m] per measurement, the largest distance of a reference reflector read with
+        its pose (same source, stamp within PAIR_TOLERANCE_S) from where the tracker's drift
+        puts it (`ReferenceReads.leftover_m`); NaN where none was read or is known."""
+        out = np.full(len(self), np.nan)
+        if self.stamp_ns is None:
+            return out
+        for reads in self.references:
+            rows = np.flatnonzero(self.bag_index == reads.source)
+            if not len(rows) or not len(reads.stamp_ns):
+                continue
+            stamps, read = self.stamp_ns[rows], reads.stamp_ns
+            after = np.searchsorted(read, stamps)
+            lo, hi = np.clip(after - 1, 0, len(read) - 1), np.clip(after, 0, len(read) - 1)
+            near = np.where(np.abs(read[lo] - stamps) <= np.abs(read[hi] - stamps), lo, hi)
+            close = np.abs(read[near] - stamps) <= PAIR_TOLERANCE_S * 1e9
+            out[rows[close]] = reads.leftover_m()[near[close]]
+        return out
+
     def without_drift(self, reads: ReferenceReads) -> Recording:
         """This recording with the reference reflectors `reads` of its source `reads.source`
         attached, and the tracker's drift they show removed from that source's points (and

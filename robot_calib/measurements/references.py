@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from robot_calib.kinematics.frames import Array, IntArray
@@ -23,7 +24,9 @@ from robot_calib.records import Record
 
 DRIFT_DEGREE = 3  # polynomial degree of each drift component against time
 MIN_READS = 2 * (DRIFT_DEGREE + 1)  # reads of the references a drift needs
-START_READS = 5  # reads averaged for the references' first positions
+START_READS = 5  # reads whose median is the references' first positions
+JUMP_K = 8.0  # a read this many times the median read's distance from the drift: a jump
+MIN_JUMP_M = 1e-5  # ... and at least this far [m] (exact data: no jump at round-off)
 
 
 @dataclass(frozen=True)
@@ -46,6 +49,8 @@ class TrackerDrift(Record):
     poses: int = 0  # poses in all
     # (R, 3) [m, tracker frame] the references' positions at the first read
     start_m: list[list[float]] = field(default_factory=list)
+    # reads where the references jumped together (JUMP_K), left out of the drift
+    jumps: int = 0
 
     def line(self) -> str:
         """'reference reflectors A, B, C: tracker drift up to 0.059 mm (0.041 at the end)
@@ -54,6 +59,9 @@ class TrackerDrift(Record):
         kind += "" if self.rigid else "references give its rotation too)"
         seen = (f" (read together at {self.reads} of {self.poses} poses)"
                 if self.reads < self.poses else "")  # fmt: skip
+        if self.jumps:
+            seen += (f" ({self.jumps} read(s) where they jumped together, the tracker's frame "
+                     "moved at one pose, left out of the drift)")  # fmt: skip
         return (f"reference reflectors {', '.join(self.references)}{seen}: the tracker "
                 "drifted up "
                 f"to {self.max_mm:.4f} mm at them ({self.end_mm:.4f} mm at the end; {kind}), "
@@ -109,7 +117,7 @@ def estimate_drift(names: list[str], time_s: Array, references: Array) -> Tracke
                          f"{MIN_READS}")  # fmt: skip
     refs, t = refs[:, read], t[read]
     rigid = len(names) >= 3
-    start = np.mean(refs[:, :START_READS], axis=1)  # (R, 3): first positions
+    start = np.median(refs[:, :START_READS], axis=1)  # (R, 3): first positions
     motions = np.zeros((len(t), 6))
     for k in range(len(t)):
         if rigid:
@@ -120,18 +128,35 @@ def estimate_drift(names: list[str], time_s: Array, references: Array) -> Tracke
         else:
             motions[k, 3:] = np.mean(refs[:, k] - start, axis=0)
     span = [float(t[0]), float(t[-1])]
-    basis = _time_basis(t, span)
-    coef = np.linalg.lstsq(basis, motions, rcond=None)[0]  # (D + 1, 6)
-    coef[0] -= (basis[:1] @ coef)[0]  # relative to the first read
-    drift = TrackerDrift(list(names), 0.0, 0.0, 0.0, rigid, coef.T.tolist(), span,
-                         int(read.sum()), len(read), start.tolist())  # fmt: skip
+    drift = _fitted(names, rigid, span, t, motions, np.ones(len(t), dtype=bool), start)
+    # reads where the references jumped together (the tracker's frame moved at one pose, a
+    # knocked nest) are no drift: left out of it, fitted again
+    off = np.linalg.norm(refs - drift.expected(t), axis=2).max(axis=0)  # (n,)
+    jumped = off > max(JUMP_K * float(np.median(off)), MIN_JUMP_M)
+    if jumped.any() and int((~jumped).sum()) >= MIN_READS:
+        drift = _fitted(names, rigid, span, t, motions, ~jumped, start)
+    else:
+        jumped[:] = False
     moved = drift.expected(t)  # (R, n, 3)
     shift = np.linalg.norm(moved - start[:, None], axis=2)
-    leftover = refs - moved
-    dof = max(leftover.size - coef.size - start.size, 1)
+    leftover = (refs - moved)[:, ~jumped]
+    dof = max(leftover.size - 6 * (DRIFT_DEGREE + 1) - start.size, 1)
     noise = float(np.sqrt(np.sum(leftover**2) / dof))
     return replace(drift, max_mm=float(shift.max()) * 1e3, end_mm=float(shift[:, -1].max()) * 1e3,
-                   noise_mm=noise * 1e3)  # fmt: skip
+                   noise_mm=noise * 1e3, reads=int(read.sum()), poses=len(read),
+                   jumps=int(jumped.sum()))  # fmt: skip
+
+
+def _fitted(names: list[str], rigid: bool, span: list[float], t: Array, motions: Array,
+            use: NDArray[np.bool_], start: Array) -> TrackerDrift:  # fmt: skip
+    """The drift whose components are the polynomials fitted to the per-read motions
+    (n, 6) at times t (n,) [s] of the rows `use`, relative to the first read (figures
+    left 0 for the caller)."""
+    basis = _time_basis(t, span)
+    coef = np.linalg.lstsq(basis[use], motions[use], rcond=None)[0]  # (D + 1, 6)
+    coef[0] -= (basis[:1] @ coef)[0]  # relative to the first read
+    return TrackerDrift(list(names), 0.0, 0.0, 0.0, rigid, coef.T.tolist(), span,
+                        start_m=start.tolist())  # fmt: skip
 
 
 @dataclass(frozen=True)
