@@ -343,41 +343,97 @@ def test_a_urdf_as_it_ships_loads_as_ros_loads_it(tmp_path: Path) -> None:
     np.testing.assert_array_equal(robot.link_mass, reference.link_mass)  # not the 99 kg
 
 
-def test_a_mass_model_beyond_physics_is_named_and_not_used(tmp_path: Path) -> None:
+def test_a_mass_model_beyond_physics_is_named_and_replaced(tmp_path: Path) -> None:
     """The shipped IRB 120 URDF puts link 4's centre of mass 500.22 m from its frame (the
-    ROS-Industrial description: 0.22 m); a YAML robot may say 1e6 kg. Each is named in one
-    warning, and its gravity torques are not used (no mass model: the gravity effects have
-    nothing to fit), where before they were taken as given and changed the verdict."""
+    ROS-Industrial description: 0.22 m); a YAML robot may say 1e6 kg, or leave a link at
+    0 kg. Each is named in one warning and never used: the gravity effects use the masses of
+    the built-in description of the same arm (found by its kinematics, the centres carried
+    into the file's own frames), so the gravity torques are those of the sane file; an arm
+    that is no built-in gets a default from its geometry."""
     import warnings
 
-    from robot_calib.effects.compliance import gravity_joints
+    from robot_calib.effects.compliance import gravity_joints, gravity_torques
+    from robot_calib.kinematics.masses import DEFAULT_DENSITY_KG_M3, mass_model_line, reach_m
+
+    def loaded(reference: str) -> tuple[RobotDescription, list[str]]:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            robot = load_robot(reference)
+        return robot, [str(w.message) for w in caught]
 
     text = (DATA / "irb120_3_58.urdf").read_text()
     sane_com = '<origin xyz="0.2247 0.00015 0.00041"/>'
     text = text.replace(sane_com, sane_com.replace("0.2247", "500.2247"))
     shipped = tmp_path / "irb120_absurd_com.urdf"
     shipped.write_text(text)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        robot = load_robot(f"{shipped}#base_link=base&tip_link=tool0")
-    said = [str(w.message) for w in caught]
+    robot, said = loaded(f"{shipped}#base_link=base&tip_link=tool0")
     assert len(said) == 1 and "mass model beyond physics" in said[0], said
     assert "the link of joint_4: centre of mass 499.9 m from its frame" in said[0], said
-    assert not robot.link_mass.any() and gravity_joints(robot) == ()
-    from robot_calib.kinematics.masses import mass_model_line
-
-    assert mass_model_line(robot).startswith("none of the description's")
-    assert "centre of mass 499.9 m" in mass_model_line(robot)
+    assert "the built-in irb120_3_58's masses" in said[0], said
+    line = mass_model_line(robot)
+    assert line.startswith("the built-in irb120_3_58's masses (the same arm by its kinematics)")
+    assert "not the description's" in line and "centre of mass 499.9 m" in line
     sane = load_robot(f"{DATA / 'irb120_3_58.urdf'}#base_link=base&tip_link=tool0")
-    assert sane.link_mass.any() and gravity_joints(sane)  # the same file, sane: used
     assert mass_model_line(sane).startswith("the description's (URDF irb120_3_58.urdf")
     np.testing.assert_array_equal(robot.a, sane.a)  # the geometry is not touched
-    heavy = tmp_path / "heavy.yaml"
-    doc = (ROOT / "robot_calib/kinematics/robots/kr5_sixx_r650.yaml").read_text()
-    heavy.write_text(doc.replace("mass: 9.0,", "mass: 1000000.0,", 1))
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        robot = load_robot(str(heavy))
-    said = [str(w.message) for w in caught]
-    assert len(said) == 1 and "1e+06 kg in all for a reach of 1.15 m" in said[0], said
-    assert not robot.link_mass.any()
+    q = random_readings(sane, seed=5)
+    torque, truth = gravity_torques(robot, q), gravity_torques(sane, q)
+    assert np.abs(torque - truth).max() < 1e-3 * np.abs(truth).max()  # the arm's own
+    assert gravity_joints(robot) == gravity_joints(sane) != ()
+    kr5 = (ROOT / "robot_calib/kinematics/robots/kr5_sixx_r650.yaml").read_text()
+    builtin = load_robot("kr5_sixx_r650")
+    for name, doc, value in (("heavy", kr5.replace("mass: 9.0,", "mass: 1000000.0,", 1),
+                              "1e+06 kg in all for a reach of 1.15 m"),
+                             ("massless", kr5.replace("mass: 9.0,", "mass: 0.0,", 1),
+                              "mass 0 kg")):  # fmt: skip
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(doc)
+        robot, said = loaded(str(path))
+        assert len(said) == 1 and value in said[0], said
+        assert "the built-in kr5_sixx_r650's masses" in said[0], said
+        np.testing.assert_allclose(robot.link_mass, builtin.link_mass)
+    # not a built-in arm (link 2 5 cm longer), link 2 left at 0 kg: a default from its size
+    other = tmp_path / "other.yaml"
+    other.write_text(kr5.replace("mass: 6.0,", "mass: 0.0,", 1).replace("a: 0.270,", "a: 0.320,"))
+    robot, said = loaded(str(other))
+    assert len(said) == 1 and "a default from the geometry" in said[0], said
+    assert float(robot.link_mass.sum()) == pytest.approx(
+        DEFAULT_DENSITY_KG_M3 * reach_m(robot) ** 3
+    )
+    assert 2 in gravity_joints(robot) and np.all(robot.link_mass > 0)
+
+
+def test_the_verdict_is_the_same_with_an_absurd_urdf_and_the_builtin_arm(tmp_path: Path) -> None:
+    """A simulated IRB 120 whose joint 2 bends under gravity (1e-4 rad/(N m)), diagnosed
+    with its URDF as shipped (link 4's centre of mass 500 m off) and with the built-in
+    description of the same arm: one verdict, compliance on joint 2, because the absurd
+    masses are replaced by the arm's own. (Without masses, as before, the same data read as
+    a transmission error.)"""
+    import warnings
+
+    from robot_calib.flows.diagnose import diagnose_recordings
+    from robot_calib.sim.measure import record_plan
+    from robot_calib.sim.plans import random_plan
+    from robot_calib.sim.world import build_world
+
+    sane_com = '<origin xyz="0.2247 0.00015 0.00041"/>'
+    shipped = tmp_path / "irb120_absurd_com.urdf"
+    shipped.write_text((DATA / "irb120_3_58.urdf").read_text().replace(
+        sane_com, sane_com.replace("0.2247", "500.2247")))  # fmt: skip
+    world = build_world(
+        {"robot": "irb120_3_58", "seed": 4, "geometry": "nominal",
+         "deviations": {"a2": 0.0004, "d4": -0.0003, "theta3": 0.001},
+         "effects": [{"name": "compliance", "joints": [2], "values": {"compliance2": 1.0e-4}},
+                     {"name": "backlash", "joints": [1], "values": {"backlash1": 0.001}}]},
+        "IRB 120 bending at joint 2",
+    )  # fmt: skip
+    rng = np.random.default_rng(1)
+    recording = record_plan(world, random_plan(world.model.robot, 240, rng), rng)
+    verdicts = []
+    for reference in ("irb120_3_58", f"{shipped}#base_link=base&tip_link=tool0"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the absurd model's warning: tested above
+            robot = load_robot(reference)
+        diagnosis, _ = diagnose_recordings(recording, robot)
+        verdicts.append(diagnosis.verdict)
+    assert verdicts[0] == verdicts[1] == "compliance on joints [2]", verdicts

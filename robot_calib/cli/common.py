@@ -162,7 +162,7 @@ def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: f
         print(f"calibration data: {diagnosis.reads_line()}")
     for drift in diagnosis.tracker_drift:
         print(f"tracker drift: {drift.line()}")
-    if diagnosis.mass_model.startswith("none of the description's"):  # not what was given
+    if "not the description's" in diagnosis.mass_model:  # not what was given
         print(f"mass model of the gravity effects: {diagnosis.mass_model}")
     for place in diagnosis.concentration_lines():
         print(f"where the residual concentrates: {place}")
