@@ -139,3 +139,104 @@ def test_a_modified_table_calibrates_and_exports_as_urdf(tmp_path: Path) -> None
     exported = urdf.dh02base @ model_flange(urdf.description, q) @ urdf.tip2flange
     theirs = np.array([craig_flange(rows, qi) for qi in q])
     assert np.abs(exported[:, :3, 3] - theirs[:, :3, 3]).max() < 1e-9
+
+
+def _csv(path: Path, header: str, rows: list[list[float]]) -> Path:
+    lines = [",".join(f"{v:.17g}" for v in row) for row in rows]
+    path.write_text("\n".join(["# an arm's table, as a vendor prints it", header, *lines]) + "\n")
+    return path
+
+
+def test_a_modified_table_as_csv_gives_its_own_forward_kinematics(tmp_path: Path) -> None:
+    """A random Craig table written as a CSV with its units in the header (mm, deg): the
+    flange of the loaded robot is the convention's own product, to 1e-12 m; a standard DH
+    table of the KR5 as CSV is the built-in KR5."""
+    rng = np.random.default_rng(8)
+    rows = [{"alpha": 0.0, "a": 0.0, "theta": 0.2, "d": 0.35}]
+    for _ in range(5):
+        rows.append({"alpha": float(rng.choice([-1, 1]) * rng.uniform(0.3, 2.8)),
+                     "a": float(rng.uniform(-0.5, 0.5)), "theta": float(rng.uniform(-3, 3)),
+                     "d": float(rng.uniform(-0.5, 0.5))})  # fmt: skip
+    table = [[np.degrees(r["alpha"]), r["a"] * 1e3, np.degrees(r["theta"]), r["d"] * 1e3, -170.0,
+              170.0] for r in rows]  # fmt: skip
+    path = _csv(
+        tmp_path / "craig.csv",
+        "alpha_{i-1} [deg],a_{i-1} [mm],theta [deg],d [mm],min [deg],max [deg]",
+        table,
+    )
+    robot = load_robot(str(path))
+    assert robot.name == "craig" and robot.joint_names[0] == "joint_a1"
+    q = rng.uniform(-2.9, 2.9, (50, 6))
+    ours = model_flange(robot, q)
+    theirs = np.array([craig_flange(rows, qi) for qi in q])
+    assert np.abs(ours - theirs).max() < 1e-12
+    np.testing.assert_allclose(np.degrees(robot.limits), [[-170.0, 170.0]] * 6)
+    kr5 = load_robot("kr5_sixx_r650")
+    doc = yaml.safe_load((ROOT / "robot_calib/kinematics/robots/kr5_sixx_r650.yaml").read_text())
+    standard = [[j["name"], j["theta"], j["d"], j["a"], j["alpha"], *j["limits"]]
+                for j in doc["joints"]]  # fmt: skip
+    dh = tmp_path / "kr5.csv"
+    lines = [",".join(str(v) for v in row) for row in standard]
+    dh.write_text("\n".join(["name,theta_deg,d_m,a_m,alpha_deg,min_deg,max_deg", *lines]) + "\n")
+    again = load_robot(str(dh))
+    for field in ("theta", "d", "a", "alpha", "beta", "limits"):
+        np.testing.assert_allclose(getattr(again, field), getattr(kr5, field), atol=1e-12,
+                                   err_msg=field)  # fmt: skip
+    assert again.hayati.tolist() == kr5.hayati.tolist() and again.joint_names == kr5.joint_names
+
+
+@pytest.mark.parametrize(
+    ("header", "row", "said"),
+    [
+        ("alpha_prev,a_prev [mm],theta [deg],d [mm]", "0,0,0,400", "column 'alpha_prev' has no "
+         "unit: write it as 'alpha_prev [deg or rad]'"),
+        ("alpha_prev [deg],a_prev [mm],theta [deg],d [mm],offset [deg]", "0,0,0,400,0",
+         "column 'offset [deg]' is none of"),
+        ("alpha_prev [deg],a_prev [mm],a [mm],theta [deg],d [mm]", "0,0,0,0,400",
+         "not both a and a_prev"),
+        ("alpha [deg],a [mm],theta [deg],d [mm]", "0,0,zero,400", "joint 1: theta: 'zero' is no"),
+        ("alpha [deg],a [mm],theta [deg],d [inch]", "0,0,0,400", "column 'd [inch]' has unit"),
+        ("alpha [deg],a [mm],theta [deg],d [mm],min [deg]", "0,0,0,400,-10",
+         "limits need both min and max"),
+    ],
+)  # fmt: skip
+def test_a_bad_csv_table_is_one_line_naming_the_file(
+    tmp_path: Path, header: str, row: str, said: str
+) -> None:
+    path = tmp_path / "bad.csv"
+    path.write_text(f"{header}\n{row}\n{row}\n")
+    run = cli("plan", "--robot", str(path), "--poses", "5", "-o", str(tmp_path / "p.json"))
+    assert run.returncode == 2 and said in run.stderr and str(path) in run.stderr, run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1 and not (tmp_path / "p.json").exists()
+
+
+def test_a_csv_table_calibrates_and_its_result_carries_the_table(tmp_path: Path) -> None:
+    """Simulated and calibrated with --robot arm.csv: PARAMS.json carries the table's text,
+    so it loads (and predicts) with the CSV file gone."""
+    arm = _csv(tmp_path / "arm.csv", "alpha_prev [deg],a_prev [m],theta [deg],d [m],mass [kg]",
+               [[0, 0, 0, 0.4, 10], [-90, 0.15, -90, 0, 8], [0, 0.55, 0, 0, 5],
+                [-90, 0.12, 0, 0.62, 3], [90, 0, 0, 0, 1], [-90, 0, 0, 0.1, 0.3]])  # fmt: skip
+    for args in (("simulate", "--robot", str(arm), "--plan", "random", "--n-random", "40",
+                  "-o", str(tmp_path / "m.mcap")),
+                 ("calibrate", str(tmp_path / "m.mcap"), "--robot", str(arm),
+                  "-o", str(tmp_path / "p.json"))):  # fmt: skip
+        run = cli(*args)
+        assert run.returncode == 0, (args, run.stderr)
+    text = arm.read_text()
+    arm.unlink()
+    from robot_calib.identify.params_file import load_params
+
+    model, params, _ = load_params(str(tmp_path / "p.json"))
+    assert model.robot.name == "arm" and model.robot.n_joints == 6
+    assert "alpha_prev" in text and model.robot.source.startswith("DH table")
+    assert params.names  # the calibrated parameters read back
+
+
+def test_the_example_table_as_csv_is_the_example_yaml() -> None:
+    """docs/examples/craig_arm.csv and craig_arm.yaml: one robot (the README's example)."""
+    csv_arm = load_robot(str(ROOT / "docs/examples/craig_arm.csv"))
+    yaml_arm = load_robot(str(ROOT / "docs/examples/craig_arm.yaml"))
+    for field in ("theta", "d", "a", "alpha", "beta", "limits", "link_mass", "link_com"):
+        np.testing.assert_allclose(getattr(csv_arm, field), getattr(yaml_arm, field),
+                                   atol=1e-12, err_msg=field)  # fmt: skip
+    assert csv_arm.joint_names == yaml_arm.joint_names

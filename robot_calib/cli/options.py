@@ -153,8 +153,9 @@ def add_robot(p: argparse.ArgumentParser, default: str | None = None) -> None:
     p.add_argument(
         "--robot",
         default=DEFAULT_ROBOT if default is None else None,
-        help=f"built-in robot name ({', '.join(available_robots())}), robot YAML file "
-        f"or URDF file (.urdf) (default {default or DEFAULT_ROBOT})",
+        help=f"built-in robot name ({', '.join(available_robots())}), robot YAML file, "
+        "DH table as CSV (.csv, standard or modified DH, units in the header) or URDF file "
+        f"(.urdf) (default {default or DEFAULT_ROBOT})",
     )
     p.add_argument(
         "--base-link", help="URDF robots: the chain's base link (default: the root link)"

@@ -95,7 +95,8 @@ def description_section(robot: RobotDescription) -> dict[str, str] | None:
     known = _SECTIONS.get((reference, robot.fingerprint()))
     if known is not None:
         return known
-    kind = "urdf" if is_urdf_reference(reference) else "yaml"
+    kind = ("urdf" if is_urdf_reference(reference)
+            else "csv" if reference.lower().endswith(".csv") else "yaml")  # fmt: skip
     try:
         text = Path(reference.partition("#")[0]).read_text(encoding="utf-8")
         section = {"format": kind, "text": text}

@@ -134,27 +134,35 @@ def load_urdf(
     return replace(robot, description=replace(robot.description, path=reference))
 
 
-def description_from_text(kind: str, text: str, reference: str, where: str) -> RobotDescription:
+def description_from_text(kind: str, text: str, reference: str, where: str,
+                          quiet: bool = True) -> RobotDescription:  # fmt: skip
     """A robot description from its own text, as a PARAMS.json carries it (issue 24): `kind`
-    'urdf' (the chain of `reference`'s #base_link=..&tip_link=.. choice, else the defaults)
-    or 'yaml' (a robot YAML file's text); the result's path is `reference`, the original
-    file's, so it is written back unchanged. Errors name `where`."""
+    'urdf' (the chain of `reference`'s #base_link=..&tip_link=.. choice, else the defaults),
+    'yaml' (a robot YAML file's text) or 'csv' (a DH table, kinematics/dh_csv.py); the
+    result's path is `reference`, the original file's, so it is written back unchanged.
+    Errors name `where`; `quiet`: the loading warnings were said already (not again)."""
     import yaml
 
-    if kind not in ("urdf", "yaml"):
-        raise RobotDescriptionError(f"{where}: description format {kind!r}: urdf or yaml")
-    with python_warnings.catch_warnings():  # said when the file was loaded: not again
-        python_warnings.simplefilter("ignore", UserWarning)
+    from robot_calib.kinematics.dh_csv import dh_csv_mapping
+
+    if kind not in ("urdf", "yaml", "csv"):
+        raise RobotDescriptionError(f"{where}: description format {kind!r}: urdf, yaml or csv")
+    with python_warnings.catch_warnings():
+        if quiet:
+            python_warnings.simplefilter("ignore", UserWarning)
         if kind == "urdf":
             options = dict(_fragment(reference.partition("#")[2], where))
             found = urdf_to_description(parse_urdf(text, where), options.get("base_link"),
                                         options.get("tip_link"), where)  # fmt: skip
             return replace(found.description, path=reference)
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise RobotDescriptionError(f"{where}: not valid YAML ({first})") from None
+        if kind == "csv":
+            data = dh_csv_mapping(text, Path(reference.partition("#")[0]).stem, where)
+        else:
+            try:
+                data = yaml.safe_load(text)
+            except yaml.YAMLError as exc:
+                first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                raise RobotDescriptionError(f"{where}: not valid YAML ({first})") from None
         return replace(checked_mass_model(parse_robot(data, where), where), path=reference)
 
 
