@@ -99,41 +99,35 @@ def test_a_world_without_references_publishes_none(tmp_path: Path) -> None:
 
 
 def test_references_tell_a_tracker_jump_from_a_robot_error(tmp_path: Path) -> None:
-    """Three SMRs on the tool, three reflectors on the floor. At 3 poses the tool's SMRs
-    are all 2.4 mm off the same way while the reflectors stay put: the robot (named with the
-    reflectors' figure). At 1 pose the SMRs and the reflectors are all off by 2.4 mm
-    together: the tracker's frame jumped there (a tracker blunder). Both left out of the
-    fit."""
+    """Three SMRs on the tool, three reflectors on the floor, and the simulator's events:
+    at 3 poses the robot is 2.5 mm off (every SMR the same way, the reflectors in place):
+    the robot, named with the reflectors' figure; at 1 pose the tracker's frame jumps 2.5
+    mm (the SMRs and the reflectors together): a tracker blunder. Both left out of the fit;
+    the jump left out of the drift too."""
     from robot_calib.identify.outliers import ROBOT
-    from robot_calib.measurements.references import ReferenceReads
 
+    offset = [0.002, -0.0012, 0.0008]
+    robot_poses, jump = (10, 30, 50), 65
     world = build_world(
         {"robot": "kr5_sixx_r650", "seed": 2, "references": FLOOR,
-         "targets": {"smr2": [0.0, 0.07, 0.04], "smr3": [-0.05, -0.04, 0.06]}},
+         "targets": {"smr2": [0.0, 0.07, 0.04], "smr3": [-0.05, -0.04, 0.06]},
+         "events": [*({"kind": "robot", "poses": [p, p], "offset_m": offset}
+                      for p in robot_poses),
+                    {"kind": "tracker", "poses": [jump, jump], "offset_m": offset}]},
         "three SMRs",
     )  # fmt: skip
     bag = tmp_path / "three.mcap"
     simulate(bag, "random", world, n_random=80)
     recording = read_recording([bag], world.model.robot)
     (refs,) = recording.references
-    assert recording.stamp_ns is not None
+    assert recording.stamp_ns is not None and refs.drift is not None
     pose = recording.pose_index()
-    offset = np.array([0.002, -0.0012, 0.0008])
-    robot_poses, jump = (10, 30, 50), 65
-    points = recording.points.copy()
-    for p in (*robot_poses, jump):
-        points[pose == p] += offset
-    reads = refs.points.copy()
-    at = int(np.searchsorted(refs.stamp_ns, recording.stamp_ns[pose == jump][0]))
-    reads[:, at] += offset  # the tracker's frame moved: the reflectors with it
-    jumped = ReferenceReads.estimated(0, refs.names, refs.stamp_ns, reads)
-    recording = replace(recording, points=points, references=(jumped,))
-    cal = calibrate(recording, world.model.robot, "geometric", log=None)
     stamps = recording.stamp_ns
 
     def pose_of(stamp: int | None) -> int:
         return int(pose[stamps == stamp][0])
 
+    cal = calibrate(recording, world.model.robot, "geometric", log=None)
     kinds = {pose_of(o.stamp_ns): o.kind for o in cal.outliers}
     assert kinds == {**dict.fromkeys(robot_poses, ROBOT), jump: "tracker"}, kinds
     assert cal.inliers is not None and not cal.inliers[np.isin(pose, (*robot_poses, jump))].any()
@@ -141,12 +135,34 @@ def test_references_tell_a_tracker_jump_from_a_robot_error(tmp_path: Path) -> No
     assert "while the reference reflectors stayed within" in lines[robot_poses[0]]
     assert "the tracker's frame moved there" in lines[jump]
     # the jump left out of the drift (said so), which the robot's poses then sit on
-    assert jumped.drift is not None and jumped.drift.jumps == 1
-    assert "1 read(s) where they jumped together" in jumped.drift.line()
-    noise_m = jumped.drift.noise_mm * 1e-3
+    assert refs.drift.jumps == 1 and "1 read(s) where they jumped together" in refs.drift.line()
+    noise_m = refs.drift.noise_mm * 1e-3
     for o in cal.outliers:
         assert o.references_m is not None
         if o.kind == ROBOT:
             assert o.references_m < 5.0 * noise_m, (o.references_m, noise_m)
         else:
             assert o.references_m == pytest.approx(float(np.linalg.norm(offset)), rel=0.05)
+
+
+def test_a_world_with_references_drift_and_events_reads_back(tmp_path: Path) -> None:
+    """The world file written beside a bag rebuilds the world: references, drift, events;
+    a bad event is one line naming the file and the key."""
+    from robot_calib.errors import InputError
+    from robot_calib.sim.world import load_world, save_world
+
+    world = build_world(
+        {**{"references": FLOOR, "tracker": {"drift_m_per_s": [1e-8, 0.0, 0.0]}},
+         "events": [{"kind": "tracker", "poses": [0, 11], "offset_m": [0.0, 0.005, 0.0]}]},
+        "events",
+    )  # fmt: skip
+    save_world(world, tmp_path / "w.yaml")
+    again = load_world(tmp_path / "w.yaml")
+    assert again.references == world.references and again.events == world.events
+    assert again.tracker == world.tracker
+    zero = [0, 0, 0]
+    for bad, said in (({"kind": "robto", "poses": [1, 2], "offset_m": zero}, "kind must"),
+                      ({"kind": "robot", "poses": [5, 2], "offset_m": zero}, "first <= last"),
+                      ({"kind": "robot", "poses": [1, 2]}, "offset_m: expected three")):  # fmt: skip
+        with pytest.raises(InputError, match=said):
+            build_world({"events": [bad]}, "bad.yaml")

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.model import KinematicModel
@@ -189,6 +189,7 @@ class StreamingTracker:
         sigma = stated_accuracy(self.world.noise, points)
         noise = self._reference_noise(1)
         points, frames, refs = self._drifted(
+            np.array([self.count - 1]),
             np.array([stamp_s - self._t0]),
             points[None],
             None if frames is None else frames[None],
@@ -208,15 +209,18 @@ class StreamingTracker:
         sigma = float(np.hypot(noise.tracker_sigma_m, noise.target_sigma_m))
         return np.stack([self.rng.normal(0.0, sigma, (n_refs, 3)) for _ in range(m)])
 
-    def _drifted(self, time_s: Array, points: Array, frames: Array | None,
+    def _drifted(self, index: IntArray, time_s: Array, points: Array, frames: Array | None,
                  ref_noise: Array | None) -> tuple[Array, Array | None, Array | None]:  # fmt: skip
-        """Points (m, T, 3) [m] and frames (m, T, 3, 3) read at times (m,) [s] since the
-        first measurement with the tracker's drift in them, and the references (m, R, 3)
+        """Points (m, T, 3) [m] and frames (m, T, 3, 3) of the measured poses `index` (m,)
+        (0-based) read at times (m,) [s] since the first measurement, with the world's
+        events (`SimEvent`) and the tracker's drift in them, and the references (m, R, 3)
         read then (with `ref_noise` (m, R, 3); None without references)."""
         options = self.world.tracker
         refs = None
         if ref_noise is not None:
             refs = np.broadcast_to(self.world.reference_points(), ref_noise.shape).copy()
+        if self.world.events:
+            points, refs = self._events(index, points, refs)
         if not options.drifts:
             return points, frames, None if refs is None or ref_noise is None else refs + ref_noise
         rotation, translation = options.drift(time_s)
@@ -229,6 +233,25 @@ class StreamingTracker:
             refs = np.einsum("mab,mrb->mra", turn, refs) + translation[:, None] + ref_noise
         assert len(points) == m
         return points, frames, refs
+
+    def _events(self, index: IntArray, points: Array,
+                refs: Array | None) -> tuple[Array, Array | None]:  # fmt: skip
+        """Points (m, T, 3) and references (m, R, 3) [m, tracker frame] of the measured
+        poses `index` (m,) moved by the world's events there (before the drift)."""
+        points = points.copy()
+        refs = None if refs is None else refs.copy()
+        turn = self.world.model.base2tracker(self.world.truth)[:3, :3]
+        for event in self.world.events:
+            at = event.at(index)
+            if not at.any():
+                continue
+            if event.kind == "robot":
+                points[at] += turn @ np.asarray(event.offset_m)
+            else:
+                points[at] += np.asarray(event.offset_m)
+                if refs is not None:
+                    refs[at] += np.asarray(event.offset_m)
+        return points, refs
 
     def measure_batch(self, q: Array, stamp_s: Array) -> list[TrackerReading | None]:
         """`measure_all` of each reading q (m, J) stamped stamp_s (m,) [s] in turn, bit for
@@ -339,8 +362,9 @@ class StreamingTracker:
         sigma = stated_accuracy(noise, points)
         k = len(rows)
         ref_noise = columns[-1].reshape(k, -1, 3) if world.references else None
+        index = self.count - k + np.arange(k)  # the measured poses' 0-based count
         drifted, drifted_frames, refs = self._drifted(
-            stamps[rows] - self._t0, points.reshape(k, n_targets, 3),
+            index, stamps[rows] - self._t0, points.reshape(k, n_targets, 3),
             None if frames is None else frames.reshape(k, n_targets, 3, 3), ref_noise,
         )  # fmt: skip
         for i, row in enumerate(rows.tolist()):

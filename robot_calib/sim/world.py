@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from robot_calib.effects import (
@@ -26,7 +27,7 @@ from robot_calib.effects import (
 )
 from robot_calib.errors import InputError, RobotCalibError, check_keys
 from robot_calib.kinematics.description import with_payload
-from robot_calib.kinematics.frames import Array, matrix_to_rpy, rpy_to_matrix
+from robot_calib.kinematics.frames import Array, IntArray, matrix_to_rpy, rpy_to_matrix
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel, target_parameters, tool_rotation_parameters
@@ -130,6 +131,31 @@ class TemperatureProfile:
         )
 
 
+EVENT_KINDS = ("robot", "tracker")
+
+
+@dataclass(frozen=True)
+class SimEvent:
+    """Something that happened at measured poses first..last (0-based, inclusive; the count
+    of points the tracker measured, as the outlier lines count them):
+
+    kind 'robot': the tool was `offset_m` (3,) [m, robot base frame] away from where the
+      readings put it (a cable pulling, a brake slipping, the robot in a region it misses):
+      every target of those poses together, the reference reflectors not;
+    kind 'tracker': the tracker's frame jumped by `offset_m` [m, tracker frame] (a knock,
+      a re-levelling): every point and reference reflector read then.
+    """
+
+    kind: str
+    first: int
+    last: int
+    offset_m: tuple[float, float, float]
+
+    def at(self, index: IntArray) -> NDArray[np.bool_]:
+        """(n,) True where the measured poses `index` (n,) fall in this event."""
+        return np.asarray((index >= self.first) & (index <= self.last))
+
+
 @dataclass(frozen=True)
 class World:
     """A complete simulated world; `truth` holds every true parameter value (SI)."""
@@ -145,6 +171,8 @@ class World:
     # reference reflectors fixed off the robot {NAME: (x, y, z) [m, robot base frame]}, read
     # with every pose (msgs_doc/references.md)
     references: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    # things that happened at some poses (a robot off, a tracker jump): `SimEvent`
+    events: tuple[SimEvent, ...] = ()
 
     def reference_points(self) -> Array:
         """(R, 3) [m, tracker frame at the first read] the reference reflectors' places."""
@@ -162,8 +190,9 @@ class World:
 TOP_KEYS = (
     "robot", "seed", "geometry", "deviations", "base2tracker", "target_in_flange_m", "targets",
     "effects", "truth", "noise", "tracker", "timing", "six_dof", "payload", "temperature",
-    "references",
+    "references", "events",
 )  # fmt: skip
+EVENT_KEYS = ("kind", "poses", "offset_m")
 PAYLOAD_KEYS = ("mass_kg", "com_m")
 FIRST_TARGET_KEY = "first"  # the first target's key in `six_dof` (its name is '')
 FRAME_KEYS = ("xyz_m", "rpy_deg")
@@ -285,6 +314,25 @@ def _six_dof(
     return out
 
 
+def _event(spec: Any, source: str) -> SimEvent:  # noqa: ANN401 - YAML
+    """An entry of a world file's `events`: {kind: robot | tracker, poses: [first, last],
+    offset_m: [x, y, z]} (`SimEvent`)."""
+    where = f"{source}: events"
+    if not isinstance(spec, dict):
+        raise InputError(f"{where}: each entry is a mapping kind, poses, offset_m; got {spec!r}")
+    check_keys(spec, EVENT_KEYS, where)
+    kind = spec.get("kind")
+    if kind not in EVENT_KINDS:
+        raise InputError(f"{where}: kind must be one of {', '.join(EVENT_KINDS)}, got {kind!r}")
+    poses = spec.get("poses")
+    if (not isinstance(poses, list) or len(poses) != 2
+            or not all(isinstance(p, int) and not isinstance(p, bool) for p in poses)
+            or not 0 <= poses[0] <= poses[1]):  # fmt: skip
+        raise InputError(f"{where}: poses must be [first, last], 0 <= first <= last, got "
+                         f"{poses!r}")  # fmt: skip
+    return SimEvent(kind, poses[0], poses[1], _triple(spec.get("offset_m"), f"{where}.offset_m"))
+
+
 def _seed(value: Any, source: str) -> int:  # noqa: ANN401 - YAML
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
         raise InputError(f"{source}: seed: expected an integer >= 0, got {value!r}")
@@ -365,6 +413,7 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
             drift_rad_per_s=_triple(tracker.drift_rad_per_s, f"{source}: tracker.drift_rad_per_s"),
         )
         references = _targets(data.get("references"), source, "references")
+        events = tuple(_event(e, source) for e in data.get("events", []) or [])
         if not tracker.dropout_probability < 1.0:
             raise InputError(
                 f"{source}: tracker.dropout_probability {tracker.dropout_probability}: must be "
@@ -403,7 +452,8 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         raise InputError(str(exc) if str(exc).startswith(source) else f"{source}: {exc}") from None
     except (TypeError, KeyError, ValueError) as exc:
         raise InputError(f"{source}: malformed world ({type(exc).__name__}: {exc})") from None
-    return World(model, truth, noise, tracker, timing, seed, source, temperature, references)
+    return World(model, truth, noise, tracker, timing, seed, source, temperature, references,
+                 events)  # fmt: skip
 
 
 def world_to_dict(world: World) -> dict[str, Any]:
@@ -439,7 +489,17 @@ def world_to_dict(world: World) -> dict[str, Any]:
             {"references": {k: list(v) for k, v in world.references.items()}}
             if world.references
             else {}
-        ),  # fmt: skip
+        ),
+        **(
+            {
+                "events": [
+                    {"kind": e.kind, "poses": [e.first, e.last], "offset_m": list(e.offset_m)}
+                    for e in world.events
+                ]
+            }
+            if world.events
+            else {}
+        ),
         "timing": timing,
     }
 
