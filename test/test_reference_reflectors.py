@@ -163,6 +163,6 @@ def test_a_world_with_references_drift_and_events_reads_back(tmp_path: Path) -> 
     zero = [0, 0, 0]
     for bad, said in (({"kind": "robto", "poses": [1, 2], "offset_m": zero}, "kind must"),
                       ({"kind": "robot", "poses": [5, 2], "offset_m": zero}, "first <= last"),
-                      ({"kind": "robot", "poses": [1, 2]}, "offset_m: expected three")):  # fmt: skip
+                      ({"kind": "robot", "poses": [1, 2]}, "expected three")):  # fmt: skip
         with pytest.raises(InputError, match=said):
             build_world({"events": [bad]}, "bad.yaml")
