@@ -443,7 +443,8 @@ def read_bag(
     # each pose of a static bag are no stream (issue 24)
     per_target = (len(stamped.point_ns) if len(names) <= 1 else
                   int(np.bincount(stamped.point_target, minlength=len(names)).max()))  # fmt: skip
-    hint = stream_hint(js_ns[order], q[order], per_target, str(path))
+    hint = stream_hint(js_ns[order], q[order], per_target, str(path),
+                       np.asarray(stamped.point_ns, dtype=np.int64))  # fmt: skip
     if hint and len(names) > 1:  # --stream reads a single target (read_stream)
         advice = (f" (points per target); --stream reads the single target of {POINT_TOPIC}: "
                   "measure each pose at rest (msgs_doc/stream.md)")  # fmt: skip

@@ -36,6 +36,7 @@ STREAM_MAX_GAP_S = 0.05  # joint states further apart than this: the points betw
 STREAM_MAX_POINTS = 3000  # points kept for the fit (every k-th point, k chosen to fit)
 STREAM_RATIO = 3.0  # points per joint state above which a bag looks like a stream
 MOVING_FRACTION = 0.5  # ... when the robot moves at more than this fraction of its points
+AT_STATE = 0.05  # points this close to a joint state (of the states' spacing) are not a stream
 # The interpolation, chosen on the simulated controller's motion (smooth steps between
 # waypoints, accelerations up to ~10 rad/s^2) sampled at 200 Hz, max error over 20000
 # instants: linear 29 urad, PCHIP 21 urad, modified Akima 9.6 urad, cubic spline 4.5 urad
@@ -258,14 +259,22 @@ def stream_recording(
     return rec, pairing
 
 
-def stream_hint(js_ns: IntArray, q: Array, n_points: int, source: str) -> str | None:
+def stream_hint(js_ns: IntArray, q: Array, n_points: int, source: str,
+                point_ns: IntArray | None = None) -> str | None:  # fmt: skip
     """A warning line when a bag looks like a stream (more than STREAM_RATIO points per
     joint state while the robot moves between most joint states), for which the
     contract's nearest-stamp pairing is off by up to half a joint-state period of motion:
-    it suggests `--stream`. None otherwise. js_ns (m,) [ns], q (m, J) [rad] sorted."""
+    it suggests `--stream`. None otherwise, and None when the points (their stamps
+    `point_ns` [ns]) lie at the joint states (within AT_STATE of their median spacing:
+    re-reads of each pose, not a stream). js_ns (m,) [ns], q (m, J) [rad] sorted."""
     m = len(js_ns)
     if m < 2 or n_points < STREAM_RATIO * m:
         return None
+    if point_ns is not None and len(point_ns):
+        after = np.clip(np.searchsorted(js_ns, point_ns), 1, m - 1)
+        gap = np.minimum(np.abs(point_ns - js_ns[after - 1]), np.abs(js_ns[after] - point_ns))
+        if np.median(gap) < AT_STATE * np.median(np.diff(js_ns)):
+            return None
     moving = np.any(np.abs(np.diff(q, axis=0)) > 1e-4, axis=1).mean()
     if moving <= MOVING_FRACTION:
         return None

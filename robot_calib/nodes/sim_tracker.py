@@ -47,6 +47,7 @@ from robot_calib.sim.world import load_world
 
 # readers of each published topic to wait for: the recorder (README recipe, issue 16)
 DEFAULT_WAIT_FOR = 1
+REREAD_STEP_NS = 1_000_000  # the further reads of one pose follow the first 1 ms apart
 
 
 class SimTrackerNode(Node):
@@ -205,6 +206,13 @@ class SimTrackerNode(Node):
             out.append(reading is not None)
         return out
 
+    def messages_per_pose(self, topic: str) -> int:
+        """How many messages each measured pose publishes on `topic`: every read of it on a
+        target's point topic (`reads_per_pose`), one on the others."""
+        if any(p.topic_name == topic for p in self.point_publishers):
+            return self.world.tracker.reads_per_pose
+        return 1
+
     def _on_trigger(self, request: Any, response: Any) -> Any:  # noqa: ANN401 - std_srvs
         """Trigger: publish the measurement at the latest joint state (success false when
         there is none yet or the line of sight is lost)."""
@@ -235,15 +243,22 @@ class SimTrackerNode(Node):
             if not encoder.check(sec, nanosec, x, y, z):
                 encoder = None
             self._point_encoder = encoder
-        points = [*zip(self.point_publishers, reading.points.tolist())]
+        stamp_ns = sec * 1_000_000_000 + nanosec
+        first = [*zip(self.point_publishers, reading.points.tolist())]
         if reading.references is not None:
-            points += zip(self.reference_publishers, reading.references.tolist())
-        if encoder is not None:
-            for publisher, xyz in points:
-                publisher.publish(encoder.encode(sec, nanosec, *xyz))
-        else:
-            for publisher, xyz in points:
-                publisher.publish(PointStamped(header=header, point=point_message(xyz)))
+            first += zip(self.reference_publishers, reading.references.tolist())
+        points = [(stamp_ns, p, xyz) for p, xyz in first]
+        for k, again in enumerate([] if reading.rereads is None else reading.rereads, start=1):
+            points += [(stamp_ns + k * REREAD_STEP_NS, p, xyz)
+                       for p, xyz in zip(self.point_publishers, again.tolist())]  # fmt: skip
+        for at, publisher, xyz in points:
+            s, ns = ns_to_sec_nanosec(at)
+            if encoder is not None:
+                publisher.publish(encoder.encode(s, ns, *xyz))
+            else:
+                head = Header(frame_id=TRACKER_FRAME)
+                head.stamp.sec, head.stamp.nanosec = s, ns
+                publisher.publish(PointStamped(header=head, point=point_message(xyz)))
         for k, publisher in self.pose_publishers.items():
             assert reading.frames is not None  # the world has probes
             publisher.publish(

@@ -172,7 +172,8 @@ class _Stepper:
             self._wait(partial(recorder.take, JOINT_STATES_TOPIC), f"pose {k}")
             if answer:
                 for topic in self.answers:
-                    self._wait(partial(recorder.take, topic), f"{topic} of pose {k}")
+                    for _ in range(tracker.messages_per_pose(topic)):
+                        self._wait(partial(recorder.take, topic), f"{topic} of pose {k}")
         self._take_clocks()
         self.executor.spin_once(timeout_sec=0)  # timers (the recorder's flush), events
         if self.received:
@@ -297,7 +298,8 @@ def _simulate_bag(
         total = len(robot.plan)
         step = _Stepper(executor, robot, tracker, recorder, received)
         while not robot.done:
-            step.burst(min(BURST, QOS.depth, recorder.qos_depth))
+            reads = tracker.world.tracker.reads_per_pose  # messages per pose on a point topic
+            step.burst(min(BURST, QOS.depth // reads, recorder.qos_depth // reads))
             if progress is not None:
                 progress(robot.next_pose, total)
         recorder.close()

@@ -122,6 +122,9 @@ class TrackerReading:
     latency_s : by how much the measurement precedes the joint state's stamp [s]
     references : (R, 3) the world's reference reflectors read with this pose, tracker frame
       [m] (None: the world has none; msgs_doc/references.md)
+    rereads : (N - 1, T, 3) the further reads of every target at this pose when the tracker
+      reads each pose N times (`TrackerOptions.reads_per_pose`; the robot still: the same
+      physical pose, the tracker's noise drawn again), tracker frame [m]; None: one read
     The tracker's drift (`TrackerOptions.drift`) is in the points, frames and references.
     """
 
@@ -130,6 +133,7 @@ class TrackerReading:
     sigma: Array
     latency_s: float
     references: Array | None = None
+    rereads: Array | None = None
 
 
 @dataclass
@@ -177,12 +181,12 @@ class StreamingTracker:
         latency = self.rng.uniform(0.0, options.latency_max_s)
         if self.rng.random() < options.dropout_probability:
             return None
-        n_targets = len(self.world.model.targets)
+        n_rows, targets = self._rows()
         poses = Poses(
-            np.repeat(q[None, :], n_targets, axis=0),
-            np.repeat(self._direction[None, :], n_targets, axis=0),
-            np.full(n_targets, stamp_s - self._t0),
-            np.arange(n_targets) if n_targets > 1 else None,
+            np.repeat(q[None, :], n_rows, axis=0),
+            np.repeat(self._direction[None, :], n_rows, axis=0),
+            np.full(n_rows, stamp_s - self._t0),
+            targets,
         )
         self.count += 1
         points, frames = measure_six_dof(self.world, poses, self.rng)
@@ -195,8 +199,26 @@ class StreamingTracker:
             None if frames is None else frames[None],
             noise,
         )
-        return TrackerReading(points[0], None if frames is None else frames[0], sigma, latency,
-                              None if refs is None else refs[0])  # fmt: skip
+        return self._reading(points[0], None if frames is None else frames[0], sigma, latency,
+                             None if refs is None else refs[0])  # fmt: skip
+
+    def _rows(self) -> tuple[int, IntArray | None]:
+        """The rows a pose is measured in (every target, `reads_per_pose` times over) and
+        their target indices (None for a single row)."""
+        n_targets = len(self.world.model.targets)
+        n_rows = n_targets * self.world.tracker.reads_per_pose
+        return n_rows, (np.tile(np.arange(n_targets), n_rows // n_targets) if n_rows > 1
+                        else None)  # fmt: skip
+
+    def _reading(self, points: Array, frames: Array | None, sigma: Array, latency: float,
+                 refs: Array | None) -> TrackerReading:  # fmt: skip
+        """One pose's reading from its rows (`_rows`): the first read's points (T, 3),
+        frames and stated accuracies, the further reads as `rereads`."""
+        n_targets = len(self.world.model.targets)
+        rereads = (points[n_targets:].reshape(-1, n_targets, 3)
+                   if len(points) > n_targets else None)  # fmt: skip
+        return TrackerReading(points[:n_targets], None if frames is None else frames[:n_targets],
+                              sigma[:n_targets], latency, refs, rereads)  # fmt: skip
 
     def _reference_noise(self, m: int) -> Array | None:
         """The noise draws (m, R, 3) [m] of the reference reflectors' reads at m poses
@@ -289,7 +311,7 @@ class StreamingTracker:
         m, n_joints = q.shape
         world, rng = self.world, self.rng
         model, noise, options = world.model, world.noise, world.tracker
-        n_targets = len(model.targets)
+        n_targets, targets = self._rows()  # rows per pose: every target, every read
         # approach directions: each joint's last move beyond the tolerance (next_direction)
         if self._last_q is None:
             start, previous, self._t0 = np.ones(n_joints), q[:1], float(stamps[0])
@@ -336,7 +358,7 @@ class StreamingTracker:
             np.repeat(q[rows], n_targets, axis=0) + np.repeat(columns[0], n_targets, axis=0),
             np.repeat(direction[rows], n_targets, axis=0),
             np.repeat(stamps[rows] - self._t0, n_targets),
-            np.tile(np.arange(n_targets), len(rows)) if n_targets > 1 else None,
+            None if targets is None else np.tile(targets, len(rows)),
         )
         points = _target_points(model, world.truth, physical, n_targets)
         n = len(points)
@@ -368,11 +390,11 @@ class StreamingTracker:
             None if frames is None else frames.reshape(k, n_targets, 3, 3), ref_noise,
         )  # fmt: skip
         for i, row in enumerate(rows.tolist()):
-            out[row] = TrackerReading(drifted[i],
-                                      None if drifted_frames is None else drifted_frames[i],
-                                      sigma[i * n_targets:(i + 1) * n_targets],
-                                      float(latency[row]),
-                                      None if refs is None else refs[i])  # fmt: skip
+            out[row] = self._reading(drifted[i],
+                                     None if drifted_frames is None else drifted_frames[i],
+                                     sigma[i * n_targets:(i + 1) * n_targets],
+                                     float(latency[row]),
+                                     None if refs is None else refs[i])  # fmt: skip
         assert n == len(rows) * n_targets
         return out
 
@@ -401,9 +423,10 @@ def _same(a: TrackerReading | None, b: TrackerReading | None) -> bool:
         frames_equal = a.frames is None and b.frames is None
     else:
         frames_equal = np.array_equal(a.frames, b.frames, equal_nan=True)
-    refs_equal = (a.references is None and b.references is None) or (
-        a.references is not None and b.references is not None
-        and np.array_equal(a.references, b.references))  # fmt: skip
+    refs_equal = all(
+        (x is None and y is None) or (x is not None and y is not None and np.array_equal(x, y))
+        for x, y in ((a.references, b.references), (a.rereads, b.rereads))
+    )
     return (
         frames_equal
         and refs_equal

@@ -76,10 +76,13 @@ class TrackerOptions:
     translation and a rotation vector growing linearly from the first measurement): a point
     p of the first read's frame is read at time t as Rotation(drift_rad_per_s t) p +
     drift_m_per_s t (what reference reflectors show, msgs_doc/references.md; 50 um/h is
-    1.39e-8 m/s)."""
+    1.39e-8 m/s); reads_per_pose: how many times the tracker reads each pose, the robot
+    standing still (the same physical pose, the tracker's and target's noise drawn again;
+    published as that many messages per target, 1 ms apart; not with 6-DoF probes)."""
 
     latency_max_s: float = 0.002
     dropout_probability: float = 0.0
+    reads_per_pose: int = 1
     drift_m_per_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     drift_rad_per_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
@@ -132,6 +135,7 @@ class TemperatureProfile:
 
 
 EVENT_KINDS = ("robot", "tracker")
+MAX_READS = 20  # reads of one pose a simulated tracker makes, at most
 
 
 @dataclass(frozen=True)
@@ -412,6 +416,13 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
             drift_m_per_s=_triple(tracker.drift_m_per_s, f"{source}: tracker.drift_m_per_s"),
             drift_rad_per_s=_triple(tracker.drift_rad_per_s, f"{source}: tracker.drift_rad_per_s"),
         )
+        reads = tracker.reads_per_pose
+        if isinstance(reads, bool) or not isinstance(reads, int) or not 1 <= reads <= MAX_READS:
+            raise InputError(f"{source}: tracker.reads_per_pose: a whole number 1-{MAX_READS}, "
+                             f"got {reads!r}")  # fmt: skip
+        if reads > 1 and model.oriented:
+            raise InputError(f"{source}: tracker.reads_per_pose {reads} with six_dof probes: "
+                             "not simulated (one read per pose)")  # fmt: skip
         references = _targets(data.get("references"), source, "references")
         events = tuple(_event(e, source) for e in data.get("events", []) or [])
         if not tracker.dropout_probability < 1.0:
