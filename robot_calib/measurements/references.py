@@ -14,13 +14,16 @@ tracker's own noise (per axis, degrees of freedom counted): a measured noise flo
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.records import Record
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
 DRIFT_DEGREE = 3  # polynomial degree of each drift component against time
 MIN_READS = 2 * (DRIFT_DEGREE + 1)  # reads of the references a drift needs
@@ -98,6 +101,8 @@ def _time_basis(time_s: Array, time_range_s: list[float]) -> Array:
 def _motion(values: Array) -> tuple[Rotation, Array]:
     """Rotation and translation (n, 3) [m] of drift values (n, 6): rotation vector [rad],
     then translation."""
+    from scipy.spatial.transform import Rotation  # scipy on use: readers of help stay light
+
     return Rotation.from_rotvec(values[:, :3]), values[:, 3:]
 
 
@@ -109,6 +114,8 @@ def estimate_drift(names: list[str], time_s: Array, references: Array) -> Tracke
     """The drift (module docstring) of references (R, n, 3) [m, tracker frame] read at
     times (n,) [s] (NaN where a reference was not read); TooFewReads with fewer than
     MIN_READS reads of every reference."""
+    from scipy.spatial.transform import Rotation
+
     refs = np.asarray(references, dtype=float)
     t = np.asarray(time_s, dtype=float)
     read = np.isfinite(refs).all(axis=2).all(axis=0)  # rows with every reference

@@ -76,11 +76,14 @@ class SimTrackerNode(Node):
             self.create_publisher(PointStamped, target_topic(t), QOS) for t in model.targets
         ]
         # and one per 6-DoF probe (msgs_doc/six_dof.md), by target index
+        # (and with every point's own stated accuracy, one per target: msgs_doc/sim_tracker.md)
+        stated = self.world.noise.point_sigma_range_m[1] > 0
         self.pose_publishers = {
             model.targets.index(t): self.create_publisher(
                 PoseWithCovarianceStamped, pose_topic(t), QOS
             )
-            for t in model.oriented
+            for t in model.targets
+            if t in model.oriented or stated
         }
         # and one per reference reflector of the world (msgs_doc/references.md)
         self.reference_publishers = [
@@ -260,10 +263,8 @@ class SimTrackerNode(Node):
                 head.stamp.sec, head.stamp.nanosec = s, ns
                 publisher.publish(PointStamped(header=head, point=point_message(xyz)))
         for k, publisher in self.pose_publishers.items():
-            assert reading.frames is not None  # the world has probes
-            publisher.publish(
-                pose_message(header, reading.points[k], reading.frames[k], reading.sigma[k])
-            )
+            frame = None if reading.frames is None else reading.frames[k]
+            publisher.publish(pose_message(header, reading.points[k], frame, reading.sigma[k]))
         self.published += 1
 
 
@@ -273,16 +274,20 @@ def point_message(xyz: Array) -> Point:
 
 
 def pose_message(
-    header: Header, xyz: Array, rotation: Array, sigma: Array
+    header: Header, xyz: Array, rotation: Array | None, sigma: Array
 ) -> PoseWithCovarianceStamped:
     """The 6-DoF message of a probe (msgs_doc/six_dof.md): its point xyz (3,) [m] and frame
-    rotation (3, 3) in the tracker frame, the stated standard deviations sigma (2,) [m, rad]
+    rotation (3, 3) in the tracker frame (None or NaN: a point without an orientation,
+    identity and rotation variances -1), the stated standard deviations sigma (2,) [m, rad]
     as covariance; `header` that of its point."""
     out = PoseWithCovarianceStamped(header=header)
     out.pose.pose.position = point_message(xyz)
     o = out.pose.pose.orientation
-    o.x, o.y, o.z, o.w = orientation_quaternion(rotation)
-    out.pose.covariance = pose_covariance(sigma, oriented=True)
+    o.x, o.y, o.z, o.w = 0.0, 0.0, 0.0, 1.0
+    oriented = rotation is not None and bool(np.all(np.isfinite(rotation)))
+    if rotation is not None and oriented:
+        o.x, o.y, o.z, o.w = orientation_quaternion(rotation)
+    out.pose.covariance = pose_covariance(sigma, oriented=oriented)
     return out
 
 

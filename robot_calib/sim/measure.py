@@ -107,6 +107,7 @@ def measure_six_dof(
     return points, frames
 
 
+POINT_SIGMA_STREAM = 0x51A  # the side generator of each point's own accuracy (with the seed)
 BATCH_CHECK_POSES = 32
 """Poses of the first batch `StreamingTracker.measure_batch` checks against `measure_all`."""
 
@@ -191,6 +192,7 @@ class StreamingTracker:
         self.count += 1
         points, frames = measure_six_dof(self.world, poses, self.rng)
         sigma = stated_accuracy(self.world.noise, points)
+        points, sigma = self._point_accuracy(np.array([self.count - 1]), points, sigma)
         noise = self._reference_noise(1)
         points, frames, refs = self._drifted(
             np.array([self.count - 1]),
@@ -219,6 +221,34 @@ class StreamingTracker:
                    if len(points) > n_targets else None)  # fmt: skip
         return TrackerReading(points[:n_targets], None if frames is None else frames[:n_targets],
                               sigma[:n_targets], latency, refs, rereads)  # fmt: skip
+
+    def _point_accuracy(self, index: IntArray, points: Array,
+                        sigma: Array) -> tuple[Array, Array]:  # fmt: skip
+        """Points (m R, 3) [m] of the measured poses `index` (m,) (R rows each) and their
+        stated accuracies (m R, 2) with each point's own accuracy (`point_sigma_range_m`):
+        drawn per pose from a generator of the world's seed and the pose's index (the same
+        in every path and batch, the main draws untouched), the noise beyond the tracker's
+        and target's added, the accuracy stated. Unchanged without a range."""
+        noise = self.world.noise
+        low, high = noise.point_sigma_range_m
+        if high <= 0:
+            return points, sigma
+        rows = len(points) // len(index)
+        base = noise.base_sigma_m
+        extra, stated = np.zeros((len(points), 3)), np.zeros(len(points))
+        for i, pose in enumerate(np.asarray(index).tolist()):
+            side = np.random.default_rng((self.world.seed, POINT_SIGMA_STREAM, pose))
+            s = (
+                low * (high / low) ** side.uniform(0.0, 1.0, rows)
+                if low > 0
+                else side.uniform(0.0, high, rows)
+            )
+            beyond = np.sqrt(np.maximum(s**2 - base**2, 0.0))
+            extra[i * rows : (i + 1) * rows] = side.normal(0.0, 1.0, (rows, 3)) * beyond[:, None]
+            stated[i * rows : (i + 1) * rows] = s
+        sigma = sigma.copy()
+        sigma[:, 0] = stated
+        return points + extra, sigma
 
     def _reference_noise(self, m: int) -> Array | None:
         """The noise draws (m, R, 3) [m] of the reference reflectors' reads at m poses
@@ -383,6 +413,7 @@ class StreamingTracker:
             frames[~np.isin(physical.target_index, probes)] = np.nan
         sigma = stated_accuracy(noise, points)
         k = len(rows)
+        points, sigma = self._point_accuracy(self.count - k + np.arange(k), points, sigma)
         ref_noise = columns[-1].reshape(k, -1, 3) if world.references else None
         index = self.count - k + np.arange(k)  # the measured poses' 0-based count
         drifted, drifted_frames, refs = self._drifted(

@@ -57,6 +57,10 @@ class NoiseModel:
     joint_sigma_rad : robot repeatability noise on the physical joint angle [rad].
     orientation_sigma_rad : a 6-DoF probe's orientation noise per axis [rad] (worlds with
       `six_dof` probes; msgs_doc/six_dof.md).
+    point_sigma_range_m : (low, high) [m]: each point's accuracy drawn log-uniformly in the
+      range and stated with it (a tracker's uncertainty column, msgs_doc/sim_tracker.md):
+      its noise per axis then has that 1-sigma (the tracker's and target's noise above,
+      plus what each point adds); (0, 0): every point as accurate as the others.
     """
 
     tracker_sigma_m: float = 3.75e-6
@@ -66,6 +70,12 @@ class NoiseModel:
     target_sigma_m: float = 3.0e-6
     joint_sigma_rad: float = 5.0e-6
     orientation_sigma_rad: float = 50e-6
+    point_sigma_range_m: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def base_sigma_m(self) -> float:
+        """The isotropic tracker and target noise per axis [m] every point has."""
+        return float(np.hypot(self.tracker_sigma_m, self.target_sigma_m))
 
 
 @dataclass(frozen=True)
@@ -337,6 +347,17 @@ def _event(spec: Any, source: str) -> SimEvent:  # noqa: ANN401 - YAML
     return SimEvent(kind, poses[0], poses[1], _triple(spec.get("offset_m"), f"{where}.offset_m"))
 
 
+def _pair(value: Any, where: str) -> tuple[float, float]:  # noqa: ANN401 - YAML
+    """Two finite numbers >= 0 of a world file, else InputError."""
+    try:
+        out = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        raise InputError(f"{where}: expected two numbers, got {value!r}") from None
+    if len(out) != 2 or not all(math.isfinite(v) and v >= 0 for v in out):
+        raise InputError(f"{where}: expected two finite numbers >= 0, got {value!r}")
+    return out[0], out[1]
+
+
 def _seed(value: Any, source: str) -> int:  # noqa: ANN401 - YAML
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
         raise InputError(f"{source}: seed: expected an integer >= 0, got {value!r}")
@@ -420,6 +441,16 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         if isinstance(reads, bool) or not isinstance(reads, int) or not 1 <= reads <= MAX_READS:
             raise InputError(f"{source}: tracker.reads_per_pose: a whole number 1-{MAX_READS}, "
                              f"got {reads!r}")  # fmt: skip
+        noise = replace(noise, point_sigma_range_m=_pair(
+            noise.point_sigma_range_m, f"{source}: noise.point_sigma_range_m"))  # fmt: skip
+        low, high = noise.point_sigma_range_m
+        if high > 0 and (noise.anisotropic or not noise.base_sigma_m <= low <= high
+                         or reads > 1 or model.oriented):  # fmt: skip
+            raise InputError(
+                f"{source}: noise.point_sigma_range_m [{low:g}, {high:g}]: needs "
+                f"{noise.base_sigma_m:.3g} (the tracker and target noise) <= low <= high, "
+                "isotropic noise, one read per pose and no six_dof probe"
+            )
         if reads > 1 and model.oriented:
             raise InputError(f"{source}: tracker.reads_per_pose {reads} with six_dof probes: "
                              "not simulated (one read per pose)")  # fmt: skip
@@ -492,10 +523,8 @@ def world_to_dict(world: World) -> dict[str, Any]:
             t: [world.truth[k] for k in target_parameters(t)] for t in world.model.targets[1:]
         },
         "truth": {n: float(v) for n, v in zip(world.truth.names, world.truth.values)},
-        "noise": asdict(world.noise),
-        "tracker": {
-            k: list(v) if isinstance(v, tuple) else v for k, v in asdict(world.tracker).items()
-        },  # fmt: skip
+        "noise": _yaml_fields(world.noise),
+        "tracker": _yaml_fields(world.tracker),
         **(
             {"references": {k: list(v) for k, v in world.references.items()}}
             if world.references
@@ -513,6 +542,11 @@ def world_to_dict(world: World) -> dict[str, Any]:
         ),
         "timing": timing,
     }
+
+
+def _yaml_fields(section: NoiseModel | TrackerOptions) -> dict[str, Any]:
+    """A world section's fields as YAML takes them (tuples as lists)."""
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(section).items()}
 
 
 def save_world(world: World, path: Path) -> None:
