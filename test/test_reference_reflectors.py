@@ -166,3 +166,56 @@ def test_a_world_with_references_drift_and_events_reads_back(tmp_path: Path) -> 
                       ({"kind": "robot", "poses": [1, 2]}, "expected three")):  # fmt: skip
         with pytest.raises(InputError, match=said):
             build_world({"events": [bad]}, "bad.yaml")
+
+
+def test_a_still_tracker_shows_no_drift_and_a_real_one_is_found() -> None:
+    """False alarms and hits of the drift's significance: 100 campaigns of a still tracker
+    (40-600 reads of three reflectors at 12.5 um) never report a drift, 20 campaigns
+    drifting 50 um/h over an hour (120 reads) always do, within the stated uncertainty."""
+    from robot_calib.measurements.references import estimate_drift
+
+    fixed = np.array([[2.0, 0.5, -0.8], [2.2, -0.6, -0.8], [1.8, 0.0, -0.2]])
+    names = ["a", "b", "c"]
+    for seed in range(100):
+        rng = np.random.default_rng(seed)
+        n = int(rng.integers(40, 600))
+        reads = np.stack([np.tile(p, (n, 1)) + rng.normal(0, 12.5e-6, (n, 3)) for p in fixed])
+        drift = estimate_drift(names, np.sort(rng.uniform(0, 3600, n)), reads)
+        assert not drift.significant, (seed, drift.line())
+        assert "no drift of the tracker beyond the uncertainty" in drift.line()
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        t = np.linspace(0.0, 3600.0, 120)
+        shift = np.outer(t / 3600.0 * 50e-6, [0.6, 0.8, 0.0])
+        reads = np.stack([np.tile(p, (120, 1)) + shift + rng.normal(0, 12.5e-6, (120, 3))
+                          for p in fixed])  # fmt: skip
+        drift = estimate_drift(names, t, reads)
+        assert drift.significant, drift.line()  # and as large as it is, to its uncertainty
+        assert drift.max_mm == pytest.approx(0.05, abs=drift.uncertainty_mm), drift.line()
+
+
+def test_a_tracker_knocked_for_good_is_a_step_not_a_drift(tmp_path: Path) -> None:
+    """The tracker's frame moves 0.5 mm at pose 40 of 80 and stays there (a knock): the
+    readers find one step of 0.5 mm at that read, fit each stretch on its own, and the
+    geometric fit of the corrected points lies at the noise; the floor stays the
+    reflectors' noise (where a smooth drift through the step made it ten times that)."""
+    world = build_world(
+        {"robot": "kr5_sixx_r650", "seed": 5, "references": FLOOR,
+         "events": [{"kind": "tracker", "poses": [40, 79], "offset_m": [3e-4, 4e-4, 0.0]}]},
+        "knocked tracker",
+    )  # fmt: skip
+    bag = tmp_path / "knock.mcap"
+    simulate(bag, "random", world, n_random=80)
+    recording = read_recording([bag], world.model.robot)
+    (refs,) = recording.references
+    assert refs.drift is not None and len(refs.drift.step_mm) == 1
+    assert refs.drift.step_mm[0] == pytest.approx(0.5, abs=0.02)
+    assert refs.stamp_ns is not None
+    seconds = refs.stamp_ns * 1e-9
+    assert refs.drift.step_times_s[0] == pytest.approx(seconds[40])  # the first read after it
+    assert "1 step(s) where the tracker's frame moved at once and stayed: 0.5" in refs.drift.line()
+    expected = world.noise.base_sigma_m
+    assert estimate_noise(recording).sigma_m == pytest.approx(expected, rel=0.2)
+    cal = calibrate(recording, world.model.robot, "geometric", log=None, screen_outliers=False)
+    rms = float(np.sqrt(np.mean((cal.predict(recording.poses) - recording.points) ** 2)))
+    assert rms < 1.5 * expected, rms

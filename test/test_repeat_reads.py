@@ -42,7 +42,7 @@ def test_the_k_fold_figure_of_re_read_poses_is_that_of_new_poses() -> None:
     assert "fold" in diagnosis.scored_on
     poses = len(scenario.calibration)  # the report says how many reads per pose
     assert (diagnosis.measurements, diagnosis.poses) == (READS * poses, poses)
-    assert f"({READS:.1f} per pose: the reads of a pose share a fold" in diagnosis.reads_line()
+    assert f"({READS:.1f} per pose: every measurement of a pose, re-read" in diagnosis.reads_line()
     chosen = ladder.rungs[-1]
     held = reread(scenario.holdout, 1, seed=3)  # new poses, measured as the others
     truth = accuracy(held.points, chosen.calibration.predict(held.poses)).absolute_rms_mm

@@ -235,9 +235,10 @@ def _reference_reads(
 ) -> dict[str, Array]:  # fmt: skip
     """The reference reflectors' reads {NAME: (n, 3) [m]} taken out of the further targets
     `extra`, written as read (the readers remove the drift they show from every point,
-    msgs_doc/references.md); the drift and the references' scatter printed now, and an
-    InputError when they cannot give a drift."""
-    from robot_calib.measurements.references import TooFewReads, estimate_drift
+    msgs_doc/references.md); the drift and the references' scatter printed now, an
+    InputError when they are read too seldom for a drift, a warning when they scatter
+    beyond any tracker (the readers then remove nothing either)."""
+    from robot_calib.measurements.references import NoDrift, TooFewReads, estimate_drift
 
     names = [name for name, _ in references]
     time_s = np.arange(len(next(iter(extra.values()))), dtype=float) if times is None else times
@@ -247,6 +248,9 @@ def _reference_reads(
                                np.stack(list(reads.values())))  # fmt: skip
     except TooFewReads as exc:
         raise InputError(f"{', '.join(csvs)}: --reference: {exc}") from None
+    except NoDrift as exc:
+        log(f"warning: {', '.join(csvs)}: --reference: {exc}")
+        return reads
     print(drift.line())
     return reads
 

@@ -216,13 +216,15 @@ class Diagnosis(Record):
         return [s.line() for s in self.stretches] + [r.line() for r in self.regions]
 
     def reads_line(self) -> str:
-        """'1134 measurements at 378 poses (3.0 per pose: the reads of a pose share a fold
-        in every k-fold and split)', '' for documents without the counts."""
+        """'1134 measurements at 378 poses (3.0 per pose: every measurement of a pose,
+        re-read, revisited or of another target, shares its fold in every k-fold and
+        split)', '' for documents without the counts."""
         if not self.poses:
             return ""
         per = self.measurements / self.poses
         return (f"{self.measurements} measurements at {self.poses} poses ({per:.1f} per pose"
-                + (": the reads of a pose share a fold in every k-fold and split)" if per > 1
+                + (": every measurement of a pose, re-read, revisited or of another target, "
+                   "shares its fold in every k-fold and split)" if per > 1
                    else ")"))  # fmt: skip
 
     warnings: list[str] = field(default_factory=list)  # implausible geometric calibration

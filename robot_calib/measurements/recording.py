@@ -279,9 +279,10 @@ class Recording:
         """This recording with the reference reflectors `reads` of its source `reads.source`
         attached, and the tracker's drift they show removed from that source's points (and
         a 6-DoF probe's frames): as the tracker would have read them at its first read.
-        Needs `stamp_ns`; without a drift (too few reads) only attached."""
+        Needs `stamp_ns`; without a drift (too few reads) or one within the noise of its
+        estimate (`TrackerDrift.significant`), only attached."""
         recording = replace(self, references=self.references + (reads,))
-        if reads.drift is None or self.stamp_ns is None:
+        if reads.drift is None or not reads.drift.significant or self.stamp_ns is None:
             return recording
         rows = self.bag_index == reads.source
         time_s = self.stamp_ns[rows] * 1e-9
