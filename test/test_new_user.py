@@ -234,7 +234,7 @@ def test_the_noise_floor_says_what_its_number_counts() -> None:
     noise = estimate_noise(read_recording([SAMPLE], KR5))
     assert noise.basis == f"{noise.source}, {noise.n} degrees of freedom" and noise.n > 100
     assert noise_basis("stated tracker accuracy (per point)", 300) == (
-        "stated tracker accuracy (per point), median of 300 values"
+        "stated tracker accuracy (per point), rms of 300 values"
     )
     assert noise_basis("stated tracker accuracy (--tracker-accuracy)", 0).endswith("accuracy)")
 

@@ -9,11 +9,13 @@
    sigma^2 = sum(residual^2) / (2 n - 6 per sweep) (an upper bound if effects bend circles).
    Where both exist and agree (circles within 1.5 x), they are pooled by degrees of freedom
    (a handful of repeat pairs alone scatters by +-20 %); else the repeat poses win.
-3. Else reference reflectors (msgs_doc/references.md): their scatter about the tracker's
+3. Else a stated accuracy: the user's `--tracker-accuracy`, or the rms of the position
+   standard deviations the tracker stated per point (msgs_doc/six_dof.md; the rms, since
+   the floor is compared with an rms over points of unequal accuracy).
+4. Else reference reflectors (msgs_doc/references.md): their scatter about the tracker's
    drift is the tracker's own noise at a fixed reflector (the robot's repeatability and the
    SMR on the tool not in it: a lower bound of the tool's noise, said so in its source).
-4. Else a stated accuracy: the user's `--tracker-accuracy`, or the median of the
-   standard deviations the tracker stated per point (msgs_doc/six_dof.md).
+   Stated accuracies come first: they are of the tool's own points.
 5. Else the floor is unknown: the in-sample residual of a fitted model with its degrees of
    freedom serves the ladder's internal tests only (`NoiseLevel.independent` is False), and
    every output says the floor is unknown.
@@ -63,7 +65,7 @@ def noise_basis(source: str, n: int) -> str:
     ('circle fits, 601 degrees of freedom'; 'stated tracker accuracy (per point), median
     of 300 values'; a user's --tracker-accuracy has no n)."""
     if source.startswith(STATED):
-        return f"{source}, median of {n} values" if n else source
+        return f"{source}, rms of {n} values" if n else source
     return f"{source}, {n} degrees of freedom"
 
 
@@ -168,8 +170,10 @@ def estimate_noise(
 def _estimate(recording: Recording, fallback_residuals: Array | None, fallback_dof: int,
               stated_sigma_m: float | None) -> NoiseLevel:  # fmt: skip
     """`estimate_noise` without the re-read check."""
-    measured = _measured_noise(recording) or _reference_noise(recording)
+    measured = _measured_noise(recording)
     stated = _stated(recording, stated_sigma_m)
+    if measured is None and stated is None:
+        measured = _reference_noise(recording)
     if measured is not None:
         return replace(measured, warning=_unused(stated, measured, stated_sigma_m is not None))
     model = (None if fallback_residuals is None
@@ -274,14 +278,15 @@ def _unused(stated: NoiseLevel | None, measured: NoiseLevel, given: bool) -> str
 
 
 def _stated(recording: Recording, stated_sigma_m: float | None) -> NoiseLevel | None:
-    """The user's stated accuracy, else the median of the per-point position standard
+    """The user's stated accuracy, else the rms of the per-point position standard
     deviations the recording states, else None."""
     if stated_sigma_m is not None:
         return NoiseLevel(float(stated_sigma_m), f"{STATED} (--tracker-accuracy)", 0)
     sigma = recording.poses.sigma
     if sigma is not None and np.isfinite(sigma[:, 0]).any():
         stated = sigma[np.isfinite(sigma[:, 0]), 0]
-        return NoiseLevel(float(np.median(stated)), f"{STATED} (per point)", len(stated))
+        return NoiseLevel(float(np.sqrt(np.mean(stated**2))), f"{STATED} (per point)",
+                          len(stated))  # fmt: skip
     return None
 
 

@@ -207,7 +207,7 @@ class SimRobotNode(Node):
         except JointLimitError as exc:
             self.get_logger().error(str(exc))
             return
-        speed = np.asarray(self.world.timing.max_joint_speed_rad_s)[: robot.n_joints]
+        speed = self.world.timing.speeds(robot.n_joints)
         self.motion = follow(now, q_now, waypoints, times, self.speed_fraction * speed)
         self.commands += 1
 

@@ -221,7 +221,7 @@ def step_seconds(q_from: Array, q_to: Array, timing: Timing, speed_fraction: flo
     readings (n, J) or (J,) [rad] each (broadcast): a joint-interpolated move at
     `speed_fraction` of each joint's max speed, plus acceleration, settling and measurement."""
     q_from, q_to = np.atleast_2d(q_from), np.atleast_2d(q_to)
-    speed = np.asarray(timing.max_joint_speed_rad_s)[: q_to.shape[1]] * speed_fraction
+    speed = timing.speeds(q_to.shape[1]) * speed_fraction
     move = np.max(np.abs(q_to - q_from) / speed, axis=1)
     return move + timing.accel_overhead_s + timing.settle_s + timing.measure_s
 

@@ -56,7 +56,7 @@ def simulate_stream(
         raise InputError(f"a stream needs >= 2 waypoints (m, J), got shape {waypoints.shape}")
     if not (options.joint_rate_hz > 0 and options.point_rate_hz > 0):
         raise InputError("stream rates must be > 0 Hz")
-    speed = np.asarray(world.timing.max_joint_speed_rad_s)[: waypoints.shape[1]]
+    speed = world.timing.speeds(waypoints.shape[1])
     motion = follow(
         0.0, waypoints[0], waypoints[1:], np.zeros(len(waypoints) - 1),
         speed * options.speed_fraction,

@@ -117,6 +117,15 @@ class Timing:
     max_joint_speed_rad_s: tuple[float, ...] = tuple(
         np.radians([375, 300, 375, 410, 410, 660])
     )  # KR5 sixx R650 data sheet
+
+    def speeds(self, n_joints: int) -> Array:
+        """(n_joints,) the max joint speeds [rad/s] of an arm of n_joints: those given, the
+        last repeated for joints beyond them (a 7-axis arm's wrist as fast as its 6th)."""
+        given = np.asarray(self.max_joint_speed_rad_s, dtype=float)
+        return np.concatenate([given, np.full(max(n_joints - len(given), 0), given[-1])])[
+            :n_joints
+        ]
+
     accel_overhead_s: float = 0.3
     settle_s: float = 0.5
     measure_s: float = 0.2
@@ -502,7 +511,9 @@ def world_to_dict(world: World) -> dict[str, Any]:
     """A world-file mapping that rebuilds `world` exactly (every true value under `truth`)."""
     effects = [effect.to_dict() for effect in world.effects]
     timing = asdict(world.timing)
-    timing["max_joint_speed_deg_s"] = np.degrees(timing.pop("max_joint_speed_rad_s")).tolist()
+    timing.pop("max_joint_speed_rad_s")
+    speeds = world.timing.speeds(world.model.robot.n_joints)
+    timing["max_joint_speed_deg_s"] = np.degrees(speeds).tolist()
     robot = world.model.robot
     probes = {
         t or FIRST_TARGET_KEY: np.degrees(
