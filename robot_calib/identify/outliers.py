@@ -127,6 +127,10 @@ class Outlier(Record):
                 f"; the reference reflectors read with it were off by "
                 f"{self.references_m * 1e3:.3f} mm too: the tracker's frame moved there"
             )
+        elif self.references_m is not None and not self.target:
+            why = (f"; the reference reflectors read with it stayed within "
+                   f"{self.references_m * 1e3:.3f} mm: the tracker's frame did not move; the "
+                   "robot there, or this target's SMR (one target cannot tell)")  # fmt: skip
         else:
             why = ""
         return (

@@ -331,10 +331,10 @@ def outlier_lines(outliers: Sequence[Outlier]) -> list[str]:
     """Human lines for the flagged measurements (none: no line)."""
     if not outliers:
         return []
-    head = (
-        f"outliers: {len(outliers)} measurement(s) flagged as tracker blunders, left out of "
-        "the fit (hold-out ones: not scored):"
-    )
+    from robot_calib.identify.outliers import outlier_counts
+
+    head = (f"outliers: {len(outliers)} measurement(s) flagged ({outlier_counts(outliers)}), "
+            "left out of the fit (hold-out ones: not scored):")  # fmt: skip
     return [head] + [f"  {o.line()}" for o in outliers]
 
 

@@ -195,8 +195,9 @@ def estimate_drift(names: list[str], time_s: Array, references: Array) -> Tracke
     if int(read.sum()) < MIN_READS:
         each = np.isfinite(refs).all(axis=2).sum(axis=1)
         seldom = ", ".join(f"{n} at {int(c)}" for n, c in zip(names, each) if c < MIN_READS)
+        each_text = f" ({seldom} of {refs.shape[1]})" if seldom else ""
         raise TooFewReads(f"references read together at {int(read.sum())} poses: a drift needs "
-                         f"{MIN_READS}" + (f" ({seldom} of {refs.shape[1]})" if seldom else ""))  # fmt: skip
+                         f"{MIN_READS}{each_text}")  # fmt: skip
     refs, t = refs[:, read], t[read]
     rigid = len(names) >= 3
     start = np.median(refs[:, :START_READS], axis=1)  # (R, 3): first places
