@@ -26,6 +26,14 @@ WORLDS = {
     "six_dof_alone": {"six_dof": {"first": [20.0, 35.0, -30.0]}},
     "dropouts": {"noise": {"anisotropic": True}, "tracker": {"dropout_probability": 0.3},
                  "targets": {"smr2": [-0.04, 0.05, 0.03]}},
+    "references_reads_events": {
+        "targets": {"smr2": [-0.04, 0.05, 0.03]},
+        "references": {"r1": [0.6, 0.7, -0.1], "r2": [0.7, -0.6, -0.1]},
+        "tracker": {"reads_per_pose": 3, "dropout_probability": 0.1,
+                    "drift_m_per_s": [1e-8, 0.0, 2e-9], "drift_rad_per_s": [0.0, 0.0, 5e-9]},
+        "events": [{"kind": "robot", "poses": [30, 31], "offset_m": [0.002, 0.0, 0.0]},
+                   {"kind": "tracker", "poses": [150, 259], "offset_m": [0.0, 0.001, 0.0]}]},
+    "point_accuracy": {"noise": {"point_sigma_range_m": [5e-6, 60e-6]}},
 }  # fmt: skip
 
 

@@ -31,10 +31,14 @@ def line_of_sight(p_in_tracker: Array) -> tuple[Array, Array, Array, Array]:
     return distance, radial, across1, np.cross(radial, across1)
 
 
-def tracker_noise(noise: NoiseModel, p_in_tracker: Array, rng: np.random.Generator) -> Array:
-    """Noise vectors (n, 3) [m] for points p_in_tracker (n, 3) (tracker at the origin)."""
+def tracker_noise(noise: NoiseModel, p_in_tracker: Array, rng: np.random.Generator,
+                  reads: int = 1) -> Array:  # fmt: skip
+    """Noise vectors (n, 3) [m] for points p_in_tracker (n, 3) (tracker at the origin).
+    `reads`: the rows are that many reads of the same n / reads targets in turn (a still
+    pose read again): the target's centring error drawn once per target, shared by its
+    reads; the tracker's own noise drawn per read."""
     n = p_in_tracker.shape[0]
-    target = rng.normal(0.0, noise.target_sigma_m, (n, 3))
+    target = np.tile(rng.normal(0.0, noise.target_sigma_m, (n // reads, 3)), (reads, 1))
     if not noise.anisotropic:
         return target + rng.normal(0.0, noise.tracker_sigma_m, (n, 3))
     distance, radial, across1, across2 = line_of_sight(p_in_tracker)
@@ -84,7 +88,7 @@ def physical_points(
 
 
 def measure_six_dof(
-    world: World, poses: Poses, rng: np.random.Generator, noisy: bool = True
+    world: World, poses: Poses, rng: np.random.Generator, noisy: bool = True, reads: int = 1
 ) -> tuple[Array, Array | None]:
     """What the tracker measures at `poses`: points (n, 3) [m] as `physical_points` and,
     where the world has 6-DoF probes (`model.oriented`), their frames (n, 3, 3) in the
@@ -95,7 +99,7 @@ def measure_six_dof(
     physical = physical_poses(world, poses, rng) if noisy else poses
     points = model.target_points(truth, physical)
     if noisy:
-        points = points + tracker_noise(world.noise, points, rng)
+        points = points + tracker_noise(world.noise, points, rng, reads)
     if not model.oriented:
         return points, None
     frames = model.probe_orientations(truth, physical)
@@ -190,7 +194,8 @@ class StreamingTracker:
             targets,
         )
         self.count += 1
-        points, frames = measure_six_dof(self.world, poses, self.rng)
+        reads = self.world.tracker.reads_per_pose
+        points, frames = measure_six_dof(self.world, poses, self.rng, reads=reads)
         sigma = stated_accuracy(self.world.noise, points)
         points, sigma = self._point_accuracy(np.array([self.count - 1]), points, sigma)
         noise = self._reference_noise(1)
@@ -252,13 +257,13 @@ class StreamingTracker:
 
     def _reference_noise(self, m: int) -> Array | None:
         """The noise draws (m, R, 3) [m] of the reference reflectors' reads at m poses
-        (tracker and target noise, isotropic; one draw per pose, after the pose's others),
-        None when the world has none."""
+        (the tracker's noise, isotropic: a reflector left in its nest keeps its centring
+        error, part of its place; one draw per pose, after the pose's others), None when
+        the world has none."""
         n_refs = len(self.world.references)
         if not n_refs:
             return None
-        noise = self.world.noise
-        sigma = float(np.hypot(noise.tracker_sigma_m, noise.target_sigma_m))
+        sigma = self.world.noise.tracker_sigma_m  # a nest's centring error is its place
         return np.stack([self.rng.normal(0.0, sigma, (n_refs, 3)) for _ in range(m)])
 
     def _drifted(self, index: IntArray, time_s: Array, points: Array, frames: Array | None,
@@ -342,6 +347,7 @@ class StreamingTracker:
         world, rng = self.world, self.rng
         model, noise, options = world.model, world.noise, world.tracker
         n_targets, targets = self._rows()  # rows per pose: every target, every read
+        reads = options.reads_per_pose  # the reads share each target's centring error
         # approach directions: each joint's last move beyond the tolerance (next_direction)
         if self._last_q is None:
             start, previous, self._t0 = np.ones(n_joints), q[:1], float(stamps[0])
@@ -365,7 +371,8 @@ class StreamingTracker:
                 continue
             measured[k] = True
             pose = [rng.normal(0.0, noise.joint_sigma_rad, (1, n_joints)),
-                    rng.normal(0.0, noise.target_sigma_m, (n_targets, 3))]  # fmt: skip
+                    np.tile(rng.normal(0.0, noise.target_sigma_m, (n_targets // reads, 3)),
+                            (reads, 1))]  # fmt: skip
             if noise.anisotropic:
                 pose += [rng.normal(0.0, noise.tracker_radial_sigma_m, (n_targets, 1)),
                          rng.normal(0.0, 1.0, (n_targets, 1)),
