@@ -4,8 +4,11 @@ bag, with the world's truth beside it (flows/simulate.py)."""
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
-from robot_calib.cli.common import progress
+import numpy as np
+
+from robot_calib.cli.common import log, progress
 from robot_calib.cli.options import (
     WORLD_ROBOT,
     add_force,
@@ -16,6 +19,9 @@ from robot_calib.cli.options import (
     signed_seconds,
 )
 from robot_calib.flows import DEFAULT_PLAN, N_RANDOM_POSES
+
+if TYPE_CHECKING:
+    from robot_calib.sim.world import World
 
 NAME = "simulate"
 HELP = "simulate a measurement plan and record an MCAP bag"
@@ -89,7 +95,35 @@ def main(args: argparse.Namespace) -> int:
     print(
         f"{sim.bag}: {', '.join(f'{t}={n}' for t, n in sim.counts.items())} messages "
         f"({plan}{', stream' if args.stream else ''}, effects: "
-        f"{', '.join(sim.effects) or 'none'}) in {sim.seconds:.1f} s; "
+        f"{', '.join(sim.effects) or 'none'}{_tracker_line(world)}) in {sim.seconds:.1f} s; "
         f"truth in {sim.world_file}"
     )
+    poses = sim.counts.get("/joint_states", 0)
+    for event in world.events:
+        if event.last >= poses:
+            log(f"warning: {world.source}: the {event.kind} event at poses {event.first}-"
+                f"{event.last}: the recording has {poses} poses, so "
+                + ("it never happened" if event.first >= poses else
+                   f"only poses {event.first}-{poses - 1} of it happened"))  # fmt: skip
     return 0
+
+
+def _tracker_line(world: World) -> str:
+    """'; tracker: 3 reads per pose, 3 reference reflectors, drift 50.0 um/h, 2 events'
+    (what the world's tracker does beyond measuring; '' when nothing)."""
+    tracker = world.tracker
+    parts = []
+    if tracker.reads_per_pose > 1:
+        parts.append(f"{tracker.reads_per_pose} reads per pose")
+    if world.references:
+        parts.append(f"{len(world.references)} reference reflector(s)")
+    if tracker.drifts:
+        rate = float(np.linalg.norm(tracker.drift_m_per_s)) * 3.6e9
+        turn = float(np.linalg.norm(tracker.drift_rad_per_s)) * 3.6e9
+        parts.append(f"drift {rate:.1f} um/h, {turn:.1f} urad/h")
+    if world.noise.point_sigma_range_m[1] > 0:
+        low, high = (v * 1e6 for v in world.noise.point_sigma_range_m)
+        parts.append(f"each point's accuracy {low:g}-{high:g} um, stated")
+    if world.events:
+        parts.append(f"{len(world.events)} event(s)")
+    return f"; tracker: {', '.join(parts)}" if parts else ""

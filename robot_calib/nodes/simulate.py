@@ -20,6 +20,7 @@ import contextlib
 import signal
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterator, Sequence
 from functools import partial
 from pathlib import Path
@@ -257,22 +258,24 @@ def _simulate_bag(
     world_param = Parameter("world", value=str(world) if world else "")
     nodes: list[Node] = []
     try:
-        robot = SimRobotNode(
-            context=context,
-            parameter_overrides=[
-                sim_time,
-                world_param,
-                Parameter("plan", value=plan),
-                Parameter("seed", value=seed),
-                Parameter("n_random", value=n_random),
-                Parameter("publish_clock", value=True),
-                Parameter("wait_for_subscribers", value=2),
-                Parameter("autostart", value=False),
-            ],
-        )
-        nodes.append(robot)
-        tracker = SimTrackerNode(context=context, parameter_overrides=[sim_time, world_param])
-        nodes.append(tracker)
+        with warnings.catch_warnings():  # the world's description warned when it was built
+            warnings.simplefilter("ignore", UserWarning)
+            robot = SimRobotNode(
+                context=context,
+                parameter_overrides=[
+                    sim_time,
+                    world_param,
+                    Parameter("plan", value=plan),
+                    Parameter("seed", value=seed),
+                    Parameter("n_random", value=n_random),
+                    Parameter("publish_clock", value=True),
+                    Parameter("wait_for_subscribers", value=2),
+                    Parameter("autostart", value=False),
+                ],
+            )
+            nodes.append(robot)
+            tracker = SimTrackerNode(context=context, parameter_overrides=[sim_time, world_param])
+            nodes.append(tracker)
         recorder = RecorderNode(
             context=context,
             parameter_overrides=[

@@ -356,6 +356,36 @@ def _event(spec: Any, source: str) -> SimEvent:  # noqa: ANN401 - YAML
     return SimEvent(kind, poses[0], poses[1], _triple(spec.get("offset_m"), f"{where}.offset_m"))
 
 
+#: what a simulated world's tracker can plausibly do; beyond, a unit slip (mm or um as m)
+MAX_POINT_SIGMA_M = 1e-3  # a point's stated 1-sigma
+MAX_DRIFT_M_PER_S = 1e-5  # 36 mm/h
+MAX_DRIFT_RAD_PER_S = 1e-5  # 2 deg/h
+MAX_REFERENCE_M = 30.0  # a reference reflector's distance from the robot's base
+MAX_EVENT_M = 0.1  # an event's offset
+
+
+def _check_magnitudes(noise: NoiseModel, tracker: TrackerOptions,
+                      references: dict[str, tuple[float, float, float]],
+                      events: tuple[SimEvent, ...], source: str) -> None:  # fmt: skip
+    """InputError naming the key when a world's tracker figure is beyond any tracker (the
+    MAX_* bounds): most likely a unit slip."""
+    checks = [
+        (noise.point_sigma_range_m[1], MAX_POINT_SIGMA_M, "noise.point_sigma_range_m", "m"),
+        (float(np.linalg.norm(tracker.drift_m_per_s)), MAX_DRIFT_M_PER_S,
+         "tracker.drift_m_per_s", "m/s (50 um/h is 1.39e-8)"),
+        (float(np.linalg.norm(tracker.drift_rad_per_s)), MAX_DRIFT_RAD_PER_S,
+         "tracker.drift_rad_per_s", "rad/s"),
+        *((float(np.linalg.norm(xyz)), MAX_REFERENCE_M, f"references.{name}", "m")
+          for name, xyz in references.items()),
+        *((float(np.linalg.norm(e.offset_m)), MAX_EVENT_M, "events.offset_m", "m")
+          for e in events),
+    ]  # fmt: skip
+    for value, bound, key, unit in checks:
+        if value > bound:
+            raise InputError(f"{source}: {key}: {value:.4g} is beyond any tracker's (at most "
+                             f"{bound:g} {unit}): a unit slip?")  # fmt: skip
+
+
 def _pair(value: Any, where: str) -> tuple[float, float]:  # noqa: ANN401 - YAML
     """Two finite numbers >= 0 of a world file, else InputError."""
     try:
@@ -412,7 +442,9 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         geometry = data.get("geometry", "seed_table3_avg_2_6")
         if geometry == "seed_table3_avg_2_6":
             if robot.name != "kr5_sixx_r650":
-                raise InputError(f"{source}: geometry {geometry} is for the kr5_sixx_r650")
+                raise InputError(f"{source}: geometry {geometry} (the default) is the "
+                                 f"kr5_sixx_r650's: for {robot.name} write geometry: nominal "
+                                 "(and any deviations)")  # fmt: skip
             truth = truth.with_values(
                 {
                     k: v * (DEG if k.startswith(("theta", "alpha", "beta")) else 1e-3)
@@ -464,7 +496,15 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
             raise InputError(f"{source}: tracker.reads_per_pose {reads} with six_dof probes: "
                              "not simulated (one read per pose)")  # fmt: skip
         references = _targets(data.get("references"), source, "references")
-        events = tuple(_event(e, source) for e in data.get("events", []) or [])
+        clash = sorted(set(references) & set(extra))
+        if clash:
+            raise InputError(f"{source}: references.{clash[0]}: also a target's name")
+        events_data = data.get("events", []) or []
+        if not isinstance(events_data, list):
+            raise InputError(f"{source}: events: expected a list of mappings, got "
+                             f"{events_data!r}")  # fmt: skip
+        events = tuple(_event(e, source) for e in events_data)
+        _check_magnitudes(noise, tracker, references, events, source)
         if not tracker.dropout_probability < 1.0:
             raise InputError(
                 f"{source}: tracker.dropout_probability {tracker.dropout_probability}: must be "
