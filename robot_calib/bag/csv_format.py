@@ -82,6 +82,9 @@ class CsvFormat:
     # further targets measured at each pose: (NAME, (x, y, z) columns), each onto
     # /laser_tracker/NAME/point (msgs_doc/targets.md); an empty cell: not measured there
     targets: tuple[tuple[str, tuple[str, str, str]], ...] = ()
+    # the names among `targets` that are reference reflectors (--reference; msgs_doc/
+    # references.md): read like targets, named as references in messages
+    references: tuple[str, ...] = ()
     # 6-DoF probes (msgs_doc/six_dof.md): orientation columns and stated standard deviations
     # per target ('' the first), at most one of each per target
     orientations: tuple[OrientationColumns, ...] = ()
@@ -139,3 +142,8 @@ class ImportedTable:
 def with_overrides(fmt: CsvFormat, **changes: Any) -> CsvFormat:
     """A copy of `fmt` with the given (non-None) fields replaced."""
     return replace(fmt, **{k: v for k, v in changes.items() if v is not None})
+
+
+def target_word(fmt: CsvFormat, name: str) -> str:
+    """'target NAME' or 'reference NAME' (a --reference), for messages."""
+    return f"{'reference' if name in fmt.references else 'target'} {name}"

@@ -28,6 +28,7 @@ from robot_calib.bag.csv_format import (
     LENGTH_UNITS,
     CsvFormat,
     ImportedTable,
+    target_word,
 )
 from robot_calib.bag.csv_six_dof import check_six_dof_format, six_dof_columns
 from robot_calib.bag.write import EPOCH_MIN_S
@@ -122,14 +123,14 @@ def _check_distinct_columns(
     path: Path, refs: list[str], cols: list[int], header: list[str] | None
 ) -> None:
     """InputError when two of the columns given (--joints, --point, --dif, --time,
-    --temperature, --target) are one column of the file: one number read as two."""
+    --temperature, --target, --reference) are one column of the file: one number read as
+    two."""
     for k, col in enumerate(cols):
         if col in cols[:k]:
-            other = refs[cols.index(col)]
             raise InputError(
-                f"{path}: column {_column_label(refs[k], col, header)!r} is given twice (as "
-                f"{other!r} and {refs[k]!r} in --joints/--point/--dif/--time/--temperature/"
-                "--target): each value needs its own column"
+                f"{path}: column {_column_label(refs[k], col, header)!r} is given twice (in "
+                "two of --joints, --point, --dif, --time, --temperature, --target, "
+                "--reference): each value needs its own column"
             )
 
 
@@ -399,11 +400,12 @@ def read_measurement_csv(
     }
     for (name, columns), xyz in zip(fmt.targets, extra.values()):
         if set(columns) == set(fmt.point):
-            raise InputError(f"{path}: --target {name} names the --point columns {columns}")
+            option = "--reference" if name in fmt.references else "--target"
+            raise InputError(f"{path}: {option} {name} names the --point columns {columns}")
         dist_m = np.linalg.norm(xyz[np.isfinite(xyz).all(axis=1)], axis=1)
         if len(dist_m) and not MIN_TRACKER_RANGE_M <= np.median(dist_m) <= MAX_TRACKER_RANGE_M:
             raise InputError(
-                f"{path}: target {name} columns {'/'.join(columns)} are "
+                f"{path}: {target_word(fmt, name)} columns {'/'.join(columns)} are "
                 f"{np.median(dist_m):.3g} m from the tracker read as {fmt.length_unit} "
                 f"(the --point columns' unit): another unit, or not point columns?"
             )
@@ -411,8 +413,8 @@ def read_measurement_csv(
         if partial.any():
             k = int(np.flatnonzero(partial)[0])
             raise InputError(
-                f"{path}:{lines[k]}: target {name} has some of its x, y, z cells empty: a "
-                "target is measured whole or not at all"
+                f"{path}:{lines[k]}: {target_word(fmt, name)} has some of its x, y, z cells "
+                "empty: a point is measured whole or not at all"
             )
     if time is not None and np.any(np.diff(time) <= 0):
         k = int(np.flatnonzero(np.diff(time) <= 0)[0]) + 1

@@ -164,6 +164,7 @@ def main(args: argparse.Namespace) -> int:
         length_unit=args.length_unit,
         header=False if args.no_header else None,
         targets=(_target_columns(args.target or []) + references) or None,
+        references=tuple(name for name, _ in references) or None,
         orientations=_orientation_columns(args.orientation, args.orientation_rpy),
         sigmas=_sigma_columns(args.sigma),
         orientation_unit=args.orientation_unit,

@@ -27,11 +27,11 @@ from typing import Any
 
 from robot_calib.errors import RobotDescriptionError
 
-ANGLE_UNITS = {"deg": math.pi / 180.0, "rad": 1.0}
+ANGLE_UNITS = {"deg": math.pi / 180.0, "°": math.pi / 180.0, "rad": 1.0}
 LENGTH_UNITS = {"m": 1.0, "mm": 1e-3}
 MASS_UNITS = {"kg": 1.0}
 _UNIT = "|".join(sorted({*ANGLE_UNITS, *LENGTH_UNITS, *MASS_UNITS}, key=len, reverse=True))
-_HEADER = re.compile(rf"(.+?)(?:\[(\w+)\]|\(({_UNIT})\)|_({_UNIT}))?")
+_HEADER = re.compile(rf"(.+?)(?:\[([^\]]+)\]|\(({_UNIT})\)|_({_UNIT}))?")
 _PREVIOUS = re.compile(r"(alpha|a)_?(?:\{i-1\}|\(i-1\)|i-1|prev)")
 #: each column's kind of unit (None: no unit)
 COLUMNS: dict[str, dict[str, float] | None] = {
@@ -48,11 +48,17 @@ def _column(header: str, where: str) -> tuple[str, float]:
     text = header.strip().lower().replace(" ", "")
     match = _HEADER.fullmatch(text)
     if not text or match is None:
-        raise RobotDescriptionError(f"{where}: empty column name")
+        raise RobotDescriptionError(f"{where}: an empty column name (a trailing comma?)")
     key, unit = match.group(1), match.group(2) or match.group(3) or match.group(4)
     previous = _PREVIOUS.fullmatch(key)
     key = f"{previous.group(1)}_prev" if previous else key
     if key not in COLUMNS:
+        import difflib
+
+        close = difflib.get_close_matches(key, COLUMNS, n=1)
+        if close:
+            raise RobotDescriptionError(f"{where}: column {header.strip()!r}: did you mean "
+                                        f"{close[0]!r}?")  # fmt: skip
         known = ", ".join(COLUMNS)
         raise RobotDescriptionError(f"{where}: column {header.strip()!r} is none of {known} "
                                     "(with a unit, e.g. 'a [mm]')")  # fmt: skip
@@ -64,8 +70,13 @@ def _column(header: str, where: str) -> tuple[str, float]:
     if unit not in units:
         given = f"unit {unit!r}" if unit else "no unit"
         raise RobotDescriptionError(f"{where}: column {header.strip()!r} has {given}: write "
-                                    f"it as '{key} [{' or '.join(units)}]'")  # fmt: skip
+                                    f"it as '{key} [{' or '.join(_shown(units))}]'")  # fmt: skip
     return key, units[unit]
+
+
+def _shown(units: dict[str, float]) -> list[str]:
+    """The unit names to suggest (not the degree sign, which is the same as deg)."""
+    return [u for u in units if u != "°"]
 
 
 def dh_csv_mapping(text: str, name: str, source: str) -> dict[str, Any]:
@@ -74,6 +85,9 @@ def dh_csv_mapping(text: str, name: str, source: str) -> dict[str, Any]:
     lines = [line for line in text.lstrip("\ufeff").splitlines()
              if line.strip() and not line.lstrip().startswith("#")]  # fmt: skip
     rows = list(csv.reader(io.StringIO("\n".join(lines))))
+    if rows and len(rows[0]) == 1 and ";" in rows[0][0]:
+        raise RobotDescriptionError(f"{source}: the columns are separated by ';': write the "
+                                    "table with commas (and '.' decimals)")  # fmt: skip
     if len(rows) < 3:
         raise RobotDescriptionError(f"{source}: a DH table needs a header and >= 2 joint rows")
     columns = [_column(h, f"{source}: header") for h in rows[0]]
@@ -93,6 +107,10 @@ def dh_csv_mapping(text: str, name: str, source: str) -> dict[str, Any]:
         )
     if ("min" in keys) != ("max" in keys):
         raise RobotDescriptionError(f"{source}: header: limits need both min and max")
+    com = [k for k in ("com_x", "com_y", "com_z") if k in keys]
+    if com and len(com) < 3:
+        raise RobotDescriptionError(f"{source}: header: a centre of mass needs com_x, com_y "
+                                    f"and com_z; only {', '.join(com)} given")  # fmt: skip
     joints = []
     for number, row in enumerate(rows[1:], start=1):
         where = f"{source}: joint {number}"
@@ -114,11 +132,14 @@ def dh_csv_mapping(text: str, name: str, source: str) -> dict[str, Any]:
         if "name" in values:
             joint["name"] = values["name"]
         if "min" in values:
+            if not values["min"] < values["max"]:
+                low, high = (row[keys.index(k)].strip() for k in ("min", "max"))
+                raise RobotDescriptionError(f"{where}: min {low} is not below max {high}")
             joint["limits"] = [values["min"], values["max"]]
         if "mass" in values:
             joint["mass"] = values["mass"]
         if any(k in values for k in ("com_x", "com_y", "com_z")):
-            joint["com"] = [values.get(f"com_{c}", 0.0) for c in "xyz"]
+            joint["com"] = [values[f"com_{c}"] for c in "xyz"]
         joints.append(joint)
     return {"name": name, "source": f"DH table {source}", "angle_unit": "rad",
             "convention": "modified_dh" if modified else "dh", "joints": joints}  # fmt: skip

@@ -539,8 +539,11 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
             )
             if temperature.tau_s <= 0 or temperature.period_s <= 0:
                 raise InputError(f"{source}: temperature.tau_s and period_s must be > 0")
-    except RobotCalibError as exc:  # name the file once
-        raise InputError(str(exc) if str(exc).startswith(source) else f"{source}: {exc}") from None
+    except RobotCalibError as exc:  # name the file once (a description's names its own)
+        named = str(exc).startswith(
+            (source, str(data.get("robot", "")).partition("#")[0] or source)
+        )
+        raise InputError(str(exc) if named else f"{source}: {exc}") from None
     except (TypeError, KeyError, ValueError) as exc:
         raise InputError(f"{source}: malformed world ({type(exc).__name__}: {exc})") from None
     return World(model, truth, noise, tracker, timing, seed, source, temperature, references,
