@@ -548,13 +548,20 @@ def read_stream(path: Path, robot: RobotDescription) -> JointStream:
     """The raw stream of one bag for continuous tracking (msgs_doc/stream.md): joint
     states and the points of the contract's single target, unpaired (`stream_recording`
     pairs them at a latency), with the side topic's temperature at each point. BagError
-    for a bag with further targets or 6-DoF poses (not supported in stream mode)."""
+    for a bag with further targets, 6-DoF poses or reference reflectors (not supported in
+    stream mode)."""
     js_ns, q, velocity_sign, stamped, names, celsius, _ = _bag_messages(path, robot)
     if len(names) > 1 or stamped.rotation is not None:
         raise BagError(
             f"{path}: --stream reads the single target of {POINT_TOPIC}; this bag has "
             f"further targets or 6-DoF poses ({len(names)} target(s))"
         )
+    with BagReader(path) as reader:
+        references = [t for t in reader.topics if reference_topic_name(t) is not None]
+    if references:
+        raise BagError(f"{path}: --stream does not read reference reflectors ({references[0]}"
+                       "): the tracker's drift they show would stay in the points; read the "
+                       "bag without --stream (msgs_doc/references.md)")  # fmt: skip
     try:
         return JointStream.from_messages(
             js_ns, q, velocity_sign, stamped.point_ns, stamped.points, str(path),

@@ -75,7 +75,10 @@ def main(args: argparse.Namespace) -> int:
     if others:
         log(f"warning: {source}: topics {others} are not measurements: not copied")
     for refs in recording.references:
-        if refs.drift is not None:
+        if refs.drift is None or not refs.drift.significant:
+            log(f"note: {source}: reference reflectors {', '.join(refs.names)} are not copied "
+                "(they showed no drift to remove)")  # fmt: skip
+        else:
             log(f"note: {source}: the tracker's drift that reference reflectors "
                 f"{', '.join(refs.names)} show ({refs.drift.max_mm:.4f} mm at most) is removed "
                 "from the points written; the references themselves are not copied")  # fmt: skip

@@ -27,7 +27,7 @@ from robot_calib.diagnose.ladder import (
     run_ladder,
 )
 from robot_calib.diagnose.learnable import MIN_LEARNABLE_SHARE, LearnableBound
-from robot_calib.diagnose.noise import STATED, NoiseLevel
+from robot_calib.diagnose.noise import LOWER_BOUNDS, STATED, NoiseLevel
 from robot_calib.diagnose.outside import OutsideVocabulary, outside_vocabulary
 from robot_calib.diagnose.signatures import (
     RemovedSignature,
@@ -298,6 +298,14 @@ class Diagnosis(Record):
                     "null (geometric reaches the noise level; that floor rests on the "
                     f"{self.noise.source} alone, not on repeat poses or circle fits)"
                 )
+            if self.noise.floor_known and self.noise.source in LOWER_BOUNDS:
+                ratio = self.unexplained.geometric_ratio_to_noise_floor
+                above = "" if ratio is None else f"{ratio:.2f} x "
+                return (f"null (no structure found: geometric is {above}a floor of the "
+                        f"tracker's noise alone, {self.noise.source.split(' (')[0]}, which the "
+                        "robot's repeatability and the SMR's centring add to; the learned "
+                        "correction learns nothing held out and no joint signature stands "
+                        "out)")  # fmt: skip
             if self.noise.floor_known:
                 return "null (geometric reaches the noise level)"
             return (
@@ -383,8 +391,8 @@ def dominant_effect(
     strongest = where.strongest_signature
     learnt = ladder.learnable is not None and ladder.learnable.structure_left
     signed = strongest is not None and strongest.significance >= SIGNATURE_STRUCTURE
-    if not noise.independent and not learnt and not signed:
-        return None  # floor unknown, nothing learnable and no signature: no evidence
+    if (not noise.independent or noise.lower_bound) and not learnt and not signed:
+        return None  # floor unknown or the tracker's alone, nothing learnable, no signature
     if outside is not None and outside.motions:  # what the learned correction found
         return DominantEffect(UNKNOWN, [outside.motions[0].joint])
     # a drift with time (joint 0) names no joint

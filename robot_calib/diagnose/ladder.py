@@ -587,10 +587,11 @@ def _climb(
         scan = joint_spectra(fitted.model, fitted.parameters, recording, fitted.residuals)
         spectra[current.model] = scan
         pool = candidates(robot, recording, current.effects, scan)
-        pool, left_out = _affordable(pool, current.calibration, len(recording))
+        distinct = recording.distinct_points()  # re-reads and repeats pin no parameter
+        pool, left_out = _affordable(pool, current.calibration, distinct)
         if left_out:
             say(f"  {left_out} candidate(s) left out: more free parameters than "
-                f"{len(recording)} measurements can pin ({RESIDUALS_PER_PARAMETER} residuals "
+                f"{distinct} distinct points can pin ({RESIDUALS_PER_PARAMETER} residuals "
                 "per parameter)")  # fmt: skip
         if not pool:
             break
@@ -659,7 +660,8 @@ def _affordable(
     pool: list[Effect], current: Calibration, n_points: int
 ) -> tuple[list[Effect], int]:
     """The candidates of `pool` whose model keeps RESIDUALS_PER_PARAMETER residuals (3 per
-    measured point) per free parameter, and how many were left out."""
+    distinct measured point, `Recording.distinct_points`) per free parameter, and how many
+    were left out."""
     robot, have = current.model.robot, set(current.parameters.names)
     n_free = int(current.parameters.free.sum())
     budget = 3 * n_points / RESIDUALS_PER_PARAMETER

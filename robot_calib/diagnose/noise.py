@@ -52,6 +52,7 @@ STATED = "stated tracker accuracy"
 MAX_REREAD_SIGMA_M = 1e-4
 REREADS = "re-reads of still poses (the tracker alone, not the robot's repeatability)"
 REFERENCES = "reference reflectors (the tracker alone, not the robot's repeatability)"
+LOWER_BOUNDS = (REREADS, REFERENCES)  # floors of the tracker's noise alone
 MAX_REPEAT_GAP_S = 60.0  # repeats farther apart in time may include drift, not only noise
 MAX_REPEAT_LAG = 50  # rows between a pose and its repeat, at most
 AGREE = 1.5  # circle-fit noise within this factor of the repeat-pose noise: pool them
@@ -90,6 +91,13 @@ class NoiseLevel:
         """True when estimated without any model (repeat poses, circle fits): only then can
         a model's error be compared with it (a model's own residual is no floor)."""
         return self.source != "model residual"
+
+    @property
+    def lower_bound(self) -> bool:
+        """True for a floor of the tracker's noise alone (re-reads of still poses, reference
+        reflectors): the robot's repeatability and the SMR's centring add to what a correct
+        model reaches, so a model above it is no evidence of a missing effect by itself."""
+        return self.source in LOWER_BOUNDS
 
     @property
     def floor_rms_m(self) -> float:

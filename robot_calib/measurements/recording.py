@@ -29,7 +29,7 @@ from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements.references import ReferenceReads
 from robot_calib.measurements.sweeps import MIN_SWEEP_POSES, Sweep, usable_sweeps
 from robot_calib.messages import target_topic
-from robot_calib.poses import PRIMARY_TARGET, Poses, approach_directions
+from robot_calib.poses import PRIMARY_TARGET, Poses, approach_directions, reading_groups
 
 if TYPE_CHECKING:
     from robot_calib.kinematics.description import RobotDescription
@@ -255,6 +255,15 @@ class Recording:
                 replace(r, source=r.source + b) for b, p in enumerate(parts) for r in p.references
             ),  # fmt: skip
         )
+
+    def distinct_points(self) -> int:
+        """How many different points the recording measured: one per target at each
+        distinct pose (`reading_groups`); re-reads and repeats of a pose add none (they
+        tell the noise, not the kinematics)."""
+        if not len(self):
+            return 0
+        groups = reading_groups(self.poses.q) * len(self.target_names) + self.poses.target_index
+        return len(np.unique(groups))
 
     def reference_leftover_m(self) -> Array:
         """(n,) [m] per measurement, the largest distance of a reference reflector read with
