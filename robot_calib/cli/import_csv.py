@@ -191,9 +191,13 @@ def main(args: argparse.Namespace) -> int:
         print(f"{csv_path}: {counted(len(table.q), 'row')} imported, "
               f"{counted(len(table.bad_rows), 'bad row')} skipped")  # fmt: skip
         for name, (rotation, sigma) in table.six_dof.items():
-            print(f"  {target_label(name)}: {np.isfinite(rotation).all(axis=(1, 2)).sum()} "
-                  f"orientations, {np.isfinite(sigma).any(axis=1).sum()} rows with stated "
-                  "standard deviations")  # fmt: skip
+            oriented = int(np.isfinite(rotation).all(axis=(1, 2)).sum())
+            stated = int(np.isfinite(sigma).any(axis=1).sum())
+            parts = ([f"{oriented} orientations"] if oriented else []) + (
+                [f"{stated} rows with stated standard deviations"] if stated else []
+            )
+            if parts:
+                print(f"  {target_label(name)}: {', '.join(parts)}")
         tables.append(table)
     note = check_no_copies(args.csv, tables)
     if note:
