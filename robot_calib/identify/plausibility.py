@@ -35,6 +35,8 @@ FAR_ANGLE_RAD = np.radians(2.0)
 RESIDUAL_FACTOR = 20.0
 #: tracker + target noise per axis [m] assumed when the data cannot tell (no circle fits)
 DEFAULT_NOISE_M = 10e-6
+#: the circle fits' noise is taken as at least this [m]: no tracker resolves finer
+MIN_NOISE_M = 1e-6
 #: readings beyond the joint limits by more than this [rad] are reported
 LIMIT_MARGIN_RAD = np.radians(2.0)
 HINT = "a wrong --robot, two joints' readings swapped, or readings in other units?"
@@ -137,7 +139,8 @@ def degrees_reason(recording: Recording, robot: RobotDescription, what: str = "r
 
 def noise_per_axis(cal: Calibration, stated_sigma_m: float | None = None) -> tuple[float, str]:
     """What the tracker alone leaves per axis [m], and where that figure comes from: the
-    circle fits of the sweeps (pooled rms over 3 components) when CPA ran, else the
+    circle fits of the sweeps (pooled rms over 3 components, at least MIN_NOISE_M) when
+    CPA ran, else the
     user's stated accuracy `stated_sigma_m` [m] (`--tracker-accuracy`), else the assumed
     DEFAULT_NOISE_M."""
     if cal.cpa is not None and cal.cpa.sweeps:
@@ -146,7 +149,8 @@ def noise_per_axis(cal: Calibration, stated_sigma_m: float | None = None) -> tup
             for s in cal.cpa.sweeps
         )
         count = sum(2 * len(s.circle.plane_residuals) for s in cal.cpa.sweeps)
-        return float(np.sqrt(total / count)), "circle fits"
+        # exact (simulated) points fit their circles to round-off: no tracker's noise
+        return max(float(np.sqrt(total / count)), MIN_NOISE_M), "circle fits"
     if stated_sigma_m is not None:
         return float(stated_sigma_m), "stated tracker accuracy (--tracker-accuracy)"
     return DEFAULT_NOISE_M, "assumed tracker noise"

@@ -44,6 +44,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from robot_calib.diagnose.diagnosis import Diagnosis
+from robot_calib.diagnose.ladder import Ladder
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.flows.bags import read_bags
 from robot_calib.flows.calibrate import calibrate_recording
@@ -119,6 +120,8 @@ class CalibratorNode(Node):
         self.error: RobotCalibError | None = None
         self.solves = 0
         self.held_out: HeldOut | None = None  # the last result scored on `holdout_bags`
+        # what the diagnosis says of the published model ('' when nothing: `left_by_published`)
+        self.diagnosis_note = ""
         self._description_note = ""  # what became of /robot_description (for /diagnostics)
         self._result_publishers = {
             "parameters": self.create_publisher(String, "~/parameters", LATCHED),
@@ -185,19 +188,17 @@ class CalibratorNode(Node):
             f"std_srvs/srv/Trigger){idle}"
         )
 
-    def _solve_on_request(self) -> tuple[Calibration | None, str]:
+    def _solve_on_request(self) -> tuple[Calibration | None, bool, str]:
         """A service's solve: live mode solves now, bag mode answers with the bags' result.
-        Returns the calibration (None on failure) and one line: the model and its in-sample
-        accuracy (seed criterion and absolute, mm, points fitted), or the error."""
+        Returns the calibration (None on failure), whether it is a result to use (False:
+        none, or an implausible one: `solve_verdict`) and one line saying why or what."""
         cal = self.calibration if self.settings.bags else self.solve()
-        if cal is None:
-            return None, str(self.error) if self.error else "no calibration"
-        return cal, f"{cal.name}: in-sample {cal.accuracy.line()}"
+        return (cal, *solve_verdict(cal, self.error, self.diagnosis_note))
 
     def _on_solve_service(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
-        """Service ~/solve (std_srvs/srv/Trigger): solve now; `success` and one line."""
-        cal, response.message = self._solve_on_request()
-        response.success = cal is not None
+        """Service ~/solve (std_srvs/srv/Trigger): solve now; `success` (False without a
+        result to use) and one line."""
+        _, response.success, response.message = self._solve_on_request()
         return response
 
     def _on_calibrate(self, _request: SelfTest.Request, response: SelfTest.Response) -> Any:
@@ -211,9 +212,9 @@ class CalibratorNode(Node):
                 "(diagnostic_msgs/srv/SelfTest) is deprecated and goes in the next release: "
                 f"call {self.resolve_service_name('~/solve')} (std_srvs/srv/Trigger) instead"
             )
-        cal, message = self._solve_on_request()
+        cal, usable, message = self._solve_on_request()
         status = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="")
-        if cal is None:
+        if cal is None or not usable:
             status.level = DiagnosticStatus.ERROR
             status.message = message
         else:
@@ -232,7 +233,7 @@ class CalibratorNode(Node):
                 )
             ]
         response.id = cal.name if cal is not None else ""
-        response.passed = bytes([cal is not None])
+        response.passed = bytes([cal is not None and usable])
         response.status = [status]
         return response
 
@@ -302,9 +303,27 @@ class CalibratorNode(Node):
             correction = cal.correction
             for line in [] if correction is None else [correction.line(), *correction.warnings]:
                 self._log(line)
-        doc = cal.to_dict(recording)
+        holdout = None
+        if settings.holdout_bags:  # a bad hold-out bag is bad input, as for the diagnosis
+            holdout = read_bags(
+                settings.holdout_bags, settings.robot, settings.pair_tolerance, self._log
+            )
+        published, fitted_on = cal, recording
+        note = ""
+        if settings.diagnose:
+            diagnosis, ladder = self._diagnose(recording, holdout)
+            if diagnosis is not None and ladder is not None:
+                best = ladder.rungs[-1].calibration
+                if settings.publish == "best" and ladder.recording is not None:
+                    published, fitted_on = best, ladder.recording
+                    self.get_logger().info(f"publishing the diagnosis's model {best.name} "
+                                           f"(parameter publish: best)")  # fmt: skip
+                note = left_by_published(published.name, diagnosis)
+                if note:
+                    self.get_logger().warning(note)
+        doc = published.to_dict(fitted_on)
         if self.stopping:  # destroyed while solving (Ctrl-C): nothing to publish to
-            return cal
+            return published
         if settings.output:
             try:
                 write_json_atomic(doc, Path(settings.output))
@@ -312,43 +331,43 @@ class CalibratorNode(Node):
                 raise InputError(f"{settings.output}: cannot write ({exc.strerror})") from None
         self._result_publishers["parameters"].publish(String(data=json.dumps(doc)))
         # residuals and markers of the points fitted (tracker blunders are left out)
-        fitted_points = recording.points if cal.inliers is None else recording.points[cal.inliers]
-        self._result_publishers["summary"].publish(String(data=summary(cal, recording)))
+        points = fitted_on.points
+        fitted_points = points if published.inliers is None else points[published.inliers]
+        self._result_publishers["summary"].publish(String(data=summary(published, fitted_on)))
         self._result_publishers["residuals"].publish(
-            residuals_message(fitted_points, cal.residuals)
+            residuals_message(fitted_points, published.residuals)
         )
         self._result_publishers["markers"].publish(
-            calibration_markers(cal, fitted_points, settings.residual_scale)
+            calibration_markers(published, fitted_points, settings.residual_scale)
         )
-        self._description_note = self._publish_description(cal)
-        holdout = None
-        if settings.holdout_bags:  # a bad hold-out bag is bad input, as for the diagnosis
-            holdout = read_bags(
-                settings.holdout_bags, settings.robot, settings.pair_tolerance, self._log
-            )
-        held_out = None if holdout is None else score_held_out(cal, recording, holdout)
+        self._description_note = self._publish_description(published)
+        held_out = None if holdout is None else score_held_out(published, fitted_on, holdout)
         for warning in held_out.warnings if held_out is not None else ():
             self._log(warning)
-        if settings.diagnose:
-            self._diagnose(recording, holdout)
-        self.calibration, self.recording, self.error = cal, recording, None
-        self.held_out = held_out
+        self.calibration, self.recording, self.error = published, fitted_on, None
+        self.held_out, self.diagnosis_note = held_out, note
         self.solves += 1
         self._publish_status(self._health())
         written = f", written to {settings.output}" if settings.output else ""
-        self.get_logger().info(f"{cal.name}: {cal.accuracy.line()}; published{written}")
-        return cal
+        self.get_logger().info(
+            f"{published.name}: {published.accuracy.line()}; published{written}"
+        )
+        return published
 
-    def _diagnose(self, recording: Recording, holdout: Recording | None) -> None:
+    def _diagnose(
+        self, recording: Recording, holdout: Recording | None
+    ) -> tuple[Diagnosis | None, Ladder | None]:
         """Run the diagnosis on `recording` (scored on `holdout`, the `holdout_bags`, or
-        k-fold) and publish the DIAGNOSIS.json document and its one-paragraph summary."""
-        diagnosis, _ = diagnose_recordings(recording, self.settings.robot, holdout)
+        k-fold) and publish the DIAGNOSIS.json document and its one-paragraph summary; the
+        diagnosis and its ladder (None when the node is being destroyed)."""
+        diagnosis, ladder = diagnose_recordings(recording, self.settings.robot, holdout)
         if self.stopping:
-            return
+            return None, None
         self.diagnosis = diagnosis
         self._result_publishers["diagnosis"].publish(String(data=json.dumps(diagnosis.to_dict())))
         self._result_publishers["diagnosis_summary"].publish(String(data=diagnosis.summary()))
         self.get_logger().info(diagnosis.summary())
+        return diagnosis, ladder
 
     def _fail(self, exc: RobotCalibError) -> None:
         self.error = exc
@@ -379,6 +398,7 @@ class CalibratorNode(Node):
             status_name(self.get_name()), self.settings.robot.name, self.calibration, self.error,
             held_out=self.held_out, params_path=self.settings.output,
             description=self._description_note, waiting=waiting,
+            diagnosis=self.diagnosis_note,
         )  # fmt: skip
 
     def _publish_status(self, status: DiagnosticStatus | None = None) -> None:
@@ -390,9 +410,12 @@ class CalibratorNode(Node):
             self._diagnostics.publish(diagnostic_array(self._status, stamp))
 
     def _log(self, message: str) -> None:
-        """The core's progress lines as info, its 'warning: ...' lines as warnings."""
+        """The core's progress lines as info, its 'warning: ...' lines as warnings and its
+        'implausible: ...' lines as errors (a result not to use)."""
         if message.startswith("warning: "):
             self.get_logger().warning(message.removeprefix("warning: "))
+        elif message.startswith("implausible: "):
+            self.get_logger().error(message.strip())
         else:
             self.get_logger().info(message.strip())
 
@@ -407,6 +430,40 @@ class CalibratorNode(Node):
                 f"no new point for {self.settings.solve_after_idle_s} s: solving {what}"
             )
             self.solve()
+
+
+def left_by_published(published: str, diagnosis: Diagnosis) -> str:
+    """'' when the diagnosis chose the published model `published` (or nothing beyond it);
+    else one line naming the model it chose and the held-out figures of both, and how to
+    publish it (parameter publish: best)."""
+    scores = {r.model: r.holdout_abs_rms_mm for r in diagnosis.ladder}
+    chosen = diagnosis.ladder[-1].model if diagnosis.ladder else published
+    if chosen == published:
+        return ""
+    mine = (f"{scores[published]:.4f} mm" if published in scores
+            else "not on the diagnosis's ladder")  # fmt: skip
+    floor = diagnosis.noise.floor_abs_rms_mm
+    against = "" if floor is None else f", noise floor {floor:.4f} mm"
+    return (
+        f"the diagnosis chose {chosen} (held-out rms {scores[chosen]:.4f} mm{against}) "
+        f"over the published {published} ({mine}): the published model leaves what it "
+        "found; parameter publish: best publishes the diagnosis's model"
+    )
+
+
+def solve_verdict(cal: Calibration | None, error: RobotCalibError | None,
+                  note: str = "") -> tuple[bool, str]:  # fmt: skip
+    """What a service answers for a solve's result: (usable, one line). None (nothing could
+    be fitted, the data are not enough): False and the error; an implausible calibration
+    (readings in degrees, a residual 1000 x the noise, parameters beyond physics): False and
+    its reasons; else True, the model and its in-sample accuracy, and `note` (what the
+    diagnosis says of it) when given."""
+    if cal is None:
+        return False, str(error) if error else "no calibration"
+    if not cal.plausible:
+        return False, f"{cal.name}: implausible: {'; '.join(cal.implausible)}"
+    line = f"{cal.name}: in-sample {cal.accuracy.line()}"
+    return True, f"{line}; {note}" if note else line
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -19,6 +19,7 @@ from robot_calib.nodes._common import declare
 from robot_calib.nodes.calibrator_live import FIRST_TARGET, LiveTargets, live_targets
 
 DEFAULT_QOS_DEPTH = 10000
+PUBLISH_CHOICES = ("fitted", "best")  # parameter `publish`
 
 
 @dataclass(frozen=True)
@@ -36,6 +37,7 @@ class CalibratorParameters:
     residual_scale: float
     learned_correction: bool
     diagnose: bool
+    publish: str
     holdout_bags: list[str]
     publish_robot_description: bool
     nominal_urdf: str
@@ -102,6 +104,13 @@ def declare_parameters(node: Node) -> CalibratorParameters:
         False,
         "also run the sim-to-real gap diagnosis and publish ~/diagnosis (+ _summary)",
     )
+    publish: str = declare(
+        node,
+        "publish",
+        "fitted",
+        "which model the result topics and robot_description carry: 'fitted' (the "
+        "parameter model) or 'best' (the diagnosis's chosen model; needs diagnose)",
+    )
     holdout_bags: list[str] = declare(
         node,
         "holdout_bags",
@@ -154,6 +163,12 @@ def declare_parameters(node: Node) -> CalibratorParameters:
         raise InputError(f"{name}: parameter 'solve_after_idle_s' must be >= 0 [s]")
     if residual_scale <= 0:
         raise InputError(f"{name}: parameter 'residual_scale' must be > 0")
+    if publish not in PUBLISH_CHOICES:
+        raise InputError(f"{name}: parameter 'publish' must be one of "
+                         f"{', '.join(PUBLISH_CHOICES)}, got {publish!r}")  # fmt: skip
+    if publish == "best" and not diagnose:
+        raise InputError(f"{name}: parameter 'publish' best publishes the diagnosis's model: "
+                         "set diagnose to true as well")  # fmt: skip
     if qos_depth < 1:
         raise InputError(f"{name}: parameter 'qos_depth' must be >= 1")
     if nominal_urdf and not Path(nominal_urdf).is_file():
@@ -166,7 +181,7 @@ def declare_parameters(node: Node) -> CalibratorParameters:
         bags=bags, model_spec=model_spec, ecc_order=ecc_order, robot=robot,
         pair_tolerance=pair_tolerance, output=output, solve_after_idle_s=solve_after_idle_s,
         residual_scale=residual_scale, learned_correction=learned_correction,
-        diagnose=diagnose, holdout_bags=holdout_bags,
+        diagnose=diagnose, publish=publish, holdout_bags=holdout_bags,
         publish_robot_description=publish_robot_description, nominal_urdf=nominal_urdf,
         qos_depth=qos_depth, targets=targets,
     )  # fmt: skip

@@ -155,11 +155,13 @@ def calibration_status(
     params_path: str = "",
     description: str = "",
     waiting: str = "",
+    diagnosis: str = "",
 ) -> DiagnosticStatus:
     """The calibrator's health: ERROR when the last solve failed (`error`) or its result is
     implausible (`cal.implausible`); WARN with the calibration's warnings, those of its
     held-out score (`held_out`: far above the noise, or not held out) and a description
     that could not be published (`description` starting 'not published'); else OK.
+    `diagnosis`: what the diagnosis says the published model leaves (a WARN when given).
     Before any result: OK with `waiting` (what the node is doing). Values: model, held-out
     and in-sample rms / mean / max [mm], measurements used, PARAMS path, robot_description."""
     values: list[tuple[str, str]] = [("robot", robot)]
@@ -197,6 +199,8 @@ def calibration_status(
     warnings = [*cal.warnings, *(held_out.warnings if held_out is not None else ())]
     if description.startswith("not published"):
         warnings.append(f"/robot_description {description}")
+    if diagnosis:
+        warnings.append(diagnosis)
     if warnings:
         return _status(name, robot, WARN, "; ".join(map(_unlabelled, warnings)), values)
     figures = held_out.score.accuracy if held_out is not None else acc
