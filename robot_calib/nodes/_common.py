@@ -4,6 +4,7 @@ QoS conversion, and the standalone `main` loop with SIGINT/SIGTERM/SIGHUP handli
 from __future__ import annotations
 
 import importlib
+import re
 import signal
 import sys
 from collections.abc import Callable, Sequence
@@ -12,6 +13,7 @@ from typing import Any, TypeVar
 
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.executors import (
     Executor,
@@ -108,6 +110,28 @@ def qos_to_record(qos: QoSProfile) -> QosProfile:
     )
 
 
+_FLAG = re.compile(r"(?<![\w-])--([a-z][a-z0-9]*(?:-[a-z0-9]+)*)")
+
+
+def in_ros_terms(text: object) -> str:
+    """A core message in a node's terms: the command line's `--some-option` named as the
+    node's parameter 'some_option' (the core speaks to the command line; a node's user
+    sets parameters)."""
+    return _FLAG.sub(lambda m: f"parameter '{m.group(1).replace('-', '_')}'", str(text))
+
+
+def ros_arguments_error(exc: Exception) -> str:
+    """One line for rcl's refusal of the command line's ROS arguments: the rule it could not
+    parse, and how an empty value is written."""
+    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    match = re.search(r"Couldn't parse parameter override rule: '([^']*)'", text)
+    if match:
+        rule = match.group(1).removeprefix("-p").strip()
+        return (f"the ROS argument {match.group(1)!r} has no value: write an empty value "
+                f"quoted, -p \"{rule}''\", or leave the parameter out (its default)")  # fmt: skip
+    return f"the ROS arguments could not be read ({text.split(', at ')[0]})"
+
+
 def run_node(
     factory: Callable[[], N],
     args: Sequence[str] | None = None,
@@ -136,15 +160,19 @@ def run_node(
     def stop(signum: int, frame: FrameType | None) -> None:
         received.append(signum)
 
+    name = name or getattr(factory, "__name__", "node")
+    try:
+        rclpy.init(
+            args=list(args) if args is not None else None,
+            signal_handler_options=SignalHandlerOptions.NO,
+        )
+    except RCLError as exc:  # rcl could not read the --ros-args (e.g. `-p world:=`)
+        print(f"{name}: error: {ros_arguments_error(exc)}", file=sys.stderr, flush=True)
+        return InputError.exit_status
     previous = {sig: signal.signal(sig, stop) for sig in _STOP_SIGNALS}
-    rclpy.init(
-        args=list(args) if args is not None else None,
-        signal_handler_options=SignalHandlerOptions.NO,
-    )
     node: N | None = None
     executor: Executor | None = None
     status = 0
-    name = name or getattr(factory, "__name__", "node")
     try:
         node = factory()
         executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
@@ -154,7 +182,7 @@ def run_node(
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RobotCalibError as exc:
-        print(f"{name}: error: {exc}", file=sys.stderr, flush=True)
+        print(f"{name}: error: {in_ros_terms(exc)}", file=sys.stderr, flush=True)
         status = exc.exit_status
     finally:
         if executor is not None:
@@ -172,7 +200,7 @@ def run_node(
                     print(f"{name}: interrupted: {undone}", file=sys.stderr, flush=True)
                     status = 130
         except RobotCalibError as exc:
-            print(f"{name}: error: {exc}", file=sys.stderr, flush=True)
+            print(f"{name}: error: {in_ros_terms(exc)}", file=sys.stderr, flush=True)
             status = exc.exit_status
         finally:
             rclpy.try_shutdown()

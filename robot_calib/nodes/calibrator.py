@@ -53,7 +53,7 @@ from robot_calib.identify.calibration import Calibration, summary
 from robot_calib.identify.params_file import write_json_atomic
 from robot_calib.measurements import Recording
 from robot_calib.messages import JOINT_STATES_TOPIC
-from robot_calib.nodes._common import overrides, run_node
+from robot_calib.nodes._common import in_ros_terms, overrides, run_node
 from robot_calib.nodes.calibrator_live import LiveInputs
 from robot_calib.nodes.calibrator_messages import calibration_markers, residuals_message
 from robot_calib.nodes.calibrator_parameters import declare_parameters
@@ -371,7 +371,7 @@ class CalibratorNode(Node):
 
     def _fail(self, exc: RobotCalibError) -> None:
         self.error = exc
-        self.get_logger().error(str(exc))
+        self.get_logger().error(in_ros_terms(exc))
         self._publish_status(self._health())
 
     # --- robot_description and /diagnostics (nodes/ros_outputs.py) ----------------------------

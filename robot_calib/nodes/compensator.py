@@ -42,7 +42,7 @@ from robot_calib.identify.params_file import (
 from robot_calib.kinematics.description import with_joint_names
 from robot_calib.kinematics.frames import Array
 from robot_calib.messages import JOINT_STATES_TOPIC, joint_positions, velocity_signs
-from robot_calib.nodes._common import declare, run_node
+from robot_calib.nodes._common import declare, in_ros_terms, run_node
 from robot_calib.poses import DirectionTracker, Poses, approach_directions
 
 INPUT_TOPIC = "~/joint_trajectory_in"
@@ -182,7 +182,7 @@ class CompensatorNode(Node):
         try:
             q = joint_positions(msg, self.model.robot.joint_names)
         except InputError as exc:
-            self.get_logger().error(str(exc), throttle_duration_sec=10.0)
+            self.get_logger().error(in_ros_terms(exc), throttle_duration_sec=10.0)
             return
         self._directions.add(q, velocity_signs(msg, self.model.robot.joint_names))
         assert self._directions.direction is not None
@@ -249,7 +249,7 @@ class CompensatorNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(CompensatorNode, args))
+    sys.exit(run_node(CompensatorNode, args, name="compensator"))
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ import os
 import time
 from collections.abc import Sequence
 from functools import partial
+from pathlib import Path
 from typing import Any
 
 from rclpy.clock import Clock, ClockType
@@ -44,7 +45,14 @@ from robot_calib.messages import (
     reference_topic_name,
     target_topic_name,
 )
-from robot_calib.nodes._common import declare, message_class, overrides, qos_to_record, run_node
+from robot_calib.nodes._common import (
+    declare,
+    in_ros_terms,
+    message_class,
+    overrides,
+    qos_to_record,
+    run_node,
+)
 
 DEFAULT_TOPICS = [JOINT_STATES_TOPIC, POINT_TOPIC]
 KNOWN_TYPES = {  # msgs_doc/specification.md section 1
@@ -196,7 +204,9 @@ class RecorderNode(Node):
         return True
 
     def close(self) -> None:
-        """Stop recording and finalise the bag (summary, index). Idempotent; logs counts."""
+        """Stop recording and finalise the bag (summary, index). Idempotent; logs counts.
+        A bag without a single message is removed (and said): it would only block a rerun
+        with the same name."""
         if self._closed:
             return
         self._closed = True
@@ -204,6 +214,11 @@ class RecorderNode(Node):
             self.destroy_subscription(subscription)
         self._subscriptions_by_topic.clear()
         self._writer.close()
+        if not sum(self._counts.values()):  # an empty bag says nothing and blocks a rerun
+            Path(self.output).unlink(missing_ok=True)
+            self.get_logger().warning(f"recorded nothing on {', '.join(self._topics)}: "
+                                      f"{self.output} not written")  # fmt: skip
+            return
         self.get_logger().info(self.summary())
 
     def destroy_node(self) -> None:
@@ -310,7 +325,7 @@ class RecorderNode(Node):
         try:
             self._writer.flush_stale()
         except BagError as exc:
-            self.get_logger().error(str(exc))
+            self.get_logger().error(in_ros_terms(exc))
         if self._pending:
             self._discover()
 

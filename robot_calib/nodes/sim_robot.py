@@ -34,7 +34,7 @@ from robot_calib.errors import InputError
 from robot_calib.kinematics.description import JointLimitError
 from robot_calib.messages import JOINT_STATES_TOPIC, ns_to_sec_nanosec
 from robot_calib.nodes._cdr import ClockEncoder, JointStateEncoder
-from robot_calib.nodes._common import declare, run_node
+from robot_calib.nodes._common import declare, in_ros_terms, run_node
 from robot_calib.sim.controller import Motion, follow, hold, state_at
 from robot_calib.sim.plans import PLAN_NAMES, Plan, home_pose, make_plan, plan_times
 from robot_calib.sim.world import load_world
@@ -205,7 +205,7 @@ class SimRobotNode(Node):
         try:  # the one check of limits and units (compensate, compensator, capture, plan)
             robot.check_joints(waypoints, f"{self.topic}: rejected", what="point")
         except JointLimitError as exc:
-            self.get_logger().error(str(exc))
+            self.get_logger().error(in_ros_terms(exc))
             return
         speed = self.world.timing.speeds(robot.n_joints)
         self.motion = follow(now, q_now, waypoints, times, self.speed_fraction * speed)
@@ -318,7 +318,14 @@ class SimRobotNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(SimRobotNode, args, done=lambda node: node.mode == "plan" and node.finished))
+    sys.exit(
+        run_node(
+            SimRobotNode,
+            args,
+            name="sim_robot",
+            done=lambda node: node.mode == "plan" and node.finished,
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -40,7 +40,7 @@ from robot_calib.messages import (
     target_topic,
 )
 from robot_calib.nodes._cdr import JointStateEncoder, PointStampedEncoder
-from robot_calib.nodes._common import declare, run_node
+from robot_calib.nodes._common import declare, in_ros_terms, run_node
 from robot_calib.nodes.sim_robot import QOS
 from robot_calib.sim.measure import StreamingTracker, TrackerReading
 from robot_calib.sim.world import load_world
@@ -137,7 +137,7 @@ class SimTrackerNode(Node):
         try:
             q = joint_positions(msg, self.world.model.robot.joint_names)
         except InputError as exc:
-            self.get_logger().error(str(exc))
+            self.get_logger().error(in_ros_terms(exc))
             return
         stamp = stamp_to_ns(msg.header.stamp)
         reading = self.tracker.measure_all(q, stamp * 1e-9)  # every reading: the history
@@ -173,7 +173,7 @@ class SimTrackerNode(Node):
                         msg = deserialize_message(data, JointState)
                         q = joint_positions(msg, names).tolist()
                     except InputError as exc:
-                        self.get_logger().error(str(exc))
+                        self.get_logger().error(in_ros_terms(exc))
                         taken.append(False)
                         continue
                     stamp = stamp_to_ns(msg.header.stamp)
@@ -292,7 +292,7 @@ def pose_message(
 
 
 def main(args: list[str] | None = None) -> None:
-    sys.exit(run_node(SimTrackerNode, args))
+    sys.exit(run_node(SimTrackerNode, args, name="sim_tracker"))
 
 
 if __name__ == "__main__":
