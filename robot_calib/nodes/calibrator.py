@@ -166,9 +166,8 @@ class CalibratorNode(Node):
                 f"calibrating {self.settings.model_spec} from {', '.join(self.settings.bags)}"
             )
             return
-        self._live = LiveInputs(
-            self, self.settings.robot, self.settings.targets, self.settings.qos_depth
-        )
+        self._live = LiveInputs(self, self.settings.robot, self.settings.targets,
+                                self.settings.qos_depth, self._solver_group)  # fmt: skip
         self.create_subscription(Empty, "~/solve", self._on_solve, 10, callback_group=group)
         if self.settings.solve_after_idle_s > 0:
             period = min(self.settings.solve_after_idle_s / 4, 0.5)

@@ -13,10 +13,12 @@ from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
+from rclpy.callback_groups import CallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import QoSRequestedIncompatibleQoSInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 
 from robot_calib.errors import InputError
@@ -88,9 +90,12 @@ class LiveInputs:
     their type. Thread-safe: the subscriptions append while a solve takes a snapshot."""
 
     def __init__(
-        self, node: Node, robot: RobotDescription, targets: LiveTargets, qos_depth: int
-    ) -> None:
+        self, node: Node, robot: RobotDescription, targets: LiveTargets, qos_depth: int,
+        group: CallbackGroup | None = None,
+    ) -> None:  # fmt: skip
         self._node = node
+        self._group = group  # the solver's: no callback of ours runs while a solve drains
+        self._subscriptions: list[tuple[Subscription, Any]] = []
         self._robot = robot
         self.targets = targets
         self._lock = threading.Lock()
@@ -132,9 +137,23 @@ class LiveInputs:
         with self._lock:
             return dict(self._counts)
 
+    def drain(self) -> int:
+        """Take every message waiting in the subscriptions' queues now (delivered but not
+        yet handed to a callback by the executor) and buffer it, so a solve sees all that
+        arrived before it: the end of a replayed bag is not lost. Returns how many."""
+        taken = 0
+        for subscription, callback in self._subscriptions:
+            with subscription.handle:
+                while (found := subscription.handle.take_message(subscription.msg_type,
+                                                                 False)) is not None:  # fmt: skip
+                    callback(found[0])
+                    taken += 1
+        return taken
+
     def recording(self, pair_tolerance: float) -> Recording:
-        """Everything received so far, paired exactly as a bag is (RobotCalibError for bad
-        input, naming the live topics)."""
+        """Everything received so far (`drain` first), paired exactly as a bag is
+        (RobotCalibError for bad input, naming the live topics)."""
+        self.drain()
         names = self._robot.joint_names
         with self._lock:  # a consistent snapshot while the subscriptions keep appending
             self._unsolved = False
@@ -171,8 +190,8 @@ class LiveInputs:
     # --- subscriptions ----------------------------------------------------------------------
 
     def _subscribe(self, msg_type: type, topic: str, callback: Any) -> None:
-        """A live subscription warning of incompatible QoS."""
-        self._node.create_subscription(
+        """A live subscription warning of incompatible QoS, in the solver's group."""
+        subscription = self._node.create_subscription(
             msg_type,
             topic,
             callback,
@@ -180,7 +199,9 @@ class LiveInputs:
             event_callbacks=SubscriptionEventCallbacks(
                 incompatible_qos=partial(self._on_incompatible_qos, topic)
             ),
+            callback_group=self._group,
         )
+        self._subscriptions.append((subscription, callback))
 
     def _on_incompatible_qos(self, topic: str, event: QoSRequestedIncompatibleQoSInfo) -> None:
         self._node.get_logger().warning(
