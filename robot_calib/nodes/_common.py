@@ -42,16 +42,18 @@ _TYPES = {
 }
 
 
-def declare(node: Node, name: str, default: Any, description: str) -> Any:
-    """Declare a typed, read-only ROS parameter with a description (units in the text) and
+def declare(node: Node, name: str, default: Any, description: str,
+            read_only: bool = True) -> Any:  # fmt: skip
+    """Declare a typed ROS parameter with a description (units in the text), read-only
+    unless `read_only` is False (a run-time parameter: the node validates changes), and
     return its value. A float parameter also takes an integer (`-p rate:=1`)."""
     if isinstance(default, float):
         descriptor = ParameterDescriptor(
-            description=description, read_only=True, dynamic_typing=True
+            description=description, read_only=read_only, dynamic_typing=True
         )
     else:
         descriptor = ParameterDescriptor(
-            type=_TYPES[type(default)], description=description, read_only=True
+            type=_TYPES[type(default)], description=description, read_only=read_only
         )
     try:
         if isinstance(default, list) and not default:  # an empty list has no inferable type

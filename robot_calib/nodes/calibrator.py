@@ -35,10 +35,12 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from diagnostic_msgs.srv import SelfTest
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
+from rclpy.timer import Timer
 from std_msgs.msg import Empty, Float64MultiArray, String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
@@ -53,10 +55,14 @@ from robot_calib.identify.calibration import Calibration, summary
 from robot_calib.identify.params_file import write_json_atomic
 from robot_calib.measurements import Recording
 from robot_calib.messages import JOINT_STATES_TOPIC
-from robot_calib.nodes._common import in_ros_terms, overrides, run_node
+from robot_calib.nodes._common import declare, in_ros_terms, overrides, run_node
 from robot_calib.nodes.calibrator_live import LiveInputs
 from robot_calib.nodes.calibrator_messages import calibration_markers, residuals_message
-from robot_calib.nodes.calibrator_parameters import declare_parameters
+from robot_calib.nodes.calibrator_parameters import (
+    PARAMETER_NAMES,
+    checked_parameters,
+    declare_parameters,
+)
 from robot_calib.nodes.ros_outputs import (
     DIAGNOSTIC_PERIOD_S,
     DIAGNOSTICS_QOS,
@@ -75,9 +81,10 @@ from robot_calib.nodes.ros_outputs import (
 # TRANSIENT_LOCAL, the profile robot_state_publisher gives /robot_description
 LATCHED = ROBOT_DESCRIPTION_QOS
 STEADY = ClockType.STEADY_TIME  # timers run on wall time also when /clock stands still
+IDLE_CHECK_S = 0.1  # live mode: how often the idle solve (solve_after_idle_s) is checked
 
 
-class CalibratorNode(Node):
+class CalibratorNode(LifecycleNode):
     """Calibrates from `bags`, or from live topics when `bags` is empty.
 
     In-process: `CalibratorNode(bags=[...], context=...)`; keyword values become parameter
@@ -111,6 +118,11 @@ class CalibratorNode(Node):
         )
         try:
             self.settings = declare_parameters(self)
+            autostart: bool = declare(
+                self, "autostart", True,
+                "configure and activate at once (false: stay unconfigured for a lifecycle "
+                "manager: ros2 lifecycle set NODE configure, then activate)",
+            )  # fmt: skip
         except RobotCalibError:
             super().destroy_node()
             raise
@@ -123,33 +135,30 @@ class CalibratorNode(Node):
         # what the diagnosis says of the published model ('' when nothing: `left_by_published`)
         self.diagnosis_note = ""
         self._description_note = ""  # what became of /robot_description (for /diagnostics)
+        self.active = False  # lifecycle state active: solves and live topics taken
+        self._live: LiveInputs | None = None  # live mode's buffers, from configure to cleanup
+        self._once: Timer | None = None  # bag mode's solve at activation
         self._result_publishers = {
             "parameters": self.create_publisher(String, "~/parameters", LATCHED),
             "summary": self.create_publisher(String, "~/summary", LATCHED),
             "residuals": self.create_publisher(Float64MultiArray, "~/residuals", LATCHED),
             "markers": self.create_publisher(MarkerArray, "~/markers", LATCHED),
+            "diagnosis": self.create_publisher(String, "~/diagnosis", LATCHED),
+            "diagnosis_summary": self.create_publisher(String, "~/diagnosis_summary", LATCHED),
         }
-        if self.settings.diagnose:
-            self._result_publishers["diagnosis"] = self.create_publisher(
-                String, "~/diagnosis", LATCHED
-            )
-            self._result_publishers["diagnosis_summary"] = self.create_publisher(
-                String, "~/diagnosis_summary", LATCHED
-            )
         self._description = self.create_publisher(
             String, ROBOT_DESCRIPTION_TOPIC, ROBOT_DESCRIPTION_QOS
         )
         self._diagnostics = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS
         )
-        self._status = self._health(waiting="calibrating from the bags" if self.settings.bags else
-                                    "collecting live topics")  # fmt: skip
-        steady = Clock(clock_type=STEADY)
-        self.create_timer(DIAGNOSTIC_PERIOD_S, self._publish_status, clock=steady)
+        self._status = self._health(waiting="unconfigured (lifecycle): waiting for configure")
+        self._steady = Clock(clock_type=STEADY)
+        self.create_timer(DIAGNOSTIC_PERIOD_S, self._publish_status, clock=self._steady)
         # Solving takes seconds: its callbacks share one mutually exclusive group (one solve
-        # at a time), apart from the default group of the subscriptions and the parameter
-        # services, so under a MultiThreadedExecutor the node keeps answering while it
-        # solves (ros2/examples callback_group.py).
+        # at a time), apart from the default group of the parameter and lifecycle services,
+        # so under a MultiThreadedExecutor the node keeps answering while it solves
+        # (ros2/examples callback_group.py).
         self._solver_group = MutuallyExclusiveCallbackGroup()
         self.busy = False  # a solve is running
         self.stopping = False  # destroy_node was called: a running solve publishes nothing
@@ -158,39 +167,126 @@ class CalibratorNode(Node):
         self.create_service(Trigger, "~/solve", self._on_solve_service, callback_group=group)
         # deprecated (issue 16): SelfTest on ~/calibrate, kept for one release beside ~/solve
         self.create_service(SelfTest, "~/calibrate", self._on_calibrate, callback_group=group)
+        self.create_service(Trigger, "~/reset", self._on_reset, callback_group=group)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        if autostart:
+            self.trigger_configure()
+            self.trigger_activate()
+        else:
+            self.get_logger().info("unconfigured: waiting for the lifecycle transitions "
+                                   "configure and activate")  # fmt: skip
+
+    # --- lifecycle (rclpy.lifecycle: configure / activate / deactivate / cleanup) ------------
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Bag mode: nothing to set up; live mode: subscribe and start buffering."""
+        del state
         if self.settings.bags:
-            self._once = self.create_timer(
-                0.0, self._solve_bags, clock=steady, callback_group=self._solver_group
-            )
             self.get_logger().info(
                 f"calibrating {self.settings.model_spec} from {', '.join(self.settings.bags)}"
             )
-            return
+            self._status = self._health(waiting="configured: calibrating from the bags once "
+                                        "active")  # fmt: skip
+            return TransitionCallbackReturn.SUCCESS
+        group = self._solver_group
         self._live = LiveInputs(self, self.settings.robot, self.settings.targets,
-                                self.settings.qos_depth, self._solver_group)  # fmt: skip
-        self.create_subscription(Empty, "~/solve", self._on_solve, 10, callback_group=group)
-        if self.settings.solve_after_idle_s > 0:
-            period = min(self.settings.solve_after_idle_s / 4, 0.5)
-            self._idle_timer = self.create_timer(
-                period, self._check_idle, clock=steady, callback_group=group
-            )
-        idle = (
-            f", or {self.settings.solve_after_idle_s} s after the last point"
-            if self.settings.solve_after_idle_s > 0
-            else ""
-        )
+                                self.settings.qos_depth, group)  # fmt: skip
+        self._live_entities = (
+            self.create_subscription(Empty, "~/solve", self._on_solve, 10, callback_group=group),
+            self.create_timer(IDLE_CHECK_S, self._check_idle, clock=self._steady,
+                              callback_group=group),
+        )  # fmt: skip
         topics = [JOINT_STATES_TOPIC, *self.settings.targets.topics]
         self.get_logger().info(
             f"collecting {', '.join(topics[:-1])} and {topics[-1]}; solving "
             f"{self.settings.model_spec} "
             f"on {self.resolve_topic_name('~/solve')} (topic std_msgs/msg/Empty or service "
-            f"std_srvs/srv/Trigger){idle}"
+            f"std_srvs/srv/Trigger){self._idle_text()}"
         )
+        self._status = self._health(waiting="collecting live topics")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Take live topics and solves; bag mode solves its bags now (once)."""
+        self.active = True
+        if self._live is not None:
+            self._live.enabled = True
+        if self.settings.bags and self.calibration is None and self._once is None:
+            self._once = self.create_timer(0.0, self._solve_bags, clock=self._steady,
+                                           callback_group=self._solver_group)  # fmt: skip
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Keep the buffers and results; take no message and answer no solve."""
+        self.active = False
+        if self._live is not None:
+            self._live.enabled = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        """Drop the live set (its subscriptions and buffers) and the results."""
+        del state
+        if self._live is not None:
+            self._live.close()
+            solve_topic, idle_timer = self._live_entities
+            self.destroy_subscription(solve_topic)
+            self.destroy_timer(idle_timer)
+        self._live, self._once = None, None
+        self._clear_results("unconfigured (lifecycle): waiting for configure")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        del state
+        self.active = False
+        return TransitionCallbackReturn.SUCCESS
+
+    def _idle_text(self) -> str:
+        idle = self.settings.solve_after_idle_s
+        return f", or {idle} s after the last point" if idle > 0 else ""
+
+    def _clear_results(self, waiting: str) -> None:
+        """Forget the last result and error (the latched topics keep their last message)."""
+        self.calibration = self.diagnosis = self.recording = self.error = None
+        self.held_out, self.diagnosis_note, self._description_note = None, "", ""
+        self._publish_status(self._health(waiting=waiting))
+
+    def _on_reset(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
+        """Service ~/reset (std_srvs/srv/Trigger): begin a new set: live mode forgets every
+        message received, both modes the last result (bag mode then solves its bags again
+        when active)."""
+        counts = {} if self._live is None else self._live.clear()
+        self._clear_results("reset: collecting live topics" if self._live is not None else
+                            "reset")  # fmt: skip
+        if self.settings.bags and self.active:
+            self._once = self.create_timer(0.0, self._solve_bags, clock=self._steady,
+                                           callback_group=self._solver_group)  # fmt: skip
+        dropped = ", ".join(f"{t}={n}" for t, n in counts.items()) or "no live messages"
+        response.success = True
+        response.message = f"reset: dropped {dropped} and the last result"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Run-time parameters (calibrator_parameters.RUN_TIME) checked as at start and
+        taking effect from the next solve; a bad value is refused with its reason."""
+        values = {name: self.get_parameter(name).value for name in PARAMETER_NAMES}
+        values.update({p.name: p.value for p in parameters if p.name in values})
+        try:
+            self.settings = checked_parameters(self.get_name(), values, self.settings.robot)
+        except RobotCalibError as exc:
+            return SetParametersResult(successful=False, reason=in_ros_terms(exc))
+        changed = ", ".join(f"{p.name}={p.value}" for p in parameters)
+        self.get_logger().info(f"parameters changed: {changed} (from the next solve)")
+        return SetParametersResult(successful=True)
 
     def _solve_on_request(self) -> tuple[Calibration | None, bool, str]:
         """A service's solve: live mode solves now, bag mode answers with the bags' result.
         Returns the calibration (None on failure), whether it is a result to use (False:
         none, or an implausible one: `solve_verdict`) and one line saying why or what."""
+        if not self.active:
+            state = "unconfigured" if self._live is None and not self.settings.bags else "inactive"
+            return None, False, (f"{self.get_name()} is {state} (lifecycle): configure and "
+                                 "activate it first")  # fmt: skip
         cal = self.calibration if self.settings.bags else self.solve()
         return (cal, *solve_verdict(cal, self.error, self.diagnosis_note))
 
@@ -252,7 +348,7 @@ class CalibratorNode(Node):
     @property
     def received(self) -> dict[str, int]:
         """Live mode: messages buffered per topic (joint states refused are not counted)."""
-        if self.settings.bags:
+        if self.settings.bags or self._live is None:
             return {}
         return self._live.counts
 
@@ -261,6 +357,9 @@ class CalibratorNode(Node):
         logged (one line) and kept in `error`; returns None then."""
         if self.settings.bags:
             self.get_logger().warning("~/solve ignored: the node calibrates from its bags")
+            return None
+        if self._live is None or not self.active:
+            self.get_logger().warning("~/solve ignored: the node is not active (lifecycle)")
             return None
         try:
             recording = self._live.recording(self.settings.pair_tolerance)
@@ -274,7 +373,10 @@ class CalibratorNode(Node):
     # --- internals ------------------------------------------------------------------------
 
     def _solve_bags(self) -> None:
-        self._once.cancel()
+        if self._once is not None:
+            self._once.cancel()
+            self.destroy_timer(self._once)
+            self._once = None
         try:
             recording = read_bags(
                 self.settings.bags, self.settings.robot, self.settings.pair_tolerance, self._log
@@ -423,6 +525,8 @@ class CalibratorNode(Node):
 
     def _check_idle(self) -> None:
         """Solve once the points have stopped for solve_after_idle_s (the plan ended)."""
+        if self._live is None or not self.active or self.settings.solve_after_idle_s <= 0:
+            return
         what = self._live.idle(self.settings.solve_after_idle_s)
         if what is not None:
             self.get_logger().info(

@@ -96,6 +96,7 @@ class LiveInputs:
         self._node = node
         self._group = group  # the solver's: no callback of ours runs while a solve drains
         self._subscriptions: list[tuple[Subscription, Any]] = []
+        self.enabled = True  # False: messages taken are dropped (a lifecycle node inactive)
         self._robot = robot
         self.targets = targets
         self._lock = threading.Lock()
@@ -136,6 +137,28 @@ class LiveInputs:
         """Messages buffered per topic (joint states refused are not counted)."""
         with self._lock:
             return dict(self._counts)
+
+    def clear(self) -> dict[str, int]:
+        """Forget every message buffered (a new set begins); the counts dropped per topic."""
+        with self._lock:
+            dropped = {t: n for t, n in self._counts.items() if n}
+            for buffer in (self._js_ns, self._js_q, self._js_v, self._pt_ns, self._pt_xyz,
+                           self._pt_target):  # fmt: skip
+                buffer.clear()
+            for by_stamp in self._poses:
+                by_stamp.clear()
+            self._counts = dict.fromkeys(self._counts, 0)
+            self._last_point_s, self._unsolved = None, False
+        return dropped
+
+    def close(self) -> None:
+        """Destroy the subscriptions and the discovery timer (the buffers stay as they are)."""
+        for subscription, _ in self._subscriptions:
+            self._node.destroy_subscription(subscription)
+        self._subscriptions.clear()
+        if self._pending_poses:
+            self._node.destroy_timer(self._discovery_timer)
+            self._pending_poses.clear()
 
     def drain(self) -> int:
         """Take every message waiting in the subscriptions' queues now (delivered but not
@@ -238,6 +261,8 @@ class LiveInputs:
             )
 
     def _on_joint_state(self, msg: JointState) -> None:
+        if not self.enabled:
+            return
         names = self._robot.joint_names
         try:
             q = joint_positions(msg, names)
@@ -254,6 +279,8 @@ class LiveInputs:
             self._counts[JOINT_STATES_TOPIC] += 1
 
     def _on_point(self, target: int, msg: PointStamped) -> None:
+        if not self.enabled:
+            return
         topic = target_topic(self.targets.names[target])
         xyz = np.array([msg.point.x, msg.point.y, msg.point.z])
         if not np.all(np.isfinite(xyz)):
@@ -271,6 +298,8 @@ class LiveInputs:
     def _on_pose(
         self, target: int, topic: str, msg: PoseStamped | PoseWithCovarianceStamped
     ) -> None:
+        if not self.enabled:
+            return
         try:
             where = f"{topic} message {self._counts[topic] + 1}"
             reading = pose_measurement(msg, where)

@@ -45,118 +45,88 @@ class CalibratorParameters:
     targets: LiveTargets
 
 
+#: parameters that may change while the node runs (`ros2 param set`): checked as at start
+#: and taking effect from the next solve; the others are read once (a robot, its topics and
+#: bags are the node's configuration: change them by restarting, or cleanup + configure)
+RUN_TIME = frozenset({
+    "model", "ecc_order", "pair_tolerance", "output", "solve_after_idle_s", "residual_scale",
+    "learned_correction", "diagnose", "publish", "holdout_bags", "publish_robot_description",
+    "nominal_urdf",
+})  # fmt: skip
+
+_SPECS: tuple[tuple[str, object, str], ...] = (
+    ("bags", [], "calibration bags (.mcap) to solve at start; empty: live topics"),
+    ("model", DEFAULT_MODEL, "model to identify, e.g. geometric, geometric+eccentricity"),
+    ("ecc_order", DEFAULT_ECC_ORDER, "Fourier order of the eccentricity effect [1]"),
+    ("robot", DEFAULT_ROBOT, "built-in robot name, robot YAML, DH table CSV or URDF file"),
+    ("joint_names", [],
+     "JointState names of joints 1..J in order, if not the robot's own; empty: the robot's"),
+    ("pair_tolerance", PAIR_TOLERANCE_S,
+     "a point pairs with the joint state nearest in header.stamp within this [s]"),
+    ("output", "", "also write each result to this PARAMS.json path ('' = no file)"),
+    ("solve_after_idle_s", 0.0,
+     "live mode: solve when no new point arrived for this long after the last one "
+     "[s, wall time]; 0 = only on ~/solve"),
+    ("residual_scale", 100.0,
+     "residual lines in ~/markers are drawn this many times their length [1]"),
+    ("learned_correction", False,
+     "also learn a correction of the model's residuals (a Gaussian process: the hybrid "
+     "model, PARAMS.json correction), which predict, score and compensate apply"),
+    ("diagnose", False,
+     "also run the sim-to-real gap diagnosis and publish ~/diagnosis (+ _summary)"),
+    ("publish", "fitted",
+     "which model the result topics and robot_description carry: 'fitted' (the "
+     "parameter model) or 'best' (the diagnosis's chosen model; needs diagnose)"),
+    ("holdout_bags", [],
+     "hold-out bags: each result scored on them (/diagnostics) and the diagnosis's "
+     "(empty: none; the diagnosis then k-fold CV)"),
+    ("publish_robot_description", True,
+     "publish each plausible result as a calibrated URDF on robot_description"),
+    ("nominal_urdf", "",
+     "the URDF to write the calibration into for robot_description ('' = the robot's "
+     "own URDF when `robot` is one, else the calibrated chain alone)"),
+    ("qos_depth", DEFAULT_QOS_DEPTH,
+     "live mode: history depth of the topic subscriptions [messages]"),
+    ("targets", [], "live mode: further targets NAME whose /laser_tracker/NAME/point to take too"),
+    ("six_dof_targets", [],
+     f"live mode: targets with a 6-DoF probe whose /laser_tracker/(NAME/)pose to take "
+     f"('{FIRST_TARGET}' = the first target, /laser_tracker/pose)"),
+)  # fmt: skip
+
+
+PARAMETER_NAMES = tuple(name for name, _, _ in _SPECS)
+
+
 def declare_parameters(node: Node) -> CalibratorParameters:
-    """Declare and read the calibrator's parameters on `node`; InputError naming the node
-    (or the file) for a bad value, an unknown robot or model, a missing folder."""
-    bags: list[str] = declare(
-        node, "bags", [], "calibration bags (.mcap) to solve at start; empty: live topics"
-    )
-    model_spec: str = declare(
-        node,
-        "model",
-        DEFAULT_MODEL,
-        "model to identify, e.g. geometric, geometric+eccentricity",
-    )
-    ecc_order: int = declare(
-        node, "ecc_order", DEFAULT_ECC_ORDER, "Fourier order of the eccentricity effect [1]"
-    )
-    robot_name: str = declare(
-        node, "robot", DEFAULT_ROBOT, "built-in robot name or robot YAML file"
-    )
-    joint_names: list[str] = declare(
-        node,
-        "joint_names",
-        [],
-        "JointState names of joints 1..J in order, if not the robot's own; empty: the robot's",
-    )
-    pair_tolerance: float = declare(
-        node,
-        "pair_tolerance",
-        PAIR_TOLERANCE_S,
-        "a point pairs with the joint state nearest in header.stamp within this [s]",
-    )
-    output: str = declare(
-        node, "output", "", "also write each result to this PARAMS.json path ('' = no file)"
-    )
-    solve_after_idle_s: float = declare(
-        node,
-        "solve_after_idle_s",
-        0.0,
-        "live mode: solve when no new point arrived for this long after the last one "
-        "[s, wall time]; 0 = only on ~/solve",
-    )
-    residual_scale: float = declare(
-        node,
-        "residual_scale",
-        100.0,
-        "residual lines in ~/markers are drawn this many times their length [1]",
-    )
-    learned_correction: bool = declare(
-        node,
-        "learned_correction",
-        False,
-        "also learn a correction of the model's residuals (a Gaussian process: the hybrid "
-        "model, PARAMS.json correction), which predict, score and compensate apply",
-    )
-    diagnose: bool = declare(
-        node,
-        "diagnose",
-        False,
-        "also run the sim-to-real gap diagnosis and publish ~/diagnosis (+ _summary)",
-    )
-    publish: str = declare(
-        node,
-        "publish",
-        "fitted",
-        "which model the result topics and robot_description carry: 'fitted' (the "
-        "parameter model) or 'best' (the diagnosis's chosen model; needs diagnose)",
-    )
-    holdout_bags: list[str] = declare(
-        node,
-        "holdout_bags",
-        [],
-        "hold-out bags: each result scored on them (/diagnostics) and the diagnosis's "
-        "(empty: none; the diagnosis then k-fold CV)",
-    )
-    publish_robot_description: bool = declare(
-        node,
-        "publish_robot_description",
-        True,
-        "publish each plausible result as a calibrated URDF on robot_description",
-    )
-    nominal_urdf: str = declare(
-        node,
-        "nominal_urdf",
-        "",
-        "the URDF to write the calibration into for robot_description ('' = the robot's "
-        "own URDF when `robot` is one, else the calibrated chain alone)",
-    )
-    qos_depth: int = declare(
-        node,
-        "qos_depth",
-        DEFAULT_QOS_DEPTH,
-        "live mode: history depth of the topic subscriptions [messages]",
-    )
-    further: list[str] = declare(
-        node,
-        "targets",
-        [],
-        "live mode: further targets NAME whose /laser_tracker/NAME/point to take too",
-    )
-    six_dof: list[str] = declare(
-        node,
-        "six_dof_targets",
-        [],
-        f"live mode: targets with a 6-DoF probe whose /laser_tracker/(NAME/)pose to take "
-        f"('{FIRST_TARGET}' = the first target, /laser_tracker/pose)",
-    )
-    robot = load_robot(robot_name)
-    if joint_names:
-        robot = with_joint_names(robot, joint_names)
-    parse_model(model_spec, robot, ecc_order)  # a bad model fails now
-    name = node.get_name()
+    """Declare the calibrator's parameters on `node` (those of RUN_TIME writable, the rest
+    read-only) and read and check them (`checked_parameters`)."""
+    values = {name: declare(node, name, default, description + (
+        " (run-time: takes effect from the next solve)" if name in RUN_TIME else ""),
+        read_only=name not in RUN_TIME) for name, default, description in _SPECS}  # fmt: skip
+    return checked_parameters(node.get_name(), values)
+
+
+def checked_parameters(name: str, values: dict[str, object],
+                       robot: RobotDescription | None = None) -> CalibratorParameters:  # fmt: skip
+    """The parameters `values` (by name) checked: InputError naming the node `name` (or the
+    file) for a bad value, an unknown robot or model, a missing folder. `robot`: the one
+    already loaded (a change at run time keeps it), else loaded from `robot`."""
+    v = values
+    model_spec, ecc_order = str(v["model"]), int(v["ecc_order"])  # type: ignore[call-overload]
+    if robot is None:
+        robot = load_robot(str(v["robot"]))
+        joint_names = list(v["joint_names"])  # type: ignore[call-overload]
+        if joint_names:
+            robot = with_joint_names(robot, joint_names)
+    pair_tolerance = float(v["pair_tolerance"])  # type: ignore[arg-type]
+    solve_after_idle_s = float(v["solve_after_idle_s"])  # type: ignore[arg-type]
+    residual_scale = float(v["residual_scale"])  # type: ignore[arg-type]
+    qos_depth = int(v["qos_depth"])  # type: ignore[call-overload]
+    publish, diagnose = str(v["publish"]), bool(v["diagnose"])
+    nominal_urdf, output = str(v["nominal_urdf"]), str(v["output"])
     if ecc_order < 1:
         raise InputError(f"{name}: parameter 'ecc_order' must be >= 1")
+    parse_model(model_spec, robot, ecc_order)  # a bad model fails now
     if pair_tolerance <= 0:
         raise InputError(f"{name}: parameter 'pair_tolerance' must be > 0 [s]")
     if solve_after_idle_s < 0:
@@ -175,13 +145,13 @@ def declare_parameters(node: Node) -> CalibratorParameters:
         raise InputError(f"{nominal_urdf}: no such nominal URDF (parameter nominal_urdf)")
     if output and not Path(output).parent.is_dir():
         raise InputError(f"{output}: no such folder for the parameter file")
-    targets = live_targets(name, further, six_dof)
-
+    targets = live_targets(name, list(v["targets"]), list(v["six_dof_targets"]))  # type: ignore[call-overload]
     return CalibratorParameters(
-        bags=bags, model_spec=model_spec, ecc_order=ecc_order, robot=robot,
-        pair_tolerance=pair_tolerance, output=output, solve_after_idle_s=solve_after_idle_s,
-        residual_scale=residual_scale, learned_correction=learned_correction,
-        diagnose=diagnose, publish=publish, holdout_bags=holdout_bags,
-        publish_robot_description=publish_robot_description, nominal_urdf=nominal_urdf,
-        qos_depth=qos_depth, targets=targets,
+        bags=list(v["bags"]), model_spec=model_spec, ecc_order=ecc_order,  # type: ignore[call-overload]
+        robot=robot, pair_tolerance=pair_tolerance, output=output,
+        solve_after_idle_s=solve_after_idle_s, residual_scale=residual_scale,
+        learned_correction=bool(v["learned_correction"]), diagnose=diagnose,
+        publish=publish, holdout_bags=list(v["holdout_bags"]),  # type: ignore[call-overload]
+        publish_robot_description=bool(v["publish_robot_description"]),
+        nominal_urdf=nominal_urdf, qos_depth=qos_depth, targets=targets,
     )  # fmt: skip
