@@ -38,6 +38,7 @@ from diagnostic_msgs.srv import SelfTest
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterUninitializedException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.timer import Timer
@@ -210,6 +211,7 @@ class CalibratorNode(LifecycleNode):
         """Take live topics and solves; bag mode solves its bags now (once)."""
         self.active = True
         if self._live is not None:
+            self._live.drain()  # delivered while inactive: dropped, not taken now
             self._live.enabled = True
         if self.settings.bags and self.calibration is None and self._once is None:
             self._once = self.create_timer(0.0, self._solve_bags, clock=self._steady,
@@ -266,10 +268,17 @@ class CalibratorNode(LifecycleNode):
         self.get_logger().info(response.message)
         return response
 
+    def _value(self, name: str) -> Any:  # noqa: ANN401 - a parameter's value
+        """Parameter `name`'s value ([] for an empty list never set: uninitialised)."""
+        try:
+            return self.get_parameter(name).value
+        except ParameterUninitializedException:
+            return []
+
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         """Run-time parameters (calibrator_parameters.RUN_TIME) checked as at start and
         taking effect from the next solve; a bad value is refused with its reason."""
-        values = {name: self.get_parameter(name).value for name in PARAMETER_NAMES}
+        values = {name: self._value(name) for name in PARAMETER_NAMES}
         values.update({p.name: p.value for p in parameters if p.name in values})
         try:
             self.settings = checked_parameters(self.get_name(), values, self.settings.robot)
