@@ -95,10 +95,11 @@ def run_graph(
     tracker_parameters: list[Parameter] | None = None,
     stop: Callable[[CaptureNode], bool] = lambda capture: False,
     listeners: Sequence[Node] = (),
+    settled: Callable[[], bool] = lambda: True,
 ) -> CaptureNode:
     """capture + sim_robot (controller mode) + sim_tracker in one executor until capture
-    has finished (or `stop(capture)`: then it is stopped as by Ctrl-C); `listeners` spin
-    with them (and are left to the caller)."""
+    has finished and `settled()` (or `stop(capture)`: then it is stopped as by Ctrl-C);
+    `listeners` spin with them (and are left to the caller)."""
     robot = SimRobotNode(context=context, parameter_overrides=FAST)
     tracker = SimTrackerNode(context=context, parameter_overrides=tracker_parameters or [])
     capture = CaptureNode(
@@ -114,7 +115,7 @@ def run_graph(
         executor.add_node(node)
     deadline = time.monotonic() + TIMEOUT_S
     try:
-        while not capture.finished and not stop(capture):
+        while not (capture.finished and settled()) and not stop(capture):
             assert time.monotonic() < deadline, "capture timed out"
             executor.spin_once(timeout_sec=0.01)
     finally:
@@ -385,3 +386,44 @@ def test_skipped_poses_warn_and_an_abort_is_an_error(context: Context, tmp_path:
     assert final.level == DiagnosticStatus.ERROR
     assert final.message.startswith("aborted: the first 3 poses all failed")
     assert values(final)["failures"] == "3"
+
+
+def test_capture_cancelled_through_its_service_keeps_the_poses_measured(
+    context: Context, tmp_path: Path
+) -> None:
+    """~/progress (latched JSON) follows the campaign; ~/cancel (std_srvs/Trigger) stops it
+    after 4 poses: the robot told to hold, the bag holds those 4 poses, and the answer and
+    the progress say how many are left."""
+    import json
+
+    from std_msgs.msg import String
+    from std_srvs.srv import Trigger
+
+    from robot_calib.nodes.ros_outputs import ROBOT_DESCRIPTION_QOS
+
+    bag = tmp_path / "cancel.mcap"
+    operator = Node("operator", context=context)
+    progress: list[dict] = []
+    operator.create_subscription(String, "/capture/progress",
+                                 lambda m: progress.append(json.loads(m.data)),
+                                 ROBOT_DESCRIPTION_QOS)  # fmt: skip
+    client = operator.create_client(Trigger, "/capture/cancel")
+    answers: list = []  # the future of the one ~/cancel call
+
+    def cancel_at_four(capture: CaptureNode) -> bool:
+        if capture.measured >= 4 and not answers and client.service_is_ready():
+            answers.append(client.call_async(Trigger.Request()))
+        return False  # the campaign ends by itself once cancelled
+
+    capture = run_graph(context, [Parameter("plan", value="paper-test1"),
+                                  Parameter("output", value=str(bag))],
+                        stop=cancel_at_four, listeners=[operator],
+                        settled=lambda: bool(answers) and answers[0].done())  # fmt: skip
+    operator.destroy_node()
+    assert capture.cancelled and capture.finished
+    assert answers and answers[0].done() and answers[0].result().success
+    assert answers[0].result().message.startswith(f"cancelled: {capture.measured} poses measured")
+    assert "to go" in answers[0].result().message
+    assert len(read_recording([bag], ROBOT)) == capture.measured >= 4
+    assert progress and progress[-1]["cancelled"] and progress[-1]["step"] == "finished"
+    assert progress[-1]["measured"] == capture.measured < progress[-1]["total"]

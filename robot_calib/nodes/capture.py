@@ -29,10 +29,11 @@ Parameters and topics: msgs_doc/capture.md.
 from __future__ import annotations
 
 import copy
+import json
 import sys
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from functools import partial
 from typing import Any
 
@@ -42,6 +43,8 @@ from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
 
 from robot_calib.bag import BagWriter
 from robot_calib.capture.moves import (
@@ -69,6 +72,7 @@ from robot_calib.nodes.ros_outputs import (
     DIAGNOSTIC_PERIOD_S,
     DIAGNOSTICS_QOS,
     DIAGNOSTICS_TOPIC,
+    ROBOT_DESCRIPTION_QOS,
     CaptureProgress,
     capture_status,
     diagnostic_array,
@@ -150,6 +154,10 @@ class CaptureNode(Node):
         self._diagnostics = self.create_publisher(
             DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS
         )
+        # the progress for a program (a cell controller, a GUI), latched; ~/cancel stops
+        self._progress = self.create_publisher(String, "~/progress", ROBOT_DESCRIPTION_QOS)
+        self.cancelled = False
+        self.create_service(Trigger, "~/cancel", self._on_cancel)
         self.create_timer(DIAGNOSTIC_PERIOD_S, self.report)
         if settings.dry_run:
             start = "; ".join(
@@ -178,8 +186,6 @@ class CaptureNode(Node):
             self.create_subscription(PointStamped, topic, partial(self._on_point, topic), QOS)
         self.trigger = None
         if settings.trigger_service:
-            from std_srvs.srv import Trigger
-
             self.trigger = self.create_client(Trigger, settings.trigger_service)
         self._timer = self.create_timer(0.01, self._step)
         log.info(f"commands on {trajectory_topic(settings.controller)}; the bag "
@@ -288,8 +294,6 @@ class CaptureNode(Node):
                 if time.monotonic() - self._settled_wall > self.settings.measure_timeout:
                     self._skip(f"trigger service {self.trigger.srv_name} not available")
                 return
-            from std_srvs.srv import Trigger
-
             for points in self._points.values():
                 points.clear()
             self._trigger_future = self.trigger.call_async(Trigger.Request())
@@ -415,12 +419,30 @@ class CaptureNode(Node):
         )  # fmt: skip
 
     def report(self) -> None:
-        """Publish the progress on /diagnostics (on each step and every second)."""
+        """Publish the progress on /diagnostics and ~/progress (on each step and every
+        second)."""
         if not self.context.ok():
             return  # shutting down (Ctrl-C): close() runs without a graph
         name, robot = status_name(self.get_name()), self.settings.robot.name
-        status = capture_status(name, robot, self.progress())
+        progress = self.progress()
+        status = capture_status(name, robot, progress)
         self._diagnostics.publish(diagnostic_array(status, self.get_clock().now().to_msg()))
+        doc = {**asdict(progress), "skipped": list(progress.skipped),
+               "cancelled": self.cancelled}  # fmt: skip
+        self._progress.publish(String(data=json.dumps(doc)))
+
+    def _on_cancel(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
+        """Service ~/cancel (std_srvs/srv/Trigger): stop the campaign now: the robot told
+        to hold, the bag closed with every pose measured so far (resumable: run again with
+        the same plan and output). `success` false when it had already finished."""
+        if self.finished:
+            response.success, response.message = False, f"already finished: {self.summary()}"
+            return response
+        self.cancelled = True
+        self.get_logger().warning("cancelled (service ~/cancel)")
+        self.close()
+        response.success, response.message = True, f"cancelled: {self.summary()}"
+        return response
 
     def summary(self) -> str:
         """'N poses measured -> BAG; K skipped: pose i: why; ...' (and what is left)."""
