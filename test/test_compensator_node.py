@@ -176,3 +176,43 @@ def test_a_trajectory_corrected_beyond_max_correction_is_not_sent(
         for node in (compensator, client):
             node.destroy_node()
     assert (compensator.published, compensator.dropped, received) == (0, 1, [])
+
+
+def test_each_trajectory_outcome_is_reported_on_status(
+    context: Context, params_file: Path
+) -> None:
+    """The sender learns what became of each trajectory on ~/status (DiagnosticStatus):
+    the first corrected (OK, its largest correction), the second dropped for a point in
+    degrees (ERROR, the reason), each with its stamp and number of points."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    compensator, client, publisher, received = nodes(context, params_file)
+    statuses: list[DiagnosticStatus] = []
+    client.create_subscription(DiagnosticStatus, "/compensator/status", statuses.append, 10)
+    executor = SingleThreadedExecutor(context=context)
+    for node in (compensator, client):
+        executor.add_node(node)
+    names = [ROBOT.joint_names[j] for j in ORDER]
+    try:
+        spin_until(executor, lambda: publisher.get_subscription_count() > 0
+                   and compensator.status.get_subscription_count() > 0)  # fmt: skip
+        q = random_plan(ROBOT, 4, np.random.default_rng(5)).q
+        publisher.publish(trajectory(q, names))
+        spin_until(executor, lambda: len(statuses) == 1)
+        degrees = trajectory(np.degrees(q[:3]), names)
+        degrees.header.stamp.sec = 43
+        publisher.publish(degrees)
+        spin_until(executor, lambda: len(statuses) == 2)
+    finally:
+        executor.shutdown()
+        for node in (compensator, client):
+            node.destroy_node()
+    ok, dropped = statuses
+    assert ok.level == DiagnosticStatus.OK and ok.message.startswith("corrected: 4 points")
+    values = {v.key: v.value for v in ok.values}
+    assert values["stamp"] == "42.000000000" and values["points"] == "4"
+    assert float(values["largest_correction_mrad"]) > 0.1  # the 2 mrad backlash's share
+    assert dropped.level == DiagnosticStatus.ERROR
+    assert dropped.message.startswith("dropped, not sent:") and "degrees" in dropped.message
+    assert {v.key: v.value for v in dropped.values}["stamp"] == "43.000000000"
+    assert len(received) == 1

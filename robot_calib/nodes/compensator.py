@@ -20,10 +20,12 @@ Standalone: `ros2 run robot_calib compensator --ros-args -p params:=params_best.
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -158,6 +160,8 @@ class CompensatorNode(Node):
             depth=depth,
         )
         self.publisher = self.create_publisher(JointTrajectory, output_topic, qos)
+        # each trajectory's outcome for its sender: corrected (OK) or dropped and why (ERROR)
+        self.status = self.create_publisher(DiagnosticStatus, "~/status", qos)
         self.subscription = self.create_subscription(
             JointTrajectory, input_topic, self.on_trajectory, qos
         )
@@ -204,10 +208,23 @@ class CompensatorNode(Node):
             poses = replace(poses, temperature=np.full(len(poses), self.temperature))
         return poses
 
-    def _drop(self, error: str) -> None:
+    def _drop(self, error: str, msg: JointTrajectory) -> None:
         self.dropped += 1
         self.last_error = error
         self.get_logger().error(error)
+        said = error.replace("dropped a trajectory, not sent: ", "dropped, not sent: ")
+        self._report(DiagnosticStatus.ERROR, said, msg)
+
+    def _report(self, level: bytes, message: str, msg: JointTrajectory,
+                values: Sequence[tuple[str, str]] = ()) -> None:  # fmt: skip
+        """One trajectory's outcome on ~/status: level, one line, the trajectory's stamp
+        and points (which trajectory it was), and `values`."""
+        stamp = f"{msg.header.stamp.sec}.{msg.header.stamp.nanosec:09d}"
+        status = DiagnosticStatus(level=level, name=f"{self.get_name()}: trajectory",
+                                  message=message, hardware_id=self.model.robot.name)  # fmt: skip
+        every = (("stamp", stamp), ("points", str(len(msg.points))), *values)
+        status.values = [KeyValue(key=k, value=v) for k, v in every]
+        self.status.publish(status)
 
     def on_trajectory(self, msg: JointTrajectory) -> None:
         self.received += 1
@@ -225,7 +242,7 @@ class CompensatorNode(Node):
                     result.q, f"{self.subscription.topic_name}: compensated", what="point"
                 )
         except RobotCalibError as exc:
-            self._drop(f"dropped a trajectory, not sent: {exc}")
+            self._drop(f"dropped a trajectory, not sent: {in_ros_terms(exc)}", msg)
             return
         change = np.abs(result.q - q)
         k, j = np.unravel_index(int(np.argmax(change)), change.shape)
@@ -236,16 +253,19 @@ class CompensatorNode(Node):
                 f"calibrated model (singularity or out of reach)" if bad else
                 f"dropped a trajectory, not sent: point {k} {names[j]} would be corrected by "
                 f"{np.degrees(change[k, j]):.3f} deg > max_correction {self.max_correction:g} "
-                "deg (near a singularity?)"
+                "deg (near a singularity?)", msg,
             )  # fmt: skip
             return
         self.publisher.publish(corrected_trajectory(msg, result.q, names))
         self.published += 1
         self.last = result
-        self.get_logger().info(
-            f"{len(q)} points compensated; largest correction {change[k, j] * 1e3:.3f} mrad "
-            f"({names[j]}, point {k}); model error max {result.error_m.max() * 1e6:.3f} um"
-        )
+        line = (f"{len(q)} points compensated; largest correction {change[k, j] * 1e3:.3f} "
+                f"mrad ({names[j]}, point {k}); model error max "
+                f"{result.error_m.max() * 1e6:.3f} um")  # fmt: skip
+        self.get_logger().info(line)
+        self._report(DiagnosticStatus.OK, f"corrected: {line}", msg,
+                     (("largest_correction_mrad", f"{change[k, j] * 1e3:.6f}"),
+                      ("model_error_max_um", f"{result.error_m.max() * 1e6:.6f}")))  # fmt: skip
 
 
 def main(args: list[str] | None = None) -> None:
