@@ -42,6 +42,7 @@ from robot_calib.nodes import launch_support
 from robot_calib.nodes.launch_support import (
     SIM_GRAPH,
     SPECS,
+    FileText,
     FromArgument,
     LaunchSpec,
     ShareFile,
@@ -320,6 +321,11 @@ def test_launch_specs_start_our_executables_with_declared_parameters(
                 assert node.executable == "rviz2" and not node.parameters
                 assert ShareFile("rviz", RVIZ.name) in node.arguments, "rviz2 without our config"
                 continue
+            if node.package == "robot_state_publisher":  # on the URDF file the calibrator
+                assert node.executable == "robot_state_publisher"  # writes into and updates
+                assert node.parameters == {"robot_description": FileText("urdf")}
+                assert node.when is not None and node.when.argument == "urdf"
+                continue
             assert node.package == PACKAGE, f"{spec.name}: unknown package {node.package}"
             assert node.executable in nodes, f"{spec.name}: {node.executable} not in setup.py"
             started.add(node.executable)
@@ -386,6 +392,7 @@ def _signatures() -> dict[str, dict[str, Any]]:
         **kwargs,
     ): ...
     def parameter_value(value, *, value_type=None): ...
+    def command(command, *, on_stderr="fail"): ...
     def find_package_share(package): ...
 
     return {
@@ -396,7 +403,8 @@ def _signatures() -> dict[str, dict[str, Any]]:
         "launch.conditions": {"IfCondition": if_condition},
         "launch.event_handlers": {"OnProcessExit": on_process_exit},
         "launch.events": {"Shutdown": shutdown},
-        "launch.substitutions": {"EqualsSubstitution": equals, "NotEqualsSubstitution": equals,
+        "launch.substitutions": {"Command": command,
+                                 "EqualsSubstitution": equals, "NotEqualsSubstitution": equals,
                                  "LaunchConfiguration": launch_configuration,
                                  "PathJoinSubstitution": path_join},
         "launch_ros.actions": {"Node": node},

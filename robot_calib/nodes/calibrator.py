@@ -36,7 +36,9 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from diagnostic_msgs.srv import SelfTest
 from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.srv import SetParameters
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.client import Client
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterUninitializedException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -55,7 +57,7 @@ from robot_calib.flows.diagnose import diagnose_recordings
 from robot_calib.identify.calibration import Calibration, summary
 from robot_calib.identify.params_file import write_json_atomic
 from robot_calib.measurements import Recording
-from robot_calib.messages import JOINT_STATES_TOPIC
+from robot_calib.messages import JOINT_STATES_TOPIC, TRACKER_FRAME
 from robot_calib.nodes._common import declare, in_ros_terms, overrides, run_node
 from robot_calib.nodes.calibrator_live import LiveInputs
 from robot_calib.nodes.calibrator_messages import calibration_markers, residuals_message
@@ -76,6 +78,7 @@ from robot_calib.nodes.ros_outputs import (
     diagnostic_array,
     score_held_out,
     status_name,
+    tracker_in_base,
 )
 
 # late joiners (RViz, a test, `ros2 topic echo`) get the last result: KEEP_LAST 1, RELIABLE,
@@ -137,6 +140,10 @@ class CalibratorNode(LifecycleNode):
         self.diagnosis_note = ""
         self._description_note = ""  # what became of /robot_description (for /diagnostics)
         self.active = False  # lifecycle state active: solves and live topics taken
+        self._rsp_client: Client | None = None  # robot_state_publisher's SetParameters
+        self._static_tf: Any = None  # tf2_ros StaticTransformBroadcaster, where installed
+        self._said_no_tf = False
+        self._said_no_rsp = False
         self._live: LiveInputs | None = None  # live mode's buffers, from configure to cleanup
         self._once: Timer | None = None  # bag mode's solve at activation
         self._result_publishers = {
@@ -451,6 +458,8 @@ class CalibratorNode(LifecycleNode):
             calibration_markers(published, fitted_points, settings.residual_scale)
         )
         self._description_note = self._publish_description(published)
+        if published.plausible:
+            self._publish_tracker_frame(published)
         held_out = None if holdout is None else score_held_out(published, fitted_on, holdout)
         for warning in held_out.warnings if held_out is not None else ():
             self._log(warning)
@@ -500,7 +509,65 @@ class CalibratorNode(LifecycleNode):
             self.get_logger().warning(f"{self._description.topic_name} not published: {exc}")
             return f"not published: {exc}"
         self._description.publish(String(data=text))
+        self._update_state_publisher(text)
         return f"published to {self._description.topic_name}, written into {into}"
+
+    def _update_state_publisher(self, urdf: str) -> None:
+        """Set the robot_description parameter of the robot_state_publisher node named by
+        the parameter of that name (its SetParameters service; the answer is logged), so
+        TF and RViz follow the calibration."""
+        target = self.settings.robot_state_publisher
+        if not target:
+            return
+        name = f"{target.rstrip('/')}/set_parameters"
+        if self._rsp_client is None or self._rsp_client.srv_name != name:
+            self._rsp_client = self.create_client(SetParameters, name)
+        if not self._rsp_client.service_is_ready():
+            if not self._said_no_rsp:  # once: a launch without urdf:= starts none
+                self._said_no_rsp = True
+                hint = "start robot_state_publisher on the URDF: calibrator.launch.py urdf:=FILE"
+                self.get_logger().warning(f"{name}: not available: TF does not follow the "
+                                          f"calibration ({hint})")  # fmt: skip
+            return
+        request = SetParameters.Request(parameters=[
+            Parameter("robot_description", value=urdf).to_parameter_msg()])  # fmt: skip
+        future = self._rsp_client.call_async(request)
+
+        def said(done: Any) -> None:  # noqa: ANN401 - an rclpy Future
+            results = getattr(done.result(), "results", None) or []
+            if results and results[0].successful:
+                self.get_logger().info(f"{target}: robot_description set: TF follows")
+            else:
+                reason = results[0].reason if results else "no answer"
+                self.get_logger().warning(f"{target}: robot_description not set ({reason})")
+
+        future.add_done_callback(said)
+
+    def _publish_tracker_frame(self, cal: Calibration) -> None:
+        """The tracker frame's place in the robot's base frame as a static transform
+        (tf2_ros, where installed): markers in laser_tracker then show in base_link."""
+        if self._static_tf is None:
+            try:
+                from tf2_ros.static_transform_broadcaster import StaticTransformBroadcaster
+            except ImportError:
+                if not self._said_no_tf:
+                    self._said_no_tf = True
+                    self.get_logger().info(
+                        "tf2_ros is not installed: the tracker frame is not on /tf_static "
+                        "(its place is in ~/parameters, base2tracker)")  # fmt: skip
+                return
+            self._static_tf = StaticTransformBroadcaster(self)
+        from geometry_msgs.msg import TransformStamped
+
+        translation, quaternion = tracker_in_base(cal)
+        stamped = TransformStamped()
+        stamped.header.stamp = self.get_clock().now().to_msg()
+        stamped.header.frame_id = self.settings.base_frame
+        stamped.child_frame_id = TRACKER_FRAME
+        t, q = stamped.transform.translation, stamped.transform.rotation
+        t.x, t.y, t.z = (float(v) for v in translation)
+        q.x, q.y, q.z, q.w = (float(v) for v in quaternion)
+        self._static_tf.sendTransform(stamped)
 
     def _health(self, waiting: str = "") -> DiagnosticStatus:
         """The node's status on /diagnostics from its last result or error."""

@@ -41,6 +41,8 @@ class CalibratorParameters:
     holdout_bags: list[str]
     publish_robot_description: bool
     nominal_urdf: str
+    robot_state_publisher: str
+    base_frame: str
     qos_depth: int
     targets: LiveTargets
 
@@ -51,7 +53,7 @@ class CalibratorParameters:
 RUN_TIME = frozenset({
     "model", "ecc_order", "pair_tolerance", "output", "solve_after_idle_s", "residual_scale",
     "learned_correction", "diagnose", "publish", "holdout_bags", "publish_robot_description",
-    "nominal_urdf",
+    "nominal_urdf", "robot_state_publisher", "base_frame",
 })  # fmt: skip
 
 _SPECS: tuple[tuple[str, object, str], ...] = (
@@ -85,6 +87,11 @@ _SPECS: tuple[tuple[str, object, str], ...] = (
     ("nominal_urdf", "",
      "the URDF to write the calibration into for robot_description ('' = the robot's "
      "own URDF when `robot` is one, else the calibrated chain alone)"),
+    ("robot_state_publisher", "",
+     "a robot_state_publisher node (e.g. /robot_state_publisher) whose robot_description "
+     "each plausible result sets, so TF follows the calibration ('' = none)"),
+    ("base_frame", "base_link",
+     "the robot's base frame: the parent of the static transform to laser_tracker"),
     ("qos_depth", DEFAULT_QOS_DEPTH,
      "live mode: history depth of the topic subscriptions [messages]"),
     ("targets", [], "live mode: further targets NAME whose /laser_tracker/NAME/point to take too"),
@@ -153,5 +160,6 @@ def checked_parameters(name: str, values: dict[str, object],
         learned_correction=bool(v["learned_correction"]), diagnose=diagnose,
         publish=publish, holdout_bags=list(v["holdout_bags"]),  # type: ignore[call-overload]
         publish_robot_description=bool(v["publish_robot_description"]),
-        nominal_urdf=nominal_urdf, qos_depth=qos_depth, targets=targets,
+        nominal_urdf=nominal_urdf, robot_state_publisher=str(v["robot_state_publisher"]),
+        base_frame=str(v["base_frame"]) or "base_link", qos_depth=qos_depth, targets=targets,
     )  # fmt: skip

@@ -68,7 +68,15 @@ class When:
             raise ValueError(f"When({self.argument!r}, {self.test!r}): true, empty or given")
 
 
-Value = FromArgument | bool | int | float | str
+@dataclass(frozen=True)
+class FileText:
+    """A parameter set to the text of the file a launch argument names (`cat FILE`, as
+    robot_state_publisher's robot_description is given)."""
+
+    argument: str
+
+
+Value = FromArgument | FileText | bool | int | float | str
 
 
 @dataclass(frozen=True)
@@ -182,7 +190,11 @@ _CALIBRATOR_COMMON: dict[str, Value] = {
     "robot": _text("robot"),
     "output": _text("output"),
     "diagnose": FromArgument("diagnose"),
+    # the calibration written into the robot's URDF, and robot_state_publisher told of it
+    "nominal_urdf": _text("urdf"),
+    "robot_state_publisher": _text("state_publisher"),
 }
+STATE_PUBLISHER = "/robot_state_publisher"
 CALIBRATOR = LaunchSpec(
     "calibrator.launch.py",
     (
@@ -199,6 +211,18 @@ CALIBRATOR = LaunchSpec(
             "live: solve this long after the last point [s]; 0 = on request",
         ),
         Argument("rviz", "false", "start RViz with robot_calib.rviz"),
+        Argument(
+            "urdf",
+            "",
+            "the robot's URDF: robot_state_publisher starts on it and each "
+            "plausible calibration is written into it and set as its robot_description "
+            "(TF and RViz follow the calibration); '' = none",
+        ),  # fmt: skip
+        Argument(
+            "state_publisher",
+            STATE_PUBLISHER,
+            "the robot_state_publisher node the calibrator updates ('' = none)",
+        ),  # fmt: skip
     ),
     (
         # bag mode
@@ -213,6 +237,12 @@ CALIBRATOR = LaunchSpec(
             {**_CALIBRATOR_COMMON, "solve_after_idle_s": FromArgument("solve_after_idle_s")},
             when=When("bags", "empty"),
         ),
+        NodeSpec(
+            "robot_state_publisher",
+            {"robot_description": FileText("urdf")},
+            package="robot_state_publisher",
+            when=When("urdf", "given"),
+        ),  # fmt: skip
         NodeSpec(
             "rviz2", package="rviz2", when=When("rviz"), arguments=("-d", ShareFile(*RVIZ_CONFIG))
         ),
@@ -231,6 +261,7 @@ def launch_description(spec: LaunchSpec) -> Any:  # noqa: ANN401 - a launch.Laun
     from launch.event_handlers import OnProcessExit
     from launch.events import Shutdown
     from launch.substitutions import (
+        Command,
         EqualsSubstitution,
         LaunchConfiguration,
         NotEqualsSubstitution,
@@ -244,6 +275,9 @@ def launch_description(spec: LaunchSpec) -> Any:  # noqa: ANN401 - a launch.Laun
         return PathJoinSubstitution([FindPackageShare(PACKAGE), file.folder, file.name])
 
     def value(given: Value) -> Any:  # noqa: ANN401 - a launch substitution or a constant
+        if isinstance(given, FileText):
+            return ParameterValue(Command(["cat ", LaunchConfiguration(given.argument)]),
+                                  value_type=str)  # fmt: skip
         if not isinstance(given, FromArgument):
             return given
         argument = LaunchConfiguration(given.argument)
@@ -269,9 +303,11 @@ def launch_description(spec: LaunchSpec) -> Any:  # noqa: ANN401 - a launch.Laun
     handlers = []  # after every node, as the launch files had them
     for node in spec.nodes:
         options = {} if node.when is None else {"condition": condition(node.when)}
+        parameters = {name: value(v) for name, v in node.parameters.items()}
         if node.package == PACKAGE:
-            parameters = {name: value(v) for name, v in node.parameters.items()}
             options["parameters"] = [LaunchConfiguration(PARAMS_FILE), parameters]
+        elif parameters:
+            options["parameters"] = [parameters]
         if node.arguments:
             options["arguments"] = [
                 share(a) if isinstance(a, ShareFile) else a for a in node.arguments

@@ -18,6 +18,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.urdf import is_urdf_reference
 
 if TYPE_CHECKING:
@@ -260,3 +261,16 @@ def capture_status(name: str, robot: str, progress: CaptureProgress) -> Diagnost
         return _status(name, robot, WARN, message, values)
     at = "" if p.current_pose is None else f"; at plan pose {p.current_pose} ({p.step})"
     return _status(name, robot, WARN if p.skipped else OK, done + skipped + at, values)
+
+
+def tracker_in_base(cal: Calibration) -> tuple[Array, Array]:
+    """Where the tracker frame sits in the robot's base frame by the calibration (its
+    fitted base2tracker inverted): translation (3,) [m] and rotation as a quaternion
+    (x, y, z, w): the static transform base -> laser_tracker that TF wants (a point p
+    measured in the tracker frame is R p + t in the base frame)."""
+    from scipy.spatial.transform import Rotation
+
+    base2tracker = cal.model.base2tracker(cal.parameters)  # p_tracker = B p_base
+    rotation = base2tracker[:3, :3].T
+    translation = -rotation @ base2tracker[:3, 3]
+    return translation, Rotation.from_matrix(rotation).as_quat()
