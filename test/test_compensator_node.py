@@ -216,3 +216,19 @@ def test_each_trajectory_outcome_is_reported_on_status(
     assert dropped.message.startswith("dropped, not sent:") and "degrees" in dropped.message
     assert {v.key: v.value for v in dropped.values}["stamp"] == "43.000000000"
     assert len(received) == 1
+
+
+def test_the_follow_joint_trajectory_adapter_needs_control_msgs(
+    context: Context, params_file: Path
+) -> None:
+    """control_msgs is not installable here: asking for the adapter is one error naming
+    the parameter and the package (on a Jazzy install the adapter serves the action)."""
+    try:
+        import control_msgs  # noqa: F401
+
+        pytest.skip("control_msgs installed: the adapter would start")
+    except ImportError:
+        pass
+    with pytest.raises(InputError, match="parameter 'action_controller': control_msgs is not"):
+        nodes(context, params_file,
+              Parameter("action_controller", value="/jtc/follow_joint_trajectory"))  # fmt: skip

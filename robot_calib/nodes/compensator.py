@@ -137,6 +137,12 @@ class CompensatorNode(Node):
             "the robot's joint states: where a trajectory starts and each joint's last "
             "approach direction (backlash); '' = not read, the first point's directions +1",
         )  # fmt: skip
+        action_controller: str = declare(
+            self, "action_controller", "",
+            "the controller's control_msgs/FollowJointTrajectory action (e.g. "
+            "/joint_trajectory_controller/follow_joint_trajectory): serve "
+            "~/follow_joint_trajectory in front of it, goals compensated ('' = none)",
+        )  # fmt: skip
         if not params_file:
             raise InputError(f"{self.get_name()}: parameter 'params' (PARAMS.json) is required")
         self.model, self.params, doc = load_params(params_file)
@@ -173,6 +179,16 @@ class CompensatorNode(Node):
         self.received = self.published = self.dropped = 0
         self.last_error: str | None = None  # the last dropped trajectory's error line
         self.last: Compensation | None = None
+        self.adapter = None
+        if action_controller:
+            try:
+                from robot_calib.nodes.compensator_action import FollowJointTrajectoryAdapter
+
+                self.adapter = FollowJointTrajectoryAdapter(self, action_controller)
+            except ImportError as exc:
+                raise InputError(f"{self.get_name()}: parameter 'action_controller': "
+                                 f"control_msgs is not installed ({exc.name}): install "
+                                 "ros-jazzy-control-msgs, or leave it ''") from None  # fmt: skip
         self.get_logger().info(
             f"compensating {self.subscription.topic_name} -> {self.publisher.topic_name} "
             f"with {params_file} ({self.model.robot.name}, joints "
@@ -227,23 +243,30 @@ class CompensatorNode(Node):
         self.status.publish(status)
 
     def on_trajectory(self, msg: JointTrajectory) -> None:
+        """A trajectory on the input topic: compensated and sent on (`compensated`)."""
+        corrected = self.compensated(msg, self.subscription.topic_name)
+        if corrected is not None:
+            self.publisher.publish(corrected)
+
+    def compensated(self, msg: JointTrajectory, where: str) -> JointTrajectory | None:
+        """Trajectory `msg` (received on `where`) with every point compensated, its outcome
+        reported on ~/status and logged; None when it is dropped (`last_error` says why):
+        what the topic and the FollowJointTrajectory adapter (compensator_action.py) send."""
         self.received += 1
         names = self.model.robot.joint_names
         try:
-            q, time = trajectory_readings(msg, names, self.subscription.topic_name)
+            q, time = trajectory_readings(msg, names, where)
             # the one check of limits and units, as `compensate` and sim_robot apply it:
             # degrees or a point beyond the limits never reach the controller
-            self.model.robot.check_joints(q, self.subscription.topic_name, what="point")
+            self.model.robot.check_joints(q, where, what="point")
             result = compensate_commands(self.model, self.params, self.nominal,
                                          self.nominal_params, self.commands(q, time),
                                          self.correction)  # fmt: skip
             if result.converged.all():
-                self.model.robot.check_joints(
-                    result.q, f"{self.subscription.topic_name}: compensated", what="point"
-                )
+                self.model.robot.check_joints(result.q, f"{where}: compensated", what="point")
         except RobotCalibError as exc:
             self._drop(f"dropped a trajectory, not sent: {in_ros_terms(exc)}", msg)
-            return
+            return None
         change = np.abs(result.q - q)
         k, j = np.unravel_index(int(np.argmax(change)), change.shape)
         if not result.converged.all() or np.degrees(change[k, j]) > self.max_correction:
@@ -255,8 +278,7 @@ class CompensatorNode(Node):
                 f"{np.degrees(change[k, j]):.3f} deg > max_correction {self.max_correction:g} "
                 "deg (near a singularity?)", msg,
             )  # fmt: skip
-            return
-        self.publisher.publish(corrected_trajectory(msg, result.q, names))
+            return None
         self.published += 1
         self.last = result
         line = (f"{len(q)} points compensated; largest correction {change[k, j] * 1e3:.3f} "
@@ -266,6 +288,7 @@ class CompensatorNode(Node):
         self._report(DiagnosticStatus.OK, f"corrected: {line}", msg,
                      (("largest_correction_mrad", f"{change[k, j] * 1e3:.6f}"),
                       ("model_error_max_um", f"{result.error_m.max() * 1e6:.6f}")))  # fmt: skip
+        return corrected_trajectory(msg, result.q, names)
 
 
 def main(args: list[str] | None = None) -> None:
