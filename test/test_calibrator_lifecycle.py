@@ -138,6 +138,32 @@ def test_a_run_time_parameter_takes_effect_at_the_next_solve(context: Context) -
         assert not bad.successful and "parameter 'model' geometrc" in bad.reason, bad.reason
         (fixed,) = calibrator.set_parameters([Parameter("robot", value="ur10")])
         assert not fixed.successful  # read-only: the node's configuration
+        for name, value in (("residual_scale", "abc"), ("pair_tolerance", float("nan")),
+                            ("pair_tolerance", True)):  # fmt: skip
+            (odd,) = calibrator.set_parameters([Parameter(name, value=value)])
+            assert not odd.successful, (name, value)  # refused, the node alive
         assert calibrator.settings.model_spec == "geometric+backlash:4"
+        assert calibrator.settings.pair_tolerance == 0.05
+    finally:
+        graph.close()
+
+
+def test_a_transition_waits_for_a_running_solve(context: Context) -> None:
+    """Deactivate and cleanup are refused while a solve runs (its result would land in an
+    unconfigured node), and succeed once it has ended."""
+    graph = Graph(context)
+    calibrator = graph.calibrator
+    try:
+        assert graph.transition(Transition.TRANSITION_CONFIGURE)
+        assert graph.transition(Transition.TRANSITION_ACTIVATE)
+        calibrator.busy = True  # as while `_calibrate` runs in the solver's thread
+        assert not graph.transition(Transition.TRANSITION_DEACTIVATE)
+        assert graph.state() == State.PRIMARY_STATE_ACTIVE
+        calibrator.busy = False
+        assert graph.transition(Transition.TRANSITION_DEACTIVATE)
+        calibrator.busy = True
+        assert not graph.transition(Transition.TRANSITION_CLEANUP)
+        calibrator.busy = False
+        assert graph.transition(Transition.TRANSITION_CLEANUP)
     finally:
         graph.close()

@@ -43,6 +43,8 @@ def test_an_empty_parameter_value_is_one_error_line(node: str) -> None:
         ("calibrator", ["-p", "model:=geometrc", "-p", "bags:=['x.mcap']"],
          "calibrator: error: parameter 'model' geometrc"),
         ("compensator", ["-p", "params:=/nonexistent.json"], "compensator: error: "),
+        ("calibrator", ["-p", "ecc_order:=0", "-p", "bags:=['x.mcap']"],
+         "calibrator: error: parameter 'ecc_order' must be >= 1"),  # named once
     ],
 )  # fmt: skip
 def test_node_errors_name_parameters_under_one_prefix(node: str, args: list[str],

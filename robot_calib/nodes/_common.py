@@ -112,7 +112,7 @@ def qos_to_record(qos: QoSProfile) -> QosProfile:
     )
 
 
-_FLAG = re.compile(r"(?<![\w-])--([a-z][a-z0-9]*(?:-[a-z0-9]+)*)")
+_FLAG = re.compile(r"(?<![\w-])--(?!ros-args\b)([a-z][a-z0-9]*(?:-[a-z0-9]+)*)")
 
 
 def in_ros_terms(text: object) -> str:
@@ -120,6 +120,11 @@ def in_ros_terms(text: object) -> str:
     node's parameter 'some_option' (the core speaks to the command line; a node's user
     sets parameters)."""
     return _FLAG.sub(lambda m: f"parameter '{m.group(1).replace('-', '_')}'", str(text))
+
+
+def _unprefixed(name: str | None, exc: Exception) -> str:
+    """The error in ROS terms without a leading 'NAME: ' that the line's prefix says."""
+    return in_ros_terms(exc).removeprefix(f"{name}: ") if name else in_ros_terms(exc)
 
 
 def ros_arguments_error(exc: Exception) -> str:
@@ -184,7 +189,7 @@ def run_node(
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RobotCalibError as exc:
-        print(f"{name}: error: {in_ros_terms(exc)}", file=sys.stderr, flush=True)
+        print(f"{name}: error: {_unprefixed(name, exc)}", file=sys.stderr, flush=True)
         status = exc.exit_status
     finally:
         if executor is not None:
@@ -202,7 +207,7 @@ def run_node(
                     print(f"{name}: interrupted: {undone}", file=sys.stderr, flush=True)
                     status = 130
         except RobotCalibError as exc:
-            print(f"{name}: error: {in_ros_terms(exc)}", file=sys.stderr, flush=True)
+            print(f"{name}: error: {_unprefixed(name, exc)}", file=sys.stderr, flush=True)
             status = exc.exit_status
         finally:
             rclpy.try_shutdown()

@@ -178,8 +178,12 @@ class CalibratorNode(LifecycleNode):
         self.create_service(Trigger, "~/reset", self._on_reset, callback_group=group)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if autostart:
-            self.trigger_configure()
-            self.trigger_activate()
+            for name, transition in (("configure", self.trigger_configure),
+                                     ("activate", self.trigger_activate)):  # fmt: skip
+                if transition() != TransitionCallbackReturn.SUCCESS:
+                    super().destroy_node()
+                    raise InputError(f"{node_name}: the lifecycle transition {name} failed "
+                                     "at start (autostart)")  # fmt: skip
         else:
             self.get_logger().info("unconfigured: waiting for the lifecycle transitions "
                                    "configure and activate")  # fmt: skip
@@ -225,16 +229,31 @@ class CalibratorNode(LifecycleNode):
                                            callback_group=self._solver_group)  # fmt: skip
         return super().on_activate(state)
 
+    def _refuse_while_solving(self, transition: str) -> bool:
+        """True (and said) when a solve is running: a transition waits for its end."""
+        if self.busy:
+            self.get_logger().warning(f"{transition} refused: a solve is running; try again "
+                                      "when it has ended")  # fmt: skip
+        return self.busy
+
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Keep the buffers and results; take no message and answer no solve."""
+        """Keep the buffers and results; take no message and answer no solve (refused
+        while a solve runs)."""
+        if self._refuse_while_solving("deactivate"):
+            return TransitionCallbackReturn.FAILURE
         self.active = False
         if self._live is not None:
             self._live.enabled = False
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Drop the live set (its subscriptions and buffers) and the results."""
+        """Drop the live set (its subscriptions and buffers) and the results (refused while
+        a solve runs)."""
         del state
+        if self._refuse_while_solving("cleanup"):
+            return TransitionCallbackReturn.FAILURE
+        if self._once is not None:
+            self.destroy_timer(self._once)
         if self._live is not None:
             self._live.close()
             solve_topic, idle_timer = self._live_entities
@@ -291,6 +310,8 @@ class CalibratorNode(LifecycleNode):
             self.settings = checked_parameters(self.get_name(), values, self.settings.robot)
         except RobotCalibError as exc:
             return SetParametersResult(successful=False, reason=in_ros_terms(exc))
+        except (TypeError, ValueError) as exc:  # a value of another type than declared
+            return SetParametersResult(successful=False, reason=f"{type(exc).__name__}: {exc}")
         changed = ", ".join(f"{p.name}={p.value}" for p in parameters)
         self.get_logger().info(f"parameters changed: {changed} (from the next solve)")
         return SetParametersResult(successful=True)
@@ -374,11 +395,12 @@ class CalibratorNode(LifecycleNode):
         if self.settings.bags:
             self.get_logger().warning("~/solve ignored: the node calibrates from its bags")
             return None
-        if self._live is None or not self.active:
+        live = self._live  # one reference: a cleanup cannot pull it away mid-solve
+        if live is None or not self.active:
             self.get_logger().warning("~/solve ignored: the node is not active (lifecycle)")
             return None
         try:
-            recording = self._live.recording(self.settings.pair_tolerance)
+            recording = live.recording(self.settings.pair_tolerance)
             for warning in recording.warnings:
                 self._log(warning)
             return self._calibrate(recording)
@@ -592,7 +614,7 @@ class CalibratorNode(LifecycleNode):
         if message.startswith("warning: "):
             self.get_logger().warning(message.removeprefix("warning: "))
         elif message.startswith("implausible: "):
-            self.get_logger().error(message.strip())
+            self.get_logger().error(in_ros_terms(message.strip()))
         else:
             self.get_logger().info(message.strip())
 
@@ -640,7 +662,7 @@ def solve_verdict(cal: Calibration | None, error: RobotCalibError | None,
     if cal is None:
         return False, str(error) if error else "no calibration"
     if not cal.plausible:
-        return False, f"{cal.name}: implausible: {'; '.join(cal.implausible)}"
+        return False, in_ros_terms(f"{cal.name}: implausible: {'; '.join(cal.implausible)}")
     line = f"{cal.name}: in-sample {cal.accuracy.line()}"
     return True, f"{line}; {note}" if note else line
 

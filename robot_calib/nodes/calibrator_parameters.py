@@ -3,6 +3,7 @@ with their descriptions, checked once at start, handed to the node as one typed 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -118,7 +119,12 @@ def checked_parameters(name: str, values: dict[str, object],
     """The parameters `values` (by name) checked: InputError naming the node `name` (or the
     file) for a bad value, an unknown robot or model, a missing folder. `robot`: the one
     already loaded (a change at run time keeps it), else loaded from `robot`."""
-    v = values
+    v = {**values}
+    for key in ("pair_tolerance", "solve_after_idle_s", "residual_scale"):
+        v[key] = _number(name, key, v[key])
+    for key in ("ecc_order", "qos_depth"):
+        if isinstance(v[key], bool) or not isinstance(v[key], int):
+            raise InputError(f"{name}: parameter {key!r} must be a whole number, not {v[key]!r}")
     model_spec, ecc_order = str(v["model"]), int(v["ecc_order"])  # type: ignore[call-overload]
     if robot is None:
         robot = load_robot(str(v["robot"]))
@@ -163,3 +169,10 @@ def checked_parameters(name: str, values: dict[str, object],
         nominal_urdf=nominal_urdf, robot_state_publisher=str(v["robot_state_publisher"]),
         base_frame=str(v["base_frame"]) or "base_link", qos_depth=qos_depth, targets=targets,
     )  # fmt: skip
+
+
+def _number(name: str, key: str, value: object) -> float:
+    """A float parameter's value: a finite number (an int too), else InputError."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise InputError(f"{name}: parameter {key!r} must be a finite number, not {value!r}")
+    return float(value)

@@ -18,20 +18,19 @@ this module is imported only when the parameter is set, and has not been run her
 from __future__ import annotations
 
 import copy
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-
-if TYPE_CHECKING:
-    from robot_calib.nodes.compensator import CompensatorNode
 
 
 class FollowJointTrajectoryAdapter:
     """`~/follow_joint_trajectory` on `node`, forwarding compensated goals to
     `controller_action` (module docstring). Raises ImportError without control_msgs."""
 
-    def __init__(self, node: CompensatorNode, controller_action: str) -> None:
+    def __init__(self, node: Any, controller_action: str) -> None:  # noqa: ANN401
+        # `node`: the CompensatorNode (its `compensated`, `last_error`; typed loosely: the
+        # node module imports this one)
         from control_msgs.action import FollowJointTrajectory
 
         self._node = node
@@ -80,6 +79,8 @@ class FollowJointTrajectoryAdapter:
                                  f"{self.controller_action}: goal rejected")  # fmt: skip
         key = bytes(goal_handle.goal_id.uuid)
         self._forwarded[key] = sent
+        if goal_handle.is_cancel_requested:  # cancelled before the controller accepted it
+            sent.cancel_goal_async()
         try:
             outcome = await sent.get_result_async()
         finally:

@@ -20,6 +20,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.urdf import is_urdf_reference
+from robot_calib.nodes._common import in_ros_terms
 
 if TYPE_CHECKING:
     from robot_calib.errors import RobotCalibError
@@ -196,7 +197,9 @@ def calibration_status(
         ("robot_description", description),
     ]
     if not cal.plausible:
-        return _status(name, robot, ERROR, "implausible: " + "; ".join(cal.implausible), values)
+        return _status(
+            name, robot, ERROR, in_ros_terms("implausible: " + "; ".join(cal.implausible)), values
+        )
     warnings = [*cal.warnings, *(held_out.warnings if held_out is not None else ())]
     if description.startswith("not published"):
         warnings.append(f"/robot_description {description}")
