@@ -45,6 +45,11 @@ def test_an_empty_parameter_value_is_one_error_line(node: str) -> None:
         ("compensator", ["-p", "params:=/nonexistent.json"], "compensator: error: "),
         ("calibrator", ["-p", "ecc_order:=0", "-p", "bags:=['x.mcap']"],
          "calibrator: error: parameter 'ecc_order' must be >= 1"),  # named once
+        ("calibrator", ["-p", "modle:=geometric+backlash:4"],
+         "calibrator: error: parameter 'modle' is not one of calibrator's (did you mean "
+         "'model'?)"),  # a misspelt name is not ignored
+        ("sim_robot", ["-p", "wait_for_subscribers:=-1"],
+         "sim_robot: error: parameter 'wait_for_subscribers' must be >= 0"),
     ],
 )  # fmt: skip
 def test_node_errors_name_parameters_under_one_prefix(node: str, args: list[str],

@@ -64,7 +64,9 @@ def declare(node: Node, name: str, default: Any, description: str,
     except ParameterUninitializedException:  # the empty-list default, not overridden
         return []
     except ParameterException as exc:  # e.g. `-p qos_depth:=many`
-        raise InputError(f"{node.get_name()}: parameter {name!r}: {exc}") from None
+        hint = (f" (a list: -p \"{name}:=['a.mcap']\")" if isinstance(default, list)
+                else "")  # fmt: skip
+        raise InputError(f"{node.get_name()}: parameter {name!r}: {exc}{hint}") from None
     if isinstance(default, float):
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise InputError(
@@ -120,6 +122,21 @@ def in_ros_terms(text: object) -> str:
     node's parameter 'some_option' (the core speaks to the command line; a node's user
     sets parameters)."""
     return _FLAG.sub(lambda m: f"parameter '{m.group(1).replace('-', '_')}'", str(text))
+
+
+def check_overrides(node: Node) -> None:
+    """InputError for a parameter given on the command line (`-p name:=value`) that the
+    node does not declare: a misspelt name would else be ignored without a word."""
+    import difflib
+
+    declared = set(node._parameters)  # noqa: SLF001 - rclpy keeps no public list of both
+    given = set(getattr(node, "_parameter_overrides", {}))
+    unknown = sorted(n for n in given - declared if not n.startswith("qos_overrides."))
+    if unknown:
+        close = difflib.get_close_matches(unknown[0], sorted(declared), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise InputError(f"parameter {unknown[0]!r} is not one of {node.get_name()}'s{hint}: "
+                         f"{', '.join(sorted(declared))}")  # fmt: skip
 
 
 def _unprefixed(name: str | None, exc: Exception) -> str:
@@ -182,6 +199,7 @@ def run_node(
     status = 0
     try:
         node = factory()
+        check_overrides(node)
         executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
         executor.add_node(node)
         while not received and rclpy.ok() and not (done is not None and done(node)):

@@ -146,6 +146,7 @@ class CalibratorNode(LifecycleNode):
         self._said_no_rsp = False
         self._live: LiveInputs | None = None  # live mode's buffers, from configure to cleanup
         self._once: Timer | None = None  # bag mode's solve at activation
+        self._idle_timer: Timer | None = None  # live mode's idle solve check
         self._result_publishers = {
             "parameters": self.create_publisher(String, "~/parameters", LATCHED),
             "summary": self.create_publisher(String, "~/summary", LATCHED),
@@ -203,11 +204,9 @@ class CalibratorNode(LifecycleNode):
         group = self._solver_group
         self._live = LiveInputs(self, self.settings.robot, self.settings.targets,
                                 self.settings.qos_depth, group)  # fmt: skip
-        self._live_entities = (
-            self.create_subscription(Empty, "~/solve", self._on_solve, 10, callback_group=group),
-            self.create_timer(IDLE_CHECK_S, self._check_idle, clock=self._steady,
-                              callback_group=group),
-        )  # fmt: skip
+        self._solve_topic = self.create_subscription(Empty, "~/solve", self._on_solve, 10,
+                                                     callback_group=group)  # fmt: skip
+        self._start_idle_timer()
         topics = [JOINT_STATES_TOPIC, *self.settings.targets.topics]
         self.get_logger().info(
             f"collecting {', '.join(topics[:-1])} and {topics[-1]}; solving "
@@ -256,9 +255,10 @@ class CalibratorNode(LifecycleNode):
             self.destroy_timer(self._once)
         if self._live is not None:
             self._live.close()
-            solve_topic, idle_timer = self._live_entities
-            self.destroy_subscription(solve_topic)
-            self.destroy_timer(idle_timer)
+            self.destroy_subscription(self._solve_topic)
+            if self._idle_timer is not None:
+                self.destroy_timer(self._idle_timer)
+                self._idle_timer = None
         self._live, self._once = None, None
         self._clear_results("unconfigured (lifecycle): waiting for configure")
         return TransitionCallbackReturn.SUCCESS
@@ -267,6 +267,15 @@ class CalibratorNode(LifecycleNode):
         del state
         self.active = False
         return TransitionCallbackReturn.SUCCESS
+
+    def _start_idle_timer(self) -> None:
+        """Live mode with solve_after_idle_s > 0: the timer that checks for the idle solve
+        (none otherwise: no callback every tick for nothing)."""
+        if self._idle_timer is None and self._live is not None and (
+                self.settings.solve_after_idle_s > 0):  # fmt: skip
+            self._idle_timer = self.create_timer(IDLE_CHECK_S, self._check_idle,
+                                                 clock=self._steady,
+                                                 callback_group=self._solver_group)  # fmt: skip
 
     def _idle_text(self) -> str:
         idle = self.settings.solve_after_idle_s
@@ -312,6 +321,7 @@ class CalibratorNode(LifecycleNode):
             return SetParametersResult(successful=False, reason=in_ros_terms(exc))
         except (TypeError, ValueError) as exc:  # a value of another type than declared
             return SetParametersResult(successful=False, reason=f"{type(exc).__name__}: {exc}")
+        self._start_idle_timer()  # solve_after_idle_s set > 0 at run time
         changed = ", ".join(f"{p.name}={p.value}" for p in parameters)
         self.get_logger().info(f"parameters changed: {changed} (from the next solve)")
         return SetParametersResult(successful=True)
@@ -322,8 +332,8 @@ class CalibratorNode(LifecycleNode):
         none, or an implausible one: `solve_verdict`) and one line saying why or what."""
         if not self.active:
             state = "unconfigured" if self._live is None and not self.settings.bags else "inactive"
-            return None, False, (f"{self.get_name()} is {state} (lifecycle): configure and "
-                                 "activate it first")  # fmt: skip
+            todo = "configure and activate it first" if state == "unconfigured" else "activate it"
+            return None, False, f"{self.get_name()} is {state} (lifecycle): {todo}"
         cal = self.calibration if self.settings.bags else self.solve()
         return (cal, *solve_verdict(cal, self.error, self.diagnosis_note))
 
@@ -680,7 +690,7 @@ def main(args: Sequence[str] | None = None) -> int:
     )
     if status == 0 and started and started[0].failed:
         assert started[0].error is not None
-        return started[0].error.exit_status
+        return started[0].error.exit_status  # its one line: the node's [ERROR] log line
     return status
 
 

@@ -408,7 +408,7 @@ class CaptureNode(Node):
         if error is None and self.finished and not (self.measured or left or dry_run):
             error = "no pose measured" if self.moves else None
         eta = None
-        if self._durations and left:
+        if self._durations and left and not self.finished:
             eta = (len(self.moves) - self._index) * float(np.mean(self._durations))
         return CaptureProgress(
             measured=self.measured, total=len(self.moves), earlier=self.n_already,

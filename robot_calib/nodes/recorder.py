@@ -177,6 +177,8 @@ class RecorderNode(Node):
 
     def summary(self) -> str:
         """'recorded N messages: /topic=n, ... -> FILE' (and messages lost in transport)."""
+        if self._closed and not sum(self._counts.values()):
+            return f"recorded nothing: {self.output} not written"
         per_topic = ", ".join(f"{t}={n}" for t, n in self._counts.items())
         text = f"recorded {sum(self._counts.values())} messages: {per_topic} -> {self.output}"
         if self.lost:

@@ -105,8 +105,9 @@ class ReplayNode(Node):
             self.wait_for_subscribers: int = declare(
                 self,
                 "wait_for_subscribers",
-                0,
-                "start once every publisher has at least this many subscribers [count]",
+                1,
+                "start once every publisher has at least this many subscribers [count] (0: at "
+                "once, whoever listens: messages sent before a reader is matched are lost)",
             )
             depth: int = declare(
                 self, "qos_depth", DEFAULT_QOS_DEPTH, "history depth of each publisher [messages]"

@@ -87,6 +87,9 @@ class SimRobotNode(Node):
             "start once this many /joint_states readers are matched (2: a recorder and "
             "sim_tracker, as in the README's recipe)",
         )
+        if self.wait_for < 0:
+            raise InputError(f"{self.get_name()}: parameter 'wait_for_subscribers' must be "
+                             f">= 0, not {self.wait_for}")  # fmt: skip
         publish_clock = declare(
             self, "publish_clock", False, "also publish /clock = measurement time (simulated time)"
         )
