@@ -17,6 +17,32 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 __version__ = "0.1.0"
 
+#: the public Python API (robot_calib/api.py), loaded on first use: `import robot_calib`
+#: stays light (no numpy or scipy until a function is called)
+__all__ = [
+    "Calibration", "Diagnosis", "Recording", "RobotCalibError", "InputError", "calibrate",
+    "compensate", "diagnose", "load_robot", "read_recording", "recording_from_arrays",
+    "simulate", "__version__",
+]  # fmt: skip
+_LAZY = {
+    "calibrate": "robot_calib.api", "compensate": "robot_calib.api",
+    "diagnose": "robot_calib.api", "load_robot": "robot_calib.api",
+    "read_recording": "robot_calib.api", "recording_from_arrays": "robot_calib.api",
+    "simulate": "robot_calib.api", "Calibration": "robot_calib.identify.calibration",
+    "Diagnosis": "robot_calib.diagnose.diagnosis", "Recording": "robot_calib.measurements",
+    "RobotCalibError": "robot_calib.errors", "InputError": "robot_calib.errors",
+}  # fmt: skip
+
+
+def __getattr__(name: str) -> object:
+    """The public API's names (`__all__`), imported when first used."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'robot_calib' has no attribute {name!r}")
+    import importlib
+
+    return getattr(importlib.import_module(module), name)
+
 
 def program_and_verb() -> str:
     """'robot-calib VERB' of this program's arguments (the verb: the first, unless an

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -160,7 +161,7 @@ class NoiseReport(Record):
     ladder_sigma_mm: float
     ladder_source: str
     floor_known: bool = True
-    # a stated accuracy against the evidence (issue 24): unused beside measured noise, far
+    # a stated accuracy against the evidence: unused beside measured noise, far
     # above it or the geometric fit's residual (a unit slip), refuted; '' when none
     warning: str = ""
 
@@ -323,6 +324,15 @@ class Diagnosis(Record):
         return (f"{named}; most of what remains lies outside the vocabulary{where}: "
                 f"{out.physical_abs_rms_mm:.4f} -> {out.hybrid_abs_rms_mm:.4f} mm held-out with a "
                 "learned correction")  # fmt: skip
+
+    def save(self, path: str | Path) -> Path:
+        """Write this diagnosis as DIAGNOSIS.json at `path` (atomically); the path written.
+        (`robot-calib diagnose` also writes the Markdown and HTML reports beside it.)"""
+        from robot_calib.identify.params_file import write_json_atomic
+
+        path = Path(path)
+        write_json_atomic(self.to_dict(), path)
+        return path
 
     def summary(self) -> str:
         """A few human lines: the verdict, the ladder (held-out, seed criterion), what

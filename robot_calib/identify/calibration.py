@@ -45,6 +45,7 @@ if TYPE_CHECKING:
     from robot_calib.identify.cpa import CPAResult
     from robot_calib.measurements import Recording
     from robot_calib.poses import Poses
+    from robot_calib.score import Score
 
 #: what the hybrid model's label adds to its physical model's name (`Calibration.label`)
 LEARNED_SUFFIX = "+learned"
@@ -122,6 +123,28 @@ class Calibration:
         """The PARAMS.json document (msgs_doc/parameters.md) of this calibration from
         `recording` (its sources, counts and warnings go into the document)."""
         return calibration_to_dict(self, recording)
+
+    def save(self, path: str | Path, recording: Recording) -> Path:
+        """Write this calibration from `recording` as a PARAMS.json at `path` (atomically:
+        a failure leaves no half file); the path written. `Calibration.load` reads it."""
+        from robot_calib.identify.params_file import write_json_atomic
+
+        path = Path(path)
+        write_json_atomic(self.to_dict(recording), path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> Calibration:
+        """The calibration of a PARAMS.json file (`from_dict`): the one loader every front
+        end uses for a whole calibration."""
+        return load_calibration(path)
+
+    def score(self, recording: Recording) -> Score:
+        """This calibration's errors on `recording` (held out, or its own): absolute and
+        seed-criterion figures [mm], residuals, suspect points (`robot_calib.score`)."""
+        from robot_calib.score import score
+
+        return score(self.model, self.parameters, recording, correction=self.correction)
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any], where: str = "PARAMS.json") -> Calibration:

@@ -1,0 +1,141 @@
+"""The public Python API: a calibration from a script or a notebook in a few calls.
+
+    import robot_calib as rc
+
+    robot = rc.load_robot("kr5_sixx_r650")
+    sim = rc.simulate("run.mcap", plan="paper-test2", effects=["backlash:4"])
+    recording = rc.read_recording("run.mcap", robot=robot)
+    cal = rc.calibrate(recording, robot, model="geometric+backlash:4")
+    print(cal.score(recording).lines("in-sample"))
+    cal.save("params.json", recording)
+    again = rc.Calibration.load("params.json")
+    diagnosis = rc.diagnose(recording, robot)
+    print(diagnosis.summary())
+    commands = rc.compensate(again, q)  # nominal joint commands (n, J) [rad] -> corrected
+
+Every function here is one call into the same core the command line and the nodes use
+(`flows/`, `identify/`, `diagnose/`, `compensate/`), with keyword-only options and SI units
+(rad, m, s). Errors are `robot_calib.errors.RobotCalibError` subclasses (InputError for bad
+input) with one line naming the file or value. Importing `robot_calib` stays light: these
+functions load numpy, scipy and the rest when first called (`robot_calib.__getattr__`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from robot_calib.compensate import Compensation
+    from robot_calib.diagnose.diagnosis import Diagnosis
+    from robot_calib.flows.simulate import Simulation
+    from robot_calib.identify.calibration import Calibration
+    from robot_calib.kinematics.description import RobotDescription
+    from robot_calib.kinematics.frames import Array
+    from robot_calib.measurements import Recording
+
+Log = Callable[[str], None]
+
+
+def load_robot(name_or_path: str | Path) -> RobotDescription:
+    """A robot description: a built-in name (e.g. 'kr5_sixx_r650', 'ur10'), a robot YAML,
+    a DH table CSV or a URDF (msgs_doc/robots.md)."""
+    from robot_calib.kinematics.loader import load_robot as load
+
+    return load(name_or_path)
+
+
+def read_recording(
+    *bags: str | Path, robot: RobotDescription, pair_tolerance: float | None = None,
+    log: Log | None = None,
+) -> Recording:  # fmt: skip
+    """The paired measurements of one or more MCAP bags (msgs_doc/specification.md): each
+    tracker point with the joint state nearest in stamp (within `pair_tolerance` [s],
+    default 0.05), reference reflectors' drift removed (msgs_doc/references.md)."""
+    from robot_calib.bag.read import read_recording as read
+    from robot_calib.measurements import PAIR_TOLERANCE_S
+
+    tolerance = PAIR_TOLERANCE_S if pair_tolerance is None else pair_tolerance
+    return read([Path(b) for b in bags], robot, tolerance, log)
+
+
+def recording_from_arrays(
+    q: Array, points: Array, *, time: Array | None = None, robot: RobotDescription | None = None,
+    source: str = "arrays",
+) -> Recording:  # fmt: skip
+    """A recording of measurements already paired in memory: joint readings q (n, J) [rad]
+    and the tracker's points (n, 3) [m, tracker frame] in the order measured, their times
+    (n,) [s] if known; circle sweeps are found on `robot`'s joints when given."""
+    from robot_calib.measurements import recording_from_arrays as make
+
+    return make(q, points, time, robot=robot, source=source)
+
+
+def simulate(
+    output: str | Path, *, plan: str = "paper-test2", world: str | Path | None = None,
+    robot: str | None = None, effects: Sequence[str] = (), seed: int | None = None,
+    n_random: int = 20, force: bool = False,
+) -> Simulation:  # fmt: skip
+    """Simulate a measurement campaign (robot, tracker and recorder nodes, in-process) and
+    write the bag `output` with its world file (the truth) beside it. `plan`: a built-in
+    plan or a PLAN.yaml; `world`: a world YAML (default: the built-in KR5 world, or `robot`'s
+    nominal geometry); `effects`: e.g. ['backlash:4', 'compliance:2=2e-5']."""
+    from robot_calib.flows.simulate import simulate as run
+    from robot_calib.flows.simulate import simulation_world
+
+    built = simulation_world(world, robot if robot is not None or world else None, effects,
+                             seed)  # fmt: skip
+    return run(output, plan, built, seed, n_random, force=force)
+
+
+def calibrate(
+    recording: Recording, robot: RobotDescription, *, model: str = "geometric",
+    ecc_order: int = 1, log: Log | None = None,
+) -> Calibration:  # fmt: skip
+    """Identify `model` ('nominal', 'cpa', 'geometric', 'geometric+EFFECT[:joints]...',
+    msgs_doc/effects.md) from `recording`: CPA, then Levenberg-Marquardt; tracker blunders
+    left out and listed (`Calibration.outliers`), an implausible result marked
+    (`Calibration.plausible`)."""
+    from robot_calib.flows.calibrate import calibrate_recording
+
+    return calibrate_recording(recording, robot, model, ecc_order, log=log)
+
+
+def diagnose(
+    recording: Recording, robot: RobotDescription, *, holdout: Recording | None = None,
+    tracker_sigma_m: float | None = None, log: Log | None = None,
+) -> Diagnosis:  # fmt: skip
+    """The sim-to-real gap diagnosis (msgs_doc/diagnosis.md): the ladder of models scored
+    on `holdout` (else k-fold over poses), the noise floor, the dominant effect and what
+    remains. `Diagnosis.summary()` in words, `.to_dict()` the DIAGNOSIS.json document,
+    `.save(path)` writes it."""
+    from robot_calib.flows.diagnose import diagnose_recordings
+
+    diagnosis, _ = diagnose_recordings(recording, robot, holdout, log=log,
+                                       tracker_sigma_m=tracker_sigma_m)  # fmt: skip
+    return diagnosis
+
+
+def compensate(
+    calibration: Calibration, q: Array, *, directions: Array | None = None,
+    time: Array | None = None,
+) -> Compensation:  # fmt: skip
+    """The joint commands (n, J) [rad] the nominal controller must be given so that the
+    calibrated robot reaches where the nominal model puts commands q (n, J) [rad]
+    (`Compensation.q`; `.converged`, `.error_m` per command). `directions` (n, J) +-1: each
+    joint's approach direction (default: from the motion between consecutive commands);
+    `time` (n,) [s] for models that follow time."""
+    import numpy as np
+
+    from robot_calib.compensate import compensate_commands
+    from robot_calib.compensate.solve import nominal_counterpart
+    from robot_calib.poses import Poses, approach_directions
+
+    q = np.asarray(q, dtype=float)
+    nominal, nominal_params = nominal_counterpart(calibration.model, calibration.parameters)
+    commands = Poses.from_readings(
+        q, approach_directions(q) if directions is None else directions, time
+    )
+    return compensate_commands(calibration.model, calibration.parameters, nominal,
+                               nominal_params, commands, calibration.correction)  # fmt: skip
