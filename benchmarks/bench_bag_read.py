@@ -1,13 +1,13 @@
 # ruff: noqa: E402 - the BLAS thread setting must precede the numpy import
 """Benchmark (not a test): `read_recording` of a bag of 200k messages (100k JointState +
 100k PointStamped, a UR10 random-pose campaign as `bench_diagnose_ur10.py` writes it),
-decoded message by message (mcap's stream reader + mcap_ros2, the reader before issue 23)
+decoded message by message (mcap's stream reader + mcap_ros2, as the reader once did)
 and in bulk (`BagReader.channel_messages` + `bag.bulk_decode`), each in a child process so
 that its peak RSS is its own.
 
     .venv/bin/python benchmarks/bench_bag_read.py [--poses 100000] [--repeat 3] [--bag B]
 
-Target (issue 23): <= 3 s for the 200k messages. Prints per way the median wall time of
+Target: <= 3 s for the 200k messages. Prints per way the median wall time of
 `read_recording` (the child's clock: imports and bag writing are not in it), the bag
 reading alone (`_bag_messages`), the peak RSS of the child and whether both give the
 same recording.
@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from robot_calib.bag import mcap_reader, read
 from robot_calib.kinematics.loader import load_robot
-if sys.argv[2] == "each":  # the reader before issue 23: every message through mcap_ros2
+if sys.argv[2] == "each":  # the earlier reader: every message through mcap_ros2
     mcap_reader.BagReader.channel_messages = lambda self, topics: None
 robot, bag = load_robot("ur10"), Path(sys.argv[1])
 started = time.perf_counter()

@@ -1,5 +1,5 @@
 # ruff: noqa: E402 - the BLAS thread setting must precede the numpy import
-"""Compensation speed (issue 15: >= 1,000 poses/s): nominal commands of a program, and
+"""Compensation speed (target: >= 1,000 poses/s): nominal commands of a program, and
 target poses (tool point and orientation, tracker frame, no seeds: the nominal inverse
 kinematics starts at the home pose), compensated for a KR5 calibrated with joint-4
 backlash, in one batch each.

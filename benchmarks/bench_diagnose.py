@@ -3,7 +3,7 @@
 
     .venv/bin/python benchmarks/bench_diagnose.py [--repeat 3] [--effects backlash:4 ...]
 
-Target (issue 5): <= 10 s on 2 cores. Prints the median wall time per effect world, with
+Target: <= 10 s on 2 cores. Prints the median wall time per effect world, with
 the stages (read bags, ladder) timed separately, and the verdict for a sanity check.
 """
 

@@ -7,8 +7,8 @@ user runs it, in a child process so that its wall time and peak RSS are its own.
     .venv/bin/python benchmarks/bench_diagnose_ur10.py [--poses 2773] [--repeat 3]
 
 Two runs per repeat: all poses in one bag (5-fold CV), and the 70/30 split as calibration
-+ hold-out bags. Targets: <= 10 s on an idle 2-core machine (issue 22), and <= 5 s for
-the 5-fold run (issue 23). Prints the median
++ hold-out bags. Targets: <= 10 s on an idle 2-core machine, and <= 5 s for
+the 5-fold run. Prints the median
 wall time, CPU time and peak RSS of each, the verdict and the held-out figures, and the
 load average (timings on a loaded machine are not the target's).
 """
@@ -32,8 +32,8 @@ from robot_calib.bag.write import START_NS, STEP_NS, write_measurements
 from robot_calib.measurements import Recording
 from robot_calib.sim.scenarios import ur10_random
 
-TARGET_S = 10.0  # issue 22, both runs
-FIVE_FOLD_TARGET_S = 5.0  # issue 23, the 5-fold run (bench_lean.py's row)
+TARGET_S = 10.0  # both runs
+FIVE_FOLD_TARGET_S = 5.0  # the 5-fold run (bench_lean.py's row)
 
 
 def _bag(path: Path, recording: Recording, names: tuple[str, ...], first: int = 0) -> Path:
@@ -97,11 +97,11 @@ def main() -> int:
                 f"{verdict} mm ({best['model']})"
             )
     print(
-        f"target <= {TARGET_S:.0f} s (issue 22): {'PASS' if worst <= TARGET_S else 'MISS'} "
+        f"target <= {TARGET_S:.0f} s: {'PASS' if worst <= TARGET_S else 'MISS'} "
         f"(worst median {worst:.2f} s)"
     )
     five = medians["all poses, 5-fold CV"]
-    print(f"target <= {FIVE_FOLD_TARGET_S:.0f} s for the 5-fold run (issue 23): "
+    print(f"target <= {FIVE_FOLD_TARGET_S:.0f} s for the 5-fold run: "
           f"{'PASS' if five <= FIVE_FOLD_TARGET_S else 'MISS'} (median {five:.2f} s)")  # fmt: skip
     return 0
 

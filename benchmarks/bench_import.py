@@ -1,4 +1,4 @@
-"""Import benchmark (issue 13 target: a 2773-row, 20-column semicolon / decimal-comma
+"""Import benchmark (target: a 2773-row, 20-column semicolon / decimal-comma
 export with orientation and temperature imported in < 2 s).
 
     .venv/bin/python benchmarks/bench_import.py [--rows 2773] [--repeat 5]

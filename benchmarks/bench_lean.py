@@ -1,5 +1,5 @@
 # ruff: noqa: E402 - the BLAS thread setting must precede the numpy import
-"""Benchmark (not a test): issue 23's table in one run, each figure a whole `robot-calib`
+"""Benchmark (not a test): the lean table in one run, each figure a whole `robot-calib`
 process (wall time, CPU time, peak RSS of the child itself) beside its goal and, for the
 geometric fit, the plain-numpy limit for the same number of poses.
 
@@ -41,7 +41,7 @@ from measure import robot_calib
 from robot_calib.bag.write import START_NS, STEP_NS, write_measurements
 from robot_calib.sim.scenarios import ur10_random
 
-PEER_RSS_MIB = {10_000: 171, 50_000: 351, 100_000: 508}  # robotkinecal, issue 23
+PEER_RSS_MIB = {10_000: 171, 50_000: 351, 100_000: 508}  # robotkinecal's peak RSS
 DIAGNOSE_GOAL = {2773: (5.0, None), 100_000: (30.0, 600.0)}  # s, MiB
 
 

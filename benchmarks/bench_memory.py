@@ -19,7 +19,7 @@ model. Columns, in MiB (2^20 bytes):
 - traced: tracemalloc peak of one more, untimed fit (NumPy/Python allocations only);
 - time: median wall time of --repeat fits [s].
 
-Target (issue 11 part 6): peak < 300 MiB at 50k poses.
+Target: peak < 300 MiB at 50k poses.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ from robot_calib.sim.plans import random_plan
 from robot_calib.sim.world import load_world, with_effect
 
 SIZES = (10_000, 50_000)
-TARGET_MIB = 300.0  # issue 11 part 6: geometric fit peak at 50k poses
+TARGET_MIB = 300.0  # geometric fit peak at 50k poses
 SIM_CHUNK = 1_000  # poses simulated at once: keeps the setup far below the fit
 MIB = 2.0**20
 

@@ -5,7 +5,7 @@ process per run (imports, rclpy start-up, discovery, the bag's summary included)
     .venv/bin/python benchmarks/bench_simulate.py [--sizes 1000,10000,100000] [--repeat 1]
     .venv/bin/python benchmarks/bench_simulate.py --quick      # 1k and 10k only
 
-Target (issue 23): 100k poses in <= 30 s (192 s before the graph was stepped in bursts).
+Target: 100k poses in <= 30 s (192 s before the graph was stepped in bursts).
 Prints per size the process's wall time (min of --repeat), the simulation's own time (what
 `simulate` reports: the graph and the bag, no imports), the time per pose, the peak RSS of
 the child (its own rusage, os.wait4) and the messages recorded, then PASS/MISS against the

@@ -3,7 +3,7 @@
 
     .venv/bin/python benchmarks/bench_startup.py [--repeat 15]
 
-Prints, per command, the median [s] and its ratio to the numpy baseline. Target (issue 11):
+Prints, per command, the median [s] and its ratio to the numpy baseline. Target:
 `robot-calib --help` and `robot-calib predict` within 2.5 x the baseline. `calibrate` of the
 sample bag is shown for scale (it imports scipy and mcap: it needs them).
 """

@@ -22,9 +22,11 @@ functions load numpy, scipy and the rest when first called (`robot_calib.__getat
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from robot_calib.log import Log
 
 if TYPE_CHECKING:
     from robot_calib.compensate import Compensation
@@ -34,8 +36,6 @@ if TYPE_CHECKING:
     from robot_calib.kinematics.description import RobotDescription
     from robot_calib.kinematics.frames import Array
     from robot_calib.measurements import Recording
-
-Log = Callable[[str], None]
 
 
 def load_robot(name_or_path: str | Path) -> RobotDescription:

@@ -1,4 +1,4 @@
-"""Issue 13's FANUC-like campaign over several seeds (`robot_calib.sim.scenarios`): raw
+"""The FANUC-like campaign over several seeds (`robot_calib.sim.scenarios`): raw
 coupled readings, three SMRs 0.34 m out (one on the J6 axis), 6-pose sweeps with 144 deg
 steps on J4/J6. Prints, per model, in-sample and held-out rms over the simulated noise
 (the floor no model can beat), the worst a3 error, and the same for the 288 deg-step

@@ -1,5 +1,5 @@
 # ruff: noqa: E402 - the BLAS thread setting must precede the numpy import
-"""Issue-4 acceptance figures on effect-free simulated worlds with known truth.
+"""Acceptance figures on effect-free simulated worlds with known truth.
 
     .venv/bin/python scripts/identify_acceptance.py [--seeds 10] [--plan 2]
 

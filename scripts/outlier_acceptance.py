@@ -1,5 +1,5 @@
 # ruff: noqa: E402 - the BLAS thread setting must precede the numpy import
-"""Outlier acceptance (issue 12): tracker blunders in the seed's Test 2 recording (580
+"""Outlier acceptance: tracker blunders in the seed's Test 2 recording (580
 points, default world, noise on), calibrated `geometric`, scored on 200 random hold-out
 poses against the clean calibration of the same points.
 

@@ -1,4 +1,4 @@
-"""Issue 13's 6-DoF measurements over several seeds: a simulated KR5 with a tracker 6-DoF
+"""6-DoF measurements over several seeds: a simulated KR5 with a tracker 6-DoF
 probe (roll/pitch/yaw 20/35/-30 deg in the flange, 50 urad orientation noise per axis),
 150 random poses with stated accuracies. Prints the worst tool-frame errors (orientation
 [urad], offset [um]) and their ratio to the reported 1-sigma, the in-sample orientation

@@ -50,7 +50,7 @@ SLOW_FIRST = (
     "test_field_files.py",
     "test_field_results.py",
     "test_diagnose.py",
-    "test_new_user_22.py",
+    "test_implausible_inputs.py",
     "test_reliability.py",
     "test_targets.py",
     "test_oov_effects.py",

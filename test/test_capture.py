@@ -1,4 +1,4 @@
-"""Capture on a robot with ROS 2 (issue 16, msgs_doc/capture.md): the pure rules (limits,
+"""Capture on a robot with ROS 2 (msgs_doc/capture.md): the pure rules (limits,
 step limit, approach side, settling) and the graph capture -> sim_robot (controller mode)
 -> sim_tracker, in-process on this test process's private ROS_DOMAIN_ID. Known answer: the
 campaign bag of a 60-pose D-optimal plan calibrates to the noise floor of the default

@@ -164,7 +164,7 @@ def test_a_robot_file_edited_after_calibration_is_noticed(tmp_path: Path) -> Non
             1,
         )
     )  # noqa: E501
-    # issue 24: PARAMS.json carries its description: the edited file is not read, the
+    # PARAMS.json carries its description: the edited file is not read, the
     # prediction is the calibrated robot's (its own text is guarded by the fingerprint)
     proc = run("predict", str(params), "--joints", str(joints), "-o", str(tmp_path / "c.csv"))
     assert proc.returncode == 0, proc.stderr
@@ -178,7 +178,7 @@ def test_a_robot_file_edited_after_calibration_is_noticed(tmp_path: Path) -> Non
 
 
 def test_version_and_the_summary_of_frames() -> None:
-    """`--version` (issue 15); the tracker pose and target offsets have no nominal: the
+    """`--version`; the tracker pose and target offsets have no nominal: the
     parameter table shows '-' for their nominal and deviation, never their value again."""
     proc = run_process("--version")  # the program itself: its exit status and output
     assert proc.returncode == 0 and proc.stdout.strip().startswith("robot-calib 0.")

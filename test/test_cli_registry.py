@@ -1,4 +1,4 @@
-"""The command line's registry (issue 25: one module per verb): every verb module of
+"""The command line's registry (one module per verb): every verb module of
 `robot_calib.cli` is registered once, in the order `robot-calib --help` lists the verbs,
 and has the verb interface (NAME, HELP, ROBOT, add_arguments, main)."""
 

@@ -1,4 +1,4 @@
-"""Compensation (issue 15): joint commands of a program taught on the nominal model,
+"""Compensation: joint commands of a program taught on the nominal model,
 corrected so that the calibrated robot (effects included) puts the tool where the nominal
 model promised. Known answer: the simulated true robot commanded with them."""
 

@@ -1,4 +1,4 @@
-"""The compensator node (issue 15, msgs_doc/compensator.md) through real rclpy on this
+"""The compensator node (msgs_doc/compensator.md) through real rclpy on this
 process's private ROS_DOMAIN_ID (conftest.py): a JointTrajectory in the controller's joint
 order (shuffled against the model's) comes back corrected, equal to the pure function's
 answer, and the simulated true robot commanded with it reaches what the nominal model

@@ -1,4 +1,4 @@
-"""The lean least-squares fit (issue 23): Levenberg-Marquardt runs on the R of [J | r]
+"""The lean least-squares fit: Levenberg-Marquardt runs on the R of [J | r]
 (`identify.fit._Problem` with `compressed`), folded block by block, instead of the (3n, p)
 rows. Both present MINPACK the same J^T J, J^T r and |r| at every x, so the fit takes the
 same steps: known answers are that the invariants agree at any x (weights, 6-DoF

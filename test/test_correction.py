@@ -1,4 +1,4 @@
-"""The learned residual correction (issue 22: a learnable bound that learns, the hybrid
+"""The learned residual correction (a learnable bound that learns, the hybrid
 model). Known answers: smooth structure of known joints is recovered and the joints it
 does not depend on are found irrelevant; a simulated UR10 whose compliance the geometric
 model lacks is mostly learnable; an edge of a hyperparameter's range is said; a correction
@@ -156,8 +156,8 @@ def test_compliance_the_geometry_lacks_is_learnable(
     assert "Gaussian process" in bound.line() and bound.fitted_poses == 700
 
 
-def test_gear_harmonics_of_joint_2_are_partly_learnable_on_the_issue_22_ur10() -> None:
-    """The issue-22 UR10 (2773 random poses, 70/30; joint 2's 11th and 27th harmonics, joint
+def test_gear_harmonics_of_joint_2_are_partly_learnable_on_the_ur10_gear_world() -> None:
+    """The simulated UR10 (2773 random poses, 70/30; joint 2's 11th and 27th harmonics, joint
     1's 17th): the kernel ridge bound learned nothing there (0.191 -> 0.192 mm); one length
     scale per joint finds joint 2's short one and learns about half."""
     scenario = ur10_random(seed=0)

@@ -1,4 +1,4 @@
-"""The hybrid model's load-driven geometry (issue 22, effects outside the vocabulary).
+"""The hybrid model's load-driven geometry (effects outside the vocabulary).
 Known answers on the simulated UR10 (700 calibration / 300 hold-out poses): a gravity-side
 backlash of joint 2 and link 3 twisting out of the arm plane, which the physical rungs
 leave at 65 x and 20 x the noise floor and the Gaussian process alone at 27 x and 9 x, come

@@ -1,4 +1,4 @@
-"""Circle sweeps as real robots record them (issue 13): the axis direction comes from the
+"""Circle sweeps as real robots record them: the axis direction comes from the
 readings, never from the order of the points, so steps above 180 deg work (six poses at
 144 deg over +-360 deg on joints 4 and 6, and four of them, with 288 deg steps, which the
 point order turned backwards before); a target too close to an axis is warned about."""

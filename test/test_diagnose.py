@@ -30,7 +30,7 @@ def test_withheld_effect_is_named_and_removed(effect: str, seed: int) -> None:
 
 
 @pytest.mark.parametrize("effect", ["backlash+thermal_warmup", "compliance_payload"])
-def test_issue_14_classes_of_the_blind_harness(effect: str) -> None:
+def test_each_class_of_the_blind_harness_is_diagnosed(effect: str) -> None:
     """One case of two new kinds (the harness runs 20 of each class: README): two effects
     at once, and a form other than the vocabulary's (an unknown payload: named as
     gravity compliance); every withheld effect named, at the floor, near the right model."""
@@ -79,11 +79,11 @@ def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:
     assert "null (geometric reaches the noise level): no dominant unmodelled effect" in report
     for suffix in ("_ladder.png", "_angle.png", "_time.png", "_map.png"):
         assert (tmp_path / f"diagnosis{suffix}").stat().st_size > 1000
-    # the self-contained HTML report beside it (issue 15; test_html_report.py reads one)
+    # the self-contained HTML report beside it (test_html_report.py reads one)
     page = tmp_path / "diagnosis.html"
     assert f"HTML report (self-contained, open in a browser): {page}" in proc.stdout
     assert "null (geometric reaches the noise level)" in page.read_text()
-    # the chosen rung's PARAMS.json beside it (issue 15): loadable, saying how it was chosen
+    # the chosen rung's PARAMS.json beside it: loadable, saying how it was chosen
     best = tmp_path / "diagnosis.params_best.json"
     assert f"best model (the ladder's chosen rung): geometric -> {best}" in proc.stdout
     model, params, saved = load_params(best)
@@ -95,7 +95,7 @@ def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("effect", ["harmonics_high", "joint_harmonics"])
-def test_issue_22_gear_harmonics_of_the_blind_harness(effect: str) -> None:
+def test_gear_harmonics_of_the_blind_harness_are_diagnosed(effect: str) -> None:
     """Joint-angle harmonics at gear orders (harmonics_high: 11 and 27 on joint 2, 17 on
     joint 1; joint_harmonics: two random orders 7-59 on a random joint), 50-300 urad: the
     diagnosis, told nothing, names the joints and the orders and reaches the floor."""

@@ -1,4 +1,4 @@
-"""Divergence guard (issue 22): on a simulated random-pose UR10 campaign as the issue's real
+"""Divergence guard: on a simulated random-pose UR10 campaign modelled on a real
 one (`sim.scenarios.ur10_random`: joint 2 over 140 deg only, where the columns of a
 low-order joint harmonic are nearly collinear with the DH offsets; gear harmonics of orders
 11, 27 and 17 in the world), every model string of the vocabulary ends in-sample no worse

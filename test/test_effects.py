@@ -171,12 +171,12 @@ def test_registry_order_and_vocabulary_are_the_contracts() -> None:
     and never renamed; simulator-only effects are not in it; model names print and parse
     through the registry."""
     contract = {"eccentricity", "backlash", "compliance", "encoder_scale", "thermal_drift"}
-    added = {  # issue 14
+    added = {  # beyond the contract
         "transmission_error",
         "gravity_compliance",
         "thermal_warmup",
         "thermal_temperature",
-    } | {"joint_harmonics"}  # fmt: skip  (issue 22)
+    } | {"joint_harmonics"}  # fmt: skip
     assert set(vocabulary()) == contract | added
     assert "joint_ripple" not in vocabulary()
     base, effects = parse_model("geometric+eccentricity:6:order=3+thermal_drift", ROBOT)

@@ -1,4 +1,4 @@
-"""`robot-calib export` (issue 15): a calibration as a URDF, a DH table, a Universal Robots
+"""`robot-calib export`: a calibration as a URDF, a DH table, a Universal Robots
 calibration file and a flat JSON. The URDF's forward kinematics, computed from the file as
 parsed by ROS's own URDF parser (urdf_parser_py) and chained here joint by joint, equals
 the calibrated geometric model to < 1 um at random poses."""

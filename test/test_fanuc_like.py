@@ -1,4 +1,4 @@
-"""The FANUC-like campaign of issue 13 (`robot_calib.sim.scenarios.fanuc_like`), from the
+"""The FANUC-like campaign (`robot_calib.sim.scenarios.fanuc_like`), from the
 raw controller readings with no preprocessing: J3 coupled to J2, three SMRs 0.34 m out
 (one on the joint-6 axis), sweeps of 6 poses with 144 deg steps over +-360 deg on joints 4
 and 6. Known answers: the simulated truth and its noise."""

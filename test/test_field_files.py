@@ -1,4 +1,4 @@
-"""Issue 24, files and faults through the real command line: a corrupt chunk length, a full
+"""Files and faults through the real command line: a corrupt chunk length, a full
 disk under repair, two writers of one output, an interrupted multi-file output, Ctrl-C at
 start-up, unexpanded xacro, the compensated CSV read back.
 

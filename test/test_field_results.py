@@ -1,4 +1,4 @@
-"""Safe in the field (issue 24, items 2, 4, 7, 8, 9 and CPA's 1-sigma): a stated tracker
+"""Safe in the field, and CPA's 1-sigma: a stated tracker
 accuracy the evidence contradicts is said so (never a green verdict resting on a unit
 slip), self-contained PARAMS.json, CSV imports, multi-target bags. Real CLI on simulated
 robots whose answers are known."""

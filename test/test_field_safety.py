@@ -1,4 +1,4 @@
-"""Safe in the field (issue 24, item 3): one check of joint limits and units
+"""Safe in the field: one check of joint limits and units
 (`RobotDescription.check_joints`) shared by `compensate`, the compensator node, `capture`,
 `sim_robot` and `plan`; the compensator node forwards nothing the CLI would refuse or flag
 (a trajectory in degrees, a point beyond the joint limits), tested through real rclpy on

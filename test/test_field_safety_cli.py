@@ -1,4 +1,4 @@
-"""Safe in the field (issue 24, "also found"): the overwrite policy of every verb holds for
+"""Safe in the field: the overwrite policy of every verb holds for
 `repair` (--force), `plan` writes YAML only under a YAML name and refuses a floor height
 given in mm, and `run -o` in a folder it cannot create or write is one line, exit 2 (was a
 NotADirectoryError / PermissionError traceback). Real CLI, as a user runs it."""

@@ -1,4 +1,4 @@
-"""The HTML report (issue 15): one self-contained file an engineer reads in two minutes,
+"""The HTML report: one self-contained file an engineer reads in two minutes,
 from a small simulated diagnosis whose truth is known (joint-4 backlash, one tracker
 blunder, the ISO 9283 cube repeated in the hold-out), checked as a document and rendered
 in a real headless browser (Debian's Chromium) to a screenshot that must not be blank."""

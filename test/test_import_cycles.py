@@ -1,4 +1,4 @@
-"""No import cycles inside robot_calib (issue 25: one home per thing, layers that point down).
+"""No import cycles inside robot_calib (one home per thing, layers that point down).
 
 Every module's imports, read with `ast`: relative ones resolved, those inside functions and
 under `if TYPE_CHECKING:` counted too (a lazy import that closes a loop is still a cycle,

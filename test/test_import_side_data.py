@@ -1,4 +1,4 @@
-"""Extra columns of a tracker export (issue 13): a temperature column goes onto the side
+"""Extra columns of a tracker export: a temperature column goes onto the side
 topic /temperature (sensor_msgs/Temperature, deg C), one message per pose stamped as the
 pose; the contract's two topics and their reading are unchanged."""
 

@@ -1,5 +1,5 @@
 """`robot-calib import` of a 6-DoF probe's orientation (quaternion or roll-pitch-yaw columns)
-and of the tracker's per-point standard deviations (issue 13, msgs_doc/import.md): a
+and of the tracker's per-point standard deviations (msgs_doc/import.md): a
 simulated KR5 with a probe is exported as a semicolon / decimal-comma CSV in mm, deg, um and
 mdeg with the columns in another order, imported through the command line, read back and
 calibrated. Known answers: the simulated frames and the stated values, the true probe frame.

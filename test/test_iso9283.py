@@ -1,5 +1,5 @@
 """ISO 9283 pose accuracy (AP) and repeatability (RP) before and after calibration, from
-repeat poses (issue 15). Known answers: a simulated KR5 (the seed's Table 3 geometry)
+repeat poses. Known answers: a simulated KR5 (the seed's Table 3 geometry)
 calibrated on Test 2 and scored on the ISO cube's five poses over ten cycles."""
 
 from __future__ import annotations

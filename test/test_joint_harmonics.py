@@ -1,4 +1,4 @@
-"""Issue 22: joint-angle harmonics at high orders (gear stages, strain-wave drives, encoder
+"""Joint-angle harmonics at high orders (gear stages, strain-wave drives, encoder
 rings), on a simulated UR10 random-pose campaign whose truth is known: the frequency scan
 finds the joints and orders, the ladder adds them while the held-out error falls, and the
 diagnosis reaches the noise floor on poses it did not fit."""

@@ -344,7 +344,7 @@ def test_launch_specs_start_our_executables_with_declared_parameters(
 
 
 def test_sim_graph_launch_waits_as_the_recipe_does() -> None:
-    """sim_robot waits for its two readers, sim_tracker for the recorder (issue 16)."""
+    """sim_robot waits for its two readers, sim_tracker for the recorder."""
     arguments = {a.name: a.default for a in SIM_GRAPH.all_arguments}
     assert arguments["wait_for_subscribers"] == "2"
     nodes = {n.executable: n for n in SIM_GRAPH.nodes}

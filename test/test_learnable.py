@@ -1,4 +1,4 @@
-"""An honest floor and the learnable bound (issue 14): without repeat poses, circle sweeps
+"""An honest floor and the learnable bound: without repeat poses, circle sweeps
 or a stated accuracy the noise floor is unknown and every output says so; the verdict is
 never null merely because geometric fits itself: a residual model (a Gaussian process on
 the readings, its hyperparameters from the calibration poses only) scored held out decides
@@ -108,7 +108,7 @@ def test_each_rung_reports_its_share_of_the_learnable_gap() -> None:
 
 
 def test_a_share_never_prints_as_minus_zero() -> None:
-    """Issue 24: geometric's own share came out as -1.3e-16 and printed '-0 %'."""
+    """Geometric's own share of -1.3e-16 prints as '0 %', never '-0 %'."""
     from robot_calib.diagnose.diagnosis import percent
 
     assert percent(-1.33e-16) == "0 %"

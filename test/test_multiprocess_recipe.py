@@ -1,4 +1,4 @@
-"""The README's multi-process recipe loses nothing (issue 16).
+"""The README's multi-process recipe loses nothing.
 
 recorder, sim_tracker and sim_robot as three separate processes with their default
 parameters, as the README starts them (`ros2 run robot_calib <node>`): sim_robot waits for

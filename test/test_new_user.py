@@ -1,4 +1,4 @@
-"""What a new user met (round 13), each fixed where it is met: `score` flags an error far
+"""What a new user met, each fixed where it is met: `score` flags an error far
 above the calibration's own and orientations it cannot score, `predict` refuses degrees and
 a --robot that is not the calibration's, `import` says why its rows are bad and which
 --sep or --robot would help, `--help` shows the defaults, the docs list every column.
@@ -253,7 +253,7 @@ def test_the_docs_list_every_column_of_the_score_table(work: Path) -> None:
 def test_no_file_a_simulation_or_plan_reads_is_ever_overwritten(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """The issue-15 new user replaced a PLAN.yaml, a world file and a URDF with
+    """A new user replaced a PLAN.yaml, a world file and a URDF with
     `-o SAME --force`: every file read is an input, never overwritten."""
     from robot_calib.cli import main
 

@@ -1,4 +1,4 @@
-"""The noise floor from repeat poses anywhere in a recording (issue 13): a UR10-style
+"""The noise floor from repeat poses anywhere in a recording: a UR10-style
 series of random poses that revisits poses 7-8 rows later measures the simulated noise."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 24, second private battery: every numeric input has a finite plausible range
+"""Every numeric input has a finite plausible range
 (msgs_doc/units.md, walked row by row), copies of measurements are no data, stamps going
 backwards are said, a tracker measuring one point is refused, duplicate CSV columns are
 refused. Real CLI on a simulated KR5."""

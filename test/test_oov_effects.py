@@ -1,6 +1,6 @@
-"""The simulator's effects outside the vocabulary (issue 22): gravity_backlash and
+"""The simulator's effects outside the vocabulary: gravity_backlash and
 link_bending, known answers of their physics, that no vocabulary model absorbs them on
-issue 22's UR10 campaign, and the blind harness's cases for them and for high-order joint
+the UR10 random-pose campaign, and the blind harness's cases for them and for high-order joint
 harmonics (built and judged here; diagnosing them is the harness's and test_diagnose's).
 
 The checks every effect gets (Jacobian against finite differences, text and file forms,
@@ -182,7 +182,7 @@ def test_link_bending_names_a_link_and_its_two_joints() -> None:
         LinkBending(joints=(6,)).parameters(UR10)
 
 
-# -- outside the vocabulary on issue 22's UR10 campaign -----------------------------------
+# -- outside the vocabulary on the UR10 random-pose campaign ------------------------------
 
 
 def test_both_are_registered_outside_the_vocabulary() -> None:
@@ -350,7 +350,7 @@ def test_judge_a_real_diagnosis_whose_hybrid_rung_won() -> None:
 
 @pytest.mark.parametrize(("kind", "joint"), [("gravity_backlash", 2), ("link_bending", 4)])
 def test_the_diagnosis_says_what_lies_outside_the_vocabulary(kind: str, joint: int) -> None:
-    """Issue 22: on the UR10 campaign the physical rungs stay far above the floor, the
+    """On the UR10 campaign the physical rungs stay far above the floor, the
     hybrid rung comes to it, and the diagnosis says that most of what remains lies outside
     the vocabulary, naming the joint whose load-driven motion it is (gravity backlash:
     joint 2's angle; link 3 twisting: joint 4's axis) in the verdict and DIAGNOSIS.json."""

@@ -1,4 +1,4 @@
-"""Issue 22: effects outside the vocabulary (a gravity-side backlash, a link twisting out of
+"""Effects outside the vocabulary (a gravity-side backlash, a link twisting out of
 the arm plane) on simulated UR10 random-pose campaigns whose truth is known: no physical
 rung reaches the noise floor, and the diagnosis names the joint and says the structure is
 outside the vocabulary."""

@@ -1,4 +1,4 @@
-"""Tracker blunders, bad starts and too little data (issue 12), against known answers in
+"""Tracker blunders, bad starts and too little data, against known answers in
 the simulated world: the corrupted points are the ones flagged, the held-out error stays
 that of the clean fit, clean data flag nothing, and the diagnosis never calls a blunder an
 effect of the robot."""

@@ -131,7 +131,7 @@ def test_colcon_build_installs_executables_and_ament_index(tmp_path: Path) -> No
         exe = prefix / "lib" / "robot_calib" / script
         assert exe.is_file() and os.access(exe, os.X_OK), f"missing executable {exe}"
     assert (site_packages / "robot_calib/kinematics/robots/kr5_sixx_r650.yaml").is_file()
-    # what `ros2 launch robot_calib ...` finds (issue 16): launch files, parameters, RViz
+    # what `ros2 launch robot_calib ...` finds: launch files, parameters, RViz
     share = prefix / "share" / "robot_calib"
     for folder, pattern in (("launch", "*.launch.py"), ("config", "*.yaml"), ("rviz", "*.rviz")):
         files = sorted(p.name for p in (REPO / folder).glob(pattern))

@@ -1,7 +1,7 @@
-"""A fit that converges can still be wrong: plausibility warnings against known answers
-(issue 12). Clean data of the right robot warn nothing; a wrong robot, swapped joints,
+"""A fit that converges can still be wrong: plausibility warnings against known
+answers. Clean data of the right robot warn nothing; a wrong robot, swapped joints,
 readings in degrees, a stuck joint and a residual far above the noise each warn, naming
-what is wrong. Nonsense (issue 22: readings in degrees, parameters beyond physics, a
+what is wrong. Nonsense (readings in degrees, parameters beyond physics, a
 residual > 1000 x the noise, worse than the simpler model) is more than a warning: the
 calibration is `implausible`, PARAMS.json `plausible: false`, `calibrate` exits 3 and
 `predict`, `compensate`, `export` refuse the file without --force."""

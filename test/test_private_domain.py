@@ -1,7 +1,7 @@
-"""The offline simulation sees no other ROS 2 graph (issue 24, found again at the end of
-issue 22): a foreign node publishing /joint_states and /clock on this process's domain (as
-a real robot or a user's sim_robot would on the default domain) made `simulate` and `run`
-stall. Their in-process graph runs on a private domain (`nodes.private_domain`)."""
+"""The offline simulation sees no other ROS 2 graph: a foreign node publishing
+/joint_states and /clock on this process's domain (as a real robot or a user's sim_robot
+would on the default domain) made `simulate` and `run` stall. Their in-process
+graph runs on a private domain (`nodes.private_domain`)."""
 
 from __future__ import annotations
 

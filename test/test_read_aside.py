@@ -24,7 +24,7 @@ from robot_calib.sim.scenarios import ur10_random
 
 @pytest.fixture(scope="module")
 def campaign() -> Recording:
-    """300 random UR10 poses with gear harmonics (issue 22's campaign, smaller)."""
+    """300 random UR10 poses with gear harmonics (`ur10_random`'s campaign, smaller)."""
     return ur10_random(seed=4, n=300, holdout_share=0.0).calibration
 
 

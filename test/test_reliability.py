@@ -1,4 +1,4 @@
-"""Faulty inputs, files and interruptions through the real command line (issue 12).
+"""Faulty inputs, files and interruptions through the real command line.
 
 Every case is one line of CASES: an input maker (writes files into the case's folder),
 the command (run there by the command line's main() in the test process, cli_runner.cli,

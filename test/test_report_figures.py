@@ -1,4 +1,4 @@
-"""The diagnosis reports as a field user reads them (issue 24 leftovers): the ladder on a
+"""The diagnosis reports as a field user reads them: the ladder on a
 log axis when its rungs span decades, with the noise floor labelled on its line; the
 histogram's legend beside the data, never over it; a colour bar on the 3D residual vectors;
 model names broken only between terms (or after a comma); and the per-joint rows of the

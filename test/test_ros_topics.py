@@ -1,4 +1,4 @@
-"""The topics ROS users look for (issue 25), through real rclpy on this process's private
+"""The topics ROS users look for, through real rclpy on this process's private
 domain: the calibrator's calibrated URDF on /robot_description reaches a TRANSIENT_LOCAL
 subscriber that joins after it was published, parses and carries the calibrated joint
 origins; its /diagnostics status is OK for a calibration at the noise on held-out poses, WARN

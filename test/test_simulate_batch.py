@@ -1,4 +1,4 @@
-"""`robot-calib simulate` in bursts (issue 23): the batched tracker measures what the
+"""`robot-calib simulate` in bursts: the batched tracker measures what the
 streaming one measures, bit for bit; the CDR templates put on the wire the bytes rclpy's
 own publishing does; the stepped graph records every pose with its receive time."""
 

@@ -1,4 +1,4 @@
-"""6-DoF measurements (issue 13, msgs_doc/six_dof.md): a tracker's 6-DoF probe measures the
+"""6-DoF measurements (msgs_doc/six_dof.md): a tracker's 6-DoF probe measures the
 probe frame's orientation besides its point; bags carry it on /laser_tracker/(NAME/)pose
 (PoseStamped, or PoseWithCovarianceStamped with the stated accuracies); the fit weights
 every residual by the stated accuracies and identifies the whole tool frame (offset and

@@ -1,4 +1,4 @@
-"""6-DoF probes and further targets through the ROS graph (issue 13, msgs_doc/six_dof.md,
+"""6-DoF probes and further targets through the ROS graph (msgs_doc/six_dof.md,
 msgs_doc/sim_tracker.md, msgs_doc/calibrator.md): sim_tracker publishes each probe's frame
 as a PoseWithCovarianceStamped beside its point, the recorder keeps it (and a further
 target's points), and the bag identifies the probe's frame in the flange; the live

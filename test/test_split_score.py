@@ -1,4 +1,4 @@
-"""`robot-calib split` and `score` (issue 13): verbs that replace users' scripts. A split
+"""`robot-calib split` and `score`: verbs that replace users' scripts. A split
 keeps every measurement exactly once, with the approach directions it was measured with;
 a score is the calibration's error on a bag it was not fitted on."""
 

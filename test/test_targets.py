@@ -1,5 +1,5 @@
-"""Several targets (SMRs) on one flange, measured at the same poses (issue 13,
-msgs_doc/targets.md): each has its own offset, all share the tracker pose; bags carry them
+"""Several targets (SMRs) on one flange, measured at the same poses
+(msgs_doc/targets.md): each has its own offset, all share the tracker pose; bags carry them
 on /laser_tracker/NAME/point beside the contract's /laser_tracker/point, `import` takes
 their columns, CPA uses every target's circles and leans on the others where one target
 sits on a joint's axis. Known answers: a simulated KR5 with three targets.

@@ -1,4 +1,4 @@
-"""Thermal effects real robots have (issue 14): a first-order warm-up (amplitude and time
+"""Thermal effects real robots have: a first-order warm-up (amplitude and time
 constant identified, where thermal_drift is a line) and an expansion that follows the
 robot's recorded temperature (the side topic /temperature, read from bags). Known
 answers: simulated worlds."""

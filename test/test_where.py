@@ -1,4 +1,4 @@
-"""Where the residual lies, on real robots' data (issue 14): per-joint figures only where
+"""Where the residual lies, on real robots' data: per-joint figures only where
 a target's lever makes them observable, a sweep table that says why it is empty, and the
 residual maps of the report."""
 

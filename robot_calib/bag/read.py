@@ -440,7 +440,7 @@ def read_bag(
     warnings = warnings + _backwards_stamps(path, js_ns)
     order = np.argsort(js_ns, kind="stable")
     # a stream is told by one target's points per joint state: several targets measured at
-    # each pose of a static bag are no stream (issue 24)
+    # each pose of a static bag are no stream
     per_target = (len(stamped.point_ns) if len(names) <= 1 else
                   int(np.bincount(stamped.point_target, minlength=len(names)).max()))  # fmt: skip
     hint = stream_hint(js_ns[order], q[order], per_target, str(path),

@@ -133,7 +133,7 @@ def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: f
     unknown = "unknown (no repeat poses, circle sweeps or stated accuracy; --tracker-accuracy)"
     known = f"{floor:.4f} mm ({diagnosis.noise.source})" if floor is not None else ""
     print(f"noise floor (abs rms): {known or ('unknown' if diagnosis.noise.warning else unknown)}")
-    if diagnosis.noise.warning:  # a stated accuracy the evidence contradicts (issue 24)
+    if diagnosis.noise.warning:  # a stated accuracy the evidence contradicts
         print(diagnosis.noise.warning)
     geometric = diagnosis.unexplained.geometric_ratio_to_noise_floor
     if geometric is not None:

@@ -1,5 +1,5 @@
 """Compensation: joint commands that make the calibrated robot reach what the nominal
-model promised, or given targets (issue 15)."""
+model promised, or given targets."""
 
 from robot_calib.compensate.solve import (
     Compensation,

@@ -40,7 +40,7 @@ def pyplot() -> Any:  # noqa: ANN401 - the matplotlib.pyplot module
 
 
 #: points a figure draws at most (a seeded random subset above; statistics use all):
-#: a screen shows no more, and matplotlib's cost grows with every marker (issue 23)
+#: a screen shows no more, and matplotlib's cost grows with every marker
 MAX_DRAWN = 1500
 MAX_ARROWS = 500  # 3D arrows of the residual-vector figure
 #: the quantity and unit of the residual-vector figure's colour bars

@@ -15,7 +15,6 @@ fitted in full (Levenberg-Marquardt) and its rung scored with real refits per fo
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import partial
 
@@ -49,6 +48,7 @@ from robot_calib.identify.outliers import (
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.log import Log
 from robot_calib.measurements import Recording
 from robot_calib.measurements.split import N_FOLDS, pose_folds
 from robot_calib.model import KinematicModel
@@ -61,7 +61,6 @@ HOLDOUT_K = 12.0  # hold-out blunders: scored only, never refitted, so a higher 
 TRY_TOP = 3  # candidates refitted per round when the best one's refit disappoints
 CONFIRMED = 0.05  # a refit within this share of its linearised score confirms the screening
 SCREEN_DAMPING = 1e-6  # of the screening step, relative to unit-norm Jacobian columns
-Log = Callable[[str], None]
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ noise, and structure the data do not sample, are not. The ladder then reports wh
 of that learnable gap (geometric's held-out error minus the bound) each physical effect
 explains.
 
-The model (`identify.correction_structured`, since issue 22's out-of-vocabulary item):
+The model (`identify.correction_structured`):
 load-driven geometry first, every link frame's small motion times the gravity moment it
 carries and steps of its joint's gravity torque (plus the model's own Jacobian columns),
 a ridge fit whose ridge is chosen by generalised cross-validation on the calibration

@@ -25,7 +25,7 @@ Repeat poses are told from re-reads (`moved_between`): a pose measured again aft
 robot left it holds the robot's repeatability, a still pose read again only the tracker's
 noise; re-reads serve only where no pose was repeated, and the source says so.
 
-A stated accuracy is checked against the evidence (`NoiseLevel.warning`, issue 24): not
+A stated accuracy is checked against the evidence (`NoiseLevel.warning`): not
 used beside repeat poses or circle fits (said so, naming both figures); FAR_ABOVE x or more
 above them, or above the geometric fit's in-sample residual, a warning (a unit slip: 5 mm
 typed for 5 um); REFUTED x or more above that residual (no fit lies that far below the

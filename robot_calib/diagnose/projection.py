@@ -27,7 +27,7 @@ from robot_calib.poses import Poses
 #: target 0.2 mm from the axis would turn noise into 25 mrad of "harmonics")
 MIN_LEVER_M = 5e-3
 #: a signature column keeping less than this of its norm after the model's own columns are
-#: projected off is collinear with the model: skipped (issue 22: 3.6e15 urad "harmonics")
+#: projected off is collinear with the model: skipped (else "harmonics" of 3.6e15 urad)
 MIN_LEFT = 1e-3
 
 

@@ -32,10 +32,10 @@ limits; for a UR10 forearm 150 um is c_3 = 1.5e-4 rad/(N m) (twist stiffness 7 k
 
 Why the form is the twist only: a link's bending under the same moment, about the
 horizontal in-plane axis, turns the wrist about an axis fixed in the base and mostly drops
-it by a constant amount, which the tracker frame and the DH angles absorb (on issue 22's
-UR10 campaign a forearm bent and twisted as a tube keeps 40 % of its deflection after a
-geometric fit, twisted only 80 %: `sim.blind.ur10_out_of_vocabulary` leaves geometric at
-22 x the noise floor, `test/test_oov_effects.py`).
+it by a constant amount, which the tracker frame and the DH angles absorb (on the
+UR10 random-pose campaign a forearm bent and twisted as a tube keeps 40 % of its
+deflection after a geometric fit, twisted only 80 %: `sim.blind.ur10_out_of_vocabulary`
+leaves geometric at 22 x the noise floor, `test/test_oov_effects.py`).
 
 Why no effect of the vocabulary expresses it: the deflection is a turn about the link's
 own axis, perpendicular to joint j+1's (no joint turns about it: `compliance`,

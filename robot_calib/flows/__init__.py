@@ -21,7 +21,6 @@ the package's light `__init__` (importing it loads nothing else).
 
 from collections.abc import Callable
 
-Log = Callable[[str], None]
 Progress = Callable[[str, int, int], None]  # (plan, poses done, poses in all)
 
 DEFAULT_ROBOT = "kr5_sixx_r650"  # the seed's robot

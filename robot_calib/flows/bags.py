@@ -13,8 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot_calib.errors import InputError
-from robot_calib.flows import Log
 from robot_calib.kinematics.description import RobotDescription
+from robot_calib.log import Log
 from robot_calib.measurements import PAIR_TOLERANCE_S
 
 if TYPE_CHECKING:

@@ -8,10 +8,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from robot_calib.errors import InputError
-from robot_calib.flows import Log
 from robot_calib.flows.bags import read_bags
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.kinematics.description import RobotDescription
+from robot_calib.log import Log
 from robot_calib.measurements import PAIR_TOLERANCE_S
 
 if TYPE_CHECKING:

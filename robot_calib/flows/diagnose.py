@@ -13,9 +13,9 @@ from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
 from robot_calib.errors import InputError
-from robot_calib.flows import Log
 from robot_calib.flows.bags import ReadBags, read_inputs
 from robot_calib.kinematics.description import RobotDescription
+from robot_calib.log import Log
 from robot_calib.measurements import PAIR_TOLERANCE_S
 
 if TYPE_CHECKING:

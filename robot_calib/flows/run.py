@@ -20,7 +20,6 @@ from robot_calib.flows import (
     RUN_HOLDOUT_POSES,
     RUN_MODELS,
     RUN_PLAN,
-    Log,
     Progress,
 )
 from robot_calib.flows.bags import read_bags
@@ -38,6 +37,7 @@ from robot_calib.flows.diagnose import (
 )
 from robot_calib.flows.simulate import Simulation, simulate, simulation_world
 from robot_calib.kinematics.description import RobotDescription
+from robot_calib.log import Log
 
 if TYPE_CHECKING:
     from robot_calib.accuracy import Accuracy

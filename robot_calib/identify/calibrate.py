@@ -59,6 +59,7 @@ from robot_calib.identify.registration import fit_frames, initial_tool_rotations
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.log import Log
 from robot_calib.measurements import Recording
 from robot_calib.messages import target_topic
 from robot_calib.model import KinematicModel, target_parameters
@@ -71,7 +72,6 @@ OBJECTIVES = ("absolute", "seed")
 SEED_ANCHORS = (1, 3, 5)  # the seed fixes the cloud on the centres of circles 1, 3 and 5
 MAX_OUTLIER_ROUNDS = 4  # refits without the flagged points until the set is stable
 START_POSES = 20_000  # poses (a fixed random subset above) of the frames-only start fit
-Log = Callable[[str], None]
 
 
 def parse_model(
@@ -433,7 +433,7 @@ CPA_DRAWS = 40
 
 def _cpa_std(recording: Recording, robot: RobotDescription, geometric: KinematicModel,
              cpa: CPAResult, params: ParameterVector) -> Array:  # fmt: skip
-    """1-sigma of CPA's parameters (issue 24; was 0, which PARAMS.json reserves for fixed
+    """1-sigma of CPA's parameters (not 0, which PARAMS.json reserves for fixed
     ones): a parametric bootstrap of the circle fits. CPA_DRAWS times, the measured points
     plus Gaussian noise of the circle fits' own level (`pooled_circle_noise`, per axis)
     go through the same analysis; each free parameter's spread over the draws is its

@@ -1,7 +1,7 @@
 """Equivalent solutions in one canonical form: the one nearest nominal.
 
 Different DH/Hayati values can describe the same robot exactly; a fit may end at any of
-them (issue 22: theta4 +180 deg with a4 negated is the same arm). Two transforms map a
+them (e.g. theta4 +180 deg with a4 negated is the same arm). Two transforms map a
 solution to an equivalent one:
 
 - wrap: theta, alpha and beta enter the chain only through Rz, Rx and Ry, which repeat

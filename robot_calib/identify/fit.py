@@ -339,7 +339,7 @@ class _Problem:
         n_free): Q^T r and R of the whole [J | r] = Q [R_J  f] (R_J's last row zero), so
         that |f| = |r|, f's Jacobian^T f = J^T r and its Gram matrix J^T J at every x:
         Levenberg-Marquardt (MINPACK) on them takes the steps it takes on the rows, while
-        memory stays O(block x n_free) whatever the number of poses (issue 23)."""
+        memory stays O(block x n_free) whatever the number of poses."""
         n, w = len(self.poses), self.weights
         free = params.free
         n_free = int(free.sum())

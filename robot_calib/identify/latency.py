@@ -19,7 +19,6 @@ on for the final fit.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,6 +28,7 @@ from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.calibration import Calibration
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
+from robot_calib.log import Log
 from robot_calib.measurements.recording import Recording
 from robot_calib.measurements.stream import (
     STREAM_MAX_GAP_S,
@@ -44,8 +44,6 @@ LATENCY_SCAN_STEPS = 21  # coarse scan points over the bounds
 LATENCY_XTOL_S = 2e-6  # Brent's absolute tolerance on the latency [s]
 LATENCY_MAX_ROUNDS = 6  # alternations of latency search and geometry fit
 LATENCY_ROUND_TOL_S = 1e-5  # the rounds stop when the latency moves less than this [s]
-
-Log = Callable[[str], None]
 
 
 @dataclass(frozen=True)

@@ -85,7 +85,7 @@ _SECTIONS: dict[tuple[str, str], dict[str, str]] = {}
 
 
 def description_section(robot: RobotDescription) -> dict[str, str] | None:
-    """PARAMS.json's own copy of the robot description (issue 24: the result is portable,
+    """PARAMS.json's own copy of the robot description (the result is portable,
     it needs no file of the machine it was made on): `format` (urdf | yaml), `text` (the
     file's), None for a built-in robot (its name is enough) or a description whose file no
     longer reads back as `robot` (edited since it was loaded: the path alone, as before)."""

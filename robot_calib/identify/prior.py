@@ -3,7 +3,7 @@
 Real data leave some directions of a rich model nearly flat: over a 140 deg range of joint 2
 the columns [1, cos kq, sin kq] of a low-order harmonic are collinear to 1 part in 1e7, so
 theta2 and the harmonic's constant term can trade hundreds of radians for a micrometre of
-fit, and Levenberg-Marquardt wanders there (issue 22: theta2 -11762 deg, a2 +15.7 m). The
+fit, and Levenberg-Marquardt wanders there (on a UR10 campaign: theta2 -11762 deg, a2 +15.7 m). The
 prior closes those directions without moving well-determined ones: each parameter with a
 prior adds one residual row
 

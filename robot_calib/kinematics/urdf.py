@@ -136,7 +136,7 @@ def load_urdf(
 
 def description_from_text(kind: str, text: str, reference: str, where: str,
                           quiet: bool = True) -> RobotDescription:  # fmt: skip
-    """A robot description from its own text, as a PARAMS.json carries it (issue 24): `kind`
+    """A robot description from its own text, as a PARAMS.json carries it: `kind`
     'urdf' (the chain of `reference`'s #base_link=..&tip_link=.. choice, else the defaults),
     'yaml' (a robot YAML file's text) or 'csv' (a DH table, kinematics/dh_csv.py); the
     result's path is `reference`, the original file's, so it is written back unchanged.

@@ -174,7 +174,7 @@ class CalibratorNode(LifecycleNode):
         self._warned_calibrate = False  # the deprecated ~/calibrate warns once
         group = self._solver_group
         self.create_service(Trigger, "~/solve", self._on_solve_service, callback_group=group)
-        # deprecated (issue 16): SelfTest on ~/calibrate, kept for one release beside ~/solve
+        # deprecated: SelfTest on ~/calibrate, kept for one release beside ~/solve
         self.create_service(SelfTest, "~/calibrate", self._on_calibrate, callback_group=group)
         self.create_service(Trigger, "~/reset", self._on_reset, callback_group=group)
         self.add_on_set_parameters_callback(self._on_set_parameters)

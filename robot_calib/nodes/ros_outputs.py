@@ -1,4 +1,4 @@
-"""The topics ROS users look for (issue 25, msgs_doc/ros_topics.md): the calibrated URDF on
+"""The topics ROS users look for (msgs_doc/ros_topics.md): the calibrated URDF on
 `robot_description` and each node's health on `/diagnostics`.
 
 Builders only: what goes into the messages, from the typed results (`Calibration`, `Score`,

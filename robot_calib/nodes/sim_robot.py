@@ -45,7 +45,7 @@ QOS = QoSProfile(
 )
 MODES = ("plan", "controller")
 # /joint_states readers plan mode waits for: the README's recipe runs a recorder and
-# sim_tracker; starting on the first one lost the poses the other one missed (issue 16)
+# sim_tracker; starting on the first one would lose the poses the other one missed
 DEFAULT_WAIT_FOR = 2
 
 

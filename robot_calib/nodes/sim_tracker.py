@@ -45,7 +45,7 @@ from robot_calib.nodes.sim_robot import QOS
 from robot_calib.sim.measure import StreamingTracker, TrackerReading
 from robot_calib.sim.world import load_world
 
-# readers of each published topic to wait for: the recorder (README recipe, issue 16)
+# readers of each published topic to wait for: the recorder (the README's recipe)
 DEFAULT_WAIT_FOR = 1
 REREAD_STEP_NS = 1_000_000  # the further reads of one pose follow the first 1 ms apart
 

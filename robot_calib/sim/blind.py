@@ -13,7 +13,7 @@ Case classes (`classes()`):
   `thermal_drift` is linear in time), `ripple_order5` (a 5th-harmonic joint-angle ripple,
   the simulator's joint_ripple: no single order of the ladder's transmission_error, 1, 2,
   3, 4, 6, is it, order 6 holds it; judged by its joint, as effects outside the vocabulary),
-  `harmonics_high` (issue 22's gear harmonics: joint_harmonics of orders 11 and 27 on
+  `harmonics_high` (high-order gear harmonics: joint_harmonics of orders 11 and 27 on
   joint 2 and 17 on joint 1, 50-300 urad each, random phases), `harmonics_aliased` (orders
   17 on joint 1, 23 on joint 2 and 11 on joint 3, calibrated on the sweeps alone: the
   sweeps' regular steps alias 23 with 43 and 44, 11 with 57; the hold-out's general poses
@@ -38,7 +38,7 @@ the effect named (`unknown` included), without the floor.
 Every case also gets the right model's held-out error (the withheld effects, fitted as the
 diagnosis would fit them, scored on the same hold-out poses): the diagnosis's chosen rung
 over that is the `ratio_to_right` of the README.
-`ur10_out_of_vocabulary` builds issue 22's out-of-vocabulary UR10 campaigns
+`ur10_out_of_vocabulary` builds the out-of-vocabulary UR10 campaigns
 (`sim.scenarios.ur10_random` with OOV_UR10 effects) for the hybrid model's tests.
 """
 
@@ -100,7 +100,7 @@ GENERAL_POSES = 300
 CARRIED_TOOL_CLASSES = ("link_bending",)
 CARRIED_TOOL_KG = (3.0, 5.0)
 CARRIED_TOOL_OFFSET_M = (0.10, 0.15)
-#: issue 22's out-of-vocabulary UR10 cases: kind -> (effect name, joint, magnitude): the
+#: the out-of-vocabulary UR10 cases: kind -> (effect name, joint, magnitude): the
 #: play [rad] of gravity_backlash, the flange deflection [m rms] of link_bending (whose
 #: compliance is sized for it); geometric alone leaves about 60 x and 20 x the noise floor
 OOV_UR10 = {"gravity_backlash": ("gravity_backlash", 2, 2.0e-3),
@@ -398,7 +398,7 @@ def _options_found(withheld: tuple[Effect, ...], terms: list[Effect],
 def ur10_out_of_vocabulary(
     kind: str, seed: int = 0, n: int = 1000, holdout_share: float = 0.3, harmonics: bool = False
 ) -> Scenario:
-    """Issue 22's UR10 random-pose campaign (`sim.scenarios.ur10_random`: `n` poses,
+    """The UR10 random-pose campaign (`sim.scenarios.ur10_random`: `n` poses,
     `holdout_share` held out) with effects outside the vocabulary: `kind` a key of OOV_UR10
     or several joined by '+' ('gravity_backlash+link_bending'); `harmonics` adds the UR10's
     gear harmonics (UR10_HARMONICS). The answer: the world's effects and their

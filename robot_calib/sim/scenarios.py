@@ -1,6 +1,6 @@
 """Simulated situations of real measurement campaigns, with known answers.
 
-`fanuc_like`: a large FANUC arm as issue 13 describes a real one: the controller reports
+`fanuc_like`: a large FANUC arm modelled on a real one: the controller reports
 J3 coupled to J2 (the built-in `r2000ic_165f`'s reading_to_joint), three SMRs per pose on
 a plate 0.34 m from the flange (one of them on the joint-6 axis), six single-joint sweeps
 of 6 poses each with 144 deg steps over +-360 deg on joints 4 and 6, plus random general
@@ -123,7 +123,7 @@ UR10_DEVIATIONS = {
     "theta1": 4.0e-4, "theta2": -1.1e-3, "theta3": 9.0e-4, "theta4": 1.3e-3, "theta5": -7.0e-4,
     "alpha1": 6.0e-4, "alpha4": -4.0e-4, "alpha5": 5.0e-4, "beta2": 3.0e-4, "beta3": -2.0e-4,
 }  # fmt: skip
-# What the real arm hides (issue 22): joint-angle harmonics of gear stages [rad]
+# What the arm hides: joint-angle harmonics of gear stages [rad]
 UR10_HARMONICS = (
     {"name": "joint_harmonics", "joints": [1], "orders": [17],
      "values": {"jh1_c17": 1.2e-4, "jh1_s17": -0.8e-4}},
@@ -133,7 +133,7 @@ UR10_HARMONICS = (
 
 
 def ur10_world(seed: int = 0, effects: tuple[dict, ...] = UR10_HARMONICS) -> World:  # type: ignore[type-arg]
-    """A UR10 as issue 22's real one: nominal geometry plus UR10_DEVIATIONS, one SMR 0.1 m
+    """A UR10 modelled on a real one: nominal geometry plus UR10_DEVIATIONS, one SMR 0.1 m
     off the flange, the tracker 3 m from the base, `effects` (world-file entries)."""
     return build_world(
         {
@@ -156,7 +156,7 @@ def ur10_random_plan(n: int, rng: np.random.Generator) -> Plan:
 
 def ur10_random(seed: int = 0, n: int = 2773, holdout_share: float = 0.3,
                 effects: tuple[dict, ...] = UR10_HARMONICS) -> Scenario:  # type: ignore[type-arg]  # fmt: skip
-    """Issue 22's UR10 campaign: `n` random poses (UR10_RANGES_DEG) measured in
+    """A UR10 random-pose campaign: `n` random poses (UR10_RANGES_DEG) measured in
     `ur10_world(seed, effects)`, split at random into calibration and hold-out
     (`holdout_share` of the poses), as a user splits a real data set."""
     world = ur10_world(seed, effects)

@@ -1,4 +1,4 @@
-"""What a new user met (issue 22's review, round 22), each fixed where it is met: a hold-out
+"""What a new user met, each fixed where it is met: a hold-out
 bag that does not belong to the calibration is implausible (exit 3, no verdict blaming the
 vocabulary), the best model of an implausible diagnosis is marked `plausible: false`, a
 PARAMS.json edited by hand is re-checked on reading, `compensate` that reaches no row is no
