@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 
@@ -167,6 +168,13 @@ def housing_transforms(housing: Array) -> Array:
     out[:, :3, 3] = flat[:, :3]
     out[:, 3, 3] = 1.0
     return out.reshape(n, j, 4, 4)
+
+
+class PointCorrection(Protocol):
+    """What corrects a model's points: a learned correction's predicted residual (n, 3)
+    [m] at poses (`identify.correction_structured.LearnedCorrection`)."""
+
+    def predict(self, poses: Poses) -> Array: ...
 
 
 @dataclass(frozen=True)
@@ -329,17 +337,21 @@ class KinematicModel:
         origins = frames[..., :3, 3] @ b2t[:3, :3].T + b2t[:3, 3]
         return origins, frames[..., :3, 2] @ b2t[:3, :3].T
 
-    def target_points(self, params: ParameterVector, poses: Poses) -> Array:
+    def target_points(self, params: ParameterVector, poses: Poses,
+                      correction: PointCorrection | None = None) -> Array:  # fmt: skip
         """Predicted target centres in the tracker frame, shape (n, 3) [m] (CHAIN_BLOCK_POSES
-        poses at a time: memory O(block) beyond the result)."""
+        poses at a time: memory O(block) beyond the result); with a learned `correction`
+        (the hybrid model, PARAMS.json `correction`) less the residual it predicts at
+        `poses`: the one place a learned correction is applied to points."""
         n = len(poses)
         if n <= CHAIN_BLOCK_POSES:
-            return self._evaluate(params, poses, with_jacobian=False)[0]
-        out = np.empty((n, 3))
-        for start in range(0, n, CHAIN_BLOCK_POSES):
-            rows = slice(start, min(start + CHAIN_BLOCK_POSES, n))
-            out[rows] = self._evaluate(params, poses.subset(rows), with_jacobian=False)[0]
-        return out
+            out = self._evaluate(params, poses, with_jacobian=False)[0]
+        else:
+            out = np.empty((n, 3))
+            for start in range(0, n, CHAIN_BLOCK_POSES):
+                rows = slice(start, min(start + CHAIN_BLOCK_POSES, n))
+                out[rows] = self._evaluate(params, poses.subset(rows), with_jacobian=False)[0]
+        return out if correction is None else out - correction.predict(poses)
 
     def jacobian(self, params: ParameterVector, poses: Poses) -> tuple[Array, Array]:
         """Points (n, 3) [m] and d points / d parameters, shape (n, 3, P), full vector order

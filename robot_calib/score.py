@@ -81,9 +81,7 @@ def score(
     have none: `in_sample` is then the hybrid model's (PARAMS.json `hybrid_residuals`), the
     model actually applied. judged_by: what `in_sample` is, for the warning."""
     recording = recording.with_targets(model.targets)
-    predicted = model.target_points(params, recording.poses)
-    if correction is not None:
-        predicted = predicted - correction.predict(recording.poses)
+    predicted = model.target_points(params, recording.poses, correction)
     residuals = predicted - recording.points
     n_suspect = int(outlier_mask(residuals, robust_sigma(residuals)).sum())
     rotation = orientation_residuals(model, params, recording.poses)

@@ -58,9 +58,7 @@ def main(args: argparse.Namespace) -> int:
 
         frames = model.probe_orientations(params, poses)
         quaternions = Rotation.from_matrix(frames).as_quat()
-    points = model.target_points(params, poses)
-    if correction is not None:  # the hybrid model: minus the learned residual
-        points = points - correction.predict(poses)
+    points = model.target_points(params, poses, correction)  # hybrid: less the learned
     write_points_csv(points, output, quaternions)
     which = "" if len(model.targets) == 1 else f", target {target_topic(args.target)}"
     frames_too = "" if quaternions is None else " with the probe frame as qx,qy,qz,qw"

@@ -94,10 +94,7 @@ class Calibration:
     def predict(self, poses: Poses) -> Array:
         """Target points (n, 3) [m] in the tracker frame: the model's, minus the learned
         correction's predicted residual when the calibration has one."""
-        points = self.model.target_points(self.parameters, poses)
-        if self.correction is not None:
-            points = points - self.correction.predict(poses)
-        return points
+        return self.model.target_points(self.parameters, poses, self.correction)
 
     @property
     def label(self) -> str:
