@@ -20,17 +20,20 @@ __version__ = "0.1.0"
 #: the public Python API (robot_calib/api.py), loaded on first use: `import robot_calib`
 #: stays light (no numpy or scipy until a function is called)
 __all__ = [
-    "Calibration", "Diagnosis", "Recording", "RobotCalibError", "InputError", "calibrate",
-    "compensate", "diagnose", "load_robot", "read_recording", "recording_from_arrays",
-    "simulate", "__version__",
+    "Calibration", "Diagnosis", "InputError", "ModelSpec", "Recording", "RobotCalibError",
+    "calibrate", "compensate", "diagnose", "load_robot", "read_recording",
+    "recording_from_arrays", "simulate", "__version__",
 ]  # fmt: skip
+_API = "robot_calib.api"
 _LAZY = {
-    "calibrate": "robot_calib.api", "compensate": "robot_calib.api",
-    "diagnose": "robot_calib.api", "load_robot": "robot_calib.api",
-    "read_recording": "robot_calib.api", "recording_from_arrays": "robot_calib.api",
-    "simulate": "robot_calib.api", "Calibration": "robot_calib.identify.calibration",
-    "Diagnosis": "robot_calib.diagnose.diagnosis", "Recording": "robot_calib.measurements",
-    "RobotCalibError": "robot_calib.errors", "InputError": "robot_calib.errors",
+    **dict.fromkeys(("calibrate", "compensate", "diagnose", "load_robot", "read_recording",
+                     "recording_from_arrays", "simulate"), _API),
+    "Calibration": "robot_calib.identify.calibration",
+    "Diagnosis": "robot_calib.diagnose.diagnosis",
+    "ModelSpec": "robot_calib.identify.model_spec",
+    "Recording": "robot_calib.measurements",
+    "RobotCalibError": "robot_calib.errors",
+    "InputError": "robot_calib.errors",
 }  # fmt: skip
 
 

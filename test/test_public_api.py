@@ -42,3 +42,13 @@ def test_the_example_script_calibrates_from_python(tmp_path: Path) -> None:
         assert (tmp_path / written).is_file(), written
     again = rc.Calibration.load(tmp_path / "params.json")  # written by the script, read here
     assert again.name == "geometric+backlash:4"
+
+
+def test_a_model_name_is_a_value_that_round_trips() -> None:
+    spec = rc.ModelSpec.parse("geometric+backlash:4+joint_harmonics:1,2:orders=17,23")
+    assert spec.base == "geometric" and spec.effect_names == ("backlash", "joint_harmonics")
+    assert str(spec) == "geometric+backlash:4+joint_harmonics:1,2:orders=17,23"
+    assert str(rc.ModelSpec.parse("cpa")) == "cpa" and rc.ModelSpec.parse("cpa").terms == ()
+    assert spec.added_to(rc.ModelSpec.parse("geometric+backlash:4")) == (
+        "joint_harmonics:1,2:orders=17,23"
+    )

@@ -100,9 +100,10 @@ def check_model_terms(spec: str, robot: RobotDescription, ecc_order: int) -> Non
     line for each joint_harmonics term that leaves its defaults to be guessed (no
     `orders=`: order 2 alone; no joints: every joint; msgs_doc/effects.md)."""
     from robot_calib.identify.calibrate import parse_model
+    from robot_calib.identify.model_spec import ModelSpec
 
     _, effects = parse_model(spec, robot, ecc_order)
-    terms = spec.split("+")[1:]
+    terms = ModelSpec.parse(spec).terms
     owner: dict[str, str] = {}
     for text, effect in zip(terms, effects):
         for name in effect.parameter_names(robot):

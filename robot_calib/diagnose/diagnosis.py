@@ -40,6 +40,7 @@ from robot_calib.diagnose.signatures import (
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.model_spec import ModelSpec
 from robot_calib.identify.outliers import Outlier
 from robot_calib.identify.plausibility import degrees_reason
 from robot_calib.kinematics.description import RobotDescription
@@ -268,8 +269,7 @@ class Diagnosis(Record):
         for before, rung in zip(self.ladder, self.ladder[1:]):
             if rung.learnable_gap_share is None or before.learnable_gap_share is None:
                 continue
-            terms = before.model.split("+")
-            added = "+".join(t for t in rung.model.split("+") if t not in terms)
+            added = ModelSpec.parse(rung.model).added_to(ModelSpec.parse(before.model))
             out.append((added, rung.learnable_gap_share - before.learnable_gap_share))
         return out
 

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 from robot_calib.errors import InputError
 from robot_calib.flows.bags import read_bags
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
+from robot_calib.identify.model_spec import ModelSpec
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.log import Log
 from robot_calib.measurements import PAIR_TOLERANCE_S
@@ -136,7 +137,7 @@ def calibrate_stream_bag(
     parse_model(model, robot, ecc_order)
     if len(bags) != 1:
         raise InputError(f"--stream calibrates one bag (its own latency); got {len(bags)}")
-    if model.split("+")[0] == "cpa":
+    if ModelSpec.parse(model).base == "cpa":
         raise InputError(f"--stream --model {model}: a stream has no circle sweeps; use an "
                          "LM model (nominal, geometric, geometric+EFFECT)")  # fmt: skip
     stream = read_stream(Path(bags[0]), robot)

@@ -39,6 +39,7 @@ from robot_calib.identify.identifiability import (
     fix_poorly_determined,
     fix_unidentifiable,
 )
+from robot_calib.identify.model_spec import ModelSpec
 from robot_calib.identify.objectives import AbsoluteObjective, Objective, SeedObjective
 from robot_calib.identify.outliers import (
     OUTLIER_K,
@@ -88,7 +89,8 @@ def parse_model(
     effects : list of Effect
         The effects after the base, in the order written (empty unless base is 'geometric').
     """
-    base, *extras = spec.split("+")
+    parsed = ModelSpec.parse(spec)
+    base, extras = parsed.base, list(parsed.terms)
     known = ", ".join(vocabulary())
     if base not in BASE_MODELS or (extras and base != "geometric"):
         raise InputError(

@@ -68,6 +68,7 @@ from robot_calib.effects.thermal_warmup import ThermalWarmup
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.fit import fit_model
+from robot_calib.identify.model_spec import ModelSpec
 from robot_calib.kinematics.description import RobotDescription, with_payload
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import Recording
@@ -368,7 +369,7 @@ def judge_evidence(case: Case, where: WhereItLies) -> EvidenceVerdict:
 def _rung_terms(diagnosis: Diagnosis, n_joints: int) -> list[Effect]:
     """The effects of the chosen physical rung's model name (its terms after the geometry;
     the hybrid rung, a learned correction on top of it, adds none)."""
-    return [parse_effect(t, n_joints) for t in diagnosis.physical_model.split("+")[1:]]
+    return [parse_effect(t, n_joints) for t in ModelSpec.parse(diagnosis.physical_model).terms]
 
 
 def _joints_named(withheld: tuple[Effect, ...], joints: list[int]) -> bool:
