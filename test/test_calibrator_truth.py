@@ -146,3 +146,27 @@ def _param(name: str, value: object):  # noqa: ANN202 - rclpy Parameter
     from rclpy.parameter import Parameter
 
     return Parameter(name, value=value)
+
+
+def test_the_nodes_diagnosis_is_the_command_lines(
+    context: Context, backlash_bag: Path, tmp_path: Path
+) -> None:
+    """The same bags diagnosed by `robot-calib diagnose --holdout` and by the calibrator
+    node (diagnose, holdout_bags): one DIAGNOSIS.json document, its warnings included (a
+    richer model that generalises worse was the command line's alone before)."""
+    from cli_runner import cli
+
+    world = build_world({"seed": 9, "effects": [{"name": "backlash", "joints": [4]}]}, "hold")
+    holdout = tmp_path / "holdout.mcap"
+    simulate(holdout, "random", world, seed=19, n_random=60)
+    run = cli("diagnose", str(backlash_bag), "--holdout", str(holdout),
+              "-o", str(tmp_path / "d.json"))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    by_cli = json.loads((tmp_path / "d.json").read_text())
+    calibrator, _ = _solved(context, backlash_bag, diagnose=True,
+                            holdout_bags=[str(holdout)])  # fmt: skip
+    assert calibrator.diagnosis is not None
+    by_node = json.loads(json.dumps(calibrator.diagnosis.to_dict()))
+    assert by_node["warnings"] == by_cli["warnings"]
+    assert any("generalises worse" in w for w in by_cli["warnings"]), by_cli["warnings"]
+    assert by_node == by_cli

@@ -50,8 +50,14 @@ def diagnose_recordings(
 
     if holdout is not None:  # index the hold-out's targets as the calibration's
         holdout = holdout.with_targets(recording.target_names)
-    return diagnose(recording, robot, holdout, log=log, tracker_sigma_m=tracker_sigma_m,
-                    on_ladder=on_ladder)  # fmt: skip
+    diagnosis, ladder = diagnose(recording, robot, holdout, log=log,
+                                 tracker_sigma_m=tracker_sigma_m, on_ladder=on_ladder)  # fmt: skip
+    if on_ladder is None and holdout is not None:
+        # the warnings every front end gives (a richer model that generalises worse): the
+        # command line's hook (`FiguresWhenClimbed`) adds them with its reports' figures
+        _, warnings = compare_before_after(ladder)
+        diagnosis = replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
+    return diagnosis, ladder
 
 
 def diagnose_bags(
