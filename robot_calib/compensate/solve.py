@@ -53,12 +53,11 @@ from robot_calib.ik import (
     solve_ik,
     tool2base,
 )
-from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.description import RobotDescription, home_variables
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses, approach_directions
-from robot_calib.sim.plans import home_variables
 
 #: Compensated readings of nominal commands: `ik.IKSolution` (q, error_m, error_rad,
 #: iterations, converged) of the calibrated model.
@@ -190,7 +189,7 @@ class TargetCompensation:
 def home_readings(
     model: KinematicModel, params: ParameterVector, goal2base: Array, tool2flange: Array
 ) -> Array:
-    """(n, J) readings [rad] of the home pose (sim.plans.home_variables) with joint 1 turned
+    """(n, J) readings [rad] of the home pose (`home_variables`) with joint 1 turned
     to face each goal (n, 4, 4) (base frame): the default seed of the nominal inverse
     kinematics. Joint 1's axis is the base z axis."""
     variables = home_variables(model.robot.n_joints)

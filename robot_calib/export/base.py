@@ -96,12 +96,12 @@ def effect_sizes(cal: Calibration) -> dict[str, tuple[float, float]]:
     SIZE_POSES random poses (directions as visited, times over SIZE_HOURS, temperatures in
     SIZE_TEMPERATURE_C): the model's points with the effect against the same model with its
     parameters at 0 (no effect). By effect label."""
+    from robot_calib.kinematics.description import random_readings
     from robot_calib.poses import Poses
-    from robot_calib.sim.plans import random_plan
 
     model, params = cal.model, cal.parameters
     rng = np.random.default_rng(0)
-    q = random_plan(model.robot, SIZE_POSES, rng).q
+    q = random_readings(model.robot, SIZE_POSES, rng)
     time = np.sort(rng.uniform(0.0, SIZE_HOURS * 3600.0, SIZE_POSES))
     visited = Poses.from_readings(q, None, time)
     poses = replace(visited, temperature=rng.uniform(*SIZE_TEMPERATURE_C, SIZE_POSES))

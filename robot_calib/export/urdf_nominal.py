@@ -202,11 +202,11 @@ def fit_nominal(cal: Calibration, chain: FileChain, source: str) -> NominalFit:
     they disagree by more than the tolerances at random poses."""
     model = KinematicModel(cal.model.robot, (), cal.model.targets, cal.model.oriented)
     nominal = model.parameters()
-    from robot_calib.sim.plans import random_plan
+    from robot_calib.kinematics.description import random_readings
 
     signs = joint_signs(cal, "a URDF")
     zero_q = np.zeros((1, len(chain.moving)))
-    q = np.vstack([zero_q, random_plan(model.robot, CHECK_POSES, np.random.default_rng(0)).q])
+    q = np.vstack([zero_q, random_readings(model.robot, CHECK_POSES, np.random.default_rng(0))])
     frames = _at(model, nominal, q)  # the zero pose first
     dh = frames[0]
     file_frames = chain_frames(chain, q)
@@ -347,11 +347,11 @@ def render_on_nominal(cal: Calibration, source: str, nominal_path: str | Path) -
 def _verify(cal: Calibration, text: bytes, fit: NominalFit, source: str) -> None:
     """The written file's joint frames at random poses vs B E'_j(q) C_j: ExportError (a
     bug, never a silent wrong file) when they differ by more than VERIFY_TOLERANCE_M."""
-    from robot_calib.sim.plans import random_plan
+    from robot_calib.kinematics.description import random_readings
 
     model = cal.model
     chain = file_chain(parse_urdf(text, source), model.robot.joint_names, source)
-    q = random_plan(model.robot, CHECK_POSES, np.random.default_rng(1)).q
+    q = random_readings(model.robot, CHECK_POSES, np.random.default_rng(1))
     expected = fit.base @ _at(model, cal.parameters, q)[:, :-1] @ fit.attach
     error = np.abs(chain_frames(chain, q) - expected).max()
     if not error < VERIFY_TOLERANCE_M:

@@ -226,6 +226,35 @@ class RobotDescription:
         return self.path
 
 
+# The home pose [deg] of joints 1-6 (0 beyond): wrist bent so that every joint's circle has a
+# radius of several cm at a target on the flange; where simulated controllers start, dry
+# runs plan from and the compensator's alternative solutions are sought near.
+HOME_DEG = (0.0, -90.0, 90.0, 0.0, 45.0, 0.0)
+
+
+def home_variables(n_joints: int) -> Array:
+    """(J,) joint variables [rad] of the home pose: HOME_DEG, 0 for joints beyond it."""
+    out = np.zeros(n_joints)
+    k = min(len(HOME_DEG), n_joints)
+    out[:k] = np.radians(HOME_DEG[:k])
+    return out
+
+
+def home_pose(robot: RobotDescription) -> Array:
+    """(J,) readings [rad] of the home pose (`home_variables`, through the robot's
+    reading-to-joint mapping)."""
+    return np.asarray(robot.readings(home_variables(robot.n_joints)[None, :])[0], dtype=float)
+
+
+def random_readings(robot: RobotDescription, n: int, rng: np.random.Generator,
+                    margin: float = 0.05) -> Array:  # fmt: skip
+    """(n, J) readings [rad] drawn uniformly in the joint limits shrunk by `margin` of each
+    range (general poses: for checks at random poses, and the `random` plan)."""
+    lo, hi = robot.limits.T
+    span = hi - lo
+    return rng.uniform(lo + margin * span, hi - margin * span, (n, robot.n_joints))
+
+
 def available_robots() -> list[str]:
     """Names of the built-in descriptions."""
     return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))

@@ -56,6 +56,7 @@ from robot_calib.capture.moves import (
 from robot_calib.capture.resume import existing_parts, measured, part_path
 from robot_calib.capture.settle import Settler
 from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.kinematics.description import home_pose
 from robot_calib.kinematics.frames import Array
 from robot_calib.messages import (
     JOINT_STATE_TYPE,
@@ -80,7 +81,7 @@ from robot_calib.nodes.ros_outputs import (
 )
 from robot_calib.nodes.sim_robot import QOS, trajectory_topic
 from robot_calib.poses import DirectionTracker
-from robot_calib.sim.plans import home_pose, make_plan
+from robot_calib.sim.plans import make_plan
 
 DIRECTION_SPEED_RAD_S = 1e-9  # |velocity| recorded with a settled pose: only its sign counts
 STATE_BUFFER = 400  # joint states kept to pair a point with (a few seconds at 100 Hz)

@@ -31,12 +31,12 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from robot_calib.errors import InputError
-from robot_calib.kinematics.description import JointLimitError
+from robot_calib.kinematics.description import JointLimitError, home_pose
 from robot_calib.messages import JOINT_STATES_TOPIC, ns_to_sec_nanosec
 from robot_calib.nodes._cdr import ClockEncoder, JointStateEncoder
 from robot_calib.nodes._common import declare, in_ros_terms, run_node
 from robot_calib.sim.controller import Motion, follow, hold, state_at
-from robot_calib.sim.plans import PLAN_NAMES, Plan, home_pose, make_plan, plan_times
+from robot_calib.sim.plans import PLAN_NAMES, Plan, make_plan, plan_times
 from robot_calib.sim.world import load_world
 
 SYSTEM_CLOCK = RosClock(clock_type=ClockType.SYSTEM_TIME)

@@ -20,7 +20,11 @@ import numpy as np
 
 from robot_calib.errors import InputError
 from robot_calib.ik import solve_ik
-from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.description import (
+    HOME_DEG,
+    RobotDescription,
+    random_readings,
+)
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
@@ -43,25 +47,6 @@ PAPER_TESTS: dict[int, tuple[list[tuple[float, float, int]], float]] = {
     6: ([(80, -80, 30), (-40, -120, 15), (80, -50, 25), (90, -90, 30), (45, -45, 15),
          (90, -90, 30)], 0.10),
 }  # fmt: skip
-
-# Pose of the joints that do not sweep [deg]: wrist bent so that every joint's circle has
-# a radius of several cm at the target.
-HOME_DEG = (0.0, -90.0, 90.0, 0.0, 45.0, 0.0)
-
-
-def home_variables(n_joints: int) -> Array:
-    """(J,) joint variables [rad] of the home pose: HOME_DEG, 0 for joints beyond it."""
-    out = np.zeros(n_joints)
-    k = min(len(HOME_DEG), n_joints)
-    out[:k] = np.radians(HOME_DEG[:k])
-    return out
-
-
-def home_pose(robot: RobotDescription) -> Array:
-    """(J,) readings [rad] of the home pose (`home_variables`, through the robot's
-    reading-to-joint mapping): where a simulated controller starts and a dry run plans from."""
-    return np.asarray(robot.readings(home_variables(robot.n_joints)[None, :])[0], dtype=float)
-
 
 PLAN_NAMES = (*(f"paper-test{k}" for k in PAPER_TESTS), "random", "iso9283")
 
@@ -129,9 +114,7 @@ def random_plan(
     speed_fraction: float = 0.1,
 ) -> Plan:
     """`n` general poses uniform in the joint limits shrunk by `margin` of each range."""
-    lo, hi = robot.limits.T
-    span = hi - lo
-    q = rng.uniform(lo + margin * span, hi - margin * span, (n, robot.n_joints))
+    q = random_readings(robot, n, rng, margin)
     return Plan("random", q, np.zeros(n, dtype=int), speed_fraction)
 
 
