@@ -84,8 +84,7 @@ def simulate(
     from robot_calib.flows.simulate import simulate as run
     from robot_calib.flows.simulate import simulation_world
 
-    built = simulation_world(world, robot if robot is not None or world else None, effects,
-                             seed)  # fmt: skip
+    built = simulation_world(world, robot, effects, seed)  # robot None: the world's
     return run(output, plan, built, seed, n_random, force=force)
 
 

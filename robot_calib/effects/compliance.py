@@ -12,7 +12,6 @@ import numpy as np
 
 from robot_calib.effects.base import Effect, JointOffsetEffect, register_effect
 from robot_calib.kinematics.description import RobotDescription
-from robot_calib.kinematics.dh import DHTable, chain
 from robot_calib.kinematics.frames import Array
 from robot_calib.poses import Poses
 
@@ -33,8 +32,7 @@ def gravity_torques(robot: RobotDescription, q: Array) -> Array:
     of link i (moved by joint i), all on the nominal kinematics (the robot's joint
     variables of q).
     """
-    dh = DHTable(robot.theta + robot.joint_variables(q), robot.d, robot.a, robot.alpha, robot.beta)
-    frames = chain(dh)  # (n, J + 1, 4, 4)
+    frames = robot.nominal_frames(q)  # (n, J + 1, 4, 4)
     com = np.einsum("njab,jb->nja", frames[:, 1:, :3, :3], robot.link_com) + frames[:, 1:, :3, 3]
     force = robot.link_mass[:, None] * GRAVITY  # (J, 3)
     n, n_joints = q.shape

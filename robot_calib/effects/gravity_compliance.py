@@ -30,7 +30,6 @@ from robot_calib.effects.compliance import (
     visible_gravity_joints,
 )
 from robot_calib.kinematics.description import RobotDescription, with_payload
-from robot_calib.kinematics.dh import DHTable, chain
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
@@ -44,8 +43,7 @@ def gravity_regressors(robot: RobotDescription, q: Array) -> Array:
     """R (n, J, J, 4): tau_j / g = sum_i R[:, j, i] . (m_i c_i (3, link frame), m_i) for
     readings q (n, J) [rad] on the nominal kinematics (zero for i < j); first three terms
     dimensionless, the last [m]."""
-    dh = DHTable(robot.theta + robot.joint_variables(q), robot.d, robot.a, robot.alpha, robot.beta)
-    frames = chain(dh)  # (n, J + 1, 4, 4)
+    frames = robot.nominal_frames(q)  # (n, J + 1, 4, 4)
     down = GRAVITY / np.linalg.norm(GRAVITY)
     n, n_joints = q.shape
     out = np.zeros((n, n_joints, n_joints, len(TERMS)))

@@ -53,7 +53,6 @@ from robot_calib.effects.base import Contribution, Effect, register_effect
 from robot_calib.effects.compliance import GRAVITY
 from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
-from robot_calib.kinematics.dh import DHTable, chain
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import Parameter, ParameterVector
 from robot_calib.poses import Poses
@@ -72,16 +71,10 @@ MIN_SPAN_M = 1e-6
 SPREAD_POSES = 500
 
 
-def _frames(robot: RobotDescription, q: Array) -> Array:
-    """Nominal frames (n, J + 1, 4, 4) in the base for readings q (n, J) [rad]."""
-    dh = DHTable(robot.theta + robot.joint_variables(q), robot.d, robot.a, robot.alpha, robot.beta)
-    return chain(dh)
-
-
 def carried_moment(robot: RobotDescription, q: Array, link: int) -> Array:
     """M (n, 3) [N m] in frame `link`: the gravity moment about frame `link`'s origin of
     the links beyond joint link + 1 (1-based `link`), for readings q (n, J) [rad]."""
-    frames = _frames(robot, q)
+    frames = robot.nominal_frames(q)
     com = np.einsum("njab,jb->nja", frames[:, 1:, :3, :3], robot.link_com) + frames[:, 1:, :3, 3]
     force = robot.link_mass[:, None] * GRAVITY  # (J, 3) base frame
     origin = frames[:, link, :3, 3]
@@ -92,7 +85,7 @@ def carried_moment(robot: RobotDescription, q: Array, link: int) -> Array:
 def twist_axis(robot: RobotDescription, link: int) -> Array:
     """The link's axis t (3,) in frame `link` (1-based): o_link - o_{link-1} normal to joint
     link+1's axis, normalised; zeros for a link along that axis (it cannot twist)."""
-    frames = _frames(robot, np.zeros((1, robot.n_joints)))[0]  # the span is fixed in frame j
+    frames = robot.nominal_frames(np.zeros((1, robot.n_joints)))[0]  # the span is fixed in frame j
     span = frames[link, :3, :3].T @ (frames[link, :3, 3] - frames[link - 1, :3, 3])
     span[2] = 0.0
     norm = float(np.linalg.norm(span))
@@ -103,7 +96,7 @@ def twist_alignment(robot: RobotDescription, link: int) -> float:
     """|cos| of the angle between link `link`'s twist axis (`twist_axis`) and its own joint's
     axis (joint `link`'s, z of frame link - 1): near 1, a twist turns the housing the way
     the joint turns (a joint-angle error, no twist); 0 for a link that cannot twist."""
-    frames = _frames(robot, np.zeros((1, robot.n_joints)))[0]
+    frames = robot.nominal_frames(np.zeros((1, robot.n_joints)))[0]
     own = frames[link, :3, :3].T @ frames[link - 1, :3, 2]
     return abs(float(twist_axis(robot, link) @ own))
 
@@ -121,7 +114,7 @@ def housing_per_unit(robot: RobotDescription, q: Array, link: int) -> Array:
 def flange_per_unit(robot: RobotDescription, q: Array, link: int) -> Array:
     """Flange-origin displacement (n,) [m per rad/(N m)] of link `link`'s twist, to first
     order: (R phi) x (flange - o_link)."""
-    frames = _frames(robot, q)
+    frames = robot.nominal_frames(q)
     ex_ey = housing_per_unit(robot, q, link)[:, 3:]
     tilt = np.einsum("nab,nb->na", frames[:, link, :3, :2], ex_ey)  # base frame
     lever = frames[:, -1, :3, 3] - frames[:, link, :3, 3]

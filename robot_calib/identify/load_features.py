@@ -12,7 +12,6 @@ import numpy as np
 
 from robot_calib.effects.compliance import GRAVITY
 from robot_calib.kinematics.description import RobotDescription
-from robot_calib.kinematics.dh import DHTable, chain
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.model import KinematicModel
@@ -37,8 +36,7 @@ def frame_loads(robot: RobotDescription, q: Array) -> Array:
     robot's mass model), then P [N m / kg] that of a unit mass at the flange's origin: a
     payload or tool the mass model does not know (its mass unknown) loads every frame as a
     multiple of P. Nominal kinematics of readings q (n, J) [rad]."""
-    dh = DHTable(robot.theta + robot.joint_variables(q), robot.d, robot.a, robot.alpha, robot.beta)
-    frames = chain(dh)
+    frames = robot.nominal_frames(q)
     com = np.einsum("njab,jb->nja", frames[:, 1:, :3, :3], robot.link_com) + frames[:, 1:, :3, 3]
     force = robot.link_mass[:, None] * GRAVITY  # (J, 3) base frame
     n, n_joints = q.shape

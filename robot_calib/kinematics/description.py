@@ -26,6 +26,7 @@ import numpy as np
 import yaml
 
 from robot_calib.errors import InputError, RobotDescriptionError, check_keys
+from robot_calib.kinematics.dh import DHTable, chain
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.modified_dh import (
     MAX_BASE_OFFSET,
@@ -164,6 +165,12 @@ class RobotDescription:
         if self.reading_offset is not None:
             out = out + self.reading_offset
         return out
+
+    def nominal_frames(self, q: Array) -> Array:
+        """(n, J + 1, 4, 4) the nominal DH frames in the base frame at readings q (n, J)
+        [rad]: frame 0 the base, frame j moved by joint j (the frame of link j's mass)."""
+        dh = DHTable(self.theta + self.joint_variables(q), self.d, self.a, self.alpha, self.beta)
+        return chain(dh)
 
     def readings(self, joint_variables: Array) -> Array:
         """Readings q (n, J) [rad] of joint variables (n, J) [rad]: the inverse of

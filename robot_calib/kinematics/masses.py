@@ -34,7 +34,6 @@ from dataclasses import replace
 import numpy as np
 
 from robot_calib.kinematics.description import RobotDescription
-from robot_calib.kinematics.dh import DHTable, chain
 from robot_calib.kinematics.frames import Array
 
 #: an arm's total mass [kg] above this times its reach [m] cubed is no arm
@@ -112,13 +111,6 @@ def substitute_masses(robot: RobotDescription) -> tuple[RobotDescription, str]:
             "masses)")  # fmt: skip
 
 
-def _frames(robot: RobotDescription, q: Array) -> Array:
-    """(n, J + 1, 4, 4) the nominal DH frames of `robot` at readings q (n, J) [rad]."""
-    dh = DHTable(robot.theta + robot.joint_variables(q), robot.d, robot.a, robot.alpha,
-                 robot.beta)  # fmt: skip
-    return chain(dh)
-
-
 def builtin_twin(robot: RobotDescription) -> RobotDescription | None:
     """The built-in description of the same arm as `robot` (same joint count, flange
     frames within MATCH_M / MATCH_RAD at MATCH_POSES random poses inside both arms'
@@ -137,7 +129,7 @@ def builtin_twin(robot: RobotDescription) -> RobotDescription | None:
         if np.any(lo > hi):
             continue
         q = np.random.default_rng(0).uniform(lo, hi, (MATCH_POSES, robot.n_joints))
-        mine, theirs = _frames(robot, q)[:, -1], _frames(other, q)[:, -1]
+        mine, theirs = robot.nominal_frames(q)[:, -1], other.nominal_frames(q)[:, -1]
         if (np.abs(mine[:, :3, 3] - theirs[:, :3, 3]).max() <= MATCH_M
                 and np.abs(mine[:, :3, :3] - theirs[:, :3, :3]).max() <= MATCH_RAD):  # fmt: skip
             return other
@@ -148,7 +140,7 @@ def _carried_over(twin: RobotDescription, robot: RobotDescription) -> tuple[Arra
     """`twin`'s link masses (J,) [kg] and centres of mass carried into `robot`'s DH
     frames (J, 3) [m] through both arms' frames at the zero pose."""
     zero = np.zeros((1, robot.n_joints))
-    theirs, mine = _frames(twin, zero)[0, 1:], _frames(robot, zero)[0, 1:]
+    theirs, mine = twin.nominal_frames(zero)[0, 1:], robot.nominal_frames(zero)[0, 1:]
     in_base = np.einsum("jab,jb->ja", theirs[:, :3, :3], twin.link_com) + theirs[:, :3, 3]
     com = np.einsum("jba,jb->ja", mine[:, :3, :3], in_base - mine[:, :3, 3])
     return twin.link_mass.copy(), com
@@ -158,7 +150,7 @@ def default_masses(robot: RobotDescription) -> tuple[Array, Array]:
     """A default mass model from `robot`'s geometry (module docstring): masses (J,) [kg]
     and centres of mass (J, 3) [m, DH frame j], each link's centre midway between its
     frame's origin and the previous one at the zero pose."""
-    frames = _frames(robot, np.zeros((1, robot.n_joints)))[0]
+    frames = robot.nominal_frames(np.zeros((1, robot.n_joints)))[0]
     origins = frames[:, :3, 3]  # (J + 1, 3)
     length = np.maximum(np.linalg.norm(np.diff(origins, axis=0), axis=1), MIN_LINK_M)
     mass = DEFAULT_DENSITY_KG_M3 * reach_m(robot) ** 3 * length / length.sum()

@@ -276,11 +276,8 @@ class Recording:
             rows = np.flatnonzero(self.bag_index == reads.source)
             if not len(rows) or not len(reads.stamp_ns):
                 continue
-            stamps, read = self.stamp_ns[rows], reads.stamp_ns
-            after = np.searchsorted(read, stamps)
-            lo, hi = np.clip(after - 1, 0, len(read) - 1), np.clip(after, 0, len(read) - 1)
-            near = np.where(np.abs(read[lo] - stamps) <= np.abs(read[hi] - stamps), lo, hi)
-            close = np.abs(read[near] - stamps) <= PAIR_TOLERANCE_S * 1e9
+            near = pair_nearest(reads.stamp_ns, self.stamp_ns[rows], int(PAIR_TOLERANCE_S * 1e9))
+            close = near >= 0
             out[rows[close]] = reads.leftover_m()[near[close]]
         return out
 

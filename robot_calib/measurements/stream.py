@@ -271,8 +271,7 @@ def stream_hint(js_ns: IntArray, q: Array, n_points: int, source: str,
     if m < 2 or n_points < STREAM_RATIO * m:
         return None
     if point_ns is not None and len(point_ns):
-        after = np.clip(np.searchsorted(js_ns, point_ns), 1, m - 1)
-        gap = np.minimum(np.abs(point_ns - js_ns[after - 1]), np.abs(js_ns[after] - point_ns))
+        gap = np.abs(js_ns[pair_nearest(js_ns, point_ns, np.iinfo(np.int64).max)] - point_ns)
         if np.median(gap) < AT_STATE * np.median(np.diff(js_ns)):
             return None
     moving = np.any(np.abs(np.diff(q, axis=0)) > 1e-4, axis=1).mean()

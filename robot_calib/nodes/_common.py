@@ -68,12 +68,16 @@ def declare(node: Node, name: str, default: Any, description: str,
                 else "")  # fmt: skip
         raise InputError(f"{node.get_name()}: parameter {name!r}: {exc}{hint}") from None
     if isinstance(default, float):
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise InputError(
-                f"{node.get_name()}: parameter {name!r} must be a number, not {value!r}"
-            )
-        return float(value)
+        return parameter_number(node.get_name(), name, value)
     return list(value) if isinstance(default, list) else value
+
+
+def parameter_number(node_name: str, name: str, value: object) -> float:
+    """A float parameter's value (an int too: `-p rate:=1`); InputError naming the node
+    and the parameter for anything else (a bool, a string)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(f"{node_name}: parameter {name!r} must be a number, not {value!r}")
+    return float(value)
 
 
 def overrides(

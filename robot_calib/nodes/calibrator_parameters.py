@@ -16,7 +16,7 @@ from robot_calib.identify.calibrate import parse_model
 from robot_calib.kinematics.description import RobotDescription, with_joint_names
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import PAIR_TOLERANCE_S
-from robot_calib.nodes._common import declare
+from robot_calib.nodes._common import declare, parameter_number
 from robot_calib.nodes.calibrator_live import FIRST_TARGET, LiveTargets, live_targets
 
 DEFAULT_QOS_DEPTH = 10000
@@ -172,7 +172,8 @@ def checked_parameters(name: str, values: dict[str, object],
 
 
 def _number(name: str, key: str, value: object) -> float:
-    """A float parameter's value: a finite number (an int too), else InputError."""
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise InputError(f"{name}: parameter {key!r} must be a finite number, not {value!r}")
-    return float(value)
+    """A float parameter's value (`parameter_number`) that is finite, else InputError."""
+    number = parameter_number(name, key, value)
+    if not math.isfinite(number):
+        raise InputError(f"{name}: parameter {key!r} must be finite, not {value!r}")
+    return number
