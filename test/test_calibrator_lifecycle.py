@@ -6,7 +6,6 @@ the next solve, a bad value or a read-only parameter is refused with its reason.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -17,6 +16,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from ros_spin import spin_until
 from std_srvs.srv import Trigger
 
 from robot_calib.messages import JOINT_STATES_TOPIC, POINT_TOPIC
@@ -42,10 +42,7 @@ class Graph:
             self.executor.add_node(node)
 
     def spin_until(self, condition: Callable[[], bool]) -> None:
-        deadline = time.monotonic() + TIMEOUT_S
-        while not condition():
-            assert time.monotonic() < deadline, "timed out"
-            self.executor.spin_once(timeout_sec=0.01)
+        spin_until(self.executor, condition, TIMEOUT_S)
 
     def call(self, srv: Any, name: str, request: Any) -> Any:  # noqa: ANN401 - srv types
         client = self.manager.create_client(srv, f"/calibrator/{name}")

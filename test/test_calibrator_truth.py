@@ -6,7 +6,6 @@ model leaves the backlash, and with publish:=best publishes the backlash model i
 from __future__ import annotations
 
 import json
-import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -18,6 +17,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from ros_spin import spin_until as wait_until
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -36,10 +36,7 @@ T0_NS = 1_700_000_000_000_000_000
 
 
 def spin_until(executor: SingleThreadedExecutor, condition: Callable[[], bool]) -> None:
-    deadline = time.monotonic() + TIMEOUT_S
-    while not condition():
-        assert time.monotonic() < deadline, "timed out"
-        executor.spin_once(timeout_sec=0.01)
+    wait_until(executor, condition, TIMEOUT_S)  # a diagnosis in the node takes seconds
 
 
 def test_a_solve_of_joints_in_degrees_answers_failure(context: Context) -> None:

@@ -58,13 +58,21 @@ def _write(path: Path, rows: list[dict[str, float]], **extra: object) -> Path:
     return path
 
 
-def test_a_random_modified_table_gives_its_own_forward_kinematics(tmp_path: Path) -> None:
-    rng = np.random.default_rng(5)
-    rows = [{"alpha": 0.0, "a": 0.0, "theta": 0.3, "d": 0.4}]
+def random_craig_rows(rng: np.random.Generator, theta1: float,
+                      d1: float) -> list[dict[str, float]]:  # fmt: skip
+    """A random 6-joint Craig table (rad, m): row 1 on the base axis (alpha_0 = a_0 = 0,
+    theta1, d1), rows 2-6 drawn, each twist well away from 0 and pi."""
+    rows = [{"alpha": 0.0, "a": 0.0, "theta": theta1, "d": d1}]
     for _ in range(5):
         rows.append({"alpha": float(rng.choice([-1, 1]) * rng.uniform(0.3, 2.8)),
                      "a": float(rng.uniform(-0.5, 0.5)), "theta": float(rng.uniform(-3, 3)),
                      "d": float(rng.uniform(-0.5, 0.5))})  # fmt: skip
+    return rows
+
+
+def test_a_random_modified_table_gives_its_own_forward_kinematics(tmp_path: Path) -> None:
+    rng = np.random.default_rng(5)
+    rows = random_craig_rows(rng, theta1=0.3, d1=0.4)
     robot = load_robot(str(_write(tmp_path / "arm.yaml", rows)))
     q = rng.uniform(-3.0, 3.0, (50, 6))
     ours = model_flange(robot, q)
@@ -152,11 +160,7 @@ def test_a_modified_table_as_csv_gives_its_own_forward_kinematics(tmp_path: Path
     flange of the loaded robot is the convention's own product, to 1e-12 m; a standard DH
     table of the KR5 as CSV is the built-in KR5."""
     rng = np.random.default_rng(8)
-    rows = [{"alpha": 0.0, "a": 0.0, "theta": 0.2, "d": 0.35}]
-    for _ in range(5):
-        rows.append({"alpha": float(rng.choice([-1, 1]) * rng.uniform(0.3, 2.8)),
-                     "a": float(rng.uniform(-0.5, 0.5)), "theta": float(rng.uniform(-3, 3)),
-                     "d": float(rng.uniform(-0.5, 0.5))})  # fmt: skip
+    rows = random_craig_rows(rng, theta1=0.2, d1=0.35)
     table = [[np.degrees(r["alpha"]), r["a"] * 1e3, np.degrees(r["theta"]), r["d"] * 1e3, -170.0,
               170.0] for r in rows]  # fmt: skip
     path = _csv(

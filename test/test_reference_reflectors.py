@@ -37,12 +37,16 @@ def _world(references: bool = True) -> World:
     )  # fmt: skip
 
 
+def recorded(world: World, bag: Path, poses: int = 80) -> Recording:
+    """`poses` random poses of `world` simulated into `bag` and read back."""
+    simulate(bag, "random", world, n_random=poses)
+    return read_recording([bag], world.model.robot)
+
+
 @pytest.fixture(scope="module")
 def drifting(tmp_path_factory: pytest.TempPathFactory) -> tuple[World, Recording]:
     world = _world()
-    bag = tmp_path_factory.mktemp("refs") / "drift.mcap"
-    simulate(bag, "random", world, n_random=120)
-    return world, read_recording([bag], world.model.robot)
+    return world, recorded(world, tmp_path_factory.mktemp("refs") / "drift.mcap", 120)
 
 
 def test_the_drift_found_is_the_simulated_one(drifting: tuple[World, Recording]) -> None:
@@ -117,9 +121,7 @@ def test_references_tell_a_tracker_jump_from_a_robot_error(tmp_path: Path) -> No
                     {"kind": "tracker", "poses": [jump, jump], "offset_m": offset}]},
         "three SMRs",
     )  # fmt: skip
-    bag = tmp_path / "three.mcap"
-    simulate(bag, "random", world, n_random=80)
-    recording = read_recording([bag], world.model.robot)
+    recording = recorded(world, tmp_path / "three.mcap")
     (refs,) = recording.references
     assert recording.stamp_ns is not None and refs.drift is not None
     pose = recording.pose_index()
@@ -205,9 +207,7 @@ def test_a_tracker_knocked_for_good_is_a_step_not_a_drift(tmp_path: Path) -> Non
          "events": [{"kind": "tracker", "poses": [40, 79], "offset_m": [3e-4, 4e-4, 0.0]}]},
         "knocked tracker",
     )  # fmt: skip
-    bag = tmp_path / "knock.mcap"
-    simulate(bag, "random", world, n_random=80)
-    recording = read_recording([bag], world.model.robot)
+    recording = recorded(world, tmp_path / "knock.mcap")
     (refs,) = recording.references
     assert refs.drift is not None and len(refs.drift.step_mm) == 1
     assert refs.drift.step_mm[0] == pytest.approx(0.5, abs=0.02)
