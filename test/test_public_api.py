@@ -42,6 +42,10 @@ def test_the_example_script_calibrates_from_python(tmp_path: Path) -> None:
         assert (tmp_path / written).is_file(), written
     again = rc.Calibration.load(tmp_path / "params.json")  # written by the script, read here
     assert again.name == "geometric+backlash:4"
+    import json
+
+    diagnosis = rc.Diagnosis.from_dict(json.loads((tmp_path / "diagnosis.json").read_text()))
+    assert diagnosis.verdict == "backlash on joints [4]"
 
 
 def test_a_model_name_is_a_value_that_round_trips() -> None:
