@@ -47,13 +47,13 @@ def context():  # noqa: ANN201 - rclpy is imported lazily, after the domain is c
 # hands each worker the next file in this order as it frees up, so the long files start
 # first and the two workers end together. The other files follow in their usual order.
 SLOW_FIRST = (
-    "test_field_files.py",
-    "test_field_results.py",
+    "test_files_and_faults.py",
+    "test_stated_accuracy_and_cpa_sigma.py",
     "test_diagnose.py",
     "test_implausible_inputs.py",
-    "test_reliability.py",
+    "test_faulty_inputs.py",
     "test_targets.py",
-    "test_oov_effects.py",
+    "test_effects_outside_vocabulary.py",
     "test_divergence.py",
     "test_types.py",  # mypy: ~40 s without its .mypy_cache (a fresh clone)
     "test_joint_harmonics.py",
@@ -62,7 +62,7 @@ SLOW_FIRST = (
     "test_plausibility.py",
     "test_capture.py",
     "test_calibrator.py",
-    "test_out_of_vocabulary.py",
+    "test_outside_vocabulary.py",
     "test_outliers.py",
     "test_correction_structured.py",
     "test_private_domain.py",
