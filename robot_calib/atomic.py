@@ -30,7 +30,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from robot_calib.errors import InputError
+from robot_calib.errors import EXISTS, InputError, param
 
 _NEW: set[Path] = set()
 """Targets checked to be new (absolute): created exclusively, never replaced."""
@@ -126,9 +126,7 @@ def staged_outputs(folder: str | Path, force: bool = False) -> Iterator[Path]:
         if not force:
             for staged in files:
                 if (folder / staged.name).exists():
-                    raise InputError(
-                        f"{folder / staged.name}: exists; will not overwrite it (use --force)"
-                    )
+                    raise InputError(f"{folder / staged.name}: {EXISTS}")
         deferred = _defer_signals(True)  # the set moves in as one: no signal between renames
         _refuse_if_interrupted()
         # what a SIGKILL between the renames (which no handler can hold) would leave part of:
@@ -200,7 +198,7 @@ def _refuse_incomplete(folder: Path, stale: dict[Path, list[str]]) -> None:
             raise InputError(
                 f"{folder}: {', '.join(partial)}: left by a write that was killed between the "
                 f"renames of its files (journal {journal.name}): an incomplete set; use "
-                "--force to replace it"
+                f"{param('force', True)} to replace it"
             )
 
 
@@ -343,10 +341,10 @@ def _move_new(staged: Path, target: Path) -> None:
     try:
         os.link(staged, target)
     except FileExistsError:
-        raise InputError(f"{target}: exists; will not overwrite it (use --force)") from None
+        raise InputError(f"{target}: {EXISTS}") from None
     except OSError:  # e.g. a file system without hard links
         if target.exists():
-            raise InputError(f"{target}: exists; will not overwrite it (use --force)") from None
+            raise InputError(f"{target}: {EXISTS}") from None
         os.replace(staged, target)
         return
     staged.unlink()
@@ -384,7 +382,7 @@ def output_path(
     if not force:
         refuse_incomplete(path)  # a set killed half-moved: said as such, not "exists"
     if path.exists() and not force:
-        raise InputError(f"{path}: exists; will not overwrite it (use --force)")
+        raise InputError(f"{path}: {EXISTS}")
     if not force:  # still new at the final rename, or refused (a second command wrote it)
         claim_new(path)
     return path

@@ -6,8 +6,38 @@ bad input, 3 for a fit that ran to its end with a nonsense result (`ImplausibleE
 
 from __future__ import annotations
 
+import ast
 import difflib
+import re
 from collections.abc import Iterable, Sequence
+
+_UNSET = object()
+
+
+def param(name: str, value: object = _UNSET) -> str:
+    """How a message of the core names a caller's option: its Python keyword in backquotes,
+    `` `name` `` or `` `name=value` `` with the value as Python writes it
+    (`` `model='geometric+x'` ``, `` `force=True` ``). The command line prints the verb's
+    flag instead (`--model geometric+x`, `--force`: cli/flags.py); the core never names a
+    flag its caller may not have."""
+    return f"`{name}`" if value is _UNSET else f"`{name}={value!r}`"
+
+
+#: a keyword in a message as `param` writes it: group 1 its name, group 2 its value as
+#: Python writes it (None: the name alone); the front ends rewrite it in their terms
+KEYWORD = re.compile(r"`([a-z_][a-z0-9_]*)(?:=([^`]*))?`")
+
+
+def keyword_value(text: str) -> object:
+    """The value of a keyword as `param` wrote it (its repr read back), else `text`."""
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        return text
+
+
+#: the end of the message of an output that exists (the overwrite policy)
+EXISTS = f"exists; will not overwrite it (use {param('force', True)})"
 
 
 class RobotCalibError(Exception):

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.kinematics.frames import Array
 
 JOINT_STATES_TOPIC = "/joint_states"
@@ -154,17 +154,17 @@ def joint_positions(
             if len(missing) == len(joint_names)
             else f"lack the robot's joints {missing} (robot: {list(joint_names)})"
         )
-        robots = robots_with_joint_names(names)  # a wrong --robot is likelier than renaming
+        robots = robots_with_joint_names(names)  # a wrong robot is likelier than renaming
         other = (
             f"they are the joints of built-in robot{'s' if len(robots) > 1 else ''} "
-            f"{', '.join(robots)}: give --robot {robots[0]} ("
-            f"{'or another of them; ' if len(robots) > 1 else ''}node parameter robot), or "
+            f"{', '.join(robots)}: give {param('robot', robots[0])}"
+            f"{' (or another of them)' if len(robots) > 1 else ''}, or "
             if robots
             else ""
         )
         raise InputError(
-            f"{where}: JointState names {names} {what}; {other}map them with --joint-names "
-            f"NAME1,...,NAME{len(joint_names)} (node parameter joint_names): the message's "
+            f"{where}: JointState names {names} {what}; {other}map them with "
+            f"{param('joint_names', f'NAME1,...,NAME{len(joint_names)}')}: the message's "
             f"names of joints 1..{len(joint_names)} in order"
         )
     if len(msg.position) != len(names):

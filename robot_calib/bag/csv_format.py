@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from robot_calib.bag.write import SixDof
+from robot_calib.errors import param
 from robot_calib.kinematics.frames import Array
 
 ANGLE_UNITS = {"deg": np.pi / 180.0, "rad": 1.0}
@@ -44,9 +45,9 @@ class OrientationColumns:
 
     @property
     def option(self) -> str:
-        """How the command line spells it: '--orientation[-rpy] [NAME:]C,C,...'."""
-        flag = "--orientation" if self.kind == "quaternion" else "--orientation-rpy"
-        return f"{flag} {self.target + ':' if self.target else ''}{','.join(self.columns)}"
+        """How messages name it: `orientation[_rpy]='[NAME:]C,C,...'` (`errors.param`)."""
+        name = "orientation" if self.kind == "quaternion" else "orientation_rpy"
+        return param(name, f"{self.target + ':' if self.target else ''}{','.join(self.columns)}")
 
 
 @dataclass(frozen=True)
@@ -61,9 +62,9 @@ class SigmaColumns:
 
     @property
     def option(self) -> str:
-        """How the command line spells it: '--sigma [NAME:]SP[,SR]'."""
+        """How messages name it: `sigma='[NAME:]SP[,SR]'` (`errors.param`)."""
         columns = self.position + (f",{self.orientation}" if self.orientation else "")
-        return f"--sigma {self.target + ':' if self.target else ''}{columns}"
+        return param("sigma", f"{self.target + ':' if self.target else ''}{columns}")
 
 
 @dataclass(frozen=True)

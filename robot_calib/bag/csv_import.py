@@ -32,7 +32,7 @@ from robot_calib.bag.csv_format import (
 )
 from robot_calib.bag.csv_six_dof import check_six_dof_format, six_dof_columns
 from robot_calib.bag.write import EPOCH_MIN_S
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements.recording import are_rereads, copied_rows, copies, pasted_block
 from robot_calib.poses import beyond_reach
@@ -129,8 +129,8 @@ def _check_distinct_columns(
         if col in cols[:k]:
             raise InputError(
                 f"{path}: column {_column_label(refs[k], col, header)!r} is given twice (in "
-                "two of --joints, --point, --dif, --time, --temperature, --target, "
-                "--reference): each value needs its own column"
+                f"two of {', '.join(param(k) for k in COLUMN_OPTIONS)}): each value needs its own "
+                "column"
             )
 
 
@@ -177,7 +177,9 @@ def _row_numbers(
     return numbers, ""
 
 
-SEPARATORS = {";": "';'", "\t": "tab", ",": "','", "|": "'|'", " ": "' '"}  # as --sep spells them
+SEPARATORS = {";": "';'", "\t": "tab", ",": "','", "|": "'|'", " ": "' '"}  # for people
+# the format's options that each name columns of the file (CsvFormat's fields)
+COLUMN_OPTIONS = ("joints", "point", "dif", "time", "temperature", "targets", "references")
 
 
 def _check_separator(path: Path, fmt: CsvFormat, line: int, row: list[str]) -> None:
@@ -189,8 +191,8 @@ def _check_separator(path: Path, fmt: CsvFormat, line: int, row: list[str]) -> N
         first = "the header" if fmt.header else "the first row"
         raise InputError(
             f"{path}:{line}: {first} is one column containing {found[sep]} {SEPARATORS[sep]} "
-            f"(separator {SEPARATORS.get(fmt.separator, repr(fmt.separator))}): give --sep "
-            f"{SEPARATORS[sep]}"
+            f"(separator {SEPARATORS.get(fmt.separator, repr(fmt.separator))}): give "
+            f"{param('separator', sep)}"
         )
 
 
@@ -212,13 +214,14 @@ def _check_decimal_mark(path: Path, fmt: CsvFormat, cells: list[tuple[int, str]]
     if fmt.decimal_comma and points and not commas:
         line, cell = points[0]
         raise InputError(
-            f"{path}:{line}: --decimal-comma, but the numbers have a decimal point "
-            f"({cell!r}); drop --decimal-comma"
+            f"{path}:{line}: {param('decimal_comma', True)}, but the numbers have a decimal "
+            f"point ({cell!r}); drop it"
         )
     if not fmt.decimal_comma and commas and fmt.separator != ",":
         line, cell = commas[0]
         raise InputError(
-            f"{path}:{line}: number {cell!r} has a decimal comma; add --decimal-comma"
+            f"{path}:{line}: number {cell!r} has a decimal comma; add "
+            f"{param('decimal_comma', True)}"
         )
 
 
@@ -252,7 +255,7 @@ def _unit_checks(
                     f"{path}: joint column {fmt.joints[j]!r} reaches "
                     f"{np.abs(q[:, j]).max():.1f}, beyond any joint reading in rad "
                     f"(|q| <= {reach[j]:.1f}): the angles look like degrees; give "
-                    "--angle-unit deg"
+                    f"{param('angle_unit', 'deg')}"
                 )
         for k in np.flatnonzero(beyond.any(axis=1)):
             j = int(np.flatnonzero(beyond[k])[0])
@@ -265,9 +268,9 @@ def _unit_checks(
     dist_m = np.linalg.norm(points, axis=1) * LENGTH_UNITS[fmt.length_unit]
     columns = "/".join(fmt.point)
     if fmt.length_unit == "m":
-        far, other, hint = dist_m > MAX_TRACKER_RANGE_M, "millimetres", "--length-unit mm"
+        far, other, hint = dist_m > MAX_TRACKER_RANGE_M, "millimetres", param("length_unit", "mm")
     else:
-        far, other, hint = dist_m < MIN_TRACKER_RANGE_M, "metres", "--length-unit m"
+        far, other, hint = dist_m < MIN_TRACKER_RANGE_M, "metres", param("length_unit", "m")
     if far.mean() > 0.5:
         raise InputError(
             f"{path}: point columns {columns} are {np.median(dist_m):.3g} m from the tracker "
@@ -283,7 +286,7 @@ def _unit_checks(
         if np.all(np.abs(q) <= 2 * np.pi) and span.max() > 0.5:
             warnings.append(
                 f"warning: {path}: every joint column stays within +-{2 * np.pi:.2f} while "
-                "read as degrees: they look like radians (--angle-unit rad?)"
+                f"read as degrees: they look like radians ({param('angle_unit', 'rad')}?)"
             )
     bad = [(lines[k], why[k]) for k in np.flatnonzero(bad_mask)]
     return ~bad_mask, bad, warnings
@@ -312,7 +315,9 @@ def read_measurement_csv(
         )
     check_six_dof_format(path, fmt)
     if len(fmt.separator) != 1:
-        raise InputError(f"{path}: separator {fmt.separator!r}: one character (--sep tab: a tab)")
+        raise InputError(
+            f"{path}: {param('separator', fmt.separator)}: one character ('\\t': a tab)"
+        )
     spaced = fmt.separator == " "  # a run of spaces (aligned columns) is one separator
     try:
         with path.open(newline="", encoding="utf-8-sig") as handle:
@@ -330,7 +335,7 @@ def read_measurement_csv(
         raise InputError(
             f"{path}:{numbered[0][0]}: the header row is all numbers ({', '.join(header[:3])}"
             f"{', ...' if len(header) > 3 else ''}): a measurement, not column names; give "
-            "--no-header (columns by 0-based index) or add a header row"
+            f"{param('header', False)} (columns by 0-based index) or add a header row"
         )
     body = numbered[1:] if fmt.header else numbered
     if not body:
@@ -400,14 +405,16 @@ def read_measurement_csv(
     }
     for (name, columns), xyz in zip(fmt.targets, extra.values()):
         if set(columns) == set(fmt.point):
-            option = "--reference" if name in fmt.references else "--target"
-            raise InputError(f"{path}: {option} {name} names the --point columns {columns}")
+            option = param("references" if name in fmt.references else "targets")
+            raise InputError(
+                f"{path}: {option} {name} names the {param('point')} columns {columns}"
+            )
         dist_m = np.linalg.norm(xyz[np.isfinite(xyz).all(axis=1)], axis=1)
         if len(dist_m) and not MIN_TRACKER_RANGE_M <= np.median(dist_m) <= MAX_TRACKER_RANGE_M:
             raise InputError(
                 f"{path}: {target_word(fmt, name)} columns {'/'.join(columns)} are "
                 f"{np.median(dist_m):.3g} m from the tracker read as {fmt.length_unit} "
-                f"(the --point columns' unit): another unit, or not point columns?"
+                f"(the {param('point')} columns' unit): another unit, or not point columns?"
             )
         partial = np.isnan(xyz).any(axis=1) & ~np.isnan(xyz).all(axis=1)
         if partial.any():

@@ -25,7 +25,7 @@ from robot_calib.bag.csv_format import (
     target_label,
 )
 from robot_calib.bag.write import SixDof
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.kinematics.frames import Array
 from robot_calib.messages import QUATERNION_TOLERANCE
 
@@ -36,12 +36,12 @@ def check_six_dof_format(path: Path, fmt: CsvFormat) -> None:
     specifications, have the wrong number of columns, give an orientation standard
     deviation without an orientation, or a unit is not understood."""
     for unit, known, option in (
-        (fmt.orientation_unit, ANGLE_UNITS, "--orientation-unit"),
-        (fmt.sigma_unit, SIGMA_LENGTH_UNITS, "--sigma-unit"),
-        (fmt.sigma_angle_unit, SIGMA_ANGLE_UNITS, "--sigma-angle-unit"),
+        (fmt.orientation_unit, ANGLE_UNITS, "orientation_unit"),
+        (fmt.sigma_unit, SIGMA_LENGTH_UNITS, "sigma_unit"),
+        (fmt.sigma_angle_unit, SIGMA_ANGLE_UNITS, "sigma_angle_unit"),
     ):
         if unit is not None and unit not in known:
-            raise InputError(f"{path}: {option} {unit}: expected one of {'|'.join(known)}")
+            raise InputError(f"{path}: {param(option, unit)}: expected one of {'|'.join(known)}")
     names = [name for name, _ in fmt.targets]
     known_targets = ", ".join(names) or "none given"
     oriented: dict[str, OrientationColumns] = {}
@@ -49,8 +49,8 @@ def check_six_dof_format(path: Path, fmt: CsvFormat) -> None:
     for spec in specs:
         if spec.target and spec.target not in names:
             raise InputError(
-                f"{path}: {spec.option}: no target {spec.target} among the --target names "
-                f"({known_targets}); without NAME: the first target"
+                f"{path}: {spec.option}: no target {spec.target} among the targets of "
+                f"{param('targets')} ({known_targets}); without NAME: the first target"
             )
     for o in fmt.orientations:
         n_columns = 4 if o.kind == "quaternion" else 3
@@ -70,7 +70,8 @@ def check_six_dof_format(path: Path, fmt: CsvFormat) -> None:
         if sig.orientation and sig.target not in oriented:
             raise InputError(
                 f"{path}: {sig.option}: an orientation standard deviation, but no "
-                f"--orientation or --orientation-rpy for {target_label(sig.target)}"
+                f"{param('orientation')} or {param('orientation_rpy')} for "
+                f"{target_label(sig.target)}"
             )
 
 
@@ -164,7 +165,8 @@ def _orientation(
     if unit == "rad" and (k := _first_row(beyond)) is not None:
         raise InputError(
             f"{path}:{lines[k]}: roll-pitch-yaw {columns} of {label} = {cells[k].tolist()} "
-            "go beyond 2 pi read as rad: they look like degrees; give --orientation-unit deg"
+            f"go beyond 2 pi read as rad: they look like degrees; give "
+            f"{param('orientation_unit', 'deg')}"
         )
     # lowercase 'xyz': extrinsic (fixed axes) x, then y, then z, i.e. R = Rz Ry Rx
     rotation[whole] = Rotation.from_euler("xyz", cells[whole] * ANGLE_UNITS[unit]).as_matrix()
@@ -203,7 +205,7 @@ def _sigma(
     median = float(np.median(sigma[filled])) if filled.any() else low
     if low <= median <= high:
         return sigma, []
-    option = "--sigma-unit" if kind == 0 else "--sigma-angle-unit"
+    option = param("sigma_unit" if kind == 0 else "sigma_angle_unit")
     return sigma, [
         f"warning: {path}: {what} standard deviations {column} of {label} have a median of "
         f"{median:.3g} {si} read as {unit}, outside the plausible {low:g}..{high:g} {si}: "

@@ -23,7 +23,7 @@ import numpy.typing as npt
 
 from robot_calib.bag.bulk_decode import Columns, decode_columns
 from robot_calib.bag.mcap_reader import BagReader
-from robot_calib.errors import BagError, InputError, TruncatedBagError
+from robot_calib.errors import BagError, InputError, TruncatedBagError, param
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements.recording import (
@@ -37,7 +37,7 @@ from robot_calib.measurements.recording import (
 )
 from robot_calib.measurements.references import ReferenceReads
 from robot_calib.measurements.six_dof import PoseReading, StampedMeasurements, join_poses
-from robot_calib.measurements.stream import JointStream, stream_hint
+from robot_calib.measurements.stream import STREAM_ADVICE, JointStream, stream_hint
 from robot_calib.messages import (
     JOINT_STATE_TYPE,
     JOINT_STATES_TOPIC,
@@ -78,7 +78,8 @@ def _check_no_extra_joints(names: tuple[str, ...], robot: RobotDescription, path
     if extra:
         raise BagError(
             f"{path}: {JOINT_STATES_TOPIC} has joints {extra} that robot {robot.name} "
-            f"({robot.n_joints} joints: {list(robot.joint_names)}) does not have; wrong --robot?"
+            f"({robot.n_joints} joints: {list(robot.joint_names)}) does not have; wrong "
+            f"{param('robot')}?"
         )
 
 
@@ -445,10 +446,10 @@ def read_bag(
                   int(np.bincount(stamped.point_target, minlength=len(names)).max()))  # fmt: skip
     hint = stream_hint(js_ns[order], q[order], per_target, str(path),
                        np.asarray(stamped.point_ns, dtype=np.int64))  # fmt: skip
-    if hint and len(names) > 1:  # --stream reads a single target (read_stream)
-        advice = (f" (points per target); --stream reads the single target of {POINT_TOPIC}: "
-                  "measure each pose at rest (msgs_doc/stream.md)")  # fmt: skip
-        hint = hint.replace(": use --stream (msgs_doc/stream.md)", advice)
+    if hint and len(names) > 1:  # a stream is read for a single target (read_stream)
+        advice = (f"(points per target); {param('stream', True)} reads the single target of "
+                  f"{POINT_TOPIC}: measure each pose at rest (msgs_doc/stream.md)")  # fmt: skip
+        hint = hint.replace(f": {STREAM_ADVICE}", f" {advice}")
     warnings = warnings + ([hint] if hint else [])
     rec = recording_from_stream(
         js_ns,
@@ -553,15 +554,16 @@ def read_stream(path: Path, robot: RobotDescription) -> JointStream:
     js_ns, q, velocity_sign, stamped, names, celsius, _ = _bag_messages(path, robot)
     if len(names) > 1 or stamped.rotation is not None:
         raise BagError(
-            f"{path}: --stream reads the single target of {POINT_TOPIC}; this bag has "
-            f"further targets or 6-DoF poses ({len(names)} target(s))"
+            f"{path}: {param('stream', True)} reads the single target of {POINT_TOPIC}; this bag "
+            f"has further targets or 6-DoF poses ({len(names)} target(s))"
         )
     with BagReader(path) as reader:
         references = [t for t in reader.topics if reference_topic_name(t) is not None]
     if references:
-        raise BagError(f"{path}: --stream does not read reference reflectors ({references[0]}"
-                       "): the tracker's drift they show would stay in the points; read the "
-                       "bag without --stream (msgs_doc/references.md)")  # fmt: skip
+        raise BagError(f"{path}: {param('stream', True)} does not read reference reflectors "
+                       f"({references[0]}): the tracker's drift they show would stay in the "
+                       "points; read the bag as poses at rest "
+                       "(msgs_doc/references.md)")  # fmt: skip
     try:
         return JointStream.from_messages(
             js_ns, q, velocity_sign, stamped.point_ns, stamped.points, str(path),

@@ -21,7 +21,7 @@ from pathlib import Path
 from robot_calib.bag.mcap_reader import BagReader
 from robot_calib.bag.mcap_writer import BagWriter
 from robot_calib.bag.ros2_formats import MESSAGE_ENCODING
-from robot_calib.errors import BagError, InputError
+from robot_calib.errors import EXISTS, BagError, InputError
 
 
 @dataclass(frozen=True)
@@ -142,7 +142,7 @@ def _check_output(source: Path, output: Path, force: bool = False) -> None:
         if output.is_dir():
             raise InputError(f"{output}: is a folder; give a file name for the repaired bag")
         if not force:
-            raise InputError(f"{output}: exists; will not overwrite it (use --force)")
+            raise InputError(f"{output}: {EXISTS}")
     if not output.parent.is_dir():
         raise InputError(f"{output.parent}: no such folder for the repaired bag")
 

@@ -22,6 +22,7 @@ from typing import Any, NoReturn
 
 from robot_calib import program_and_verb
 from robot_calib.atomic import INTERRUPTS
+from robot_calib.cli.flags import in_flags, learn
 from robot_calib.cli.options import OVERWRITE_POLICY
 from robot_calib.cli.registry import VERB_NAMES, build_parser
 from robot_calib.errors import RobotCalibError
@@ -56,7 +57,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     named = argv[0] if argv and argv[0] in VERB_NAMES else None  # only its options built
-    args = build_parser(named).parse_args(argv)
+    parser = build_parser(named)
+    args = parser.parse_args(argv)
+    learn(parser, args.command)  # the core's messages name keywords: printed as its flags
     signal.signal(signal.SIGTERM, _interrupt)
     if signal.getsignal(signal.SIGHUP) is signal.SIG_DFL:  # not under nohup (ignored)
         signal.signal(signal.SIGHUP, _interrupt)
@@ -77,7 +80,7 @@ def _warning_line(verb: str, message: Warning | str, category: type[Warning], *_
     'warning: MESSAGE' like the verb's own warnings (`verb`: kept for the signature),
     never a source line or a file path ('robot-calib VERB: ...' is the line of an error)."""
     del verb
-    text = " ".join(str(message).split())
+    text = in_flags(" ".join(str(message).split()))
     print(f"warning: {text}", file=sys.stderr)
 
 
@@ -99,7 +102,7 @@ def _run_verb(args: argparse.Namespace) -> int:
             print(f"robot-calib {args.command}: interrupted", file=sys.stderr)
             return 130
         if isinstance(exc, RobotCalibError):
-            print(f"robot-calib {args.command}: {exc.kind}: {exc}", file=sys.stderr)
+            print(f"robot-calib {args.command}: {exc.kind}: {in_flags(str(exc))}", file=sys.stderr)
             return exc.exit_status
         raise
 

@@ -12,6 +12,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from robot_calib.cli.flags import in_flags
 from robot_calib.cli.options import MAX_PAYLOAD_COM_M, MAX_PAYLOAD_KG
 from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription, with_joint_names, with_payload
@@ -25,8 +26,9 @@ if TYPE_CHECKING:
 
 
 def log(message: str) -> None:
-    """A line for people on stderr (warnings, progress), apart from the results on stdout."""
-    print(message, file=sys.stderr)
+    """A line for people on stderr (warnings, progress), apart from the results on stdout;
+    the core's keywords in it as the verb's flags."""
+    print(in_flags(message), file=sys.stderr)
 
 
 def progress() -> Callable[[str, int, int], None]:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements.recording import MAX_COORDINATE_M, implausible_values
@@ -133,5 +133,5 @@ def check_reach(goal2base: Array, model: KinematicModel, source: str | Path) -> 
         raise InputError(
             f"{source}: every target is out of robot {robot.name}'s reach (median "
             f"{np.median(distance):.4g} m from its base, reach about {reach:.2f} m): targets in "
-            "mm (--unit mm) or in the tracker frame (--frame tracker)?"
+            f"mm ({param('unit', 'mm')}) or in the tracker frame ({param('frame', 'tracker')})?"
         )

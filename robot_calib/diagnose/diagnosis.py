@@ -489,7 +489,7 @@ def diagnose(
     elif ratio is None:
         why = ("the stated tracker accuracy is refuted by the geometric fit's residual: see "
                "the warning" if ladder.noise.warning else "no repeat poses, circle sweeps or "
-               "stated tracker accuracy; give --tracker-accuracy")  # fmt: skip
+               "stated tracker accuracy; state the tracker's accuracy")  # fmt: skip
         note = (
             f"noise floor unknown ({why}): held-out errors are not compared with one"
             + (f"; {learnable.line()}" if learnable is not None else "")
@@ -652,8 +652,8 @@ def small_holdout(holdout: Recording | None) -> str:
         f"warning: the hold-out bags ({', '.join(holdout.sources)}) hold {n} pose(s), fewer "
         f"than {MIN_HOLDOUT_POSES}: each held-out rms is uncertain by about "
         f"{100 / np.sqrt(6 * n):.0f} % and the model chosen on them (the dominant effect "
-        "included) may be chance; record more hold-out poses, or omit --holdout (k-fold "
-        "over the calibration's poses)"
+        "included) may be chance; record more hold-out poses, or score without a hold-out "
+        "(k-fold over the calibration's poses)"
     )
 
 

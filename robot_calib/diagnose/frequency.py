@@ -274,6 +274,6 @@ def alias_warnings(effects: tuple[Effect, ...], recording: Recording,
                         f"joint {j}'s harmonic of order {k} is not told from {word} "
                         f"{', '.join(map(str, left))} by these poses (regular sweeps alias "
                         "them): the robot may have either; measure random general poses, or "
-                        "sweeps of irregular steps (robot-calib plan --sweeps), to tell"
+                        "sweeps of irregular steps (msgs_doc/plan.md), to tell"
                     )
     return out

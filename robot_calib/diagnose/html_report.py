@@ -275,8 +275,7 @@ def _parameters(cal: Calibration) -> str:
 def _floor_text(diagnosis: Diagnosis) -> str:
     noise = diagnosis.noise
     if noise.sigma_mm is None or noise.floor_abs_rms_mm is None:
-        return ("unknown: no repeat poses, circle sweeps or stated accuracy "
-                "(diagnose --tracker-accuracy)")  # fmt: skip
+        return "unknown: no repeat poses, circle sweeps or stated tracker accuracy"
     return (f"{noise.floor_abs_rms_mm:.4f} mm rms ({noise.sigma_mm:.4f} mm per axis from "
             f"{noise_basis(noise.source, noise.n)})")  # fmt: skip
 
@@ -321,8 +320,8 @@ def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibr
         items.insert(0, ("IMPLAUSIBLE", "; ".join(diagnosis.implausible)))
         body = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in items)
         return (f'<section class="verdict warn"><dl>{body}</dl><p><b>Next</b>: fix the data '
-                "(units, --robot, joint order) and diagnose again; export, compensate and "
-                "predict refuse this result.</p></section>")  # fmt: skip
+                "(units, robot description, joint order) and diagnose again; export, "
+                "compensate and predict refuse this result.</p></section>")  # fmt: skip
     body = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in items)
     commands = (
         f"robot-calib export {best_params} --format urdf -o calibrated.urdf\n"

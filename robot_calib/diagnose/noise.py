@@ -289,7 +289,7 @@ def _stated(recording: Recording, stated_sigma_m: float | None) -> NoiseLevel | 
     """The user's stated accuracy, else the rms of the per-point position standard
     deviations the recording states, else None."""
     if stated_sigma_m is not None:
-        return NoiseLevel(float(stated_sigma_m), f"{STATED} (--tracker-accuracy)", 0)
+        return NoiseLevel(float(stated_sigma_m), f"{STATED} (given by the user)", 0)
     sigma = recording.poses.sigma
     if sigma is not None and np.isfinite(sigma[:, 0]).any():
         stated = sigma[np.isfinite(sigma[:, 0]), 0]

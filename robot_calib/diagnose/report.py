@@ -149,7 +149,7 @@ def _floor_sentence(noise: NoiseReport) -> str:
         return (
             "Noise floor **unknown**: "
             + ("" if noise.warning else "the data have no repeat poses or circle sweeps and no "
-               "accuracy is stated (`--tracker-accuracy`); ")
+               "accuracy is stated; ")
             + "held-out errors are not compared with a floor." + said
         )  # fmt: skip
     return (
@@ -339,7 +339,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         *(
             [
                 f"**IMPLAUSIBLE** — {'; '.join(diagnosis.implausible)}: fix the data (units, "
-                "--robot, joint order) and diagnose again.",
+                "robot description, joint order) and diagnose again.",
                 "",
             ]
             if diagnosis.implausible

@@ -35,7 +35,7 @@ horizontal in-plane axis, turns the wrist about an axis fixed in the base and mo
 it by a constant amount, which the tracker frame and the DH angles absorb (on the
 UR10 random-pose campaign a forearm bent and twisted as a tube keeps 40 % of its
 deflection after a geometric fit, twisted only 80 %: `sim.blind.ur10_out_of_vocabulary`
-leaves geometric at 22 x the noise floor, `test/test_oov_effects.py`).
+leaves geometric at 22 x the noise floor, `test/sim/test_effects_outside_vocabulary.py`).
 
 Why no effect of the vocabulary expresses it: the deflection is a turn about the link's
 own axis, perpendicular to joint j+1's (no joint turns about it: `compliance`,

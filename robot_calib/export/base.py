@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.kinematics.dh import link_transforms
 from robot_calib.kinematics.frames import Array
 
@@ -57,8 +57,8 @@ def joint_signs(cal: Calibration, what: str) -> Array:
         pairs = ", ".join(f"{j + 1}<-{k + 1}" for j, k in zip(*np.nonzero(coupled)))
         raise ExportError(
             f"robot {robot.name} couples joints (reading_to_joint coupling {pairs}): {what} "
-            "cannot hold a joint driven by another joint's reading; export --format dh or "
-            "json instead"
+            "cannot hold a joint driven by another joint's reading; export "
+            f"{param('format', 'dh')} or {param('format', 'json')} instead"
         )
     return np.diag(matrix).copy()
 

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import yaml
 
+from robot_calib.errors import param
 from robot_calib.export.base import (
     Exporter,
     ExportError,
@@ -63,13 +64,13 @@ def joint_origins(cal: Calibration) -> Array:
     if not is_ur or robot.n_joints != len(ENTRIES):
         raise ExportError(
             f"robot {robot.name} is not a Universal Robots arm: the UR calibration file is "
-            "only for UR robots (use --format urdf or dh)"
+            f"only for UR robots (use {param('format', 'urdf')} or {param('format', 'dh')})"
         )
     signs = joint_signs(cal, "the UR calibration file")
     if np.any(signs != 1.0) or robot.reading_offset is not None:
         raise ExportError(
             f"robot {robot.name}: a reading_to_joint sign or offset has no place in the UR "
-            "calibration file (use --format urdf)"
+            f"calibration file (use {param('format', 'urdf')})"
         )
     table = model.dh_table(params, np.zeros((1, robot.n_joints)))
     theta, d, a, alpha, beta = (np.asarray(getattr(table, f)).reshape(-1) for f in

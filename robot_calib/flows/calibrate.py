@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.flows.bags import read_bags
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.model_spec import ModelSpec
@@ -74,9 +74,10 @@ def check_seed_objective_memory(
         allowed += 1
     gib = 1024**3
     raise InputError(
-        f"--objective seed on {n_points} points needs {need / gib:.1f} GiB for its pairwise "
-        f"rows (limit {SEED_OBJECTIVE_MEMORY_LIMIT / gib:.0f} GiB: at most {allowed} points "
-        f"with {n_params} parameters); use --objective absolute (O(N)) or fewer points"
+        f"{param('objective', 'seed')} on {n_points} points needs {need / gib:.1f} GiB for "
+        f"its pairwise rows (limit {SEED_OBJECTIVE_MEMORY_LIMIT / gib:.0f} GiB: at most "
+        f"{allowed} points with {n_params} parameters); use "
+        f"{param('objective', 'absolute')} (O(N)) or fewer points"
     )
 
 
@@ -136,9 +137,12 @@ def calibrate_stream_bag(
 
     parse_model(model, robot, ecc_order)
     if len(bags) != 1:
-        raise InputError(f"--stream calibrates one bag (its own latency); got {len(bags)}")
+        raise InputError(
+            f"{param('stream', True)} calibrates one bag (its own latency); got {len(bags)}"
+        )
     if ModelSpec.parse(model).base == "cpa":
-        raise InputError(f"--stream --model {model}: a stream has no circle sweeps; use an "
+        raise InputError(f"{param('stream', True)} {param('model', model)}: a stream has no "
+                         "circle sweeps; use an "
                          "LM model (nominal, geometric, geometric+EFFECT)")  # fmt: skip
     stream = read_stream(Path(bags[0]), robot)
     return calibrate_stream(

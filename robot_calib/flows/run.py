@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.flows import (
     DEFAULT_ROBOT,
     RUN_HOLDOUT_POSES,
@@ -129,7 +129,7 @@ def run(
     description = load_robot(robot)  # every input checked before anything is written
     check_plan(plan, description)
     if not 1 <= n_holdout <= MAX_HOLDOUT_POSES or seed < 0:
-        raise InputError(f"--holdout {n_holdout}, --seed {seed}: need 1 to "
+        raise InputError(f"{param('holdout', n_holdout)}, {param('seed', seed)}: need 1 to "
                          f"{MAX_HOLDOUT_POSES} poses, seed >= 0")  # fmt: skip
     effects = MAIN_JOB_EFFECTS if effects is None else effects
     world = simulation_world(None, robot, effects, seed)

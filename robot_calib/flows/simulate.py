@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from robot_calib.atomic import output_path
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.flows import DEFAULT_PLAN, DEFAULT_ROBOT, N_RANDOM_POSES, Progress
 
 if TYPE_CHECKING:
@@ -55,14 +55,14 @@ def simulation_world(
     from robot_calib.sim.world import build_world, load_world, parse_sim_effect, with_effect
 
     if world is None and robot not in (None, DEFAULT_ROBOT):
-        out = build_world({"robot": robot, "geometry": "nominal"}, f"--robot {robot}")
+        out = build_world({"robot": robot, "geometry": "nominal"}, param("robot", robot))
     else:
         out = load_world(world)
         wanted = None if robot is None else load_robot(robot)
         if wanted is not None and wanted.reference() != out.model.robot.reference():
             raise InputError(
                 f"{out.source}: world robot {out.model.robot.reference()} differs from "
-                f"--robot {robot}; give one of them"
+                f"{param('robot', robot)}; give one of them"
             )
     if seed is not None:
         out = replace(out, seed=seed)

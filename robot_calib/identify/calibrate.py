@@ -22,7 +22,7 @@ import numpy as np
 from robot_calib.accuracy import accuracy
 from robot_calib.effects import Effect, parse_effect, vocabulary
 from robot_calib.effects.eccentricity import Eccentricity
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
 from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.canonical import canonical_form
@@ -94,20 +94,20 @@ def parse_model(
     known = ", ".join(vocabulary())
     if base not in BASE_MODELS or (extras and base != "geometric"):
         raise InputError(
-            f"--model {spec}: expected nominal, cpa, geometric or geometric+EFFECT[:joints] "
-            f"(effects: {known})"
+            f"{param('model', spec)}: expected nominal, cpa, geometric or "
+            f"geometric+EFFECT[:joints] (effects: {known})"
         )
     effects: list[Effect] = []
     for extra in extras:
         name = extra.split(":")[0]
         if name not in vocabulary():
-            raise InputError(f"--model {spec}: unknown effect {name!r} ({known})")
+            raise InputError(f"{param('model', spec)}: unknown effect {name!r} ({known})")
         try:
             # --ecc-order is eccentricity's default order, no other effect's
             defaults = {"order": ecc_order} if name == Eccentricity.name else {}
             effects.append(parse_effect(extra, robot.n_joints, **defaults))
         except InputError as exc:
-            raise InputError(f"--model {spec}: {exc}") from None
+            raise InputError(f"{param('model', spec)}: {exc}") from None
     return base, effects
 
 
@@ -351,7 +351,9 @@ def _calibrate_once(
 ) -> Calibration:
     """`calibrate` of every measurement of `recording` (no outlier screening)."""
     if objective not in OBJECTIVES:
-        raise InputError(f"--objective {objective}: expected one of {', '.join(OBJECTIVES)}")
+        raise InputError(
+            f"{param('objective', objective)}: expected one of {', '.join(OBJECTIVES)}"
+        )
     say = log or (lambda _msg: None)
     base, effects = parse_model(model_spec, robot, ecc_order)
     poses, points = recording.poses, recording.points

@@ -47,7 +47,7 @@ MAX_CORRECTION_M it is capped there with a RuntimeWarning.
 
 Measured (simulated UR10, `ur10_out_of_vocabulary(kind, seed=0, n=1000)` and
 `ur10_random`, 700 calibration / 300 hold-out poses, held-out rms / noise floor;
-`test/test_correction_structured.py`): a 2 mrad gravity-side backlash of joint 2 from
+`test/identify/test_correction_structured.py`): a 2 mrad gravity-side backlash of joint 2 from
 65.0 x (geometric) to 1.11 x (the process alone: 27 x); link 3 twisting out of the arm
 plane from 20.5 x to 1.08 x (the process alone: 9.2 x); compliance of joints 2 and 3
 (`ur10_random(seed=1)`) from 87.9 x to 1.06 x; gear harmonics the physical rung already

@@ -20,7 +20,7 @@ import numpy as np
 from robot_calib.accuracy import Accuracy
 from robot_calib.atomic import write_text_atomic
 from robot_calib.effects import effect_from_dict
-from robot_calib.errors import InputError, ParameterError, RobotCalibError
+from robot_calib.errors import InputError, ParameterError, RobotCalibError, param
 from robot_calib.identify.correction_structured import LearnedCorrection, correction_from_dict
 from robot_calib.kinematics.description import RobotDescription, with_payload
 from robot_calib.kinematics.loader import load_robot
@@ -281,8 +281,10 @@ def check_plausible(reasons: Sequence[str], where: str | Path, force: bool) -> s
         return None
     why = "; ".join(reasons)
     if not force:
-        raise InputError(f"{where}: fitted, implausible ({why}); --force to use it anyway")
-    return f"warning: {where}: fitted, implausible ({why}); used because of --force"
+        raise InputError(
+            f"{where}: fitted, implausible ({why}); {param('force', True)} to use it anyway"
+        )
+    return f"warning: {where}: fitted, implausible ({why}); used because of {param('force', True)}"
 
 
 def in_sample_accuracy(

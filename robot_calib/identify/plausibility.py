@@ -39,7 +39,7 @@ DEFAULT_NOISE_M = 10e-6
 MIN_NOISE_M = 1e-6
 #: readings beyond the joint limits by more than this [rad] are reported
 LIMIT_MARGIN_RAD = np.radians(2.0)
-HINT = "a wrong --robot, two joints' readings swapped, or readings in other units?"
+HINT = "a wrong robot description, two joints' readings swapped, or readings in other units?"
 
 
 def recording_warnings(recording: Recording, robot: RobotDescription) -> list[str]:
@@ -152,7 +152,7 @@ def noise_per_axis(cal: Calibration, stated_sigma_m: float | None = None) -> tup
         # exact (simulated) points fit their circles to round-off: no tracker's noise
         return max(float(np.sqrt(total / count)), MIN_NOISE_M), "circle fits"
     if stated_sigma_m is not None:
-        return float(stated_sigma_m), "stated tracker accuracy (--tracker-accuracy)"
+        return float(stated_sigma_m), "stated tracker accuracy (given by the user)"
     return DEFAULT_NOISE_M, "assumed tracker noise"
 
 

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from robot_calib.kinematics.frames import Array
 from robot_calib.poses import Poses
@@ -83,6 +82,8 @@ def orientation_errors(predicted: Array, measured: Array) -> Array:
     rotation that takes each measured frame (n, 3, 3) onto the predicted one."""
     if not len(predicted):
         return np.zeros((0, 3))
+    from scipy.spatial.transform import Rotation  # here: the PARAMS.json readers load no scipy
+
     return np.asarray(
         Rotation.from_matrix(predicted @ np.transpose(measured, (0, 2, 1))).as_rotvec()
     )

@@ -33,6 +33,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from robot_calib.errors import param
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 
@@ -88,7 +89,7 @@ def checked_mass_model(robot: RobotDescription, source: str) -> RobotDescription
     note = f"{source}: mass model beyond physics ({'; '.join(problems)})"
     python_warnings.warn(
         f"{note}: not used; the gravity effects (compliance, gravity_compliance) use {which} "
-        "instead; fix the masses, or give --robot a description with sane ones",
+        f"instead; fix the masses, or give {param('robot')} a description with sane ones",
         UserWarning, stacklevel=2,
     )  # fmt: skip
     return replace(substitute, mass_note=f"{which}, not the description's: {note}")
@@ -173,5 +174,5 @@ def mass_model_line(robot: RobotDescription) -> str:
         text = "none: the description gives no masses (no gravity effect of its own weight)"
     if payload > 0:
         com = ", ".join(f"{v:.3f}" for v in robot.payload_com_m)
-        text += f"; a payload of {payload:.2f} kg at ({com}) m of the flange (--payload)"
+        text += f"; a payload of {payload:.2f} kg at ({com}) m of the flange ({param('payload')})"
     return text

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.errors import InputError, RobotDescriptionError
+from robot_calib.errors import InputError, RobotDescriptionError, param
 from robot_calib.kinematics.axes import AxisLine, angle_about, dh_from_axes, link_transform, wrap
 from robot_calib.kinematics.description import RobotDescription, parse_robot
 from robot_calib.kinematics.frames import Array, homogeneous, rpy_to_matrix
@@ -99,7 +99,10 @@ def is_urdf_reference(name_or_path: str | Path) -> bool:
 def urdf_reference(path: str | Path, base_link: str | None, tip_link: str | None) -> str:
     """The robot reference of a URDF with chosen links: PATH.urdf#base_link=B&tip_link=T."""
     if not is_urdf_reference(path):
-        raise InputError(f"--base-link/--tip-link need --robot FILE.urdf, not {str(path)!r}")
+        raise InputError(
+            f"{param('base_link')}/{param('tip_link')} need {param('robot', 'FILE.urdf')}, "
+            f"not {str(path)!r}"
+        )
     file, _, fragment = str(path).partition("#")
     options = dict(_fragment(fragment, file))
     options.update({k: v for k, v in (("base_link", base_link), ("tip_link", tip_link)) if v})
@@ -388,7 +391,7 @@ def urdf_to_description(
     if len(moving) < 2:
         raise RobotDescriptionError(
             f"{source}: the chain {base!r} -> {tip!r} has {len(moving)} moving joint(s); "
-            "it needs >= 2 (choose --base-link/--tip-link)"
+            f"it needs >= 2 (choose {param('base_link')}/{param('tip_link')})"
         )
     root2base_inv = np.linalg.inv(zero[base])
     in_base = {name: root2base_inv @ frame for name, frame in zero.items()}

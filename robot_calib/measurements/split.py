@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.kinematics.frames import IntArray
 from robot_calib.measurements.recording import Recording
 from robot_calib.poses import reading_groups
@@ -25,13 +25,13 @@ def holdout_mask(
     order or in time (a pose revisited at the end stays with its first visit). InputError
     when either set would be empty."""
     if by not in SPLITS:
-        raise InputError(f"--by {by}: expected one of {', '.join(SPLITS)}")
+        raise InputError(f"{param('by', by)}: expected one of {', '.join(SPLITS)}")
     if not 0.0 < fraction < 1.0:
-        raise InputError(f"--holdout {fraction}: a fraction between 0 and 1")
+        raise InputError(f"{param('fraction', fraction)}: a fraction between 0 and 1")
     n = len(recording)
     k = int(round(fraction * n))
     if not 0 < k < n:
-        raise InputError(f"--holdout {fraction} of {n} measurements leaves a set empty")
+        raise InputError(f"{param('fraction', fraction)} of {n} measurements leaves a set empty")
     group = reading_groups(recording.poses.q)  # one pose's reads and targets together
     n_groups = int(group.max()) + 1
     if by == "random":
@@ -46,7 +46,7 @@ def holdout_mask(
     taken = picked[: int(np.searchsorted(np.cumsum(sizes), k)) + 1]  # whole poses, >= k
     mask = np.isin(group, taken)
     if mask.all():
-        raise InputError(f"--holdout {fraction}: every measurement is of a pose held out "
+        raise InputError(f"{param('fraction', fraction)}: every measurement is of a pose held out "
                          "(its other reads): nothing left to fit")  # fmt: skip
     return mask
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements.recording import (
     Recording,
@@ -259,6 +259,10 @@ def stream_recording(
     return rec, pairing
 
 
+#: what the stream warning advises (`stream_hint`)
+STREAM_ADVICE = f"use {param('stream', True)} (msgs_doc/stream.md)"
+
+
 def stream_hint(js_ns: IntArray, q: Array, n_points: int, source: str,
                 point_ns: IntArray | None = None) -> str | None:  # fmt: skip
     """A warning line when a bag looks like a stream (more than STREAM_RATIO points per
@@ -280,5 +284,5 @@ def stream_hint(js_ns: IntArray, q: Array, n_points: int, source: str,
     return (
         f"warning: {source}: {n_points} points for {m} joint states while the robot moves "
         f"between {moving:.0%} of them: a stream (continuous tracking); nearest-stamp "
-        "pairing pairs a moving robot badly: use --stream (msgs_doc/stream.md)"
+        f"pairing pairs a moving robot badly: {STREAM_ADVICE}"
     )

@@ -27,7 +27,7 @@ from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
 from robot_calib.bag.ros2_formats import QosProfile, duration_from_ns
-from robot_calib.errors import InputError, RobotCalibError
+from robot_calib.errors import KEYWORD, InputError, RobotCalibError, keyword_value
 
 N = TypeVar("N", bound=Node)
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -118,14 +118,21 @@ def qos_to_record(qos: QoSProfile) -> QosProfile:
     )
 
 
-_FLAG = re.compile(r"(?<![\w-])--(?!ros-args\b)([a-z][a-z0-9]*(?:-[a-z0-9]+)*)")
-
-
 def in_ros_terms(text: object) -> str:
-    """A core message in a node's terms: the command line's `--some-option` named as the
-    node's parameter 'some_option' (the core speaks to the command line; a node's user
-    sets parameters)."""
-    return _FLAG.sub(lambda m: f"parameter '{m.group(1).replace('-', '_')}'", str(text))
+    """A core message in a node's terms: a keyword the core names (`errors.param`:
+    `` `model='x'` ``) as the node's parameter of that name (parameter 'model' x)."""
+    return KEYWORD.sub(_as_parameter, str(text))
+
+
+def _as_parameter(match: re.Match[str]) -> str:
+    if match.group(2) is None:
+        return f"parameter '{match.group(1)}'"
+    value = keyword_value(match.group(2))
+    if isinstance(value, bool):
+        value = str(value).lower()  # as a ROS parameter is written: force:=true
+    elif isinstance(value, list | tuple):
+        value = ",".join(map(str, value))
+    return f"parameter '{match.group(1)}' {value}"
 
 
 def check_overrides(node: Node) -> None:

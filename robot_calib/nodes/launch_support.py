@@ -8,7 +8,7 @@ once: the `params_file` argument (the installed config/robot_calib.yaml, loaded 
 arguments win), `output='screen'`, string parameters passed as text, and shutting the
 launch down when a node ends. msgs_doc/launch.md documents the arguments.
 
-The specs are plain data (test/test_launch_files.py checks them against the parameters
+The specs are plain data (test/nodes/test_launch_files.py checks them against the parameters
 each node declares); `launch` and `launch_ros` are imported only inside
 `launch_description`, so importing robot_calib never needs them (they come with a ROS 2
 install, package.xml `exec_depend`, not with the wheels).

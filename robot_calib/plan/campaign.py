@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.identify import DEFAULT_ECC_ORDER
 from robot_calib.identify.calibrate import parse_model
 from robot_calib.model import KinematicModel
@@ -78,7 +78,7 @@ def planning_problem(
     base, effects = parse_model(model_spec, robot, ecc_order)
     if base != "geometric":
         raise InputError(
-            f"--model {model_spec}: plans are made for geometric[+EFFECT...] models (cpa "
+            f"{param('model', model_spec)}: plans are made for geometric[+EFFECT...] models (cpa "
             "needs circle sweeps: the paper-test plans; nominal fits only the frames)"
         )
     model = KinematicModel(robot, tuple(effects))

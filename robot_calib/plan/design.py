@@ -43,7 +43,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.identify.identifiability import fix_unidentifiable
 from robot_calib.kinematics.dh import chain
 from robot_calib.kinematics.frames import Array
@@ -141,7 +141,7 @@ def draw_candidates(
         if found >= n:
             return np.concatenate(kept)[:n]
     raise InputError(
-        f"--floor-z {floor_z_m}: only {found} of {drawn} random poses keep the joint "
+        f"{param('floor_z_m', floor_z_m)}: only {found} of {drawn} random poses keep the joint "
         f"centres, flange and target above z = {floor_z_m} m of the robot base; lower the "
         "floor"
     )
@@ -324,11 +324,13 @@ def d_optimal(
     p = len(problem.scale)
     if 3 * n <= p:
         raise InputError(
-            f"--poses {n}: {n} poses ({3 * n} residuals) cannot determine the {p} "
+            f"{param('n_poses', n)}: {n} poses ({3 * n} residuals) cannot determine the {p} "
             f"identifiable parameters; at least {p // 3 + 1} poses are needed"
         )
     if n > len(problem.candidates):
-        raise InputError(f"--poses {n}: more than the {len(problem.candidates)} candidates")
+        raise InputError(
+            f"{param('n_poses', n)}: more than the {len(problem.candidates)} candidates"
+        )
     if problem.sequential:
         return problem.candidates[_sequential(problem, n, progress)]
     jac = problem.free_jacobian(Poses.from_readings(problem.candidates)) / problem.scale

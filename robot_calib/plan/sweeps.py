@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.kinematics.frames import Array
 from robot_calib.measurements.aliasing import MAX_ORDER, order_similarity
 from robot_calib.sim.plans import HOME_DEG, Plan, sweep_plan
@@ -62,7 +62,7 @@ def irregular_sweeps(test: int, max_order: int = MAX_ORDER, seed: int = 0,
     variables q (n, J) [rad] (a robot's readings: `RobotDescription.readings`), each row
     labelled with the joint it sweeps, at the test's speed."""
     if not 1 <= max_order <= MAX_ORDER:
-        raise InputError(f"--max-order {max_order}: an order from 1 to {MAX_ORDER}")
+        raise InputError(f"{param('max_order', max_order)}: an order from 1 to {MAX_ORDER}")
     rng = np.random.default_rng(seed)
 
     def readings(_joint: int, start: float, end: float, points: int) -> Array:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.ik import solve_ik
 from robot_calib.kinematics.description import (
     HOME_DEG,
@@ -169,7 +169,8 @@ def check_plan(name: str, robot: RobotDescription) -> None:
         load_plan(name, robot)
     elif name not in PLAN_NAMES:
         raise InputError(
-            f"--plan {name}: unknown plan (known: {', '.join(PLAN_NAMES)}, or a PLAN.yaml file)"
+            f"{param('plan', name)}: unknown plan (known: {', '.join(PLAN_NAMES)}, or a "
+            "PLAN.yaml file)"
         )
 
 

@@ -25,7 +25,7 @@ from robot_calib.effects import (
     option_types,
     parse_effect,
 )
-from robot_calib.errors import InputError, RobotCalibError, check_keys
+from robot_calib.errors import InputError, RobotCalibError, check_keys, param
 from robot_calib.kinematics.description import with_payload
 from robot_calib.kinematics.frames import Array, IntArray, matrix_to_rpy, rpy_to_matrix
 from robot_calib.kinematics.loader import load_robot
@@ -642,8 +642,8 @@ def parse_sim_effect(text: str, n_joints: int) -> tuple[Effect, float | None]:
         try:
             value = float(raw)
         except ValueError:
-            raise InputError(f"--effects {text}: value must be a number (SI)") from None
+            raise InputError(f"{param('effects', [text])}: value must be a number (SI)") from None
         if not math.isfinite(value):
-            raise InputError(f"--effects {text}: value must be finite")
+            raise InputError(f"{param('effects', [text])}: value must be finite")
         text = spec
     return parse_effect(text, n_joints), value

@@ -239,8 +239,8 @@ def test_bad_six_dof_input_is_one_line_exit_2_and_no_bag(
          "some of its orientation cells (QX,QY,QZ,QW) empty"),
         (path, ("--orientation", "QX,QY,QZ,NOPE"), "no column 'NOPE'"),
         (path, ("--orientation", "QX,QY,QZ,QW", "--sigma", "NOPE"), "no column 'NOPE'"),
-        (path, ("--orientation", "smr9:QX,QY,QZ,QW"), "no target smr9 among the --target"),
-        (path, ("--sigma", "smr9:SP"), "no target smr9 among the --target names"),
+        (path, ("--orientation", "smr9:QX,QY,QZ,QW"), "no target smr9 among the targets"),
+        (path, ("--sigma", "smr9:SP"), "no target smr9 among the targets of --target"),
         (path, ("--orientation", "QX,QY,QZ,QW", *both), "one orientation per target"),
         (path, ("--sigma", "SP,SR"), "an orientation standard deviation, but no --orientation"),
     ]  # fmt: skip

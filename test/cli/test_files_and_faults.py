@@ -175,6 +175,7 @@ def test_two_calibrates_of_one_output_at_once_never_replace_a_result(tmp_path: P
 # --- item 6: Ctrl-C while the program starts ---
 
 
+@pytest.mark.slow
 def test_ctrl_c_while_the_program_starts_is_one_line_and_130(tmp_path: Path) -> None:
     """SIGINT 0-0.4 s after `robot-calib calibrate` starts (the console script and `python
     -m robot_calib`): was a 4-47 line KeyboardInterrupt traceback of the import in progress
@@ -220,6 +221,7 @@ def test_ctrl_c_while_the_program_starts_is_one_line_and_130(tmp_path: Path) -> 
 # --- item 7: a run's files name its final folder ---
 
 
+@pytest.mark.slow
 def test_a_run_names_its_final_folder_not_the_one_it_was_built_in(tmp_path: Path) -> None:
     """`run -o out` builds `out/.run-XXXX.partial` and renames it: its reports, PARAMS.json
     and world files named the bags in that folder, gone once renamed. Every path of the
@@ -408,6 +410,7 @@ def node_process(name: str, cwd: Path, *ros_args: str) -> subprocess.Popen[str]:
     )  # fmt: skip
 
 
+@pytest.mark.slow
 def test_capture_interrupted_mid_plan_exits_130_with_its_summary(tmp_path: Path) -> None:
     """capture against sim_robot (controller mode) and sim_tracker, three processes on this
     test's ROS domain; Ctrl-C after the 3rd measured pose of 120: exit 130 (was 0: an
@@ -481,6 +484,7 @@ def interrupted_diagnose(folder: Path, *extra: str) -> subprocess.CompletedProce
     return subprocess.CompletedProcess(run.args, run.returncode, out, err)
 
 
+@pytest.mark.slow
 def test_an_interrupted_diagnosis_set_appears_whole_or_not_at_all(tmp_path: Path) -> None:
     """Ctrl-C between the renames of diagnose's .json/.md/.html/params_best/plots: without
     --force nothing of the set is left; with --force over an earlier set every file is the
@@ -501,6 +505,7 @@ def test_an_interrupted_diagnosis_set_appears_whole_or_not_at_all(tmp_path: Path
     assert leftovers(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_a_set_killed_between_its_renames_is_found_by_the_next_write(tmp_path: Path) -> None:
     """SIGKILL (no handler can hold it) between the renames of diagnose's set leaves part
     of it and the set's journal; the next `diagnose -o d.json` names the incomplete set

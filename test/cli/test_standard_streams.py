@@ -62,7 +62,7 @@ def test_full_stderr_keeps_the_verbs_exit_status(tmp_path: Path) -> None:
     assert json.loads((tmp_path / "c.json").read_text())["plausible"] is True
 
 
-@pytest.mark.parametrize("verb", ["calibrate", "run"])
+@pytest.mark.parametrize("verb", ["calibrate", pytest.param("run", marks=pytest.mark.slow)])
 def test_a_reader_gone_is_sigpipes_status_and_the_files_are_written(
     verb: str, tmp_path: Path
 ) -> None:

@@ -156,6 +156,7 @@ def test_kfold_of_a_warm_up_is_not_spoilt_by_its_time_constant() -> None:
     assert cv["thermal_warmup"] < 1.5 * 0.0089, cv  # about the noise floor of the world
 
 
+@pytest.mark.slow
 def test_a_block_of_poses_off_together_is_one_stretch_not_blunders() -> None:
     """A Yaskawa campaign's first 12 poses (joint 1 near -160 deg) sat 5 mm off and nothing
     pointed at them: here 12 poses first in time, joint 1 near -150 deg, 5 mm off the same

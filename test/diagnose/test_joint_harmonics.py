@@ -197,6 +197,7 @@ def test_sweeps_alone_alias_high_orders_unless_their_steps_are_irregular(irregul
         assert any("order 11 is not told from order 57" in w for w in ambiguous), ambiguous
 
 
+@pytest.mark.slow
 def test_the_holdout_tells_aliases_apart() -> None:
     """The issue's world calibrated on the regular sweeps, general poses held out: orders
     17/23/11 kept, held-out within 1.5 x the right model's error (the blind class

@@ -66,7 +66,7 @@ def test_without_independent_evidence_the_floor_is_unknown_and_said_so() -> None
     ratio = stated.unexplained.ratio_to_noise_floor
     assert ratio is not None and 0.8 < ratio < 1.4
     assert stated.verdict.startswith("null (geometric reaches the noise level; that floor rests")
-    assert "stated tracker accuracy (--tracker-accuracy) alone" in stated.verdict
+    assert "stated tracker accuracy (given by the user) alone" in stated.verdict
 
 
 def test_structure_no_effect_explains_is_unknown_not_null_without_a_floor() -> None:

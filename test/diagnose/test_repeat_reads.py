@@ -34,6 +34,7 @@ def reread(recording: Recording, reads: int, seed: int) -> Recording:
     return recording_from_arrays(poses.q[rows], points, poses.time[rows], "reads")
 
 
+@pytest.mark.slow
 def test_the_k_fold_figure_of_re_read_poses_is_that_of_new_poses() -> None:
     scenario = ur10_out_of_vocabulary("link_bending", seed=0, n=1000)
     robot = scenario.world.model.robot
@@ -79,6 +80,7 @@ def test_re_reads_give_the_tracker_floor_and_say_so() -> None:
     assert 0.7 * POSE_SIGMA_M < moved.sigma_m < 1.3 * POSE_SIGMA_M, moved
 
 
+@pytest.mark.slow
 def test_the_verdict_floor_is_independent_evidence_only() -> None:
     """The floor of the verdict is the repeat poses' or circle fits' alone: a best model's
     residual that agrees with it is not pooled in (a real arm: repeats 0.1735 mm, pooled

@@ -220,6 +220,7 @@ def recorded(plan: Plan, seed: int) -> Recording:
     return recording_from_arrays(plan.q, points, time, robot=ROBOT)
 
 
+@pytest.mark.slow
 def test_joint_4_backlash_is_said_removed_by_the_best_model(tmp_path: Path) -> None:
     """A simulated joint-4 backlash: the geometric model's per-joint rows of joint 4 say the
     best model (geometric+backlash:4) removed it, in the HTML, the Markdown and the JSON;

@@ -155,7 +155,9 @@ def test_the_urdf_header_lists_the_effects_it_cannot_hold_and_their_size() -> No
 
 def test_a_robot_with_coupled_joints_is_refused_for_urdf() -> None:
     cal = calibration("m20ia")
-    with pytest.raises(InputError, match="couples joints .*3<-2.*--format dh or json"):
+    with pytest.raises(
+        InputError, match="couples joints .*3<-2.*`format='dh'` or `format='json'`"
+    ):
         FORMATS["urdf"].render(cal, "p.json")
 
 

@@ -23,6 +23,7 @@ PROGRAM = "q1,q2,q3,q4,q5,q6\n0.0,-1.5708,1.5708,0.0,0.7854,0.0\n0.3,-1.2,1.4,0.
 
 
 @pytest.mark.parametrize("effect", ["none", "backlash", "gravity_backlash"])
+@pytest.mark.slow
 def test_the_best_model_loads_in_predict_score_and_compensate(effect: str, tmp_path: Path) -> None:
     case = make_case(effect, 1000)
     robot = load_world().model.robot

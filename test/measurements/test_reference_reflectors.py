@@ -171,6 +171,7 @@ def test_a_world_with_references_drift_and_events_reads_back(tmp_path: Path) -> 
             build_world({"events": [bad]}, "bad.yaml")
 
 
+@pytest.mark.slow
 def test_a_still_tracker_shows_no_drift_and_a_real_one_is_found() -> None:
     """False alarms and hits of the drift's significance: 100 campaigns of a still tracker
     (40-600 reads of three reflectors at 12.5 um) never report a drift, 20 campaigns

@@ -121,7 +121,7 @@ def test_stream_bag_round_trip_hint_and_cli(simulated: SimulatedStream, tmp_path
     assert np.allclose(back.q, s.q[js], atol=0) and np.array_equal(back.points, s.points[short])
     assert np.array_equal(back.velocity_sign, s.velocity_sign[js])
     paired = read_bag(bag, robot)
-    assert any("--stream" in w for w in paired.warnings)
+    assert any("`stream=True`" in w for w in paired.warnings)
     out = tmp_path / "PARAMS.json"
     run = cli(
         "calibrate", str(bag), "--stream", "--latency", "0.002", "--stream-max-points", "500",

@@ -145,6 +145,7 @@ def _param(name: str, value: object):  # noqa: ANN202 - rclpy Parameter
     return Parameter(name, value=value)
 
 
+@pytest.mark.slow
 def test_the_nodes_diagnosis_is_the_command_lines(
     context: Context, backlash_bag: Path, tmp_path: Path
 ) -> None:

@@ -128,6 +128,7 @@ def run_graph(
     return capture
 
 
+@pytest.mark.slow
 def test_a_planned_campaign_captured_in_the_graph_calibrates_to_the_noise_floor(
     context: Context, tmp_path: Path
 ) -> None:

@@ -92,6 +92,7 @@ def test_simulated_points_match_the_world(tmp_path: Path) -> None:
     assert 1e-6 < error.mean() < 20e-6
 
 
+@pytest.mark.slow
 def test_nodes_run_alone_as_processes(tmp_path: Path) -> None:
     """The three console scripts as separate processes (as `ros2 run` starts them)."""
     bag = tmp_path / "procs.mcap"

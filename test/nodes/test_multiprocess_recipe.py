@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from robot_calib.bag import BagReader
 from robot_calib.messages import JOINT_STATES_TOPIC, POINT_TOPIC, joint_positions
@@ -40,6 +41,7 @@ def node(name: str, cwd: Path, *ros_args: str, **popen: object) -> subprocess.Po
     return subprocess.Popen(command, cwd=cwd, env=env, text=True, **popen)  # type: ignore[call-overload]
 
 
+@pytest.mark.slow
 def test_recipe_as_separate_processes_records_every_pose(tmp_path: Path) -> None:
     bag = tmp_path / "run.mcap"
     # The robot first and the recorder last: the worst start order for a robot that

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 import rclpy
 from builtin_interfaces.msg import Time
 from cli_runner import robot_calib
@@ -118,6 +119,7 @@ def free_domains(count: int) -> list[int]:
     raise AssertionError("no free domain")
 
 
+@pytest.mark.slow
 def test_two_simulations_beside_foreign_publishers_on_every_domain(tmp_path: Path) -> None:
     """Two `robot-calib simulate` at once, while another process publishes /joint_states
     and /clock (1 kHz) on domain 0 and on the domains the simulations will claim (a

@@ -198,6 +198,7 @@ def outcomes(
 
 
 @pytest.mark.parametrize("example", list(EXAMPLES))
+@pytest.mark.slow
 def test_walkthrough_example_runs_as_written(example: str, outcomes: dict[str, Outcome]) -> None:
     outcome = outcomes[example]
     assert outcome.failure is None, outcome.failure

@@ -7,9 +7,12 @@ import sys
 from importlib.metadata import version
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow
 def test_mypy_clean() -> None:
     # The default .mypy_cache (in the repo, git-ignored) keeps reruns to a few seconds.
     result = subprocess.run(

@@ -68,6 +68,7 @@ def test_predicted_sigma_matches_the_spread_of_simulated_calibrations(problem) -
     assert np.all((ratio > 0.3) & (ratio < 2.5)), dict(zip(predicted.names, ratio.round(2)))
 
 
+@pytest.mark.slow
 def test_plan_file_round_trip_through_simulate_and_run(tmp_path: Path) -> None:
     plan = tmp_path / "plan.yaml"
     made = cli("plan", "--poses", "20", "--candidates", "300", "--trials", "0",
@@ -91,6 +92,7 @@ def test_plan_file_round_trip_through_simulate_and_run(tmp_path: Path) -> None:
     assert list((tmp_path / "out").glob("run-*/params_geometric.json"))
 
 
+@pytest.mark.slow
 def test_sweeps_in_irregular_steps_tell_every_order_apart(tmp_path: Path) -> None:
     """`plan --sweeps paper-test2`: the seed's sweeps, whose regular steps tell joint 4's
     orders apart up to 30 only (60 steps of 6 deg: order k and 60 - k coincide), in

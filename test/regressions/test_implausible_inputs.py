@@ -243,6 +243,7 @@ def test_what_remains_when_the_hybrid_won_is_coherent() -> None:
     assert size < STRUCTURE_SHARE * floor
 
 
+@pytest.mark.slow
 def test_force_replaces_the_whole_output_set(work: Path) -> None:
     """Item 7: `diagnose -o d.json --force` over an earlier run's set kept its d_angle.png
     when the new report has no angle figure (random poses: no sweeps). Now the set is

@@ -61,13 +61,13 @@ def test_a_stated_accuracy_a_few_times_the_residual_is_used_and_said(
     assert run.returncode == 0, run.stderr
     doc = json.loads(out.read_text())
     assert doc["noise"]["floor_known"] is True
-    assert doc["noise"]["source"] == "stated tracker accuracy (--tracker-accuracy)"
+    assert doc["noise"]["source"] == "stated tracker accuracy (given by the user)"
     assert doc["noise"]["sigma_mm"] == pytest.approx(0.2, rel=1e-9)
     warning = doc["noise"]["warning"]
     assert "0.2 mm per axis is" in warning and "rest on the stated accuracy alone" in warning
     assert warning in run.stdout
     if doc["dominant_effect"] is None:  # at that floor geometric is "at the noise level"
-        assert "rests on the stated tracker accuracy (--tracker-accuracy) alone" in run.stdout
+        assert "rests on the stated tracker accuracy (given by the user) alone" in run.stdout
 
 
 def test_the_calibrate_warning_inside_diagnose_uses_the_stated_accuracy(
@@ -80,10 +80,11 @@ def test_the_calibrate_warning_inside_diagnose_uses_the_stated_accuracy(
     run = cli("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy",
               "0.002", "-o", str(tmp_path / "d.json"))  # fmt: skip
     assert run.returncode == 0, run.stderr
-    assert "(0.0020 mm, stated tracker accuracy (--tracker-accuracy))" in run.stderr
+    assert "(0.0020 mm, stated tracker accuracy (given by the user))" in run.stderr
     assert "assumed tracker noise" not in run.stderr
 
 
+@pytest.mark.slow
 def test_on_a_bag_with_sweeps_a_stated_accuracy_is_never_ignored_without_a_word(
     tmp_path: Path,
 ) -> None:
@@ -293,6 +294,7 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
     assert len(run.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_cpa_parameters_carry_a_real_one_sigma(tmp_path: Path) -> None:
     """CPA printed a 1-sigma of 0 for every free parameter (0 means fixed). Known answer:
     the scatter of CPA's estimates over 6 noise seeds of one simulated KR5 (the same true
