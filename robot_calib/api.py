@@ -128,13 +128,10 @@ def compensate(
     import numpy as np
 
     from robot_calib.compensate import compensate_commands
-    from robot_calib.compensate.solve import nominal_counterpart
     from robot_calib.poses import Poses, approach_directions
 
     q = np.asarray(q, dtype=float)
-    nominal, nominal_params = nominal_counterpart(calibration.model, calibration.parameters)
     commands = Poses.from_readings(
         q, approach_directions(q) if directions is None else directions, time
     )
-    return compensate_commands(calibration.model, calibration.parameters, nominal,
-                               nominal_params, commands, calibration.correction)  # fmt: skip
+    return compensate_commands(calibration, commands)

@@ -177,6 +177,21 @@ class PointCorrection(Protocol):
     def predict(self, poses: Poses) -> Array: ...
 
 
+class Calibrated(Protocol):
+    """What applying a calibration takes: its model, its parameters and its learned
+    correction (None: the model alone). `identify.calibration.Calibration` is one, as loaded
+    from PARAMS.json by every front end."""
+
+    @property
+    def model(self) -> KinematicModel: ...
+
+    @property
+    def parameters(self) -> ParameterVector: ...
+
+    @property
+    def correction(self) -> PointCorrection | None: ...
+
+
 @dataclass(frozen=True)
 class KinematicModel:
     """Forward model and analytic Jacobian: a robot description plus effects, measured at

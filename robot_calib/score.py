@@ -17,14 +17,12 @@ import numpy as np
 
 from robot_calib.accuracy import Accuracy, OrientationAccuracy, accuracy, orientation_accuracy
 from robot_calib.atomic import write_text_atomic
-from robot_calib.identify.correction_structured import LearnedCorrection
 from robot_calib.identify.fit import orientation_residuals
 from robot_calib.identify.outliers import OUTLIER_K, outlier_mask, robust_sigma
 from robot_calib.kinematics.frames import Array
-from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
 from robot_calib.messages import target_topic
-from robot_calib.model import KinematicModel
+from robot_calib.model import Calibrated, KinematicModel
 
 #: a held-out rms this many times the calibration's in-sample rms, and above
 #: IMPLAUSIBLE_MM, is no generalisation gap: the calibration does not describe these data
@@ -64,22 +62,22 @@ class Score:
 
 
 def score(
-    model: KinematicModel,
-    params: ParameterVector,
+    calibration: Calibrated,
     recording: Recording,
+    *,
     in_sample: Accuracy | None = None,
     fitted: Sequence[str | Path] = (),
-    correction: LearnedCorrection | None = None,
     judged_by: str = "the calibration's in-sample rms",
 ) -> Score:
-    """The calibration `model` at `params` scored on every measurement of `recording`
-    (of the model's targets; InputError naming a target the model has not identified).
+    """`calibration` (its model at its parameters, less its learned correction: the hybrid
+    model's points; orientations have none) scored on every measurement of `recording` (of
+    the model's targets; InputError naming a target the model has not identified).
     in_sample, fitted: the calibration's own figures and recordings (PARAMS.json
-    `residuals`, `recordings`), to flag a score far above them, or of a bag it was fitted
-    on (`score_warnings`). correction: the calibration's learned correction (PARAMS.json
-    `correction`, the hybrid model), subtracted from the model's points; orientations
-    have none: `in_sample` is then the hybrid model's (PARAMS.json `hybrid_residuals`), the
-    model actually applied. judged_by: what `in_sample` is, for the warning."""
+    `residuals` or, with a learned correction, `hybrid_residuals`: the model actually
+    applied; `recordings`), to flag a score far above them, or of a bag it was fitted on
+    (`score_warnings`). judged_by: what `in_sample` is, for the warning."""
+    model, params = calibration.model, calibration.parameters
+    correction = calibration.correction
     recording = recording.with_targets(model.targets)
     predicted = model.target_points(params, recording.poses, correction)
     residuals = predicted - recording.points

@@ -8,9 +8,9 @@ import argparse
 import math
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from robot_calib.cli.flags import in_flags
 from robot_calib.cli.options import MAX_PAYLOAD_COM_M, MAX_PAYLOAD_KG
@@ -20,9 +20,7 @@ from robot_calib.kinematics.loader import load_robot
 
 if TYPE_CHECKING:
     from robot_calib.diagnose.diagnosis import Diagnosis
-    from robot_calib.identify.correction_structured import LearnedCorrection
-    from robot_calib.kinematics.parameters import ParameterVector
-    from robot_calib.model import KinematicModel
+    from robot_calib.identify.calibration import Calibration
 
 
 def log(message: str) -> None:
@@ -80,44 +78,30 @@ def payload(text: str) -> tuple[float, tuple[float, float, float]]:
     return kg, (values[0], values[1], values[2])
 
 
-def calibration_of(
-    args: argparse.Namespace,
-) -> tuple[KinematicModel, ParameterVector, dict[str, Any]]:
-    """The model, parameters and document of args.params (PARAMS.json), checked (finite SI
-    values) and for the robot --robot names, if it names one (its default is None: the
-    calibration's robot, so that an explicit --robot of the default robot is checked too)."""
-    from robot_calib.identify.params_file import load_params
+def calibration_of(args: argparse.Namespace) -> Calibration:
+    """The calibration of args.params (PARAMS.json, `Calibration.load`: checked, finite SI
+    values, the robot unchanged), for the robot --robot names, if it names one (its default
+    is None: the calibration's robot, so that an explicit --robot of the default robot is
+    checked too)."""
+    from robot_calib.identify.calibration import Calibration as Loaded
 
-    model, params, doc = load_params(args.params)  # checked: finite SI values, robot unchanged
-    if args.robot is not None and load_robot(args.robot).name != model.robot.name:
+    cal = Loaded.load(args.params)
+    robot = cal.model.robot
+    if args.robot is not None and load_robot(args.robot).name != robot.name:
         raise InputError(
-            f"{args.params}: identified for robot {model.robot.name}, not --robot {args.robot}"
+            f"{args.params}: identified for robot {robot.name}, not --robot {args.robot}"
         )
-    return model, params, doc
+    return cal
 
 
-def plausible_or_forced(
-    doc: Mapping[str, Any] | tuple[str, ...], args: argparse.Namespace
-) -> None:
-    """Exit 2 naming args.params and its reasons when it is marked `plausible: false`
-    (`doc`: the PARAMS.json document, or its reasons), unless --force: then a warning."""
-    from robot_calib.identify.params_file import check_plausible, implausible_of
+def plausible_or_forced(reasons: tuple[str, ...], args: argparse.Namespace) -> None:
+    """Exit 2 naming args.params and its `reasons` when it is marked implausible
+    (`Calibration.implausible`), unless --force: then a warning."""
+    from robot_calib.identify.params_file import check_plausible
 
-    reasons = doc if isinstance(doc, tuple) else implausible_of(doc, args.params)
     warning = check_plausible(reasons, args.params, args.force)
     if warning is not None:
         log(warning)
-
-
-def correction_of(
-    doc: Mapping[str, Any], model: KinematicModel, params: ParameterVector,
-    args: argparse.Namespace,
-) -> LearnedCorrection | None:  # fmt: skip
-    """The learned correction of args.params (PARAMS.json `correction`, the hybrid model,
-    fitted at the file's `params`), None when it has none."""
-    from robot_calib.identify.params_file import correction_of as read_correction
-
-    return read_correction(doc, model, params, args.params)
 
 
 def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: float) -> None:

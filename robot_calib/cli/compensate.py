@@ -10,7 +10,7 @@ import sys
 
 import numpy as np
 
-from robot_calib.cli.common import calibration_of, correction_of, plausible_or_forced, robot_files
+from robot_calib.cli.common import calibration_of, plausible_or_forced, robot_files
 from robot_calib.cli.options import CALIBRATION_ROBOT, add_force, add_output
 from robot_calib.errors import InputError, RobotCalibError
 
@@ -62,27 +62,26 @@ def main(args: argparse.Namespace) -> int:
     """Nominal joint commands, or targets, -> compensated commands (msgs_doc/compensate.md)."""
     from robot_calib.atomic import output_path
     from robot_calib.compensate import compensate_commands, compensate_targets
-    from robot_calib.compensate.solve import nominal_counterpart, within_limits
+    from robot_calib.compensate.solve import within_limits
     from robot_calib.compensate.targets import check_reach, goals_in_base, read_targets_csv
     from robot_calib.compensate.write import LARGE_CHANGE_DEG, row_status, write_compensated_csv
     from robot_calib.predict import read_joints_csv
 
-    model, params, doc = calibration_of(args)
-    plausible_or_forced(doc, args)
-    correction = correction_of(doc, model, params, args)
+    cal = calibration_of(args)
+    plausible_or_forced(cal.implausible, args)
+    model, params, correction = cal.model, cal.parameters, cal.correction
     n_joints, limits = model.robot.n_joints, model.robot.limits
     source = args.joints or args.targets
     inputs = [args.params, source, *robot_files(args)] + (
         [args.seed_joints] if args.seed_joints else []
     )
-    nominal, nominal_params = nominal_counterpart(model, params)
     if args.joints:
         for option in ("seed_joints", "frame", "unit"):
             if getattr(args, option) is not None:
                 raise InputError(f"--{option.replace('_', '-')} goes with --targets, not --joints")
         poses = read_joints_csv(args.joints, n_joints, limits)
         output = output_path(args.output, "JOINTS.csv", inputs, args.force)
-        result = compensate_commands(model, params, nominal, nominal_params, poses, correction)
+        result = compensate_commands(cal, poses)
         # a command or its correction beyond the limits: `beyond_limits` (the one check)
         inside = within_limits(model.robot, result.q) & within_limits(model.robot, poses.q)
         status = row_status(result, poses.q, inside)
@@ -103,8 +102,7 @@ def main(args: argparse.Namespace) -> int:
         goals = goals_in_base(targets, args.frame or "base", model, params)
         check_reach(goals, model, args.targets)
         output = output_path(args.output, "JOINTS.csv", inputs, args.force)
-        found = compensate_targets(model, params, nominal, nominal_params, targets, goals,
-                                   correction)  # fmt: skip
+        found = compensate_targets(cal, targets, goals)
         result = found.compensated
         status = row_status(result, found.nominal.q, found.within_limits)
         write_compensated_csv(output, result, found.direction, status)

@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 
-from robot_calib.cli.common import calibration_of, correction_of, plausible_or_forced, robot_files
+from robot_calib.cli.common import calibration_of, plausible_or_forced, robot_files
 from robot_calib.cli.options import CALIBRATION_ROBOT, add_force, add_output
 from robot_calib.errors import InputError
 
@@ -40,9 +40,9 @@ def main(args: argparse.Namespace) -> int:
     from robot_calib.messages import target_topic
     from robot_calib.predict import read_joints_csv, write_points_csv
 
-    model, params, doc = calibration_of(args)
-    plausible_or_forced(doc, args)
-    correction = correction_of(doc, model, params, args)
+    cal = calibration_of(args)
+    plausible_or_forced(cal.implausible, args)
+    model, params, correction = cal.model, cal.parameters, cal.correction
     args.target = model.targets[0] if args.target is None else args.target
     if args.target not in model.targets:
         known = ", ".join(repr(t) for t in model.targets)
@@ -58,7 +58,7 @@ def main(args: argparse.Namespace) -> int:
 
         frames = model.probe_orientations(params, poses)
         quaternions = Rotation.from_matrix(frames).as_quat()
-    points = model.target_points(params, poses, correction)  # hybrid: less the learned
+    points = cal.predict(poses)  # hybrid: less the learned correction's residual
     write_points_csv(points, output, quaternions)
     which = "" if len(model.targets) == 1 else f", target {target_topic(args.target)}"
     frames_too = "" if quaternions is None else " with the probe frame as qx,qy,qz,qw"

@@ -42,7 +42,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot_calib.compensate.targets import Targets
-from robot_calib.identify.correction_structured import LearnedCorrection
 from robot_calib.ik import (
     CONVERGED_M,
     ORIENTATION_LEVER_M,
@@ -56,7 +55,7 @@ from robot_calib.ik import (
 from robot_calib.kinematics.description import RobotDescription, home_variables
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
-from robot_calib.model import KinematicModel
+from robot_calib.model import Calibrated, KinematicModel, PointCorrection
 from robot_calib.poses import Poses, approach_directions
 
 #: Compensated readings of nominal commands: `ik.IKSolution` (q, error_m, error_rad,
@@ -76,7 +75,7 @@ def solve_corrected(
     goal2base: Array,
     tool2flange: Array,
     oriented: NDArray[np.bool_] | None = None,
-    correction: LearnedCorrection | None = None,
+    correction: PointCorrection | None = None,
 ) -> IKSolution:
     """`ik.solve_ik` for a model whose first target really sits at its point minus the
     learned `correction`'s predicted residual (tracker frame): the model aimed at
@@ -125,18 +124,15 @@ def solve_corrected(
     )
 
 
-def compensate_commands(
-    calibrated: KinematicModel,
-    params: ParameterVector,
-    nominal: KinematicModel,
-    nominal_params: ParameterVector,
-    commands: Poses,
-    correction: LearnedCorrection | None = None,
-) -> Compensation:
+def compensate_commands(calibration: Calibrated, commands: Poses) -> Compensation:
     """The compensated readings of `commands` (readings (n, J) [rad], approach directions
-    and times of the nominal program; see the module docstring). The nominal model's tool
-    is the calibrated first target's; both models in the robot base frame. correction:
-    the calibration's learned correction (the hybrid model), None: the model alone."""
+    and times of the nominal program; see the module docstring) for `calibration` (its
+    model, parameters and learned correction, the hybrid model's). The nominal model
+    (`nominal_counterpart`) has the calibrated first target as its tool; both models in the
+    robot base frame."""
+    calibrated, params = calibration.model, calibration.parameters
+    correction = calibration.correction
+    nominal, nominal_params = nominal_counterpart(calibrated, params)
     tool = first_tool2flange(calibrated, params)
     goal = tool2base(nominal, nominal_params, replace(commands, rotation=None), tool)
     full = solve_corrected(calibrated, params, commands, goal, tool, correction=correction)
@@ -368,27 +364,24 @@ def _other_branches(
 
 
 def compensate_targets(
-    calibrated: KinematicModel,
-    params: ParameterVector,
-    nominal: KinematicModel,
-    nominal_params: ParameterVector,
-    targets: Targets,
-    goal2base: Array,
-    correction: LearnedCorrection | None = None,
+    calibration: Calibrated, targets: Targets, goal2base: Array
 ) -> TargetCompensation:
     """Commands at which the calibrated model reaches the goals.
 
+    calibration : its model, parameters and learned correction (the hybrid model: the
+        model aimed at goal + the predicted residual, `solve_corrected`)
     targets : the rows of a TARGETS.csv (seeds, directions, times, temperatures)
     goal2base : shape (n, 4, 4), the goal tool frames in the robot base frame [m]
         (`targets.goals_in_base`); only the position where `targets.rotation` is None
-    correction : the calibration's learned correction (the hybrid model: the model aimed
-        at goal + the predicted residual, `solve_corrected`); None: the model alone
 
     The nominal model's inverse kinematics from the seeds (or the home pose) gives the start;
     the calibrated model's from there the commands. Without given directions, those of the
     commands found in row order are used, re-solving (at most DIRECTION_ROUNDS times) where
     compensating flips one.
     """
+    calibrated, params = calibration.model, calibration.parameters
+    correction = calibration.correction
+    nominal, nominal_params = nominal_counterpart(calibrated, params)
     n = len(targets)
     oriented = np.full(n, targets.rotation is not None)
     tool = first_tool2flange(calibrated, params)

@@ -32,6 +32,7 @@ from robot_calib.identify.params_file import (
     fixed_reasons,
     human_value,
     implausible_of,
+    in_sample_accuracy,
     outlier_lines,
     params_from_dict,
     read_document,
@@ -85,11 +86,26 @@ class Calibration:
     # the simpler model this one extends, fitted first on the same measurements: its name
     # and in-sample rms per axis [m]; None when none was fitted here (a base model, a start)
     simpler: tuple[str, float] | None = None
+    # read from a PARAMS.json: the bags it was fitted on (`recordings`) and the hybrid
+    # model's in-sample figures (`hybrid_residuals`; None: none, or not read from a file)
+    recordings: tuple[str, ...] = ()
+    hybrid_accuracy: Accuracy | None = None
 
     @property
     def plausible(self) -> bool:
         """False when `implausible` names a reason (PARAMS.json `plausible`)."""
         return not self.implausible
+
+    def applied_accuracy(self) -> tuple[Accuracy, str]:
+        """The in-sample figures of the model this calibration applies, and what they are
+        (for people): the physical model's, or with a learned correction the hybrid
+        model's when known (`hybrid_accuracy`; `hybrid_in_sample` computes them)."""
+        if self.correction is None:
+            return self.accuracy, "the calibration's in-sample rms"
+        if self.hybrid_accuracy is not None:
+            return self.hybrid_accuracy, "the hybrid model's in-sample rms"
+        return self.accuracy, ("the physical model's in-sample rms (the file has no "
+                               "hybrid_residuals: written before them)")  # fmt: skip
 
     def predict(self, poses: Poses) -> Array:
         """Target points (n, 3) [m] in the tracker frame: the model's, minus the learned
@@ -141,7 +157,9 @@ class Calibration:
         seed-criterion figures [mm], residuals, suspect points (`robot_calib.score`)."""
         from robot_calib.score import score
 
-        return score(self.model, self.parameters, recording, correction=self.correction)
+        in_sample, judged_by = self.applied_accuracy()
+        return score(self, recording, in_sample=in_sample, fitted=self.recordings,
+                     judged_by=judged_by)  # fmt: skip
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any], where: str = "PARAMS.json") -> Calibration:
@@ -152,9 +170,15 @@ class Calibration:
         file: residuals is empty (0, 3), cpa None."""
         model, params = params_from_dict(doc, where)
         correction = correction_of(doc, model, params, where)  # None: the physical model alone
+        acc = in_sample_accuracy(doc, where)
+        if acc is None:
+            raise InputError(f"{where}: malformed parameter file (no 'residuals')")
+        hybrid = in_sample_accuracy(doc, where, "hybrid_residuals")
+        recordings = doc.get("recordings", [])
+        if not isinstance(recordings, list) or not all(isinstance(r, str) for r in recordings):
+            raise InputError(f"{where}: 'recordings' must be a list of bag paths")
         try:
             std = np.array([float(r.get("std", 0.0)) for r in doc["parameters"]])
-            acc = Accuracy.from_dict(doc["residuals"])
             solver = SolverReport.from_dict(doc.get("solver") or {"method": "unknown"})
             ident = None
             if "identifiability" in doc:
@@ -179,7 +203,8 @@ class Calibration:
             raise InputError(f"{where}: malformed outliers ({exc})") from None
         return cls(str(doc.get("model", "")), model, params, std, acc, np.empty((0, 3)),
                    ident, solver, outliers=outliers, correction=correction,
-                   implausible=implausible_of(doc, where))  # fmt: skip
+                   implausible=implausible_of(doc, where, model, params),
+                   recordings=tuple(recordings), hybrid_accuracy=hybrid)  # fmt: skip
 
 
 def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any]:

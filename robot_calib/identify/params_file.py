@@ -191,16 +191,6 @@ def check_params_document(
             )
 
 
-def load_params(path: str | Path) -> tuple[KinematicModel, ParameterVector, dict[str, Any]]:
-    """The forward model and parameters of a PARAMS.json (and the whole document).
-
-    Light on purpose (no scipy): `predict` reads parameter files through it."""
-    path = Path(path)
-    doc = read_document(path)
-    model, params = params_from_dict(doc, str(path))
-    return model, params, doc
-
-
 def far_from_nominal_values(
     params: ParameterVector,
     length_m: float,

@@ -32,15 +32,10 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from robot_calib.compensate import Compensation, compensate_commands
-from robot_calib.compensate.solve import nominal_counterpart
 from robot_calib.compensate.write import LARGE_CHANGE_DEG
 from robot_calib.errors import InputError, RobotCalibError
-from robot_calib.identify.params_file import (
-    check_plausible,
-    correction_of,
-    implausible_of,
-    load_params,
-)
+from robot_calib.identify.calibration import Calibration
+from robot_calib.identify.params_file import check_plausible
 from robot_calib.kinematics.description import with_joint_names
 from robot_calib.kinematics.frames import Array
 from robot_calib.messages import JOINT_STATES_TOPIC, joint_positions, velocity_signs
@@ -145,18 +140,20 @@ class CompensatorNode(Node):
         )  # fmt: skip
         if not params_file:
             raise InputError(f"{self.get_name()}: parameter 'params' (PARAMS.json) is required")
-        self.model, self.params, doc = load_params(params_file)
+        # the one loader of PARAMS.json (a hybrid calibration's learned correction included,
+        # applied by the compensation)
+        self.calibration = Calibration.load(params_file)
         # a calibration marked implausible never steers a robot unless asked for (`force`),
         # as compensate, predict and export refuse it
-        warning = check_plausible(implausible_of(doc, params_file), params_file, use_anyway)
+        reasons = self.calibration.implausible
+        warning = check_plausible(reasons, params_file, use_anyway)
         if warning is not None:
             self.get_logger().warning(warning)
-        # a hybrid calibration's learned correction, applied by the compensation (None: none)
-        self.correction = correction_of(doc, self.model, self.params, params_file)
         if joint_names:
-            robot = with_joint_names(self.model.robot, joint_names)
-            self.model = replace(self.model, robot=robot)
-        self.nominal, self.nominal_params = nominal_counterpart(self.model, self.params)
+            robot = with_joint_names(self.calibration.model.robot, joint_names)
+            model = replace(self.calibration.model, robot=robot)
+            self.calibration = replace(self.calibration, model=model)
+        self.model = self.calibration.model
         self.temperature = temperature
         # reliable and volatile, as ros2_control's joint_trajectory_controller subscribes
         qos = QoSProfile(
@@ -259,9 +256,7 @@ class CompensatorNode(Node):
             # the one check of limits and units, as `compensate` and sim_robot apply it:
             # degrees or a point beyond the limits never reach the controller
             self.model.robot.check_joints(q, where, what="point")
-            result = compensate_commands(self.model, self.params, self.nominal,
-                                         self.nominal_params, self.commands(q, time),
-                                         self.correction)  # fmt: skip
+            result = compensate_commands(self.calibration, self.commands(q, time))
             if result.converged.all():
                 self.model.robot.check_joints(result.q, f"{where}: compensated", what="point")
         except RobotCalibError as exc:

@@ -25,10 +25,10 @@ from robot_calib.sim.plans import random_plan
 
 def test_the_true_robot_reaches_what_the_nominal_model_promised() -> None:
     cal, _ = calibrated()
-    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     commands = Poses.from_readings(random_plan(ROBOT, 200, np.random.default_rng(5)).q)
-    result = compensate_commands(cal.model, cal.parameters, nominal, nominal_params, commands)
+    result = compensate_commands(cal, commands)
     assert result.converged.all() and result.error_m.max() < 1e-8
+    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     promised = nominal.target_points(nominal_params, commands)  # tracker frame
     as_commanded = WORLD.model.target_points(WORLD.truth, commands)
     compensated = WORLD.model.target_points(WORLD.truth, replace(commands, q=result.q))
@@ -45,10 +45,9 @@ def test_at_the_wrist_singularity_only_the_position_is_compensated() -> None:
     from robot_calib.compensate.write import row_status
 
     cal, _ = calibrated()
-    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     q = np.radians([[0, -90, 90, 0, 0, 0], [0, -90, 90, 0, 45, 0], [30, -60, 100, 20, 0.001, 5]])
     commands = Poses.from_readings(q)
-    result = compensate_commands(cal.model, cal.parameters, nominal, nominal_params, commands)
+    result = compensate_commands(cal, commands)
     assert result.position_only is not None
     assert result.position_only.tolist() == [True, False, True]
     assert np.degrees(np.abs(result.q - q)).max() < 0.5 and result.error_m.max() < 1e-8
@@ -89,9 +88,9 @@ def target_poses(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Readings (n, J) [rad] of random poses within the limits and the tool frames
     (n, 4, 4) the nominal model (with the calibration's frames) puts there, base frame."""
     cal, _ = calibrated()
-    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     q = random_plan(ROBOT, n, np.random.default_rng(seed)).q
     tool = first_tool2flange(cal.model, cal.parameters)
+    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     return q, tool2base(nominal, nominal_params, Poses.from_readings(q), tool)
 
 
@@ -115,11 +114,9 @@ def test_the_true_robot_reaches_the_targets(oriented: bool) -> None:
     tenths of a millimetre; with the compensated commands it reaches them within 1.5 x the
     noise floor (the calibration's own error)."""
     cal, _ = calibrated()
-    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     q, goal = target_poses(150, 7)
     seed = q + np.random.default_rng(8).uniform(-0.05, 0.05, q.shape)
-    found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params,
-                               targets_of(goal, oriented, seed), goal)  # fmt: skip
+    found = compensate_targets(cal, targets_of(goal, oriented, seed), goal)  # fmt: skip
     assert found.reached.all() and found.compensated.error_m.max() < 1e-8
     assert found.nominal.converged.all()
     if oriented:  # the solution near the seed: the pose the targets came from (but near a
@@ -146,10 +143,9 @@ def test_targets_from_the_home_pose_in_either_frame() -> None:
     the target): position targets are reached (within the joint limits) nearly all; the
     same targets given in the tracker frame give the same commands."""
     cal, _ = calibrated()
-    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     _, goal = target_poses(100, 9)
     targets = targets_of(goal, False, None)
-    found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params, targets, goal)
+    found = compensate_targets(cal, targets, goal)
     assert found.reached.mean() >= 0.9
     # every target moved from the nominal solution took steps to get there (all rounds)
     moved = np.abs(found.compensated.q - found.nominal.q).max(axis=1) > 1e-9
@@ -170,10 +166,9 @@ def test_targets_of_poses_within_the_limits_are_reached_within_them() -> None:
     behind the robot for some (4 of 300 'beyond_limits' in the field, joint 1 past its
     limit); seeds over the arm's branches find one within the limits for every target."""
     cal, _ = calibrated()
-    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     _, goal = target_poses(300, 11)
     targets = targets_of(goal, False, None)
-    found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params, targets, goal)
+    found = compensate_targets(cal, targets, goal)
     limits = ROBOT.limits
     inside = np.all((found.compensated.q >= limits[:, 0]) & (found.compensated.q <= limits[:, 1]),
                     axis=1)  # fmt: skip
@@ -186,14 +181,13 @@ def test_a_path_behind_the_robot_stays_on_one_branch() -> None:
     some): every target reached within the limits, and the commands move smoothly from
     one row to the next (no switch of branch: at most 0.2 rad per step; 3.1 rad before)."""
     cal, _ = calibrated()
-    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     tool = first_tool2flange(cal.model, cal.parameters)
     a = np.array([-0.015, -1.827, -1.646, -1.615, 0.513, -1.581])
     b = np.array([0.10, -1.75, -1.55, -1.50, 0.60, -1.40])
     q = a + np.linspace(0.0, 1.0, 20)[:, None] * (b - a)  # steps of < 0.01 rad
+    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     goal = tool2base(nominal, nominal_params, Poses.from_readings(q), tool)
-    found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params,
-                               targets_of(goal, False, None), goal)  # fmt: skip
+    found = compensate_targets(cal, targets_of(goal, False, None), goal)  # fmt: skip
     limits = ROBOT.limits
     commands = found.compensated.q
     assert found.reached.all()
@@ -206,11 +200,10 @@ def test_a_target_at_no_finite_distance_is_not_reached() -> None:
     neighbour; a target at 1e300 m (a caller past the CSV reader's check) has none: it is
     not reached, the others are, nothing raises."""
     cal, _ = calibrated()
-    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     _, goal = target_poses(6, 9)
     goal[2, 0, 3] = 1e300
     targets = targets_of(goal, False, None)
-    found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params, targets, goal)
+    found = compensate_targets(cal, targets, goal)
     assert not found.reached[2] and found.reached[[0, 1, 3, 4, 5]].sum() >= 4
 
 
@@ -338,13 +331,11 @@ def test_oriented_targets_without_seeds_are_reached_in_orientation_or_said_not()
     tool pointing the opposite way, 180 deg off, reported reached with 0 urad: the
     small-angle orientation error is zero at a half turn)."""
     cal, _ = calibrated()
-    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     _, goal = target_poses(40, 21)
     turned = np.eye(4)
     turned[1:3, 1:3] = [[0.5, -np.sqrt(0.75)], [np.sqrt(0.75), 0.5]]
     goal[::2] = goal[::2] @ turned
-    found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params,
-                               targets_of(goal, True, None), goal)  # fmt: skip
+    found = compensate_targets(cal, targets_of(goal, True, None), goal)  # fmt: skip
     tool = first_tool2flange(cal.model, cal.parameters)
     at = replace(Poses.from_readings(found.compensated.q), direction=found.direction)
     actual = tool2base(cal.model, cal.parameters, at, tool)

@@ -12,7 +12,7 @@ from cli_runner import cli
 
 from robot_calib.diagnose.diagnosis import Diagnosis, DominantEffect, diagnose, small_holdout
 from robot_calib.diagnose.report import write_report
-from robot_calib.identify.params_file import load_params
+from robot_calib.identify.calibration import Calibration
 from robot_calib.sim.blind import judge, make_case, run_case
 from robot_calib.sim.world import load_world
 
@@ -86,7 +86,8 @@ def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:
     # the chosen rung's PARAMS.json beside it: loadable, saying how it was chosen
     best = tmp_path / "diagnosis.params_best.json"
     assert f"best model (the ladder's chosen rung): geometric -> {best}" in proc.stdout
-    model, params, saved = load_params(best)
+    saved = json.loads(best.read_text())
+    assert Calibration.load(best).name == "geometric"  # our own reader takes it
     assert saved["selected"]["model"] == doc["ladder"][-1]["model"] == "geometric"
     assert set(saved["selected"]["holdout_abs_rms_mm"]) == {r["model"] for r in doc["ladder"]}
     # written once: a second run refuses to overwrite it

@@ -25,8 +25,8 @@ from robot_calib.effects import (
     vocabulary,
 )
 from robot_calib.identify.calibrate import calibrate, parse_model
-from robot_calib.identify.calibration import load_calibration
-from robot_calib.identify.params_file import load_params, write_json_atomic
+from robot_calib.identify.calibration import Calibration, load_calibration
+from robot_calib.identify.params_file import write_json_atomic
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import recording_from_arrays
 from robot_calib.model import KinematicModel
@@ -117,7 +117,7 @@ def check_params_round_trip(cls: type[Effect], tmp_path: Path) -> None:
         cal = calibrate(recording, ROBOT, spec, log=None, start=cal)
     path = tmp_path / f"{cls.name}.json"
     write_json_atomic(cal.to_dict(recording), path)
-    model, params, _ = load_params(path)
+    model, params = (loaded := Calibration.load(path)).model, loaded.parameters
     assert model.effects == cal.model.effects
     np.testing.assert_array_equal(params.values, cal.parameters.values)
     test = random_poses(rng, 10)

@@ -13,7 +13,7 @@ from cli_runner import cli
 
 from robot_calib.accuracy import accuracy
 from robot_calib.bag.read import read_recording
-from robot_calib.identify.params_file import load_params
+from robot_calib.identify.calibration import Calibration
 from robot_calib.kinematics.loader import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -62,7 +62,7 @@ def test_score_is_the_error_on_a_bag_not_fitted(tmp_path: Path) -> None:
     table = tmp_path / "points.csv"
     proc = cli("score", str(params), str(hold), "--points-csv", str(table))
     assert proc.returncode == 0, proc.stderr
-    model, values, _ = load_params(params)
+    model, values = (loaded := Calibration.load(params)).model, loaded.parameters
     held = read_recording([hold], ROBOT)
     acc = accuracy(held.points, model.target_points(values, held.poses))
     assert f"absolute error mean {acc.absolute_mean_mm:.4f}" in proc.stdout

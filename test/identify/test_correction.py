@@ -264,7 +264,7 @@ def test_compensating_with_the_hybrid_model_puts_the_true_tool_nearer(
     nearer the nominal promise; its own fixed point (model - correction = goal) holds."""
     scenario, _ = compliant
     model, params = hybrid.model, hybrid.parameters
-    nominal, nominal_params = nominal_counterpart(model, params)
+    nominal, nominal_params = nominal_counterpart(model, params)  # what the program expects
     commands = Poses.from_readings(scenario.holdout.poses.q[:60])
     goal = tool2base(nominal, nominal_params, commands, first_tool2flange(model, params))
     base2tracker = model.base2tracker(params)
@@ -272,8 +272,7 @@ def test_compensating_with_the_hybrid_model_puts_the_true_tool_nearer(
     world = scenario.world
     errors = {}
     for name, correction in (("physical", None), ("hybrid", hybrid.correction)):
-        found = compensate_commands(model, params, nominal, nominal_params, commands,
-                                    correction)  # fmt: skip
+        found = compensate_commands(replace(hybrid, correction=correction), commands)
         at = replace(commands, q=found.q)
         errors[name] = rms_mm(world.model.target_points(world.truth, at) - goal_in_tracker)
     # the fixed point (model - correction = goal) holds where the compensation says it
@@ -307,7 +306,7 @@ def test_predict_score_and_export_use_or_name_the_correction(
     written = np.loadtxt(points, delimiter=",", skiprows=1)
     assert np.allclose(written, hybrid.predict(Poses.from_readings(q)), rtol=0, atol=1e-12)
     # score: the hybrid's residuals
-    scored = score(hybrid.model, hybrid.parameters, held, correction=hybrid.correction)
+    scored = score(hybrid, held)
     assert scored.accuracy.absolute_rms_mm == pytest.approx(
         rms_mm(hybrid.predict(held.poses) - held.points), rel=1e-9
     )

@@ -17,9 +17,9 @@ from cli_runner import cli
 from robot_calib.accuracy import accuracy, pairwise_errors
 from robot_calib.effects import make_effect
 from robot_calib.identify.calibrate import calibrate, parse_model
+from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.cpa import circle_point_analysis
 from robot_calib.identify.identifiability import fix_unidentifiable
-from robot_calib.identify.params_file import load_params
 from robot_calib.kinematics.frames import rpy_to_matrix
 from robot_calib.measurements import recording_from_arrays
 from robot_calib.model import KinematicModel, absorb_base_offsets
@@ -200,7 +200,7 @@ def test_calibrate_and_predict_commands(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     predicted = np.loadtxt(points, delimiter=",", skiprows=1)
     assert points.read_text().startswith("x,y,z\n") and predicted.shape == (200, 3)
-    model, values, _ = load_params(params)
+    model, values = (loaded := Calibration.load(params)).model, loaded.parameters
     same = model.target_points(values, read_joints_csv(joints, 6))
     assert np.allclose(predicted, same, atol=1e-12)
     assert np.linalg.norm(predicted - h_points, axis=1).mean() < 2e-5  # held-out, ~noise

@@ -21,7 +21,7 @@ from cli_runner import cli
 from robot_calib.accuracy import accuracy
 from robot_calib.errors import RobotDescriptionError
 from robot_calib.identify.calibrate import calibrate
-from robot_calib.identify.params_file import load_params
+from robot_calib.identify.calibration import Calibration
 from robot_calib.kinematics.description import ROBOTS_DIR
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import find_sweeps
@@ -156,7 +156,7 @@ def test_coupled_robot_calibrates_from_raw_readings(tmp_path: Path) -> None:
     free = mapped.parameters.free
     z = (mapped.parameters.values - truth.values)[free] / mapped.std[free]
     assert np.all(np.abs(z) < 3.0), dict(zip(mapped.parameters.free_names, np.round(z, 2)))
-    model, params, _ = load_params(tmp_path / "p.json")
+    model, params = (loaded := Calibration.load(tmp_path / "p.json")).model, loaded.parameters
     assert model.robot.has_mapping
 
     # Hold-out: random general poses (readings within the limits).

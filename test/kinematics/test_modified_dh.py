@@ -228,9 +228,9 @@ def test_a_csv_table_calibrates_and_its_result_carries_the_table(tmp_path: Path)
         assert run.returncode == 0, (args, run.stderr)
     text = arm.read_text()
     arm.unlink()
-    from robot_calib.identify.params_file import load_params
+    from robot_calib.identify.calibration import Calibration
 
-    model, params, _ = load_params(str(tmp_path / "p.json"))
+    model, params = (loaded := Calibration.load(str(tmp_path / "p.json"))).model, loaded.parameters
     assert model.robot.name == "arm" and model.robot.n_joints == 6
     assert "alpha_prev" in text and model.robot.source.startswith("DH table")
     assert params.names  # the calibrated parameters read back

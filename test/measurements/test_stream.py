@@ -89,10 +89,10 @@ def test_latency_identified_and_geometry_at_the_noise_floor(
     assert abs(fit.latency_s - LATENCY_S) < 0.2e-3
     assert abs(fit.latency_s - LATENCY_S) < 20e-6
     assert fit.rounds >= 2 and fit.pairing.every == 11 and fit.pairing.n_kept <= 1500
-    held = score(fit.calibration.model, fit.calibration.parameters, holdout).accuracy
+    held = score(fit.calibration, holdout).accuracy
     assert held.absolute_rms_mm < 0.02
     ignored = calibrate_stream(simulated.stream, robot, latency_s=0.0, max_points=1500)
-    worse = score(ignored.calibration.model, ignored.calibration.parameters, holdout).accuracy
+    worse = score(ignored.calibration, holdout).accuracy
     assert worse.absolute_rms_mm > 10 * held.absolute_rms_mm
 
 

@@ -19,7 +19,7 @@ from robot_calib.bag.mcap_reader import BagReader
 from robot_calib.bag.read import read_recording
 from robot_calib.bag.write import write_measurement_bag
 from robot_calib.identify.calibrate import calibrate
-from robot_calib.identify.params_file import load_params
+from robot_calib.identify.calibration import Calibration
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.model import absorb_base_offsets, target_parameters
 from robot_calib.sim.measure import measure_every_target
@@ -130,7 +130,7 @@ def test_bag_round_trip_keeps_the_contract_topic_and_adds_one_per_target(tmp_pat
         "/laser_tracker/point", "/laser_tracker/smr2/point", "/laser_tracker/smr3/point"
     ]  # fmt: skip
     assert [t["measurements"] for t in doc["targets"]] == [n, n, n - 1]
-    model, fitted, _ = load_params(params)
+    model, fitted = (loaded := Calibration.load(params)).model, loaded.parameters
     assert model.targets == ("", "smr2", "smr3")
     truth = absorb_base_offsets(ROBOT, WORLD.truth)
     assert abs(fitted["target_smr3_z"] - truth["target_smr3_z"]) < 1e-5

@@ -129,13 +129,13 @@ def test_a_trajectory_comes_back_compensated(context: Context, params_file: Path
     ]
 
     cal, _ = calibrated()
-    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     commands = Poses.from_readings(q, approach_directions(q, start=start), seconds)
     assert commands.direction[0, 3] == -1.0  # a sign (+-1), not a computed value
-    expected = compensate_commands(cal.model, cal.parameters, nominal, nominal_params, commands)
+    expected = compensate_commands(cal, commands)
     np.testing.assert_allclose(corrected, expected.q, rtol=0, atol=1e-12)
     assert np.abs(corrected - q).max() > 1e-4  # corrected (backlash 2 mrad), not passed on
 
+    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     promised = nominal.target_points(nominal_params, commands)  # tracker frame
     moved = Poses.from_readings(  # as the robot moves, from where it stood
         corrected, approach_directions(corrected, start=start)

@@ -22,7 +22,7 @@ from robot_calib.bag.write import write_measurement_bag
 from robot_calib.cli import build_parser
 from robot_calib.diagnose.noise import estimate_noise, noise_basis
 from robot_calib.errors import InputError
-from robot_calib.identify.params_file import in_sample_accuracy, load_params
+from robot_calib.identify.calibration import Calibration
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import recording_from_arrays
 from robot_calib.predict import read_joints_csv
@@ -85,8 +85,8 @@ def test_score_flags_another_robot_in_every_output(work: Path) -> None:
 
 def test_the_implausibility_threshold(work: Path) -> None:
     """Above 10 x the in-sample rms and above 1 mm: both are needed."""
-    model, params, doc = load_params(work / "p5.json")
-    fitted = in_sample_accuracy(doc, "p5.json")
+    cal = Calibration.load(work / "p5.json")
+    model, fitted = cal.model, cal.accuracy
     assert fitted is not None and fitted.absolute_rms_mm < 0.02
     recording = read_recording([SAMPLE], KR5)
 
@@ -101,8 +101,8 @@ def test_the_implausibility_threshold(work: Path) -> None:
     # sample bag is the calibration's own: only that is said).
     shifted = recording_from_arrays(recording.poses.q, recording.points + [0.005, 0, 0],
                                     recording.poses.time, robot=KR5)  # fmt: skip
-    assert any(IMPLAUSIBLE_HINT in w for w in score(model, params, shifted, fitted).warnings)
-    (only,) = score(model, params, recording, fitted, doc["recordings"]).warnings
+    assert any(IMPLAUSIBLE_HINT in w for w in score(cal, shifted, in_sample=fitted).warnings)
+    (only,) = cal.score(recording).warnings
     assert "looks like a bag this calibration was fitted on" in only
 
 
@@ -240,10 +240,10 @@ def test_the_noise_floor_says_what_its_number_counts() -> None:
 
 
 def test_the_docs_list_every_column_of_the_score_table(work: Path) -> None:
-    model, params, _ = load_params(work / "p10.json")
+    cal10 = Calibration.load(work / "p10.json")
     recording = read_recording([work / "ur10.mcap"], UR10)
     table = work / "table.csv"
-    write_points_table(score(model, params, recording), recording, table)
+    write_points_table(score(cal10, recording), recording, table)
     header = table.read_text().splitlines()[0].split(",")
     assert header[-4:] == ["rx_rad", "ry_rad", "rz_rad", "angle_rad"]
     doc = (ROOT / "msgs_doc" / "split_score.md").read_text()
