@@ -18,9 +18,9 @@ import time
 
 import numpy as np
 
-from robot_calib.compensate import compensate_commands, compensate_targets
-from robot_calib.compensate.solve import nominal_counterpart
-from robot_calib.compensate.targets import Targets, goals_in_base
+from robot_calib.compensation import compensate_commands, compensate_targets
+from robot_calib.compensation.solve import nominal_counterpart
+from robot_calib.compensation.targets import Targets, goals_in_base
 from robot_calib.effects import parse_effect
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.ik import first_tool2flange, tool2base

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from robot_calib.bag.read import read_recording
 from robot_calib.cli import main as cli
-from robot_calib.diagnose.diagnosis import diagnose
+from robot_calib.diagnosis.diagnosis import diagnose
 from robot_calib.effects.backlash import Backlash
 from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.effects.thermal_drift import ThermalDrift

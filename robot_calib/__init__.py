@@ -29,7 +29,7 @@ _LAZY = {
     **dict.fromkeys(("calibrate", "compensate", "diagnose", "load_robot", "read_recording",
                      "recording_from_arrays", "simulate"), _API),
     "Calibration": "robot_calib.identify.calibration",
-    "Diagnosis": "robot_calib.diagnose.diagnosis",
+    "Diagnosis": "robot_calib.diagnosis.diagnosis",
     "ModelSpec": "robot_calib.identify.model_spec",
     "Recording": "robot_calib.measurements",
     "RobotCalibError": "robot_calib.errors",

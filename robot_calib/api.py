@@ -29,8 +29,8 @@ from typing import TYPE_CHECKING
 from robot_calib.log import Log
 
 if TYPE_CHECKING:
-    from robot_calib.compensate import Compensation
-    from robot_calib.diagnose.diagnosis import Diagnosis
+    from robot_calib.compensation import Compensation
+    from robot_calib.diagnosis.diagnosis import Diagnosis
     from robot_calib.flows.simulate import Simulation
     from robot_calib.identify.calibration import Calibration
     from robot_calib.kinematics.description import RobotDescription
@@ -127,7 +127,7 @@ def compensate(
     `time` (n,) [s] for models that follow time."""
     import numpy as np
 
-    from robot_calib.compensate import compensate_commands
+    from robot_calib.compensation import compensate_commands
     from robot_calib.poses import Poses, approach_directions
 
     q = np.asarray(q, dtype=float)

@@ -27,7 +27,7 @@ from robot_calib.bag.csv_format import PRESETS, with_overrides
 from robot_calib.bag.csv_import import read_measurement_csv
 from robot_calib.bag.read import read_recording
 from robot_calib.bag.write import write_measurement_bag
-from robot_calib.diagnose.diagnosis import diagnose
+from robot_calib.diagnosis.diagnosis import diagnose
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.kinematics.loader import load_robot
 

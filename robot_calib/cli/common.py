@@ -19,7 +19,7 @@ from robot_calib.kinematics.description import RobotDescription, with_joint_name
 from robot_calib.kinematics.loader import load_robot
 
 if TYPE_CHECKING:
-    from robot_calib.diagnose.diagnosis import Diagnosis
+    from robot_calib.diagnosis.diagnosis import Diagnosis
     from robot_calib.identify.calibration import Calibration
 
 
@@ -107,7 +107,7 @@ def plausible_or_forced(reasons: tuple[str, ...], args: argparse.Namespace) -> N
 def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: float) -> None:
     """The diagnosis for people: the ladder (mm), the floor, the verdict, what remains,
     the measurements left out as tracker blunders."""
-    from robot_calib.diagnose.diagnosis import percent
+    from robot_calib.diagnosis.diagnosis import percent
     from robot_calib.flows.diagnose import html_report_path
     from robot_calib.identify.params_file import outlier_lines
 

@@ -1,6 +1,6 @@
 """`robot-calib compensate`: nominal joint commands, or targets, -> the commands that
 make the calibrated robot go where the nominal model would (msgs_doc/compensate.md;
-robot_calib/compensate/)."""
+robot_calib/compensation/)."""
 
 from __future__ import annotations
 
@@ -61,10 +61,10 @@ def add_arguments(comp: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     """Nominal joint commands, or targets, -> compensated commands (msgs_doc/compensate.md)."""
     from robot_calib.atomic import output_path
-    from robot_calib.compensate import compensate_commands, compensate_targets
-    from robot_calib.compensate.solve import within_limits
-    from robot_calib.compensate.targets import check_reach, goals_in_base, read_targets_csv
-    from robot_calib.compensate.write import LARGE_CHANGE_DEG, row_status, write_compensated_csv
+    from robot_calib.compensation import compensate_commands, compensate_targets
+    from robot_calib.compensation.solve import within_limits
+    from robot_calib.compensation.targets import check_reach, goals_in_base, read_targets_csv
+    from robot_calib.compensation.write import LARGE_CHANGE_DEG, row_status, write_compensated_csv
     from robot_calib.predict import read_joints_csv
 
     cal = calibration_of(args)

@@ -67,7 +67,7 @@ def main(args: argparse.Namespace) -> int:
 
 def _diagnose(args: argparse.Namespace, robot: RobotDescription, reading: ReadAside) -> int:
     from robot_calib.atomic import output_path, refuse_input
-    from robot_calib.diagnose.report import plot_paths
+    from robot_calib.diagnosis.report import plot_paths
     from robot_calib.flows.diagnose import (
         FiguresWhenClimbed,
         best_params_path,

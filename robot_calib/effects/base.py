@@ -102,7 +102,7 @@ class Effect(ABC):
     #: picks joint_harmonics' orders), not from the poses alone (`ladder_candidates`)
     candidates_from_residuals: ClassVar[bool] = False
     #: The per-joint signature family of the diagnosis this effect models on its joints
-    #: (`robot_calib.diagnose.signatures.SIGNATURE_FAMILIES`: "direction", "scale",
+    #: (`robot_calib.diagnosis.signatures.SIGNATURE_FAMILIES`: "direction", "scale",
     #: "gravity"; "" none): the reports say a finding of that family on those joints is
     #: removed by a model with the effect. Joint-angle harmonics: `harmonic_orders`.
     signature_family: ClassVar[str] = ""

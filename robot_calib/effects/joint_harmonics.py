@@ -13,7 +13,7 @@ stage's 17th or 29th harmonic costs two parameters, not 58. What the orders usua
   ring's pole count.
 
 The orders of a real robot are found by a frequency scan of the residuals
-(`robot_calib.diagnose.frequency`), not guessed. Parameters `jhJ_cK`, `jhJ_sK` [rad]
+(`robot_calib.diagnosis.frequency`), not guessed. Parameters `jhJ_cK`, `jhJ_sK` [rad]
 (the constant term is theta_j's own). Over a partial turn of the joint the low orders are
 nearly collinear with theta_j and the other geometry: the weak prior of every effect
 amplitude (`robot_calib.identify.prior`) keeps them from trading radians with it.
@@ -141,5 +141,5 @@ class JointHarmonics(Effect):
     @classmethod
     def ladder_candidates(cls, robot: RobotDescription, poses: Poses) -> list[Effect]:
         """None from the poses alone: the orders come from the residuals' frequency scan
-        (`robot_calib.diagnose.frequency`), which the ladder runs every round."""
+        (`robot_calib.diagnosis.frequency`), which the ladder runs every round."""
         return []

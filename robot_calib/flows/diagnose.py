@@ -19,10 +19,10 @@ from robot_calib.log import Log
 from robot_calib.measurements import PAIR_TOLERANCE_S
 
 if TYPE_CHECKING:
-    from robot_calib.diagnose.diagnosis import Diagnosis
-    from robot_calib.diagnose.figures import FigureCache
-    from robot_calib.diagnose.ladder import Ladder
-    from robot_calib.diagnose.report import ModelErrors
+    from robot_calib.diagnosis.diagnosis import Diagnosis
+    from robot_calib.diagnosis.figures import FigureCache
+    from robot_calib.diagnosis.ladder import Ladder
+    from robot_calib.diagnosis.report import ModelErrors
     from robot_calib.identify.calibration import Calibration
     from robot_calib.measurements import Recording
 
@@ -42,11 +42,11 @@ def diagnose_recordings(
     Returns
     -------
     diagnosis : Diagnosis
-        The DIAGNOSIS.json document (as `robot_calib.diagnose.diagnosis.diagnose`).
+        The DIAGNOSIS.json document (as `robot_calib.diagnosis.diagnosis.diagnose`).
     ladder : Ladder
         The rungs behind it, each with its calibration and held-out scores.
     """
-    from robot_calib.diagnose.diagnosis import diagnose
+    from robot_calib.diagnosis.diagnosis import diagnose
 
     if holdout is not None:  # index the hold-out's targets as the calibration's
         holdout = holdout.with_targets(recording.target_names)
@@ -174,9 +174,9 @@ def started_figures() -> FigureCache:
     (a context manager). The modules of the diagnosis and its reports are imported here
     first (this process needs them anyway): the helper inherits them instead of importing
     them again (0.45 s)."""
-    import robot_calib.diagnose.html_report  # noqa: F401 - inherited by the helper
-    import robot_calib.diagnose.report  # noqa: F401 - inherited by the helper
-    from robot_calib.diagnose.figures import FigureCache
+    import robot_calib.diagnosis.html_report  # noqa: F401 - inherited by the helper
+    import robot_calib.diagnosis.report  # noqa: F401 - inherited by the helper
+    from robot_calib.diagnosis.figures import FigureCache
 
     return FigureCache.started()
 
@@ -188,8 +188,8 @@ def draw_figures(figures: FigureCache, ladder: Ladder, fitted: Recording,
     about equal cost, 2773 poses: 0.4-0.5 s each, each in the order the HTML page asks
     for them); `fitted`: the measurements the ladder was fitted on, `floor_mm` the noise
     floor [mm] (None: unknown), `compared` the before/after models. Once per cache."""
-    from robot_calib.diagnose.html_report import page_figures
-    from robot_calib.diagnose.report import report_figures
+    from robot_calib.diagnosis.html_report import page_figures
+    from robot_calib.diagnosis.report import report_figures
 
     shown = {key: draw for _, key, _, draw in report_figures(ladder, fitted, floor_mm)}
     shown.update(page_figures(ladder, fitted, compared))
@@ -296,9 +296,9 @@ def write_diagnosis(
         The Markdown report: `report_path(output)` (the HTML one: `html_report_path`).
     """
     from robot_calib.atomic import staged_outputs
-    from robot_calib.diagnose.figures import FigureCache
-    from robot_calib.diagnose.html_report import compare_models, html_report
-    from robot_calib.diagnose.report import plot_paths, write_report
+    from robot_calib.diagnosis.figures import FigureCache
+    from robot_calib.diagnosis.html_report import compare_models, html_report
+    from robot_calib.diagnosis.report import plot_paths, write_report
     from robot_calib.identify.params_file import write_json_atomic
 
     output = Path(output)
@@ -419,7 +419,7 @@ def compare_before_after(
     """The HTML report's before/after models (`compare_models`: nominal, cpa, geometric,
     the best rung) and, when they are all scored on hold-out bags, a warning for each that
     generalises worse than the simpler one before it (what `diagnose` says, as `run` does)."""
-    from robot_calib.diagnose.html_report import compare_models
+    from robot_calib.diagnosis.html_report import compare_models
 
     compared = compare_models(ladder, calibrations)
     if ladder.holdout is None:  # nominal/cpa in-sample, the rungs k-fold: not comparable

@@ -41,8 +41,8 @@ from robot_calib.log import Log
 
 if TYPE_CHECKING:
     from robot_calib.accuracy import Accuracy
-    from robot_calib.diagnose.diagnosis import Diagnosis
-    from robot_calib.diagnose.ladder import Ladder
+    from robot_calib.diagnosis.diagnosis import Diagnosis
+    from robot_calib.diagnosis.ladder import Ladder
     from robot_calib.identify.calibration import Calibration
     from robot_calib.measurements import Recording
     from robot_calib.sim.world import World

@@ -48,8 +48,8 @@ from std_msgs.msg import Empty, Float64MultiArray, String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
-from robot_calib.diagnose.diagnosis import Diagnosis
-from robot_calib.diagnose.ladder import Ladder
+from robot_calib.diagnosis.diagnosis import Diagnosis
+from robot_calib.diagnosis.ladder import Ladder
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.flows.bags import read_bags
 from robot_calib.flows.calibrate import calibrate_recording

@@ -31,8 +31,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from robot_calib.compensate import Compensation, compensate_commands
-from robot_calib.compensate.write import LARGE_CHANGE_DEG
+from robot_calib.compensation import Compensation, compensate_commands
+from robot_calib.compensation.write import LARGE_CHANGE_DEG
 from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.params_file import check_plausible

@@ -51,10 +51,10 @@ from typing import Any
 import numpy as np
 
 from robot_calib.accuracy import accuracy
-from robot_calib.diagnose.diagnosis import Diagnosis, diagnose
-from robot_calib.diagnose.evidence import STRUCTURE_Z
-from robot_calib.diagnose.ladder import Ladder
-from robot_calib.diagnose.signatures import WhereItLies
+from robot_calib.diagnosis.diagnosis import Diagnosis, diagnose
+from robot_calib.diagnosis.evidence import STRUCTURE_Z
+from robot_calib.diagnosis.ladder import Ladder
+from robot_calib.diagnosis.signatures import WhereItLies
 from robot_calib.effects import EFFECTS, Effect, effect_class, parse_effect
 from robot_calib.effects.base import signed_uniform
 from robot_calib.effects.compliance import Compliance

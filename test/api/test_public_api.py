@@ -56,3 +56,20 @@ def test_a_model_name_is_a_value_that_round_trips() -> None:
     assert spec.added_to(rc.ModelSpec.parse("geometric+backlash:4")) == (
         "joint_harmonics:1,2:orders=17,23"
     )
+
+
+def test_no_exported_name_is_also_a_submodule() -> None:
+    """A submodule named like an API function would replace it once imported (importing
+    `robot_calib.x` binds `robot_calib.x` to the module): `rc.diagnose` must stay the
+    function after the diagnosis package has loaded."""
+    import importlib
+
+    import robot_calib as rc
+
+    package = Path(rc.__file__).parent
+    for name in rc.__all__:
+        assert not (package / name).is_dir() and not (package / f"{name}.py").exists(), name
+    importlib.import_module("robot_calib.diagnosis.ladder")
+    importlib.import_module("robot_calib.compensation.solve")
+    assert callable(rc.diagnose) and rc.diagnose.__module__ == "robot_calib.api"
+    assert callable(rc.compensate) and rc.compensate.__module__ == "robot_calib.api"

@@ -12,7 +12,7 @@ import numpy as np
 
 from robot_calib.bag.read import read_recording
 from robot_calib.bag.write import write_measurement_bag
-from robot_calib.diagnose.diagnosis import diagnose
+from robot_calib.diagnosis.diagnosis import diagnose
 from robot_calib.effects import parse_effect
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.measurements import Recording, recording_from_arrays

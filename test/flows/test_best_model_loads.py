@@ -13,7 +13,7 @@ import pytest
 from cli_runner import cli
 
 from robot_calib.bag.write import write_measurement_bag
-from robot_calib.diagnose.diagnosis import diagnose
+from robot_calib.diagnosis.diagnosis import diagnose
 from robot_calib.flows.diagnose import best_params_path, compare_before_after, write_diagnosis
 from robot_calib.identify.calibration import load_calibration
 from robot_calib.sim.blind import make_case

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from robot_calib.cli import main
-from robot_calib.compensate import compensate_commands
-from robot_calib.compensate.solve import nominal_counterpart
-from robot_calib.diagnose.ladder import kfold_parameters
-from robot_calib.diagnose.learnable import corrected_heldout, learnable_bound
+from robot_calib.compensation import compensate_commands
+from robot_calib.compensation.solve import nominal_counterpart
+from robot_calib.diagnosis.ladder import kfold_parameters
+from robot_calib.diagnosis.learnable import corrected_heldout, learnable_bound
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.calibration import Calibration

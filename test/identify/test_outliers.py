@@ -14,7 +14,7 @@ from bag_files import write_measurements
 from cli_runner import cli
 
 from robot_calib.accuracy import accuracy
-from robot_calib.diagnose.diagnosis import diagnose
+from robot_calib.diagnosis.diagnosis import diagnose
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.calibration import summary
 from robot_calib.identify.fit import fit_model

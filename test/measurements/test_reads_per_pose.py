@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from robot_calib.bag.read import read_recording
-from robot_calib.diagnose.noise import REREADS, estimate_noise
+from robot_calib.diagnosis.noise import REREADS, estimate_noise
 from robot_calib.flows.diagnose import diagnose_recordings
 from robot_calib.flows.simulate import simulate
 from robot_calib.poses import reading_groups

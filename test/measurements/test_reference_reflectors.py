@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from robot_calib.bag.read import read_recording
-from robot_calib.diagnose.noise import REFERENCES, estimate_noise
+from robot_calib.diagnosis.noise import REFERENCES, estimate_noise
 from robot_calib.flows.simulate import simulate
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.measurements import Recording

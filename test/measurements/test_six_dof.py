@@ -251,7 +251,7 @@ def test_a_probe_with_a_further_target_keeps_its_frame_to_itself() -> None:
 def test_diagnose_takes_6dof_measurements() -> None:
     """The ladder's screening model keeps the probe (its frame's parameters): diagnose runs
     on 6-DoF data and, on a world without effects, finds none."""
-    from robot_calib.diagnose.diagnosis import diagnose
+    from robot_calib.diagnosis.diagnosis import diagnose
 
     poses, points = measured(n=120, seed=21)
     held_poses, held_points = measured(n=60, seed=22)

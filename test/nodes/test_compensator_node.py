@@ -22,8 +22,8 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from robot_calib.compensate import compensate_commands
-from robot_calib.compensate.solve import nominal_counterpart
+from robot_calib.compensation import compensate_commands
+from robot_calib.compensation.solve import nominal_counterpart
 from robot_calib.errors import InputError
 from robot_calib.identify.params_file import write_json_atomic
 from robot_calib.nodes.compensator import CompensatorNode

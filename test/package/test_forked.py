@@ -235,9 +235,9 @@ def test_children_of_a_killed_process_end_and_remove_their_folders() -> None:
 KFOLD_CHECK = """
 import threading
 import numpy as np
-import robot_calib.diagnose.learnable as learnable
-from robot_calib.diagnose.ladder import kfold_parameters
-from robot_calib.diagnose.learnable import corrected_heldout
+import robot_calib.diagnosis.learnable as learnable
+from robot_calib.diagnosis.ladder import kfold_parameters
+from robot_calib.diagnosis.learnable import corrected_heldout
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.sim.scenarios import ur10_random
 

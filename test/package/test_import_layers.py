@@ -32,7 +32,7 @@ def core_modules() -> list[str]:
     import robot_calib
 
     names = ["robot_calib.flows", "robot_calib.bag", "robot_calib.model"]
-    for package in ("measurements", "effects", "identify", "diagnose", "kinematics", "flows"):
+    for package in ("measurements", "effects", "identify", "diagnosis", "kinematics", "flows"):
         path = [str(Path(robot_calib.__file__).parent / package)]
         names += [f"robot_calib.{package}.{m.name}" for m in pkgutil.iter_modules(path)]
     return names
@@ -90,7 +90,7 @@ def test_the_core_imports_no_file_format_nor_ros(
 
 
 def test_diagnose_does_not_import_the_simulator() -> None:
-    diagnose = [m for m in core_modules() if m.startswith("robot_calib.diagnose.")]
+    diagnose = [m for m in core_modules() if m.startswith("robot_calib.diagnosis.")]
     probe = f"import {', '.join(diagnose)}, sys\n"
     probe += "print([m for m in sys.modules if m.startswith('robot_calib.sim')])"
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,

@@ -215,12 +215,12 @@ def test_what_remains_when_the_hybrid_won_is_coherent() -> None:
     the physical rung's structure. Now it says what the hybrid leaves, what the physical
     model alone leaves (its ratio, its structure) and points to `outside_vocabulary`; a
     signature of negligible size (0.5 urad) is no structure to name."""
-    from robot_calib.diagnose.diagnosis import (
+    from robot_calib.diagnosis.diagnosis import (
         STRUCTURE_SHARE,
         diagnose,
         signature_size_mm,
     )
-    from robot_calib.diagnose.signatures import Signature
+    from robot_calib.diagnosis.signatures import Signature
     from robot_calib.sim.blind import ur10_out_of_vocabulary
 
     sc = ur10_out_of_vocabulary("gravity_backlash", seed=0, n=1000, holdout_share=0.3)

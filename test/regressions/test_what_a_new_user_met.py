@@ -20,7 +20,7 @@ from robot_calib.bag.csv_import import read_measurement_csv
 from robot_calib.bag.read import read_recording
 from robot_calib.bag.write import write_measurement_bag
 from robot_calib.cli import build_parser
-from robot_calib.diagnose.noise import estimate_noise, noise_basis
+from robot_calib.diagnosis.noise import estimate_noise, noise_basis
 from robot_calib.errors import InputError
 from robot_calib.identify.calibration import Calibration
 from robot_calib.kinematics.loader import load_robot

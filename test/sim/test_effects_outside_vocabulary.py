@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from robot_calib.accuracy import accuracy
-from robot_calib.diagnose.diagnosis import Diagnosis, DominantEffect, diagnose
+from robot_calib.diagnosis.diagnosis import Diagnosis, DominantEffect, diagnose
 from robot_calib.effects import EFFECTS, make_effect, vocabulary
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.effects.gravity_backlash import TAU0_NM, GravityBacklash

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robot_calib.diagnose.noise import estimate_noise, repeat_pairs
+from robot_calib.diagnosis.noise import estimate_noise, repeat_pairs
 from robot_calib.measurements import recording_from_arrays
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points

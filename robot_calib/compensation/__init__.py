@@ -1,7 +1,7 @@
 """Compensation: joint commands that make the calibrated robot reach what the nominal
 model promised, or given targets."""
 
-from robot_calib.compensate.solve import (
+from robot_calib.compensation.solve import (
     Compensation,
     TargetCompensation,
     compensate_commands,

@@ -21,19 +21,19 @@ from functools import partial
 import numpy as np
 
 from robot_calib.accuracy import Accuracy, accuracy
-from robot_calib.diagnose.frequency import (
+from robot_calib.diagnosis.frequency import (
     ASIDE_POSES,
     JointSpectrum,
     harmonic_candidates,
     joint_spectra,
 )
-from robot_calib.diagnose.learnable import (
+from robot_calib.diagnosis.learnable import (
     LearnableBound,
     bound_of,
     corrected_heldout,
     final_correction,
 )
-from robot_calib.diagnose.noise import NoiseLevel, estimate_noise
+from robot_calib.diagnosis.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
 from robot_calib.forked import Aside
 from robot_calib.identify.calibrate import calibrate, model_name

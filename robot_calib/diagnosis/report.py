@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from robot_calib.accuracy import Accuracy
-from robot_calib.diagnose.diagnosis import Diagnosis, NoiseReport, percent, small_holdout
-from robot_calib.diagnose.figures import (
+from robot_calib.diagnosis.diagnosis import Diagnosis, NoiseReport, percent, small_holdout
+from robot_calib.diagnosis.figures import (
     ANGLE_UNITS,
     FigureCache,
     angle_figure,
@@ -22,10 +22,10 @@ from robot_calib.diagnose.figures import (
     residual_map_figure,
     time_figure,
 )
-from robot_calib.diagnose.ladder import HOLDOUT_K, Ladder
-from robot_calib.diagnose.names import with_breaks
-from robot_calib.diagnose.noise import noise_basis
-from robot_calib.diagnose.signatures import (
+from robot_calib.diagnosis.ladder import HOLDOUT_K, Ladder
+from robot_calib.diagnosis.names import with_breaks
+from robot_calib.diagnosis.noise import noise_basis
+from robot_calib.diagnosis.signatures import (
     ArcSignature,
     JointTerms,
     WhereItLies,
@@ -41,7 +41,7 @@ from robot_calib.measurements import Recording
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from robot_calib.diagnose.iso9283 import Iso9283
+    from robot_calib.diagnosis.iso9283 import Iso9283
     from robot_calib.identify.calibration import Calibration
 
 #: the figures' file name suffixes: `<stem>_<suffix>.png` (a figure with nothing to show is

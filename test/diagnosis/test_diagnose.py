@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from cli_runner import cli
 
-from robot_calib.diagnose.diagnosis import Diagnosis, DominantEffect, diagnose, small_holdout
-from robot_calib.diagnose.report import write_report
+from robot_calib.diagnosis.diagnosis import Diagnosis, DominantEffect, diagnose, small_holdout
+from robot_calib.diagnosis.report import write_report
 from robot_calib.identify.calibration import Calibration
 from robot_calib.sim.blind import judge, make_case, run_case
 from robot_calib.sim.world import load_world
@@ -141,7 +141,7 @@ def test_kfold_of_a_warm_up_is_not_spoilt_by_its_time_constant() -> None:
     its optimum there; every fold once took that step too and landed far off (k-fold 0.029
     mm against 0.013 on the hold-out), so the ladder chose a linear drift. Less the step
     the whole data would take, the true model's k-fold is the better one."""
-    from robot_calib.diagnose.ladder import score_rung
+    from robot_calib.diagnosis.ladder import score_rung
     from robot_calib.identify.calibrate import calibrate
 
     case = make_case("backlash+eccentricity+thermal_warmup", 1000)

@@ -14,9 +14,9 @@ import pytest
 from cli_runner import cli
 from compensation_world import NOISE_FLOOR_M, ROBOT, WORLD, calibrated
 
-from robot_calib.compensate import compensate_commands, compensate_targets
-from robot_calib.compensate.solve import BRANCH_JUMP_RAD, _follow_the_rows, nominal_counterpart
-from robot_calib.compensate.targets import Targets, goals_in_base
+from robot_calib.compensation import compensate_commands, compensate_targets
+from robot_calib.compensation.solve import BRANCH_JUMP_RAD, _follow_the_rows, nominal_counterpart
+from robot_calib.compensation.targets import Targets, goals_in_base
 from robot_calib.identify.params_file import write_json_atomic
 from robot_calib.ik import IKSolution, first_tool2flange, tool2base
 from robot_calib.poses import Poses, approach_directions
@@ -42,7 +42,7 @@ def test_at_the_wrist_singularity_only_the_position_is_compensated() -> None:
     """Joint 5 at 0: the exact pose would swing joints 4 and 6 by tens of degrees for a few
     urad of orientation (the new user's 67.9 deg); the row is solved for the position alone
     with a small joint change and flagged, its orientation error reported."""
-    from robot_calib.compensate.write import row_status
+    from robot_calib.compensation.write import row_status
 
     cal, _ = calibrated()
     q = np.radians([[0, -90, 90, 0, 0, 0], [0, -90, 90, 0, 45, 0], [30, -60, 100, 20, 0.001, 5]])

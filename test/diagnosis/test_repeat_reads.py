@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from robot_calib.accuracy import accuracy
-from robot_calib.diagnose.diagnosis import diagnose
-from robot_calib.diagnose.noise import REREADS, estimate_noise
+from robot_calib.diagnosis.diagnosis import diagnose
+from robot_calib.diagnosis.noise import REREADS, estimate_noise
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.measurements.split import holdout_mask
 from robot_calib.poses import reading_groups
@@ -100,7 +100,7 @@ def test_the_verdict_floor_is_independent_evidence_only() -> None:
 def test_a_hold_out_is_counted_in_poses_not_reads() -> None:
     """5 poses read 3 times each are 5 hold-out poses (the uncertainty of a held-out rms
     over them: 18 %), not 15."""
-    from robot_calib.diagnose.diagnosis import small_holdout
+    from robot_calib.diagnosis.diagnosis import small_holdout
 
     scenario = ur10_out_of_vocabulary("link_bending", seed=0, n=20)
     five = scenario.holdout.subset(np.arange(len(scenario.holdout)) < 5)

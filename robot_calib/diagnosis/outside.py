@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from robot_calib.diagnose.ladder import Ladder
+from robot_calib.diagnosis.ladder import Ladder
 from robot_calib.identify.correction_structured import LoadMotion, StructuredCorrection
 from robot_calib.measurements import Recording
 from robot_calib.records import Record

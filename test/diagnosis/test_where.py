@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_calib.diagnose.diagnosis import diagnose
-from robot_calib.diagnose.report import write_report
+from robot_calib.diagnosis.diagnosis import diagnose
+from robot_calib.diagnosis.report import write_report
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points

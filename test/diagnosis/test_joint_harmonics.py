@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from robot_calib.accuracy import accuracy
-from robot_calib.diagnose.diagnosis import Diagnosis, diagnose
-from robot_calib.diagnose.frequency import joint_spectra
+from robot_calib.diagnosis.diagnosis import Diagnosis, diagnose
+from robot_calib.diagnosis.frequency import joint_spectra
 from robot_calib.effects import parse_effect
 from robot_calib.effects.joint_harmonics import JointHarmonics, meaning
 from robot_calib.errors import InputError
@@ -96,7 +96,7 @@ def test_signatures_give_no_figure_for_columns_the_model_has(scenario) -> None: 
     """A model that already has joint 2's low harmonics (transmission_error order 4):
     the per-joint terms of joint 2 report no harmonic 1-4 beyond it (collinear columns are
     skipped), and no figure anywhere beyond a physical magnitude (1 rad)."""
-    from robot_calib.diagnose.signatures import joint_terms
+    from robot_calib.diagnosis.signatures import joint_terms
 
     robot = scenario.world.model.robot
     cal = calibrate(scenario.calibration, robot, "geometric+transmission_error:2:order=4")

@@ -32,7 +32,7 @@ from functools import partial
 
 import numpy as np
 
-from robot_calib.diagnose.projection import MIN_LEFT, MIN_LEVER_M, model_span
+from robot_calib.diagnosis.projection import MIN_LEFT, MIN_LEVER_M, model_span
 from robot_calib.effects import Effect
 from robot_calib.effects.joint_harmonics import JointHarmonics, meaning
 from robot_calib.forked import Aside

@@ -1,4 +1,4 @@
-"""The per-joint evidence (diagnose/evidence.py) on blind worlds whose truth is known: the
+"""The per-joint evidence (diagnosis/evidence.py) on blind worlds whose truth is known: the
 joints without an effect show no term at >= 5 x its uncertainty, the joint with the effect
 does, and the strongest structure is on it (or on time for a drift). Tested one term at a
 time against the tracker's noise, a backlash on joint 4 showed on joints 1 and 6 at over
@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robot_calib.diagnose.evidence import joint_evidence, normal_z, paired_z
-from robot_calib.diagnose.signatures import where_it_lies
+from robot_calib.diagnosis.evidence import joint_evidence, normal_z, paired_z
+from robot_calib.diagnosis.signatures import where_it_lies
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.poses import reading_groups
 from robot_calib.sim.blind import EVIDENCE_Z, judge_evidence, make_case

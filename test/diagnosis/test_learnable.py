@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robot_calib.diagnose.diagnosis import UNKNOWN, diagnose
+from robot_calib.diagnosis.diagnosis import UNKNOWN, diagnose
 from robot_calib.effects import parse_effect, registered
 from robot_calib.effects.base import JointOffsetEffect
 from robot_calib.kinematics.description import RobotDescription
@@ -109,7 +109,7 @@ def test_each_rung_reports_its_share_of_the_learnable_gap() -> None:
 
 def test_a_share_never_prints_as_minus_zero() -> None:
     """Geometric's own share of -1.3e-16 prints as '0 %', never '-0 %'."""
-    from robot_calib.diagnose.diagnosis import percent
+    from robot_calib.diagnosis.diagnosis import percent
 
     assert percent(-1.33e-16) == "0 %"
     assert percent(-0.004) == "0 %"
@@ -121,7 +121,7 @@ def test_a_residual_model_worse_than_geometric_bounds_nothing() -> None:
     """A residual model that does worse held out than geometric alone did not fit: its
     figure is no bound (a '10.0150 mm bound' was printed beside a 0.155 mm geometric
     error), neither in the line nor in the ladder's picture."""
-    from robot_calib.diagnose.learnable import LearnableBound
+    from robot_calib.diagnosis.learnable import LearnableBound
 
     worse = LearnableBound("method", "hold-out bags", 0.155, 0.14, 10.015, 9.0, -63.6)
     assert not worse.bounds

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robot_calib.diagnose.diagnosis import Diagnosis
-from robot_calib.diagnose.ladder import Ladder
-from robot_calib.diagnose.names import with_breaks
+from robot_calib.diagnosis.diagnosis import Diagnosis
+from robot_calib.diagnosis.ladder import Ladder
+from robot_calib.diagnosis.names import with_breaks
 from robot_calib.flows.diagnose import (
     compare_before_after,
     diagnose_recordings,

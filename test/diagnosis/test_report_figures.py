@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from matplotlib.transforms import Bbox
 
-from robot_calib.diagnose.figures import (
+from robot_calib.diagnosis.figures import (
     COLOUR_BAR_LABEL,
     error_histogram_figure,
     ladder_figure,
@@ -23,8 +23,8 @@ from robot_calib.diagnose.figures import (
     pyplot,
     quiver_figure,
 )
-from robot_calib.diagnose.names import name_pieces, with_breaks, wrap_name
-from robot_calib.diagnose.signatures import (
+from robot_calib.diagnosis.names import name_pieces, with_breaks, wrap_name
+from robot_calib.diagnosis.signatures import (
     REMOVED,
     RemovedSignature,
     removed_note,
@@ -183,8 +183,8 @@ def test_a_scanned_order_the_physical_model_leaves_no_trace_of_is_said_an_image(
     """A geometric frequency-scan order (joint 6's order 5 while joint 4 has backlash) that
     the physical model's own scan no longer finds is said to be an image of what that model
     models; one it still finds gets no note; one the best model has is 'removed'."""
-    from robot_calib.diagnose.frequency import JointSpectrum
-    from robot_calib.diagnose.signatures import (
+    from robot_calib.diagnosis.frequency import JointSpectrum
+    from robot_calib.diagnosis.signatures import (
         TimeTrend,
         WhereItLies,
         Workspace,
@@ -268,7 +268,7 @@ def test_joint_4_backlash_is_said_removed_by_the_best_model(tmp_path: Path) -> N
 ASIDE_CHECK = """
 import os, signal
 import numpy as np
-from robot_calib.diagnose.figures import FigureCache, pyplot
+from robot_calib.diagnosis.figures import FigureCache, pyplot
 
 parent = os.getpid()
 

@@ -22,9 +22,9 @@ from functools import partial
 from typing import TYPE_CHECKING
 
 from robot_calib.accuracy import accuracy
-from robot_calib.diagnose.diagnosis import Diagnosis, percent
-from robot_calib.diagnose.evidence import ordinal
-from robot_calib.diagnose.figures import (
+from robot_calib.diagnosis.diagnosis import Diagnosis, percent
+from robot_calib.diagnosis.evidence import ordinal
+from robot_calib.diagnosis.figures import (
     ANGLE_UNITS,
     FigureCache,
     angle_figure,
@@ -36,10 +36,10 @@ from robot_calib.diagnose.figures import (
     residual_map_figure,
     time_figure,
 )
-from robot_calib.diagnose.ladder import Ladder
-from robot_calib.diagnose.names import MODEL_CLASS, MODEL_CSS, with_breaks
-from robot_calib.diagnose.noise import noise_basis
-from robot_calib.diagnose.report import (
+from robot_calib.diagnosis.ladder import Ladder
+from robot_calib.diagnosis.names import MODEL_CLASS, MODEL_CSS, with_breaks
+from robot_calib.diagnosis.noise import noise_basis
+from robot_calib.diagnosis.report import (
     NOT_RESOLVED,
     PARAMETER_COLUMNS,
     ModelErrors,
@@ -49,7 +49,7 @@ from robot_calib.diagnose.report import (
     parameter_rows,
     unobservable,
 )
-from robot_calib.diagnose.signatures import (
+from robot_calib.diagnosis.signatures import (
     FAMILIES,
     JointTerms,
     WhereItLies,

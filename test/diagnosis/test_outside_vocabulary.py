@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robot_calib.diagnose.diagnosis import diagnose
+from robot_calib.diagnosis.diagnosis import diagnose
 from robot_calib.sim.blind import ur10_out_of_vocabulary
 from robot_calib.sim.scenarios import noise_rms_mm
 

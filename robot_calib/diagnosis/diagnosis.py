@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 
 from robot_calib.accuracy import NO_PAIR
-from robot_calib.diagnose.concentration import Region, Stretch, regions, stretches
-from robot_calib.diagnose.frequency import MAX_SCAN_ORDER, alias_warnings
-from robot_calib.diagnose.iso9283 import Iso9283, iso9283, repeat_groups
-from robot_calib.diagnose.ladder import (
+from robot_calib.diagnosis.concentration import Region, Stretch, regions, stretches
+from robot_calib.diagnosis.frequency import MAX_SCAN_ORDER, alias_warnings
+from robot_calib.diagnosis.iso9283 import Iso9283, iso9283, repeat_groups
+from robot_calib.diagnosis.ladder import (
     AT_FLOOR,
     N_FOLDS,
     Ladder,
@@ -27,10 +27,10 @@ from robot_calib.diagnose.ladder import (
     Rung,
     run_ladder,
 )
-from robot_calib.diagnose.learnable import MIN_LEARNABLE_SHARE, LearnableBound
-from robot_calib.diagnose.noise import LOWER_BOUNDS, STATED, NoiseLevel
-from robot_calib.diagnose.outside import OutsideVocabulary, outside_vocabulary
-from robot_calib.diagnose.signatures import (
+from robot_calib.diagnosis.learnable import MIN_LEARNABLE_SHARE, LearnableBound
+from robot_calib.diagnosis.noise import LOWER_BOUNDS, STATED, NoiseLevel
+from robot_calib.diagnosis.outside import OutsideVocabulary, outside_vocabulary
+from robot_calib.diagnosis.signatures import (
     RemovedSignature,
     Signature,
     WhereItLies,

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot_calib.atomic import write_text_atomic
-from robot_calib.compensate.solve import SINGULAR_CHANGE_DEG
+from robot_calib.compensation.solve import SINGULAR_CHANGE_DEG
 from robot_calib.ik import IKSolution
 from robot_calib.kinematics.frames import Array
 

@@ -14,9 +14,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from robot_calib.diagnose.ladder import Ladder, Rung
-from robot_calib.diagnose.names import wrap_name
-from robot_calib.diagnose.signatures import arc_angle_errors
+from robot_calib.diagnosis.ladder import Ladder, Rung
+from robot_calib.diagnosis.names import wrap_name
+from robot_calib.diagnosis.signatures import arc_angle_errors
 from robot_calib.forked import Aside, Helper, can_fork
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robot_calib.diagnose.diagnosis import diagnose
-from robot_calib.diagnose.iso9283 import iso9283, repeat_groups
+from robot_calib.diagnosis.diagnosis import diagnose
+from robot_calib.diagnosis.iso9283 import iso9283, repeat_groups
 from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.sim.measure import measure_every_target
 from robot_calib.sim.plans import Plan, iso9283_plan, paper_test_plan, plan_times

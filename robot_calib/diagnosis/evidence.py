@@ -41,8 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
-from robot_calib.diagnose.frequency import modelled_orders
-from robot_calib.diagnose.projection import MIN_LEVER_M, joint_motion
+from robot_calib.diagnosis.frequency import modelled_orders
+from robot_calib.diagnosis.projection import MIN_LEVER_M, joint_motion
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.effects.link_bending import twist_alignment, twist_axis
 from robot_calib.identify.fit import blocked_jacobian

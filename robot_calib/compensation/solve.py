@@ -41,7 +41,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from robot_calib.compensate.targets import Targets
+from robot_calib.compensation.targets import Targets
 from robot_calib.ik import (
     CONVERGED_M,
     ORIENTATION_LEVER_M,

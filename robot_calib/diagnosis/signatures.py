@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from robot_calib.diagnose.evidence import (
+from robot_calib.diagnosis.evidence import (
     FAMILY_WORDS,
     STRUCTURE_Z,
     UNITS,
@@ -23,8 +23,8 @@ from robot_calib.diagnose.evidence import (
     TermEvidence,
     joint_evidence,
 )
-from robot_calib.diagnose.frequency import JointSpectrum, joint_spectra
-from robot_calib.diagnose.projection import MIN_LEVER_M
+from robot_calib.diagnosis.frequency import JointSpectrum, joint_spectra
+from robot_calib.diagnosis.projection import MIN_LEVER_M
 from robot_calib.effects.base import Effect
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.effects.eccentricity import fourier_basis
@@ -141,7 +141,7 @@ class WhereItLies(Record):
     time: TimeTrend
     workspace: Workspace
     noise_sigma_mm: float
-    # the frequency scan (diagnose/frequency.py): dominant joint-angle harmonic orders,
+    # the frequency scan (diagnosis/frequency.py): dominant joint-angle harmonic orders,
     # their amplitudes and significances those of the joint fit (`evidence`)
     harmonic_orders: list[JointSpectrum] = field(default_factory=list)
     # every candidate term of the joint fit (`evidence.joint_evidence`), time included
