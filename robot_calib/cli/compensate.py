@@ -65,7 +65,7 @@ def main(args: argparse.Namespace) -> int:
     from robot_calib.compensation.solve import within_limits
     from robot_calib.compensation.targets import check_reach, goals_in_base, read_targets_csv
     from robot_calib.compensation.write import LARGE_CHANGE_DEG, row_status, write_compensated_csv
-    from robot_calib.predict import read_joints_csv
+    from robot_calib.csv_tables import read_joints_csv
 
     cal = calibration_of(args)
     plausible_or_forced(cal.implausible, args)

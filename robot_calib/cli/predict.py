@@ -1,5 +1,5 @@
 """`robot-calib predict`: target positions (tracker frame, m) of a calibration for the
-joint angles of JOINTS.csv (robot_calib/predict.py)."""
+joint angles of JOINTS.csv (robot_calib/csv_tables.py)."""
 
 from __future__ import annotations
 
@@ -37,8 +37,8 @@ def add_arguments(pred: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     """Target positions (tracker frame, m) for the joint angles of JOINTS.csv."""
     from robot_calib.atomic import output_path
+    from robot_calib.csv_tables import read_joints_csv, write_points_csv
     from robot_calib.messages import target_topic
-    from robot_calib.predict import read_joints_csv, write_points_csv
 
     cal = calibration_of(args)
     plausible_or_forced(cal.implausible, args)

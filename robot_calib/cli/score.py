@@ -1,5 +1,5 @@
 """`robot-calib score`: a calibration scored on bags it was not fitted on (absolute and
-seed criterion; robot_calib/score.py)."""
+seed criterion; robot_calib/identify/score.py)."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def main(args: argparse.Namespace) -> int:
     """A calibration scored on bags it was not fitted on (absolute and seed criterion)."""
     from robot_calib.atomic import output_path
     from robot_calib.flows.bags import read_bags
-    from robot_calib.score import write_points_table
+    from robot_calib.identify.score import write_points_table
 
     cal = calibration_of(args)
     if cal.implausible:  # scored all the same: that is inspecting it

@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
+from robot_calib.csv_tables import TEMPERATURE_COLUMN, joint_columns, read_csv_table
 from robot_calib.errors import InputError, param
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements.recording import MAX_COORDINATE_M, implausible_values
 from robot_calib.messages import QUATERNION_TOLERANCE
 from robot_calib.model import KinematicModel
-from robot_calib.predict import TEMPERATURE_COLUMN, joint_columns, read_csv_table
 
 FRAMES = ("base", "tracker")
 UNITS = {"m": 1.0, "mm": 1e-3}  # --unit of the x,y,z columns -> m

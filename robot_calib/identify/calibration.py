@@ -44,9 +44,9 @@ from robot_calib.model import KinematicModel, target_parameters
 
 if TYPE_CHECKING:
     from robot_calib.identify.cpa import CPAResult
+    from robot_calib.identify.score import Score
     from robot_calib.measurements import Recording
     from robot_calib.poses import Poses
-    from robot_calib.score import Score
 
 #: what the hybrid model's label adds to its physical model's name (`Calibration.label`)
 LEARNED_SUFFIX = "+learned"
@@ -154,8 +154,8 @@ class Calibration:
 
     def score(self, recording: Recording) -> Score:
         """This calibration's errors on `recording` (held out, or its own): absolute and
-        seed-criterion figures [mm], residuals, suspect points (`robot_calib.score`)."""
-        from robot_calib.score import score
+        seed-criterion figures [mm], residuals, suspect points (`robot_calib.identify.score`)."""
+        from robot_calib.identify.score import score
 
         in_sample, judged_by = self.applied_accuracy()
         return score(self, recording, in_sample=in_sample, fitted=self.recordings,

@@ -25,8 +25,8 @@ from robot_calib.nodes._common import in_ros_terms
 if TYPE_CHECKING:
     from robot_calib.errors import RobotCalibError
     from robot_calib.identify.calibration import Calibration
+    from robot_calib.identify.score import Score
     from robot_calib.measurements import Recording
-    from robot_calib.score import Score
 
 # robot_state_publisher (Jazzy, 3.3.x: src/robot_state_publisher.cpp) publishes the relative
 # name `robot_description` with rclcpp::QoS(1).transient_local() (KEEP_LAST 1, RELIABLE by
@@ -135,7 +135,7 @@ def score_held_out(cal: Calibration, recording: Recording, holdout: Recording) -
     against the tracker's noise (`identify.plausibility.held_out_warnings`)."""
     from robot_calib.identify.calibration import hybrid_in_sample
     from robot_calib.identify.plausibility import held_out_warnings
-    from robot_calib.score import score
+    from robot_calib.identify.score import score
 
     in_sample, judged_by = cal.accuracy, "the calibration's in-sample rms"
     if cal.correction is not None:  # the model applied: physical + learned correction

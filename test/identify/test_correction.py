@@ -24,10 +24,10 @@ from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.correction import ResidualCorrection, fit_correction
 from robot_calib.identify.correction_structured import StructuredCorrection
+from robot_calib.identify.score import score
 from robot_calib.ik import first_tool2flange, tool2base
 from robot_calib.kinematics.frames import Array
 from robot_calib.poses import Poses
-from robot_calib.score import score
 from robot_calib.sim.scenarios import Scenario, ur10_random
 
 # compliance of joints 2 and 3 (gravity bends them): smooth in the readings, not in the

@@ -15,6 +15,7 @@ import pytest
 from cli_runner import cli
 
 from robot_calib.accuracy import accuracy, pairwise_errors
+from robot_calib.csv_tables import read_joints_csv
 from robot_calib.effects import make_effect
 from robot_calib.identify.calibrate import calibrate, parse_model
 from robot_calib.identify.calibration import Calibration
@@ -24,7 +25,6 @@ from robot_calib.kinematics.frames import rpy_to_matrix
 from robot_calib.measurements import recording_from_arrays
 from robot_calib.model import KinematicModel, absorb_base_offsets
 from robot_calib.poses import Poses
-from robot_calib.predict import read_joints_csv
 from robot_calib.sim.measure import physical_points
 from robot_calib.sim.plans import paper_test_plan, random_plan
 from robot_calib.sim.world import load_world, with_effect

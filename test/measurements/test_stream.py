@@ -15,13 +15,13 @@ from robot_calib.bag.read import read_bag, read_stream
 from robot_calib.bag.write import write_stream_bag
 from robot_calib.flows.simulate import simulation_world
 from robot_calib.identify.latency import calibrate_stream, steffensen
+from robot_calib.identify.score import score
 from robot_calib.measurements.stream import (
     JointStream,
     joints_at,
     stream_recording,
     velocity_directions,
 )
-from robot_calib.score import score
 from robot_calib.sim.controller import states_at
 from robot_calib.sim.measure import record_plan
 from robot_calib.sim.plans import random_plan

@@ -103,7 +103,7 @@ def test_help_and_reading_a_parameter_file_stay_light() -> None:
     import no solver, file format, plotting or ROS."""
     assert not loaded_after("import robot_calib.cli as c; c.build_parser()")
     assert not loaded_after(
-        "import robot_calib.identify.params_file, robot_calib.predict, robot_calib.cli"
+        "import robot_calib.identify.params_file, robot_calib.csv_tables, robot_calib.cli"
     )
 
 

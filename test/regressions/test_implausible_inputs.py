@@ -145,7 +145,7 @@ def test_score_judges_a_hybrid_by_its_own_in_sample_rms(tmp_path: Path) -> None:
     from robot_calib.accuracy import accuracy
     from robot_calib.identify.calibrate import calibrate
     from robot_calib.identify.params_file import write_json_atomic
-    from robot_calib.score import IMPLAUSIBLE_HINT
+    from robot_calib.identify.score import IMPLAUSIBLE_HINT
     from robot_calib.sim.blind import ur10_out_of_vocabulary
 
     sc = ur10_out_of_vocabulary("gravity_backlash", seed=0, n=300, holdout_share=0.3)

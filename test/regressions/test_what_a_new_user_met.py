@@ -20,13 +20,13 @@ from robot_calib.bag.csv_import import read_measurement_csv
 from robot_calib.bag.read import read_recording
 from robot_calib.bag.write import write_measurement_bag
 from robot_calib.cli import build_parser
+from robot_calib.csv_tables import read_joints_csv
 from robot_calib.diagnosis.noise import estimate_noise, noise_basis
 from robot_calib.errors import InputError
 from robot_calib.identify.calibration import Calibration
+from robot_calib.identify.score import IMPLAUSIBLE_HINT, score, score_warnings, write_points_table
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.measurements import recording_from_arrays
-from robot_calib.predict import read_joints_csv
-from robot_calib.score import IMPLAUSIBLE_HINT, score, score_warnings, write_points_table
 from robot_calib.sim.measure import measure_every_target
 from robot_calib.sim.plans import plan_times, random_plan
 from robot_calib.sim.world import build_world
@@ -284,7 +284,7 @@ def test_no_file_a_simulation_or_plan_reads_is_ever_overwritten(
 def test_a_joints_file_that_is_no_csv_is_one_line(
     tmp_path: Path, content: bytes, message: str
 ) -> None:
-    from robot_calib.predict import read_csv_table
+    from robot_calib.csv_tables import read_csv_table
 
     path = tmp_path / "joints.csv"
     path.write_bytes(content)

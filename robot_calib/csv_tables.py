@@ -1,5 +1,5 @@
-"""`robot-calib predict`: target positions for given joint angles (msgs_doc/specification.md
-section 2).
+"""The numeric CSV tables of joint commands and points that `predict` and `compensate` read
+and write (msgs_doc/specification.md section 2).
 
 JOINTS.csv: header q1..qJ [rad], optional leading column t [s] and optional dir1..dirJ (+1/-1);
 without dir columns the directions follow the row order, without t the time is 0. A reading

@@ -1,9 +1,9 @@
-"""`robot-calib score`: how well a calibration (PARAMS.json) predicts measurements it was
-not fitted on: absolute errors in the tracker frame (the tracker has not moved since the
-calibration, msgs_doc/specification.md section 1) and the seed's frame-free pairwise criterion,
-with a
-per-point table for plots. A score far above the calibration's own in-sample residual, and
-orientations that one side has and the other cannot use, are said in warnings."""
+"""How well a calibration predicts measurements it was not fitted on (`robot-calib score`,
+`Calibration.score`): absolute errors in the tracker frame (the tracker has not moved since
+the calibration, msgs_doc/specification.md section 1) and the seed's frame-free pairwise
+criterion, with a per-point table for plots. A score far above the calibration's own
+in-sample residual, and orientations that one side has and the other cannot use, are said
+in warnings."""
 
 from __future__ import annotations
 
