@@ -8,13 +8,6 @@ import _signal  # the C module: `signal` takes ~10 ms to import (its enums)
 import os
 import sys
 
-# The linear algebra here is many small solves (thousands of rows, tens of columns): one
-# BLAS thread is fastest, and threaded OpenBLAS next to another busy process slows them down
-# 50-fold (measured: a diagnosis 1.1 s vs 59 s on 2 cores). Effective when robot_calib is
-# imported before numpy (the console scripts, the nodes); set it yourself to override.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
 __version__ = "0.1.0"
 
 #: the public Python API (robot_calib/api.py), loaded on first use: `import robot_calib`
@@ -80,6 +73,17 @@ def _open_closed_descriptors() -> None:
                 os.close(devnull)
 
 
+def one_blas_thread() -> None:
+    """One BLAS thread, unless the user chose (OPENBLAS_NUM_THREADS, OMP_NUM_THREADS,
+    MKL_NUM_THREADS): the linear algebra here is many small solves (thousands of rows, tens
+    of columns), fastest on one thread, and threaded OpenBLAS beside another busy process
+    slowed them 50-fold (a diagnosis: 1.1 s vs 59 s on 2 cores). Effective only before numpy
+    is imported: the programs' entries call it (`robot-calib`, the nodes), never a plain
+    `import robot_calib` (a notebook's threads are its own business)."""
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(name, "1")
+
+
 def _console_program() -> bool:
     """True when the package is loaded by the `robot-calib` program or `python -m
     robot_calib` (not imported by a test, a node or another program)."""
@@ -115,6 +119,7 @@ def _keep_freed_memory() -> None:
 
 
 if _console_program():  # before the heavy imports of robot_calib.cli (numpy, ...: ~0.3 s)
+    one_blas_thread()
     _open_closed_descriptors()
     # the handlers first: a Ctrl-C during any import after them (ctypes below) is one line
     if _signal.getsignal(_signal.SIGINT) is _signal.default_int_handler:

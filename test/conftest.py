@@ -12,8 +12,10 @@ from pathlib import Path
 
 import pytest
 
-import robot_calib  # noqa: F401 - first, so its one-BLAS-thread default precedes numpy
+from robot_calib import one_blas_thread
 from robot_calib.nodes.private_domain import claim
+
+one_blas_thread()  # as the programs start (robot-calib, the nodes): before numpy loads
 
 _held_lock = None
 
