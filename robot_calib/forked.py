@@ -419,3 +419,19 @@ def _share(tasks: list[tuple[int, tuple[Hashable, Callable[[], object]]]], split
         _compute(tasks[:split], folder, write)
     finally:
         os.waitpid(twin, 0)
+
+
+class Forked:
+    """The runner of `robot_calib.parallel` that computes `aside`'s tasks in a forked child
+    (`Aside`, `Mailbox`): what `flows/` install for the command line and the nodes."""
+
+    def aside(
+        self, tasks: Sequence[tuple[Hashable, Callable[[], T]]], mailbox: Any = None
+    ) -> Aside[T]:
+        return Aside(tasks, mailbox=mailbox)
+
+    def mailbox(self) -> Mailbox[Any]:
+        return Mailbox()
+
+
+FORKED = Forked()

@@ -35,12 +35,12 @@ import numpy as np
 from robot_calib.diagnosis.projection import MIN_LEFT, MIN_LEVER_M, model_span
 from robot_calib.effects import Effect
 from robot_calib.effects.joint_harmonics import JointHarmonics, meaning
-from robot_calib.forked import Aside
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
 from robot_calib.measurements.aliasing import ALIAS_CORRELATION, MAX_ORDER, order_similarity
 from robot_calib.model import KinematicModel
+from robot_calib.parallel import aside
 from robot_calib.records import Record
 
 MAX_SCAN_ORDER = MAX_ORDER
@@ -187,12 +187,12 @@ def joint_spectra(
                              similarity.resolvable(), alias)  # fmt: skip
 
     # the joints are independent: the second half scanned by a forked child meanwhile
-    # (`forked.Aside`; the same numbers either way) when the scan is large enough to pay
+    # (`parallel.aside`; the same numbers either way) when the scan is large enough to pay
     joints = list(range(model.robot.n_joints))
     theirs = joints[len(joints) // 2 :] if n >= ASIDE_POSES else []
-    with Aside([(j, partial(joint, j)) for j in theirs]) as aside:
+    with aside([(j, partial(joint, j)) for j in theirs]) as others:
         mine = {j: joint(j) for j in joints if j not in theirs}
-        return [mine[j] if j in mine else aside.result(j) for j in joints]
+        return [mine[j] if j in mine else others.result(j) for j in joints]
 
 
 def _pick(cols: Array, r: Array, usable: Array, scatter: float) -> tuple[list[int], list[float]]:

@@ -35,7 +35,6 @@ from robot_calib.diagnosis.learnable import (
 )
 from robot_calib.diagnosis.noise import NoiseLevel, estimate_noise
 from robot_calib.effects import Effect, ladder_candidates
-from robot_calib.forked import Aside
 from robot_calib.identify.calibrate import calibrate, model_name
 from robot_calib.identify.calibration import LEARNED_SUFFIX, Calibration
 from robot_calib.identify.fit import BLOCK_POSES, PRIOR_ROW, weighted_rows
@@ -52,6 +51,7 @@ from robot_calib.log import Log
 from robot_calib.measurements import Recording
 from robot_calib.measurements.split import N_FOLDS, pose_folds
 from robot_calib.model import KinematicModel
+from robot_calib.parallel import aside
 from robot_calib.records import Record
 
 MAX_RUNGS = 6
@@ -253,14 +253,14 @@ class LinearScreen:
             return out
 
         # the calibration poses' second half summed by a forked child meanwhile
-        # (`forked.Aside`) when there are enough of them to pay
+        # (`parallel.aside`: a forked child from the command line) when enough to pay
         n = len(recording)
         half = n // 2 if n >= ASIDE_POSES else n
-        with Aside([("rest", partial(sums, recording, fold, half))] if half < n else []) as aside:
+        with aside([("rest", partial(sums, recording, fold, half))] if half < n else []) as rest:
             own = sums(recording, fold, 0, half)
             held = None if holdout is None else sums(holdout, None).get(0)
             if half < n:
-                for f, part in aside.result("rest").items():
+                for f, part in rest.result("rest").items():
                     own[f] = own[f].plus(part) if f in own else part
         return cls(own, held, n, 0 if holdout is None else len(holdout))
 

@@ -38,7 +38,6 @@ from typing import Any
 
 import numpy as np
 
-from robot_calib.forked import Aside, Mailbox
 from robot_calib.identify.calibration import Calibration
 from robot_calib.identify.correction import (
     INDUCING,
@@ -56,6 +55,7 @@ from robot_calib.identify.correction_structured_fit import (
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
+from robot_calib.parallel import Box, aside, mailbox
 from robot_calib.records import Record
 
 METHOD = (
@@ -226,7 +226,7 @@ def corrected_heldout(
             computed[k] = structure(k)
         return computed[k]
 
-    def rest(k: int, box: Mailbox[Hyperparameters]) -> tuple[tuple[str, ...], Array]:
+    def rest(k: int, box: Box[Hyperparameters]) -> tuple[tuple[str, ...], Array]:
         """Fold folds[k] from the first fold's hyperparameters (`box`): `one`'s warnings
         and prediction, what the caller needs (light to send)."""
         local, predicted = one(k, part(k), box.get())
@@ -236,7 +236,8 @@ def corrected_heldout(
     learned: StructuredCorrection | None = None  # the first fold's correction
     if folds:
         # the folds are independent but for the process's hyperparameters, the first
-        # fold's starting the others' search. Two processes (`forked.Aside`: threads ran
+        # fold's starting the others' search. Two processes (`parallel.aside`, a forked
+        # child from the command line: threads ran
         # at 1.1 cores): a child fits the other folds' load-driven geometry while this one
         # learns the first fold's hyperparameters, then (they come through `box` as soon as
         # they are learned) half of the other folds while this one fits the first fold and
@@ -251,18 +252,18 @@ def corrected_heldout(
         # before its process (the child waited for the hyperparameters in between)
         tasks: list[tuple[Hashable, Callable[[], Any]]]
         tasks = [(("part", k), partial(part, k)) for k in mine]
-        with Mailbox[Hyperparameters]() as box:
+        with mailbox() as box:
             tasks += [(("part", k), partial(part, k)) for k in theirs]
             tasks += [(("fold", k), partial(rest, k, box)) for k in theirs]
-            with Aside(tasks, mailbox=box) as aside:
+            with aside(tasks, mailbox=box) as child:
                 learned, predicted = one(0, part(0), None, on_learned=box.put)
                 outcomes = {0: (learned.warnings, predicted)}
                 for k in mine:
-                    computed[k] = aside.result(("part", k))
+                    computed[k] = child.result(("part", k))
                     outcomes[k] = rest(k, box)
                 for k in theirs:
-                    computed[k] = aside.result(("part", k))
-                    outcomes[k] = aside.result(("fold", k))
+                    computed[k] = child.result(("part", k))
+                    outcomes[k] = child.result(("fold", k))
         for k, f in enumerate(folds):
             test = fold == f
             before[test] = computed[k][1][test]

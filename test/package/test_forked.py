@@ -235,7 +235,7 @@ def test_children_of_a_killed_process_end_and_remove_their_folders() -> None:
 KFOLD_CHECK = """
 import threading
 import numpy as np
-import robot_calib.diagnosis.learnable as learnable
+from robot_calib import forked as forking, parallel
 from robot_calib.diagnosis.ladder import kfold_parameters
 from robot_calib.diagnosis.learnable import corrected_heldout
 from robot_calib.identify.calibrate import calibrate
@@ -244,21 +244,25 @@ from robot_calib.sim.scenarios import ur10_random
 effects = ({"name": "compliance", "joints": [2, 3],
             "values": {"compliance2": 2e-5, "compliance3": 2e-5}},)
 received = []
-class Counted(learnable.Aside):
+class Counted(forking.Aside):
     def close(self, abort=False):
         super().close(abort)
         received.append(self.received)
-learnable.Aside = Counted
+class CountedRunner(forking.Forked):  # the forked runner, counting what its child sent
+    def aside(self, tasks, mailbox=None):
+        return Counted(tasks, mailbox=mailbox)
 scenario = ur10_random(seed=1, n=500, effects=effects)
 recording = scenario.calibration
 geo = calibrate(recording, scenario.world.model.robot, "geometric")
 fold, fitted = kfold_parameters(geo, recording)
-forked = corrected_heldout(geo, recording, None, fold, fitted, final=False)
+with parallel.using(CountedRunner()):
+    forked = corrected_heldout(geo, recording, None, fold, fitted, final=False)
 assert received == [6], received  # the other folds' geometry, then two folds, aside
 stop = threading.Event()
 other = threading.Thread(target=stop.wait)
 other.start()  # another thread: everything computed in this process
-here = corrected_heldout(geo, recording, None, fold, fitted, final=False)
+with parallel.using(CountedRunner()):
+    here = corrected_heldout(geo, recording, None, fold, fitted, final=False)
 assert received[1:] == [0], received
 stop.set()
 other.join()
