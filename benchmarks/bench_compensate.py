@@ -37,14 +37,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--poses", type=int, default=10000)
     args = parser.parse_args()
-    world = with_effect(build_world({"seed": 4}), parse_effect("backlash:4", 6),
-                        {"backlash4": 2e-3})  # fmt: skip
+    world = with_effect(
+        build_world({"seed": 4}), parse_effect("backlash:4", 6), {"backlash4": 2e-3}
+    )
     robot = world.model.robot
     plan = paper_test_plan(2)
-    poses, points = measure_every_target(world, plan.q, plan_times(plan, world.timing),
-                                         np.random.default_rng(1))  # fmt: skip
-    cal = calibrate(recording_from_arrays(poses.q, points, poses.time, robot=robot), robot,
-                    "geometric+backlash:4")  # fmt: skip
+    poses, points = measure_every_target(
+        world, plan.q, plan_times(plan, world.timing), np.random.default_rng(1)
+    )
+    cal = calibrate(
+        recording_from_arrays(poses.q, points, poses.time, robot=robot),
+        robot,
+        "geometric+backlash:4",
+    )
     nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     commands = Poses.from_readings(random_plan(robot, args.poses, np.random.default_rng(5)).q)
     started = time.perf_counter()
@@ -52,10 +57,12 @@ def main() -> None:
     seconds = time.perf_counter() - started
     rate = args.poses / seconds
     verdict = "PASS" if rate >= TARGET_POSES_PER_S else "FAIL"
-    print(f"{args.poses} commands compensated in {seconds:.2f} s: {rate:.0f} poses/s "
-          f"(target >= {TARGET_POSES_PER_S:.0f}: {verdict}); converged "
-          f"{int(result.converged.sum())}/{args.poses}, iterations max "
-          f"{int(result.iterations.max())}")  # fmt: skip
+    print(
+        f"{args.poses} commands compensated in {seconds:.2f} s: {rate:.0f} poses/s "
+        f"(target >= {TARGET_POSES_PER_S:.0f}: {verdict}); converged "
+        f"{int(result.converged.sum())}/{args.poses}, iterations max "
+        f"{int(result.iterations.max())}"
+    )
 
     # targets: the tool frames the nominal model reaches at other random readings
     q = random_plan(robot, args.poses, np.random.default_rng(6)).q
@@ -63,18 +70,27 @@ def main() -> None:
     in_tracker = cal.model.base2tracker(cal.parameters) @ tool2base(
         nominal, nominal_params, Poses.from_readings(q), tool
     )
-    targets = Targets(in_tracker[:, :3, 3], in_tracker[:, :3, :3], None, None,
-                      np.zeros(args.poses), None, tuple(range(2, args.poses + 2)))  # fmt: skip
+    targets = Targets(
+        in_tracker[:, :3, 3],
+        in_tracker[:, :3, :3],
+        None,
+        None,
+        np.zeros(args.poses),
+        None,
+        tuple(range(2, args.poses + 2)),
+    )
     started = time.perf_counter()
     goals = goals_in_base(targets, "tracker", cal.model, cal.parameters)
     found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params, targets, goals)
     seconds = time.perf_counter() - started
     rate = args.poses / seconds
     verdict = "PASS" if rate >= TARGET_POSES_PER_S else "FAIL"
-    print(f"{args.poses} target poses (from the home pose) compensated in {seconds:.2f} s: "
-          f"{rate:.0f} poses/s (target >= {TARGET_POSES_PER_S:.0f}: {verdict}); reached "
-          f"{int(found.reached.sum())}/{args.poses} (within the joint limits), nominal IK "
-          f"iterations max {int(found.nominal.iterations.max())}")  # fmt: skip
+    print(
+        f"{args.poses} target poses (from the home pose) compensated in {seconds:.2f} s: "
+        f"{rate:.0f} poses/s (target >= {TARGET_POSES_PER_S:.0f}: {verdict}); reached "
+        f"{int(found.reached.sum())}/{args.poses} (within the joint limits), nominal IK "
+        f"iterations max {int(found.nominal.iterations.max())}"
+    )
 
 
 if __name__ == "__main__":

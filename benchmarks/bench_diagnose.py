@@ -25,7 +25,9 @@ from robot_calib.diagnosis.diagnosis import diagnose
 from robot_calib.effects.backlash import Backlash
 from robot_calib.effects.eccentricity import Eccentricity
 from robot_calib.effects.thermal_drift import ThermalDrift
+from robot_calib.forked import FORKED
 from robot_calib.kinematics.loader import load_robot
+from robot_calib.parallel import using
 
 TARGET_S = 10.0
 
@@ -36,10 +38,14 @@ def main() -> int:
     parser.add_argument(
         "--effects",
         nargs="*",
-        default=["none", Backlash(joints=(4,)).spec, Eccentricity(joints=(5,)).spec,
-                 ThermalDrift().spec],
+        default=[
+            "none",
+            Backlash(joints=(4,)).spec,
+            Eccentricity(joints=(5,)).spec,
+            ThermalDrift().spec,
+        ],
         help="worlds: 'none' or an effect of `simulate --effects`",
-    )  # fmt: skip
+    )
     args = parser.parse_args()
     robot = load_robot("kr5_sixx_r650")
     print(f"{'world':<16}{'read [s]':>10}{'diagnose [s]':>14}{'total [s]':>11}  verdict")
@@ -51,8 +57,19 @@ def main() -> int:
             bag, hold = folder / "cal.mcap", folder / "hold.mcap"
             effects = [] if spec == "none" else ["--effects", spec]
             cli(["simulate", "--plan", "paper-test2", *effects, "--seed", "1", "-o", str(bag)])
-            cli(["simulate", "--plan", "random", "--world", str(bag.with_suffix(".world.yaml")),
-                 "--seed", "2", "-o", str(hold)])  # fmt: skip
+            cli(
+                [
+                    "simulate",
+                    "--plan",
+                    "random",
+                    "--world",
+                    str(bag.with_suffix(".world.yaml")),
+                    "--seed",
+                    "2",
+                    "-o",
+                    str(hold),
+                ]
+            )
             reads, runs = [], []
             for _ in range(args.repeat):
                 started = time.perf_counter()
@@ -60,14 +77,20 @@ def main() -> int:
                 held = read_recording([hold], robot)
                 reads.append(time.perf_counter() - started)
                 started = time.perf_counter()
-                diagnosis, _ = diagnose(rec, robot, held)
+                with using(FORKED):  # the other core, as the command line's diagnosis
+                    diagnosis, _ = diagnose(rec, robot, held)
                 runs.append(time.perf_counter() - started)
             total = statistics.median(reads) + statistics.median(runs)
             worst = max(worst, total)
-            print(f"{spec:<16}{statistics.median(reads):>10.2f}{statistics.median(runs):>14.2f}"
-                  f"{total:>11.2f}  {diagnosis.verdict}", flush=True)  # fmt: skip
-    print(f"worst total {worst:.2f} s vs target {TARGET_S:.0f} s: "
-          f"{'PASS' if worst <= TARGET_S else 'MISS'}")  # fmt: skip
+            print(
+                f"{spec:<16}{statistics.median(reads):>10.2f}{statistics.median(runs):>14.2f}"
+                f"{total:>11.2f}  {diagnosis.verdict}",
+                flush=True,
+            )
+    print(
+        f"worst total {worst:.2f} s vs target {TARGET_S:.0f} s: "
+        f"{'PASS' if worst <= TARGET_S else 'MISS'}"
+    )
     return 0
 
 

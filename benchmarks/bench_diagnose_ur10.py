@@ -49,8 +49,9 @@ def _run(args: list[str]) -> tuple[float, float, float]:
     (`measure.robot_calib`); its failure ends the benchmark."""
     run = robot_calib(args)
     if run.status not in (0, 3):
-        raise SystemExit(f"robot-calib {' '.join(args)} failed ({run.status}): "
-                         f"{run.stderr.strip()[-400:]}")  # fmt: skip
+        raise SystemExit(
+            f"robot-calib {' '.join(args)} failed ({run.status}): {run.stderr.strip()[-400:]}"
+        )
     return run.wall_s, run.cpu_s, run.peak_mib
 
 
@@ -61,8 +62,10 @@ def main() -> int:
     args = parser.parse_args()
     scenario = ur10_random(seed=0, n=args.poses, holdout_share=0.3)
     names = scenario.world.model.robot.joint_names
-    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs; "
-          f"{args.poses} poses, UR10 scenario (gear harmonics on joints 1-2)")  # fmt: skip
+    print(
+        f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs; "
+        f"{args.poses} poses, UR10 scenario (gear harmonics on joints 1-2)"
+    )
     print(f"{'run':<34}{'wall [s]':>10}{'cpu [s]':>9}{'peak RSS [MiB]':>16}  verdict, held-out")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -75,14 +78,15 @@ def main() -> int:
                 "--holdout",
                 str(_bag(folder / "hold.mcap", scenario.holdout, names, n_cal)),
             ],
-        }  # fmt: skip
+        }
         worst, medians = 0.0, {}
         for label, bags in runs.items():
             out = folder / f"{label.split(',')[0].replace(' ', '_').replace('/', '_')}.json"
             times, cpus, rss = [], [], 0.0
             for _ in range(args.repeat):
-                wall, cpu, peak = _run(["diagnose", *bags, "--robot", "ur10", "-o", str(out),
-                                        "--force"])  # fmt: skip
+                wall, cpu, peak = _run(
+                    ["diagnose", *bags, "--robot", "ur10", "-o", str(out), "--force"]
+                )
                 times.append(wall)
                 cpus.append(cpu)
                 rss = max(rss, peak)
@@ -101,8 +105,10 @@ def main() -> int:
         f"(worst median {worst:.2f} s)"
     )
     five = medians["all poses, 5-fold CV"]
-    print(f"target <= {FIVE_FOLD_TARGET_S:.0f} s for the 5-fold run: "
-          f"{'PASS' if five <= FIVE_FOLD_TARGET_S else 'MISS'} (median {five:.2f} s)")  # fmt: skip
+    print(
+        f"target <= {FIVE_FOLD_TARGET_S:.0f} s for the 5-fold run: "
+        f"{'PASS' if five <= FIVE_FOLD_TARGET_S else 'MISS'} (median {five:.2f} s)"
+    )
     return 0
 
 

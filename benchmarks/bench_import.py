@@ -26,10 +26,31 @@ from pathlib import Path
 import numpy as np
 
 TARGET_S = 2.0
-JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
-          "wrist_2_joint", "wrist_3_joint")  # fmt: skip
-COLUMNS = (*JOINTS, "X", "Y", "Z", "Q0", "QX", "QY", "QZ", "SP", "SR", "Dist", "Temp",
-           "Time", "Status", "Index")  # fmt: skip
+JOINTS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+COLUMNS = (
+    *JOINTS,
+    "X",
+    "Y",
+    "Z",
+    "Q0",
+    "QX",
+    "QY",
+    "QZ",
+    "SP",
+    "SR",
+    "Dist",
+    "Temp",
+    "Time",
+    "Status",
+    "Index",
+)
 
 
 def export(path: Path, rows: int) -> None:
@@ -58,12 +79,41 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         csv = Path(tmp) / "export.csv"
         export(csv, args.rows)
-        cmd = [sys.executable, "-m", "robot_calib", "import", str(csv), "--robot", "ur10",
-               "--sep", ";", "--decimal-comma", "--angle-unit", "deg", "--length-unit", "mm",
-               "--joints", ",".join(JOINTS), "--point", "X,Y,Z", "--time", "Time",
-               "--temperature", "Temp", "--orientation", "QX,QY,QZ,Q0", "--sigma", "SP,SR",
-               "--sigma-unit", "um", "--sigma-angle-unit", "urad",
-               "-o", str(Path(tmp) / "out.mcap"), "--force"]  # fmt: skip
+        cmd = [
+            sys.executable,
+            "-m",
+            "robot_calib",
+            "import",
+            str(csv),
+            "--robot",
+            "ur10",
+            "--sep",
+            ";",
+            "--decimal-comma",
+            "--angle-unit",
+            "deg",
+            "--length-unit",
+            "mm",
+            "--joints",
+            ",".join(JOINTS),
+            "--point",
+            "X,Y,Z",
+            "--time",
+            "Time",
+            "--temperature",
+            "Temp",
+            "--orientation",
+            "QX,QY,QZ,Q0",
+            "--sigma",
+            "SP,SR",
+            "--sigma-unit",
+            "um",
+            "--sigma-angle-unit",
+            "urad",
+            "-o",
+            str(Path(tmp) / "out.mcap"),
+            "--force",
+        ]
         times, out = [], []
         for _ in range(args.repeat):
             started = time.perf_counter()

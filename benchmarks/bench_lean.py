@@ -51,8 +51,9 @@ def _bag(folder: Path, n: int) -> Path:
         scenario = ur10_random(seed=0, n=n, holdout_share=0.0)
         rec = scenario.calibration
         stamps = START_NS + np.arange(len(rec)) * STEP_NS
-        write_measurements(path, rec.poses.q, rec.points,
-                           scenario.world.model.robot.joint_names, stamps)  # fmt: skip
+        write_measurements(
+            path, rec.poses.q, rec.points, scenario.world.model.robot.joint_names, stamps
+        )
     return path
 
 
@@ -63,13 +64,15 @@ def _cli(args: list[str]) -> tuple[float, float, float]:
     failure ends the benchmark."""
     run = robot_calib(args)
     if run.status not in (0, 3):
-        raise SystemExit(f"robot-calib {' '.join(args)} failed ({run.status}): "
-                         f"{run.stderr.strip()[-400:]}")  # fmt: skip
+        raise SystemExit(
+            f"robot-calib {' '.join(args)} failed ({run.status}): {run.stderr.strip()[-400:]}"
+        )
     return run.wall_s, run.cpu_s, max(run.peak_mib, run.tree_mib)
 
 
-def numpy_limit(q: np.ndarray, d: np.ndarray, a: np.ndarray, alpha: np.ndarray,
-                theta: np.ndarray) -> np.ndarray:  # fmt: skip
+def numpy_limit(
+    q: np.ndarray, d: np.ndarray, a: np.ndarray, alpha: np.ndarray, theta: np.ndarray
+) -> np.ndarray:
     """Plain numpy: the flange point of n poses (standard DH, q (n, 6)) and its analytic
     Jacobian with respect to theta, d, a, alpha of every link (n, 3, 24): the least any
     implementation of the same model must compute per evaluation."""
@@ -143,28 +146,59 @@ def main() -> int:
         print(f"{'work':<34}{'wall [s]':>9}{'cpu [s]':>9}{'memory [MiB]':>13}  goal")
         for n in args.sizes if args.only in (None, "calibrate") else []:
             bag = _bag(folder, n)
-            wall, cpu, peak = _cli(["calibrate", str(bag), "--robot", "ur10", "-o",
-                                    str(folder / f"c{n}.json"), "--force"])  # fmt: skip
+            wall, cpu, peak = _cli(
+                [
+                    "calibrate",
+                    str(bag),
+                    "--robot",
+                    "ur10",
+                    "-o",
+                    str(folder / f"c{n}.json"),
+                    "--force",
+                ]
+            )
             peer = PEER_RSS_MIB.get(n)
-            goal = (f"RSS < {peer} MiB (peer){' and <= 250' if n == 100_000 else ''}: "
-                    f"{'met' if peak < min(peer, 250 if n == 100_000 else peer) else 'MISSED'}"
-                    if peer else "")  # fmt: skip
+            goal = (
+                f"RSS < {peer} MiB (peer){' and <= 250' if n == 100_000 else ''}: "
+                f"{'met' if peak < min(peer, 250 if n == 100_000 else peer) else 'MISSED'}"
+                if peer
+                else ""
+            )
             print(f"{f'calibrate {n} poses':<34}{wall:>9.2f}{cpu:>9.2f}{peak:>13.0f}  {goal}")
         for n in args.sizes if args.only in (None, "fit") else []:
             wall, evals, limit = _fit_vs_limit(n)
             per = wall / max(evals, 1)
-            print(f"{f'fit_model {n} poses':<34}{wall:>9.2f}{'':>9}{'':>13}  {evals} evaluations, "
-                  f"{per:.3f} s each = {per / limit:.1f} x the numpy limit {limit:.3f} s "
-                  f"(goal <= 2 x)")  # fmt: skip
+            print(
+                f"{f'fit_model {n} poses':<34}{wall:>9.2f}{'':>9}{'':>13}  {evals} evaluations, "
+                f"{per:.3f} s each = {per / limit:.1f} x the numpy limit {limit:.3f} s "
+                f"(goal <= 2 x)"
+            )
         for n in args.diagnose if args.only in (None, "diagnose") else []:
             bag = _bag(folder, n)
-            wall, cpu, peak = _cli(["diagnose", str(bag), "--robot", "ur10", "-o",
-                                    str(folder / f"d{n}.json"), "--force"])  # fmt: skip
+            wall, cpu, peak = _cli(
+                [
+                    "diagnose",
+                    str(bag),
+                    "--robot",
+                    "ur10",
+                    "-o",
+                    str(folder / f"d{n}.json"),
+                    "--force",
+                ]
+            )
             limit_s, limit_mib = DIAGNOSE_GOAL.get(n, (None, None))
-            goal = "" if limit_s is None else (
-                f"<= {limit_s:.0f} s{f', {limit_mib:.0f} MiB' if limit_mib else ''}: "
-                + ("met" if wall <= limit_s and (limit_mib is None or peak <= limit_mib)
-                   else "MISSED"))  # fmt: skip
+            goal = (
+                ""
+                if limit_s is None
+                else (
+                    f"<= {limit_s:.0f} s{f', {limit_mib:.0f} MiB' if limit_mib else ''}: "
+                    + (
+                        "met"
+                        if wall <= limit_s and (limit_mib is None or peak <= limit_mib)
+                        else "MISSED"
+                    )
+                )
+            )
             print(
                 f"{f'diagnose {n} poses (5-fold)':<34}{wall:>9.2f}{cpu:>9.2f}{peak:>13.0f}  {goal}"
             )

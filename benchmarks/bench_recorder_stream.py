@@ -83,16 +83,26 @@ def main() -> int:
     folder = Path(tempfile.mkdtemp(prefix="bench_recorder_stream_"))
     bag = folder / "stream.mcap"
     recorder = subprocess.Popen(
-        [sys.executable, "-m", "robot_calib.nodes.recorder", "--ros-args",
-         "-p", f"output:={bag}", *args.recorder_args.split()],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "robot_calib.nodes.recorder",
+            "--ros-args",
+            "-p",
+            f"output:={bag}",
+            *args.recorder_args.split(),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     rclpy.init()
     node = rclpy.create_node("bench_stream_publisher")
     qos = QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=args.pub_depth,
+        history=HistoryPolicy.KEEP_LAST,
+        depth=args.pub_depth,
         reliability=ReliabilityPolicy.RELIABLE,
-    )  # fmt: skip
+    )
     points = node.create_publisher(PointStamped, POINT_TOPIC, qos)
     joints = node.create_publisher(JointState, JOINT_STATES_TOPIC, qos)
     deadline = time.monotonic() + 30.0
@@ -139,10 +149,13 @@ def main() -> int:
     print(f"published for {wall:.2f} s ({late} point(s) more than one period late)")
     print(f"{'topic':<22} {'sent':>7} {'recorded':>9} {'lost':>5} {'rate [Hz]':>10}")
     for topic, n in sent.items():
-        print(f"{topic:<22} {n:>7} {recorded[topic]:>9} {n - recorded[topic]:>5} "
-              f"{n / wall:>10.1f}")  # fmt: skip
-    print(f"recorder CPU {100 * cpu / wall:.1f} % of one core while publishing; peak RSS "
-          f"{rss:.0f} MB; bag {bag.stat().st_size / 1e6:.1f} MB")  # fmt: skip
+        print(
+            f"{topic:<22} {n:>7} {recorded[topic]:>9} {n - recorded[topic]:>5} {n / wall:>10.1f}"
+        )
+    print(
+        f"recorder CPU {100 * cpu / wall:.1f} % of one core while publishing; peak RSS "
+        f"{rss:.0f} MB; bag {bag.stat().st_size / 1e6:.1f} MB"
+    )
     print(f"recorder said: {output.strip().splitlines()[-1] if output.strip() else '(nothing)'}")
     return 0
 

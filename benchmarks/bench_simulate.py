@@ -32,8 +32,19 @@ def _run(n: int, folder: Path) -> tuple[float, float, float, str]:
     """One `simulate` of n random poses: (wall s, simulation s, peak RSS MiB, counts)."""
     bag = folder / f"random_{n}.mcap"
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", ROS_LOG_DIR=str(folder / "ros_log"))
-    command = [str(CLI), "simulate", "--plan", "random", "--n-random", str(n), "--seed", "0",
-               "-o", str(bag), "--force"]  # fmt: skip
+    command = [
+        str(CLI),
+        "simulate",
+        "--plan",
+        "random",
+        "--n-random",
+        str(n),
+        "--seed",
+        "0",
+        "-o",
+        str(bag),
+        "--force",
+    ]
     log = folder / "simulate.log"
     with open(log, "wb") as output:
         started = time.perf_counter()
@@ -48,9 +59,12 @@ def _run(n: int, folder: Path) -> tuple[float, float, float, str]:
     counts = re.search(r": (/joint_states=\d+, [^ ]+) messages", text)
     for path in (bag, bag.with_suffix(".world.yaml")):
         path.unlink(missing_ok=True)
-    return (wall, float(seconds.group(1)) if seconds else float("nan"),
-            usage.ru_maxrss / 1024.0,  # KiB on Linux
-            counts.group(1) if counts else text.strip()[-200:])  # fmt: skip
+    return (
+        wall,
+        float(seconds.group(1)) if seconds else float("nan"),
+        usage.ru_maxrss / 1024.0,  # KiB on Linux
+        counts.group(1) if counts else text.strip()[-200:],
+    )
 
 
 def main() -> None:
@@ -66,8 +80,10 @@ def main() -> None:
         raise SystemExit(f"{CLI}: robot-calib not installed in this environment")
     load = os.getloadavg()
     busy = " (above the CPU count: timings inflated)" if load[0] > (os.cpu_count() or 1) else ""
-    print(f"robot-calib simulate --plan random (default world); {os.cpu_count()} CPUs, "
-          f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}{busy}")  # fmt: skip
+    print(
+        f"robot-calib simulate --plan random (default world); {os.cpu_count()} CPUs, "
+        f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}{busy}"
+    )
     print(f"{'poses':>8} {'wall s':>8} {'sim s':>8} {'us/pose':>8} {'peak MiB':>9}  messages")
     results: dict[int, float] = {}
     with tempfile.TemporaryDirectory(prefix="bench_simulate_") as tmp:
@@ -75,13 +91,17 @@ def main() -> None:
             runs = [_run(n, Path(tmp)) for _ in range(max(1, args.repeat))]
             wall, sim, peak, counts = min(runs)
             results[n] = wall
-            print(f"{n:>8} {wall:>8.2f} {sim:>8.2f} {sim / n * 1e6:>8.1f} {peak:>9.0f}  {counts}",
-                  flush=True)  # fmt: skip
+            print(
+                f"{n:>8} {wall:>8.2f} {sim:>8.2f} {sim / n * 1e6:>8.1f} {peak:>9.0f}  {counts}",
+                flush=True,
+            )
     if TARGET_POSES in results:
         wall = results[TARGET_POSES]
         verdict = "PASS" if wall <= TARGET_S else "MISS"
-        print(f"target: simulate {TARGET_POSES} poses <= {TARGET_S:.0f} s wall: {wall:.1f} s "
-              f"{verdict}")  # fmt: skip
+        print(
+            f"target: simulate {TARGET_POSES} poses <= {TARGET_S:.0f} s wall: {wall:.1f} s "
+            f"{verdict}"
+        )
 
 
 if __name__ == "__main__":

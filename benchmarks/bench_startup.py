@@ -36,17 +36,32 @@ def main() -> int:
     cli = [sys.executable, "-m", "robot_calib"]
     with tempfile.TemporaryDirectory() as tmp:
         params, joints = Path(tmp) / "params.json", Path(tmp) / "joints.csv"
-        subprocess.run([*cli, "calibrate", str(SAMPLE), "-o", str(params)], check=True,
-                       capture_output=True)  # fmt: skip
+        subprocess.run(
+            [*cli, "calibrate", str(SAMPLE), "-o", str(params)], check=True, capture_output=True
+        )
         joints.write_text("q1,q2,q3,q4,q5,q6\n" + "0.1,0.2,0.3,0.4,0.5,0.6\n" * 10)
         commands = {
             "python -c 'import numpy'": [sys.executable, "-c", "import numpy"],
             "robot-calib --help": [*cli, "--help"],
-            "robot-calib predict": [*cli, "predict", str(params), "--joints", str(joints),
-                                    "-o", str(Path(tmp) / "points.csv"), "--force"],
-            "robot-calib calibrate (sample bag)": [*cli, "calibrate", str(SAMPLE), "-o",
-                                                   str(Path(tmp) / "p2.json"), "--force"],
-        }  # fmt: skip
+            "robot-calib predict": [
+                *cli,
+                "predict",
+                str(params),
+                "--joints",
+                str(joints),
+                "-o",
+                str(Path(tmp) / "points.csv"),
+                "--force",
+            ],
+            "robot-calib calibrate (sample bag)": [
+                *cli,
+                "calibrate",
+                str(SAMPLE),
+                "-o",
+                str(Path(tmp) / "p2.json"),
+                "--force",
+            ],
+        }
         times: dict[str, list[float]] = {name: [] for name in commands}
         for _ in range(args.repeat):  # alternate: each round runs every command once
             for name, cmd in commands.items():

@@ -68,8 +68,9 @@ def robot_calib(args: list[str]) -> Run:
     """`robot-calib ARGS` in a child process, measured (stdout/stderr collected)."""
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
         started = time.perf_counter()
-        child = subprocess.Popen([sys.executable, "-m", "robot_calib", *args], stdout=out,
-                                 stderr=err, text=True)  # fmt: skip
+        child = subprocess.Popen(
+            [sys.executable, "-m", "robot_calib", *args], stdout=out, stderr=err, text=True
+        )
         peak_tree = [0]
         done = threading.Event()
 
@@ -87,5 +88,12 @@ def robot_calib(args: list[str]) -> Run:
         out.seek(0)
         err.seek(0)
         cpu = usage.ru_utime + usage.ru_stime
-        return Run(wall, cpu, usage.ru_maxrss / 1024.0, peak_tree[0] / 1024.0, child.returncode,
-                   out.read(), err.read())  # fmt: skip
+        return Run(
+            wall,
+            cpu,
+            usage.ru_maxrss / 1024.0,
+            peak_tree[0] / 1024.0,
+            child.returncode,
+            out.read(),
+            err.read(),
+        )

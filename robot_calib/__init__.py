@@ -13,21 +13,42 @@ __version__ = "0.1.0"
 #: the public Python API (robot_calib/api.py), loaded on first use: `import robot_calib`
 #: stays light (no numpy or scipy until a function is called)
 __all__ = [
-    "Calibration", "Diagnosis", "InputError", "ModelSpec", "Recording", "RobotCalibError",
-    "calibrate", "compensate", "diagnose", "load_robot", "read_recording",
-    "recording_from_arrays", "simulate", "__version__",
-]  # fmt: skip
+    "Calibration",
+    "Diagnosis",
+    "InputError",
+    "ModelSpec",
+    "Recording",
+    "RobotCalibError",
+    "calibrate",
+    "compensate",
+    "diagnose",
+    "load_robot",
+    "read_recording",
+    "recording_from_arrays",
+    "simulate",
+    "__version__",
+]
 _API = "robot_calib.api"
 _LAZY = {
-    **dict.fromkeys(("calibrate", "compensate", "diagnose", "load_robot", "read_recording",
-                     "recording_from_arrays", "simulate"), _API),
+    **dict.fromkeys(
+        (
+            "calibrate",
+            "compensate",
+            "diagnose",
+            "load_robot",
+            "read_recording",
+            "recording_from_arrays",
+            "simulate",
+        ),
+        _API,
+    ),
     "Calibration": "robot_calib.identify.calibration",
     "Diagnosis": "robot_calib.diagnosis.diagnosis",
     "ModelSpec": "robot_calib.identify.model_spec",
     "Recording": "robot_calib.measurements",
     "RobotCalibError": "robot_calib.errors",
     "InputError": "robot_calib.errors",
-}  # fmt: skip
+}
 
 
 def __getattr__(name: str) -> object:

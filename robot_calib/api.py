@@ -47,9 +47,11 @@ def load_robot(name_or_path: str | Path) -> RobotDescription:
 
 
 def read_recording(
-    *bags: str | Path, robot: RobotDescription, pair_tolerance: float | None = None,
+    *bags: str | Path,
+    robot: RobotDescription,
+    pair_tolerance: float | None = None,
     log: Log | None = None,
-) -> Recording:  # fmt: skip
+) -> Recording:
     """The paired measurements of one or more MCAP bags (msgs_doc/specification.md): each
     tracker point with the joint state nearest in stamp (within `pair_tolerance` [s],
     default 0.05), reference reflectors' drift removed (msgs_doc/references.md)."""
@@ -61,9 +63,13 @@ def read_recording(
 
 
 def recording_from_arrays(
-    q: Array, points: Array, *, time: Array | None = None, robot: RobotDescription | None = None,
+    q: Array,
+    points: Array,
+    *,
+    time: Array | None = None,
+    robot: RobotDescription | None = None,
     source: str = "arrays",
-) -> Recording:  # fmt: skip
+) -> Recording:
     """A recording of measurements already paired in memory: joint readings q (n, J) [rad]
     and the tracker's points (n, 3) [m, tracker frame] in the order measured, their times
     (n,) [s] if known; circle sweeps are found on `robot`'s joints when given."""
@@ -73,10 +79,16 @@ def recording_from_arrays(
 
 
 def simulate(
-    output: str | Path, *, plan: str = "paper-test2", world: str | Path | None = None,
-    robot: str | None = None, effects: Sequence[str] = (), seed: int | None = None,
-    n_random: int = 20, force: bool = False,
-) -> Simulation:  # fmt: skip
+    output: str | Path,
+    *,
+    plan: str = "paper-test2",
+    world: str | Path | None = None,
+    robot: str | None = None,
+    effects: Sequence[str] = (),
+    seed: int | None = None,
+    n_random: int = 20,
+    force: bool = False,
+) -> Simulation:
     """Simulate a measurement campaign (robot, tracker and recorder nodes, in-process) and
     write the bag `output` with its world file (the truth) beside it. `plan`: a built-in
     plan or a PLAN.yaml; `world`: a world YAML (default: the built-in KR5 world, or `robot`'s
@@ -89,9 +101,13 @@ def simulate(
 
 
 def calibrate(
-    recording: Recording, robot: RobotDescription, *, model: str = "geometric",
-    ecc_order: int = 1, log: Log | None = None,
-) -> Calibration:  # fmt: skip
+    recording: Recording,
+    robot: RobotDescription,
+    *,
+    model: str = "geometric",
+    ecc_order: int = 1,
+    log: Log | None = None,
+) -> Calibration:
     """Identify `model` ('nominal', 'cpa', 'geometric', 'geometric+EFFECT[:joints]...',
     msgs_doc/effects.md) from `recording`: CPA, then Levenberg-Marquardt; tracker blunders
     left out and listed (`Calibration.outliers`), an implausible result marked
@@ -102,24 +118,32 @@ def calibrate(
 
 
 def diagnose(
-    recording: Recording, robot: RobotDescription, *, holdout: Recording | None = None,
-    tracker_sigma_m: float | None = None, log: Log | None = None,
-) -> Diagnosis:  # fmt: skip
+    recording: Recording,
+    robot: RobotDescription,
+    *,
+    holdout: Recording | None = None,
+    tracker_sigma_m: float | None = None,
+    log: Log | None = None,
+) -> Diagnosis:
     """The sim-to-real gap diagnosis (msgs_doc/diagnosis.md): the ladder of models scored
     on `holdout` (else k-fold over poses), the noise floor, the dominant effect and what
     remains. `Diagnosis.summary()` in words, `.to_dict()` the DIAGNOSIS.json document,
     `.save(path)` writes it."""
     from robot_calib.flows.diagnose import diagnose_recordings
 
-    diagnosis, _ = diagnose_recordings(recording, robot, holdout, log=log,
-                                       tracker_sigma_m=tracker_sigma_m)  # fmt: skip
+    diagnosis, _ = diagnose_recordings(
+        recording, robot, holdout, log=log, tracker_sigma_m=tracker_sigma_m
+    )
     return diagnosis
 
 
 def compensate(
-    calibration: Calibration, q: Array, *, directions: Array | None = None,
+    calibration: Calibration,
+    q: Array,
+    *,
+    directions: Array | None = None,
     time: Array | None = None,
-) -> Compensation:  # fmt: skip
+) -> Compensation:
     """The joint commands (n, J) [rad] the nominal controller must be given so that the
     calibrated robot reaches where the nominal model puts commands q (n, J) [rad]
     (`Compensation.q`; `.converged`, `.error_m` per command). `directions` (n, J) +-1: each

@@ -78,8 +78,10 @@ def read_csv_table(path: str | Path, what: str, expected: str) -> CsvTable:
         raise InputError(f"{path}: empty file (expected header {expected})")
     header = [h.strip() for h in rows[0]]
     if len(header) == 1 and ";" in header[0]:
-        raise InputError(f"{path}: one column {header[0]!r}: separated by ';'? use ',' "
-                         f"(expected header {expected})")  # fmt: skip
+        raise InputError(
+            f"{path}: one column {header[0]!r}: separated by ';'? use ',' "
+            f"(expected header {expected})"
+        )
     repeated = sorted({h for h in header if header.count(h) > 1})
     if repeated:
         raise InputError(f"{path}: columns {repeated} given more than once (header {header})")

@@ -130,8 +130,9 @@ def _read_exactly(fd: int, size: int) -> bytes:
     return out
 
 
-def _compute(tasks: Sequence[tuple[int, tuple[Hashable, Callable[[], object]]]], folder: str,
-             write: int) -> None:  # fmt: skip
+def _compute(
+    tasks: Sequence[tuple[int, tuple[Hashable, Callable[[], object]]]], folder: str, write: int
+) -> None:
     """In a child: each (number, task)'s result pickled to `folder`/<number>, then the
     number (8 bytes, written at once: a pipe never splits so few) to the pipe `write`."""
     with os.fdopen(write, "wb") as pipe:
@@ -199,8 +200,12 @@ class Mailbox(Generic[V]):
     def __enter__(self) -> Mailbox[V]:
         return self
 
-    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
-                 trace: TracebackType | None) -> None:  # fmt: skip
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
         self.close()
 
 
@@ -217,10 +222,14 @@ class Aside(Generic[T]):
     computes the tasks instead of a new child (when they can be pickled; no mailbox
     then), with `split` the tasks from that index on by a twin it forks (both cores)."""
 
-    def __init__(self, tasks: Sequence[tuple[Hashable, Callable[[], T]]],
-                 timeout_s: float = TIMEOUT_S, helper: Helper | None = None,
-                 split: int | None = None,
-                 mailbox: Mailbox[Any] | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        tasks: Sequence[tuple[Hashable, Callable[[], T]]],
+        timeout_s: float = TIMEOUT_S,
+        helper: Helper | None = None,
+        split: int | None = None,
+        mailbox: Mailbox[Any] | None = None,
+    ) -> None:
         if helper is not None and mailbox is not None:
             raise ValueError("Aside: a helper's batch takes no mailbox")
         self._tasks = dict(tasks)
@@ -236,8 +245,9 @@ class Aside(Generic[T]):
         if self._child is None and can_fork():
             self._fork(list(tasks), mailbox)
 
-    def _fork(self, tasks: list[tuple[Hashable, Callable[[], T]]],
-              mailbox: Mailbox[Any] | None) -> None:  # fmt: skip
+    def _fork(
+        self, tasks: list[tuple[Hashable, Callable[[], T]]], mailbox: Mailbox[Any] | None
+    ) -> None:
         folder = _private_folder()
         read, write = os.pipe()
 
@@ -325,8 +335,12 @@ class Aside(Generic[T]):
     def __enter__(self) -> Aside[T]:
         return self
 
-    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
-                 trace: TracebackType | None) -> None:  # fmt: skip
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
         self.close(abort=kind is not None)
 
 
@@ -364,8 +378,9 @@ class Helper:
         _HELPER_FDS.update((results[0], batch[1]))
         self._child = (pid, results[0], batch[1], folder)
 
-    def take(self, tasks: Sequence[tuple[Hashable, Callable[[], T]]], split: int | None = None
-             ) -> tuple[int, int, str] | None:  # fmt: skip
+    def take(
+        self, tasks: Sequence[tuple[Hashable, Callable[[], T]]], split: int | None = None
+    ) -> tuple[int, int, str] | None:
         """Hand `tasks` to the child (from index `split` on to its twin): its pid, results
         pipe and folder (for `Aside`), or None when it cannot (no child, already given a
         batch, tasks not picklable: it is then closed)."""
@@ -399,8 +414,12 @@ class Helper:
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def _share(tasks: list[tuple[int, tuple[Hashable, Callable[[], object]]]], split: int | None,
-           folder: str, write: int) -> None:  # fmt: skip
+def _share(
+    tasks: list[tuple[int, tuple[Hashable, Callable[[], object]]]],
+    split: int | None,
+    folder: str,
+    write: int,
+) -> None:
     """In a helper: `tasks` computed (`_compute`), those from index `split` on by a twin
     forked now (it writes to the same pipe and folder; reaped here before returning)."""
     if split is None or not 0 < split < len(tasks):

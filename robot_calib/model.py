@@ -352,8 +352,9 @@ class KinematicModel:
         origins = frames[..., :3, 3] @ b2t[:3, :3].T + b2t[:3, 3]
         return origins, frames[..., :3, 2] @ b2t[:3, :3].T
 
-    def target_points(self, params: ParameterVector, poses: Poses,
-                      correction: PointCorrection | None = None) -> Array:  # fmt: skip
+    def target_points(
+        self, params: ParameterVector, poses: Poses, correction: PointCorrection | None = None
+    ) -> Array:
         """Predicted target centres in the tracker frame, shape (n, 3) [m] (CHAIN_BLOCK_POSES
         poses at a time: memory O(block) beyond the result); with a learned `correction`
         (the hybrid model, PARAMS.json `correction`) less the residual it predicts at
@@ -375,8 +376,9 @@ class KinematicModel:
         assert jac is not None
         return points, jac
 
-    def jacobian_columns(self, params: ParameterVector, poses: Poses,
-                         columns: IntArray) -> tuple[Array, Array]:  # fmt: skip
+    def jacobian_columns(
+        self, params: ParameterVector, poses: Poses, columns: IntArray
+    ) -> tuple[Array, Array]:
         """Points (n, 3) [m] and d points / d the parameters at `columns` (indices into the
         full vector), parameter-major: shape (len(columns), n, 3), each column's (n, 3)
         contiguous (what a column-major least-squares block copies fastest)."""
@@ -496,8 +498,12 @@ class KinematicModel:
             if c.housing_blocks is not None:  # (n, 3, 5, T) per joint, in parameter order
                 assert d_housing is not None
                 d_eff += np.concatenate(
-                    [(d_housing[:, :, j, :, None] * basis[:, None, None, :]).reshape(n, 3, -1)
-                     for j, basis in c.housing_blocks], axis=2)  # fmt: skip
+                    [
+                        (d_housing[:, :, j, :, None] * basis[:, None, None, :]).reshape(n, 3, -1)
+                        for j, basis in c.housing_blocks
+                    ],
+                    axis=2,
+                )
             jac_t[cols] = np.einsum("ab,nbp->pna", rot, d_eff)
         return points, jac_t.transpose(1, 2, 0)
 

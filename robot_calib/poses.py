@@ -182,9 +182,11 @@ class Poses:
             if all(v is None for v in values):
                 return None
             return np.concatenate(
-                [np.full((len(p), *shape), np.nan) if v is None else v
-                 for p, v in zip(parts, values)]
-            )  # fmt: skip
+                [
+                    np.full((len(p), *shape), np.nan) if v is None else v
+                    for p, v in zip(parts, values)
+                ]
+            )
 
         return cls(
             np.concatenate([p.q for p in parts]),
@@ -203,9 +205,14 @@ class Poses:
         sigma = None if self.sigma is None else self.sigma[index]
         temperature = None if self.temperature is None else self.temperature[index]
         return Poses(
-            self.q[index], self.direction[index], self.time[index], target, rotation, sigma,
+            self.q[index],
+            self.direction[index],
+            self.time[index],
+            target,
+            rotation,
+            sigma,
             temperature,
-        )  # fmt: skip
+        )
 
 
 #: joint readings closer than this in every joint are one pose [rad] (a re-read of the

@@ -56,24 +56,38 @@ def main() -> int:
             strongest_wrong += not r["strongest_ok"]
             if r["best_loads"]:
                 not_loading += 1
-                print(f"  params_best.json of {effect} seed {1000 + seed}: {r['best_loads']}",
-                      file=sys.stderr)  # fmt: skip
+                print(
+                    f"  params_best.json of {effect} seed {1000 + seed}: {r['best_loads']}",
+                    file=sys.stderr,
+                )
             if r["ratio_to_right"] is not None:
                 to_right.append(r["ratio_to_right"])
             mark = "hit " if r["hit"] else "MISS"
             ratio = r["ratio_to_floor"]
             floor = "unknown" if ratio is None else f"{ratio:.2f}"
-            print(f"  {effect:<14} seed {1000 + seed}: {mark} truth {r['joints']} answer "
-                  f"{r['answer']} held-out {floor} x floor", file=sys.stderr)  # fmt: skip
+            print(
+                f"  {effect:<14} seed {1000 + seed}: {mark} truth {r['joints']} answer "
+                f"{r['answer']} held-out {floor} x floor",
+                file=sys.stderr,
+            )
         per_case = (time.perf_counter() - started) / args.cases
-        right = (f"ratio to right model median {statistics.median(to_right):.2f} worst "
-                 f"{max(to_right):.2f}" if to_right else "")  # fmt: skip
-        print(f"{effect:<38} hit rate {hits}/{args.cases}  (named {named}/{args.cases})  "
-              f"{right}  {per_case:.1f} s per case", flush=True)  # fmt: skip
-    print(f"evidence: effect-free joints' rows at >= 5 x {false_rows} of {free_rows} "
-          f"({100 * false_rows / max(free_rows, 1):.1f} %); effect joints missed {missed} of "
-          f"{joints}; strongest structure elsewhere in {strongest_wrong} of {len(results)} "
-          "cases")  # fmt: skip
+        right = (
+            f"ratio to right model median {statistics.median(to_right):.2f} worst "
+            f"{max(to_right):.2f}"
+            if to_right
+            else ""
+        )
+        print(
+            f"{effect:<38} hit rate {hits}/{args.cases}  (named {named}/{args.cases})  "
+            f"{right}  {per_case:.1f} s per case",
+            flush=True,
+        )
+    print(
+        f"evidence: effect-free joints' rows at >= 5 x {false_rows} of {free_rows} "
+        f"({100 * false_rows / max(free_rows, 1):.1f} %); effect joints missed {missed} of "
+        f"{joints}; strongest structure elsewhere in {strongest_wrong} of {len(results)} "
+        "cases"
+    )
     print(f"params_best.json that does not load: {not_loading} of {len(results)} cases")
     if args.json:
         with open(args.json, "w") as handle:

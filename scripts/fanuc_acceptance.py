@@ -35,11 +35,13 @@ def main() -> None:
             for model in ("cpa", "geometric"):
                 cal = calibrate(recording, world.model.robot, model)
                 out = accuracy(held.points, cal.model.target_points(cal.parameters, held.poses))
-                rows.setdefault(model + label, []).append((
-                    cal.accuracy.absolute_rms_mm / noise_rms_mm(world, recording),
-                    out.absolute_rms_mm / noise_rms_mm(world, held),
-                    abs(cal.parameters["a3"] - truth["a3"]) * 1e6,
-                ))  # fmt: skip
+                rows.setdefault(model + label, []).append(
+                    (
+                        cal.accuracy.absolute_rms_mm / noise_rms_mm(world, recording),
+                        out.absolute_rms_mm / noise_rms_mm(world, held),
+                        abs(cal.parameters["a3"] - truth["a3"]) * 1e6,
+                    )
+                )
     print(f"FANUC-like campaign, {args.seeds} seeds (rms / simulated noise rms; worst of seeds)")
     print(f"{'model':36s} {'in-sample':>10s} {'held-out':>10s} {'|a3 err| um':>12s}")
     for name, values in rows.items():

@@ -38,8 +38,10 @@ def main() -> int:
     robot = world.model.robot
     truth = absorb_base_offsets(robot, world.truth)
     plan = paper_test_plan(args.plan)
-    print("seed  max|z|  worst               n>3  holdout abs / floor"
-          "  holdout seed-criterion / floor")  # fmt: skip
+    print(
+        "seed  max|z|  worst               n>3  holdout abs / floor"
+        "  holdout seed-criterion / floor"
+    )
     worst_z, worst_ratio = 0.0, 0.0
     for seed in range(args.seeds):
         rng = np.random.default_rng(seed)
@@ -54,11 +56,15 @@ def main() -> int:
         ratio = fitted.absolute_mean_mm / floor.absolute_mean_mm
         pair = fitted.pairwise_mean_mm / floor.pairwise_mean_mm
         name = np.array(cal.parameters.free_names)[np.argmax(np.abs(z))]
-        print(f"{seed:>4}  {np.abs(z).max():6.2f}  {name:<18} {int((np.abs(z) > 3).sum()):>4}"
-              f"  {ratio:19.3f}  {pair:30.3f}")  # fmt: skip
+        print(
+            f"{seed:>4}  {np.abs(z).max():6.2f}  {name:<18} {int((np.abs(z) > 3).sum()):>4}"
+            f"  {ratio:19.3f}  {pair:30.3f}"
+        )
         worst_z, worst_ratio = max(worst_z, float(np.abs(z).max())), max(worst_ratio, ratio, pair)
-    print(f"largest |z| {worst_z:.2f} (target < 3); largest hold-out ratio {worst_ratio:.3f} "
-          "(target <= 1.2)")  # fmt: skip
+    print(
+        f"largest |z| {worst_z:.2f} (target < 3); largest hold-out ratio {worst_ratio:.3f} "
+        "(target <= 1.2)"
+    )
     return 0
 
 

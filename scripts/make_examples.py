@@ -35,12 +35,19 @@ from robot_calib.sim.plans import paper_test_plan, random_plan
 from robot_calib.sim.world import World, build_world
 
 ROOT = Path(__file__).resolve().parents[1]
-UR_JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
-             "wrist_2_joint", "wrist_3_joint")  # fmt: skip
+UR_JOINTS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
 
 
-def write(path: Path, columns: dict[str, np.ndarray], sep: str, decimals: dict[str, int],
-          comma: bool) -> None:  # fmt: skip
+def write(
+    path: Path, columns: dict[str, np.ndarray], sep: str, decimals: dict[str, int], comma: bool
+) -> None:
     """A CSV as tracker software writes it; NaN: an empty cell."""
     lines = [sep.join(columns)]
     for k in range(len(next(iter(columns.values())))):
@@ -90,11 +97,25 @@ def three_smr(folder: Path) -> None:
 
 
 def probe(folder: Path) -> None:
-    deviations = {"a2": 4.0e-4, "a3": -3.0e-4, "d4": 2.5e-4, "theta2": 6.0e-4,
-                  "theta3": -5.0e-4, "alpha3": 3.0e-4, "alpha4": -4.0e-4}  # fmt: skip
-    world = build_world({"robot": "ur10", "seed": 31, "geometry": "nominal",
-                         "deviations": deviations, "six_dof": {"first": [20, 35, -30]},
-                         "target_in_flange_m": [0.05, 0.0, 0.12]})  # fmt: skip
+    deviations = {
+        "a2": 4.0e-4,
+        "a3": -3.0e-4,
+        "d4": 2.5e-4,
+        "theta2": 6.0e-4,
+        "theta3": -5.0e-4,
+        "alpha3": 3.0e-4,
+        "alpha4": -4.0e-4,
+    }
+    world = build_world(
+        {
+            "robot": "ur10",
+            "seed": 31,
+            "geometry": "nominal",
+            "deviations": deviations,
+            "six_dof": {"first": [20, 35, -30]},
+            "target_in_flange_m": [0.05, 0.0, 0.12],
+        }
+    )
     q = random_plan(world.model.robot, 150, np.random.default_rng(32)).q
     points, frames = measure(world, q, seed=33)
     assert frames is not None

@@ -71,8 +71,10 @@ def main() -> int:
     for name, rows in results.items():
         ratios = [r for _, r in rows]
         exact = sum(e for e, _ in rows)
-        print(f"{name:<18}{exact:>10}/{len(rows):<5}{statistics.median(ratios):>26.3f}"
-              f"{max(ratios):>8.3f}")  # fmt: skip
+        print(
+            f"{name:<18}{exact:>10}/{len(rows):<5}{statistics.median(ratios):>26.3f}"
+            f"{max(ratios):>8.3f}"
+        )
     print(
         f"clean data: {clean_flags} points flagged over {args.seeds} seeds x 580 points "
         f"(target 0); {time.perf_counter() - started:.0f} s"

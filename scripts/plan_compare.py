@@ -30,8 +30,10 @@ def main() -> None:
     started = time.perf_counter()
     problem = planning_problem(world, args.model, 2000, np.random.default_rng(0))
     q60 = d_optimal(problem, 60)
-    print(f"plan N=60 of M=2000 for {args.model}: {time.perf_counter() - started:.2f} s "
-          "(candidates, identifiability, D-optimal choice)")  # fmt: skip
+    print(
+        f"plan N=60 of M=2000 for {args.model}: {time.perf_counter() - started:.2f} s "
+        "(candidates, identifiability, D-optimal choice)"
+    )
     noise = world_noise_m(world, problem)
     print(f"noise per coordinate: {noise * 1e3:.4f} mm")
     plans = [("D-optimal", problem.plan(q60)), ("random", problem.plan(problem.candidates[:60]))]
@@ -40,8 +42,10 @@ def main() -> None:
     started = time.perf_counter()
     plans.append(("D-optimal", problem.plan(d_optimal(problem, len(test2)))))
     print(f"plan N=580 of M=2000: {time.perf_counter() - started:.2f} s")
-    print("| plan | N | worst 1-sigma (rms over the workspace) | worst length | worst angle "
-          "| held-out abs rms / model error [mm] | campaign [min] |")  # fmt: skip
+    print(
+        "| plan | N | worst 1-sigma (rms over the workspace) | worst length | worst angle "
+        "| held-out abs rms / model error [mm] | campaign [min] |"
+    )
     print("|---|---|---|---|---|---|---|")
     rng = np.random.default_rng(1)
     for name, plan in plans:
@@ -49,11 +53,13 @@ def main() -> None:
         pred = fig.prediction
         length, angle = pred.worst_of_unit("m"), pred.worst_of_unit("rad")
         assert fig.holdout is not None and length is not None and angle is not None
-        print(f"| {name} | {len(plan)} | {pred.names[pred.worst]} {pred.rms_m.max() * 1e3:.5f} mm "
-              f"| {pred.names[length]} {pred.std[length] * 1e3:.5f} mm "
-              f"| {pred.names[angle]} {pred.std[angle] * 1e6:.2f} urad "
-              f"| {fig.holdout.abs_rms_mm:.4f} / {fig.holdout.model_rms_mm:.4f} "
-              f"| {fig.hours * 60:.0f} |")  # fmt: skip
+        print(
+            f"| {name} | {len(plan)} | {pred.names[pred.worst]} {pred.rms_m.max() * 1e3:.5f} mm "
+            f"| {pred.names[length]} {pred.std[length] * 1e3:.5f} mm "
+            f"| {pred.names[angle]} {pred.std[angle] * 1e6:.2f} urad "
+            f"| {fig.holdout.abs_rms_mm:.4f} / {fig.holdout.model_rms_mm:.4f} "
+            f"| {fig.hours * 60:.0f} |"
+        )
     print("| N | planned worst [mm] | random median worst [mm] (15 draws) | ratio |")
     print("|---|---|---|---|")
     draws = np.random.default_rng(5)

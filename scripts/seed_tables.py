@@ -67,12 +67,27 @@ ANGLE_PREFIXES = ("theta", "alpha", "beta")
 
 # Seed Table 3, column "sigma 2-6" [mm, deg] (its "Avg. 2-6" column is our truth).
 SEED_TABLE3_SIGMA_2_6 = {
-    "d1": 0.0786, "d3": 0.0047, "d4": 0.0312, "d5": 0.0199,
-    "theta1": 0.0095, "theta2": 0.0055, "theta3": 0.0054, "theta4": 0.0037, "theta5": 0.0009,
-    "a1": 0.0292, "a2": 0.0142, "a3": 0.0239, "a4": 0.0056, "a5": 0.0122,
-    "alpha1": 0.0007, "alpha2": 0.0021, "alpha3": 0.0002, "alpha4": 0.0022, "alpha5": 0.0023,
+    "d1": 0.0786,
+    "d3": 0.0047,
+    "d4": 0.0312,
+    "d5": 0.0199,
+    "theta1": 0.0095,
+    "theta2": 0.0055,
+    "theta3": 0.0054,
+    "theta4": 0.0037,
+    "theta5": 0.0009,
+    "a1": 0.0292,
+    "a2": 0.0142,
+    "a3": 0.0239,
+    "a4": 0.0056,
+    "a5": 0.0122,
+    "alpha1": 0.0007,
+    "alpha2": 0.0021,
+    "alpha3": 0.0002,
+    "alpha4": 0.0022,
+    "alpha5": 0.0023,
     "beta2": 0.0022,
-}  # fmt: skip
+}
 # Seed Table 4: nominal mean, nominal max, CPA mean, CPA max [mm] per test.
 SEED_TABLE4 = {
     1: (1.3444, 4.8369, 1.5587, 4.0045),

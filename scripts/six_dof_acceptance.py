@@ -44,16 +44,22 @@ def main() -> None:
         [] for _ in range(8)
     )
     for seed in range(args.seeds):
-        world = build_world({"seed": seed, "six_dof": {"first": [20.0, 35.0, -30.0]},
-                             "noise": {"orientation_sigma_rad": SIGMA_ORIENTATION}})  # fmt: skip
+        world = build_world(
+            {
+                "seed": seed,
+                "six_dof": {"first": [20.0, 35.0, -30.0]},
+                "noise": {"orientation_sigma_rad": SIGMA_ORIENTATION},
+            }
+        )
         robot = world.model.robot
         plan = random_plan(robot, args.poses, np.random.default_rng(seed))
         poses, points = measure_every_target(
             world, plan.q, plan_times(plan, world.timing), np.random.default_rng(seed + 100)
         )
         stated = np.tile([SIGMA_POINT, SIGMA_ORIENTATION], (len(poses), 1))
-        recording = recording_from_arrays(poses.q, points, poses.time, robot=robot,
-                                          rotation=poses.rotation, sigma=stated)  # fmt: skip
+        recording = recording_from_arrays(
+            poses.q, points, poses.time, robot=robot, rotation=poses.rotation, sigma=stated
+        )
         cal = calibrate(recording, robot, "geometric")
         truth = absorb_base_offsets(robot, world.truth)
 
@@ -84,13 +90,19 @@ def main() -> None:
     print(f"{args.seeds} seeds x {args.poses} random poses, KR5 with a 6-DoF probe")
     print(f"tool frame orientation: worst error {max(frame):.1f} urad ({max(z_frame):.2f} sigma)")
     print(f"tool frame offset:      worst error {max(offset):.2f} um ({max(z_offset):.2f} sigma)")
-    print(f"in-sample orientation residual rms per axis: {np.mean(rot_rms):.1f} urad "
-          f"(simulated noise {SIGMA_ORIENTATION * 1e6:.0f})")  # fmt: skip
-    print(f"in-sample point residual rms per coordinate: {np.mean(pt_rms):.2f} um "
-          f"(simulated noise {SIGMA_POINT * 1e6:.1f})")  # fmt: skip
-    print(f"half the points 20x noisier: model error on the accurate half, stated accuracies "
-          f"{np.mean(weighted):.2f} um vs not stated {np.mean(unweighted):.2f} um rms per "
-          "coordinate")  # fmt: skip
+    print(
+        f"in-sample orientation residual rms per axis: {np.mean(rot_rms):.1f} urad "
+        f"(simulated noise {SIGMA_ORIENTATION * 1e6:.0f})"
+    )
+    print(
+        f"in-sample point residual rms per coordinate: {np.mean(pt_rms):.2f} um "
+        f"(simulated noise {SIGMA_POINT * 1e6:.1f})"
+    )
+    print(
+        f"half the points 20x noisier: model error on the accurate half, stated accuracies "
+        f"{np.mean(weighted):.2f} um vs not stated {np.mean(unweighted):.2f} um rms per "
+        "coordinate"
+    )
 
 
 if __name__ == "__main__":

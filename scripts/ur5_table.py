@@ -51,8 +51,16 @@ def main() -> int:
         test = read_recording([bags[RANDOM]], robot)
     dif = read_measurement_csv(DATA / RANDOM, with_overrides(fmt, dif_sign=0.0))
     commanded = np.linalg.norm(test.points - dif.points, axis=1) * 1e3
-    rows = [("as commanded (dataset's own base/TCF set-up): mean abs |dif|",
-             f"{commanded.mean():.4f}", f"{commanded.max():.4f}", "-", "-", "-")]  # fmt: skip
+    rows = [
+        (
+            "as commanded (dataset's own base/TCF set-up): mean abs |dif|",
+            f"{commanded.mean():.4f}",
+            f"{commanded.max():.4f}",
+            "-",
+            "-",
+            "-",
+        )
+    ]
     fits = {}
     for model in ("nominal", "geometric"):
         started = time.perf_counter()
@@ -62,17 +70,28 @@ def main() -> int:
     diagnosis, ladder = diagnose(grid, robot, test)
     diag_time = time.perf_counter() - started
     picked = ladder.rungs[-1]
-    models = [("nominal (tracker pose + tool fitted)", *fits["nominal"]),
-              ("geometric", *fits["geometric"])]  # fmt: skip
+    models = [
+        ("nominal (tracker pose + tool fitted)", *fits["nominal"]),
+        ("geometric", *fits["geometric"]),
+    ]
     if picked.model != "geometric":
         models.append((f"diagnosis pick: {picked.model}", picked.calibration, float("nan")))
     for label, cal, seconds in models:
         acc = accuracy(test.points, cal.predict(test.poses))
-        rows.append((label, f"{acc.absolute_mean_mm:.4f}", f"{acc.absolute_max_mm:.4f}",
-                     f"{acc.pairwise_mean_mm:.4f}", f"{acc.pairwise_max_mm:.4f}",
-                     "-" if np.isnan(seconds) else f"{seconds:.2f}"))  # fmt: skip
-    print("| model (calibrated on 1000 grid poses) | abs mean | abs max | seed mean | seed max "
-          "| fit [s] |")  # fmt: skip
+        rows.append(
+            (
+                label,
+                f"{acc.absolute_mean_mm:.4f}",
+                f"{acc.absolute_max_mm:.4f}",
+                f"{acc.pairwise_mean_mm:.4f}",
+                f"{acc.pairwise_max_mm:.4f}",
+                "-" if np.isnan(seconds) else f"{seconds:.2f}",
+            )
+        )
+    print(
+        "| model (calibrated on 1000 grid poses) | abs mean | abs max | seed mean | seed max "
+        "| fit [s] |"
+    )
     print("|---|---|---|---|---|---|")
     for row in rows:
         print("| " + " | ".join(row) + " |")

@@ -22,8 +22,9 @@ ROBOT = WORLD.model.robot
 @functools.cache
 def calibrated() -> tuple[Calibration, Recording]:
     plan = paper_test_plan(2)
-    poses, points = measure_every_target(WORLD, plan.q, plan_times(plan, WORLD.timing),
-                                         np.random.default_rng(1))  # fmt: skip
+    poses, points = measure_every_target(
+        WORLD, plan.q, plan_times(plan, WORLD.timing), np.random.default_rng(1)
+    )
     recording = recording_from_arrays(poses.q, points, poses.time, robot=ROBOT)
     return calibrate(recording, ROBOT, "geometric+backlash:4"), recording
 

@@ -19,8 +19,9 @@ import robot_calib as rc
 def main(folder: Path) -> None:
     robot = rc.load_robot("kr5_sixx_r650")
     rc.simulate(folder / "run.mcap", plan="paper-test2", effects=["backlash:4"], seed=1)
-    rc.simulate(folder / "holdout.mcap", plan="random", n_random=60, effects=["backlash:4"],
-                seed=2)  # fmt: skip
+    rc.simulate(
+        folder / "holdout.mcap", plan="random", n_random=60, effects=["backlash:4"], seed=2
+    )
     recording = rc.read_recording(folder / "run.mcap", robot=robot)
     holdout = rc.read_recording(folder / "holdout.mcap", robot=robot)
     for model in ("geometric", "geometric+backlash:4"):
@@ -35,8 +36,10 @@ def main(folder: Path) -> None:
     print(f"dominant effect: {diagnosis.verdict}")
     commands = rc.compensate(again, holdout.poses.q[:5])
     moved = np.degrees(np.abs(commands.q - holdout.poses.q[:5]).max())
-    print(f"5 commands compensated, at most {moved:.4f} deg moved, all reached: "
-          f"{bool(commands.converged.all())}")  # fmt: skip
+    print(
+        f"5 commands compensated, at most {moved:.4f} deg moved, all reached: "
+        f"{bool(commands.converged.all())}"
+    )
 
 
 if __name__ == "__main__":

@@ -58,8 +58,10 @@ def check_no_copies(paths: Sequence[str | Path], tables: Sequence[ImportedTable]
     for path in paths:
         key = Path(path).resolve()
         if key in seen:
-            raise InputError(f"{path}: given twice (as {seen[key]}): its rows would be "
-                             "imported twice; give each CSV once")  # fmt: skip
+            raise InputError(
+                f"{path}: given twice (as {seen[key]}): its rows would be "
+                "imported twice; give each CSV once"
+            )
         seen[key] = str(path)
     if not tables:
         return ""
@@ -70,16 +72,21 @@ def check_no_copies(paths: Sequence[str | Path], tables: Sequence[ImportedTable]
     copied = copies(q, points)
     if not copied.any():
         return ""
-    where = [f"{p}:{line}" for p, t in zip(paths, tables)
-             for line in (t.lines or range(1, len(t.q) + 1))]  # fmt: skip
+    where = [
+        f"{p}:{line}"
+        for p, t in zip(paths, tables)
+        for line in (t.lines or range(1, len(t.q) + 1))
+    ]
     original = copied_rows(q, points)
     block = pasted_block(original)
     if are_rereads(original, len(copied)):
         k = min(original)
-        return (f"note: {int(copied.sum())} of {len(copied)} rows repeat an earlier row's "
-                f"joint readings and point exactly (first {where[k]} = {where[original[k]]}): "
-                "kept as re-reads of a still pose (an export that rounds); they count as one "
-                "pose in every fold and split")  # fmt: skip
+        return (
+            f"note: {int(copied.sum())} of {len(copied)} rows repeat an earlier row's "
+            f"joint readings and point exactly (first {where[k]} = {where[original[k]]}): "
+            "kept as re-reads of a still pose (an export that rounds); they count as one "
+            "pose in every fold and split"
+        )
     k = min(original) if block is None else block[0]
     if block is not None:
         what = (
@@ -260,8 +267,10 @@ def _unit_checks(
         for k in np.flatnonzero(beyond.any(axis=1)):
             j = int(np.flatnonzero(beyond[k])[0])
             bad_mask[k] = True
-            why[k] = (f"joint column {fmt.joints[j]!r} = {q[k, j]:g} looks like degrees "
-                      "(the other rows: rad)")  # fmt: skip
+            why[k] = (
+                f"joint column {fmt.joints[j]!r} = {q[k, j]:g} looks like degrees "
+                "(the other rows: rad)"
+            )
     points = table[:, n_j : n_j + 3]
     if fmt.dif:
         points = points + fmt.dif_sign * table[:, n_j + 3 : n_j + 6]
@@ -278,8 +287,10 @@ def _unit_checks(
         )
     for k in np.flatnonzero(far & ~bad_mask):
         bad_mask[k] = True
-        why[k] = (f"point {columns} {dist_m[k]:.3g} m from the tracker looks like {other} "
-                  f"(the other rows: {fmt.length_unit})")  # fmt: skip
+        why[k] = (
+            f"point {columns} {dist_m[k]:.3g} m from the tracker looks like {other} "
+            f"(the other rows: {fmt.length_unit})"
+        )
     warnings = []
     if fmt.angle_unit == "deg" and len(q) > 1:
         span = np.ptp(q, axis=0)
@@ -348,9 +359,12 @@ def read_measurement_csv(
     if n_fields == 1:
         _check_separator(path, fmt, *numbered[0])
     refs = (
-        list(fmt.joints) + list(fmt.point) + list(fmt.dif or ()) + ([fmt.time] if fmt.time else [])
+        list(fmt.joints)
+        + list(fmt.point)
+        + list(fmt.dif or ())
+        + ([fmt.time] if fmt.time else [])
         + ([fmt.temperature] if fmt.temperature else [])
-    )  # fmt: skip
+    )
     n_required = len(refs)  # the further targets' cells may be empty (not measured)
     refs += [c for _, triple in fmt.targets for c in triple]
     n_optional = len(refs)  # then the 6-DoF columns: orientations, then sigmas, in fmt order
@@ -434,9 +448,16 @@ def read_measurement_csv(
         measured[name] = np.asarray(np.isfinite(xyz).all(axis=1), dtype=bool)
     six_dof, more = six_dof_columns(path, fmt, table[:, n_optional:], given, lines, measured)
     return ImportedTable(
-        q, points, time, tuple(bad), (*warnings, *more), temperature, extra, six_dof,
+        q,
+        points,
+        time,
+        tuple(bad),
+        (*warnings, *more),
+        temperature,
+        extra,
+        six_dof,
         tuple(lines),
-    )  # fmt: skip
+    )
 
 
 def joined_times(times: Sequence[Array | None]) -> Array | None:

@@ -76,9 +76,13 @@ def check_six_dof_format(path: Path, fmt: CsvFormat) -> None:
 
 
 def six_dof_columns(
-    path: Path, fmt: CsvFormat, table: Array, given: NDArray[np.bool_], lines: list[int],
+    path: Path,
+    fmt: CsvFormat,
+    table: Array,
+    given: NDArray[np.bool_],
+    lines: list[int],
     measured: Mapping[str, NDArray[np.bool_]],
-) -> tuple[dict[str, SixDof], list[str]]:  # fmt: skip
+) -> tuple[dict[str, SixDof], list[str]]:
     """Rotations and stated standard deviations of the targets with 6-DoF columns.
 
     Parameters
@@ -102,8 +106,9 @@ def six_dof_columns(
     for o in fmt.orientations:
         span = slice(start, start + len(o.columns))
         start = span.stop
-        rotation = _orientation(path, fmt, o, table[:, span], given[:, span], lines,
-                                measured[o.target])  # fmt: skip
+        rotation = _orientation(
+            path, fmt, o, table[:, span], given[:, span], lines, measured[o.target]
+        )
         out[o.target] = (rotation, np.full((n, 2), np.nan))
     warnings = []
     for sig in fmt.sigmas:
@@ -127,9 +132,14 @@ def _first_row(mask: Any) -> int | None:
 
 
 def _orientation(
-    path: Path, fmt: CsvFormat, spec: OrientationColumns, cells: Array,
-    filled: NDArray[np.bool_], lines: list[int], measured: NDArray[np.bool_],
-) -> Array:  # fmt: skip
+    path: Path,
+    fmt: CsvFormat,
+    spec: OrientationColumns,
+    cells: Array,
+    filled: NDArray[np.bool_],
+    lines: list[int],
+    measured: NDArray[np.bool_],
+) -> Array:
     """Rotations (n, 3, 3) of the orientation cells (n, 3 or 4) (NaN rows where all are
     empty: orientation not measured there). InputError FILE:LINE when some of a row's cells
     are empty, a row without the target's point has an orientation, a cell is not finite,
@@ -143,11 +153,15 @@ def _orientation(
             "empty: an orientation is measured whole or not at all"
         )
     if (k := _first_row(whole & ~measured)) is not None:
-        raise InputError(f"{path}:{lines[k]}: {label} has an orientation but no point (its "
-                         "x, y, z cells are empty)")  # fmt: skip
+        raise InputError(
+            f"{path}:{lines[k]}: {label} has an orientation but no point (its "
+            "x, y, z cells are empty)"
+        )
     if (k := _first_row(whole & ~np.isfinite(cells).all(axis=1))) is not None:
-        raise InputError(f"{path}:{lines[k]}: {label}'s orientation {columns} is not finite: "
-                         f"{cells[k].tolist()}")  # fmt: skip
+        raise InputError(
+            f"{path}:{lines[k]}: {label}'s orientation {columns} is not finite: "
+            f"{cells[k].tolist()}"
+        )
     rotation = np.full((len(cells), 3, 3), np.nan)
     if not whole.any():
         return rotation
@@ -174,9 +188,15 @@ def _orientation(
 
 
 def _sigma(
-    path: Path, fmt: CsvFormat, spec: SigmaColumns, kind: int, cells: Array,
-    filled: NDArray[np.bool_], lines: list[int], measured: NDArray[np.bool_],
-) -> tuple[Array, list[str]]:  # fmt: skip
+    path: Path,
+    fmt: CsvFormat,
+    spec: SigmaColumns,
+    kind: int,
+    cells: Array,
+    filled: NDArray[np.bool_],
+    lines: list[int],
+    measured: NDArray[np.bool_],
+) -> tuple[Array, list[str]]:
     """Standard deviations (n,) in SI of the cells (n,) of spec's position (kind 0) or
     orientation (kind 1) column (NaN where empty: not stated), and a warning when their
     median is implausible for a tracker. InputError FILE:LINE when a cell is not a finite
@@ -185,8 +205,10 @@ def _sigma(
     column = (spec.position, spec.orientation)[kind]
     label = target_label(spec.target)
     if (k := _first_row(filled & ~measured)) is not None:
-        raise InputError(f"{path}:{lines[k]}: {label} has a {what} standard deviation "
-                         f"({column}) but no point (its x, y, z cells are empty)")  # fmt: skip
+        raise InputError(
+            f"{path}:{lines[k]}: {label} has a {what} standard deviation "
+            f"({column}) but no point (its x, y, z cells are empty)"
+        )
     with np.errstate(invalid="ignore"):
         wrong = filled & ~(np.isfinite(cells) & (cells > 0))
     if (k := _first_row(wrong)) is not None:

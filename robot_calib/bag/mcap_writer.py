@@ -316,22 +316,39 @@ class BagWriter:
         duration = {"nanoseconds": 0 if first is None or last is None else last - first}
         count = self.message_count
         topics = [
-            {"topic_metadata": {"name": topic, "type": entry.type_name,
-                                "serialization_format": MESSAGE_ENCODING,
-                                "offered_qos_profiles": [p.to_dict() for p in entry.offered_qos],
-                                "type_description_hash": entry.type_hash},
-             "message_count": entry.count}
+            {
+                "topic_metadata": {
+                    "name": topic,
+                    "type": entry.type_name,
+                    "serialization_format": MESSAGE_ENCODING,
+                    "offered_qos_profiles": [p.to_dict() for p in entry.offered_qos],
+                    "type_description_hash": entry.type_hash,
+                },
+                "message_count": entry.count,
+            }
             for topic, entry in self._topics.items()
-        ]  # fmt: skip
+        ]
         metadata = {
-            "version": 9, "storage_identifier": "mcap", "duration": duration,
-            "starting_time": start, "message_count": count, "topics_with_message_count": topics,
-            "compression_format": "", "compression_mode": "",
+            "version": 9,
+            "storage_identifier": "mcap",
+            "duration": duration,
+            "starting_time": start,
+            "message_count": count,
+            "topics_with_message_count": topics,
+            "compression_format": "",
+            "compression_mode": "",
             "relative_file_paths": [self._file_name],
-            "files": [{"path": self._file_name, "starting_time": start, "duration": duration,
-                       "message_count": count}],
-            "custom_data": None, "ros_distro": self._ros_distro,
-        }  # fmt: skip
+            "files": [
+                {
+                    "path": self._file_name,
+                    "starting_time": start,
+                    "duration": duration,
+                    "message_count": count,
+                }
+            ],
+            "custom_data": None,
+            "ros_distro": self._ros_distro,
+        }
         self._writer.add_metadata(METADATA_NAME, {METADATA_KEY: dump_yaml(metadata)})
 
 

@@ -247,8 +247,13 @@ def _read_each(
         np.array(js_t, dtype=np.int64),
         np.array(js_q).reshape(-1, n_joints),
         np.array(js_v).reshape(-1, n_joints),
-        pt_t, pts, pt_target, poses, celsius, frames,
-    )  # fmt: skip
+        pt_t,
+        pts,
+        pt_target,
+        poses,
+        celsius,
+        frames,
+    )
 
 
 class _NoBulk(Exception):
@@ -442,13 +447,19 @@ def read_bag(
     order = np.argsort(js_ns, kind="stable")
     # a stream is told by one target's points per joint state: several targets measured at
     # each pose of a static bag are no stream
-    per_target = (len(stamped.point_ns) if len(names) <= 1 else
-                  int(np.bincount(stamped.point_target, minlength=len(names)).max()))  # fmt: skip
-    hint = stream_hint(js_ns[order], q[order], per_target, str(path),
-                       np.asarray(stamped.point_ns, dtype=np.int64))  # fmt: skip
+    per_target = (
+        len(stamped.point_ns)
+        if len(names) <= 1
+        else int(np.bincount(stamped.point_target, minlength=len(names)).max())
+    )
+    hint = stream_hint(
+        js_ns[order], q[order], per_target, str(path), np.asarray(stamped.point_ns, dtype=np.int64)
+    )
     if hint and len(names) > 1:  # a stream is read for a single target (read_stream)
-        advice = (f"(points per target); {param('stream', True)} reads the single target of "
-                  f"{POINT_TOPIC}: measure each pose at rest (msgs_doc/stream.md)")  # fmt: skip
+        advice = (
+            f"(points per target); {param('stream', True)} reads the single target of "
+            f"{POINT_TOPIC}: measure each pose at rest (msgs_doc/stream.md)"
+        )
         hint = hint.replace(f": {STREAM_ADVICE}", f" {advice}")
     warnings = warnings + ([hint] if hint else [])
     rec = recording_from_stream(
@@ -473,9 +484,11 @@ def read_bag(
     if references is not None:
         rec = rec.without_drift(references)
         if references.drift is None:
-            warnings.append(f"warning: {path}: reference reflectors "
-                            f"{', '.join(references.names)}: {references.note}: the tracker's "
-                            "drift is not removed")  # fmt: skip
+            warnings.append(
+                f"warning: {path}: reference reflectors "
+                f"{', '.join(references.names)}: {references.note}: the tracker's "
+                "drift is not removed"
+            )
     return replace(rec, warnings=tuple(warnings) + rec.warnings)
 
 
@@ -483,9 +496,11 @@ def _reference_reads(path: Path) -> ReferenceReads | None:
     """The reference reflectors of the bag (msgs_doc/references.md), with the drift they
     show; None when it has none. BagError for a wrong type or a point not finite."""
     with BagReader(path) as reader:
-        topics = {t: name for t in sorted(reader.topics)
-                  if (name := reference_topic_name(t)) is not None
-                  and reader.topics[t].message_count}  # fmt: skip
+        topics = {
+            t: name
+            for t in sorted(reader.topics)
+            if (name := reference_topic_name(t)) is not None and reader.topics[t].message_count
+        }
         if not topics:
             return None
         for topic in topics:
@@ -560,15 +575,22 @@ def read_stream(path: Path, robot: RobotDescription) -> JointStream:
     with BagReader(path) as reader:
         references = [t for t in reader.topics if reference_topic_name(t) is not None]
     if references:
-        raise BagError(f"{path}: {param('stream', True)} does not read reference reflectors "
-                       f"({references[0]}): the tracker's drift they show would stay in the "
-                       "points; read the bag as poses at rest "
-                       "(msgs_doc/references.md)")  # fmt: skip
+        raise BagError(
+            f"{path}: {param('stream', True)} does not read reference reflectors "
+            f"({references[0]}): the tracker's drift they show would stay in the "
+            "points; read the bag as poses at rest "
+            "(msgs_doc/references.md)"
+        )
     try:
         return JointStream.from_messages(
-            js_ns, q, velocity_sign, stamped.point_ns, stamped.points, str(path),
+            js_ns,
+            q,
+            velocity_sign,
+            stamped.point_ns,
+            stamped.points,
+            str(path),
             _temperature_at(path, celsius, stamped.point_ns),
-        )  # fmt: skip
+        )
     except InputError as exc:
         raise BagError(str(exc)) from None
 
@@ -620,8 +642,10 @@ def other_topics(path: Path) -> list[str]:
     measurements (`split`) does not carry."""
     with BagReader(path) as reader:
         return [
-            t for t in reader.topics
+            t
+            for t in reader.topics
             if t not in (JOINT_STATES_TOPIC, TEMPERATURE_TOPIC, POINT_TOPIC)
-            and target_topic_name(t) is None and pose_topic_name(t) is None
+            and target_topic_name(t) is None
+            and pose_topic_name(t) is None
             and reference_topic_name(t) is None
-        ]  # fmt: skip
+        ]

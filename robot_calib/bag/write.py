@@ -48,11 +48,18 @@ SixDof = tuple[Array, Array]  # rotation (n, 3, 3) and sigma (n, 2) [m, rad] of 
 
 
 def write_measurement_bag(
-    output: str | Path, q: Array, points: Array, joint_names: tuple[str, ...],
-    time: Array | None = None, force: bool = False, direction: Array | None = None,
-    temperature: Array | None = None, extra_points: Mapping[str, Array] | None = None,
-    six_dof: Mapping[str, SixDof] | None = None, references: Mapping[str, Array] | None = None,
-) -> dict[str, int]:  # fmt: skip
+    output: str | Path,
+    q: Array,
+    points: Array,
+    joint_names: tuple[str, ...],
+    time: Array | None = None,
+    force: bool = False,
+    direction: Array | None = None,
+    temperature: Array | None = None,
+    extra_points: Mapping[str, Array] | None = None,
+    six_dof: Mapping[str, SixDof] | None = None,
+    references: Mapping[str, Array] | None = None,
+) -> dict[str, int]:
     """A contract bag: one JointState and one PointStamped per pose, stamped in row order
     (`time` [s]: absolute Unix time from EPOCH_MIN_S on, else from the first pose; without
     `time` 1 s apart; see `write_measurements`). Written
@@ -69,17 +76,31 @@ def write_measurement_bag(
         raise InputError("time column must increase from row to row")
     with staged_outputs(output.parent, force) as stage:
         return write_measurements(
-            stage / output.name, q, points, joint_names, start + offsets, direction,
-            temperature, extra_points, six_dof, references,
-        )  # fmt: skip
+            stage / output.name,
+            q,
+            points,
+            joint_names,
+            start + offsets,
+            direction,
+            temperature,
+            extra_points,
+            six_dof,
+            references,
+        )
 
 
 def write_measurements(
-    path: Path, q: Array, points: Array, joint_names: tuple[str, ...], stamps_ns: IntArray,
-    direction: Array | None = None, temperature: Array | None = None,
-    extra_points: Mapping[str, Array] | None = None, six_dof: Mapping[str, SixDof] | None = None,
+    path: Path,
+    q: Array,
+    points: Array,
+    joint_names: tuple[str, ...],
+    stamps_ns: IntArray,
+    direction: Array | None = None,
+    temperature: Array | None = None,
+    extra_points: Mapping[str, Array] | None = None,
+    six_dof: Mapping[str, SixDof] | None = None,
     references: Mapping[str, Array] | None = None,
-) -> dict[str, int]:  # fmt: skip
+) -> dict[str, int]:
     """Write a contract bag at `path` directly (callers stage it): per pose i a JointState
     (readings q (n, J) [rad] of `joint_names`) and a PointStamped (points (n, 3) [m],
     tracker frame), both stamped stamps_ns[i] [ns] (non-decreasing). `direction` (n, J)
@@ -133,8 +154,9 @@ def write_measurements(
             if temperature is not None and np.isfinite(temperature[k]):  # side data
                 msg = types[TEMPERATURE_TYPE](
                     header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
-                    temperature=float(temperature[k]), variance=0.0,
-                )  # fmt: skip
+                    temperature=float(temperature[k]),
+                    variance=0.0,
+                )
                 temperature_cdr = store.serialize_cdr(msg, TEMPERATURE_TYPE)
                 writer.write(TEMPERATURE_TOPIC, temperature_cdr, int(stamp_ns) + 2)
         writer.close()
@@ -150,9 +172,11 @@ def joint_state_cdr(
     stamp = types["builtin_interfaces/msg/Time"](*ns_to_sec_nanosec(stamp_ns))
     js = types[JOINT_STATE_TYPE](
         header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
-        name=list(joint_names), position=np.asarray(q, dtype=float),
-        velocity=np.asarray(velocity, dtype=float), effort=np.empty(0),
-    )  # fmt: skip
+        name=list(joint_names),
+        position=np.asarray(q, dtype=float),
+        velocity=np.asarray(velocity, dtype=float),
+        effort=np.empty(0),
+    )
     return bytes(store.serialize_cdr(js, JOINT_STATE_TYPE))
 
 
@@ -169,9 +193,15 @@ def point_cdr(store: Any, stamp_ns: int, xyz: Array) -> bytes:
 
 
 def write_stream_bag(
-    output: str | Path, js_ns: IntArray, q: Array, velocity: Array, point_ns: IntArray,
-    points: Array, joint_names: tuple[str, ...], force: bool = False,
-) -> dict[str, int]:  # fmt: skip
+    output: str | Path,
+    js_ns: IntArray,
+    q: Array,
+    velocity: Array,
+    point_ns: IntArray,
+    points: Array,
+    joint_names: tuple[str, ...],
+    force: bool = False,
+) -> dict[str, int]:
     """A contract bag of a stream (msgs_doc/stream.md): a JointState per js_ns (m,) [ns]
     (readings q (m, J) [rad], velocity (m, J) [rad/s]) and a PointStamped per point_ns
     (n,) [ns] (points (n, 3) [m], tracker frame), in stamp order, log time = stamp.

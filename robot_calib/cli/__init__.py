@@ -74,8 +74,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _run_verb(args)
 
 
-def _warning_line(verb: str, message: Warning | str, category: type[Warning], *_: Any,
-                  **__: Any) -> None:  # fmt: skip
+def _warning_line(
+    verb: str, message: Warning | str, category: type[Warning], *_: Any, **__: Any
+) -> None:
     """A Python warning (numpy's, scipy's, the package's RuntimeWarning) as one line
     'warning: MESSAGE' like the verb's own warnings (`verb`: kept for the signature),
     never a source line or a file path ('robot-calib VERB: ...' is the line of an error)."""
@@ -128,9 +129,11 @@ def run() -> NoReturn:
         if isinstance(stdout.lost, BrokenPipeError):  # `| head`: the shell's status for it
             status = 128 + signal.SIGPIPE
         else:
-            print(f"{program_and_verb()}: cannot write to standard output: "
-                  f"{stdout.lost.strerror or stdout.lost} (its files are written)",
-                  file=sys.stderr)  # fmt: skip
+            print(
+                f"{program_and_verb()}: cannot write to standard output: "
+                f"{stdout.lost.strerror or stdout.lost} (its files are written)",
+                file=sys.stderr,
+            )
             status = 2
     gc.freeze()
     sys.exit(status)

@@ -63,18 +63,22 @@ def main(args: argparse.Namespace) -> int:
     from robot_calib.identify.params_file import write_json_atomic
 
     robot = robot_of(args)
-    output = output_path(args.output, "PARAMS.json", [*args.bags, *robot_files(args)],
-                         args.force)  # fmt: skip
+    output = output_path(args.output, "PARAMS.json", [*args.bags, *robot_files(args)], args.force)
     check_model_terms(args.model, robot, args.ecc_order)
     started = time.perf_counter()
     if args.stream:
         if args.objective != "absolute":
             raise InputError("--stream: only --objective absolute")
         fit = calibrate_stream_bag(
-            args.bags, robot, args.model, args.ecc_order,
+            args.bags,
+            robot,
+            args.model,
+            args.ecc_order,
             None if args.latency == "auto" else float(args.latency),
-            args.stream_max_points, args.max_gap, log,
-        )  # fmt: skip
+            args.stream_max_points,
+            args.max_gap,
+            log,
+        )
         cal, recording = fit.calibration, fit.recording
         print(fit.line())
         print(summary(cal, recording))
@@ -83,9 +87,14 @@ def main(args: argparse.Namespace) -> int:
         if args.latency != "auto":
             raise InputError("--latency applies with --stream only")
         cal, recording = calibrate_bags(
-            args.bags, robot, args.model, args.ecc_order, args.objective, args.pair_tolerance,
+            args.bags,
+            robot,
+            args.model,
+            args.ecc_order,
+            args.objective,
+            args.pair_tolerance,
             log,
-        )  # fmt: skip
+        )
         print(summary(cal, recording))
         write_json_atomic(cal.to_dict(recording), output)
     print(f"{output}: {cal.name} in {time.perf_counter() - started:.2f} s")
@@ -108,17 +117,22 @@ def check_model_terms(spec: str, robot: RobotDescription, ecc_order: int) -> Non
     for text, effect in zip(terms, effects):
         for name in effect.parameter_names(robot):
             if name in owner:
-                raise InputError(f"--model {spec}: terms {owner[name]!r} and {text!r} both "
-                                 f"give parameter {name}: give each joint (and order) "
-                                 "once")  # fmt: skip
+                raise InputError(
+                    f"--model {spec}: terms {owner[name]!r} and {text!r} both "
+                    f"give parameter {name}: give each joint (and order) "
+                    "once"
+                )
             owner[name] = text
         if effect.name != "joint_harmonics":
             continue
         options = text.split(":")[1:]
-        guessed = [what for what, given in (
-            ("the default order 2 alone", any(o.startswith("orders=") for o in options)),
-            ("every joint", any(not o.startswith("orders=") for o in options)),
-        ) if not given]  # fmt: skip
+        guessed = [
+            what
+            for what, given in (
+                ("the default order 2 alone", any(o.startswith("orders=") for o in options)),
+                ("every joint", any(not o.startswith("orders=") for o in options)),
+            )
+            if not given
+        ]
         if guessed:
-            log(f"--model: {text} is {effect.spec} ({' and '.join(guessed)}: "
-                "msgs_doc/effects.md)")  # fmt: skip
+            log(f"--model: {text} is {effect.spec} ({' and '.join(guessed)}: msgs_doc/effects.md)")

@@ -113,8 +113,7 @@ def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: f
 
     print(f"{'model':<40}{'held-out mean/max [mm]':>24}{'abs rms [mm]':>14}")
     for rung in diagnosis.ladder:
-        print(f"{rung.model:<40}{rung.holdout_seed_text():>22} "
-              f"{rung.holdout_abs_rms_mm:>14.4f}")  # fmt: skip
+        print(f"{rung.model:<40}{rung.holdout_seed_text():>22} {rung.holdout_abs_rms_mm:>14.4f}")
     floor = diagnosis.noise.floor_abs_rms_mm
     unknown = "unknown (no repeat poses, circle sweeps or stated accuracy; --tracker-accuracy)"
     known = f"{floor:.4f} mm ({diagnosis.noise.source})" if floor is not None else ""
@@ -139,8 +138,7 @@ def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: f
         print(diagnosis.outside_vocabulary.line())
     for spectrum in diagnosis.unexplained.where.harmonic_orders:  # what the model leaves
         if spectrum.dominant_orders:
-            print(f"joint-angle harmonics left by {diagnosis.physical_model}: "
-                  f"{spectrum.line()}")  # fmt: skip
+            print(f"joint-angle harmonics left by {diagnosis.physical_model}: {spectrum.line()}")
     print(f"unexplained: {diagnosis.unexplained.note}")
     for line in outlier_lines(diagnosis.outliers):
         print(line)

@@ -28,27 +28,30 @@ def add_arguments(comp: argparse.ArgumentParser) -> None:
         "dir1..dirJ approach directions, temp_c): where the nominal model puts the tool is "
         "where the compensated commands make the calibrated robot go (this or --targets is "
         "required)",
-    )  # fmt: skip
+    )
     given.add_argument(
         "--targets",
         help="TARGETS.csv: header x,y,z (the tool point, --unit), optional qx,qy,qz,qw (the "
         "tool frame's orientation; without: positions only), optional q1..qJ [rad] seeds, t "
         "[s], dir1..dirJ, temp_c (msgs_doc/compensate.md; this or --joints is required)",
-    )  # fmt: skip
+    )
     comp.add_argument(
-        "--frame", choices=("base", "tracker"),
+        "--frame",
+        choices=("base", "tracker"),
         help="with --targets: the frame of the targets, the robot base or the laser tracker "
         "(through the calibration's base2tracker) (default base)",
-    )  # fmt: skip
+    )
     comp.add_argument(
-        "--unit", choices=("m", "mm"),
+        "--unit",
+        choices=("m", "mm"),
         help="with --targets: unit of x,y,z (default m)",
-    )  # fmt: skip
+    )
     comp.add_argument(
-        "--seed-joints", metavar="JOINTS.csv",
+        "--seed-joints",
+        metavar="JOINTS.csv",
         help="with --targets: readings q1..qJ [rad], one row per target, where the nominal "
         "inverse kinematics starts (default: seed columns of TARGETS.csv, else the home pose)",
-    )  # fmt: skip
+    )
     add_output(
         comp,
         "JOINTS.csv to write: q1..qJ [rad] compensated, dir1..dirJ (the approach "
@@ -92,12 +95,16 @@ def main(args: argparse.Namespace) -> int:
         targets = read_targets_csv(args.targets, n_joints, limits, args.unit or "m")
         if args.seed_joints:
             if targets.seed is not None:
-                raise InputError(f"{args.targets}: has seed columns q1..q{n_joints}; give "
-                                 "them or --seed-joints, not both")  # fmt: skip
+                raise InputError(
+                    f"{args.targets}: has seed columns q1..q{n_joints}; give "
+                    "them or --seed-joints, not both"
+                )
             seeds = read_joints_csv(args.seed_joints, n_joints, limits).q
             if len(seeds) != len(targets):
-                raise InputError(f"{args.seed_joints}: {len(seeds)} seed rows for "
-                                 f"{len(targets)} targets in {args.targets}")  # fmt: skip
+                raise InputError(
+                    f"{args.seed_joints}: {len(seeds)} seed rows for "
+                    f"{len(targets)} targets in {args.targets}"
+                )
             targets = dataclasses.replace(targets, seed=seeds)
         goals = goals_in_base(targets, args.frame or "base", model, params)
         check_reach(goals, model, args.targets)
@@ -112,28 +119,44 @@ def main(args: argparse.Namespace) -> int:
         what = f"commands (rad) for target {kind} ({frame} frame; nominal IK from {seeded})"
     flags = np.array(status)
     n, reached = len(result.q), int(np.isin(flags, ("ok", "large_change", "position_only")).sum())
-    print(f"{output}: {n} {what}; model error max {result.error_m.max() * 1e3:.6f} mm / "
-          f"{result.error_rad.max() * 1e6:.3f} urad, {int(result.iterations.max())} iterations "
-          f"at most; {reached}/{n} reached"
-          + ("; the learned correction applied" if correction is not None else ""))  # fmt: skip
+    print(
+        f"{output}: {n} {what}; model error max {result.error_m.max() * 1e3:.6f} mm / "
+        f"{result.error_rad.max() * 1e6:.3f} urad, {int(result.iterations.max())} iterations "
+        f"at most; {reached}/{n} reached"
+        + ("; the learned correction applied" if correction is not None else "")
+    )
     for flag, text in (
-        ("not_reached", "not reached by the calibrated model (near a singularity or out of "
-                        "reach; their q are nan)"),
+        (
+            "not_reached",
+            "not reached by the calibrated model (near a singularity or out of "
+            "reach; their q are nan)",
+        ),
         ("beyond_limits", "reached only beyond the joint limits"),
-        ("large_change", f"moved by more than {LARGE_CHANGE_DEG:g} deg (near a singularity?): "
-                         "check them before sending"),
-        ("position_only", f"near a singularity (the exact pose would swing a joint by more "
-                          f"than {LARGE_CHANGE_DEG:g} deg): solved for the tool position alone, "
-                          "orientation off by their error_urad"),
-    ):  # fmt: skip
+        (
+            "large_change",
+            f"moved by more than {LARGE_CHANGE_DEG:g} deg (near a singularity?): "
+            "check them before sending",
+        ),
+        (
+            "position_only",
+            f"near a singularity (the exact pose would swing a joint by more "
+            f"than {LARGE_CHANGE_DEG:g} deg): solved for the tool position alone, "
+            "orientation off by their error_urad",
+        ),
+    ):
         if (flags == flag).any():
-            print(f"warning: {source}: {int((flags == flag).sum())} row(s) {text}: "
-                  f"{_data_rows(flags == flag)[0]} (column status)", file=sys.stderr)  # fmt: skip
+            print(
+                f"warning: {source}: {int((flags == flag).sum())} row(s) {text}: "
+                f"{_data_rows(flags == flag)[0]} (column status)",
+                file=sys.stderr,
+            )
     if n and not reached:  # written for inspection, but no exit 0 when nothing is usable
-        raise NothingReached(f"{source}: none of its {n} rows reached by the calibration "
-                             f"{args.params} ({output} written, every row flagged in column "
-                             "status): a calibration far from the robot, or targets out of "
-                             "its reach?")  # fmt: skip
+        raise NothingReached(
+            f"{source}: none of its {n} rows reached by the calibration "
+            f"{args.params} ({output} written, every row flagged in column "
+            "status): a calibration far from the robot, or targets out of "
+            "its reach?"
+        )
     return 0
 
 

@@ -32,9 +32,11 @@ ROBOT = None  # --robot's default: DEFAULT_ROBOT
 def add_arguments(diag: argparse.ArgumentParser) -> None:
     diag.add_argument("bags", nargs="+", metavar="BAG", help="calibration bag(s) (.mcap)")
     diag.add_argument(
-        "--holdout", nargs="+", metavar="BAG",
+        "--holdout",
+        nargs="+",
+        metavar="BAG",
         help="hold-out bag(s): scored only (default: none; the calibration bags' k-fold)",
-    )  # fmt: skip
+    )
     add_pair_tolerance(diag)
     add_joint_names(diag)
     add_payload(diag)
@@ -84,30 +86,38 @@ def _diagnose(args: argparse.Namespace, robot: RobotDescription, reading: ReadAs
     output_path(html_report_path(output), "the HTML report", inputs, args.force)
     for figure in plot_paths(report.with_suffix("")):  # written with --force: never an input
         refuse_input(figure, inputs)
-    best = output_path(best_params_path(output), "the best model's PARAMS.json", inputs,
-                       args.force)  # fmt: skip
+    best = output_path(
+        best_params_path(output), "the best model's PARAMS.json", inputs, args.force
+    )
     started = time.perf_counter()
     accuracy = args.tracker_accuracy
     if accuracy is not None and not (math.isfinite(accuracy) and 1e-4 <= accuracy < 10):
-        raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, 0.0001 (0.1 um) "
-                         "to 10")  # fmt: skip
+        raise InputError(f"--tracker-accuracy {accuracy}: a 1-sigma in mm, 0.0001 (0.1 um) to 10")
     read = reading.read()
     with started_figures() as figures:  # its helper gets ready while the diagnosis runs
         # drawn while the diagnosis is written up; the reference models from `reading`
         early = FiguresWhenClimbed(figures, references=reading.references)
         diagnosis, ladder, recording = diagnose_read(
             read, robot, log, None if accuracy is None else accuracy * 1e-3, on_ladder=early
-        )  # fmt: skip
+        )
         compared, warnings = early.before_after(ladder)
         diagnosis = dataclasses.replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
-        report = write_diagnosis(diagnosis, ladder, recording, output, args.force,
-                                 warnings=warnings, compared=compared,
-                                 figures=figures)  # fmt: skip
+        report = write_diagnosis(
+            diagnosis,
+            ladder,
+            recording,
+            output,
+            args.force,
+            warnings=warnings,
+            compared=compared,
+            figures=figures,
+        )
     print_diagnosis(diagnosis, output, report, time.perf_counter() - started)
     for warning in warnings:
         print(warning)
     print(f"best model (the ladder's chosen rung): {diagnosis.ladder[-1].model} -> {best}")
     if diagnosis.implausible:  # written (to be read), but no exit 0 with nonsense
-        raise ImplausibleError(f"{'; '.join(diagnosis.implausible)} ({output}: implausible, "
-                               "written to be read)")  # fmt: skip
+        raise ImplausibleError(
+            f"{'; '.join(diagnosis.implausible)} ({output}: implausible, written to be read)"
+        )
     return 0

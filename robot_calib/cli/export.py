@@ -21,16 +21,19 @@ def add_arguments(exp: argparse.ArgumentParser) -> None:
 
     exp.add_argument("params", metavar="PARAMS.json")
     exp.add_argument(
-        "--format", required=True, choices=sorted(FORMATS),
+        "--format",
+        required=True,
+        choices=sorted(FORMATS),
         help="; ".join(f"{k}: {v.description}" for k, v in sorted(FORMATS.items()))
         + " (msgs_doc/export.md; no default)",
-    )  # fmt: skip
+    )
     add_output(exp, "file to write (e.g. robot.urdf)")
     exp.add_argument(
-        "--nominal-urdf", metavar="NOMINAL.urdf",
+        "--nominal-urdf",
+        metavar="NOMINAL.urdf",
         help="--format urdf: write the calibrated joint origins into this nominal URDF of the "
         "robot, keeping its link names, limits, meshes and other tags (default: a bare chain)",
-    )  # fmt: skip
+    )
     add_force(exp, implausible=True)
 
 

@@ -40,80 +40,100 @@ def add_arguments(imp: argparse.ArgumentParser) -> None:
         "preset's)",
     )
     imp.add_argument(
-        "--dif-sign", type=float, choices=(-1.0, 1.0),
+        "--dif-sign",
+        type=float,
+        choices=(-1.0, 1.0),
         help="sign of --dif (+1/-1) (default +1; ur5_jacobi2025: -1)",
-    )  # fmt: skip
+    )
     imp.add_argument("--time", help="time column [s] (default: none; poses 1 s apart)")
     imp.add_argument(
-        "--target", action="append", metavar="NAME:X,Y,Z",
+        "--target",
+        action="append",
+        metavar="NAME:X,Y,Z",
         help="a further target (SMR) measured at each pose: its name and x,y,z columns, onto "
         "/laser_tracker/NAME/point (repeat per target; an empty cell: not measured there) "
         "(default: none)",
-    )  # fmt: skip
+    )
     imp.add_argument(
-        "--reference", action="append", metavar="NAME:X,Y,Z",
+        "--reference",
+        action="append",
+        metavar="NAME:X,Y,Z",
         help="a reference reflector fixed off the robot (on its base, the floor) read with "
         "each pose: its name and x,y,z columns (repeat per reflector, 3 or more give the "
         "tracker's rotation too), written to /laser_tracker/reference/NAME/point; the "
         "tracker's drift they show is removed from every point by the readers and their "
         "scatter about it reported (default: none)",
-    )  # fmt: skip
+    )
     imp.add_argument(
         "--temperature",
         help="a temperature column [deg C]: written to /temperature (sensor_msgs/Temperature) "
         "(default: none)",
     )
     imp.add_argument(
-        "--orientation", action="append", metavar="[NAME:]QX,QY,QZ,QW",
+        "--orientation",
+        action="append",
+        metavar="[NAME:]QX,QY,QZ,QW",
         help="a 6-DoF probe's orientation as unit quaternion columns in x, y, z, w order, onto "
         "/laser_tracker/(NAME/)pose; without NAME the first target, else the --target NAME "
         "(repeat per target; empty cells: orientation not measured at that pose) (default: none)",
-    )  # fmt: skip
+    )
     imp.add_argument(
-        "--orientation-rpy", action="append", metavar="[NAME:]R,P,Y",
+        "--orientation-rpy",
+        action="append",
+        metavar="[NAME:]R,P,Y",
         help="as --orientation, as roll, pitch, yaw columns: R = Rz(yaw) Ry(pitch) Rx(roll), "
         "in --orientation-unit (default: none)",
-    )  # fmt: skip
+    )
     imp.add_argument(
-        "--orientation-unit", choices=("deg", "rad"),
+        "--orientation-unit",
+        choices=("deg", "rad"),
         help="unit of --orientation-rpy columns (default: --angle-unit)",
-    )  # fmt: skip
+    )
     imp.add_argument(
-        "--sigma", action="append", metavar="[NAME:]SP[,SR]",
+        "--sigma",
+        action="append",
+        metavar="[NAME:]SP[,SR]",
         help="the tracker's stated standard deviations: position column (per coordinate, "
         "--sigma-unit) and optionally orientation column (per axis, --sigma-angle-unit) of "
         "the first target, or of target NAME (repeat per target; an empty cell: not stated) "
         "(default: none)",
-    )  # fmt: skip
+    )
     imp.add_argument(
-        "--sigma-unit", choices=("mm", "m", "um"),
+        "--sigma-unit",
+        choices=("mm", "m", "um"),
         help="unit of the position standard deviations (default: --length-unit)",
-    )  # fmt: skip
+    )
     imp.add_argument(
-        "--sigma-angle-unit", choices=("deg", "rad", "mdeg", "urad"),
+        "--sigma-angle-unit",
+        choices=("deg", "rad", "mdeg", "urad"),
         help="unit of the orientation standard deviations (default: --orientation-unit, "
         "else --angle-unit)",
-    )  # fmt: skip
+    )
     imp.add_argument(
-        "--sep", type=separator,
+        "--sep",
+        type=separator,
         help="field separator, one character; tab: a tab (default ',')",
-    )  # fmt: skip
+    )
     imp.add_argument(
-        "--decimal-comma", action="store_true",
+        "--decimal-comma",
+        action="store_true",
         help="numbers written 1,5 (default: off, numbers written 1.5)",
-    )  # fmt: skip
+    )
     imp.add_argument(
-        "--angle-unit", choices=("deg", "rad"),
+        "--angle-unit",
+        choices=("deg", "rad"),
         help="joint angle unit (default rad; ur5_jacobi2025: deg)",
-    )  # fmt: skip
+    )
     imp.add_argument(
-        "--length-unit", choices=("mm", "m"),
+        "--length-unit",
+        choices=("mm", "m"),
         help="unit of the point, --dif and --target columns (default m; ur5_jacobi2025: mm)",
-    )  # fmt: skip
+    )
     imp.add_argument(
-        "--no-header", action="store_true",
+        "--no-header",
+        action="store_true",
         help="the CSV has no header row (default: the first row is the header)",
-    )  # fmt: skip
+    )
     add_joint_names(imp, "JointState names to write for joints 1..J")
     add_output(imp, "bag to write (BAG.mcap)")
     add_force(imp)
@@ -175,9 +195,11 @@ def main(args: argparse.Namespace) -> int:
     sides: list[SigmaColumns | OrientationColumns] = [*fmt.sigmas, *fmt.orientations]
     for side in sides:
         if side.target in reference_names:
-            raise InputError(f"{side.option}: {side.target} is a --reference, not a target: "
-                             "a reflector off the robot has no stated accuracy or orientation "
-                             "here")  # fmt: skip
+            raise InputError(
+                f"{side.option}: {side.target} is a --reference, not a target: "
+                "a reflector off the robot has no stated accuracy or orientation "
+                "here"
+            )
     if len(fmt.point) != 3 or (fmt.dif is not None and len(fmt.dif) != 3):
         raise InputError("--point and --dif take three columns: x,y,z")
     tables = []
@@ -188,8 +210,10 @@ def main(args: argparse.Namespace) -> int:
             log(warning)
         for line, why in table.bad_rows:
             log(f"warning: {csv_path}:{line}: {why}: row skipped")
-        print(f"{csv_path}: {counted(len(table.q), 'row')} imported, "
-              f"{counted(len(table.bad_rows), 'bad row')} skipped")  # fmt: skip
+        print(
+            f"{csv_path}: {counted(len(table.q), 'row')} imported, "
+            f"{counted(len(table.bad_rows), 'bad row')} skipped"
+        )
         for name, (rotation, sigma) in table.six_dof.items():
             oriented = int(np.isfinite(rotation).all(axis=(1, 2)).sum())
             stated = int(np.isfinite(sigma).any(axis=1).sum())
@@ -214,30 +238,48 @@ def main(args: argparse.Namespace) -> int:
     reference_reads = _reference_reads(args.csv, references, times, extra) if references else None
     for name, xyz in extra.items():
         if not np.isfinite(xyz).all(axis=1).any():
-            log(f"warning: {', '.join(args.csv)}: target {name} has no measured point: no "
-                "topic written for it")  # fmt: skip
+            log(
+                f"warning: {', '.join(args.csv)}: target {name} has no measured point: no "
+                "topic written for it"
+            )
     six_dof = {
-        name: (np.concatenate([t.six_dof[name][0] for t in tables]),
-               np.concatenate([t.six_dof[name][1] for t in tables]))
+        name: (
+            np.concatenate([t.six_dof[name][0] for t in tables]),
+            np.concatenate([t.six_dof[name][1] for t in tables]),
+        )
         for name in tables[0].six_dof
-    }  # fmt: skip
+    }
     for o in fmt.orientations:
         if not np.isfinite(six_dof[o.target][0]).any():
-            log(f"warning: {', '.join(args.csv)}: {o.option}: every cell is empty: "
-                f"{target_label(o.target)} has no orientation")  # fmt: skip
+            log(
+                f"warning: {', '.join(args.csv)}: {o.option}: every cell is empty: "
+                f"{target_label(o.target)} has no orientation"
+            )
     counts = write_measurement_bag(
-        output, q, points, robot.joint_names, times, args.force, temperature=temperature,
-        extra_points=extra, six_dof=six_dof, references=reference_reads,
-    )  # fmt: skip
-    print(f"{output}: {', '.join(f'{k}={v}' for k, v in counts.items())} messages "
-          f"({robot.name}, {fmt.angle_unit}/{fmt.length_unit} -> rad/m)")  # fmt: skip
+        output,
+        q,
+        points,
+        robot.joint_names,
+        times,
+        args.force,
+        temperature=temperature,
+        extra_points=extra,
+        six_dof=six_dof,
+        references=reference_reads,
+    )
+    print(
+        f"{output}: {', '.join(f'{k}={v}' for k, v in counts.items())} messages "
+        f"({robot.name}, {fmt.angle_unit}/{fmt.length_unit} -> rad/m)"
+    )
     return 0
 
 
 def _reference_reads(
-    csvs: list[str], references: tuple[tuple[str, tuple[str, str, str]], ...],
-    times: Array | None, extra: dict[str, Array],
-) -> dict[str, Array]:  # fmt: skip
+    csvs: list[str],
+    references: tuple[tuple[str, tuple[str, str, str]], ...],
+    times: Array | None,
+    extra: dict[str, Array],
+) -> dict[str, Array]:
     """The reference reflectors' reads {NAME: (n, 3) [m]} taken out of the further targets
     `extra`, written as read (the readers remove the drift they show from every point,
     msgs_doc/references.md); the drift and the references' scatter printed now, an
@@ -249,8 +291,9 @@ def _reference_reads(
     time_s = np.arange(len(next(iter(extra.values()))), dtype=float) if times is None else times
     reads = {name: extra.pop(name) for name in names}
     try:
-        drift = estimate_drift(names, np.asarray(time_s, dtype=float),
-                               np.stack(list(reads.values())))  # fmt: skip
+        drift = estimate_drift(
+            names, np.asarray(time_s, dtype=float), np.stack(list(reads.values()))
+        )
     except TooFewReads as exc:
         raise InputError(f"{', '.join(csvs)}: --reference: {exc}") from None
     except NoDrift as exc:
@@ -291,8 +334,10 @@ def _named_columns(option: str, spec: str, n_columns: tuple[int, ...]) -> tuple[
     cols = columns.split(",")
     if (colon and not name) or len(cols) not in n_columns or not all(cols):
         counts = " or ".join(map(str, n_columns))
-        raise InputError(f"{option} {spec}: expected [NAME:] and {counts} columns, comma-"
-                         "separated (without NAME: the first target)")  # fmt: skip
+        raise InputError(
+            f"{option} {spec}: expected [NAME:] and {counts} columns, comma-"
+            "separated (without NAME: the first target)"
+        )
     return name, cols
 
 
@@ -306,8 +351,10 @@ def _orientation_columns(
     if not quaternions and not rpys:
         return None
     out = []
-    for kind, option, specs, n in (("quaternion", "--orientation", quaternions, 4),
-                                   ("rpy", "--orientation-rpy", rpys, 3)):  # fmt: skip
+    for kind, option, specs, n in (
+        ("quaternion", "--orientation", quaternions, 4),
+        ("rpy", "--orientation-rpy", rpys, 3),
+    ):
         for spec in specs or ():
             name, cols = _named_columns(option, spec, (n,))
             out.append(OrientationColumns(name, kind, tuple(cols)))

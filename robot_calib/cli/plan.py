@@ -134,11 +134,15 @@ def resolved_orders_line(q: Array, label: str = "the plan") -> str:
         overlap = similarity.overlap()
         arc = np.degrees(np.ptp(distinct_readings(q[:, j])))
         alike = f"; orders {overlap} apart alike on its {arc:.0f} deg arc" if overlap else ""
-        parts.append(f"joint {j + 1} up to order {similarity.resolvable()} "
-                     f"({orders_at_once(q[:, j])} together{alike})")  # fmt: skip
-    return (f"joint-angle harmonics {label} resolves per joint (the highest order its readings "
-            "never alias with another; in brackets, how many orders its distinct readings can "
-            f"fit together): {', '.join(parts)}")  # fmt: skip
+        parts.append(
+            f"joint {j + 1} up to order {similarity.resolvable()} "
+            f"({orders_at_once(q[:, j])} together{alike})"
+        )
+    return (
+        f"joint-angle harmonics {label} resolves per joint (the highest order its readings "
+        "never alias with another; in brackets, how many orders its distinct readings can "
+        f"fit together): {', '.join(parts)}"
+    )
 
 
 def sweeps_main(args: argparse.Namespace) -> int:
@@ -151,14 +155,20 @@ def sweeps_main(args: argparse.Namespace) -> int:
     from robot_calib.sim.plans import paper_test_number, paper_test_plan
 
     name = args.sweeps
-    optimal_only = {"--model": (args.model, DEFAULT_MODEL), "--noise-mm": (args.noise_mm, None),
-                    "--candidates": (args.candidates, CANDIDATES),
-                    "--trials": (args.trials, TRIALS), "--holdout": (args.holdout, HOLDOUT),
-                    "--ecc-order": (args.ecc_order, DEFAULT_ECC_ORDER)}  # fmt: skip
+    optimal_only = {
+        "--model": (args.model, DEFAULT_MODEL),
+        "--noise-mm": (args.noise_mm, None),
+        "--candidates": (args.candidates, CANDIDATES),
+        "--trials": (args.trials, TRIALS),
+        "--holdout": (args.holdout, HOLDOUT),
+        "--ecc-order": (args.ecc_order, DEFAULT_ECC_ORDER),
+    }
     given = [flag for flag, (value, default) in optimal_only.items() if value != default]
     if given:
-        raise InputError(f"--sweeps {name}: {', '.join(given)} belong to D-optimal poses "
-                         "(--poses), not to the seed's sweeps")  # fmt: skip
+        raise InputError(
+            f"--sweeps {name}: {', '.join(given)} belong to D-optimal poses "
+            "(--poses), not to the seed's sweeps"
+        )
     try:
         test = paper_test_number(name)
     except InputError as exc:
@@ -187,8 +197,10 @@ def sweeps_main(args: argparse.Namespace) -> int:
         print(f"warning: {floor}")
         design["warning"] = floor
     write_text_atomic(output, plan_text(robot, "cpa", q, plan.speed_fraction, design, {}))
-    print(f"{output}: {len(q)} poses, {len(set(plan.sweep.tolist()))} circle sweeps "
-          "(msgs_doc/plan.md)")  # fmt: skip
+    print(
+        f"{output}: {len(q)} poses, {len(set(plan.sweep.tolist()))} circle sweeps "
+        "(msgs_doc/plan.md)"
+    )
     return 0
 
 
@@ -202,10 +214,12 @@ def _below_floor(world: World, q: Array, floor_z_m: float) -> str:
     below = lowest < floor_z_m - FLOOR_SLACK_M
     if not below.any():
         return ""
-    return (f"{int(below.sum())} of {len(q)} poses put a joint centre, the flange or the "
-            f"target below z = {floor_z_m:g} m of the robot base (lowest {lowest.min():.3f} m): "
-            "the seed's sweeps assume a robot on a pedestal; check the clearance before "
-            "running them (--floor-z sets the plane checked)")  # fmt: skip
+    return (
+        f"{int(below.sum())} of {len(q)} poses put a joint centre, the flange or the "
+        f"target below z = {floor_z_m:g} m of the robot base (lowest {lowest.min():.3f} m): "
+        "the seed's sweeps assume a robot on a pedestal; check the clearance before "
+        "running them (--floor-z sets the plane checked)"
+    )
 
 
 def main(args: argparse.Namespace) -> int:
@@ -217,13 +231,17 @@ def main(args: argparse.Namespace) -> int:
     from robot_calib.plan.evaluate import human
 
     if (args.poses is None) == (args.sweeps is None):
-        raise InputError("give either --poses N (D-optimal poses) or --sweeps paper-testN "
-                         "(the seed's sweeps in irregular steps)")  # fmt: skip
+        raise InputError(
+            "give either --poses N (D-optimal poses) or --sweeps paper-testN "
+            "(the seed's sweeps in irregular steps)"
+        )
     if args.sweeps is not None:
         return sweeps_main(args)
     if args.max_order != MAX_ORDER:
-        raise InputError("--max-order belongs to --sweeps (D-optimal poses resolve what "
-                         "their random readings do)")  # fmt: skip
+        raise InputError(
+            "--max-order belongs to --sweeps (D-optimal poses resolve what "
+            "their random readings do)"
+        )
     noise = args.noise_mm
     if noise is not None and not (math.isfinite(noise) and 0 < noise < 10):
         raise InputError(f"--noise-mm {noise}: a 1-sigma per coordinate in mm, > 0 and < 10")
@@ -238,29 +256,50 @@ def main(args: argparse.Namespace) -> int:
     output = output_path(args.output, "PLAN.yaml", simulation_inputs(world), args.force)
     if output.suffix.lower() not in (".yaml", ".yml"):  # after the input check: never an input
         raise InputError(f"{output}: a plan is written as YAML: give a .yaml or .yml name")
-    c = plan_campaign(world, args.model, args.poses, args.candidates, args.seed, args.floor_z,
-                      None if noise is None else noise * 1e-3, args.ecc_order, args.trials,
-                      args.holdout, log)  # fmt: skip
+    c = plan_campaign(
+        world,
+        args.model,
+        args.poses,
+        args.candidates,
+        args.seed,
+        args.floor_z,
+        None if noise is None else noise * 1e-3,
+        args.ecc_order,
+        args.trials,
+        args.holdout,
+        log,
+    )
     planned, rand = c.planned.prediction, c.random.prediction
-    print(f"{args.model} on {world.model.robot.name}: {args.poses} poses of "
-          f"{len(c.problem.candidates)} candidates in {c.design_seconds:.2f} s; noise "
-          f"{planned.noise_m * 1e3:.4f} mm per coordinate; predicted 1-sigma:")  # fmt: skip
+    print(
+        f"{args.model} on {world.model.robot.name}: {args.poses} poses of "
+        f"{len(c.problem.candidates)} candidates in {c.design_seconds:.2f} s; noise "
+        f"{planned.noise_m * 1e3:.4f} mm per coordinate; predicted 1-sigma:"
+    )
     print(f"{'parameter':<22}{'planned':>34}{'random (same N)':>34}")
     for k, name in enumerate(planned.names):
         unit = planned.units[k]
-        print(f"{name:<22}{human(float(planned.std[k]), unit):>34}"
-              f"{human(float(rand.std[k]), unit):>34}")  # fmt: skip
+        print(
+            f"{name:<22}{human(float(planned.std[k]), unit):>34}"
+            f"{human(float(rand.std[k]), unit):>34}"
+        )
     for name, reason in c.problem.fixed:
         print(f"{name:<22} fixed: {reason}")
     for label, fig in (("planned", c.planned), ("random", c.random)):
         pred = fig.prediction
-        held = "not simulated" if fig.holdout is None else (
-            f"{fig.holdout.abs_rms_mm:.4f} mm abs rms, seed criterion mean "
-            f"{fig.holdout.pairwise_mean_mm:.4f} mm, model error (vs the true points) "
-            f"{fig.holdout.model_rms_mm:.4f} mm rms ({fig.holdout.trials} random true "
-            f"robot(s), {fig.holdout.n_poses} held-out poses)")  # fmt: skip
-        print(f"{label}: worst {pred.line(pred.worst)}; held-out {held}; campaign "
-              f"{fig.hours * 60:.1f} min")  # fmt: skip
+        held = (
+            "not simulated"
+            if fig.holdout is None
+            else (
+                f"{fig.holdout.abs_rms_mm:.4f} mm abs rms, seed criterion mean "
+                f"{fig.holdout.pairwise_mean_mm:.4f} mm, model error (vs the true points) "
+                f"{fig.holdout.model_rms_mm:.4f} mm rms ({fig.holdout.trials} random true "
+                f"robot(s), {fig.holdout.n_poses} held-out poses)"
+            )
+        )
+        print(
+            f"{label}: worst {pred.line(pred.worst)}; held-out {held}; campaign "
+            f"{fig.hours * 60:.1f} min"
+        )
     ratio = rand.rms_m.max() / planned.rms_m.max()
     print(f"worst predicted 1-sigma: {ratio:.2f} x smaller than random poses at equal N")
     print(resolved_orders_line(c.planned.plan.q))

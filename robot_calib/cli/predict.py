@@ -20,17 +20,19 @@ ROBOT = CALIBRATION_ROBOT  # --robot's default, in words
 def add_arguments(pred: argparse.ArgumentParser) -> None:
     pred.add_argument("params", metavar="PARAMS.json")
     pred.add_argument(
-        "--joints", required=True,
+        "--joints",
+        required=True,
         help="JOINTS.csv, header q1..qJ [rad]: the readings of the robot's J joints, in rad "
         "(optional columns t [s] and dir1..dirJ: approach directions +1/-1); a reading beyond "
         "any reading of its joint in rad (degrees?) is refused",
-    )  # fmt: skip
+    )
     add_output(pred, "POINTS.csv to write (x,y,z m)")
     pred.add_argument(
-        "--target", metavar="NAME",
+        "--target",
+        metavar="NAME",
         help="which target of a several-target calibration (msgs_doc/targets.md; default: "
         "the first, /laser_tracker/point)",
-    )  # fmt: skip
+    )
     add_force(pred, implausible=True)
 
 
@@ -50,8 +52,9 @@ def main(args: argparse.Namespace) -> int:
     poses = read_joints_csv(args.joints, model.robot.n_joints, model.robot.limits)
     index = np.full(len(poses), model.targets.index(args.target))
     poses = dataclasses.replace(poses, target=index)
-    output = output_path(args.output, "POINTS.csv", [args.params, args.joints, *robot_files(args)],
-                         args.force)  # fmt: skip
+    output = output_path(
+        args.output, "POINTS.csv", [args.params, args.joints, *robot_files(args)], args.force
+    )
     quaternions = None
     if args.target in model.oriented:  # a 6-DoF probe: its frame too (msgs_doc/six_dof.md)
         from scipy.spatial.transform import Rotation

@@ -61,17 +61,26 @@ def main(args: argparse.Namespace) -> int:
     print(robot_table(robot))
     started = time.perf_counter()
     result = run(
-        args.output, args.robot, args.plan, args.effects, args.seed, args.holdout,
-        say=print, log=log, progress=progress(),
-    )  # fmt: skip
+        args.output,
+        args.robot,
+        args.plan,
+        args.effects,
+        args.seed,
+        args.holdout,
+        say=print,
+        log=log,
+        progress=progress(),
+    )
     geometric = result.models["geometric"].calibration
     text = summary(geometric, result.recording)
     for source in result.recording.sources:  # read while staged: named where it now lies
         text = text.replace(str(Path(source).parent), str(result.folder))
     print(text)
     print("accuracy (seed criterion: pairwise distance errors; absolute: tracker frame)")
-    print(f"{'model':<12}{'in-sample mean/max [mm]':>26}{'hold-out mean/max [mm]':>26}"
-          f"{'hold-out abs mean [mm]':>25}")  # fmt: skip
+    print(
+        f"{'model':<12}{'in-sample mean/max [mm]':>26}{'hold-out mean/max [mm]':>26}"
+        f"{'hold-out abs mean [mm]':>25}"
+    )
     for name, score in result.models.items():
         fit, test = score.calibration.accuracy, score.holdout
         print(
@@ -83,12 +92,16 @@ def main(args: argparse.Namespace) -> int:
         print(warning)
     seconds = time.perf_counter() - started
     print_diagnosis(result.diagnosis, result.folder / "diagnosis.json", result.report, seconds)
-    print(f"best model (lowest held-out error): {result.best} -> "
-          f"{result.folder / 'params_best.json'}")  # fmt: skip
+    print(
+        f"best model (lowest held-out error): {result.best} -> "
+        f"{result.folder / 'params_best.json'}"
+    )
     print(f"done: {result.folder} (report: {result.report})")
     if result.diagnosis.implausible:  # written (to be read), but no exit 0 with nonsense
-        raise ImplausibleError(f"{'; '.join(result.diagnosis.implausible)} ({result.folder}: "
-                               "implausible, written to be read)")  # fmt: skip
+        raise ImplausibleError(
+            f"{'; '.join(result.diagnosis.implausible)} ({result.folder}: "
+            "implausible, written to be read)"
+        )
     return 0
 
 

@@ -39,15 +39,18 @@ def main(args: argparse.Namespace) -> int:
 
     cal = calibration_of(args)
     if cal.implausible:  # scored all the same: that is inspecting it
-        log(f"warning: {args.params}: fitted, implausible ({'; '.join(cal.implausible)}); "
-            "scored to inspect it")  # fmt: skip
+        log(
+            f"warning: {args.params}: fitted, implausible ({'; '.join(cal.implausible)}); "
+            "scored to inspect it"
+        )
     robot = cal.model.robot
     if args.joint_names is not None:
         robot = with_joint_names(robot, args.joint_names)
     table = None
     if args.points_csv:
-        table = output_path(args.points_csv, "the per-point table",
-                            [args.params, *args.bags], args.force)  # fmt: skip
+        table = output_path(
+            args.points_csv, "the per-point table", [args.params, *args.bags], args.force
+        )
     recording = read_bags(args.bags, robot, args.pair_tolerance, log)
     correction = cal.correction
     result = cal.score(recording)

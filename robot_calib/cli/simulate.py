@@ -59,17 +59,25 @@ def add_arguments(sim: argparse.ArgumentParser) -> None:
         "(default plan then: random) while joint states and points stream at their rates, "
         "no ROS graph (default: off, stop-and-go through the simulated graph)",
     )
-    for flag, what, default in (("--joint-rate", "joint states", 200.0),
-                                ("--point-rate", "tracker points", 1000.0)):  # fmt: skip
+    for flag, what, default in (
+        ("--joint-rate", "joint states", 200.0),
+        ("--point-rate", "tracker points", 1000.0),
+    ):
         sim.add_argument(
-            flag, type=rate, default=default,
+            flag,
+            type=rate,
+            default=default,
             help=f"with --stream: {what} per second [Hz] (default {default:g})",
-        )  # fmt: skip
+        )
     sim.add_argument(
-        "--latency", dest="sim_latency", type=signed_seconds, default=0.002, metavar="SECONDS",
+        "--latency",
+        dest="sim_latency",
+        type=signed_seconds,
+        default=0.002,
+        metavar="SECONDS",
         help="with --stream: the controller's stamps minus the tracker's for one instant [s] "
         "(default 0.002)",
-    )  # fmt: skip
+    )
     add_output(sim, "bag to write (BAG.mcap; + BAG.world.yaml)")
     add_force(sim)
 
@@ -101,10 +109,15 @@ def main(args: argparse.Namespace) -> int:
     poses = sim.counts.get("/joint_states", 0)
     for event in world.events:
         if event.last >= poses:
-            log(f"warning: {world.source}: the {event.kind} event at poses {event.first}-"
+            log(
+                f"warning: {world.source}: the {event.kind} event at poses {event.first}-"
                 f"{event.last}: the recording has {poses} poses, so "
-                + ("it never happened" if event.first >= poses else
-                   f"only poses {event.first}-{poses - 1} of it happened"))  # fmt: skip
+                + (
+                    "it never happened"
+                    if event.first >= poses
+                    else f"only poses {event.first}-{poses - 1} of it happened"
+                )
+            )
     return 0
 
 

@@ -47,41 +47,52 @@ def main(args: argparse.Namespace) -> int:
     robot = robot_of(args)
     source = Path(args.bag)
     stem = source.with_suffix("")
-    outputs = [Path(args.calibration_out or f"{stem}.cal.mcap"),
-               Path(args.holdout_out or f"{stem}.holdout.mcap")]  # fmt: skip
+    outputs = [
+        Path(args.calibration_out or f"{stem}.cal.mcap"),
+        Path(args.holdout_out or f"{stem}.holdout.mcap"),
+    ]
     for out in outputs:
         output_path(out, "the split bag", [source, *robot_files(args)], args.force)
     if outputs[0].resolve() == outputs[1].resolve():
         raise InputError(f"{outputs[1]}: --calibration-out and --holdout-out name one file")
     if outputs[0].resolve().parent != outputs[1].resolve().parent:
-        raise InputError(f"{outputs[1]}: write both bags into one folder (they are written "
-                         "together)")  # fmt: skip
+        raise InputError(
+            f"{outputs[1]}: write both bags into one folder (they are written together)"
+        )
     recording = read_bags([args.bag], robot, args.pair_tolerance, log)
     first, points = recording.points_by_target()  # per pose: every target measured there
     poses = recording.subset(np.isin(np.arange(len(recording)), first))
     held = holdout_mask(poses, args.holdout, args.by, args.seed)
     n = len(recording)
     rotation = recording.by_target(
-        np.full((n, 3, 3), np.nan) if recording.poses.rotation is None
+        np.full((n, 3, 3), np.nan)
+        if recording.poses.rotation is None
         else recording.poses.rotation
-    )[1]  # fmt: skip
+    )[1]
     sigma = recording.by_target(
         np.full((n, 2), np.nan) if recording.poses.sigma is None else recording.poses.sigma
     )[1]
-    stamps = (poses.stamp_ns if poses.stamp_ns is not None
-              else START_NS + np.round(poses.poses.time * 1e9).astype(np.int64))  # fmt: skip
+    stamps = (
+        poses.stamp_ns
+        if poses.stamp_ns is not None
+        else START_NS + np.round(poses.poses.time * 1e9).astype(np.int64)
+    )
     temperature = poses.poses.temperature  # the side topic at each pose (as read_bag reads it)
     others = other_topics(source)
     if others:
         log(f"warning: {source}: topics {others} are not measurements: not copied")
     for refs in recording.references:
         if refs.drift is None or not refs.drift.significant:
-            log(f"note: {source}: reference reflectors {', '.join(refs.names)} are not copied "
-                "(they showed no drift to remove)")  # fmt: skip
+            log(
+                f"note: {source}: reference reflectors {', '.join(refs.names)} are not copied "
+                "(they showed no drift to remove)"
+            )
         else:
-            log(f"note: {source}: the tracker's drift that reference reflectors "
+            log(
+                f"note: {source}: the tracker's drift that reference reflectors "
                 f"{', '.join(refs.names)} show ({refs.drift.max_mm:.4f} mm at most) is removed "
-                "from the points written; the references themselves are not copied")  # fmt: skip
+                "from the points written; the references themselves are not copied"
+            )
     with staged_outputs(outputs[0].resolve().parent, args.force) as stage:
         counts = [
             write_measurements(
@@ -99,14 +110,17 @@ def main(args: argparse.Namespace) -> int:
                     for k, name in enumerate(recording.target_names)
                 },
                 temperature=None if temperature is None else temperature[rows],
-            )  # fmt: skip
+            )
             for out, rows in zip(outputs, (~held, held))
         ]
     group = reading_groups(poses.poses.q)
-    for out, role, written, rows in zip(outputs, ("calibration", "hold-out"), counts,
-                                        (~held, held)):  # fmt: skip
+    for out, role, written, rows in zip(
+        outputs, ("calibration", "hold-out"), counts, (~held, held)
+    ):
         share = f"; {100 * rows.mean():.0f} % of the measurements" if rows is held else ""
-        print(f"{out}: {written[next(iter(written))]} measurements at "
-              f"{len(np.unique(group[rows]))} distinct poses ({role}, split {args.by}{share}; "
-              "the original stamps and approach directions)")  # fmt: skip
+        print(
+            f"{out}: {written[next(iter(written))]} measurements at "
+            f"{len(np.unique(group[rows]))} distinct poses ({role}, split {args.by}{share}; "
+            "the original stamps and approach directions)"
+        )
     return 0

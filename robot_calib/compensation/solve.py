@@ -110,8 +110,14 @@ def solve_corrected(
             break
         shifted = goal2base[rows].copy()
         shifted[:, :3, 3] += shift
-        part = solve_ik(model, params, at, shifted, tool2flange,
-                        None if oriented is None else np.asarray(oriented)[rows])  # fmt: skip
+        part = solve_ik(
+            model,
+            params,
+            at,
+            shifted,
+            tool2flange,
+            None if oriented is None else np.asarray(oriented)[rows],
+        )
         q[rows], solved[rows] = part.q, part.converged
         steps[rows] += part.iterations
     size = np.linalg.norm(error, axis=1)
@@ -143,8 +149,9 @@ def compensate_commands(calibration: Calibrated, commands: Poses) -> Compensatio
     # near a singularity the exact pose swings joints 4 and 6 by degrees for a few urad of
     # orientation: solve the tool position alone there (the smallest joint change)
     part = commands.subset(rows)
-    point = solve_corrected(calibrated, params, part, goal[rows], tool,
-                            np.zeros(rows.size, bool), correction)  # fmt: skip
+    point = solve_corrected(
+        calibrated, params, part, goal[rows], tool, np.zeros(rows.size, bool), correction
+    )
     better = np.abs(point.q - part.q).max(axis=1) < swing[rows]
     rows, q = rows[better], point.q[better]
     at = tool2base(calibrated, params, replace(commands.subset(rows), q=q), tool)
@@ -210,13 +217,19 @@ def _inside(q: Array, limits: Array) -> NDArray[np.bool_]:
     return np.all((q >= limits[:, 0]) & (q <= limits[:, 1]), axis=1)
 
 
-def _merged(found: IKSolution, rows: IntArray, again: IKSolution, better: NDArray[np.bool_],
-            spent: IntArray) -> IKSolution:  # fmt: skip
+def _merged(
+    found: IKSolution,
+    rows: IntArray,
+    again: IKSolution,
+    better: NDArray[np.bool_],
+    spent: IntArray,
+) -> IKSolution:
     """`found` with its rows `rows` solved again (`again`, one row each): readings, errors
     and convergence taken where `better` (len(rows),), and `spent` (len(rows),) steps of
     the new attempt added to those rows' iterations."""
-    out = {name: getattr(found, name).copy() for name in ("q", "error_m", "error_rad",
-                                                          "converged")}  # fmt: skip
+    out = {
+        name: getattr(found, name).copy() for name in ("q", "error_m", "error_rad", "converged")
+    }
     for name, values in out.items():
         values[rows[better]] = getattr(again, name)[better]
     iterations = found.iterations.copy()
@@ -241,8 +254,9 @@ def _nominal_ik(
     limits = nominal.robot.limits
 
     def solve(poses: Poses, goal: Array, which: NDArray[np.bool_]) -> IKSolution:
-        found = solve_ik(nominal, nominal_params, poses, goal, tool, which,
-                         max_iterations=NOMINAL_ITERATIONS)  # fmt: skip
+        found = solve_ik(
+            nominal, nominal_params, poses, goal, tool, which, max_iterations=NOMINAL_ITERATIONS
+        )
         return replace(found, q=wrap_into_limits(found.q, limits))
 
     first = solve(start, goal2base, oriented)
@@ -259,10 +273,14 @@ def _nominal_ik(
         retry = retry[np.isfinite(distance)]  # no neighbour (a point at infinity): as it was
         if retry.size:
             seeds = first.q[done[nearest[np.isfinite(distance)]]]
-            again = solve(replace(start.subset(retry), q=seeds), goal2base[retry],
-                          oriented[retry])  # fmt: skip
-            first = _merged(first, retry, again, again.converged,
-                            np.where(again.converged, again.iterations, 0))  # fmt: skip
+            again = solve(replace(start.subset(retry), q=seeds), goal2base[retry], oriented[retry])
+            first = _merged(
+                first,
+                retry,
+                again,
+                again.converged,
+                np.where(again.converged, again.iterations, 0),
+            )
     return _follow_the_rows(first, start, goal2base, oriented, solve, limits) if program else first
 
 
@@ -305,10 +323,14 @@ def _follow_the_rows(
         jumps = ok[candidates] & ok[candidates - 1] & (jump > BRANCH_JUMP_RAD)
         rows = candidates[jumps]
         if rows.size:
-            again = solve(replace(start.subset(rows), q=q[rows - 1]), goal2base[rows],
-                          oriented[rows])  # fmt: skip
-            better = (again.converged & _inside(again.q, limits)
-                      & (np.abs(again.q - q[rows - 1]).max(axis=1) < jump[jumps]))  # fmt: skip
+            again = solve(
+                replace(start.subset(rows), q=q[rows - 1]), goal2base[rows], oriented[rows]
+            )
+            better = (
+                again.converged
+                & _inside(again.q, limits)
+                & (np.abs(again.q - q[rows - 1]).max(axis=1) < jump[jumps])
+            )
             kept = rows[better]
             q[kept] = again.q[better]
             for name in ("error_m", "error_rad", "converged"):
@@ -318,8 +340,9 @@ def _follow_the_rows(
         # against (its value before this round, or the start-over value this round's
         # decisions used); the first candidate moves down each round: at most n rounds
         now = q[candidates]
-        moved = candidates[np.any(now != before, axis=1)
-                           | np.any(now != found.q[candidates], axis=1)]  # fmt: skip
+        moved = candidates[
+            np.any(now != before, axis=1) | np.any(now != found.q[candidates], axis=1)
+        ]
         candidates = moved[moved + 1 < len(q)] + 1
     return replace(found, q=q, **fields)
 
@@ -328,9 +351,15 @@ def _follow_the_rows(
 #: target, then facing away: reaching over backwards; 4 and 6 at zero): elbow up and down,
 #: wrist flipped or not
 BRANCH_SHARES = (
-    (0.3, 0.3, 0.25), (0.3, 0.7, 0.25), (0.7, 0.3, 0.25), (0.7, 0.7, 0.25),
-    (0.3, 0.3, 0.75), (0.3, 0.7, 0.75), (0.7, 0.3, 0.75), (0.7, 0.7, 0.75),
-)  # fmt: skip
+    (0.3, 0.3, 0.25),
+    (0.3, 0.7, 0.25),
+    (0.7, 0.3, 0.25),
+    (0.7, 0.7, 0.25),
+    (0.3, 0.3, 0.75),
+    (0.3, 0.7, 0.75),
+    (0.7, 0.3, 0.75),
+    (0.7, 0.7, 0.75),
+)
 
 
 def _other_branches(
@@ -358,8 +387,9 @@ def _other_branches(
         for joint, share in zip((1, 2, 4), shares):
             seed[:, joint] = limits[joint, 0] + share * (limits[joint, 1] - limits[joint, 0])
         again = solve(replace(start.subset(left), q=seed), goal2base[left], oriented[left])
-        found = _merged(found, left, again, again.converged & _inside(again.q, limits),
-                        again.iterations)  # fmt: skip
+        found = _merged(
+            found, left, again, again.converged & _inside(again.q, limits), again.iterations
+        )
     return found
 
 
@@ -393,8 +423,9 @@ def compensate_targets(
     ones = np.ones_like(seed)
     start = Poses(seed, ones, targets.time, temperature=targets.temperature)
     # without seeds: rows of a program, kept on one branch
-    first = _nominal_ik(nominal, nominal_params, start, goal2base, tool, oriented,
-                        program=targets.seed is None)  # fmt: skip
+    first = _nominal_ik(
+        nominal, nominal_params, start, goal2base, tool, oriented, program=targets.seed is None
+    )
     direction = approach_directions(first.q) if targets.direction is None else targets.direction
     poses = replace(start, q=first.q, direction=direction)
     result = solve_corrected(calibrated, params, poses, goal2base, tool, oriented, correction)
@@ -405,8 +436,7 @@ def compensate_targets(
             break
         direction = found
         poses = replace(poses, q=result.q, direction=direction)
-        result = solve_corrected(calibrated, params, poses, goal2base, tool, oriented,
-                                 correction)  # fmt: skip
+        result = solve_corrected(calibrated, params, poses, goal2base, tool, oriented, correction)
         steps += result.iterations
     result = replace(result, iterations=steps)
     within = within_limits(calibrated.robot, result.q)

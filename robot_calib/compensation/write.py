@@ -33,10 +33,17 @@ def row_status(
         np.zeros(len(change), dtype=bool) if result.position_only is None else result.position_only
     )
     return [
-        "not_reached" if not ok else "beyond_limits" if not inside else
-        "large_change" if big > LARGE_CHANGE_DEG else "position_only" if alone else "ok"
+        "not_reached"
+        if not ok
+        else "beyond_limits"
+        if not inside
+        else "large_change"
+        if big > LARGE_CHANGE_DEG
+        else "position_only"
+        if alone
+        else "ok"
         for ok, inside, big, alone in zip(result.converged, within, change, point)
-    ]  # fmt: skip
+    ]
 
 
 def write_compensated_csv(
@@ -46,13 +53,27 @@ def write_compensated_csv(
     directions (n, J) (+1/-1) and each row's `status` (`row_status`) to `path`,
     atomically; the readings of a `not_reached` row are written as nan."""
     n_joints = result.q.shape[1]
-    header = [*(f"q{j + 1}" for j in range(n_joints)), *(f"dir{j + 1}" for j in range(n_joints)),
-              "error_mm", "error_urad", "iterations", "status"]  # fmt: skip
+    header = [
+        *(f"q{j + 1}" for j in range(n_joints)),
+        *(f"dir{j + 1}" for j in range(n_joints)),
+        "error_mm",
+        "error_urad",
+        "iterations",
+        "status",
+    ]
     rows = [",".join(header)]
     for k in range(len(result.q)):
         q = result.q[k] if status[k] != "not_reached" else np.full(n_joints, np.nan)
-        rows.append(",".join([*(repr(float(v)) for v in q),
-                              *(str(int(d)) for d in direction[k]),
-                              f"{result.error_m[k] * 1e3:.6f}", f"{result.error_rad[k] * 1e6:.3f}",
-                              str(int(result.iterations[k])), status[k]]))  # fmt: skip
+        rows.append(
+            ",".join(
+                [
+                    *(repr(float(v)) for v in q),
+                    *(str(int(d)) for d in direction[k]),
+                    f"{result.error_m[k] * 1e3:.6f}",
+                    f"{result.error_rad[k] * 1e6:.3f}",
+                    str(int(result.iterations[k])),
+                    status[k],
+                ]
+            )
+        )
     write_text_atomic(path, "\n".join(rows) + "\n")

@@ -56,8 +56,11 @@ class Stretch(Record):
         against 0.01 mm elsewhere, all the same way (+0.80, -0.60, +0.00); joint_a1 near
         -150 deg: a change of the set-up (tracker moved, target re-seated) or a place the
         model misses, not 12 independent blunders'."""
-        way = (", all the same way (" + ", ".join(f"{v:+.2f}" for v in self.direction) + ")"
-               if self.direction else "")  # fmt: skip
+        way = (
+            ", all the same way (" + ", ".join(f"{v:+.2f}" for v in self.direction) + ")"
+            if self.direction
+            else ""
+        )
         near = (
             "; " + ", ".join(f"{joint} near {deg:.0f} deg" for joint, deg in self.near_deg.items())
             if self.near_deg
@@ -87,8 +90,9 @@ class _PoseResiduals:
     threshold: float
 
 
-def _per_pose(recording: Recording, residuals: Array,
-              floor_mm: float | None) -> _PoseResiduals | None:  # fmt: skip
+def _per_pose(
+    recording: Recording, residuals: Array, floor_mm: float | None
+) -> _PoseResiduals | None:
     """`_PoseResiduals` of `recording`'s residuals (n, 3) [m]; None with fewer than
     2 x MIN_RUN poses (nothing to stand out from)."""
     norm = np.linalg.norm(residuals, axis=1)
@@ -106,8 +110,9 @@ def _per_pose(recording: Recording, residuals: Array,
     return _PoseResiduals(pose, first_row, norm, pose_norm, threshold)
 
 
-def stretches(recording: Recording, residuals: Array, floor_mm: float | None,
-              joint_names: Sequence[str]) -> list[Stretch]:  # fmt: skip
+def stretches(
+    recording: Recording, residuals: Array, floor_mm: float | None, joint_names: Sequence[str]
+) -> list[Stretch]:
     """The stretches (module docstring) of `recording`'s residuals (n, 3) [m] (predicted -
     measured, every measurement), largest mean first; `floor_mm` the noise floor (abs rms
     [mm]) or None; `joint_names` (J,) the robot's. Poses (`Recording.pose_index`) are
@@ -140,14 +145,23 @@ def stretches(recording: Recording, residuals: Array, floor_mm: float | None,
         mean_vec = -residuals[rows].mean(axis=0)  # measured - predicted: where they moved
         mean = float(norm[rows].mean())
         same = float(np.linalg.norm(mean_vec)) >= SAME_WAY * mean
-        narrow = {joint_names[j]: float(np.degrees(np.mean(q[rows, j])))
-                  for j in range(q.shape[1])
-                  if span[j] > 0 and np.ptp(q[rows, j]) <= NARROW * span[j]}  # fmt: skip
-        out.append(Stretch(recording.sources[int(recording.bag_index[rows[0]])],
-                           int(message[rows].min()), int(message[rows].max()), len(poses),
-                           mean * 1e3, float(norm[rest].mean()) * 1e3,
-                           [float(v) for v in mean_vec / np.linalg.norm(mean_vec)] if same
-                           else [], narrow))  # fmt: skip
+        narrow = {
+            joint_names[j]: float(np.degrees(np.mean(q[rows, j])))
+            for j in range(q.shape[1])
+            if span[j] > 0 and np.ptp(q[rows, j]) <= NARROW * span[j]
+        }
+        out.append(
+            Stretch(
+                recording.sources[int(recording.bag_index[rows[0]])],
+                int(message[rows].min()),
+                int(message[rows].max()),
+                len(poses),
+                mean * 1e3,
+                float(norm[rest].mean()) * 1e3,
+                [float(v) for v in mean_vec / np.linalg.norm(mean_vec)] if same else [],
+                narrow,
+            )
+        )
     return sorted(out, key=lambda s: -s.mean_mm)[:MAX_STRETCHES]
 
 
@@ -173,10 +187,12 @@ class Region(Record):
     def line(self) -> str:
         """'joint_a2 from -120 to -95 deg: 14 poses, 13 of them high, 0.85 mm mean against
         0.0120 mm elsewhere: a place the model misses (or the set-up there)'."""
-        return (f"{self.joint} from {self.low_deg:.0f} to {self.high_deg:.0f} deg: "
-                f"{self.poses} poses, {self.high_poses} of them high, {self.mean_mm:.2f} mm "
-                f"mean against {self.rest_mean_mm:.4f} mm elsewhere: a place the model "
-                "misses (or the set-up there)")  # fmt: skip
+        return (
+            f"{self.joint} from {self.low_deg:.0f} to {self.high_deg:.0f} deg: "
+            f"{self.poses} poses, {self.high_poses} of them high, {self.mean_mm:.2f} mm "
+            f"mean against {self.rest_mean_mm:.4f} mm elsewhere: a place the model "
+            "misses (or the set-up there)"
+        )
 
 
 def regions(
@@ -215,14 +231,25 @@ def regions(
             end = levels[k:][levels[k:] <= start + width][-1]
             inside = keep & (q[:, j] >= start) & (q[:, j] <= end)
             count = int((inside & high).sum())
-            if count >= MIN_RUN and count >= REGION_SHARE * inside.sum() and (
-                    best is None or count > best[0]):  # fmt: skip
+            if (
+                count >= MIN_RUN
+                and count >= REGION_SHARE * inside.sum()
+                and (best is None or count > best[0])
+            ):
                 best = (count, float(start), float(end))
         if best is None:
             continue
         count, lo, hi = best
         inside = keep & (q[:, j] >= lo) & (q[:, j] <= hi)
-        out.append(Region(joint_names[j], float(np.degrees(lo)), float(np.degrees(hi)),
-                          int(inside.sum()), count, float(pose_norm[inside].mean()) * 1e3,
-                          float(pose_norm[~inside].mean()) * 1e3))  # fmt: skip
+        out.append(
+            Region(
+                joint_names[j],
+                float(np.degrees(lo)),
+                float(np.degrees(hi)),
+                int(inside.sum()),
+                count,
+                float(pose_norm[inside].mean()) * 1e3,
+                float(pose_norm[~inside].mean()) * 1e3,
+            )
+        )
     return sorted(out, key=lambda r: -r.high_poses)[:MAX_STRETCHES]

@@ -129,11 +129,19 @@ class RungScore(Record):
             if abs(share) < 1e-9:  # geometric itself (the reference): 0, not -1e-16
                 share = 0.0
         return cls(
-            rung.model, held.pairwise_mean_mm, held.pairwise_max_mm, held.absolute_mean_mm,
-            held.absolute_max_mm, held.absolute_rms_mm, fit.pairwise_mean_mm,
-            fit.absolute_rms_mm, int(rung.calibration.parameters.free.sum()), share,
-            rung.learned, held.n_points,
-        )  # fmt: skip
+            rung.model,
+            held.pairwise_mean_mm,
+            held.pairwise_max_mm,
+            held.absolute_mean_mm,
+            held.absolute_max_mm,
+            held.absolute_rms_mm,
+            fit.pairwise_mean_mm,
+            fit.absolute_rms_mm,
+            int(rung.calibration.parameters.free.sum()),
+            share,
+            rung.learned,
+            held.n_points,
+        )
 
 
 @dataclass(frozen=True)
@@ -224,10 +232,12 @@ class Diagnosis(Record):
         if not self.poses:
             return ""
         per = self.measurements / self.poses
-        return (f"{self.measurements} measurements at {self.poses} poses ({per:.1f} per pose"
-                + (": every measurement of a pose, re-read, revisited or of another target, "
-                   "shares its fold in every k-fold and split)" if per > 1
-                   else ")"))  # fmt: skip
+        return f"{self.measurements} measurements at {self.poses} poses ({per:.1f} per pose" + (
+            ": every measurement of a pose, re-read, revisited or of another target, "
+            "shares its fold in every k-fold and split)"
+            if per > 1
+            else ")"
+        )
 
     warnings: list[str] = field(default_factory=list)  # implausible geometric calibration
     learnable: LearnableBound | None = None  # what a residual model reaches held out
@@ -302,11 +312,13 @@ class Diagnosis(Record):
             if self.noise.floor_known and self.noise.source in LOWER_BOUNDS:
                 ratio = self.unexplained.geometric_ratio_to_noise_floor
                 above = "" if ratio is None else f"{ratio:.2f} x "
-                return (f"null (no structure found: geometric is {above}a floor of the "
-                        f"tracker's noise alone, {self.noise.source.split(' (')[0]}, which the "
-                        "robot's repeatability and the SMR's centring add to; the learned "
-                        "correction learns nothing held out and no joint signature stands "
-                        "out)")  # fmt: skip
+                return (
+                    f"null (no structure found: geometric is {above}a floor of the "
+                    f"tracker's noise alone, {self.noise.source.split(' (')[0]}, which the "
+                    "robot's repeatability and the SMR's centring add to; the learned "
+                    "correction learns nothing held out and no joint signature stands "
+                    "out)"
+                )
             if self.noise.floor_known:
                 return "null (geometric reaches the noise level)"
             return (
@@ -321,9 +333,11 @@ class Diagnosis(Record):
         if out is None:
             return named
         where = f" (load-driven, joints {out.joints})" if out.joints else ""
-        return (f"{named}; most of what remains lies outside the vocabulary{where}: "
-                f"{out.physical_abs_rms_mm:.4f} -> {out.hybrid_abs_rms_mm:.4f} mm held-out with a "
-                "learned correction")  # fmt: skip
+        return (
+            f"{named}; most of what remains lies outside the vocabulary{where}: "
+            f"{out.physical_abs_rms_mm:.4f} -> {out.hybrid_abs_rms_mm:.4f} mm held-out with a "
+            "learned correction"
+        )
 
     def save(self, path: str | Path) -> Path:
         """Write this diagnosis as DIAGNOSIS.json at `path` (atomically); the path written.
@@ -340,10 +354,11 @@ class Diagnosis(Record):
         rungs = "; ".join(f"{r.model} {r.holdout_seed_text(sep='/')} mm" for r in self.ladder)
         blunders = (
             f" {len(self.outliers)} measurement(s) left out as tracker blunders: "
-            + "; ".join(o.line() for o in self.outliers) + "."
+            + "; ".join(o.line() for o in self.outliers)
+            + "."
             if self.outliers
             else ""
-        )  # fmt: skip
+        )
         floor = self.noise.floor_abs_rms_mm
         floor_text = "unknown" if floor is None else f"{floor:.4f} mm rms"
         bound = f" {self.learnable.line()}." if self.learnable is not None else ""
@@ -467,12 +482,26 @@ def diagnose(
     if on_ladder is not None:
         on_ladder(ladder, recording, floor_mm)
     geo = ladder.rungs[0].calibration
-    where = where_it_lies(geo.model, geo.parameters, recording, geo.residuals,
-                          ladder.noise.sigma_m, ladder.spectra.get("geometric"))  # fmt: skip
-    after = where if len(physical) == 1 else where_it_lies(
-        last.calibration.model, last.calibration.parameters, recording,
-        last.calibration.residuals, ladder.noise.sigma_m, ladder.spectra.get(last.model),
-    )  # fmt: skip
+    where = where_it_lies(
+        geo.model,
+        geo.parameters,
+        recording,
+        geo.residuals,
+        ladder.noise.sigma_m,
+        ladder.spectra.get("geometric"),
+    )
+    after = (
+        where
+        if len(physical) == 1
+        else where_it_lies(
+            last.calibration.model,
+            last.calibration.parameters,
+            recording,
+            last.calibration.residuals,
+            ladder.noise.sigma_m,
+            ladder.spectra.get(last.model),
+        )
+    )
     ratio = None if floor_mm is None else best.heldout.absolute_rms_mm / floor_mm
     learnable = ladder.learnable
     foreign = foreign_holdout(ladder, geo.accuracy.absolute_rms_mm, floor_mm)
@@ -487,9 +516,13 @@ def diagnose(
     if foreign:
         note = f"no verdict: {foreign}"
     elif ratio is None:
-        why = ("the stated tracker accuracy is refuted by the geometric fit's residual: see "
-               "the warning" if ladder.noise.warning else "no repeat poses, circle sweeps or "
-               "stated tracker accuracy; state the tracker's accuracy")  # fmt: skip
+        why = (
+            "the stated tracker accuracy is refuted by the geometric fit's residual: see "
+            "the warning"
+            if ladder.noise.warning
+            else "no repeat poses, circle sweeps or "
+            "stated tracker accuracy; state the tracker's accuracy"
+        )
         note = (
             f"noise floor unknown ({why}): held-out errors are not compared with one"
             + (f"; {learnable.line()}" if learnable is not None else "")
@@ -502,12 +535,15 @@ def diagnose(
     else:
         note = (
             f"held-out rms {ratio:.2f} x the noise floor remains"
-            + ("; it lies outside the vocabulary: no effect of it reduces it further (joint-"
-               f"angle harmonics scanned up to order {MAX_SCAN_ORDER}, as far as the readings "
-               "resolve them)" if structure
-               else "; no effect of the vocabulary reduces it further")
+            + (
+                "; it lies outside the vocabulary: no effect of it reduces it further (joint-"
+                f"angle harmonics scanned up to order {MAX_SCAN_ORDER}, as far as the readings "
+                "resolve them)"
+                if structure
+                else "; no effect of the vocabulary reduces it further"
+            )
             + structure.replace("strongest structure", "strongest remaining structure")
-        )  # fmt: skip
+        )
     misses = best.calibration.predict(whole.poses) - whole.points  # every measurement
     found = stretches(whole, misses, floor_mm, robot.joint_names)
     diagnosis = Diagnosis(
@@ -521,7 +557,7 @@ def diagnose(
             note,
             after,
             None if floor_mm is None else ladder.rungs[0].heldout.absolute_rms_mm / floor_mm,
-        ),  # fmt: skip
+        ),
         noise=NoiseReport(
             noise.sigma_m * 1e3 if noise.independent else None,
             noise.source if noise.independent else "unknown",
@@ -532,7 +568,7 @@ def diagnose(
             ladder.noise.source,
             noise.independent,
             ladder.noise.warning,
-        ),  # fmt: skip
+        ),
         scored_on=ladder.scored_on,
         selected_on=f"{N_FOLDS}-fold CV over poses"
         + (" + hold-out bags (equal weight)" if holdout is not None else ""),
@@ -547,33 +583,46 @@ def diagnose(
         measurements=len(whole),
         poses=len(np.unique(reading_groups(whole.poses.q))),
         tracker_drift=[r.drift for r in whole.references if r.drift is not None],
-        warnings=list(geo.warnings) + ([ladder.noise.warning] if ladder.noise.warning else [])
-        + ([few] if few else []) + alias_warnings(last.effects, recording, ladder.holdout),
+        warnings=list(geo.warnings)
+        + ([ladder.noise.warning] if ladder.noise.warning else [])
+        + ([few] if few else [])
+        + alias_warnings(last.effects, recording, ladder.holdout),
         learnable=learnable,
         outside_vocabulary=outside,
         iso9283=_iso9283(ladder, recording, robot),
         refits=list(ladder.refits),
         removed_by_best_model=removed_signatures(best.effects),
-        implausible=list(geo.implausible) + _holdout_in_degrees(holdout_sources, robot)
+        implausible=list(geo.implausible)
+        + _holdout_in_degrees(holdout_sources, robot)
         + ([foreign] if foreign else []),
-    )  # fmt: skip
+    )
     return diagnosis, ladder
 
 
-def _hybrid_note(hybrid: str, ratio: float, physical: Rung, floor_mm: float, structure: str,
-                 outside: OutsideVocabulary | None) -> str:  # fmt: skip
+def _hybrid_note(
+    hybrid: str,
+    ratio: float,
+    physical: Rung,
+    floor_mm: float,
+    structure: str,
+    outside: OutsideVocabulary | None,
+) -> str:
     """The 'what remains' note when the hybrid rung `hybrid` won (held-out `ratio` x the
     floor): what the physical model leaves (its ratio, its strongest structure), what the
     hybrid leaves, and where the difference lies (`outside`, DIAGNOSIS.json
     `outside_vocabulary`), never the physical model's structure as what remains."""
     left = physical.heldout.absolute_rms_mm / floor_mm
-    hybrid_part = (f"at the noise level with the hybrid model {hybrid}: held-out rms {ratio:.2f} "
-                   "x the noise floor" if ratio <= AT_FLOOR else
-                   f"held-out rms {ratio:.2f} x the noise floor remains with the hybrid model "
-                   f"{hybrid}")  # fmt: skip
-    physical_part = (f"; the physical model {physical.model} alone leaves {left:.2f} x"
-                     + structure.replace("; strongest structure", " (its strongest structure")
-                     + (")" if structure else ""))  # fmt: skip
+    hybrid_part = (
+        f"at the noise level with the hybrid model {hybrid}: held-out rms {ratio:.2f} "
+        "x the noise floor"
+        if ratio <= AT_FLOOR
+        else f"held-out rms {ratio:.2f} x the noise floor remains with the hybrid model {hybrid}"
+    )
+    physical_part = (
+        f"; the physical model {physical.model} alone leaves {left:.2f} x"
+        + structure.replace("; strongest structure", " (its strongest structure")
+        + (")" if structure else "")
+    )
     if outside is not None:
         closed = (
             "; the learned correction closes most of that: it lies outside the "
@@ -623,8 +672,12 @@ def foreign_holdout(ladder: Ladder, insample_mm: float, floor_mm: float | None) 
     reference = max(floor_mm if floor_mm else insample_mm, FOREIGN_HOLDOUT_MIN_MM)
     if not held > FOREIGN_HOLDOUT_FACTOR * reference:
         return ""
-    floor = (f"{held / floor_mm:.0f} x the noise floor ({floor_mm:.4f} mm; limit "
-             f"{FOREIGN_HOLDOUT_FACTOR:.0f} x) and " if floor_mm else "")  # fmt: skip
+    floor = (
+        f"{held / floor_mm:.0f} x the noise floor ({floor_mm:.4f} mm; limit "
+        f"{FOREIGN_HOLDOUT_FACTOR:.0f} x) and "
+        if floor_mm
+        else ""
+    )
     limit = "" if floor_mm else f"; limit {FOREIGN_HOLDOUT_FACTOR:.0f} x, the floor unknown"
     return (
         f"held-out rms {held:.4g} mm is {floor}{held / max(insample_mm, 1e-12):.0f} x the "
@@ -646,8 +699,10 @@ def small_holdout(holdout: Recording | None) -> str:
     if n >= MIN_HOLDOUT_POSES:
         return ""
     if n == 0:
-        return (f"warning: the hold-out bags ({', '.join(holdout.sources)}) hold no pose: "
-                "nothing is scored on them")  # fmt: skip
+        return (
+            f"warning: the hold-out bags ({', '.join(holdout.sources)}) hold no pose: "
+            "nothing is scored on them"
+        )
     return (
         f"warning: the hold-out bags ({', '.join(holdout.sources)}) hold {n} pose(s), fewer "
         f"than {MIN_HOLDOUT_POSES}: each held-out rms is uncertain by about "
@@ -669,8 +724,14 @@ def _iso9283(ladder: Ladder, recording: Recording, robot: RobotDescription) -> l
     the calibration recording) and after calibration (the best rung), on the hold-out
     bags' repeated poses, else the calibration recording's; empty without repeats."""
     candidates = [(ladder.holdout, "hold-out bags"), (recording, "calibration recording")]
-    found = next(((scored, where, groups) for scored, where in candidates
-                  if scored is not None and (groups := repeat_groups(scored))), None)  # fmt: skip
+    found = next(
+        (
+            (scored, where, groups)
+            for scored, where in candidates
+            if scored is not None and (groups := repeat_groups(scored))
+        ),
+        None,
+    )
     if found is None:
         return []
     scored, where, groups = found

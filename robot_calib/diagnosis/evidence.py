@@ -71,8 +71,14 @@ MAX_Z = 1e6  # a held-out z where every pose gains exactly the same
 #: a term at this significance or more is structure (the reports' and the harness' figure)
 STRUCTURE_Z = 5.0
 FAMILIES = ("harmonics", "direction", "scale", "gravity", "twist", "time")
-UNITS = {"harmonics": "urad", "direction": "urad", "scale": "urad/rad",
-         "gravity": "urad/(N m)", "twist": "mm", "time": "mm"}  # fmt: skip
+UNITS = {
+    "harmonics": "urad",
+    "direction": "urad",
+    "scale": "urad/rad",
+    "gravity": "urad/(N m)",
+    "twist": "mm",
+    "time": "mm",
+}
 
 
 @dataclass(frozen=True)
@@ -105,14 +111,18 @@ class TermEvidence(Record):
         if self.family == "harmonics":
             return f"{ordinal(int(self.order or 0))} harmonic of joint {self.joint}"
         if self.family == "twist":
-            return (f"joint {self.joint}'s housing turning with the load about link "
-                    f"{self.joint - 1}'s axis (the link twisting)")  # fmt: skip
+            return (
+                f"joint {self.joint}'s housing turning with the load about link "
+                f"{self.joint - 1}'s axis (the link twisting)"
+            )
         return f"joint {self.joint} error following its {FAMILY_WORDS[self.family]}"
 
 
-FAMILY_WORDS = {"direction": "approach direction (backlash-like)",
-                "scale": "reading (scale-like)",
-                "gravity": "gravity torque (compliance-like)"}  # fmt: skip
+FAMILY_WORDS = {
+    "direction": "approach direction (backlash-like)",
+    "scale": "reading (scale-like)",
+    "gravity": "gravity torque (compliance-like)",
+}
 
 
 def ordinal(k: int) -> str:
@@ -153,9 +163,13 @@ class _Term:
     columns: IntArray  # into the candidate block
 
 
-def _signals(model: KinematicModel, recording: Recording, levers: Array,
-             orders: dict[int, list[int]], time_scale: tuple[float, float] | None,
-             ) -> tuple[list[tuple[int, str, int | None, list[Array]]], list[Array]]:  # fmt: skip
+def _signals(
+    model: KinematicModel,
+    recording: Recording,
+    levers: Array,
+    orders: dict[int, list[int]],
+    time_scale: tuple[float, float] | None,
+) -> tuple[list[tuple[int, str, int | None, list[Array]]], list[Array]]:
     """The candidate terms (joint, family, order, signals (n,) each) and the time signals
     (t, t^2 normalised: one column per axis each), for the joints of lever >= MIN_LEVER_M
     (of the signals that vary)."""
@@ -170,8 +184,11 @@ def _signals(model: KinematicModel, recording: Recording, levers: Array,
             modelled = modelled_orders(model.effects, j)  # the model's own: not candidates
             for k in sorted({*range(1, HARMONICS + 1), *orders.get(j, [])} - modelled):
                 out.append((j, "harmonics", k, [np.cos(k * qj), np.sin(k * qj)]))
-        for family, signal in (("direction", poses.direction[:, j - 1]), ("scale", qj),
-                               ("gravity", tau[:, j - 1])):  # fmt: skip
+        for family, signal in (
+            ("direction", poses.direction[:, j - 1]),
+            ("scale", qj),
+            ("gravity", tau[:, j - 1]),
+        ):
             if np.ptp(signal) > 1e-9:
                 out.append((j, family, None, [signal]))
     time: list[Array] = []
@@ -187,8 +204,9 @@ def _signals(model: KinematicModel, recording: Recording, levers: Array,
 MAX_TWIST_ALIGNMENT = 0.5
 
 
-def _twists(model: KinematicModel, params: ParameterVector, poses: Poses,
-            geometry: Array) -> list[tuple[int, list[Array]]]:  # fmt: skip
+def _twists(
+    model: KinematicModel, params: ParameterVector, poses: Poses, geometry: Array
+) -> list[tuple[int, list[Array]]]:
     """The twist terms: per link J - 1 that can twist (`link_bending.twist_axis`) about an
     axis across its joint's (MAX_TWIST_ALIGNMENT), joint J's housing turning about that
     axis by the load's moment about it (the robot's own links beyond, an unknown payload's
@@ -221,10 +239,14 @@ def _twists(model: KinematicModel, params: ParameterVector, poses: Poses,
     return out
 
 
-def _design(model: KinematicModel, params: ParameterVector, recording: Recording,
-            predicted: Array, orders: dict[int, list[int]],
-            time_scale: tuple[float, float] | None,
-            ) -> tuple[Array, list[_Term], Array]:  # fmt: skip
+def _design(
+    model: KinematicModel,
+    params: ParameterVector,
+    recording: Recording,
+    predicted: Array,
+    orders: dict[int, list[int]],
+    time_scale: tuple[float, float] | None,
+) -> tuple[Array, list[_Term], Array]:
     """X (3n, P + K) [m per unit]: the model's free Jacobian columns, then every candidate
     term's columns; the terms (their columns' indices into X); the joints' levers (J,) [m]."""
     poses = recording.poses
@@ -233,8 +255,10 @@ def _design(model: KinematicModel, params: ParameterVector, recording: Recording
     geometry = jac[:, :, params.free]  # (n, 3, P)
     del jac
     signals, time = _signals(model, recording, levers, orders, time_scale)
-    columns = [(joint, family, order, [motion[:, joint - 1, :] * s[:, None] for s in sigs])
-               for joint, family, order, sigs in signals]  # fmt: skip
+    columns = [
+        (joint, family, order, [motion[:, joint - 1, :] * s[:, None] for s in sigs])
+        for joint, family, order, sigs in signals
+    ]
     twists = _twists(model, params, poses, geometry)
     columns += [(joint, "twist", None, cols) for joint, cols in twists]
     n, p = len(poses), geometry.shape[2]
@@ -314,8 +338,9 @@ def joint_evidence(
     time = recording.poses.time
     span_t = float(np.ptp(time)) if len(time) else 0.0
     time_scale = (float(np.mean(time)), span_t) if span_t > 0 else None
-    x, terms, levers = _design(model, params, recording, recording.points + residuals, orders,
-                               time_scale)  # fmt: skip
+    x, terms, levers = _design(
+        model, params, recording, recording.points + residuals, orders, time_scale
+    )
     r = residuals.reshape(-1)
     norms = np.linalg.norm(x, axis=0)
     norms[norms == 0] = 1.0
@@ -326,8 +351,11 @@ def joint_evidence(
     separable = [bool(v >= MIN_RESOLVED) for v in inverses.kept_share(terms, none)]
     units = []
     for i, term in enumerate(terms):
-        siblings = [k for k, t in enumerate(terms) if k != i and not separable[k]
-                    and not separable[i] and t.joint == term.joint]  # fmt: skip
+        siblings = [
+            k
+            for k, t in enumerate(terms)
+            if k != i and not separable[k] and not separable[i] and t.joint == term.joint
+        ]
         cols = np.concatenate([terms[k].columns for k in siblings]) if siblings else none
         units.append(_Unit(i, term.columns, cols))
     rss = _sum_of_squares(r2, gram, rhs, inverses.fit(rhs, none))
@@ -339,8 +367,9 @@ def joint_evidence(
             continue  # not resolvable even in its siblings' place
         kept = inverses.fit(rhs, unit.siblings)
         without = _fit_without(gram, rhs, np.concatenate([unit.siblings, unit.columns]))
-        chi2 = (_sum_of_squares(r2, gram, rhs, without)
-                - _sum_of_squares(r2, gram, rhs, kept)) / max(scatter2, 1e-300)  # fmt: skip
+        chi2 = (
+            _sum_of_squares(r2, gram, rhs, without) - _sum_of_squares(r2, gram, rhs, kept)
+        ) / max(scatter2, 1e-300)
         cov = inverses.without(unit.siblings) * scatter2
         value, sigma = _value(terms[unit.term], kept, cov, x, norms)
         fitted[u] = (value, sigma, normal_z(chi2, len(unit.columns)))
@@ -350,15 +379,31 @@ def joint_evidence(
     for u, unit in enumerate(units):
         term = terms[unit.term]
         if u not in fitted:
-            out.append(TermEvidence(term.joint, term.family, term.order, None, None, 0.0, 0.0,
-                                    False, False))  # fmt: skip
+            out.append(
+                TermEvidence(
+                    term.joint, term.family, term.order, None, None, 0.0, 0.0, False, False
+                )
+            )
             continue
         value, sigma, z = fitted[u]
         held_z = float(held.get(u, 0.0))
         confirmed = bool(held_z >= CONFIRM_Z)
         shown = z if confirmed or z < CHECK_Z else 0.0
-        out.append(TermEvidence(term.joint, term.family, term.order, value, sigma, shown, z,
-                                confirmed, True, held_z, separable[unit.term]))  # fmt: skip
+        out.append(
+            TermEvidence(
+                term.joint,
+                term.family,
+                term.order,
+                value,
+                sigma,
+                shown,
+                z,
+                confirmed,
+                True,
+                held_z,
+                separable[unit.term],
+            )
+        )
     return Evidence(out, float(np.sqrt(scatter2)), [float(v) for v in levers])
 
 
@@ -400,8 +445,7 @@ def _inverse_without(gram: Array, drop: IntArray) -> Array:
     return out
 
 
-def _value(term: _Term, beta: Array, cov: Array, x: Array,
-           norms: Array) -> tuple[float, float]:  # fmt: skip
+def _value(term: _Term, beta: Array, cov: Array, x: Array, norms: Array) -> tuple[float, float]:
     """A resolvable term's value and 1-sigma in UNITS[term.family] (see TermEvidence)."""
     cols = term.columns
     coef = beta[cols] / norms[cols]

@@ -93,8 +93,7 @@ class FigureCache:
         """The PNG of figure `key`, drawn by `draw` the first time (None: no figure)."""
         if key not in self._png:
             aside = next((a for a in self._asides if key in a), None)
-            self._png[key] = (aside.result(key) if aside is not None
-                              else render_png(draw, self.dpi))  # fmt: skip
+            self._png[key] = aside.result(key) if aside is not None else render_png(draw, self.dpi)
         return self._png[key]
 
     def draw_aside(self, *groups: Sequence[tuple[str, Callable[[], Figure | None]]]) -> None:
@@ -106,12 +105,19 @@ class FigureCache:
         if self._asides:
             return
         helpers, self._helpers = self._helpers, []
-        tasks = [[(key, partial(render_png, draw, self.dpi)) for key, draw in group
-                  if key not in self._png] for group in groups]  # fmt: skip
+        tasks = [
+            [
+                (key, partial(render_png, draw, self.dpi))
+                for key, draw in group
+                if key not in self._png
+            ]
+            for group in groups
+        ]
         if helpers and tasks:
             both = tasks[0] + (tasks[1] if len(tasks) > 1 else [])
-            self._asides.append(Aside(both, ASIDE_TIMEOUT_S, helper=helpers[0],
-                                      split=len(tasks[0])))  # fmt: skip
+            self._asides.append(
+                Aside(both, ASIDE_TIMEOUT_S, helper=helpers[0], split=len(tasks[0]))
+            )
         elif tasks and tasks[0] and can_fork():
             _warm_up(pyplot())  # imported and fonts loaded before the fork: both inherit
             self._asides.append(Aside(tasks[0], ASIDE_TIMEOUT_S))
@@ -131,8 +137,12 @@ class FigureCache:
     def __enter__(self) -> FigureCache:
         return self
 
-    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
-                 trace: TracebackType | None) -> None:  # fmt: skip
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
         self.close(abort=kind is not None)
 
 
@@ -214,8 +224,14 @@ def ladder_figure(ladder: Ladder, floor_mm: float | None) -> Figure:
     heights = [r.heldout.absolute_rms_mm for r in ladder.rungs]
     lines = [] if floor_mm is None else [(floor_mm, "noise floor", "k", "--")]
     if ladder.learnable is not None and ladder.learnable.bounds:
-        lines.append((ladder.learnable.holdout_abs_rms_mm, "learnable bound\n(residual model)",
-                      COLOURS[1], ":"))  # fmt: skip
+        lines.append(
+            (
+                ladder.learnable.holdout_abs_rms_mm,
+                "learnable bound\n(residual model)",
+                COLOURS[1],
+                ":",
+            )
+        )
     rows = max(name.count("\n") + 1 for name in names)
     longest = max(len(line) for name in names for line in name.split("\n"))
     per_bar = max(1.5, 0.07 * longest)  # [in]: the longest label line fits its slot
@@ -235,9 +251,17 @@ def ladder_figure(ladder: Ladder, floor_mm: float | None) -> Figure:
     for value, label, colour, style in lines:
         ax.axhline(value, color=colour, ls=style, lw=1.2)
         below = value == lowest and len(lines) > 1
-        ax.annotate(f"{label}\n{value:.4f} mm", (1.0, value), xycoords=("axes fraction", "data"),
-                    xytext=(4, -2 if below else 2), textcoords="offset points", ha="left",
-                    va="top" if below else "bottom", fontsize=8, color=colour)  # fmt: skip
+        ax.annotate(
+            f"{label}\n{value:.4f} mm",
+            (1.0, value),
+            xycoords=("axes fraction", "data"),
+            xytext=(4, -2 if below else 2),
+            textcoords="offset points",
+            ha="left",
+            va="top" if below else "bottom",
+            fontsize=8,
+            color=colour,
+        )
     ax.set_xticks(range(len(names)), names, fontsize=8)
     ax.set_ylabel("held-out rms error [mm]" + (" (log scale)" if scale == "log" else ""))
     ax.set_title(f"the ladder (scored on {ladder.scored_on})")
@@ -296,8 +320,10 @@ def residual_map_figure(ladder: Ladder, recording: Recording) -> Figure:
     n_rows = -(-len(axes_x) // n_cols)
     fig, axes = plt.subplots(n_rows, n_cols, figsize=(12, 2.6 * n_rows), sharey=True)
     rows = drawn(len(recording))
-    norms = [(wrap_name(rung.model), np.linalg.norm(insample_residuals(rung, recording), axis=1)
-              * 1e3) for rung in compared_rungs(ladder)]  # fmt: skip
+    norms = [
+        (wrap_name(rung.model), np.linalg.norm(insample_residuals(rung, recording), axis=1) * 1e3)
+        for rung in compared_rungs(ladder)
+    ]
     for ax, (label, x) in zip(np.ravel(axes), axes_x.items()):
         for model, norm in norms:
             ax.plot(x[rows], norm[rows], ".", ms=2, label=model)
@@ -366,15 +392,26 @@ def error_histogram_figure(errors_mm: Sequence[tuple[str, Array]], scored_on: st
     for k, (model, errors) in enumerate(errors_mm):
         rms = float(np.sqrt(np.mean(errors**2)))
         colour = COLOURS[k % len(COLOURS)]
-        ax.hist(np.clip(errors, low, high), bins=bins, histtype="step", lw=1.6, color=colour,
-                label=f"{wrap_name(model)}\n(rms {rms:.4f} mm)")  # fmt: skip
+        ax.hist(
+            np.clip(errors, low, high),
+            bins=bins,
+            histtype="step",
+            lw=1.6,
+            color=colour,
+            label=f"{wrap_name(model)}\n(rms {rms:.4f} mm)",
+        )
         ax.axvline(rms, color=colour, ls=":", lw=1)
     ax.set_xscale("log")
     ax.set_xlabel("per-point error |predicted - measured| [mm] (log scale)")
     ax.set_ylabel("points")
     ax.set_title(f"per-point error, {scored_on}", fontsize=10)
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
-              labelspacing=0.8)  # fmt: skip
+    ax.legend(
+        fontsize=8,
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        borderaxespad=0.0,
+        labelspacing=0.8,
+    )
     fig.tight_layout()
     return fig
 
@@ -383,8 +420,9 @@ def error_histogram_figure(errors_mm: Sequence[tuple[str, Array]], scored_on: st
 SUPTITLE_IN, TITLE_LINE_IN = 0.35, 0.17
 
 
-def quiver_figure(ladder: Ladder, points: Array, residuals: Sequence[tuple[str, Array]],
-                  scored_on: str) -> Figure:  # fmt: skip
+def quiver_figure(
+    ladder: Ladder, points: Array, residuals: Sequence[tuple[str, Array]], scored_on: str
+) -> Figure:
     """3D residual vectors, one panel per (model, residuals (n, 3) [m], predicted -
     measured, tracker frame) at the measured `points` (n, 3) [m, tracker frame], drawn in
     the robot base frame [mm]; every panel at one scale (the largest arrow 0.3 of the
@@ -410,14 +448,21 @@ def quiver_figure(ladder: Ladder, points: Array, residuals: Sequence[tuple[str, 
         ax.scatter(*xyz[rows].T, s=3, color="0.6")
         colour_scale = Normalize(0.0, max(float(norm.max()), 1e-12))
         cmap = plt.get_cmap("viridis")
-        ax.quiver(*xyz[rows].T, *arrows[rows].T, colors=cmap(colour_scale(norm[rows])),
-                  arrow_length_ratio=0.2, lw=1.3)  # fmt: skip
-        bar = fig.colorbar(ScalarMappable(colour_scale, cmap), ax=ax,
-                           shrink=0.6, pad=0.12)  # fmt: skip
+        ax.quiver(
+            *xyz[rows].T,
+            *arrows[rows].T,
+            colors=cmap(colour_scale(norm[rows])),
+            arrow_length_ratio=0.2,
+            lw=1.3,
+        )
+        bar = fig.colorbar(ScalarMappable(colour_scale, cmap), ax=ax, shrink=0.6, pad=0.12)
         bar.set_label(COLOUR_BAR_LABEL, fontsize=8)
         bar.ax.tick_params(labelsize=7)
-        ax.set_title(f"{wrap_name(model, 40)}\nrms {np.sqrt(np.mean(norm**2)):.4f} mm, max "
-                     f"{norm.max():.4f} mm", fontsize=9)  # fmt: skip
+        ax.set_title(
+            f"{wrap_name(model, 40)}\nrms {np.sqrt(np.mean(norm**2)):.4f} mm, max "
+            f"{norm.max():.4f} mm",
+            fontsize=9,
+        )
         ax.set_xlabel("x [mm]", fontsize=8)
         ax.set_ylabel("y [mm]", fontsize=8)
         ax.set_zlabel("z [mm]", fontsize=8)

@@ -102,7 +102,7 @@ class JointSpectrum(Record):
             + f"{_alias_clause(self.aliases_of(k))})"
             for k, a, s in zip(
                 self.dominant_orders, self.dominant_urad, self.dominant_significance
-            )  # fmt: skip
+            )
         ]
         return f"joint {self.joint}: orders " + ", ".join(parts) + limit
 
@@ -183,8 +183,18 @@ def joint_spectra(
         why = [meaning(k) for k in picked]
         modelled = modelled_orders(model.effects, j + 1)
         alias = [[m for m in similarity.aliases(k) if m not in modelled] for k in picked]
-        return JointSpectrum(j + 1, True, lever * 1e3, values, picked, amps, picked_z, why,
-                             similarity.resolvable(), alias)  # fmt: skip
+        return JointSpectrum(
+            j + 1,
+            True,
+            lever * 1e3,
+            values,
+            picked,
+            amps,
+            picked_z,
+            why,
+            similarity.resolvable(),
+            alias,
+        )
 
     # the joints are independent: the second half scanned by a forked child meanwhile
     # (`parallel.aside`; the same numbers either way) when the scan is large enough to pay
@@ -246,8 +256,9 @@ def harmonic_candidates(spectra: list[JointSpectrum], present: tuple[Effect, ...
     return out
 
 
-def alias_warnings(effects: tuple[Effect, ...], recording: Recording,
-                   holdout: Recording | None) -> list[str]:  # fmt: skip
+def alias_warnings(
+    effects: tuple[Effect, ...], recording: Recording, holdout: Recording | None
+) -> list[str]:
     """One line per joint-angle harmonic of `effects` (a chosen model) that the readings
     of `recording` cannot tell from another scanned order (`aliases`) and that `holdout`
     (its own readings) does not settle either: the robot may have that order instead."""

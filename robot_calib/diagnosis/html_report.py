@@ -107,8 +107,9 @@ def compare_models(
     if len(ladder.rungs) > 1:
         rungs.append((ladder.rungs[-1], "best rung of the ladder"))
     for rung, role in rungs:
-        out.append(ModelErrors(rung.model, role, ladder.scored_on, rung.heldout_residuals,
-                               rung.heldout))  # fmt: skip
+        out.append(
+            ModelErrors(rung.model, role, ladder.scored_on, rung.heldout_residuals, rung.heldout)
+        )
     return out
 
 
@@ -183,12 +184,18 @@ def _img(fig: Figure | bytes | None, caption: str, dpi: int = 100) -> str:
         pyplot().close(fig)
         png = buffer.getvalue()
     data = base64.b64encode(png).decode("ascii")
-    return (f'<figure><img alt="{_e(caption)}" src="data:image/png;base64,{data}">'
-            f"<figcaption>{_e(caption)}</figcaption></figure>")  # fmt: skip
+    return (
+        f'<figure><img alt="{_e(caption)}" src="data:image/png;base64,{data}">'
+        f"<figcaption>{_e(caption)}</figcaption></figure>"
+    )
 
 
-def _table(head: Sequence[str], rows: Sequence[Sequence[object]],
-           classes: Sequence[str] = (), text_columns: int = 1) -> str:  # fmt: skip
+def _table(
+    head: Sequence[str],
+    rows: Sequence[Sequence[object]],
+    classes: Sequence[str] = (),
+    text_columns: int = 1,
+) -> str:
     """An HTML table of escaped cells; `classes`: a class per row ('' none); the first
     `text_columns` columns are text (left-aligned), the others figures."""
     out = ["<table><thead><tr>", *(f"<th>{_e(h)}</th>" for h in head), "</tr></thead><tbody>"]
@@ -196,8 +203,10 @@ def _table(head: Sequence[str], rows: Sequence[Sequence[object]],
         cls = classes[k] if k < len(classes) and classes[k] else ""
         out.append(f'<tr class="{cls}">' if cls else "<tr>")
         cells = [c if isinstance(c, Markup) else _e(c) for c in row]
-        out += [f'<td class="text">{c}</td>' if i < text_columns else f"<td>{c}</td>"
-                for i, c in enumerate(cells)]  # fmt: skip
+        out += [
+            f'<td class="text">{c}</td>' if i < text_columns else f"<td>{c}</td>"
+            for i, c in enumerate(cells)
+        ]
         out.append("</tr>")
     out.append("</tbody></table>")
     return "".join(out)
@@ -235,17 +244,19 @@ def _strongest(diagnosis: Diagnosis) -> str:
         return "none (no joint observable from every pose)"
     noise = f"{sig.significance:.0f} x its uncertainty"
     if sig.harmonic is not None:
-        return (f"{ordinal(sig.harmonic)} harmonic of joint "
-                f"{sig.joint}: {_deg(sig.value)} deg of joint-angle error, {noise}")  # fmt: skip
-    terms = next((t for t in diagnosis.where.joints_from_all_poses if t.joint == sig.joint),
-                 None)  # fmt: skip
+        return (
+            f"{ordinal(sig.harmonic)} harmonic of joint "
+            f"{sig.joint}: {_deg(sig.value)} deg of joint-angle error, {noise}"
+        )
+    terms = next((t for t in diagnosis.where.joints_from_all_poses if t.joint == sig.joint), None)
     if terms is None or sig.family in ("time", "twist"):  # in mm: the sentence as it is
         return sig.text
     for key, sig_key, words, _ in FAMILIES:
         if getattr(terms, sig_key) == sig.significance:
-            value = {"direction_urad": f"{_deg(sig.value)} deg",
-                     "scale_urad_per_rad": f"{sig.value:.1f} ppm"}.get(
-                key, f"{sig.value * DEG_PER_URAD:.3g} deg/(N m)")  # fmt: skip
+            value = {
+                "direction_urad": f"{_deg(sig.value)} deg",
+                "scale_urad_per_rad": f"{sig.value:.1f} ppm",
+            }.get(key, f"{sig.value * DEG_PER_URAD:.3g} deg/(N m)")
             return f"joint {sig.joint} error following its {words}: {value}, {noise}"
     return f"joint {sig.joint}, {noise}"
 
@@ -266,8 +277,10 @@ def _parameters(cal: Calibration) -> str:
     reasons = fixed_reasons(cal.parameters)
     if reasons:
         out.append("<h3>Fixed parameters and why</h3><ul class='tight'>")
-        out += [f"<li><b>{_e(reason or 'fixed')}</b>: {_e(', '.join(names))}</li>"
-                for reason, names in reasons.items()]  # fmt: skip
+        out += [
+            f"<li><b>{_e(reason or 'fixed')}</b>: {_e(', '.join(names))}</li>"
+            for reason, names in reasons.items()
+        ]
         out.append("</ul>")
     return "".join(out)
 
@@ -276,8 +289,10 @@ def _floor_text(diagnosis: Diagnosis) -> str:
     noise = diagnosis.noise
     if noise.sigma_mm is None or noise.floor_abs_rms_mm is None:
         return "unknown: no repeat poses, circle sweeps or stated tracker accuracy"
-    return (f"{noise.floor_abs_rms_mm:.4f} mm rms ({noise.sigma_mm:.4f} mm per axis from "
-            f"{noise_basis(noise.source, noise.n)})")  # fmt: skip
+    return (
+        f"{noise.floor_abs_rms_mm:.4f} mm rms ({noise.sigma_mm:.4f} mm per axis from "
+        f"{noise_basis(noise.source, noise.n)})"
+    )
 
 
 def _times_floor(value_mm: float, diagnosis: Diagnosis) -> str:
@@ -285,16 +300,22 @@ def _times_floor(value_mm: float, diagnosis: Diagnosis) -> str:
     return "-" if floor is None else f"{value_mm / floor:.2f}"
 
 
-def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibration,
-             best_params: str, warnings: Sequence[str]) -> str:  # fmt: skip
+def _verdict(
+    diagnosis: Diagnosis,
+    compared: Sequence[ModelErrors],
+    best: Calibration,
+    best_params: str,
+    warnings: Sequence[str],
+) -> str:
     """The two-minute summary: best model and its held-out error against the floor, the
     named effect, what remains, warnings, and the commands to apply the result."""
     row = next((m for m in compared if m.model == best.label), None)
     error = ""
     if row is not None:
         rms = row.accuracy.absolute_rms_mm
-        error = (f"{rms:.4f} mm rms ({row.scored_on}), {_times_floor(rms, diagnosis)} x the "
-                 "noise floor")  # fmt: skip
+        error = (
+            f"{rms:.4f} mm rms ({row.scored_on}), {_times_floor(rms, diagnosis)} x the noise floor"
+        )
     before = next((m for m in compared if m.model == "nominal"), None)
     if before is not None and row is not None:
         error += f"; nominal: {before.accuracy.absolute_rms_mm:.4f} mm rms"
@@ -308,64 +329,110 @@ def _verdict(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: Calibr
         ("Best model", f"{best.label} ({best_params})"),
         ("Held-out error", error or "-"),
         ("Noise floor", _floor_text(diagnosis)),
-        ("Named effect", diagnosis.verdict + (f" (share of the learnable gap: {shares})"
-                                              if shares else "")),
+        (
+            "Named effect",
+            diagnosis.verdict + (f" (share of the learnable gap: {shares})" if shares else ""),
+        ),
         ("What remains", diagnosis.unexplained.note),
-        *([("Outside the vocabulary", diagnosis.outside_vocabulary.line())]
-          if diagnosis.outside_vocabulary is not None else []),
-        ("Warnings", f"{len(warnings)} warning(s), {len(diagnosis.outliers)} flagged "
-                     "outlier(s): see below" if warnings or diagnosis.outliers else "none"),
-    ]  # fmt: skip
+        *(
+            [("Outside the vocabulary", diagnosis.outside_vocabulary.line())]
+            if diagnosis.outside_vocabulary is not None
+            else []
+        ),
+        (
+            "Warnings",
+            f"{len(warnings)} warning(s), {len(diagnosis.outliers)} flagged outlier(s): see below"
+            if warnings or diagnosis.outliers
+            else "none",
+        ),
+    ]
     if diagnosis.implausible:  # nonsense: say so first, and never advise using it
         items.insert(0, ("IMPLAUSIBLE", "; ".join(diagnosis.implausible)))
         body = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in items)
-        return (f'<section class="verdict warn"><dl>{body}</dl><p><b>Next</b>: fix the data '
-                "(units, robot description, joint order) and diagnose again; export, "
-                "compensate and predict refuse this result.</p></section>")  # fmt: skip
+        return (
+            f'<section class="verdict warn"><dl>{body}</dl><p><b>Next</b>: fix the data '
+            "(units, robot description, joint order) and diagnose again; export, "
+            "compensate and predict refuse this result.</p></section>"
+        )
     body = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in items)
     commands = (
         f"robot-calib export {best_params} --format urdf -o calibrated.urdf\n"
         f"robot-calib export {best_params} --format dh -o dh_table.csv\n"
         f"robot-calib compensate {best_params} --joints JOINTS.csv -o COMPENSATED.csv"
     )
-    return (f'<section class="verdict {tone}"><dl>{body}</dl>'
-            "<p><b>Next</b>: export the best model for the controller, or correct joint "
-            "commands with it (msgs_doc/export.md, msgs_doc/compensate.md):</p>"
-            f"<pre><code>{_e(commands)}</code></pre></section>")  # fmt: skip
+    return (
+        f'<section class="verdict {tone}"><dl>{body}</dl>'
+        "<p><b>Next</b>: export the best model for the controller, or correct joint "
+        "commands with it (msgs_doc/export.md, msgs_doc/compensate.md):</p>"
+        f"<pre><code>{_e(commands)}</code></pre></section>"
+    )
 
 
-def _accuracy(diagnosis: Diagnosis, compared: Sequence[ModelErrors], best: str,
-              figures: FigureCache, histogram: Callable[[], Figure | None]) -> str:  # fmt: skip
+def _accuracy(
+    diagnosis: Diagnosis,
+    compared: Sequence[ModelErrors],
+    best: str,
+    figures: FigureCache,
+    histogram: Callable[[], Figure | None],
+) -> str:
     rows = [
-        [_model(m.model), m.role, m.scored_on, m.accuracy.n_points,
-         m.accuracy.pairwise_text(),
-         f"{m.accuracy.absolute_mean_mm:.4f}", f"{m.accuracy.absolute_rms_mm:.4f}",
-         f"{m.accuracy.absolute_max_mm:.4f}", _times_floor(m.accuracy.absolute_rms_mm, diagnosis)]
+        [
+            _model(m.model),
+            m.role,
+            m.scored_on,
+            m.accuracy.n_points,
+            m.accuracy.pairwise_text(),
+            f"{m.accuracy.absolute_mean_mm:.4f}",
+            f"{m.accuracy.absolute_rms_mm:.4f}",
+            f"{m.accuracy.absolute_max_mm:.4f}",
+            _times_floor(m.accuracy.absolute_rms_mm, diagnosis),
+        ]
         for m in compared
-    ]  # fmt: skip
+    ]
     classes = ["best" if m.model == best else "" for m in compared]
-    head = ["model", "", "scored on", "points", "seed criterion mean / max [mm]",
-            "abs mean [mm]", "abs rms [mm]", "abs max [mm]", "x noise floor"]  # fmt: skip
+    head = [
+        "model",
+        "",
+        "scored on",
+        "points",
+        "seed criterion mean / max [mm]",
+        "abs mean [mm]",
+        "abs rms [mm]",
+        "abs max [mm]",
+        "x noise floor",
+    ]
     scored = sorted({m.scored_on for m in compared})
-    note = ("" if scored == ["hold-out bags"] else
-            "<p class='muted'>Not all rows are held out: in-sample rows are optimistic; "
-            "k-fold rows are each fold predicted by the model fitted without it.</p>")  # fmt: skip
-    return (_table(head, rows, classes, text_columns=3) + note
-            + _img(figures.png("histogram", histogram), "Per-point error of each model "
-                   "(absolute distance, tracker frame); dotted: each model's rms"))  # fmt: skip
+    note = (
+        ""
+        if scored == ["hold-out bags"]
+        else "<p class='muted'>Not all rows are held out: in-sample rows are optimistic; "
+        "k-fold rows are each fold predicted by the model fitted without it.</p>"
+    )
+    return (
+        _table(head, rows, classes, text_columns=3)
+        + note
+        + _img(
+            figures.png("histogram", histogram),
+            "Per-point error of each model "
+            "(absolute distance, tracker frame); dotted: each model's rms",
+        )
+    )
 
 
 def _ladder(diagnosis: Diagnosis, ladder: Ladder, figures: FigureCache) -> str:
     rows = []
     for rung in diagnosis.ladder:
         share = rung.learnable_gap_share
-        rows.append([
-            _model(rung.model), rung.free_parameters,
-            f"{rung.holdout_seed_text()}",
-            f"{rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f}",
-            _times_floor(rung.holdout_abs_rms_mm, diagnosis),
-            "-" if share is None else percent(share),
-        ])  # fmt: skip
+        rows.append(
+            [
+                _model(rung.model),
+                rung.free_parameters,
+                f"{rung.holdout_seed_text()}",
+                f"{rung.holdout_abs_mean_mm:.4f} / {rung.holdout_abs_rms_mm:.4f}",
+                _times_floor(rung.holdout_abs_rms_mm, diagnosis),
+                "-" if share is None else percent(share),
+            ]
+        )
     head = [
         "model",
         "free parameters",
@@ -374,8 +441,11 @@ def _ladder(diagnosis: Diagnosis, ladder: Ladder, figures: FigureCache) -> str:
         "x noise floor",
         "share of the learnable gap",
     ]
-    out = [f"<p>Scored on {_e(diagnosis.scored_on)}; each rung chosen on "
-           f"{_e(diagnosis.selected_on)}.</p>", _table(head, rows)]  # fmt: skip
+    out = [
+        f"<p>Scored on {_e(diagnosis.scored_on)}; each rung chosen on "
+        f"{_e(diagnosis.selected_on)}.</p>",
+        _table(head, rows),
+    ]
     shares = diagnosis.effect_shares()
     if shares:
         out.append(
@@ -385,9 +455,11 @@ def _ladder(diagnosis: Diagnosis, ladder: Ladder, figures: FigureCache) -> str:
         )
     if diagnosis.learnable is not None:
         note = diagnosis.bound_note()
-        out.append(f"<p>{_e(diagnosis.learnable.line())}"
-                   f"{'; ' + _e(note) if note else ''}. Method: "
-                   f"{_e(diagnosis.learnable.method)}.</p>")  # fmt: skip
+        out.append(
+            f"<p>{_e(diagnosis.learnable.line())}"
+            f"{'; ' + _e(note) if note else ''}. Method: "
+            f"{_e(diagnosis.learnable.method)}.</p>"
+        )
     out.append(
         _img(
             figures.png("ladder", lambda: ladder_figure(ladder, diagnosis.noise.floor_abs_rms_mm)),
@@ -397,42 +469,80 @@ def _ladder(diagnosis: Diagnosis, ladder: Ladder, figures: FigureCache) -> str:
     return "".join(out)
 
 
-def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
-           figures: FigureCache) -> str:  # fmt: skip
+def _where(
+    diagnosis: Diagnosis, ladder: Ladder, recording: Recording, figures: FigureCache
+) -> str:
     where, removed = diagnosis.where, diagnosis.removed_by_best_model
     out = []
     if where.joints:
-        out.append("<h3>Per joint, from its circle sweeps (geometric model)</h3>"
-                   "<p>Angle-equivalent error along each sweep's arc; a joint is observable "
-                   "only through targets at least 5 mm from its axis.</p>")  # fmt: skip
-        rows = [[j.joint, _deg(j.arc_rms_urad), harmonic_cells(j, where, _deg),
-                 _deg(j.direction_split_urad),
-                 _mm(j.slope_vs_angle_urad_per_rad, 1), _mm(j.gravity_torque_correlation, 2),
-                 _note(removed_note(removed, j.joint))]
-                for j in where.joints]  # fmt: skip
-        out.append(_table(["joint", "rms [deg]", "harmonics 1-4 [deg] (x uncertainty)",
-                           "forth-back split [deg]", "slope vs angle [ppm]",
-                           "corr. with gravity torque", BEST_MODEL_COLUMN], rows))  # fmt: skip
+        out.append(
+            "<h3>Per joint, from its circle sweeps (geometric model)</h3>"
+            "<p>Angle-equivalent error along each sweep's arc; a joint is observable "
+            "only through targets at least 5 mm from its axis.</p>"
+        )
+        rows = [
+            [
+                j.joint,
+                _deg(j.arc_rms_urad),
+                harmonic_cells(j, where, _deg),
+                _deg(j.direction_split_urad),
+                _mm(j.slope_vs_angle_urad_per_rad, 1),
+                _mm(j.gravity_torque_correlation, 2),
+                _note(removed_note(removed, j.joint)),
+            ]
+            for j in where.joints
+        ]
+        out.append(
+            _table(
+                [
+                    "joint",
+                    "rms [deg]",
+                    "harmonics 1-4 [deg] (x uncertainty)",
+                    "forth-back split [deg]",
+                    "slope vs angle [ppm]",
+                    "corr. with gravity torque",
+                    BEST_MODEL_COLUMN,
+                ],
+                rows,
+            )
+        )
     else:
-        out.append("<p>No circle sweeps in the recording (no run of poses in which one "
-                   "joint moves alone): no per-joint arc figures.</p>")  # fmt: skip
+        out.append(
+            "<p>No circle sweeps in the recording (no run of poses in which one "
+            "joint moves alone): no per-joint arc figures.</p>"
+        )
     out.append(
         "<h3>Per joint, from every pose</h3><p>Joint-angle error terms, all fitted together "
         "with the model's own parameters (what they absorb does not count); in brackets: x "
         "their own uncertainty, 0 where a term does not lower the error of poses left out "
         f"(k-fold); {NOT_RESOLVED}: not resolvable from these poses.</p>"
     )
-    rows = [[t.joint, harmonic_cells(t, where, _deg),
-             _term_deg(where, t, "direction") if t.observable else unobservable(t),
-             _term_deg(where, t, "scale"), _term_deg(where, t, "gravity"),
-             _note(removed_note(removed, t.joint))]
-            for t in where.joints_from_all_poses]  # fmt: skip
-    out.append(_table(["joint", "harmonics 1-4 [deg]", "direction (backlash) [deg]",
-                       "scale [ppm]", "gravity [deg/(N m)]", BEST_MODEL_COLUMN],
-                      rows))  # fmt: skip
+    rows = [
+        [
+            t.joint,
+            harmonic_cells(t, where, _deg),
+            _term_deg(where, t, "direction") if t.observable else unobservable(t),
+            _term_deg(where, t, "scale"),
+            _term_deg(where, t, "gravity"),
+            _note(removed_note(removed, t.joint)),
+        ]
+        for t in where.joints_from_all_poses
+    ]
+    out.append(
+        _table(
+            [
+                "joint",
+                "harmonics 1-4 [deg]",
+                "direction (backlash) [deg]",
+                "scale [ppm]",
+                "gravity [deg/(N m)]",
+                BEST_MODEL_COLUMN,
+            ],
+            rows,
+        )
+    )
     found = [s for s in where.harmonic_orders if s.dominant_orders]
-    after = (None if diagnosis.unexplained.where is diagnosis.where
-             else diagnosis.unexplained.where)  # fmt: skip
+    after = None if diagnosis.unexplained.where is diagnosis.where else diagnosis.unexplained.where
     if found:
         out.append(
             "<h3>Joint-angle harmonics (frequency scan, geometric model)</h3><p>Orders "
@@ -452,37 +562,64 @@ def _where(diagnosis: Diagnosis, ladder: Ladder, recording: Recording,
                 s.dominant_orders, s.dominant_urad, s.dominant_significance, s.meaning
             )
         ]
-        out.append(_table(["joint", "order [per turn]", "amplitude [deg]",
-                           "x its uncertainty (joint fit)", "usually", BEST_MODEL_COLUMN],
-                          rows))  # fmt: skip
+        out.append(
+            _table(
+                [
+                    "joint",
+                    "order [per turn]",
+                    "amplitude [deg]",
+                    "x its uncertainty (joint fit)",
+                    "usually",
+                    BEST_MODEL_COLUMN,
+                ],
+                rows,
+            )
+        )
     reach = ", ".join(f"{v:.4f}" for v in where.workspace.rms_by_reach_tertile_mm)
     gone = signature_removed(where.strongest_signature, removed)
     strongest = _strongest(diagnosis) + (f" ({gone})" if gone else "")
-    out.append(f"<p><b>Strongest structure</b>: {_e(strongest)}. Against time: "
-               f"{_e(where.time.line())}. "
-               f"By reach (near to far): {reach} mm.</p>")  # fmt: skip
+    out.append(
+        f"<p><b>Strongest structure</b>: {_e(strongest)}. Against time: "
+        f"{_e(where.time.line())}. "
+        f"By reach (near to far): {reach} mm.</p>"
+    )
     if where.twists():
-        out.append("<p><b>Links twisting under the load</b>:</p><ul>"
-                   + "".join(f"<li>{_e(signature_text(t))}</li>" for t in where.twists())
-                   + "</ul>")  # fmt: skip
-    out.append(_img(angle_figure(ladder, recording, "deg"),
-                    "Geometric model: arc error against each joint's reading, by approach "
-                    "direction"))  # fmt: skip
+        out.append(
+            "<p><b>Links twisting under the load</b>:</p><ul>"
+            + "".join(f"<li>{_e(signature_text(t))}</li>" for t in where.twists())
+            + "</ul>"
+        )
+    out.append(
+        _img(
+            angle_figure(ladder, recording, "deg"),
+            "Geometric model: arc error against each joint's reading, by approach direction",
+        )
+    )
     out.append(
         _img(
             figures.png("map", lambda: residual_map_figure(ladder, recording)),
             "In-sample |residual| against reach, height and every joint's reading",
         )
     )
-    out.append(_img(figures.png("time", lambda: time_figure(ladder, recording)),
-                    "In-sample |residual| against time"))  # fmt: skip
+    out.append(
+        _img(
+            figures.png("time", lambda: time_figure(ladder, recording)),
+            "In-sample |residual| against time",
+        )
+    )
     if diagnosis.tracker_drift:
-        out.append("<h3>The tracker's drift (reference reflectors)</h3><ul class='tight'>"
-                   + "".join(f"<li>{_e(d.line())}</li>" for d in diagnosis.tracker_drift)
-                   + "</ul>")  # fmt: skip
-        out.append(_img(figures.png("drift", lambda: drift_figure(recording)),
-                        "Reference reflectors: displacement from their first place as read "
-                        "(dots) and as the fitted drift moves them (lines)"))  # fmt: skip
+        out.append(
+            "<h3>The tracker's drift (reference reflectors)</h3><ul class='tight'>"
+            + "".join(f"<li>{_e(d.line())}</li>" for d in diagnosis.tracker_drift)
+            + "</ul>"
+        )
+        out.append(
+            _img(
+                figures.png("drift", lambda: drift_figure(recording)),
+                "Reference reflectors: displacement from their first place as read "
+                "(dots) and as the fitted drift moves them (lines)",
+            )
+        )
     return "".join(out)
 
 
@@ -492,32 +629,49 @@ def vectors_figure(ladder: Ladder, recording: Recording) -> Figure:
     points = held.points if held is not None else recording.points
     rungs = (ladder.rungs[0], ladder.rungs[-1])[: len(ladder.rungs)]
     rows = rungs[-1].scored_rows  # a subset scored (100k poses): both panels on it
-    residuals = [(r.model, r.heldout_residuals if r.scored_rows is not None or rows is None
-                  else r.heldout_residuals[rows]) for r in rungs]  # fmt: skip
-    return quiver_figure(ladder, rungs[-1].scored(points) if held is None else points,
-                         residuals, ladder.scored_on)  # fmt: skip
+    residuals = [
+        (
+            r.model,
+            r.heldout_residuals
+            if r.scored_rows is not None or rows is None
+            else r.heldout_residuals[rows],
+        )
+        for r in rungs
+    ]
+    return quiver_figure(
+        ladder, rungs[-1].scored(points) if held is None else points, residuals, ladder.scored_on
+    )
 
 
-def page_figures(ladder: Ladder, recording: Recording, compared: Sequence[ModelErrors]
-                 ) -> list[tuple[str, Callable[[], Figure | None]]]:  # fmt: skip
+def page_figures(
+    ladder: Ladder, recording: Recording, compared: Sequence[ModelErrors]
+) -> list[tuple[str, Callable[[], Figure | None]]]:
     """The HTML page's own figures (the Markdown report's, `report.report_figures`, it
     shows too): (cache key, draw) each, the draws picklable (`FigureCache.draw_aside`)."""
     scored = " / ".join(sorted({m.scored_on for m in compared}))
     errors = [(m.model, m.errors_mm) for m in compared]
-    return [("histogram", partial(error_histogram_figure, errors, scored)),
-            ("vectors", partial(vectors_figure, ladder, recording))]  # fmt: skip
+    return [
+        ("histogram", partial(error_histogram_figure, errors, scored)),
+        ("vectors", partial(vectors_figure, ladder, recording)),
+    ]
 
 
 def _iso(diagnosis: Diagnosis) -> str:
     if not diagnosis.iso9283:
-        return ("<p class='muted'>No repeated poses (readings measured at least 3 times): no "
-                "ISO 9283 figures. The <code>iso9283</code> plan records them.</p>")  # fmt: skip
+        return (
+            "<p class='muted'>No repeated poses (readings measured at least 3 times): no "
+            "ISO 9283 figures. The <code>iso9283</code> plan records them.</p>"
+        )
     figures = diagnosis.iso9283
-    rows = [[_model(f.model), len(f.poses), f"{f.ap_max_mm:.4f}", f"{f.rp_max_mm:.4f}"]
-            for f in figures]  # fmt: skip
-    out = [f"<p>Pose accuracy AP and repeatability RP (positions), {_e(figures[0].scored_on)}, "
-           "before (nominal) and after calibration.</p>",
-           _table(["model", "repeated poses", "AP max [mm]", "RP max [mm]"], rows)]  # fmt: skip
+    rows = [
+        [_model(f.model), len(f.poses), f"{f.ap_max_mm:.4f}", f"{f.rp_max_mm:.4f}"]
+        for f in figures
+    ]
+    out = [
+        f"<p>Pose accuracy AP and repeatability RP (positions), {_e(figures[0].scored_on)}, "
+        "before (nominal) and after calibration.</p>",
+        _table(["model", "repeated poses", "AP max [mm]", "RP max [mm]"], rows),
+    ]
     out.append(_table(*iso_pose_table(figures)))
     return "".join(out)
 
@@ -527,29 +681,53 @@ def _problems(diagnosis: Diagnosis, warnings: Sequence[str]) -> str:
     if not warnings:
         out = ["<p>No warnings.</p>"]
     if diagnosis.outliers:
-        rows = [[o.bag, o.index, o.target or "-", o.kind,
-                 "-" if o.stamp_ns is None else f"{o.stamp_ns * 1e-9:.3f}",
-                 f"{o.size_m * 1e3:.3f}", f"{o.sigmas:.0f}",
-                 "-" if o.references_m is None else f"{o.references_m * 1e3:.3f}",
-                 ", ".join(f"{c:+.2f}" for c in o.direction)]
-                for o in diagnosis.outliers]  # fmt: skip
-        out.append(f"<h3>Flagged outliers ({_e(outlier_counts(diagnosis.outliers))}; never "
-                   "fitted, never explained as an effect of the robot)</h3>")  # fmt: skip
-        out.append(_table(["bag", "point", "target", "tracker or robot", "stamp [s]",
-                           "size [mm]", "robust sigmas", "reference reflectors off [mm]",
-                           "direction (tracker frame)"], rows))  # fmt: skip
+        rows = [
+            [
+                o.bag,
+                o.index,
+                o.target or "-",
+                o.kind,
+                "-" if o.stamp_ns is None else f"{o.stamp_ns * 1e-9:.3f}",
+                f"{o.size_m * 1e3:.3f}",
+                f"{o.sigmas:.0f}",
+                "-" if o.references_m is None else f"{o.references_m * 1e3:.3f}",
+                ", ".join(f"{c:+.2f}" for c in o.direction),
+            ]
+            for o in diagnosis.outliers
+        ]
+        out.append(
+            f"<h3>Flagged outliers ({_e(outlier_counts(diagnosis.outliers))}; never "
+            "fitted, never explained as an effect of the robot)</h3>"
+        )
+        out.append(
+            _table(
+                [
+                    "bag",
+                    "point",
+                    "target",
+                    "tracker or robot",
+                    "stamp [s]",
+                    "size [mm]",
+                    "robust sigmas",
+                    "reference reflectors off [mm]",
+                    "direction (tracker frame)",
+                ],
+                rows,
+            )
+        )
     else:
         out.append("<p>No measurement flagged as an outlier.</p>")
     if diagnosis.reads_line():
         out.append(f"<p><b>Calibration data</b>: {_e(diagnosis.reads_line())}.</p>")
     if diagnosis.mass_model:
-        out.append(f"<p><b>Mass model of the gravity effects</b>: {_e(diagnosis.mass_model)}"
-                   ".</p>")  # fmt: skip
+        out.append(f"<p><b>Mass model of the gravity effects</b>: {_e(diagnosis.mass_model)}.</p>")
     places = diagnosis.concentration_lines()
     if places:
-        out.append("<h3>Where the residual concentrates</h3><ul class='tight'>"
-                   + "".join(f"<li>{_e(place)}</li>" for place in places)
-                   + "</ul>")  # fmt: skip
+        out.append(
+            "<h3>Where the residual concentrates</h3><ul class='tight'>"
+            + "".join(f"<li>{_e(place)}</li>" for place in places)
+            + "</ul>"
+        )
     return "".join(out)
 
 
@@ -570,26 +748,42 @@ def html_report(
     the figures already drawn for the Markdown report (default: none yet)."""
     figures = FigureCache() if figures is None else figures
     own = dict(page_figures(ladder, recording, compared))
-    every = list(dict.fromkeys([*recording.warnings, *diagnosis.warnings, *warnings,
-                                *diagnosis.learnable_warnings()]))  # fmt: skip
+    every = list(
+        dict.fromkeys(
+            [*recording.warnings, *diagnosis.warnings, *warnings, *diagnosis.learnable_warnings()]
+        )
+    )
     held = f" ({', '.join(diagnosis.holdout)})" if diagnosis.holdout else ""
     sections = [
-        ("accuracy", "Accuracy before and after calibration",
-         _accuracy(diagnosis, compared, best.label, figures, own["histogram"])),
-        ("ladder", "The ladder: which effects, and each one's share",
-         _ladder(diagnosis, ladder, figures)),
+        (
+            "accuracy",
+            "Accuracy before and after calibration",
+            _accuracy(diagnosis, compared, best.label, figures, own["histogram"]),
+        ),
+        (
+            "ladder",
+            "The ladder: which effects, and each one's share",
+            _ladder(diagnosis, ladder, figures),
+        ),
         ("where", "Where the residual lies", _where(diagnosis, ladder, recording, figures)),
-        ("vectors", "3D residual vectors", _img(
-            figures.png("vectors", own["vectors"]),
-            "Residual vectors (predicted - measured) at the measured points, robot base "
-            "frame; one scale for all panels (in the title); colour: |residual|")),
+        (
+            "vectors",
+            "3D residual vectors",
+            _img(
+                figures.png("vectors", own["vectors"]),
+                "Residual vectors (predicted - measured) at the measured points, robot base "
+                "frame; one scale for all panels (in the title); colour: |residual|",
+            ),
+        ),
         ("iso9283", "ISO 9283 pose accuracy and repeatability", _iso(diagnosis)),
         ("parameters", f"Parameters of the best model ({best.label})", _parameters(best)),
         ("warnings", "Warnings and flagged outliers", _problems(diagnosis, every)),
-    ]  # fmt: skip
+    ]
     nav = " · ".join(f'<a href="#{key}">{_e(title)}</a>' for key, title, _ in sections)
-    body = "".join(f'<section id="{key}"><h2>{_e(title)}</h2>{content}</section>'
-                   for key, title, content in sections)  # fmt: skip
+    body = "".join(
+        f'<section id="{key}"><h2>{_e(title)}</h2>{content}</section>'
+        for key, title, content in sections
+    )
     return (
         '<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
         '<meta name="viewport" content="width=device-width, initial-scale=1">'

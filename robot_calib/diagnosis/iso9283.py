@@ -88,10 +88,16 @@ def iso9283(
         command = predicted[group].mean(axis=0)
         distance = np.linalg.norm(measured - centre, axis=1)
         rp = distance.mean() + 3.0 * distance.std(ddof=1)
-        figures.append(PoseFigures(int(group[0]), len(group),
-                                   float(np.linalg.norm(centre - command) * 1e3),
-                                   float(rp * 1e3)))  # fmt: skip
+        figures.append(
+            PoseFigures(
+                int(group[0]),
+                len(group),
+                float(np.linalg.norm(centre - command) * 1e3),
+                float(rp * 1e3),
+            )
+        )
     if not figures:
         return None
-    return Iso9283(model, scored_on, figures, max(f.ap_mm for f in figures),
-                   max(f.rp_mm for f in figures))  # fmt: skip
+    return Iso9283(
+        model, scored_on, figures, max(f.ap_mm for f in figures), max(f.rp_mm for f in figures)
+    )

@@ -118,8 +118,12 @@ class Ladder:
     spectra: dict[str, list[JointSpectrum]] = field(default_factory=dict)
 
 
-def candidates(robot: RobotDescription, recording: Recording, present: tuple[Effect, ...],
-               spectra: list[JointSpectrum] | None = None) -> list[Effect]:  # fmt: skip
+def candidates(
+    robot: RobotDescription,
+    recording: Recording,
+    present: tuple[Effect, ...],
+    spectra: list[JointSpectrum] | None = None,
+) -> list[Effect]:
     """Every effect x joint (x option, e.g. eccentricity order) of the vocabulary able to
     move a measured point (`Effect.ladder_candidates`), and the joint_harmonics the
     frequency scan `spectra` picked (`frequency.harmonic_candidates`), that add parameters
@@ -130,8 +134,9 @@ def candidates(robot: RobotDescription, recording: Recording, present: tuple[Eff
     return [e for e in pool if not any(p.supersedes(e, robot) for p in present)]
 
 
-def _replace(present: tuple[Effect, ...], new: Effect,
-             robot: RobotDescription) -> tuple[Effect, ...]:  # fmt: skip
+def _replace(
+    present: tuple[Effect, ...], new: Effect, robot: RobotDescription
+) -> tuple[Effect, ...]:
     """`present` plus `new`, which replaces what it supersedes (e.g. a lower order)."""
     return tuple(e for e in present if not new.supersedes(e, robot)) + (new,)
 
@@ -148,8 +153,9 @@ SCREEN_POSES = 20000
 Screened = tuple[Effect, float, float]  # candidate, linearised held-out, in-sample rms [m]
 
 
-def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
-            holdout: Recording | None) -> tuple[float, list[Screened]]:  # fmt: skip
+def _screen(
+    cal: Calibration, pool: list[Effect], recording: Recording, holdout: Recording | None
+) -> tuple[float, list[Screened]]:
     """Linearised held-out rms [m] of the current model, and of each candidate added with
     its linearised in-sample rms [m] (one step on all calibration points)."""
     robot = cal.model.robot
@@ -174,8 +180,11 @@ def _screen(cal: Calibration, pool: list[Effect], recording: Recording,
     base = screen.score(base_cols)
     scores = []
     for effect in pool:
-        cols = base_cols + [params.index(name) for name in effect.parameter_names(robot)
-                            if params.index(name) not in base_cols]  # fmt: skip
+        cols = base_cols + [
+            params.index(name)
+            for name in effect.parameter_names(robot)
+            if params.index(name) not in base_cols
+        ]
         scores.append((effect, screen.score(cols), screen.insample(cols)))
     return base, scores
 
@@ -200,8 +209,9 @@ class LinearScreen:
     or None; n_points, n_holdout : their numbers of points (3 rows each).
     """
 
-    def __init__(self, own: dict[int, _Sums], holdout: _Sums | None, n_points: int,
-                 n_holdout: int = 0) -> None:  # fmt: skip
+    def __init__(
+        self, own: dict[int, _Sums], holdout: _Sums | None, n_points: int, n_holdout: int = 0
+    ) -> None:
         n_cols = len(next(iter(own.values())).rhs) if own else 0
         total = _Sums.total(list(own.values()), n_cols)
         norms = np.sqrt(np.maximum(np.diag(total.gram), 0.0))  # the columns' norms
@@ -215,30 +225,43 @@ class LinearScreen:
         self.holdout = None if holdout is None else holdout.scaled(scale)
 
     @classmethod
-    def of_rows(cls, residual: Array, jac: Array, fold: IntArray, h_res: Array | None = None,
-                h_jac: Array | None = None) -> LinearScreen:  # fmt: skip
+    def of_rows(
+        cls,
+        residual: Array,
+        jac: Array,
+        fold: IntArray,
+        h_res: Array | None = None,
+        h_jac: Array | None = None,
+    ) -> LinearScreen:
         """The screen of residuals (n, 3) [m] and their Jacobian (n, 3, P) with the fold
         (n,) of each, and hold-out rows h_res (m, 3), h_jac (m, 3, P) or None."""
         n_cols = jac.shape[-1]
-        own = {int(f): _Sums.of(jac[fold == f].reshape(-1, n_cols),
-                                residual[fold == f].reshape(-1))
-               for f in np.unique(fold)}  # fmt: skip
+        own = {
+            int(f): _Sums.of(jac[fold == f].reshape(-1, n_cols), residual[fold == f].reshape(-1))
+            for f in np.unique(fold)
+        }
         held = None
         if h_res is not None and h_jac is not None:
             held = _Sums.of(h_jac.reshape(-1, n_cols), h_res.reshape(-1))
         return cls(own, held, len(residual), 0 if h_res is None else len(h_res))
 
     @classmethod
-    def of_model(cls, model: KinematicModel, params: ParameterVector, recording: Recording,
-                 holdout: Recording | None) -> LinearScreen:  # fmt: skip
+    def of_model(
+        cls,
+        model: KinematicModel,
+        params: ParameterVector,
+        recording: Recording,
+        holdout: Recording | None,
+    ) -> LinearScreen:
         """The screen of `model` at `params` on `recording` (k-fold by `pose_folds`) and
         `holdout`, its Jacobian evaluated BLOCK_POSES poses at a time and folded into the
         sums: memory O(block x P + P^2 x folds), never (n, 3, P)."""
         n_cols = len(params)
         fold = pose_folds(recording)
 
-        def sums(rec: Recording, which: IntArray | None, first: int = 0,
-                 end: int | None = None) -> dict[int, _Sums]:  # fmt: skip
+        def sums(
+            rec: Recording, which: IntArray | None, first: int = 0, end: int | None = None
+        ) -> dict[int, _Sums]:
             out: dict[int, _Sums] = {}
             end = len(rec) if end is None else end
             for start in range(first, end, BLOCK_POSES):
@@ -282,8 +305,10 @@ class LinearScreen:
 
     def score(self, cols: list[int]) -> float:
         cols = [c for c in cols if self.keep[c]]
-        total = sum(self.own[f].after(self._step(normal, cols), cols)
-                    for f, normal in self.training.items())  # fmt: skip
+        total = sum(
+            self.own[f].after(self._step(normal, cols), cols)
+            for f, normal in self.training.items()
+        )
         cv = total / max(self.n_points, 1)
         if self.holdout is None:
             return float(np.sqrt(cv))
@@ -329,8 +354,9 @@ class _Sums:
         return max(value, 0.0)
 
 
-def score_rung(cal: Calibration, recording: Recording,
-               holdout: Recording | None) -> tuple[Accuracy, Array, float]:  # fmt: skip
+def score_rung(
+    cal: Calibration, recording: Recording, holdout: Recording | None
+) -> tuple[Accuracy, Array, float]:
     """Held-out accuracy of a calibrated model (on the hold-out bags when given, else k-fold
     over whole poses, each fold refitted from the full solution), its residuals (m, 3) [m],
     and the selection score `combined_rms` [m]."""
@@ -362,8 +388,7 @@ def kfold_parameters(
     x = params.pack()
     # each fold's sums over its own rows, and the prior's (in every fold's training set):
     # a fold's training sums are the total minus its own (no copy of the rows per fold)
-    own = {int(f): _Sums.of(jac[row_fold == f], residual[row_fold == f])
-           for f in np.unique(fold)}  # fmt: skip
+    own = {int(f): _Sums.of(jac[row_fold == f], residual[row_fold == f]) for f in np.unique(fold)}
     data = _Sums.total(list(own.values()), len(x))
     norms = np.sqrt(np.maximum(np.diag(data.gram), 0.0))  # the data's columns set the scale
     scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
@@ -424,11 +449,19 @@ def run_ladder(
         still = ~geo.inliers & outlier_mask(residual, sigma)
         readmitted, n_flagged = int((~geo.inliers & ~still).sum()), int((~geo.inliers).sum())
         if readmitted:
-            say(f"outliers: {readmitted} of the {n_flagged} flagged measurements are explained "
-                f"by {best.name}: re-admitted, climbing again")  # fmt: skip
+            say(
+                f"outliers: {readmitted} of the {n_flagged} flagged measurements are explained "
+                f"by {best.name}: re-admitted, climbing again"
+            )
             recording = full.subset(~still)
-            geo = calibrate(recording, robot, "geometric", log=None, screen_outliers=False,
-                            tracker_sigma_m=tracker_sigma_m)  # fmt: skip
+            geo = calibrate(
+                recording,
+                robot,
+                "geometric",
+                log=None,
+                screen_outliers=False,
+                tracker_sigma_m=tracker_sigma_m,
+            )
             outliers = describe_outliers(full, still, residual, sigma)
             found = climb(recording, geo=geo, holdout=holdout)
     if holdout is not None:  # judged against the best model: an effect's structure is not
@@ -448,11 +481,23 @@ def run_ladder(
     bound, hybrid = _learn_the_rest(rungs, recording, holdout, scored_on)
     say(bound.line())
     if hybrid is not None:
-        say(f"  hybrid {hybrid.model}: held-out rms {hybrid.heldout.absolute_rms_mm:.4f} mm "
-            f"(physical {rungs[-1].heldout.absolute_rms_mm:.4f} mm)")  # fmt: skip
+        say(
+            f"  hybrid {hybrid.model}: held-out rms {hybrid.heldout.absolute_rms_mm:.4f} mm "
+            f"(physical {rungs[-1].heldout.absolute_rms_mm:.4f} mm)"
+        )
         rungs = [*rungs, hybrid]
-    return Ladder(rungs, noise, scored_on, found.rounds, recording, holdout, outliers, bound,
-                  found.refits, found.spectra)  # fmt: skip
+    return Ladder(
+        rungs,
+        noise,
+        scored_on,
+        found.rounds,
+        recording,
+        holdout,
+        outliers,
+        bound,
+        found.refits,
+        found.spectra,
+    )
 
 
 def _learn_the_rest(
@@ -477,8 +522,9 @@ def _learn_the_rest(
             fold, geometric = fold[keep], geometric[keep]
     else:
         fold, fitted = pose_folds(scored), {}
-    before, after, correction = corrected_heldout(physical.calibration, scored, holdout,
-                                                  fold, fitted, final=False)  # fmt: skip
+    before, after, correction = corrected_heldout(
+        physical.calibration, scored, holdout, fold, fitted, final=False
+    )
     score = combined_rms(after, None)
     gain = score <= (1.0 - MIN_GAIN) * combined_rms(before, None)
     if gain and holdout is None:  # k-fold: the first fold's correction stood in so far
@@ -491,8 +537,17 @@ def _learn_the_rest(
     acc = accuracy(measured, measured + after)
     insample = accuracy(scored.points, cal.predict(scored.poses))
     rows = None if keep is None or holdout is not None else np.flatnonzero(keep)
-    return bound, Rung(physical.model + LEARNED_SUFFIX, physical.effects, cal, acc, after,
-                       score, learned=True, insample=insample, scored_rows=rows)  # fmt: skip
+    return bound, Rung(
+        physical.model + LEARNED_SUFFIX,
+        physical.effects,
+        cal,
+        acc,
+        after,
+        score,
+        learned=True,
+        insample=insample,
+        scored_rows=rows,
+    )
 
 
 @dataclass(frozen=True)
@@ -526,22 +581,31 @@ def _try_rung(
     robot = current.calibration.model.robot
     effects = _replace(current.effects, effect, robot)
     name = model_name(effects)
-    cal = calibrate(recording, robot, name, log=None, start=current.calibration,
-                    screen_outliers=False)  # fmt: skip
+    cal = calibrate(
+        recording, robot, name, log=None, start=current.calibration, screen_outliers=False
+    )
     insample = cal.accuracy.absolute_rms_mm
     reason = _rejected_before_kfold(cal, current, lin_insample)
     if reason:
         say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, rejected: {reason}")
         return None, RefitOutcome(name, lin_score * 1e3, insample, None, False, reason)
     acc, res, score = score_rung(cal, recording, holdout)
-    say(f"  try {name}: linearised {lin_score * 1e3:.4f} mm, refitted "
-        f"{score * 1e3:.4f} mm ({current.model}: {current.score_m * 1e3:.4f})")  # fmt: skip
+    say(
+        f"  try {name}: linearised {lin_score * 1e3:.4f} mm, refitted "
+        f"{score * 1e3:.4f} mm ({current.model}: {current.score_m * 1e3:.4f})"
+    )
     good = score <= (1.0 - MIN_GAIN) * current.score_m
     outcome = RefitOutcome(
-        name, lin_score * 1e3, insample, score * 1e3, good,
-        "" if good else f"held-out {score * 1e3:.4f} mm is not {MIN_GAIN:.0%} below "
+        name,
+        lin_score * 1e3,
+        insample,
+        score * 1e3,
+        good,
+        ""
+        if good
+        else f"held-out {score * 1e3:.4f} mm is not {MIN_GAIN:.0%} below "
         f"{current.model}'s {current.score_m * 1e3:.4f} mm",
-    )  # fmt: skip
+    )
     return (Rung(name, effects, cal, acc, res, score) if good else None), outcome
 
 
@@ -556,13 +620,17 @@ def _climb(
     """The rungs from `geo` (the geometric calibration of `recording`) up, the noise level,
     what they are scored on, the candidates of every round, every refit's outcome and the
     frequency scan of every rung it scanned."""
-    noise = estimate_noise(recording, geo.residuals, int(geo.parameters.free.sum()),
-                           tracker_sigma_m)  # fmt: skip
+    noise = estimate_noise(
+        recording, geo.residuals, int(geo.parameters.free.sum()), tracker_sigma_m
+    )
     scored_on = "hold-out bags" if holdout is not None else f"{N_FOLDS}-fold CV over poses"
-    floor = (f"{noise.sigma_m * 1e3:.4f} mm per axis ({noise.basis})"
-             if noise.independent else "unknown (the stated accuracy is refuted: see below)"
-             if noise.warning else "unknown (no repeat poses, circle sweeps or stated "
-             "accuracy)")  # fmt: skip
+    floor = (
+        f"{noise.sigma_m * 1e3:.4f} mm per axis ({noise.basis})"
+        if noise.independent
+        else "unknown (the stated accuracy is refuted: see below)"
+        if noise.warning
+        else "unknown (no repeat poses, circle sweeps or stated accuracy)"
+    )
     say(f"noise floor: {floor}; scoring on {scored_on}")
     if noise.warning:
         say(noise.warning)
@@ -572,11 +640,16 @@ def _climb(
     refits: list[RefitOutcome] = []
     spectra: dict[str, list[JointSpectrum]] = {}
     try_rung = partial(_try_rung, recording=recording, holdout=holdout, say=say)
-    say(f"  geometric: held-out rms {acc.absolute_rms_mm:.4f} mm"
+    say(
+        f"  geometric: held-out rms {acc.absolute_rms_mm:.4f} mm"
         + (f" (floor {noise.floor_rms_m * 1e3:.4f})" if noise.independent else "")
-        + (f"; selection score {score * 1e3:.4f} mm (the k-fold's and the hold-out's rms "
-           "together, each counting equally: the rungs below are scored by it)"
-           if holdout is not None else ""))  # fmt: skip
+        + (
+            f"; selection score {score * 1e3:.4f} mm (the k-fold's and the hold-out's rms "
+            "together, each counting equally: the rungs below are scored by it)"
+            if holdout is not None
+            else ""
+        )
+    )
     while len(rungs) <= MAX_RUNGS:
         current = rungs[-1]
         at_floor = current.heldout.absolute_rms_mm <= AT_FLOOR * noise.floor_rms_m * 1e3
@@ -589,9 +662,11 @@ def _climb(
         distinct = recording.distinct_points()  # re-reads and repeats pin no parameter
         pool, left_out = _affordable(pool, current.calibration, distinct)
         if left_out:
-            say(f"  {left_out} candidate(s) left out: more free parameters than "
+            say(
+                f"  {left_out} candidate(s) left out: more free parameters than "
                 f"{distinct} distinct points can pin ({RESIDUALS_PER_PARAMETER} residuals "
-                "per parameter)")  # fmt: skip
+                "per parameter)"
+            )
         if not pool:
             break
         base, scores = _screen(current.calibration, pool, recording, holdout)
@@ -629,15 +704,15 @@ def _climb(
     return _Climb(rungs, noise, scored_on, rounds, refits, spectra)
 
 
-def _other_joints_harmonics(ranked: list[Screened], accepted: Rung,
-                            base: float) -> list[Screened]:  # fmt: skip
+def _other_joints_harmonics(ranked: list[Screened], accepted: Rung, base: float) -> list[Screened]:
     """When `accepted` added joint harmonics: the best screened joint_harmonics candidate
     of every other joint that screened MIN_GAIN below `base`, best first; else none."""
     added = accepted.effects[-1]
     if not added.candidates_from_residuals:
         return []
-    seen = set(added.joints) | {j for e in accepted.effects[:-1]
-                               if e.candidates_from_residuals for j in e.joints}  # fmt: skip
+    seen = set(added.joints) | {
+        j for e in accepted.effects[:-1] if e.candidates_from_residuals for j in e.joints
+    }
     out = []
     for effect, lin_score, lin_insample in ranked:
         if not effect.candidates_from_residuals or lin_score > (1.0 - MIN_GAIN) * base:
@@ -664,8 +739,7 @@ def _affordable(
     robot, have = current.model.robot, set(current.parameters.names)
     n_free = int(current.parameters.free.sum())
     budget = 3 * n_points / RESIDUALS_PER_PARAMETER
-    kept = [e for e in pool
-            if n_free + len(set(e.parameter_names(robot)) - have) <= budget]  # fmt: skip
+    kept = [e for e in pool if n_free + len(set(e.parameter_names(robot)) - have) <= budget]
     return kept, len(pool) - len(kept)
 
 
@@ -679,8 +753,10 @@ def _rejected_before_kfold(cal: Calibration, current: Rung, lin_insample_m: floa
     if cal.implausible:
         return "implausible: " + "; ".join(cal.implausible)
     if insample > before * (1.0 + 1e-6):
-        return (f"in-sample {insample:.4f} mm is worse than {current.model}'s {before:.4f} mm "
-                "that it extends")  # fmt: skip
+        return (
+            f"in-sample {insample:.4f} mm is worse than {current.model}'s {before:.4f} mm "
+            "that it extends"
+        )
     if insample > SCREEN_SLACK * lin_insample_m * 1e3:
         return (
             f"in-sample {insample:.4f} mm after the refit is above its linearised in-sample "

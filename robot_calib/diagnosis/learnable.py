@@ -124,8 +124,11 @@ class LearnableBound(Record):
                 f"{self.holdout_abs_rms_mm:.4f} mm with it: it learned the calibration "
                 f"poses, not the robot; {self.scored_on}{edge})"
             )
-        share = (f"{100 * self.learnable_share:.0f} % of geometric's error is learnable"
-                 if self.learnable_share > 0 else "it learns nothing")  # fmt: skip
+        share = (
+            f"{100 * self.learnable_share:.0f} % of geometric's error is learnable"
+            if self.learnable_share > 0
+            else "it learns nothing"
+        )
         edge = f"; {len(self.warnings)} warning(s) in the reports" if self.warnings else ""
         whose = "its" if self.learned_on == "geometric" else f"{self.learned_on}'s"
         return (
@@ -183,8 +186,9 @@ def corrected_heldout(
     residuals = cal.model.target_points(cal.parameters, poses) - points
     if holdout is not None:
         rows = fitting_rows(len(poses))
-        correction = fit_structured(cal.model, cal.parameters, poses.subset(rows),
-                                    residuals[rows], rng)  # fmt: skip
+        correction = fit_structured(
+            cal.model, cal.parameters, poses.subset(rows), residuals[rows], rng
+        )
         before = cal.model.target_points(cal.parameters, holdout.poses) - holdout.points
         with np.errstate(over="ignore", invalid="ignore"):  # a model beyond physics (1e9 m
             # of backlash): its inf / nan figures are flagged implausible, not a warning line
@@ -202,21 +206,32 @@ def corrected_heldout(
         parameters' residuals (n, 3) [m] at every pose, which it is fitted on."""
         train = train_rows[k]
         fitted = cal.model.target_points(fold_parameters[folds[k]], poses) - points
-        return fit_structured_part(cal.model, fold_parameters[folds[k]], poses.subset(train),
-                                   fitted[train]), fitted  # fmt: skip
+        return fit_structured_part(
+            cal.model, fold_parameters[folds[k]], poses.subset(train), fitted[train]
+        ), fitted
 
-    def one(k: int, structured: tuple[StructuredPart, Array], start: Hyperparameters | None,
-            on_learned: Callable[[Hyperparameters], object] | None = None,
-            ) -> tuple[StructuredCorrection, Array]:  # fmt: skip
+    def one(
+        k: int,
+        structured: tuple[StructuredPart, Array],
+        start: Hyperparameters | None,
+        on_learned: Callable[[Hyperparameters], object] | None = None,
+    ) -> tuple[StructuredCorrection, Array]:
         """Fold folds[k]'s correction learned on its training poses (its hyperparameters
         searched from `start`, else cold; `on_learned` called with them at once), and its
         prediction at the fold's poses (m, 3) [m] (recording order)."""
         train, test = train_rows[k], fold == folds[k]
         part, fitted = structured
-        local = fit_structured(cal.model, fold_parameters[folds[k]], poses.subset(train),
-                               fitted[train], np.random.default_rng(seeds[k]),
-                               start=start, max_learn=MAX_LEARN if start is None else
-                               WARM_LEARN, part=part, on_learned=on_learned)  # fmt: skip
+        local = fit_structured(
+            cal.model,
+            fold_parameters[folds[k]],
+            poses.subset(train),
+            fitted[train],
+            np.random.default_rng(seeds[k]),
+            start=start,
+            max_learn=MAX_LEARN if start is None else WARM_LEARN,
+            part=part,
+            on_learned=on_learned,
+        )
         return local, local.predict(poses.subset(test))
 
     computed: dict[int, tuple[StructuredPart, Array]] = {}  # each process's own
@@ -288,8 +303,12 @@ def final_correction(
     return _fitted_on_all(cal, recording, first.hyper, first.warnings)
 
 
-def _fitted_on_all(cal: Calibration, recording: Recording, hyper: Hyperparameters | None,
-                   folds_warnings: Sequence[str]) -> StructuredCorrection:  # fmt: skip
+def _fitted_on_all(
+    cal: Calibration,
+    recording: Recording,
+    hyper: Hyperparameters | None,
+    folds_warnings: Sequence[str],
+) -> StructuredCorrection:
     """The correction of the residuals of `cal` at (at most MAX_FIT_POSES of) the poses of
     `recording`, its process's hyperparameters `hyper` (None: learned), its warnings its
     own and then the folds'. With `hyper` given on at most MAX_POINTS poses no random draw
@@ -297,8 +316,9 @@ def _fitted_on_all(cal: Calibration, recording: Recording, hyper: Hyperparameter
     rows = fitting_rows(len(recording))
     poses = recording.poses.subset(rows)
     residuals = cal.model.target_points(cal.parameters, poses) - recording.points[rows]
-    out = fit_structured(cal.model, cal.parameters, poses, residuals, np.random.default_rng(0),
-                         hyper=hyper)  # fmt: skip
+    out = fit_structured(
+        cal.model, cal.parameters, poses, residuals, np.random.default_rng(0), hyper=hyper
+    )
     return replace(out, warnings=out.warnings + tuple(folds_warnings))
 
 
@@ -313,22 +333,40 @@ def learnable_bound(
     """The bound of `geo` (the geometric calibration of `recording`) from
     `corrected_heldout`: on `holdout`, else over the folds `fold` (n,) with
     `fold_parameters` the geometry refitted without each fold; `scored_on` says which."""
-    before, after, correction = corrected_heldout(geo, recording, holdout, fold,
-                                                  fold_parameters)  # fmt: skip
+    before, after, correction = corrected_heldout(geo, recording, holdout, fold, fold_parameters)
     assert correction is not None
     return bound_of(before, after, correction, scored_on)
 
 
-def bound_of(geometric_residuals: Array, after: Array, correction: LearnedCorrection,
-             scored_on: str, learned_on: str = "geometric") -> LearnableBound:  # fmt: skip
+def bound_of(
+    geometric_residuals: Array,
+    after: Array,
+    correction: LearnedCorrection,
+    scored_on: str,
+    learned_on: str = "geometric",
+) -> LearnableBound:
     """The bound from geometric's held-out residuals (m, 3) [m] and those (m, 3) [m] of
     the model `learned_on` corrected by a learned correction, on the same held-out data
     (`corrected_heldout`), and the `correction` fitted on all calibration residuals."""
     geo_rms, geo_mean = _figures(geometric_residuals)
     rms, mean = _figures(after)
     share = 1.0 - rms / geo_rms if geo_rms > 0 else 0.0
-    method = METHOD if learned_on == "geometric" else METHOD.replace(
-        "of the geometric residuals", f"of the residuals of {learned_on}")  # fmt: skip
-    return LearnableBound(method, scored_on, geo_rms, geo_mean, rms, mean, share,
-                          correction.length_scales_deg, correction.noise_mm,
-                          correction.n_fitted, list(correction.warnings), learned_on)  # fmt: skip
+    method = (
+        METHOD
+        if learned_on == "geometric"
+        else METHOD.replace("of the geometric residuals", f"of the residuals of {learned_on}")
+    )
+    return LearnableBound(
+        method,
+        scored_on,
+        geo_rms,
+        geo_mean,
+        rms,
+        mean,
+        share,
+        correction.length_scales_deg,
+        correction.noise_mm,
+        correction.n_fitted,
+        list(correction.warnings),
+        learned_on,
+    )

@@ -175,8 +175,12 @@ def estimate_noise(
     return replace(level, warning="; ".join(w for w in (refused, level.warning) if w))
 
 
-def _estimate(recording: Recording, fallback_residuals: Array | None, fallback_dof: int,
-              stated_sigma_m: float | None) -> NoiseLevel:  # fmt: skip
+def _estimate(
+    recording: Recording,
+    fallback_residuals: Array | None,
+    fallback_dof: int,
+    stated_sigma_m: float | None,
+) -> NoiseLevel:
     """`estimate_noise` without the re-read check."""
     measured = _measured_noise(recording)
     stated = _stated(recording, stated_sigma_m)
@@ -184,22 +188,31 @@ def _estimate(recording: Recording, fallback_residuals: Array | None, fallback_d
         measured = _reference_noise(recording)
     if measured is not None:
         return replace(measured, warning=_unused(stated, measured, stated_sigma_m is not None))
-    model = (None if fallback_residuals is None
-             else _model_noise(fallback_residuals, fallback_dof))  # fmt: skip
+    model = None if fallback_residuals is None else _model_noise(fallback_residuals, fallback_dof)
     if stated is not None:
         if model is None or stated.sigma_m < FAR_ABOVE * model.sigma_m:
             return stated
         ratio = _ratio(stated.sigma_m, model.sigma_m)
-        figures = (f"the {stated.source} {stated.sigma_m * 1e3:.4g} mm per axis is {ratio:.0f} x "
-                   f"the geometric fit's in-sample residual ({model.sigma_m * 1e3:.4g} mm per "
-                   "axis)")  # fmt: skip
+        figures = (
+            f"the {stated.source} {stated.sigma_m * 1e3:.4g} mm per axis is {ratio:.0f} x "
+            f"the geometric fit's in-sample residual ({model.sigma_m * 1e3:.4g} mm per "
+            "axis)"
+        )
         if ratio >= REFUTED:
-            return replace(model, warning=(
-                f"warning: {figures}: no fit lies that far below the noise, so it is not used "
-                f"and the noise floor is unknown; {UNIT_HINT}"))  # fmt: skip
-        return replace(stated, warning=(
-            f"warning: {figures}: the noise floor and the verdict rest on the stated accuracy "
-            f"alone (no repeat poses or circle sweeps to check it); {UNIT_HINT}"))  # fmt: skip
+            return replace(
+                model,
+                warning=(
+                    f"warning: {figures}: no fit lies that far below the noise, so it is not used "
+                    f"and the noise floor is unknown; {UNIT_HINT}"
+                ),
+            )
+        return replace(
+            stated,
+            warning=(
+                f"warning: {figures}: the noise floor and the verdict rest on the stated accuracy "
+                f"alone (no repeat poses or circle sweeps to check it); {UNIT_HINT}"
+            ),
+        )
     if model is not None:
         return model
     return NoiseLevel(float("nan"), "unknown", 0)
@@ -256,10 +269,12 @@ def _reread_check(recording: Recording) -> str:
     level = _pair_noise(recording, still, REREADS)
     if level.sigma_m <= MAX_REREAD_SIGMA_M:
         return ""
-    return (f"warning: re-reads of still poses differ by {level.sigma_m * 1e3:.4g} mm per axis "
-            f"(1-sigma, {len(still)} pairs): far beyond any tracker re-measuring a still target "
-            f"({MAX_REREAD_SIGMA_M * 1e3:g} mm): a target knocked between reads, blunders, or "
-            "readings that moved? They are not used as the noise floor")  # fmt: skip
+    return (
+        f"warning: re-reads of still poses differ by {level.sigma_m * 1e3:.4g} mm per axis "
+        f"(1-sigma, {len(still)} pairs): far beyond any tracker re-measuring a still target "
+        f"({MAX_REREAD_SIGMA_M * 1e3:g} mm): a target knocked between reads, blunders, or "
+        "readings that moved? They are not used as the noise floor"
+    )
 
 
 def _ratio(stated: float, evidence: float) -> float:
@@ -293,8 +308,7 @@ def _stated(recording: Recording, stated_sigma_m: float | None) -> NoiseLevel | 
     sigma = recording.poses.sigma
     if sigma is not None and np.isfinite(sigma[:, 0]).any():
         stated = sigma[np.isfinite(sigma[:, 0]), 0]
-        return NoiseLevel(float(np.sqrt(np.mean(stated**2))), f"{STATED} (per point)",
-                          len(stated))  # fmt: skip
+        return NoiseLevel(float(np.sqrt(np.mean(stated**2))), f"{STATED} (per point)", len(stated))
     return None
 
 

@@ -73,5 +73,6 @@ def outside_vocabulary(ladder: Ladder, recording: Recording) -> OutsideVocabular
     motions: list[LoadMotion] = []
     if isinstance(correction, StructuredCorrection):
         motions = correction.strongest(recording.poses, MOTIONS_REPORTED)
-    return OutsideVocabulary(physical.model, physical.heldout.absolute_rms_mm,
-                             hybrid.heldout.absolute_rms_mm, motions)  # fmt: skip
+    return OutsideVocabulary(
+        physical.model, physical.heldout.absolute_rms_mm, hybrid.heldout.absolute_rms_mm, motions
+    )

@@ -48,8 +48,13 @@ class ModelSpan:
         return (flat - self.basis @ (self.basis.T @ flat)).reshape(columns.shape)
 
 
-def model_span(model: KinematicModel, params: ParameterVector, poses: Poses,
-               predicted: Array, scale: float = 1.0) -> ModelSpan:  # fmt: skip
+def model_span(
+    model: KinematicModel,
+    params: ParameterVector,
+    poses: Poses,
+    predicted: Array,
+    scale: float = 1.0,
+) -> ModelSpan:
     """The span of `model`'s free parameters at `params` on `poses`, its Jacobian divided
     by `scale` (e.g. the noise [m]), and the joints' motion at the `predicted` points
     (n, 3) [m, tracker frame]."""
@@ -61,8 +66,9 @@ def model_span(model: KinematicModel, params: ParameterVector, poses: Poses,
     return ModelSpan(motion, basis, lever)
 
 
-def joint_motion(model: KinematicModel, params: ParameterVector, poses: Poses,
-                 predicted: Array) -> tuple[Array, Array]:  # fmt: skip
+def joint_motion(
+    model: KinematicModel, params: ParameterVector, poses: Poses, predicted: Array
+) -> tuple[Array, Array]:
     """How each joint's angle error moves each of the `predicted` points (n, 3) [m,
     tracker frame]: motion (n, J, 3) [m/rad] = axis_j x (point - origin_j), and each
     joint's lever (J,) [m], the median of |motion_j| over the points."""

@@ -54,26 +54,48 @@ def plot_paths(stem: Path) -> list[Path]:
     return [stem.with_name(f"{stem.name}_{suffix}.png") for suffix in PLOT_SUFFIXES]
 
 
-def report_figures(ladder: Ladder, recording: Recording, floor_mm: float | None
-                   ) -> list[tuple[str, str, str, Callable[[], Figure | None]]]:  # fmt: skip
+def report_figures(
+    ladder: Ladder, recording: Recording, floor_mm: float | None
+) -> list[tuple[str, str, str, Callable[[], Figure | None]]]:
     """The Markdown report's figures: (suffix of its PNG, cache key, title, draw) each,
     the draws picklable (`FigureCache.draw_aside`)."""
     return [
-        ("ladder", "ladder", "The ladder: held-out error of each model",
-         partial(ladder_figure, ladder, floor_mm)),
-        ("angle", "angle_urad", "Residual against each joint angle, by approach direction",
-         partial(angle_figure, ladder, recording, "urad")),
-        ("map", "map", "Residual maps: against reach, height and every joint's reading",
-         partial(residual_map_figure, ladder, recording)),
-        ("time", "time", "Residual against time (in-sample)",
-         partial(time_figure, ladder, recording)),
-        ("drift", "drift", "The tracker's drift: reference reflectors against time",
-         partial(drift_figure, recording)),
-    ]  # fmt: skip
+        (
+            "ladder",
+            "ladder",
+            "The ladder: held-out error of each model",
+            partial(ladder_figure, ladder, floor_mm),
+        ),
+        (
+            "angle",
+            "angle_urad",
+            "Residual against each joint angle, by approach direction",
+            partial(angle_figure, ladder, recording, "urad"),
+        ),
+        (
+            "map",
+            "map",
+            "Residual maps: against reach, height and every joint's reading",
+            partial(residual_map_figure, ladder, recording),
+        ),
+        (
+            "time",
+            "time",
+            "Residual against time (in-sample)",
+            partial(time_figure, ladder, recording),
+        ),
+        (
+            "drift",
+            "drift",
+            "The tracker's drift: reference reflectors against time",
+            partial(drift_figure, recording),
+        ),
+    ]
 
 
-def _plots(ladder: Ladder, recording: Recording, stem: Path, floor_mm: float | None,
-           figures: FigureCache) -> list[tuple[str, str]]:  # fmt: skip
+def _plots(
+    ladder: Ladder, recording: Recording, stem: Path, floor_mm: float | None, figures: FigureCache
+) -> list[tuple[str, str]]:
     """The figures (figures.py) saved as PNGs `<stem>_*.png`: (title, file name) each;
     drawn once in `figures` (the HTML page shows them too)."""
     out = []
@@ -87,8 +109,9 @@ def _plots(ladder: Ladder, recording: Recording, stem: Path, floor_mm: float | N
     return out
 
 
-def harmonic_cells(entry: ArcSignature | JointTerms, where: WhereItLies,
-                   shown: Callable[[float, float], str]) -> str:  # fmt: skip
+def harmonic_cells(
+    entry: ArcSignature | JointTerms, where: WhereItLies, shown: Callable[[float, float], str]
+) -> str:
     """A row's harmonics 1-4, each `shown(amplitude [urad], significance)`; an amplitude
     without a value is NOT_RESOLVED on an arc, and as `blank` says from every pose."""
     if entry.harmonics_urad is None or entry.harmonics_significance is None:
@@ -148,10 +171,14 @@ def _floor_sentence(noise: NoiseReport) -> str:
     if noise.sigma_mm is None or noise.floor_abs_rms_mm is None:
         return (
             "Noise floor **unknown**: "
-            + ("" if noise.warning else "the data have no repeat poses or circle sweeps and no "
-               "accuracy is stated; ")
-            + "held-out errors are not compared with a floor." + said
-        )  # fmt: skip
+            + (
+                ""
+                if noise.warning
+                else "the data have no repeat poses or circle sweeps and no accuracy is stated; "
+            )
+            + "held-out errors are not compared with a floor."
+            + said
+        )
     return (
         f"Noise level ({noise_basis(noise.source, noise.n)}): {noise.sigma_mm * 1e3:.1f} um per "
         f"axis; a perfect model would leave {noise.floor_abs_rms_mm:.4f} mm rms on held-out "
@@ -168,34 +195,50 @@ def _harmonic_lines(diagnosis: Diagnosis) -> list[str]:
     orders usually mean, and the refits the ladder made."""
     out: list[str] = []
     removed = diagnosis.removed_by_best_model
-    after = (None if diagnosis.unexplained.where is diagnosis.where
-             else diagnosis.unexplained.where)  # fmt: skip
-    for title, where in (("geometric", diagnosis.where),
-                         (diagnosis.physical_model, diagnosis.unexplained.where)):  # fmt: skip
+    after = None if diagnosis.unexplained.where is diagnosis.where else diagnosis.unexplained.where
+    for title, where in (
+        ("geometric", diagnosis.where),
+        (diagnosis.physical_model, diagnosis.unexplained.where),
+    ):
         found = [s for s in where.harmonic_orders if s.dominant_orders]
         if not found or (title != "geometric" and where is diagnosis.where):
             continue
-        out += ["", f"Joint-angle harmonics in the residuals of {title} (frequency scan of "
-                "orders 1-64, beyond what the model absorbs; amplitude, x its uncertainty in "
-                "the joint fit of every term, 0 where it does not lower the k-fold error):",
-                ""]  # fmt: skip
+        out += [
+            "",
+            f"Joint-angle harmonics in the residuals of {title} (frequency scan of "
+            "orders 1-64, beyond what the model absorbs; amplitude, x its uncertainty in "
+            "the joint fit of every term, 0 where it does not lower the k-fold error):",
+            "",
+        ]
         for spectrum in found:
             gone = removed_note(removed, spectrum.joint, spectrum.dominant_orders, ("harmonics",))
-            out.append(f"- {spectrum.line()}" + (f" ({gone})" if gone and title == "geometric"
-                                                   else ""))  # fmt: skip
+            out.append(
+                f"- {spectrum.line()}" + (f" ({gone})" if gone and title == "geometric" else "")
+            )
             for k, why in zip(spectrum.dominant_orders, spectrum.meaning):
-                note = "" if title != "geometric" else scan_order_note(
-                    removed, spectrum.joint, k, after, diagnosis.physical_model)  # fmt: skip
+                note = (
+                    ""
+                    if title != "geometric"
+                    else scan_order_note(
+                        removed, spectrum.joint, k, after, diagnosis.physical_model
+                    )
+                )
                 out.append(f"  - order {k}: {why}" + (f" ({note})" if note and not gone else ""))
     if diagnosis.refits:
-        out += ["", "Candidates refitted by the ladder:", "",
-                "| model | linearised [mm] | in-sample rms [mm] | held-out [mm] | outcome |",
-                "|---|---|---|---|---|"]  # fmt: skip
+        out += [
+            "",
+            "Candidates refitted by the ladder:",
+            "",
+            "| model | linearised [mm] | in-sample rms [mm] | held-out [mm] | outcome |",
+            "|---|---|---|---|---|",
+        ]
         for r in diagnosis.refits:
             held = "-" if r.heldout_mm is None else f"{r.heldout_mm:.4f}"
             outcome = "rung" if r.accepted else f"rejected: {r.reason}"
-            out.append(f"| {with_breaks(r.model)} | {r.linearised_mm:.4f} "
-                       f"| {r.insample_rms_mm:.4f} | {held} | {outcome} |")  # fmt: skip
+            out.append(
+                f"| {with_breaks(r.model)} | {r.linearised_mm:.4f} "
+                f"| {r.insample_rms_mm:.4f} | {held} | {outcome} |"
+            )
     return out
 
 
@@ -243,61 +286,105 @@ def parameter_rows(cal: Calibration) -> list[list[str]]:
         if p.group not in ("geometric", "frames") and not p.free:
             continue
         frame = p.group == "frames"  # the tracker pose and target offsets: no nominal
-        rows.append([
-            p.name, HUMAN_UNITS.get(p.unit, (1.0, p.unit))[1], f"{human(p.unit, value):.5f}",
-            "-" if frame else f"{human(p.unit, p.nominal):.5f}",
-            "-" if frame else f"{human(p.unit, value - p.nominal):.5f}",
-            f"{human(p.unit, std):.2g}" if p.free else "fixed",
-        ])  # fmt: skip
+        rows.append(
+            [
+                p.name,
+                HUMAN_UNITS.get(p.unit, (1.0, p.unit))[1],
+                f"{human(p.unit, value):.5f}",
+                "-" if frame else f"{human(p.unit, p.nominal):.5f}",
+                "-" if frame else f"{human(p.unit, value - p.nominal):.5f}",
+                f"{human(p.unit, std):.2g}" if p.free else "fixed",
+            ]
+        )
     return rows
 
 
 def iso_pose_table(figures: Sequence[Iso9283]) -> tuple[list[str], list[list[object]]]:
     """ISO 9283 per repeated pose (both reports): the header and a row per pose (its
     first measurement, n, the AP of every model of `figures`, the RP) [mm]."""
-    header = ["pose", "first measurement", "n", *(f"AP {f.model} [mm]" for f in figures),
-              "RP [mm]"]  # fmt: skip
+    header = [
+        "pose",
+        "first measurement",
+        "n",
+        *(f"AP {f.model} [mm]" for f in figures),
+        "RP [mm]",
+    ]
     rows: list[list[object]] = [
-        [k + 1, p.first_index, p.n, *(f"{f.poses[k].ap_mm:.4f}" for f in figures),
-         f"{p.rp_mm:.4f}"]
+        [
+            k + 1,
+            p.first_index,
+            p.n,
+            *(f"{f.poses[k].ap_mm:.4f}" for f in figures),
+            f"{p.rp_mm:.4f}",
+        ]
         for k, p in enumerate(figures[0].poses)
-    ]  # fmt: skip
+    ]
     return header, rows
 
 
 def _markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> list[str]:
     """A Markdown table's lines."""
-    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header),
-            *("| " + " | ".join(str(c) for c in row) + " |" for row in rows)]  # fmt: skip
+    return [
+        "| " + " | ".join(header) + " |",
+        "|" + "---|" * len(header),
+        *("| " + " | ".join(str(c) for c in row) + " |" for row in rows),
+    ]
 
 
-def _extra_sections(compared: Sequence[ModelErrors], best: Calibration | None,
-                    warnings: Sequence[str]) -> list[str]:  # fmt: skip
+def _extra_sections(
+    compared: Sequence[ModelErrors], best: Calibration | None, warnings: Sequence[str]
+) -> list[str]:
     """What the HTML report says besides: accuracy before and after calibration (the
     nominal 'before' row included), the best model's parameters, every warning."""
     lines: list[str] = []
     if compared:
-        lines += ["", "## Accuracy before and after calibration", "",
-                  *_markdown_table(
-                      ["model", "role", "scored on", "absolute mean / rms / max [mm]",
-                       "seed criterion mean / max [mm]"],
-                      [[with_breaks(m.model), m.role, m.scored_on,
+        lines += [
+            "",
+            "## Accuracy before and after calibration",
+            "",
+            *_markdown_table(
+                [
+                    "model",
+                    "role",
+                    "scored on",
+                    "absolute mean / rms / max [mm]",
+                    "seed criterion mean / max [mm]",
+                ],
+                [
+                    [
+                        with_breaks(m.model),
+                        m.role,
+                        m.scored_on,
                         f"{m.accuracy.absolute_mean_mm:.4f} / {m.accuracy.absolute_rms_mm:.4f}"
                         f" / {m.accuracy.absolute_max_mm:.4f}",
-                        m.accuracy.pairwise_text()]
-                       for m in compared])]  # fmt: skip
+                        m.accuracy.pairwise_text(),
+                    ]
+                    for m in compared
+                ],
+            ),
+        ]
     if best is not None:
-        lines += ["", f"## Parameters of the best model ({best.label})", "",
-                  *_markdown_table(PARAMETER_COLUMNS, parameter_rows(best))]  # fmt: skip
+        lines += [
+            "",
+            f"## Parameters of the best model ({best.label})",
+            "",
+            *_markdown_table(PARAMETER_COLUMNS, parameter_rows(best)),
+        ]
     lines += ["", "## Warnings", ""]
     lines += [f"- {w}" for w in warnings] if warnings else ["No warnings."]
     return lines
 
 
-def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, path: Path,
-                 figures: FigureCache | None = None, compared: Sequence[ModelErrors] = (),
-                 best: Calibration | None = None,
-                 warnings: Sequence[str] = ()) -> None:  # fmt: skip
+def write_report(
+    diagnosis: Diagnosis,
+    ladder: Ladder,
+    recording: Recording,
+    path: Path,
+    figures: FigureCache | None = None,
+    compared: Sequence[ModelErrors] = (),
+    best: Calibration | None = None,
+    warnings: Sequence[str] = (),
+) -> None:
     """Markdown report `path` (+ PNGs beside it named after it); `figures`: where the
     figures are drawn once for both reports (default: a new one); `compared`, `best`,
     `warnings`: as the HTML report's (`html_report`): the accuracy before and after
@@ -324,7 +411,7 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
             [f"**{few[0].upper()}{few[1:]}.**", ""]
             if (few := small_holdout(ladder.holdout))
             else []
-        ),  # fmt: skip
+        ),
         f"**Verdict** — {verdict}.",
         "",
         *(
@@ -368,11 +455,14 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
             f"{'; ' + note if (note := diagnosis.bound_note()) else ''}. "
             f"Method: {bound.method}. The last column: the share of that learnable gap "
             "(geometric's held-out rms minus the bound) each rung closes"
-            + (": by effect " + ", ".join(f"{e} {percent(v)}"
-                                          for e, v in diagnosis.effect_shares())
-               if diagnosis.effect_shares() else "")
+            + (
+                ": by effect "
+                + ", ".join(f"{e} {percent(v)}" for e, v in diagnosis.effect_shares())
+                if diagnosis.effect_shares()
+                else ""
+            )
             + ".",
-        ]  # fmt: skip
+        ]
     if diagnosis.iso9283:
         lines += [
             "",
@@ -396,19 +486,29 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
             "like one: check them):",
             "",
         ]
-        lines += [f"- {o.line()}" for o in diagnosis.outliers]  # fmt: skip
+        lines += [f"- {o.line()}" for o in diagnosis.outliers]
     places = diagnosis.concentration_lines()
     if places:
-        lines += ["", "Where the residual concentrates (every measurement, flagged ones "
-                  "included, under the best model):", "", *(f"- {p}" for p in places)]  # fmt: skip
+        lines += [
+            "",
+            "Where the residual concentrates (every measurement, flagged ones "
+            "included, under the best model):",
+            "",
+            *(f"- {p}" for p in places),
+        ]
     if diagnosis.mass_model:
         lines += ["", f"Mass model of the gravity effects: {diagnosis.mass_model}."]
     if diagnosis.reads_line():
         lines += ["", f"Calibration data: {diagnosis.reads_line()}."]
     for drift in diagnosis.tracker_drift:
         lines += ["", f"Tracker drift: {drift.line()}."]
-    lines += ["", f"What remains: {diagnosis.unexplained.note}.", "",
-              "## Where the residual lies", ""]  # fmt: skip
+    lines += [
+        "",
+        f"What remains: {diagnosis.unexplained.note}.",
+        "",
+        "## Where the residual lies",
+        "",
+    ]
     if where.joints:
         lines += [
             "Geometric model, per joint from its sweeps (angle-equivalent error along the "
@@ -453,11 +553,18 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
         )
     if where.strongest_signature:
         gone = signature_removed(where.strongest_signature, removed)
-        lines += ["", f"Strongest structure: {where.strongest_signature.text}"
-                  + (f" ({gone})." if gone else ".")]  # fmt: skip
+        lines += [
+            "",
+            f"Strongest structure: {where.strongest_signature.text}"
+            + (f" ({gone})." if gone else "."),
+        ]
     if where.twists():
-        lines += ["", "Links twisting under the load:", "",
-                  *(f"- {signature_text(t)}" for t in where.twists())]  # fmt: skip
+        lines += [
+            "",
+            "Links twisting under the load:",
+            "",
+            *(f"- {signature_text(t)}" for t in where.twists()),
+        ]
     lines += _harmonic_lines(diagnosis)
     lines += [
         "",
@@ -468,7 +575,10 @@ def write_report(diagnosis: Diagnosis, ladder: Ladder, recording: Recording, pat
     ]
     for title, name in plots:
         lines += [f"### {title}", "", f"![{title}]({name})", ""]
-    every = list(dict.fromkeys([*recording.warnings, *diagnosis.warnings, *warnings,
-                                *diagnosis.learnable_warnings()]))  # fmt: skip
+    every = list(
+        dict.fromkeys(
+            [*recording.warnings, *diagnosis.warnings, *warnings, *diagnosis.learnable_warnings()]
+        )
+    )
     lines += _extra_sections(compared, best, every)
     path.write_text("\n".join(lines) + "\n")

@@ -119,10 +119,12 @@ class TimeTrend(Record):
         quartiles = ", ".join(f"{v:.4f}" for v in self.rms_by_quartile_mm)
         z = self.drift_significance
         drift = (
-            "" if z is None
-            else f" (a drift with time: {z:.0f} x its uncertainty)" if z >= STRUCTURE_Z
+            ""
+            if z is None
+            else f" (a drift with time: {z:.0f} x its uncertainty)"
+            if z >= STRUCTURE_Z
             else f" (no drift with time beyond its uncertainty: {z:.0f} x)"
-        )  # fmt: skip
+        )
         return f"rms by quartile {quartiles} mm, trend {self.slope_mm_per_h:.3f} mm/h{drift}"
 
 
@@ -156,12 +158,14 @@ class WhereItLies(Record):
 
     def has_term(self, joint: int, family: str, order: int | None = None) -> bool:
         """True when the joint fit had this term as a candidate (`evidence`)."""
-        return any(t.joint == joint and t.family == family and t.order == order
-                   for t in self.evidence)  # fmt: skip
+        return any(
+            t.joint == joint and t.family == family and t.order == order for t in self.evidence
+        )
 
 
-def arc_angle_errors(model: KinematicModel, params: ParameterVector, recording: Recording,
-                     residuals: Array) -> dict[int, tuple[IntArray, Array, Array]]:  # fmt: skip
+def arc_angle_errors(
+    model: KinematicModel, params: ParameterVector, recording: Recording, residuals: Array
+) -> dict[int, tuple[IntArray, Array, Array]]:
     """Per joint j with sweeps: (pose index (k,), angle-equivalent error (k,) [rad] =
     residual along the arc of joint j / lever arm, lever arm (k,) [m]), from its sweeps."""
     origins, axes = model.joint_axes(params, recording.poses)
@@ -188,9 +192,13 @@ def harmonic_amplitudes(
     return np.hypot(coef[1::2], coef[2::2]), np.sqrt((var[1::2] + var[2::2]) / 2.0)
 
 
-def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recording,
-                residuals: Array,
-                evidence: Evidence | None = None) -> list[JointTerms]:  # fmt: skip
+def joint_terms(
+    model: KinematicModel,
+    params: ParameterVector,
+    recording: Recording,
+    residuals: Array,
+    evidence: Evidence | None = None,
+) -> list[JointTerms]:
     """From every pose (sweeps or not), per joint, the evidence of each joint-angle term
     (`evidence.joint_evidence`: harmonic k = 1..4 of the reading, the approach direction
     (backlash), the reading (scale), the gravity torque (compliance), all fitted jointly
@@ -204,8 +212,9 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
         lever = evidence.levers_m[j]
         if lever < MIN_LEVER_M:
             zeros = [0.0] * HARMONICS
-            out.append(JointTerms(j + 1, None, zeros, None, 0.0, None, 0.0, None, 0.0,
-                                  False, lever * 1e3))  # fmt: skip
+            out.append(
+                JointTerms(j + 1, None, zeros, None, 0.0, None, 0.0, None, 0.0, False, lever * 1e3)
+            )
             continue
 
         harmonics = [_of(evidence, j + 1, "harmonics", k) for k in range(1, HARMONICS + 1)]
@@ -219,21 +228,25 @@ def joint_terms(model: KinematicModel, params: ParameterVector, recording: Recor
                 *_of(evidence, j + 1, "gravity"),
                 True,
                 lever * 1e3,
-            )  # fmt: skip
+            )
         )
     return out
 
 
-def _of(evidence: Evidence, joint: int, family: str,
-        order: int | None = None) -> tuple[float | None, float]:  # fmt: skip
+def _of(
+    evidence: Evidence, joint: int, family: str, order: int | None = None
+) -> tuple[float | None, float]:
     """(value, significance) of a term of the joint fit; (None, 0) for no such candidate."""
     term = evidence.term(joint, family, order)
     return (None, 0.0) if term is None else (term.value, term.significance)
 
 
 #: the one-signal families of `JointTerms`: family -> the field of its value
-FAMILY_FIELDS = {"direction": "direction_urad", "scale": "scale_urad_per_rad",
-                 "gravity": "gravity_urad_per_Nm"}  # fmt: skip
+FAMILY_FIELDS = {
+    "direction": "direction_urad",
+    "scale": "scale_urad_per_rad",
+    "gravity": "gravity_urad_per_Nm",
+}
 FAMILIES = tuple(  # (field of the value, field of the significance, words, unit)
     (field_name, f"{family}_significance", FAMILY_WORDS[family], UNITS[family])
     for family, field_name in FAMILY_FIELDS.items()
@@ -287,9 +300,12 @@ def removed_signatures(effects: Sequence[Effect]) -> list[RemovedSignature]:
 REMOVED = "removed by the best model"
 
 
-def removed_note(removed: Sequence[RemovedSignature], joint: int,
-                 orders: Iterable[int] = range(1, HARMONICS + 1),
-                 families: Iterable[str] = SIGNATURE_FAMILIES) -> str:  # fmt: skip
+def removed_note(
+    removed: Sequence[RemovedSignature],
+    joint: int,
+    orders: Iterable[int] = range(1, HARMONICS + 1),
+    families: Iterable[str] = SIGNATURE_FAMILIES,
+) -> str:
     """'removed by the best model: direction (backlash:4); harmonics 2 (transmission_error:
     4:order=2)': what of joint `joint`'s `families` the best model removes (`removed`), the
     harmonics only for the `orders` shown (the tables' 1-4, a frequency scan's picked
@@ -308,8 +324,13 @@ def removed_note(removed: Sequence[RemovedSignature], joint: int,
     return f"{REMOVED}: {'; '.join(parts)}" if parts else ""
 
 
-def scan_order_note(removed: Sequence[RemovedSignature], joint: int, order: int,
-                    after: WhereItLies | None, after_model: str) -> str:  # fmt: skip
+def scan_order_note(
+    removed: Sequence[RemovedSignature],
+    joint: int,
+    order: int,
+    after: WhereItLies | None,
+    after_model: str,
+) -> str:
     """What became of order `order` of joint `joint` found in the geometric model's
     frequency scan: 'removed by the best model: ...' when the best model has an effect
     with it (`removed_note`), else 'not in the residuals of M: an image of what M models'
@@ -339,8 +360,14 @@ def strongest_signature(evidence: Evidence) -> Signature | None:
     best = evidence.strongest()
     if best is None:
         return None
-    return Signature(best.joint, best.order, float(best.value or 0.0), best.significance,
-                     signature_text(best), best.family)  # fmt: skip
+    return Signature(
+        best.joint,
+        best.order,
+        float(best.value or 0.0),
+        best.significance,
+        signature_text(best),
+        best.family,
+    )
 
 
 def signature_text(term: TermEvidence) -> str:
@@ -384,9 +411,14 @@ MAX_ARC_AMPLIFICATION = 10.0
 WHERE_POSES = 20000
 
 
-def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Recording,
-                  residuals: Array, noise_sigma_m: float,
-                  spectra: list[JointSpectrum] | None = None) -> WhereItLies:  # fmt: skip
+def where_it_lies(
+    model: KinematicModel,
+    params: ParameterVector,
+    recording: Recording,
+    residuals: Array,
+    noise_sigma_m: float,
+    spectra: list[JointSpectrum] | None = None,
+) -> WhereItLies:
     """Where the residual lies (units in the field names); `spectra`: the frequency scan
     of these residuals when already made (else it is made here). Above WHERE_POSES poses
     from a fixed random subset of them (statistics whose precision 20k poses give). Every
@@ -405,8 +437,11 @@ def where_it_lies(model: KinematicModel, params: ParameterVector, recording: Rec
     for j, (idx, err, lever) in arc_angle_errors(model, params, recording, residuals).items():
         seen = lever >= MIN_LEVER_M
         if seen.sum() < MIN_OBSERVABLE_POSES:
-            joints.append(ArcSignature(j, None, None, None, None, None, None, False,
-                                       float(lever.max() * 1e3)))  # fmt: skip
+            joints.append(
+                ArcSignature(
+                    j, None, None, None, None, None, None, False, float(lever.max() * 1e3)
+                )
+            )
             continue
         idx, err, lever = idx[seen], err[seen], lever[seen]
         qj = q[idx, j - 1]

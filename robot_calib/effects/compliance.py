@@ -59,8 +59,9 @@ def visible_gravity_joints(robot: RobotDescription, poses: Poses) -> list[int]:
     most VISIBLE_POSES of them (evenly spaced): a range of 1e-3 N m shows in any of them."""
     step = max(1, len(poses) // VISIBLE_POSES)
     tau = gravity_torques(robot, poses.q[::step])
-    return [j for j in range(1, robot.n_joints + 1)
-            if np.ptp(tau[:, j - 1]) > VISIBLE_TORQUE_RANGE_NM]  # fmt: skip
+    return [
+        j for j in range(1, robot.n_joints + 1) if np.ptp(tau[:, j - 1]) > VISIBLE_TORQUE_RANGE_NM
+    ]
 
 
 @register_effect

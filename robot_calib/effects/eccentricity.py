@@ -139,10 +139,18 @@ class Eccentricity(Effect):
         cls, robot: RobotDescription, rng: np.random.Generator, joint: int
     ) -> tuple[Effect, dict[str, float]]:
         """Order 1 on one joint: radial and tilt runout, random phase and sign."""
-        values = {cls.term(joint, e, t): signed_uniform(rng, *DRAW_RADIAL_M)
-                  for e in ("dx", "dy") for t in ("c1", "s1")}  # fmt: skip
-        values.update({cls.term(joint, e, t): signed_uniform(rng, *DRAW_TILT_RAD)
-                       for e in ("ex", "ey") for t in ("c1", "s1")})  # fmt: skip
+        values = {
+            cls.term(joint, e, t): signed_uniform(rng, *DRAW_RADIAL_M)
+            for e in ("dx", "dy")
+            for t in ("c1", "s1")
+        }
+        values.update(
+            {
+                cls.term(joint, e, t): signed_uniform(rng, *DRAW_TILT_RAD)
+                for e in ("ex", "ey")
+                for t in ("c1", "s1")
+            }
+        )
         return cls(joints=(joint,), order=1), values
 
     @classmethod

@@ -133,10 +133,11 @@ def bending_links(robot: RobotDescription) -> tuple[int, ...]:
     rms over the poses spread over the joint limits."""
     q = _spread(robot)
     return tuple(
-        j for j in range(1, robot.n_joints)
+        j
+        for j in range(1, robot.n_joints)
         if np.sqrt(np.mean((carried_moment(robot, q, j) @ twist_axis(robot, j)) ** 2))
         > SIGNIFICANT_MOMENT_NM
-    )  # fmt: skip
+    )
 
 
 def compliance_for(robot: RobotDescription, link: int, flange_rms_m: float) -> float:

@@ -77,8 +77,10 @@ class ThermalWarmup(Effect):
     ) -> tuple[Effect, dict[str, float]]:
         effect = cls()
         strain, ln_tau = effect.names
-        return effect, {strain: float(rng.uniform(*DRAW_STRAIN)),
-                        ln_tau: float(np.log(rng.uniform(*DRAW_TAU_S)))}  # fmt: skip
+        return effect, {
+            strain: float(rng.uniform(*DRAW_STRAIN)),
+            ln_tau: float(np.log(rng.uniform(*DRAW_TAU_S))),
+        }
 
     @classmethod
     def ladder_candidates(cls, robot: RobotDescription, poses: Poses) -> list[Effect]:

@@ -73,8 +73,9 @@ def joint_origins(cal: Calibration) -> Array:
             f"calibration file (use {param('format', 'urdf')})"
         )
     table = model.dh_table(params, np.zeros((1, robot.n_joints)))
-    theta, d, a, alpha, beta = (np.asarray(getattr(table, f)).reshape(-1) for f in
-                                ("theta", "d", "a", "alpha", "beta"))  # fmt: skip
+    theta, d, a, alpha, beta = (
+        np.asarray(getattr(table, f)).reshape(-1) for f in ("theta", "d", "a", "alpha", "beta")
+    )
     head = [_transform(rot_z([theta[j]])[0], np.array([0.0, 0.0, d[j]])) for j in range(6)]
     tail = [
         _transform(rot_x([alpha[j]])[0] @ rot_y([beta[j]])[0], np.array([a[j], 0.0, 0.0]))

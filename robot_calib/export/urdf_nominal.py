@@ -106,8 +106,10 @@ def file_chain(urdf: UrdfModel, names: tuple[str, ...], source: str) -> FileChai
         )
     bad = [j for j in path if j.mimic or j.type not in (*MOVING, "fixed")]
     if bad:
-        raise ExportError(f"{source}: joint {bad[0].name} on the robot's chain is "
-                          f"{'mimic' if bad[0].mimic else bad[0].type}")  # fmt: skip
+        raise ExportError(
+            f"{source}: joint {bad[0].name} on the robot's chain is "
+            f"{'mimic' if bad[0].mimic else bad[0].type}"
+        )
     last = path.index(moving[-1])
     return FileChain(root, tuple(path[: last + 1]), tuple(moving), zero)
 

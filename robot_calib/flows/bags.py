@@ -59,9 +59,13 @@ class ReadBags:
                 log(line)
 
 
-def read_inputs(bags: Sequence[str | Path], holdout: Sequence[str | Path],
-                robot: RobotDescription, pair_tolerance: float = PAIR_TOLERANCE_S,
-                log: Log | None = None) -> ReadBags:  # fmt: skip
+def read_inputs(
+    bags: Sequence[str | Path],
+    holdout: Sequence[str | Path],
+    robot: RobotDescription,
+    pair_tolerance: float = PAIR_TOLERANCE_S,
+    log: Log | None = None,
+) -> ReadBags:
     """The paired measurements of `bags` and of the `holdout` bags (none: None), each bag
     given once and each measurement recorded once (`check_distinct_bags`,
     `check_distinct_recordings`). The reading's lines (warnings) go to `log` as they come;

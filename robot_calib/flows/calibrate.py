@@ -141,13 +141,19 @@ def calibrate_stream_bag(
             f"{param('stream', True)} calibrates one bag (its own latency); got {len(bags)}"
         )
     if ModelSpec.parse(model).base == "cpa":
-        raise InputError(f"{param('stream', True)} {param('model', model)}: a stream has no "
-                         "circle sweeps; use an "
-                         "LM model (nominal, geometric, geometric+EFFECT)")  # fmt: skip
+        raise InputError(
+            f"{param('stream', True)} {param('model', model)}: a stream has no "
+            "circle sweeps; use an "
+            "LM model (nominal, geometric, geometric+EFFECT)"
+        )
     stream = read_stream(Path(bags[0]), robot)
     return calibrate_stream(
-        stream, robot, model, latency_s,
+        stream,
+        robot,
+        model,
+        latency_s,
         max_points=STREAM_MAX_POINTS if max_points is None else max_points,
         max_gap_s=STREAM_MAX_GAP_S if max_gap_s is None else max_gap_s,
-        ecc_order=ecc_order, log=log,
-    )  # fmt: skip
+        ecc_order=ecc_order,
+        log=log,
+    )

@@ -53,9 +53,14 @@ def diagnose_recordings(
     if holdout is not None:  # index the hold-out's targets as the calibration's
         holdout = holdout.with_targets(recording.target_names)
     with by_default(FORKED):  # the other core, unless the caller chose (`parallel.using`)
-        diagnosis, ladder = diagnose(recording, robot, holdout, log=log,
-                                     tracker_sigma_m=tracker_sigma_m,
-                                     on_ladder=on_ladder)  # fmt: skip
+        diagnosis, ladder = diagnose(
+            recording,
+            robot,
+            holdout,
+            log=log,
+            tracker_sigma_m=tracker_sigma_m,
+            on_ladder=on_ladder,
+        )
     if on_ladder is None and holdout is not None:
         # the warnings every front end gives (a richer model that generalises worse): the
         # command line's hook (`FiguresWhenClimbed`) adds them with its reports' figures
@@ -97,8 +102,9 @@ def diagnose_read(
     """`diagnose_bags` of bags already read (`read_inputs`, `ReadAside.read`): the lines
     their reading kept are logged first."""
     read.replay(log)
-    diagnosis, ladder = diagnose_recordings(read.recording, robot, read.holdout, log,
-                                            tracker_sigma_m, on_ladder)  # fmt: skip
+    diagnosis, ladder = diagnose_recordings(
+        read.recording, robot, read.holdout, log, tracker_sigma_m, on_ladder
+    )
     return diagnosis, ladder, read.recording
 
 
@@ -116,9 +122,14 @@ class ReadAside:
     come and its error raised here, as a reading here always did. Use it as a context
     manager: the child is ended on the way out."""
 
-    def __init__(self, bags: Sequence[str | Path], holdout: Sequence[str | Path],
-                 robot: RobotDescription, pair_tolerance: float = PAIR_TOLERANCE_S,
-                 log: Log | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        bags: Sequence[str | Path],
+        holdout: Sequence[str | Path],
+        robot: RobotDescription,
+        pair_tolerance: float = PAIR_TOLERANCE_S,
+        log: Log | None = None,
+    ) -> None:
         from robot_calib.forked import Aside
 
         self._creator = os.getpid()
@@ -136,8 +147,7 @@ class ReadAside:
         this process's), here logged as they come."""
         if self._read_in_this_process is None:
             here = os.getpid() == self._creator
-            self._read_in_this_process = read_inputs(*self._args,
-                                                     log=self._log if here else None)  # fmt: skip
+            self._read_in_this_process = read_inputs(*self._args, log=self._log if here else None)
         return self._read_in_this_process
 
     def _references(self) -> dict[str, Calibration]:
@@ -161,8 +171,12 @@ class ReadAside:
     def __enter__(self) -> ReadAside:
         return self
 
-    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
-                 trace: TracebackType | None) -> None:  # fmt: skip
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
         self._aside.close(abort=kind is not None)
 
 
@@ -185,8 +199,13 @@ def started_figures() -> FigureCache:
     return FigureCache.started()
 
 
-def draw_figures(figures: FigureCache, ladder: Ladder, fitted: Recording,
-                 floor_mm: float | None, compared: Sequence[ModelErrors]) -> None:  # fmt: skip
+def draw_figures(
+    figures: FigureCache,
+    ladder: Ladder,
+    fitted: Recording,
+    floor_mm: float | None,
+    compared: Sequence[ModelErrors],
+) -> None:
     """Start drawing every figure of both reports (`report_figures`, `page_figures`) in
     other processes (`FigureCache.draw_aside`: the helper and its twin, two groups of
     about equal cost, 2773 poses: 0.4-0.5 s each, each in the order the HTML page asks
@@ -198,8 +217,9 @@ def draw_figures(figures: FigureCache, ladder: Ladder, fitted: Recording,
     shown = {key: draw for _, key, _, draw in report_figures(ladder, fitted, floor_mm)}
     shown.update(page_figures(ladder, fitted, compared))
     rest = [key for key in shown if key not in ASIDE_FIRST]
-    figures.draw_aside([(key, shown[key]) for key in ASIDE_FIRST],
-                       [(key, shown[key]) for key in rest])  # fmt: skip
+    figures.draw_aside(
+        [(key, shown[key]) for key in ASIDE_FIRST], [(key, shown[key]) for key in rest]
+    )
 
 
 class FiguresWhenClimbed:
@@ -212,10 +232,12 @@ class FiguresWhenClimbed:
     meanwhile (`ReadAside.references`; None: not of that recording): used when they are
     of the ladder's, else identified again."""
 
-    def __init__(self, figures: FigureCache,
-                 calibrations: Mapping[str, Calibration] | None = None,
-                 references: Callable[[Recording], Mapping[str, Calibration] | None] | None = None,
-                 ) -> None:  # fmt: skip
+    def __init__(
+        self,
+        figures: FigureCache,
+        calibrations: Mapping[str, Calibration] | None = None,
+        references: Callable[[Recording], Mapping[str, Calibration] | None] | None = None,
+    ) -> None:
         self.figures, self.calibrations, self.references = figures, calibrations, references
         self._before_after: tuple[list[ModelErrors], list[str]] | None = None
 
@@ -320,11 +342,27 @@ def write_diagnosis(
                 compared = compare_models(ladder, calibrations)
             draw_figures(figures, ladder, fitted, diagnosis.noise.floor_abs_rms_mm, compared)
             (stage / page.name).write_text(
-                html_report(diagnosis, ladder, fitted, compared, recommended,
-                            recommended_file.name, warnings, figures)
-            )  # fmt: skip
-            write_report(diagnosis, ladder, fitted, stage / report.name, figures, compared,
-                         recommended, warnings)  # fmt: skip
+                html_report(
+                    diagnosis,
+                    ladder,
+                    fitted,
+                    compared,
+                    recommended,
+                    recommended_file.name,
+                    warnings,
+                    figures,
+                )
+            )
+            write_report(
+                diagnosis,
+                ladder,
+                fitted,
+                stage / report.name,
+                figures,
+                compared,
+                recommended,
+                warnings,
+            )
         except BaseException:
             figures.close(abort=True)  # an error or Ctrl-C here: the children go at once
             raise
@@ -332,11 +370,15 @@ def write_diagnosis(
         if best is None:  # run writes its own params_best.json: one best model per folder
             scores = {r.model: r.heldout.absolute_rms_mm for r in ladder.rungs}
             write_json_atomic(
-                selected_document(marked_implausible(chosen.calibration, diagnosis), fitted,
-                                  "the diagnosis ladder's chosen rung", diagnosis.scored_on,
-                                  scores),
+                selected_document(
+                    marked_implausible(chosen.calibration, diagnosis),
+                    fitted,
+                    "the diagnosis ladder's chosen rung",
+                    diagnosis.scored_on,
+                    scores,
+                ),
                 stage / best_file.name,
-            )  # fmt: skip
+            )
             check_loads(stage / best_file.name, best_file, chosen.calibration, fitted)
         written = {p.name for p in stage.iterdir()}
     if force:  # replaced whole: no figure of the old set that the new report does not have
@@ -365,8 +407,10 @@ def check_loads(path: Path, name: Path, cal: Calibration, recording: Recording) 
     poses = recording.poses
     gap = float(np.max(np.abs(back.predict(poses) - cal.predict(poses)), initial=0.0))
     if not gap <= WRITTEN_TOLERANCE_M:
-        raise WrittenFileError(f"{name} would predict {gap * 1e3:.3g} mm from the model it "
-                               "holds at the calibration poses")  # fmt: skip
+        raise WrittenFileError(
+            f"{name} would predict {gap * 1e3:.3g} mm from the model it "
+            "holds at the calibration poses"
+        )
 
 
 #: what a written PARAMS.json may predict away from the model it was written from [m]

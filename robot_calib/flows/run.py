@@ -129,8 +129,10 @@ def run(
     description = load_robot(robot)  # every input checked before anything is written
     check_plan(plan, description)
     if not 1 <= n_holdout <= MAX_HOLDOUT_POSES or seed < 0:
-        raise InputError(f"{param('holdout', n_holdout)}, {param('seed', seed)}: need 1 to "
-                         f"{MAX_HOLDOUT_POSES} poses, seed >= 0")  # fmt: skip
+        raise InputError(
+            f"{param('holdout', n_holdout)}, {param('seed', seed)}: need 1 to "
+            f"{MAX_HOLDOUT_POSES} poses, seed >= 0"
+        )
     effects = MAIN_JOB_EFFECTS if effects is None else effects
     world = simulation_world(None, robot, effects, seed)
     if Path(output_dir).exists() and not Path(output_dir).is_dir():
@@ -154,9 +156,19 @@ def run(
 
         try:
             log_final = None if log is None else (lambda m: log(final_paths(m)))
-            result = _run_in(folder, final, description, plan, world, seed, n_holdout,
-                             robot, lambda m: say(final_paths(m)), log_final,
-                             progress)  # fmt: skip
+            result = _run_in(
+                folder,
+                final,
+                description,
+                plan,
+                world,
+                seed,
+                n_holdout,
+                robot,
+                lambda m: say(final_paths(m)),
+                log_final,
+                progress,
+            )
             _name_final_paths(folder, final)
             os.rename(folder, final)  # onto the empty reserved folder
         except BaseException:
@@ -173,19 +185,28 @@ def run(
         return final / path.relative_to(folder)
 
     diagnosis = result.diagnosis
-    diagnosis = replace(diagnosis, implausible=[final_paths(m) for m in diagnosis.implausible],
-                        warnings=[final_paths(m) for m in diagnosis.warnings])  # fmt: skip
+    diagnosis = replace(
+        diagnosis,
+        implausible=[final_paths(m) for m in diagnosis.implausible],
+        warnings=[final_paths(m) for m in diagnosis.warnings],
+    )
     return replace(
         result,
         diagnosis=diagnosis,
         folder=final,
-        calibration_bag=replace(result.calibration_bag, bag=moved(result.calibration_bag.bag),
-                                world_file=moved(result.calibration_bag.world_file)),
-        holdout_bag=replace(result.holdout_bag, bag=moved(result.holdout_bag.bag),
-                            world_file=moved(result.holdout_bag.world_file)),
+        calibration_bag=replace(
+            result.calibration_bag,
+            bag=moved(result.calibration_bag.bag),
+            world_file=moved(result.calibration_bag.world_file),
+        ),
+        holdout_bag=replace(
+            result.holdout_bag,
+            bag=moved(result.holdout_bag.bag),
+            world_file=moved(result.holdout_bag.world_file),
+        ),
         report=moved(result.report),
         html=None if result.html is None else moved(result.html),
-    )  # fmt: skip
+    )
 
 
 def _reserve(name: Path) -> Path:
@@ -247,8 +268,10 @@ def _run_in(
     steps = 4
     say(f"[1/{steps}] simulate + record: {plan} in the default world -> {final / bag.name}")
     first = simulate(bag, plan, world, seed, n_holdout, progress)
-    say(f"[2/{steps}] simulate + record: {n_holdout} random hold-out poses -> "
-        f"{final / holdout.name}")  # fmt: skip
+    say(
+        f"[2/{steps}] simulate + record: {n_holdout} random hold-out poses -> "
+        f"{final / holdout.name}"
+    )
     truth = simulation_world(first.world_file, robot, (), seed + 1)
     second = simulate(holdout, "random", truth, seed + 1, n_holdout, progress)
     recording = read_bags([bag], description, log=log)
@@ -270,26 +293,45 @@ def _run_in(
         say(f"[4/{steps}] diagnose the sim-to-real gap (hold-out: {holdout.name})")
         calibrations = {n: m.calibration for n, m in models.items()}
         early = FiguresWhenClimbed(figures, calibrations)  # drawn while written up
-        diagnosis, ladder = diagnose_recordings(recording, description, held, log,
-                                                on_ladder=early)  # fmt: skip
+        diagnosis, ladder = diagnose_recordings(recording, description, held, log, on_ladder=early)
         best, warnings = _best_model(models, ladder)
         diagnosis = replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
         report = write_diagnosis(
-            diagnosis, ladder, recording, folder / "diagnosis.json",
-            calibrations=calibrations, best=(best, folder / "params_best.json"),
-            warnings=warnings, compared=early.before_after(ladder)[0], figures=figures,
-        )  # fmt: skip
+            diagnosis,
+            ladder,
+            recording,
+            folder / "diagnosis.json",
+            calibrations=calibrations,
+            best=(best, folder / "params_best.json"),
+            warnings=warnings,
+            compared=early.before_after(ladder)[0],
+            figures=figures,
+        )
     scores = {n: m.holdout.absolute_rms_mm for n, m in models.items()}
     scores.update({r.model: r.heldout.absolute_rms_mm for r in ladder.rungs})
     write_json_atomic(
-        selected_document(marked_implausible(best, diagnosis), recording,
-                          "the lowest held-out error of the run's models and "
-                          "the diagnosis ladder's rungs", "hold-out bag", scores),
+        selected_document(
+            marked_implausible(best, diagnosis),
+            recording,
+            "the lowest held-out error of the run's models and the diagnosis ladder's rungs",
+            "hold-out bag",
+            scores,
+        ),
         folder / "params_best.json",
-    )  # fmt: skip
+    )
     check_loads(folder / "params_best.json", Path("params_best.json"), best, recording)
-    return RunResult(folder, first, second, recording, models, diagnosis, report, best.label,
-                     tuple(warnings), html_report_path(folder / "diagnosis.json"))  # fmt: skip
+    return RunResult(
+        folder,
+        first,
+        second,
+        recording,
+        models,
+        diagnosis,
+        report,
+        best.label,
+        tuple(warnings),
+        html_report_path(folder / "diagnosis.json"),
+    )
 
 
 def _best_model(models: dict[str, ModelScore], ladder: Ladder) -> tuple[Calibration, list[str]]:

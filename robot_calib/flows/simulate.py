@@ -118,9 +118,13 @@ def simulate(
     with staged_outputs(bag.parent, force) as stage:
         save_world(world, stage / world_file.name)
         counts = simulate_bag(
-            stage / bag.name, plan, stage / world_file.name, -1 if seed is None else seed,
-            n_random, None if progress is None else partial(progress, plan),
-        )  # fmt: skip
+            stage / bag.name,
+            plan,
+            stage / world_file.name,
+            -1 if seed is None else seed,
+            n_random,
+            None if progress is None else partial(progress, plan),
+        )
         if not counts.get(POINT_TOPIC):
             raise InputError(
                 f"{bag}: the simulation recorded no tracker point (dropout probability "
@@ -177,9 +181,15 @@ def simulate_stream(
         save_world(world, stage / world_file.name)
         s = sim.stream
         counts = write_stream_bag(
-            stage / bag.name, s.js_ns, s.q, sim.velocity, s.point_ns, s.points,
-            model.robot.joint_names, force=True,
-        )  # fmt: skip
+            stage / bag.name,
+            s.js_ns,
+            s.q,
+            sim.velocity,
+            s.point_ns,
+            s.points,
+            model.robot.joint_names,
+            force=True,
+        )
     labels = tuple(e.label for e in world.effects)
     return Simulation(bag, world_file, counts, labels, time.monotonic() - started)
 

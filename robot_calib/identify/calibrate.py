@@ -111,8 +111,9 @@ def parse_model(
     return base, effects
 
 
-def _from_fit(name: str, model: KinematicModel, fit: FitResult, points: Array,
-              cpa: CPAResult | None = None) -> Calibration:  # fmt: skip
+def _from_fit(
+    name: str, model: KinematicModel, fit: FitResult, points: Array, cpa: CPAResult | None = None
+) -> Calibration:
     return Calibration(
         name,
         model,
@@ -199,8 +200,15 @@ def calibrate(
         steps = np.column_stack([steps, recording.poses.target_index])
         n_poses = len(np.unique(steps, axis=0)) if len(steps) else 0
         check_enough_data(3 * n_poses, n_poses, n_free, "distinct poses")
-    identify = partial(_calibrate_once, robot=robot, model_spec=model_spec,
-                       ecc_order=ecc_order, log=log, start=start, objective=objective)  # fmt: skip
+    identify = partial(
+        _calibrate_once,
+        robot=robot,
+        model_spec=model_spec,
+        ecc_order=ecc_order,
+        log=log,
+        start=start,
+        objective=objective,
+    )
     fit = identify(recording)
     cal = _screened(fit, recording, identify, log) if screen_outliers else fit
     geometry_fitted = base not in ("nominal", "cpa")
@@ -275,15 +283,22 @@ def _screened(
         return cal
     say = log or (lambda _msg: None)
     # Judge every point against a fit that the blunders barely pull: soft-L1, scale 3 sigma.
-    robust = fit_model(cal.model, cal.parameters, recording.poses, recording.points,
-                       check_identifiability=False,
-                       robust_scale=3.0 * robust_sigma(cal.residuals))  # fmt: skip
+    robust = fit_model(
+        cal.model,
+        cal.parameters,
+        recording.poses,
+        recording.points,
+        check_identifiability=False,
+        robust_scale=3.0 * robust_sigma(cal.residuals),
+    )
     sigmas = group_sigmas(recording, robust.residuals)
     flagged = outlier_mask(robust.residuals, sigmas)
     group = "their sweep (or their bag's general poses)" if recording.sweeps else "the campaign"
     for round_ in range(1, MAX_OUTLIER_ROUNDS + 1):
-        say(f"outliers: {int(flagged.sum())} of {len(flagged)} measurements beyond "
-            f"{OUTLIER_K:g} robust sigmas of {group}: fitted without them")  # fmt: skip
+        say(
+            f"outliers: {int(flagged.sum())} of {len(flagged)} measurements beyond "
+            f"{OUTLIER_K:g} robust sigmas of {group}: fitted without them"
+        )
         try:
             cal = identify(recording.subset(~flagged))
         except InputError as exc:
@@ -363,8 +378,12 @@ def _calibrate_once(
     has_sweeps = all(recording.sweeps_of(j) for j in range(1, robot.n_joints + 1))
     if base == "nominal":
         say("nominal: fitting the tracker pose and target offset only")
-        return _from_fit("nominal", geometric, fit_frames(geometric, geometric.parameters(),
-                                                           poses, points), points)  # fmt: skip
+        return _from_fit(
+            "nominal",
+            geometric,
+            fit_frames(geometric, geometric.parameters(), poses, points),
+            points,
+        )
     cpa = None
     if base == "cpa" or (start is None and has_sweeps) or objective == "seed":
         cpa = circle_point_analysis(recording, robot)
@@ -394,16 +413,18 @@ def _calibrate_once(
         # a start: the frames of at most START_POSES poses place the tracker as well as
         # 100k do (the fit from there uses every pose)
         sample = recording.at_most(START_POSES)
-        initial = fit_frames(geometric, geometric.parameters(), sample.poses,
-                             sample.points).parameters  # fmt: skip
+        initial = fit_frames(
+            geometric, geometric.parameters(), sample.poses, sample.points
+        ).parameters
     initial = initial_tool_rotations(geometric, _seeded(geometric, initial), poses)
     # a start pi and a sign away (CPA's axis lines, a given start) starts where it ends
     initial = canonical_form(geometric, initial, poses).parameters
     simpler = None
     if effects and start is None:  # the geometry first; the effects start from it
         say(f"geometric: Levenberg-Marquardt on {len(points)} points, before the effects")
-        geo = _canonical(geometric, fit_model(geometric, initial, poses, points, progress=say),
-                         poses, say)  # fmt: skip
+        geo = _canonical(
+            geometric, fit_model(geometric, initial, poses, points, progress=say), poses, say
+        )
         initial = geo.parameters
         if objective == "absolute":  # what the full model must not end worse than
             simpler = ("geometric", float(np.sqrt(np.mean(geo.residuals**2))))
@@ -413,10 +434,15 @@ def _calibrate_once(
     for starts in itertools.product(*(e.fit_starts(robot) for e in new)):  # one fit per start
         params = _seeded(model, initial, {k: v for start in starts for k, v in start.items()})
         n_free = int(params.free.sum())
-        say(f"{model_spec}: Levenberg-Marquardt on {len(points)} points, {n_free} free "
-            "parameters before the identifiability check")  # fmt: skip
-        fits.append(fit_model(model, params, poses, points, progress=say,
-                              objective=_objective(objective, cpa)))  # fmt: skip
+        say(
+            f"{model_spec}: Levenberg-Marquardt on {len(points)} points, {n_free} free "
+            "parameters before the identifiability check"
+        )
+        fits.append(
+            fit_model(
+                model, params, poses, points, progress=say, objective=_objective(objective, cpa)
+            )
+        )
     fit = min(fits, key=lambda f: f.solver.cost_m2 or 0.0)  # several starts: the best
     fit = _canonical(model, fit, poses, say)
     return replace(_from_fit(model_spec, model, fit, points, cpa), simpler=simpler)
@@ -435,8 +461,13 @@ def _canonical(model: KinematicModel, fit: FitResult, poses: Poses, say: Log) ->
 CPA_DRAWS = 40
 
 
-def _cpa_std(recording: Recording, robot: RobotDescription, geometric: KinematicModel,
-             cpa: CPAResult, params: ParameterVector) -> Array:  # fmt: skip
+def _cpa_std(
+    recording: Recording,
+    robot: RobotDescription,
+    geometric: KinematicModel,
+    cpa: CPAResult,
+    params: ParameterVector,
+) -> Array:
     """1-sigma of CPA's parameters (not 0, which PARAMS.json reserves for fixed
     ones): a parametric bootstrap of the circle fits. CPA_DRAWS times, the measured points
     plus Gaussian noise of the circle fits' own level (`pooled_circle_noise`, per axis)
@@ -457,8 +488,9 @@ def _cpa_std(recording: Recording, robot: RobotDescription, geometric: Kinematic
             again = circle_point_analysis(shaken, robot)
         except InputError:  # a draw no circle survives: left out
             continue
-        values = initial_tool_rotations(geometric, _seeded(geometric, again.parameters),
-                                        shaken.poses).values  # fmt: skip
+        values = initial_tool_rotations(
+            geometric, _seeded(geometric, again.parameters), shaken.poses
+        ).values
         draws.append(values)
     if len(draws) < 2:
         return std
@@ -492,9 +524,11 @@ def model_name(effects: tuple[Effect, ...] | list[Effect]) -> str:
     return "+".join(["geometric", *(e.spec for e in effects)])
 
 
-def reference_models(recording: Recording, robot: RobotDescription,
-                     given: Mapping[str, Calibration] | None = None,
-                     ) -> dict[str, Calibration]:  # fmt: skip
+def reference_models(
+    recording: Recording,
+    robot: RobotDescription,
+    given: Mapping[str, Calibration] | None = None,
+) -> dict[str, Calibration]:
     """The REFERENCE_MODELS of `recording` (tracker blunders left out) a report compares
     its calibration with: `given` ones, the others identified here, without outlier
     screening (`cpa` left out without the circle sweeps of every joint it needs). They

@@ -104,8 +104,10 @@ class Calibration:
             return self.accuracy, "the calibration's in-sample rms"
         if self.hybrid_accuracy is not None:
             return self.hybrid_accuracy, "the hybrid model's in-sample rms"
-        return self.accuracy, ("the physical model's in-sample rms (the file has no "
-                               "hybrid_residuals: written before them)")  # fmt: skip
+        return self.accuracy, (
+            "the physical model's in-sample rms (the file has no "
+            "hybrid_residuals: written before them)"
+        )
 
     def predict(self, poses: Poses) -> Array:
         """Target points (n, 3) [m] in the tracker frame: the model's, minus the learned
@@ -158,8 +160,9 @@ class Calibration:
         from robot_calib.identify.score import score
 
         in_sample, judged_by = self.applied_accuracy()
-        return score(self, recording, in_sample=in_sample, fitted=self.recordings,
-                     judged_by=judged_by)  # fmt: skip
+        return score(
+            self, recording, in_sample=in_sample, fitted=self.recordings, judged_by=judged_by
+        )
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any], where: str = "PARAMS.json") -> Calibration:
@@ -201,10 +204,21 @@ class Calibration:
             outliers = tuple(Outlier.from_dict(o) for o in doc.get("outliers", []))
         except (TypeError, RobotCalibError) as exc:
             raise InputError(f"{where}: malformed outliers ({exc})") from None
-        return cls(str(doc.get("model", "")), model, params, std, acc, np.empty((0, 3)),
-                   ident, solver, outliers=outliers, correction=correction,
-                   implausible=implausible_of(doc, where, model, params),
-                   recordings=tuple(recordings), hybrid_accuracy=hybrid)  # fmt: skip
+        return cls(
+            str(doc.get("model", "")),
+            model,
+            params,
+            std,
+            acc,
+            np.empty((0, 3)),
+            ident,
+            solver,
+            outliers=outliers,
+            correction=correction,
+            implausible=implausible_of(doc, where, model, params),
+            recordings=tuple(recordings),
+            hybrid_accuracy=hybrid,
+        )
 
 
 def calibration_to_dict(cal: Calibration, recording: Recording) -> dict[str, Any]:

@@ -51,10 +51,23 @@ from robot_calib.records import Record
 
 FORMAT = "robot_calib.correction/1"
 CORRECTION_KEYS = (
-    "format", "method", "n_targets", "fitted_poses", "rms_m", "length_scales_deg", "noise_mm",
-    "inverse_length_scales", "signal_variance", "noise_variance", "mean_m", "scale_m",
-    "inducing_q_rad", "inducing_target", "dual", "warnings",
-)  # fmt: skip
+    "format",
+    "method",
+    "n_targets",
+    "fitted_poses",
+    "rms_m",
+    "length_scales_deg",
+    "noise_mm",
+    "inverse_length_scales",
+    "signal_variance",
+    "noise_variance",
+    "mean_m",
+    "scale_m",
+    "inducing_q_rad",
+    "inducing_target",
+    "dual",
+    "warnings",
+)
 #: a learned correction larger than this is no correction of a calibrated robot [m]: a file
 #: that says so (or predicts so at its own poses) is refused
 MAX_CORRECTION_M = 0.010
@@ -143,8 +156,9 @@ class Hyperparameters:
 
     @classmethod
     def of_vector(cls, theta: Array) -> Hyperparameters:
-        return cls(np.array(theta[:-2], dtype=float), float(np.exp(theta[-2])),
-                   float(np.exp(theta[-1])))  # fmt: skip
+        return cls(
+            np.array(theta[:-2], dtype=float), float(np.exp(theta[-2])), float(np.exp(theta[-1]))
+        )
 
 
 def _phi(q: Array, target: IntArray, hyper: Hyperparameters, n_targets: int) -> Array:
@@ -171,12 +185,12 @@ def _feature_scale(u: Array, n_joints: int, n_columns: int) -> Array:
     """(n_columns,) the scale of every column of `_features` ([sin q, cos q, target code])
     by the inverse length scales u (J [+ 1],): u_j on both columns of joint j, u_T on the
     target code's."""
-    return np.concatenate([u[:n_joints], u[:n_joints],
-                           np.full(n_columns - 2 * n_joints, u[-1])])  # fmt: skip
+    return np.concatenate([u[:n_joints], u[:n_joints], np.full(n_columns - 2 * n_joints, u[-1])])
 
 
-def _negative_log_likelihood(theta: Array, inputs: Array, y: Array,
-                             n_joints: int) -> tuple[float, Array]:  # fmt: skip
+def _negative_log_likelihood(
+    theta: Array, inputs: Array, y: Array, n_joints: int
+) -> tuple[float, Array]:
     """-log p(y | theta) (constant dropped) of the (n, C) outputs `y` sharing the kernel,
     and its gradient in theta = (u (G,), log s^2, log sigma^2); `inputs` (n, 2J [+ T]) the
     unscaled features (`_features`) of the n poses, J = `n_joints`.
@@ -233,8 +247,9 @@ def _bounds(
     return joints + target + [tuple(np.log(SIGNAL_BOUNDS)), tuple(np.log(NOISE_BOUNDS))]  # type: ignore[list-item]
 
 
-def _edge_warnings(hyper: Hyperparameters, n_joints: int, min_length_scale_rad: float,
-                   scale_m: float) -> tuple[str, ...]:  # fmt: skip
+def _edge_warnings(
+    hyper: Hyperparameters, n_joints: int, min_length_scale_rad: float, scale_m: float
+) -> tuple[str, ...]:
     """'warning: learned correction: ...' for every hyperparameter at an edge of its range."""
     out = []
     top = 1.0 / min_length_scale_rad
@@ -247,11 +262,19 @@ def _edge_warnings(hyper: Hyperparameters, n_joints: int, min_length_scale_rad: 
                 "harmonics?); the correction smooths them"
             )
     for name, value, (low, high), meaning in (
-        ("signal variance", hyper.signal_variance, SIGNAL_BOUNDS,
-         "the structure's size is not determined by the data"),
-        ("noise variance", hyper.noise_variance, NOISE_BOUNDS,
-         "the residuals are nearly noise-free or all noise at this scale"),
-    ):  # fmt: skip
+        (
+            "signal variance",
+            hyper.signal_variance,
+            SIGNAL_BOUNDS,
+            "the structure's size is not determined by the data",
+        ),
+        (
+            "noise variance",
+            hyper.noise_variance,
+            NOISE_BOUNDS,
+            "the residuals are nearly noise-free or all noise at this scale",
+        ),
+    ):
         if value <= low * (1 + EDGE) or value >= high * (1 - EDGE):
             size = math.sqrt(value) * scale_m * 1e3
             out.append(
@@ -330,9 +353,15 @@ def learn_hyperparameters(
 
     def search(theta: Array, block: slice, iterations: int) -> Any:
         # L-BFGS-B: a smooth objective with an analytic gradient and box bounds (u >= 0)
-        return minimize(_negative_log_likelihood, np.clip(theta, low, high),
-                        args=(inputs[block], y[block], n_joints), jac=True, method="L-BFGS-B",
-                        bounds=bounds, options={"maxiter": iterations, "ftol": FTOL})  # fmt: skip
+        return minimize(
+            _negative_log_likelihood,
+            np.clip(theta, low, high),
+            args=(inputs[block], y[block], n_joints),
+            jac=True,
+            method="L-BFGS-B",
+            bounds=bounds,
+            options={"maxiter": iterations, "ftol": FTOL},
+        )
 
     def revived(theta: Array) -> Array:
         theta = theta.copy()
@@ -344,18 +373,21 @@ def learn_hyperparameters(
     else:  # the rows are in random order: the first COARSE are a random subset too
         coarse = slice(0, min(COARSE, len(rows)))
         starts = _starts(n_joints, n_targets)
-        at_start = [_negative_log_likelihood(t, inputs[coarse], y[coarse], n_joints)[0]
-                    for t in starts]  # fmt: skip
+        at_start = [
+            _negative_log_likelihood(t, inputs[coarse], y[coarse], n_joints)[0] for t in starts
+        ]
         best = np.argsort(at_start)[:STARTS_SEARCHED]
-        found = min((search(starts[k], coarse, MAX_ITERATIONS) for k in best),
-                    key=lambda f: float(f.fun))  # fmt: skip
+        found = min(
+            (search(starts[k], coarse, MAX_ITERATIONS) for k in best), key=lambda f: float(f.fun)
+        )
         if len(rows) > COARSE:
             found = search(revived(found.x), slice(None), MAX_ITERATIONS)
     hyper = Hyperparameters.of_vector(found.x)
     warnings = _edge_warnings(hyper, n_joints, min_length_scale_rad, scale)
     if not found.success and "ITERATIONS" not in str(found.message).upper():
-        warnings += (f"warning: learned correction: the hyperparameter search stopped: "
-                     f"{found.message}",)  # fmt: skip
+        warnings += (
+            f"warning: learned correction: the hyperparameter search stopped: {found.message}",
+        )
     return hyper, warnings
 
 
@@ -432,12 +464,16 @@ class ResidualCorrection(Record):
         the poses have another number of joints or a target beyond the calibration's."""
         n = len(poses)
         if poses.q.shape[1] != self.n_joints:
-            raise InputError(f"learned correction: poses of {poses.q.shape[1]} joints, the "
-                             f"correction was fitted on {self.n_joints}")  # fmt: skip
+            raise InputError(
+                f"learned correction: poses of {poses.q.shape[1]} joints, the "
+                f"correction was fitted on {self.n_joints}"
+            )
         target = poses.target_index
         if n and int(target.max()) >= self.n_targets:
-            raise InputError(f"learned correction: target index {int(target.max())} beyond "
-                             f"the calibration's {self.n_targets} target(s)")  # fmt: skip
+            raise InputError(
+                f"learned correction: target index {int(target.max())} beyond "
+                f"the calibration's {self.n_targets} target(s)"
+            )
         phi_z = _phi(self.inducing_q, self.inducing_target, self.hyper, self.n_targets)
         out = np.empty((n, 3))
         for rows in _blocks(n, len(phi_z)):
@@ -484,9 +520,11 @@ class ResidualCorrection(Record):
         are not finite."""
         if not isinstance(data, Mapping) or data.get("format") != FORMAT:
             found = data.get("format") if isinstance(data, Mapping) else type(data).__name__
-            raise InputError(f"{where}: not a learned correction of a known format "
-                             "(robot_calib.correction/2, the hybrid model's, or "
-                             f"{FORMAT}, the process alone; format {found!r})")  # fmt: skip
+            raise InputError(
+                f"{where}: not a learned correction of a known format "
+                "(robot_calib.correction/2, the hybrid model's, or "
+                f"{FORMAT}, the process alone; format {found!r})"
+            )
         check_keys(data, CORRECTION_KEYS, where)
         if not isinstance(data.get("warnings", []), list):
             raise InputError(f"{where}: malformed learned correction: warnings must be a list")
@@ -496,8 +534,10 @@ class ResidualCorrection(Record):
             dual = np.array(data["dual"], dtype=float)
             w = np.array(data["inverse_length_scales"], dtype=float)
             mean = np.array(data["mean_m"], dtype=float)
-            scalars = {k: float(data[k]) for k in
-                       ("signal_variance", "noise_variance", "scale_m", "rms_m")}  # fmt: skip
+            scalars = {
+                k: float(data[k])
+                for k in ("signal_variance", "noise_variance", "scale_m", "rms_m")
+            }
             n_targets, n_fitted = int(data["n_targets"]), int(data["fitted_poses"])
             warnings = tuple(str(v) for v in data.get("warnings", []))
             method = str(data["method"])
@@ -508,20 +548,27 @@ class ResidualCorrection(Record):
         m = len(q)
         problems = [
             (q.ndim != 2 or m == 0, "inducing_q_rad must be an (m, J) table, m >= 1"),
-            (target.shape != (m,) or (m and (target.min() < 0 or target.max() >= n_targets)),
-             "inducing_target must hold m target indices below n_targets"),
+            (
+                target.shape != (m,) or (m and (target.min() < 0 or target.max() >= n_targets)),
+                "inducing_target must hold m target indices below n_targets",
+            ),
             (dual.shape != (m, 3), "dual must be an (m, 3) table"),
-            (q.ndim == 2 and w.shape != (q.shape[1] + (n_targets > 1),),
-             f"inducing_q_rad has {q.shape[-1]} columns (joints) and inverse_length_scales "
-             f"{w.size} values: one per joint (+ 1 with several targets) in both"),
+            (
+                q.ndim == 2 and w.shape != (q.shape[1] + (n_targets > 1),),
+                f"inducing_q_rad has {q.shape[-1]} columns (joints) and inverse_length_scales "
+                f"{w.size} values: one per joint (+ 1 with several targets) in both",
+            ),
             (mean.shape != (3,), "mean_m must have 3 values"),
             (n_targets < 1, "n_targets must be >= 1"),
             (not all(np.isfinite(a).all() for a in (q, dual, w, mean)), "values not finite"),
             (bool((w < 0).any()), "inverse_length_scales must be >= 0"),
             (not all(math.isfinite(v) for v in scalars.values()), "values not finite"),
-            (min(scalars["signal_variance"], scalars["noise_variance"], scalars["scale_m"]) <= 0,
-             "signal_variance, noise_variance and scale_m must be > 0"),
-        ]  # fmt: skip
+            (
+                min(scalars["signal_variance"], scalars["noise_variance"], scalars["scale_m"])
+                <= 0,
+                "signal_variance, noise_variance and scale_m must be > 0",
+            ),
+        ]
         for bad, what in problems:
             if bad:
                 raise InputError(f"{where}: malformed learned correction: {what}")
@@ -531,24 +578,39 @@ class ResidualCorrection(Record):
             (scalars["scale_m"] > MAX_CORRECTION_M, "scale_m beyond 10 mm"),
             (n_fitted < m, "fitted_poses below the inducing poses"),
             (float(np.max(np.abs(q))) > 4 * np.pi, "inducing_q_rad beyond 4 pi (degrees?)"),
-        ]  # fmt: skip
+        ]
         for bad, what in physical:
             if bad:
                 raise InputError(f"{where}: implausible learned correction: {what}")
         hyper = Hyperparameters(w, scalars["signal_variance"], scalars["noise_variance"])
-        out = cls(q, target, dual, hyper, mean, scalars["scale_m"], n_targets, n_fitted,
-                  scalars["rms_m"], method, warnings)  # fmt: skip
+        out = cls(
+            q,
+            target,
+            dual,
+            hyper,
+            mean,
+            scalars["scale_m"],
+            n_targets,
+            n_fitted,
+            scalars["rms_m"],
+            method,
+            warnings,
+        )
         # what it predicts where it was fitted: finite, and of a correction's size
         with np.errstate(all="ignore"):
             at_fit = out.predict(replace(Poses.from_readings(q), target=target))
         size = float(np.max(np.linalg.norm(at_fit, axis=1))) if len(at_fit) else 0.0
         if not np.isfinite(at_fit).all():
-            raise InputError(f"{where}: implausible learned correction: it predicts "
-                             "non-finite values at its own poses")  # fmt: skip
+            raise InputError(
+                f"{where}: implausible learned correction: it predicts "
+                "non-finite values at its own poses"
+            )
         if size > MAX_CORRECTION_M:
-            raise InputError(f"{where}: implausible learned correction: it predicts "
-                             f"{size * 1e3:.3g} mm at its own poses (at most "
-                             f"{MAX_CORRECTION_M * 1e3:.0f} mm)")  # fmt: skip
+            raise InputError(
+                f"{where}: implausible learned correction: it predicts "
+                f"{size * 1e3:.3g} mm at its own poses (at most "
+                f"{MAX_CORRECTION_M * 1e3:.0f} mm)"
+            )
         return out
 
 
@@ -595,8 +657,9 @@ def fit_correction(
     -------
     correction : ResidualCorrection; `predict` gives the predicted residual (n, 3) [m]
     """
-    return fit_correction_at(poses, residuals, n_targets, rng, hyper, start,
-                             min_length_scale_rad, max_points, max_learn).correction  # fmt: skip
+    return fit_correction_at(
+        poses, residuals, n_targets, rng, hyper, start, min_length_scale_rad, max_points, max_learn
+    ).correction
 
 
 def fit_correction_at(
@@ -620,12 +683,15 @@ def fit_correction_at(
     rng = np.random.default_rng(0) if rng is None else rng
     n = len(poses)
     if residuals.shape != (n, 3) or n == 0:
-        raise InputError(f"learned correction: residuals of shape {residuals.shape} for "
-                         f"{n} poses (expected ({n}, 3), n >= 1)")  # fmt: skip
+        raise InputError(
+            f"learned correction: residuals of shape {residuals.shape} for "
+            f"{n} poses (expected ({n}, 3), n >= 1)"
+        )
     warnings: tuple[str, ...] = ()
     if hyper is None:
-        hyper, warnings = learn_hyperparameters(poses, residuals, n_targets, rng, start,
-                                                min_length_scale_rad, max_learn)  # fmt: skip
+        hyper, warnings = learn_hyperparameters(
+            poses, residuals, n_targets, rng, start, min_length_scale_rad, max_learn
+        )
         if on_learned is not None:
             on_learned(hyper)
     mean, scale = _scaling(residuals)
@@ -664,8 +730,19 @@ def fit_correction_at(
         "joint readings, one length scale per joint, white noise; "
         f"{learned}; {how})"
     )
-    correction = ResidualCorrection(q[inducing].copy(), target[inducing].copy(), dual, hyper,
-                                    mean, scale, n_targets, n, 0.0, method, warnings)  # fmt: skip
+    correction = ResidualCorrection(
+        q[inducing].copy(),
+        target[inducing].copy(),
+        dual,
+        hyper,
+        mean,
+        scale,
+        n_targets,
+        n,
+        0.0,
+        method,
+        warnings,
+    )
     if phi is None:
         fitted = correction.predict(poses)
     size = np.linalg.norm(fitted, axis=1)
@@ -673,8 +750,9 @@ def fit_correction_at(
     return FittedCorrection(correction, fitted, phi)
 
 
-def exact_holdout(phi: Array, hyper: Hyperparameters, residuals: Array,
-                  train: NDArray[np.bool_]) -> Array:  # fmt: skip
+def exact_holdout(
+    phi: Array, hyper: Hyperparameters, residuals: Array, train: NDArray[np.bool_]
+) -> Array:
     """The exact process of `hyper` on the poses of scaled features `phi` (n, F)
     (`FittedCorrection`) fitted on `residuals[train]` ((n, 3) [m]) and predicting at the
     other poses: shape (n - train.sum(), 3) [m]. The same as `fit_correction` of the

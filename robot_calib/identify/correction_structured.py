@@ -93,13 +93,25 @@ from robot_calib.records import Record
 
 FORMAT = "robot_calib.correction/2"
 CORRECTION_KEYS = (
-    "format", "method", "n_targets", "fitted_poses", "rms_m", "structured",
-    "gaussian_process", "warnings",
-)  # fmt: skip
+    "format",
+    "method",
+    "n_targets",
+    "fitted_poses",
+    "rms_m",
+    "structured",
+    "gaussian_process",
+    "warnings",
+)
 STRUCTURED_KEYS = (
-    "rms_m", "parameters", "jacobian_columns", "step_tau_nm", "coefficients", "ridge",
-    "degrees_of_freedom", "strongest",
-)  # fmt: skip
+    "rms_m",
+    "parameters",
+    "jacobian_columns",
+    "step_tau_nm",
+    "coefficients",
+    "ridge",
+    "degrees_of_freedom",
+    "strongest",
+)
 #: the loaded correction's rms at the process's inducing poses may differ from the stored
 #: rms_m by this share (plus ABS_RMS_TOLERANCE_M) when those are all the fitted poses
 #: (rounding), SUBSET_RMS_TOLERANCE when they are a subset of them (sampling)
@@ -194,16 +206,19 @@ class StructuredCorrection:
         if not np.any(self.coefficients):
             return out
         for rows in pose_blocks(len(poses)):
-            design = structured_design(self.model, self.parameters, self.columns, self.step_tau,
-                             poses.subset(rows))  # fmt: skip
+            design = structured_design(
+                self.model, self.parameters, self.columns, self.step_tau, poses.subset(rows)
+            )
             out[rows] = design @ self.coefficients
         return out
 
     def _raw(self, poses: Poses) -> Array:
         """The structure plus the process at `poses` (n, 3) [m], uncapped."""
         if poses.q.shape[1] != self.n_joints:
-            raise InputError(f"learned correction: poses of {poses.q.shape[1]} joints, the "
-                             f"correction was fitted on {self.n_joints}")  # fmt: skip
+            raise InputError(
+                f"learned correction: poses of {poses.q.shape[1]} joints, the "
+                f"correction was fitted on {self.n_joints}"
+            )
         return self.gp.predict(poses) + self.structured(poses)
 
     def predict(self, poses: Poses) -> Array:
@@ -220,8 +235,10 @@ class StructuredCorrection:
         python_warnings.warn(
             f"learned correction: {int(beyond.sum())} of {len(poses)} poses predicted beyond "
             f"{MAX_CORRECTION_M * 1e3:.0f} mm (up to {float(size.max()) * 1e3:.3g} mm), "
-            "capped there: far from the calibration poses", RuntimeWarning, stacklevel=2,
-        )  # fmt: skip
+            "capped there: far from the calibration poses",
+            RuntimeWarning,
+            stacklevel=2,
+        )
         return out * np.minimum(1.0, MAX_CORRECTION_M / np.maximum(size, 1e-300))
 
     def strongest(self, poses: Poses, count: int = 3) -> list[LoadMotion]:
@@ -240,8 +257,9 @@ class StructuredCorrection:
         size, n_rows = len(self.coefficients), 3 * len(poses)
         gram = np.zeros((size, size))
         for rows in pose_blocks(len(poses)):
-            flat = structured_design(self.model, self.parameters, self.columns, self.step_tau,
-                           poses.subset(rows)).reshape(-1, size)  # fmt: skip
+            flat = structured_design(
+                self.model, self.parameters, self.columns, self.step_tau, poses.subset(rows)
+            ).reshape(-1, size)
             gram += flat.T @ flat
         scale, kept = kept_columns(gram, n_rows)
         index = np.flatnonzero(kept)
@@ -265,8 +283,9 @@ class StructuredCorrection:
         out: list[LoadMotion] = []
         candidates = [int(g) for g in np.unique(group[load])]
         while candidates and len(out) < count:
-            after = [unexplained(np.flatnonzero(chosen | (load & (group == g))))
-                     for g in candidates]  # fmt: skip
+            after = [
+                unexplained(np.flatnonzero(chosen | (load & (group == g)))) for g in candidates
+            ]
             best = int(np.argmin(after))
             g = candidates.pop(best)
             joint, motion = g // 6 + 1, MOTIONS[g % 6]
@@ -305,15 +324,19 @@ class StructuredCorrection:
                 "coefficients": self.coefficients.tolist(),
                 "ridge": None if math.isinf(self.ridge) else self.ridge,
                 "degrees_of_freedom": self.dof,
-            },  # fmt: skip
+            },
             "gaussian_process": self.gp.to_dict(),
             "warnings": list(self.warnings),
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], model: KinematicModel,
-                  where: str = "correction",
-                  parameters: ParameterVector | None = None) -> StructuredCorrection:  # fmt: skip
+    def from_dict(
+        cls,
+        data: Mapping[str, Any],
+        model: KinematicModel,
+        where: str = "correction",
+        parameters: ParameterVector | None = None,
+    ) -> StructuredCorrection:
         """The correction of a `to_dict` mapping for `model` (the file's physical model) and,
         when given, `parameters` (the file's: the stored ones must be these); InputError
         naming `where` and the field when it is of another format, lacks a field, names
@@ -323,15 +346,17 @@ class StructuredCorrection:
         its stored rms_m."""
         if not isinstance(data, Mapping) or data.get("format") != FORMAT:
             found = data.get("format") if isinstance(data, Mapping) else type(data).__name__
-            raise InputError(f"{where}: not a learned correction of format {FORMAT} "
-                             f"(format {found!r})")  # fmt: skip
+            raise InputError(
+                f"{where}: not a learned correction of format {FORMAT} (format {found!r})"
+            )
         check_keys(data, CORRECTION_KEYS, where)
         part = data.get("structured")
         if not isinstance(part, Mapping):
             raise InputError(f"{where}: malformed learned correction: no `structured` section")
         check_keys(part, STRUCTURED_KEYS, f"{where}: structured")
-        process = ResidualCorrection.from_dict(data.get("gaussian_process", {}),
-                                               f"{where}: gaussian_process")  # fmt: skip
+        process = ResidualCorrection.from_dict(
+            data.get("gaussian_process", {}), f"{where}: gaussian_process"
+        )
         try:
             values = {str(k): float(v) for k, v in dict(part["parameters"]).items()}
             columns = tuple(str(c) for c in part["jacobian_columns"])
@@ -350,29 +375,41 @@ class StructuredCorrection:
         nominal = model.parameters()
         unknown = sorted(set(values) ^ {p.name for p in nominal.parameters})
         if unknown:
-            raise InputError(f"{where}: learned correction: parameters {unknown[:5]} do not "
-                             "match the model's")  # fmt: skip
+            raise InputError(
+                f"{where}: learned correction: parameters {unknown[:5]} do not match the model's"
+            )
         n_joints = model.robot.n_joints
         size = n_joints * 6 * len(FEATURES) + len(columns)
         problems = [
-            (step_tau.shape != (n_joints, len(STEP_SHARES)),
-             f"step_tau_nm must be a ({n_joints}, {len(STEP_SHARES)}) table"),
+            (
+                step_tau.shape != (n_joints, len(STEP_SHARES)),
+                f"step_tau_nm must be a ({n_joints}, {len(STEP_SHARES)}) table",
+            ),
             (bool(step_tau.size) and not bool(np.all(step_tau > 0)), "step_tau_nm must be > 0"),
             (coefficients.shape != (size,), f"coefficients must have {size} values"),
             (not set(columns) <= set(values), "jacobian_columns must name parameters"),
-            (not np.isfinite(coefficients).all() or not np.isfinite(step_tau).all()
-             or not all(math.isfinite(v) for v in (*values.values(), dof, structured_rms, rms)),
-             "values not finite"),
+            (
+                not np.isfinite(coefficients).all()
+                or not np.isfinite(step_tau).all()
+                or not all(math.isfinite(v) for v in (*values.values(), dof, structured_rms, rms)),
+                "values not finite",
+            ),
             (not ridge >= 0, "structured.ridge must be >= 0 (null: no structure)"),
             (not dof >= 0, "structured.degrees_of_freedom must be >= 0"),
             (n_targets < 1 or n_fitted < 1, "n_targets and fitted_poses must be >= 1"),
-            (math.isinf(ridge) and bool(np.any(coefficients)),
-             "structured.coefficients must be zero with ridge null (no structure)"),
-            (n_targets != process.n_targets or n_joints != process.n_joints,
-             "the Gaussian process has another number of joints or targets"),
-            (n_fitted != process.n_fitted,
-             "fitted_poses differs from the Gaussian process's fitted_poses"),
-        ]  # fmt: skip
+            (
+                math.isinf(ridge) and bool(np.any(coefficients)),
+                "structured.coefficients must be zero with ridge null (no structure)",
+            ),
+            (
+                n_targets != process.n_targets or n_joints != process.n_joints,
+                "the Gaussian process has another number of joints or targets",
+            ),
+            (
+                n_fitted != process.n_fitted,
+                "fitted_poses differs from the Gaussian process's fitted_poses",
+            ),
+        ]
         for bad, what in problems:
             if bad:
                 raise InputError(f"{where}: malformed learned correction: {what}")
@@ -381,13 +418,30 @@ class StructuredCorrection:
         stored = nominal.with_values(values)
         if parameters is not None:
             theirs = dict(zip(parameters.names, parameters.values))
-            differ = [k for k, v in values.items() if k not in theirs
-                      or abs(v - theirs[k]) > PARAMETER_TOLERANCE * max(1.0, abs(v))]  # fmt: skip
+            differ = [
+                k
+                for k, v in values.items()
+                if k not in theirs or abs(v - theirs[k]) > PARAMETER_TOLERANCE * max(1.0, abs(v))
+            ]
             if differ:
-                raise InputError(f"{where}: learned correction: structured.parameters "
-                                 f"{differ[:3]} differ from the file's parameters")  # fmt: skip
-        out = cls(model, stored, columns, step_tau, coefficients, ridge, dof, structured_rms,
-                  process, rms, method, warnings)  # fmt: skip
+                raise InputError(
+                    f"{where}: learned correction: structured.parameters "
+                    f"{differ[:3]} differ from the file's parameters"
+                )
+        out = cls(
+            model,
+            stored,
+            columns,
+            step_tau,
+            coefficients,
+            ridge,
+            dof,
+            structured_rms,
+            process,
+            rms,
+            method,
+            warnings,
+        )
         out.check_at_fitted_poses(where)
         return out
 
@@ -420,21 +474,27 @@ class StructuredCorrection:
         poses, structured, total = self._at_own_poses()
         size = np.linalg.norm(total, axis=1)
         if not (np.isfinite(total).all() and np.isfinite(structured).all()):
-            raise InputError(f"{where}: implausible learned correction: it predicts "
-                             "non-finite values at its own poses")  # fmt: skip
+            raise InputError(
+                f"{where}: implausible learned correction: it predicts "
+                "non-finite values at its own poses"
+            )
         if float(size.max()) > MAX_CORRECTION_M:
-            raise InputError(f"{where}: implausible learned correction: it predicts "
-                             f"{float(size.max()) * 1e3:.3g} mm at its own poses (at most "
-                             f"{MAX_CORRECTION_M * 1e3:.0f} mm)")  # fmt: skip
+            raise InputError(
+                f"{where}: implausible learned correction: it predicts "
+                f"{float(size.max()) * 1e3:.3g} mm at its own poses (at most "
+                f"{MAX_CORRECTION_M * 1e3:.0f} mm)"
+            )
         share = RMS_TOLERANCE if len(poses) == self.n_fitted else SUBSET_RMS_TOLERANCE
         for field, found, stored in (
             ("structured.rms_m", rms_norm(structured), self.structured_rms_m),
             ("rms_m", rms_norm(total), self.rms_m),
         ):
             if abs(found - stored) > share * stored + ABS_RMS_TOLERANCE_M:
-                raise InputError(f"{where}: implausible learned correction: {field} "
-                                 f"{stored * 1e3:.4g} mm, it predicts {found * 1e3:.4g} mm rms "
-                                 "at its own poses")  # fmt: skip
+                raise InputError(
+                    f"{where}: implausible learned correction: {field} "
+                    f"{stored * 1e3:.4g} mm, it predicts {found * 1e3:.4g} mm rms "
+                    "at its own poses"
+                )
 
 
 #: a correction of the hybrid model: the process alone (format 1) or structured (format 2)

@@ -67,16 +67,19 @@ class StructuredPart:
     warnings: tuple[str, ...]
 
 
-def fit_structured_part(model: KinematicModel, parameters: ParameterVector, poses: Poses,
-                        residuals: Array) -> StructuredPart:  # fmt: skip
+def fit_structured_part(
+    model: KinematicModel, parameters: ParameterVector, poses: Poses, residuals: Array
+) -> StructuredPart:
     """The load-driven geometry of `residuals` (n, 3) [m, tracker frame, predicted -
     measured] of `model` at `parameters` at `poses` by ridge least squares (ridge by
     generalised cross-validation on these residuals). Needs no hyperparameter of the
     process: folds can fit it while another fold's process searches them."""
     n = len(poses)
     if residuals.shape != (n, 3) or n == 0:
-        raise InputError(f"learned correction: residuals of shape {residuals.shape} for "
-                         f"{n} poses (expected ({n}, 3), n >= 1)")  # fmt: skip
+        raise InputError(
+            f"learned correction: residuals of shape {residuals.shape} for "
+            f"{n} poses (expected ({n}, 3), n >= 1)"
+        )
     columns = tuple(name for name, free in zip(parameters.names, parameters.free) if free)
     n_joints = model.robot.n_joints
     torque = np.sqrt(np.mean(frame_loads(model.robot, poses.q)[:, :, 2] ** 2, axis=0))
@@ -90,8 +93,10 @@ def fit_structured_part(model: KinematicModel, parameters: ParameterVector, pose
     designs: list[Array] = []  # the design's blocks, kept for the fitted values
     if rows < MIN_ROWS_PER_COLUMN * size:
         fit = Ridge(np.zeros(size), math.inf, 0.0, False)
-        how = (f"left out: {n} poses give {rows} rows for {size} columns (at least "
-               f"{MIN_ROWS_PER_COLUMN:g} per column)")  # fmt: skip
+        how = (
+            f"left out: {n} poses give {rows} rows for {size} columns (at least "
+            f"{MIN_ROWS_PER_COLUMN:g} per column)"
+        )
     else:
         gram, rhs, total = np.zeros((size, size)), np.zeros(size), 0.0
         for block in pose_blocks(n):
@@ -103,9 +108,11 @@ def fit_structured_part(model: KinematicModel, parameters: ParameterVector, pose
             rhs += flat.T @ y
             total += float(y @ y)
         fit = gcv_ridge(gram, rhs, total, rows)
-        how = (f"{size - fit.left_out} columns ({fit.left_out} of zero loads left out), "
-               f"ridge {fit.ridge:.2g} of the largest eigenvalue by generalised "
-               f"cross-validation, {fit.dof:.0f} degrees of freedom")  # fmt: skip
+        how = (
+            f"{size - fit.left_out} columns ({fit.left_out} of zero loads left out), "
+            f"ridge {fit.ridge:.2g} of the largest eigenvalue by generalised "
+            f"cross-validation, {fit.dof:.0f} degrees of freedom"
+        )
         if fit.at_edge:
             warnings += (
                 "warning: learned correction: the structured part's ridge ends at the "
@@ -142,16 +149,27 @@ def fit_structured(
         part = fit_structured_part(model, parameters, poses, residuals)
     structured, fit = part.structured, part.fit
     left = residuals - structured
-    fitted = fit_correction_at(poses, left, len(model.targets), rng, hyper=hyper, start=start,
-                               max_learn=max_learn, on_learned=on_learned)  # fmt: skip
+    fitted = fit_correction_at(
+        poses,
+        left,
+        len(model.targets),
+        rng,
+        hyper=hyper,
+        start=start,
+        max_learn=max_learn,
+        on_learned=on_learned,
+    )
     process, process_fitted = fitted.correction, fitted.fitted
     if not _process_generalises(fitted, poses, left):
         process_fitted = np.zeros_like(left)
         process = replace(
-            process, dual=np.zeros_like(process.dual), mean_m=np.zeros(3), rms_m=0.0,
+            process,
+            dual=np.zeros_like(process.dual),
+            mean_m=np.zeros(3),
+            rms_m=0.0,
             method=process.method + "; left out: it learned nothing held out in a 2-fold "
             "check on the fitted poses",
-        )  # fmt: skip
+        )
     method = (
         "load-driven geometry (every link frame's small motion times 1, the gravity moment "
         "it carries and steps of its joint's gravity torque, plus the model's own Jacobian "
@@ -159,9 +177,19 @@ def fit_structured(
         f"{process.method[1:]}"
     )
     out = StructuredCorrection(
-        model, parameters, part.columns, part.step_tau, fit.coefficients, fit.ridge, fit.dof,
-        rms_norm(structured), process, 0.0, method, part.warnings + process.warnings,
-    )  # fmt: skip
+        model,
+        parameters,
+        part.columns,
+        part.step_tau,
+        fit.coefficients,
+        fit.ridge,
+        fit.dof,
+        rms_norm(structured),
+        process,
+        0.0,
+        method,
+        part.warnings + process.warnings,
+    )
     return replace(out, rms_m=rms_norm(structured + process_fitted)).with_own_rms()
 
 
@@ -186,23 +214,47 @@ def _process_generalises(fitted: FittedCorrection, poses: Poses, left: Array) ->
         if fitted.phi is not None:
             predicted = exact_holdout(fitted.phi, process.hyper, left, train)
         else:
-            local = fit_correction(poses.subset(train), left[train], process.n_targets,
-                                   hyper=process.hyper)  # fmt: skip
+            local = fit_correction(
+                poses.subset(train), left[train], process.n_targets, hyper=process.hyper
+            )
             predicted = local.predict(poses.subset(~train))
         before += float(np.sum(left[~train] ** 2))
         after += float(np.sum((left[~train] - predicted) ** 2))
     return after < (1.0 - MIN_PROCESS_GAIN) ** 2 * before
 
 
-def _empty(model: KinematicModel, parameters: ParameterVector, columns: tuple[str, ...],
-           step_tau: Array, n: int) -> StructuredCorrection:  # fmt: skip
+def _empty(
+    model: KinematicModel,
+    parameters: ParameterVector,
+    columns: tuple[str, ...],
+    step_tau: Array,
+    n: int,
+) -> StructuredCorrection:
     """A structured correction with zero coefficients and a placeholder process (to
     evaluate the structured part of given coefficients)."""
     size = model.robot.n_joints * 6 * len(FEATURES) + len(columns)
     placeholder = ResidualCorrection(
-        np.zeros((1, model.robot.n_joints)), np.zeros(1, dtype=np.int64), np.zeros((1, 3)),
-        Hyperparameters(np.zeros(model.robot.n_joints), 1.0, 1.0), np.zeros(3), 1.0,
-        len(model.targets), n, 0.0, "",
-    )  # fmt: skip
-    return StructuredCorrection(model, parameters, columns, step_tau, np.zeros(size),
-                                math.inf, 0.0, 0.0, placeholder, 0.0, "")  # fmt: skip
+        np.zeros((1, model.robot.n_joints)),
+        np.zeros(1, dtype=np.int64),
+        np.zeros((1, 3)),
+        Hyperparameters(np.zeros(model.robot.n_joints), 1.0, 1.0),
+        np.zeros(3),
+        1.0,
+        len(model.targets),
+        n,
+        0.0,
+        "",
+    )
+    return StructuredCorrection(
+        model,
+        parameters,
+        columns,
+        step_tau,
+        np.zeros(size),
+        math.inf,
+        0.0,
+        0.0,
+        placeholder,
+        0.0,
+        "",
+    )

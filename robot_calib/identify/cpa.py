@@ -110,11 +110,15 @@ def pooled_circle_noise(fits: list[SweepFit]) -> float:
     freedom (a median: one circle fitted to a target on its axis can diverge and must
     not set the noise of all); 0 when no circle has any to spare."""
     levels = [
-        float(np.sqrt((np.sum(f.circle.plane_residuals**2)
-                       + np.sum(f.circle.radial_residuals**2)) / (2 * f.n_points - 6)))
+        float(
+            np.sqrt(
+                (np.sum(f.circle.plane_residuals**2) + np.sum(f.circle.radial_residuals**2))
+                / (2 * f.n_points - 6)
+            )
+        )
         for f in fits
         if 2 * f.n_points > 6
-    ]  # fmt: skip
+    ]
     return float(np.median(levels)) if levels else 0.0
 
 
@@ -130,8 +134,9 @@ def axis_from_sweep(points: Array, readings: Array, joint: int) -> tuple[AxisLin
 
 def _sweep_name(recording: Recording, sweep: Sweep) -> str:
     """'sweep of joint J at measurements A-B' (and its target, when there are several)."""
-    out = (f"sweep of joint {sweep.joint} at measurements {sweep.index[0] + 1}-"
-           f"{sweep.index[-1] + 1}")  # fmt: skip
+    out = (
+        f"sweep of joint {sweep.joint} at measurements {sweep.index[0] + 1}-{sweep.index[-1] + 1}"
+    )
     if len(recording.target_names) > 1:
         name = recording.target_names[int(recording.poses.target_index[sweep.index[0]])]
         out += f" of {target_topic(name)}"
@@ -245,8 +250,9 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
             except InputError as exc:  # e.g. a target on the axis, noise-free: no circle
                 if len(recording.sweeps_of(j)) == 1:
                     raise InputError(f"{where}: {exc}") from None
-                warnings.append(f"warning: {where}: {exc}: left out, the joint's other "
-                                "circles give its axis")  # fmt: skip
+                warnings.append(
+                    f"warning: {where}: {exc}: left out, the joint's other circles give its axis"
+                )
                 continue
             n_fitted = len(circle.plane_residuals)
             if n_fitted < s.n_poses:
@@ -265,8 +271,9 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
     for j in range(1, n + 1):
         sigma = [direction_sigma(f.circle, f.n_points, noise, f.lever_m) for f in fits[j]]
         warnings += _near_axis_warnings(recording, used[j], fits[j], sigma)
-        axes.append(combine_lines([(f.n_points, sd, ln)
-                                   for f, sd, ln in zip(fits[j], sigma, lines[j])]))  # fmt: skip
+        axes.append(
+            combine_lines([(f.n_points, sd, ln) for f, sd, ln in zip(fits[j], sigma, lines[j])])
+        )
 
     # Base frame: on axis 1, d1 and theta1 nominal.
     z0 = axes[0].direction
@@ -304,11 +311,17 @@ def circle_point_analysis(recording: Recording, robot: RobotDescription) -> CPAR
     qn = variables[last, n - 1]
     flanges = np.array(
         [
-            frame @ link_transform(robot.theta[n - 1] + q, robot.d[n - 1], robot.a[n - 1],
-                          robot.alpha[n - 1], robot.beta[n - 1])
+            frame
+            @ link_transform(
+                robot.theta[n - 1] + q,
+                robot.d[n - 1],
+                robot.a[n - 1],
+                robot.alpha[n - 1],
+                robot.beta[n - 1],
+            )
             for q in qn
         ]
-    )  # fmt: skip
+    )
     rel = recording.points[last] - flanges[:, :3, 3]
     in_flange = np.einsum("nji,nj->ni", flanges[:, :3, :3], rel)  # (k, 3)
     which = recording.poses.target_index[last]

@@ -137,13 +137,31 @@ def _solve(
 
     if robust_scale is None:
         tol = ROUGH_TOLERANCE if rough else 1e-12
-        solution = least_squares(fun, x0, jac=jac, method="lm", x_scale="jac", xtol=tol,
-                                 ftol=tol, gtol=tol,
-                                 max_nfev=min(100 * (len(x0) + 1), MAX_EVALUATIONS))  # fmt: skip
+        solution = least_squares(
+            fun,
+            x0,
+            jac=jac,
+            method="lm",
+            x_scale="jac",
+            xtol=tol,
+            ftol=tol,
+            gtol=tol,
+            max_nfev=min(100 * (len(x0) + 1), MAX_EVALUATIONS),
+        )
     else:
-        solution = least_squares(fun, x0, jac=jac, method="trf", loss="soft_l1",
-                                 f_scale=robust_scale, x_scale="jac", xtol=1e-10, ftol=1e-10,
-                                 gtol=1e-10, max_nfev=50 * (len(x0) + 1))  # fmt: skip
+        solution = least_squares(
+            fun,
+            x0,
+            jac=jac,
+            method="trf",
+            loss="soft_l1",
+            f_scale=robust_scale,
+            x_scale="jac",
+            xtol=1e-10,
+            ftol=1e-10,
+            gtol=1e-10,
+            max_nfev=50 * (len(x0) + 1),
+        )
     return _Solved(
         solution.x,
         int(solution.status),
@@ -250,8 +268,7 @@ class _Problem:
             self.rows6 = np.flatnonzero(self.weights.oriented)
             self.n_data = 3 * (len(poses) + len(self.rows6))
             if not self.compressed:
-                self._jac = np.zeros((self.n_data + len(self.prior_cols),
-                                      int(start.free.sum())))  # fmt: skip
+                self._jac = np.zeros((self.n_data + len(self.prior_cols), int(start.free.sum())))
 
     def evaluate(self, x: Array) -> tuple[Array, Array]:
         """Objective residuals (m,) [m] and their Jacobian (m, n_free) at free values x,
@@ -269,8 +286,7 @@ class _Problem:
                 )
                 prior_jac = np.zeros((len(prior), len(x)))
                 prior_jac[np.arange(len(prior)), self.prior_cols] = self.prior_weight
-                self._cache = (np.concatenate([residual, prior]),
-                               np.vstack([data_jac, prior_jac]))  # fmt: skip
+                self._cache = (np.concatenate([residual, prior]), np.vstack([data_jac, prior_jac]))
             else:
                 predicted, residual = self._weighted(params, self._jac[: self.n_data])
                 rows = self.n_data + np.arange(len(prior))
@@ -373,8 +389,9 @@ class _Problem:
             assert sub.rotation is not None
             frames, omega = self.model.orientation_jacobian(params, sub)
             error = orientation_errors(frames, sub.rotation)
-            self.orientation_error = (error if start == 0 else
-                                      np.concatenate([self.orientation_error, error]))  # fmt: skip
+            self.orientation_error = (
+                error if start == 0 else np.concatenate([self.orientation_error, error])
+            )
             factor = w.orientation[which]
             residual = (error * factor[:, None]).reshape(-1)
             jac = (omega[:, :, free] * factor[:, None, None]).reshape(len(residual), n_free)
@@ -436,9 +453,16 @@ class _Problem:
     ) -> _Problem:
         """The same problem (from `start`, default the same) with accuracies not stated
         taken as `fallback` (position [m], orientation [rad]); evaluations carried on."""
-        out = _Problem(self.model, start or self.start, self.poses, self.points,
-                       self.objective, fallback, self.prior_reference,
-                       self.compressed)  # fmt: skip
+        out = _Problem(
+            self.model,
+            start or self.start,
+            self.poses,
+            self.points,
+            self.objective,
+            fallback,
+            self.prior_reference,
+            self.compressed,
+        )
         out.evaluations = self.evaluations
         return out
 
@@ -479,8 +503,9 @@ def weighted_jacobian(
     objective the R of [J | r] (k = P + 1: the same J^T J, J^T r, r^T r, memory O(P^2)
     whatever m), else the rows themselves (k = m)."""
     every = params.freed(params.names)
-    problem = _Problem(model, every, poses, points, objective or AbsoluteObjective(),
-                       compressed=True)  # fmt: skip
+    problem = _Problem(
+        model, every, poses, points, objective or AbsoluteObjective(), compressed=True
+    )
     residual, jac, rows = problem.data_rows(every.pack())
     return residual.copy(), jac.copy(), rows
 
@@ -506,8 +531,13 @@ def weighted_rows(
     data = problem.evaluate(x)[0][: problem.n_data]
     problem.set_prior_reference(float(np.sqrt(np.mean(data**2))) if len(data) else 0.0)
     residual, jac = problem.evaluate(x)
-    owner = np.concatenate([np.repeat(np.arange(len(poses)), 3), np.repeat(problem.rows6, 3),
-                            np.full(len(problem.prior_cols), PRIOR_ROW)])  # fmt: skip
+    owner = np.concatenate(
+        [
+            np.repeat(np.arange(len(poses)), 3),
+            np.repeat(problem.rows6, 3),
+            np.full(len(problem.prior_cols), PRIOR_ROW),
+        ]
+    )
     # the problem's own arrays, not copies: it ends here, so nothing evaluates it again (a
     # copy doubled the peak: 2 x 120 MB at 100k poses)
     return residual, jac, owner
@@ -620,8 +650,9 @@ def fit_model(
     if check_identifiability and len(solved.x):
         residual, jac_free, n_rows = problem.data_rows(solved.x)
         at_solution = params.unpack(solved.x)
-        _, weak = fix_poorly_determined(at_solution, jac_free, residual,
-                                        columns_are_free=True, rows=n_rows)  # fmt: skip
+        _, weak = fix_poorly_determined(
+            at_solution, jac_free, residual, columns_are_free=True, rows=n_rows
+        )
         if weak:  # held at their start values, the rest refitted FROM THE START: at the
             # rough solution the weak ones may have traded radians with the rest
             for name, reason in weak:
@@ -636,8 +667,12 @@ def fit_model(
     # a solve that ends above the cost it started from is discarded.
     x = solved.x
     status, message, nfev, njev, optimality = (
-        solved.status, solved.message, solved.nfev, solved.njev, solved.optimality
-    )  # fmt: skip
+        solved.status,
+        solved.message,
+        solved.nfev,
+        solved.njev,
+        solved.optimality,
+    )
     x0 = params.pack()
     if len(x) and robust_scale is None and problem.cost(x) > problem.cost(x0):
         x, status, success_note = x0, 0, "ended above its start: the start kept"
@@ -647,8 +682,11 @@ def fit_model(
     std = np.zeros(len(fitted))
     if len(x) and statistics:
         std[fitted.free] = np.sqrt(np.diag(covariance(data_jac, data_residual, rows=n_rows)))
-    figures = (describe(data_jac, fixed, rows=n_rows) if statistics
-               else Identifiability(np.nan, np.nan, len(x), fixed))  # fmt: skip
+    figures = (
+        describe(data_jac, fixed, rows=n_rows)
+        if statistics
+        else Identifiability(np.nan, np.nan, len(x), fixed)
+    )
     return FitResult(
         fitted,
         std,

@@ -188,8 +188,16 @@ def describe(
 
 #: A free parameter whose 1-sigma from the data would exceed this (by unit) is not
 #: identified in any useful sense: 1 mm for a length, 0.01 rad (0.6 deg) for an angle.
-STD_BOUNDS = {"m": 1e-3, "rad": 1e-2, "1": 1e-2, "rad/(N m)": 1e-3, "1/s": 1e-4,
-              "1/K": 1e-4, "s": 1e4, "rad/m": 1e-4}  # fmt: skip
+STD_BOUNDS = {
+    "m": 1e-3,
+    "rad": 1e-2,
+    "1": 1e-2,
+    "rad/(N m)": 1e-3,
+    "1/s": 1e-4,
+    "1/K": 1e-4,
+    "s": 1e4,
+    "rad/m": 1e-4,
+}
 #: tighter bounds for the parameters of one effect (`Parameter.group`) whose values are
 #: small in their unit: gravity_compliance's lumped moments k g m c are a few 1e-4 rad
 GROUP_STD_BOUNDS = {"gravity_compliance": 5e-5}
@@ -291,8 +299,11 @@ def fix_poorly_determined(
         if ratio[worst] <= 1.0:
             return params, fixed
         corr = cov[worst] / np.maximum(std * std[worst], 1e-300)
-        partners = [params.names[free[k]] for k in np.argsort(-np.abs(corr))
-                    if k != worst and abs(corr[k]) > 0.9][:3]  # fmt: skip
+        partners = [
+            params.names[free[k]]
+            for k in np.argsort(-np.abs(corr))
+            if k != worst and abs(corr[k]) > 0.9
+        ][:3]
         unit = params.parameters[free[worst]].unit
         reason = (
             f"not identifiable from these poses: its 1-sigma would be {std[worst]:.2g} {unit}"

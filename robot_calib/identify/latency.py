@@ -132,8 +132,14 @@ def calibrate_stream(
         cal = calibrate(rec, robot, model, ecc_order, log=quiet, start=cal, screen_outliers=False)
     order = sorted(tried)
     return StreamCalibration(
-        cal, rec, pairing, latency, rounds, np.array(order), np.array([tried[k] for k in order]),
-    )  # fmt: skip
+        cal,
+        rec,
+        pairing,
+        latency,
+        rounds,
+        np.array(order),
+        np.array([tried[k] for k in order]),
+    )
 
 
 def steffensen(chain: list[float]) -> float:

@@ -23,9 +23,17 @@ STEP_SHARES = (0.01, 0.03, 0.1)
 #: a frame whose torque rms is below this [N m] gets steps of this width (a vertical axis:
 #: M_z = 0 everywhere, the steps are zero columns)
 MIN_TAU_NM = 1e-6
-FEATURES = ("1", "M_x", "M_y", "M_z", "P_x", "P_y", "P_z",
-            *(f"C{a}_{b}" for a in "xyz" for b in "xyz"),
-            *(f"step{k + 1}" for k in range(len(STEP_SHARES))))  # fmt: skip
+FEATURES = (
+    "1",
+    "M_x",
+    "M_y",
+    "M_z",
+    "P_x",
+    "P_y",
+    "P_z",
+    *(f"C{a}_{b}" for a in "xyz" for b in "xyz"),
+    *(f"step{k + 1}" for k in range(len(STEP_SHARES))),
+)
 MOTIONS = ("x", "y", "z", "rx", "ry", "rz")
 BLOCK_POSES = 2000  # poses per block of the design matrix (a block: 3 x 2000 x ~300 x 8 B)
 
@@ -81,8 +89,13 @@ def point_motions(model: KinematicModel, params: ParameterVector, poses: Poses) 
     return out
 
 
-def structured_design(model: KinematicModel, params: ParameterVector, columns: tuple[str, ...],
-            step_tau: Array, poses: Poses) -> Array:  # fmt: skip
+def structured_design(
+    model: KinematicModel,
+    params: ParameterVector,
+    columns: tuple[str, ...],
+    step_tau: Array,
+    poses: Poses,
+) -> Array:
     """(n, 3, P) the structured columns at `poses`: J x 6 x F load-driven motions, then the
     model's Jacobian columns `columns`."""
     n = len(poses)

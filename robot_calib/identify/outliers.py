@@ -74,8 +74,10 @@ def group_sigmas(recording: Recording, residuals: Array) -> Array:
     out = np.full(len(recording), floor)
     groups = [s.index for s in recording.sweeps]
     general = recording.general
-    groups += [np.flatnonzero(general & (recording.bag_index == b))
-               for b in np.unique(recording.bag_index)]  # fmt: skip
+    groups += [
+        np.flatnonzero(general & (recording.bag_index == b))
+        for b in np.unique(recording.bag_index)
+    ]
     for index in groups:
         if len(index):
             out[index] = max(floor, robust_sigma(residuals[index]))
@@ -128,9 +130,11 @@ class Outlier(Record):
                 f"{self.references_m * 1e3:.3f} mm too: the tracker's frame moved there"
             )
         elif self.references_m is not None and not self.target:
-            why = (f"; the reference reflectors read with it stayed within "
-                   f"{self.references_m * 1e3:.3f} mm: the tracker's frame did not move; the "
-                   "robot there, or this target's SMR (one target cannot tell)")  # fmt: skip
+            why = (
+                f"; the reference reflectors read with it stayed within "
+                f"{self.references_m * 1e3:.3f} mm: the tracker's frame did not move; the "
+                "robot there, or this target's SMR (one target cannot tell)"
+            )
         else:
             why = ""
         return (
@@ -148,8 +152,9 @@ def outlier_counts(outliers: Sequence[Outlier]) -> str:
     robot = sum(o.kind == ROBOT for o in outliers)
     parts = [f"{len(outliers) - robot} tracker blunder(s)"] if len(outliers) > robot else []
     if robot:
-        parts.append(f"{robot} measurement(s) of poses where the robot was off (every target "
-                     "together)")  # fmt: skip
+        parts.append(
+            f"{robot} measurement(s) of poses where the robot was off (every target together)"
+        )
     return ", ".join(parts)
 
 
@@ -169,12 +174,14 @@ def tracker_moved(recording: Recording, residuals: Array) -> NDArray[np.bool_]:
             noise[recording.bag_index == reads.source] = reads.drift.noise_mm * 1e-3
     size = np.linalg.norm(residuals, axis=1)
     with np.errstate(invalid="ignore"):
-        return np.asarray(np.isfinite(leftover) & (leftover >= 0.5 * size)
-                          & (leftover > RIGID_K * noise))  # fmt: skip
+        return np.asarray(
+            np.isfinite(leftover) & (leftover >= 0.5 * size) & (leftover > RIGID_K * noise)
+        )
 
 
-def robot_errors(recording: Recording, mask: NDArray[np.bool_], residuals: Array,
-                 sigma: Array) -> NDArray[np.bool_]:  # fmt: skip
+def robot_errors(
+    recording: Recording, mask: NDArray[np.bool_], residuals: Array, sigma: Array
+) -> NDArray[np.bool_]:
     """(n,) True for the flagged measurements (mask (n,)) that are a robot error, not a
     tracker blunder: at a pose (`Recording.pose_index`) with two or more targets, one rigid
     motion takes every target's predicted point to its measured one, flagged or not, to
@@ -196,11 +203,14 @@ def robot_errors(recording: Recording, mask: NDArray[np.bool_], residuals: Array
             continue
         measured, model = recording.points[rows], predicted[rows]
         if len(rows) == 2:
-            gap = abs(float(np.linalg.norm(measured[0] - measured[1]))
-                      - float(np.linalg.norm(model[0] - model[1])))  # fmt: skip
+            gap = abs(
+                float(np.linalg.norm(measured[0] - measured[1]))
+                - float(np.linalg.norm(model[0] - model[1]))
+            )
         else:
-            rotation, _ = Rotation.align_vectors(measured - measured.mean(0),
-                                                 model - model.mean(0))  # fmt: skip
+            rotation, _ = Rotation.align_vectors(
+                measured - measured.mean(0), model - model.mean(0)
+            )
             moved = rotation.apply(model - model.mean(0)) + measured.mean(0)
             gap = float(np.linalg.norm(moved - measured, axis=1).max())
         if gap <= RIGID_K * float(np.max(sigma[rows])):

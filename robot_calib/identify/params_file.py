@@ -71,8 +71,10 @@ def read_document(path: Path) -> dict[str, Any]:
         doc = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         if Path(path).suffix.lower() in (".mcap", ".db3"):  # arguments swapped
-            raise InputError(f"{path}: a bag, not a parameter file: the parameter file "
-                             "(PARAMS.json) comes first, then the bags") from None  # fmt: skip
+            raise InputError(
+                f"{path}: a bag, not a parameter file: the parameter file "
+                "(PARAMS.json) comes first, then the bags"
+            ) from None
         raise InputError(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise InputError(f"{path}: not a robot_calib parameter file (format {FORMAT})")
@@ -95,8 +97,13 @@ def description_section(robot: RobotDescription) -> dict[str, str] | None:
     known = _SECTIONS.get((reference, robot.fingerprint()))
     if known is not None:
         return known
-    kind = ("urdf" if is_urdf_reference(reference)
-            else "csv" if reference.lower().endswith(".csv") else "yaml")  # fmt: skip
+    kind = (
+        "urdf"
+        if is_urdf_reference(reference)
+        else "csv"
+        if reference.lower().endswith(".csv")
+        else "yaml"
+    )
     try:
         text = Path(reference.partition("#")[0]).read_text(encoding="utf-8")
         section = {"format": kind, "text": text}
@@ -115,10 +122,13 @@ def robot_from_section(section: Any, reference: str, where: str) -> RobotDescrip
         isinstance(section.get(k), str) for k in ("format", "text")
     ):
         raise InputError(f"{where}: 'robot_description' must hold 'format' and 'text' strings")
-    robot = description_from_text(section["format"], section["text"], reference,
-                                  f"{where}: robot_description")  # fmt: skip
-    _SECTIONS[(reference, robot.fingerprint())] = {"format": section["format"],
-                                                   "text": section["text"]}  # fmt: skip
+    robot = description_from_text(
+        section["format"], section["text"], reference, f"{where}: robot_description"
+    )
+    _SECTIONS[(reference, robot.fingerprint())] = {
+        "format": section["format"],
+        "text": section["text"],
+    }
     return robot
 
 
@@ -128,8 +138,11 @@ def params_from_dict(
     """The forward model and parameters of a PARAMS.json document; errors name `where`."""
     try:
         section = doc.get("robot_description")
-        robot = (load_robot(doc["robot"]) if section is None
-                 else robot_from_section(section, str(doc["robot"]), where))  # fmt: skip
+        robot = (
+            load_robot(doc["robot"])
+            if section is None
+            else robot_from_section(section, str(doc["robot"]), where)
+        )
         payload = doc.get("payload")
         if payload is not None:  # the calibration's payload (--payload), masses and all
             try:
@@ -245,20 +258,24 @@ def implausible_of(
     if not isinstance(plausible, bool) or not (
         isinstance(reasons, list) and all(isinstance(r, str) for r in reasons)
     ):
-        raise InputError(f"{where}: 'plausible' must be true or false, 'implausible' a list "
-                         "of reasons")  # fmt: skip
+        raise InputError(
+            f"{where}: 'plausible' must be true or false, 'implausible' a list of reasons"
+        )
     if plausible and reasons:
         raise InputError(f"{where}: 'plausible' is true but 'implausible' gives reasons")
     if not plausible:
         return tuple(reasons) or ("marked plausible: false",)
     if model is None or params is None:
         model, params = params_from_dict(doc, str(where))
-    far = far_from_nominal_values(params, PHYSICAL_LENGTH_M, PHYSICAL_ANGLE_RAD,
-                                  nominal=model.parameters())  # fmt: skip
+    far = far_from_nominal_values(
+        params, PHYSICAL_LENGTH_M, PHYSICAL_ANGLE_RAD, nominal=model.parameters()
+    )
     if far:
         said = "says plausible: true" if "plausible" in doc else "has no 'plausible' field"
-        return (f"{beyond_physics(model.robot.name, far)} (re-checked on reading: the file "
-                f"{said}; edited by hand?)",)  # fmt: skip
+        return (
+            f"{beyond_physics(model.robot.name, far)} (re-checked on reading: the file "
+            f"{said}; edited by hand?)",
+        )
     return ()
 
 
@@ -325,8 +342,10 @@ def outlier_lines(outliers: Sequence[Outlier]) -> list[str]:
         return []
     from robot_calib.identify.outliers import outlier_counts
 
-    head = (f"outliers: {len(outliers)} measurement(s) flagged ({outlier_counts(outliers)}), "
-            "left out of the fit (hold-out ones: not scored):")  # fmt: skip
+    head = (
+        f"outliers: {len(outliers)} measurement(s) flagged ({outlier_counts(outliers)}), "
+        "left out of the fit (hold-out ones: not scored):"
+    )
     return [head] + [f"  {o.line()}" for o in outliers]
 
 

@@ -156,15 +156,21 @@ def noise_per_axis(cal: Calibration, stated_sigma_m: float | None = None) -> tup
     return DEFAULT_NOISE_M, "assumed tracker noise"
 
 
-def far_from_nominal(cal: Calibration, length_m: float, angle_rad: float,
-                     free_only: bool = False, deg_digits: int = 1) -> list[str]:  # fmt: skip
+def far_from_nominal(
+    cal: Calibration,
+    length_m: float,
+    angle_rad: float,
+    free_only: bool = False,
+    deg_digits: int = 1,
+) -> list[str]:
     """'a2 +882.0 mm', 'theta4 +64.6 deg', ...: the geometric parameters of `cal` (free
     ones only with `free_only`) more than `length_m` [m] or `angle_rad` [rad] from nominal."""
     return far_from_nominal_values(cal.parameters, length_m, angle_rad, free_only, deg_digits)
 
 
-def calibration_warnings(cal: Calibration, geometry_fitted: bool = True,
-                         stated_sigma_m: float | None = None) -> list[str]:  # fmt: skip
+def calibration_warnings(
+    cal: Calibration, geometry_fitted: bool = True, stated_sigma_m: float | None = None
+) -> list[str]:
     """Geometric parameters far from nominal, and (when the geometry was fitted: not for
     the nominal model or CPA, whose residual is the gap calibration closes) an in-sample
     residual far above the noise, each with what usually causes it."""

@@ -67,8 +67,9 @@ def initial_frames(
             design[rows, :, 3 * k : 3 * k + 3] = rotation @ flange_rot[rows]
         design[:, :, -3:] = np.eye(3)
         rhs = points - flange_pos @ rotation.T
-        solution = np.linalg.lstsq(design.reshape(-1, design.shape[-1]), rhs.reshape(-1),
-                                   rcond=None)[0]  # fmt: skip
+        solution = np.linalg.lstsq(
+            design.reshape(-1, design.shape[-1]), rhs.reshape(-1), rcond=None
+        )[0]
         found: Array = np.asarray(solution[:-3], dtype=float).reshape(n_targets, 3)
         moved = float(np.linalg.norm(found - offsets))
         offsets = found

@@ -119,8 +119,10 @@ def score_warnings(
     known = [Path(str(f)) for f in fitted]  # as given then (maybe relative)
     for bag in map(Path, recording.sources):
         if any(bag.resolve() == f.resolve() or bag.name == f.name for f in known):
-            out.append(f"warning: {bag} looks like a bag this calibration was fitted on (same "
-                       "path or name): its score would be in-sample, not held out")  # fmt: skip
+            out.append(
+                f"warning: {bag} looks like a bag this calibration was fitted on (same "
+                "path or name): its score would be in-sample, not held out"
+            )
     where = ", ".join(recording.sources)
     if in_sample is not None:
         rms, fitted_rms = held_out.absolute_rms_mm, in_sample.absolute_rms_mm

@@ -66,8 +66,9 @@ def row_weights(
     given = np.full((n, 2), np.nan) if poses.sigma is None else poses.sigma
     defaults = fallback or (DEFAULT_POSITION_SIGMA_M, DEFAULT_ORIENTATION_SIGMA_RAD)
     if fallback is None:
-        sigma = np.column_stack([_filled(given[:, 0], defaults[0]),
-                                 _filled(given[:, 1], defaults[1])])  # fmt: skip
+        sigma = np.column_stack(
+            [_filled(given[:, 0], defaults[0]), _filled(given[:, 1], defaults[1])]
+        )
     else:
         sigma = np.where(np.isfinite(given), given, np.array(defaults)[None, :])
     reference = float(np.median(sigma[:, 0])) if n else DEFAULT_POSITION_SIGMA_M

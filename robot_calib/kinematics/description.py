@@ -217,9 +217,19 @@ class RobotDescription:
         made with --joint-names is of the same robot); `with_names` gives the digest that
         files written before that rule store."""
         digest = hashlib.sha256("\n".join(self.joint_names).encode() if with_names else b"")
-        for array in (self.theta, self.d, self.a, self.alpha, self.beta, self.hayati,
-                      self.limits, self.link_mass, self.link_com, self.reading_matrix,
-                      self.reading_offset):  # fmt: skip
+        for array in (
+            self.theta,
+            self.d,
+            self.a,
+            self.alpha,
+            self.beta,
+            self.hayati,
+            self.limits,
+            self.link_mass,
+            self.link_com,
+            self.reading_matrix,
+            self.reading_offset,
+        ):
             if array is not None:
                 digest.update(np.ascontiguousarray(array, dtype=float).tobytes())
         return digest.hexdigest()
@@ -253,8 +263,9 @@ def home_pose(robot: RobotDescription) -> Array:
     return np.asarray(robot.readings(home_variables(robot.n_joints)[None, :])[0], dtype=float)
 
 
-def random_readings(robot: RobotDescription, n: int, rng: np.random.Generator,
-                    margin: float = 0.05) -> Array:  # fmt: skip
+def random_readings(
+    robot: RobotDescription, n: int, rng: np.random.Generator, margin: float = 0.05
+) -> Array:
     """(n, J) readings [rad] drawn uniformly in the joint limits shrunk by `margin` of each
     range (general poses: for checks at random poses, and the `random` plan)."""
     lo, hi = robot.limits.T
@@ -292,8 +303,13 @@ def with_payload(
     bare = centre[-1] if link <= 0 else (mass[-1] * centre[-1] - robot.payload_kg * old) / link
     mass[-1] = link + mass_kg
     centre[-1] = bare if mass[-1] <= 0 else (link * bare + mass_kg * com) / mass[-1]
-    return replace(robot, link_mass=mass, link_com=centre, payload_kg=float(mass_kg),
-                   payload_com_m=(float(com[0]), float(com[1]), float(com[2])))  # fmt: skip
+    return replace(
+        robot,
+        link_mass=mass,
+        link_com=centre,
+        payload_kg=float(mass_kg),
+        payload_com_m=(float(com[0]), float(com[1]), float(com[2])),
+    )
 
 
 @functools.cache
@@ -426,8 +442,10 @@ def parse_robot(data: Any, source: str) -> RobotDescription:
         table["beta"] = [*table["beta"][1:], 0.0]
         hayati = [*hayati[1:], None]
     # Default: beta wherever axes j and j+1 are nominally parallel (alpha_j = 0 or pi).
-    hayati = [bool(h) if h is not None else j < len(joints) - 1 and abs(np.sin(alpha[j])) < 1e-9
-              for j, h in enumerate(hayati)]  # fmt: skip
+    hayati = [
+        bool(h) if h is not None else j < len(joints) - 1 and abs(np.sin(alpha[j])) < 1e-9
+        for j, h in enumerate(hayati)
+    ]
     matrix, offset = _reading_to_joint(data.get("reading_to_joint"), len(joints), to_rad, source)
     return RobotDescription(
         name=str(data.get("name", Path(source).stem)),

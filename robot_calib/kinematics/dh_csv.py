@@ -35,11 +35,20 @@ _HEADER = re.compile(rf"(.+?)(?:\[([^\]]+)\]|\(({_UNIT})\)|_({_UNIT}))?")
 _PREVIOUS = re.compile(r"(alpha|a)_?(?:\{i-1\}|\(i-1\)|i-1|prev)")
 #: each column's kind of unit (None: no unit)
 COLUMNS: dict[str, dict[str, float] | None] = {
-    "name": None, "theta": ANGLE_UNITS, "d": LENGTH_UNITS, "a": LENGTH_UNITS,
-    "alpha": ANGLE_UNITS, "alpha_prev": ANGLE_UNITS, "a_prev": LENGTH_UNITS,
-    "min": ANGLE_UNITS, "max": ANGLE_UNITS, "mass": MASS_UNITS,
-    "com_x": LENGTH_UNITS, "com_y": LENGTH_UNITS, "com_z": LENGTH_UNITS,
-}  # fmt: skip
+    "name": None,
+    "theta": ANGLE_UNITS,
+    "d": LENGTH_UNITS,
+    "a": LENGTH_UNITS,
+    "alpha": ANGLE_UNITS,
+    "alpha_prev": ANGLE_UNITS,
+    "a_prev": LENGTH_UNITS,
+    "min": ANGLE_UNITS,
+    "max": ANGLE_UNITS,
+    "mass": MASS_UNITS,
+    "com_x": LENGTH_UNITS,
+    "com_y": LENGTH_UNITS,
+    "com_z": LENGTH_UNITS,
+}
 
 
 def _column(header: str, where: str) -> tuple[str, float]:
@@ -57,11 +66,13 @@ def _column(header: str, where: str) -> tuple[str, float]:
 
         close = difflib.get_close_matches(key, COLUMNS, n=1)
         if close:
-            raise RobotDescriptionError(f"{where}: column {header.strip()!r}: did you mean "
-                                        f"{close[0]!r}?")  # fmt: skip
+            raise RobotDescriptionError(
+                f"{where}: column {header.strip()!r}: did you mean {close[0]!r}?"
+            )
         known = ", ".join(COLUMNS)
-        raise RobotDescriptionError(f"{where}: column {header.strip()!r} is none of {known} "
-                                    "(with a unit, e.g. 'a [mm]')")  # fmt: skip
+        raise RobotDescriptionError(
+            f"{where}: column {header.strip()!r} is none of {known} (with a unit, e.g. 'a [mm]')"
+        )
     units = COLUMNS[key]
     if units is None:
         return key, 1.0
@@ -69,8 +80,10 @@ def _column(header: str, where: str) -> tuple[str, float]:
         return key, 1.0
     if unit not in units:
         given = f"unit {unit!r}" if unit else "no unit"
-        raise RobotDescriptionError(f"{where}: column {header.strip()!r} has {given}: write "
-                                    f"it as '{key} [{' or '.join(_shown(units))}]'")  # fmt: skip
+        raise RobotDescriptionError(
+            f"{where}: column {header.strip()!r} has {given}: write "
+            f"it as '{key} [{' or '.join(_shown(units))}]'"
+        )
     return key, units[unit]
 
 
@@ -82,12 +95,17 @@ def _shown(units: dict[str, float]) -> list[str]:
 def dh_csv_mapping(text: str, name: str, source: str) -> dict[str, Any]:
     """The robot-YAML mapping (`description.parse_robot`) of a DH table CSV `text` (module
     docstring) named `name`; RobotDescriptionError naming `source` and the row."""
-    lines = [line for line in text.lstrip("\ufeff").splitlines()
-             if line.strip() and not line.lstrip().startswith("#")]  # fmt: skip
+    lines = [
+        line
+        for line in text.lstrip("\ufeff").splitlines()
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
     rows = list(csv.reader(io.StringIO("\n".join(lines))))
     if rows and len(rows[0]) == 1 and ";" in rows[0][0]:
-        raise RobotDescriptionError(f"{source}: the columns are separated by ';': write the "
-                                    "table with commas (and '.' decimals)")  # fmt: skip
+        raise RobotDescriptionError(
+            f"{source}: the columns are separated by ';': write the "
+            "table with commas (and '.' decimals)"
+        )
     if len(rows) < 3:
         raise RobotDescriptionError(f"{source}: a DH table needs a header and >= 2 joint rows")
     columns = [_column(h, f"{source}: header") for h in rows[0]]
@@ -109,8 +127,10 @@ def dh_csv_mapping(text: str, name: str, source: str) -> dict[str, Any]:
         raise RobotDescriptionError(f"{source}: header: limits need both min and max")
     com = [k for k in ("com_x", "com_y", "com_z") if k in keys]
     if com and len(com) < 3:
-        raise RobotDescriptionError(f"{source}: header: a centre of mass needs com_x, com_y "
-                                    f"and com_z; only {', '.join(com)} given")  # fmt: skip
+        raise RobotDescriptionError(
+            f"{source}: header: a centre of mass needs com_x, com_y "
+            f"and com_z; only {', '.join(com)} given"
+        )
     joints = []
     for number, row in enumerate(rows[1:], start=1):
         where = f"{source}: joint {number}"
@@ -124,11 +144,15 @@ def dh_csv_mapping(text: str, name: str, source: str) -> dict[str, Any]:
             try:
                 values[key] = float(cell) * factor
             except ValueError:
-                raise RobotDescriptionError(f"{where}: {key}: {cell.strip()!r} is no "
-                                            "number") from None  # fmt: skip
-        joint = {"theta": values["theta"], "d": values["d"],
-                 "a": values["a_prev" if modified else "a"],
-                 "alpha": values["alpha_prev" if modified else "alpha"]}  # fmt: skip
+                raise RobotDescriptionError(
+                    f"{where}: {key}: {cell.strip()!r} is no number"
+                ) from None
+        joint = {
+            "theta": values["theta"],
+            "d": values["d"],
+            "a": values["a_prev" if modified else "a"],
+            "alpha": values["alpha_prev" if modified else "alpha"],
+        }
         if "name" in values:
             joint["name"] = values["name"]
         if "min" in values:
@@ -141,5 +165,10 @@ def dh_csv_mapping(text: str, name: str, source: str) -> dict[str, Any]:
         if any(k in values for k in ("com_x", "com_y", "com_z")):
             joint["com"] = [values[f"com_{c}"] for c in "xyz"]
         joints.append(joint)
-    return {"name": name, "source": f"DH table {source}", "angle_unit": "rad",
-            "convention": "modified_dh" if modified else "dh", "joints": joints}  # fmt: skip
+    return {
+        "name": name,
+        "source": f"DH table {source}",
+        "angle_unit": "rad",
+        "convention": "modified_dh" if modified else "dh",
+        "joints": joints,
+    }

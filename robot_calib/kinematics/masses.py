@@ -69,12 +69,16 @@ def mass_model_problems(robot: RobotDescription) -> list[str]:
             out.append(f"the link of {name}: mass {mass:g} kg")
         distance = float(np.linalg.norm(com))
         if mass > 0 and distance > reach:
-            out.append(f"the link of {name}: centre of mass {distance:.4g} m from its frame "
-                       f"(the arm reaches {reach:.3g} m)")  # fmt: skip
+            out.append(
+                f"the link of {name}: centre of mass {distance:.4g} m from its frame "
+                f"(the arm reaches {reach:.3g} m)"
+            )
     total = float(np.sum(np.abs(robot.link_mass)))
     if total > MAX_DENSITY_KG_M3 * reach**3:
-        out.append(f"the arm: {total:.4g} kg in all for a reach of {reach:.3g} m (at most "
-                   f"{MAX_DENSITY_KG_M3 * reach**3:.3g} kg)")  # fmt: skip
+        out.append(
+            f"the arm: {total:.4g} kg in all for a reach of {reach:.3g} m (at most "
+            f"{MAX_DENSITY_KG_M3 * reach**3:.3g} kg)"
+        )
     return out
 
 
@@ -90,8 +94,9 @@ def checked_mass_model(robot: RobotDescription, source: str) -> RobotDescription
     python_warnings.warn(
         f"{note}: not used; the gravity effects (compliance, gravity_compliance) use {which} "
         f"instead; fix the masses, or give {param('robot')} a description with sane ones",
-        UserWarning, stacklevel=2,
-    )  # fmt: skip
+        UserWarning,
+        stacklevel=2,
+    )
     return replace(substitute, mass_note=f"{which}, not the description's: {note}")
 
 
@@ -101,15 +106,19 @@ def substitute_masses(robot: RobotDescription) -> tuple[RobotDescription, str]:
     twin = builtin_twin(robot)
     if twin is not None:
         mass, com = _carried_over(twin, robot)
-        return (replace(robot, link_mass=mass, link_com=com),
-                f"the built-in {twin.name}'s masses (the same arm by its kinematics), "
-                f"{float(np.sum(mass)):.1f} kg in all")  # fmt: skip
+        return (
+            replace(robot, link_mass=mass, link_com=com),
+            f"the built-in {twin.name}'s masses (the same arm by its kinematics), "
+            f"{float(np.sum(mass)):.1f} kg in all",
+        )
     mass, com = default_masses(robot)
-    return (replace(robot, link_mass=mass, link_com=com),
-            f"a default from the geometry ({float(np.sum(mass)):.1f} kg in all: "
-            f"{DEFAULT_DENSITY_KG_M3:g} kg per cubic metre of reach, each link's mass by its "
-            "length, its centre mid-link; compliances in deg/(N m) only as right as these "
-            "masses)")  # fmt: skip
+    return (
+        replace(robot, link_mass=mass, link_com=com),
+        f"a default from the geometry ({float(np.sum(mass)):.1f} kg in all: "
+        f"{DEFAULT_DENSITY_KG_M3:g} kg per cubic metre of reach, each link's mass by its "
+        "length, its centre mid-link; compliances in deg/(N m) only as right as these "
+        "masses)",
+    )
 
 
 def builtin_twin(robot: RobotDescription) -> RobotDescription | None:
@@ -131,8 +140,10 @@ def builtin_twin(robot: RobotDescription) -> RobotDescription | None:
             continue
         q = np.random.default_rng(0).uniform(lo, hi, (MATCH_POSES, robot.n_joints))
         mine, theirs = robot.nominal_frames(q)[:, -1], other.nominal_frames(q)[:, -1]
-        if (np.abs(mine[:, :3, 3] - theirs[:, :3, 3]).max() <= MATCH_M
-                and np.abs(mine[:, :3, :3] - theirs[:, :3, :3]).max() <= MATCH_RAD):  # fmt: skip
+        if (
+            np.abs(mine[:, :3, 3] - theirs[:, :3, 3]).max() <= MATCH_M
+            and np.abs(mine[:, :3, :3] - theirs[:, :3, :3]).max() <= MATCH_RAD
+        ):
             return other
     return None
 

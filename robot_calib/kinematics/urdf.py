@@ -137,8 +137,9 @@ def load_urdf(
     return replace(robot, description=replace(robot.description, path=reference))
 
 
-def description_from_text(kind: str, text: str, reference: str, where: str,
-                          quiet: bool = True) -> RobotDescription:  # fmt: skip
+def description_from_text(
+    kind: str, text: str, reference: str, where: str, quiet: bool = True
+) -> RobotDescription:
     """A robot description from its own text, as a PARAMS.json carries it: `kind`
     'urdf' (the chain of `reference`'s #base_link=..&tip_link=.. choice, else the defaults),
     'yaml' (a robot YAML file's text) or 'csv' (a DH table, kinematics/dh_csv.py); the
@@ -155,8 +156,9 @@ def description_from_text(kind: str, text: str, reference: str, where: str,
             python_warnings.simplefilter("ignore", UserWarning)
         if kind == "urdf":
             options = dict(_fragment(reference.partition("#")[2], where))
-            found = urdf_to_description(parse_urdf(text, where), options.get("base_link"),
-                                        options.get("tip_link"), where)  # fmt: skip
+            found = urdf_to_description(
+                parse_urdf(text, where), options.get("base_link"), options.get("tip_link"), where
+            )
             return replace(found.description, path=reference)
         if kind == "csv":
             data = dh_csv_mapping(text, Path(reference.partition("#")[0]).stem, where)
@@ -258,8 +260,9 @@ def parse_urdf(text: bytes | str, source: str) -> UrdfModel:
             "a link's inertial): "
             + "; ".join(_element_words(m) for m in unused[:MAX_LISTED])
             + ("; ..." if len(unused) > MAX_LISTED else ""),
-            UserWarning, stacklevel=2,
-        )  # fmt: skip
+            UserWarning,
+            stacklevel=2,
+        )
     return _model(urdf, source)
 
 
@@ -284,8 +287,12 @@ def _element_words(message: str) -> str:
     what, _, where = message.rpartition(" in ")
     tag = what.split()[-1] if what else message
     parts = [p for p in where.split("/") if p and not p.startswith("robot[")]
-    words = [p.split("[@name='")[0] + " " + p.split("[@name='")[1].rstrip("']")
-             if "[@name='" in p else p.split("[")[0] for p in parts]  # fmt: skip
+    words = [
+        p.split("[@name='")[0] + " " + p.split("[@name='")[1].rstrip("']")
+        if "[@name='" in p
+        else p.split("[")[0]
+        for p in parts
+    ]
     return f"{', '.join(words)}: {tag}"
 
 
@@ -309,10 +316,16 @@ def _model(urdf: Any, source: str) -> UrdfModel:  # noqa: ANN401 - urdf_parser_p
             limits = (float(joint.limit.lower or 0.0), float(joint.limit.upper or 0.0))
         joints.append(
             UrdfJoint(
-                str(joint.name), str(joint.type), str(joint.parent), str(joint.child),
-                _pose(joint.origin), axis / (norm or 1.0), limits, joint.mimic is not None,
+                str(joint.name),
+                str(joint.type),
+                str(joint.parent),
+                str(joint.child),
+                _pose(joint.origin),
+                axis / (norm or 1.0),
+                limits,
+                joint.mimic is not None,
             )
-        )  # fmt: skip
+        )
     inertials = {}
     for link in urdf.links:
         inertial = link.inertial

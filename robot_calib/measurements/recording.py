@@ -143,9 +143,11 @@ class Recording:
         pose, seen = -1, set[int]()
         for i in range(n):
             same = (
-                i > 0 and bag[i] == bag[i - 1] and int(target[i]) not in seen
+                i > 0
+                and bag[i] == bag[i - 1]
+                and int(target[i]) not in seen
                 and bool(np.array_equal(q[i], q[i - 1]))
-            )  # fmt: skip
+            )
             if not same:
                 pose, seen = pose + 1, set()
             seen.add(int(target[i]))
@@ -253,7 +255,7 @@ class Recording:
             tuple(names),
             tuple(
                 replace(r, source=r.source + b) for b, p in enumerate(parts) for r in p.references
-            ),  # fmt: skip
+            ),
         )
 
     def distinct_points(self) -> int:
@@ -324,8 +326,9 @@ def implausible_values(values: Array, bound: float) -> IntArray:
         return np.flatnonzero(~(np.abs(values) <= bound).all(axis=1))
 
 
-def copies(q: Array, points: Array, target: IntArray | None = None,
-           direction: Array | None = None) -> NDArray[np.bool_]:  # fmt: skip
+def copies(
+    q: Array, points: Array, target: IntArray | None = None, direction: Array | None = None
+) -> NDArray[np.bool_]:
     """Mask (n,) of the measurements that are copies of an earlier one: the same readings
     q (n, J) [rad] and point (n, 3) [m] of the same target, to COPY_RESOLUTION, reached
     from the same side (`direction` (n, J) of approach when given: a visit from the other
@@ -349,8 +352,9 @@ MIN_PASTED_ROWS = 3
 MAX_REREAD_SHARE = 0.5
 
 
-def copied_rows(q: Array, points: Array, target: IntArray | None = None,
-                direction: Array | None = None) -> dict[int, int]:  # fmt: skip
+def copied_rows(
+    q: Array, points: Array, target: IntArray | None = None, direction: Array | None = None
+) -> dict[int, int]:
     """Each copied measurement (`copies`) -> the first earlier one it repeats."""
     if len(points) < 2:
         return {}
@@ -360,17 +364,18 @@ def copied_rows(q: Array, points: Array, target: IntArray | None = None,
     return {int(k): int(original[k]) for k in np.flatnonzero(original != np.arange(len(key)))}
 
 
-def _copy_key(q: Array, points: Array, target: IntArray | None,
-              direction: Array | None) -> Array:  # fmt: skip
+def _copy_key(q: Array, points: Array, target: IntArray | None, direction: Array | None) -> Array:
     """(n, K) what makes two measurements the same (`copies`): readings and point rounded
     to COPY_RESOLUTION, target, side of approach."""
     n = len(points)
     return np.column_stack(
-        [np.round(np.asarray(q, dtype=float).reshape(n, -1) / COPY_RESOLUTION),
-         np.round(np.asarray(points, dtype=float) / COPY_RESOLUTION),
-         np.zeros(n) if target is None else target,
-         np.zeros((n, 1)) if direction is None else np.sign(direction).reshape(n, -1)]
-    )  # fmt: skip
+        [
+            np.round(np.asarray(q, dtype=float).reshape(n, -1) / COPY_RESOLUTION),
+            np.round(np.asarray(points, dtype=float) / COPY_RESOLUTION),
+            np.zeros(n) if target is None else target,
+            np.zeros((n, 1)) if direction is None else np.sign(direction).reshape(n, -1),
+        ]
+    )
 
 
 def pasted_block(original: dict[int, int]) -> tuple[int, int] | None:
@@ -692,11 +697,13 @@ def recording_from_stream(
     q, velocity = q[pick[ok]], velocity_sign[pick[ok]]
     # the visiting order: the joint states' arrival where known, else their stamps'
     if received is not None and np.shape(received) != np.shape(js_order):
-        raise InputError(f"{source}: {np.shape(received)} arrival ranks for "
-                         f"{len(js_order)} joint states")  # fmt: skip
+        raise InputError(
+            f"{source}: {np.shape(received)} arrival ranks for {len(js_order)} joint states"
+        )
     arrival = np.arange(len(js_order)) if received is None else np.asarray(received)[js_order]
-    direction = np.where(velocity != 0, velocity,
-                         _approach_in_receive_order(q, arrival[keep][pick[ok]]))  # fmt: skip
+    direction = np.where(
+        velocity != 0, velocity, _approach_in_receive_order(q, arrival[keep][pick[ok]])
+    )
     time = (point_ns[ok] - point_ns[ok][0]) * 1e-9
     target = None if target is None else target[ok]
     extra = extra.take(ok)

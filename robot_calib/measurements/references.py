@@ -108,28 +108,43 @@ class TrackerDrift(Record):
         ...'."""
         kind = "rotation and translation" if self.rigid else "translation only (3 or more "
         kind += "" if self.rigid else "references give its rotation too)"
-        seen = (f" (read together at {self.reads} of {self.poses} poses)"
-                if self.reads < self.poses else "")  # fmt: skip
+        seen = (
+            f" (read together at {self.reads} of {self.poses} poses)"
+            if self.reads < self.poses
+            else ""
+        )
         if self.jumps:
-            seen += (f" ({self.jumps} read(s) where they jumped together, the tracker's frame "
-                     "moved at one pose, left out of the drift)")  # fmt: skip
+            seen += (
+                f" ({self.jumps} read(s) where they jumped together, the tracker's frame "
+                "moved at one pose, left out of the drift)"
+            )
         if self.step_mm:
-            at = ", ".join(f"{mm:.4f} mm at {t - self.time_range_s[0]:.0f} s"
-                           for t, mm in zip(self.step_times_s, self.step_mm))  # fmt: skip
-            seen += (f" ({len(self.step_mm)} step(s) where the tracker's frame moved at once "
-                     f"and stayed: {at}; each stretch's drift fitted on its own)")  # fmt: skip
-        scatter = ("their scatter about it (the tracker's noise at fixed reflectors; the "
-                   f"tool's points add the SMR's and the robot's): {self.noise_mm:.4f} mm per "
-                   "axis")  # fmt: skip
+            at = ", ".join(
+                f"{mm:.4f} mm at {t - self.time_range_s[0]:.0f} s"
+                for t, mm in zip(self.step_times_s, self.step_mm)
+            )
+            seen += (
+                f" ({len(self.step_mm)} step(s) where the tracker's frame moved at once "
+                f"and stayed: {at}; each stretch's drift fitted on its own)"
+            )
+        scatter = (
+            "their scatter about it (the tracker's noise at fixed reflectors; the "
+            f"tool's points add the SMR's and the robot's): {self.noise_mm:.4f} mm per "
+            "axis"
+        )
         if not self.significant:
-            return (f"reference reflectors {', '.join(self.references)}{seen}: no drift of the "
-                    f"tracker beyond the uncertainty of its estimate (up to {self.max_mm:.4f} mm "
-                    f"fitted, {self.uncertainty_mm:.4f} mm by noise alone): nothing removed; "
-                    f"{scatter}")  # fmt: skip
-        return (f"reference reflectors {', '.join(self.references)}{seen}: the tracker "
-                f"drifted up to {self.max_mm:.4f} mm at them ({self.end_mm:.4f} mm at the end; "
-                f"{kind}; {self.uncertainty_mm:.4f} mm by noise alone), removed from every "
-                f"measured point; {scatter}")  # fmt: skip
+            return (
+                f"reference reflectors {', '.join(self.references)}{seen}: no drift of the "
+                f"tracker beyond the uncertainty of its estimate (up to {self.max_mm:.4f} mm "
+                f"fitted, {self.uncertainty_mm:.4f} mm by noise alone): nothing removed; "
+                f"{scatter}"
+            )
+        return (
+            f"reference reflectors {', '.join(self.references)}{seen}: the tracker "
+            f"drifted up to {self.max_mm:.4f} mm at them ({self.end_mm:.4f} mm at the end; "
+            f"{kind}; {self.uncertainty_mm:.4f} mm by noise alone), removed from every "
+            f"measured point; {scatter}"
+        )
 
     def _fitted(self, time_s: Array) -> Array:
         """(n, 6) the fitted motion at times (n,) [s]: each time in its stretch."""
@@ -162,8 +177,12 @@ class TrackerDrift(Record):
         """(R, n, 3) [m, tracker frame] where the drift puts each reference at times (n,)
         (the fitted motion applied to their first places)."""
         rotation, translation = _motion(self._fitted(time_s))
-        return np.stack([rotation.apply(np.tile(p, (len(translation), 1))) + translation
-                         for p in np.asarray(self.start_m, dtype=float)])  # fmt: skip
+        return np.stack(
+            [
+                rotation.apply(np.tile(p, (len(translation), 1))) + translation
+                for p in np.asarray(self.start_m, dtype=float)
+            ]
+        )
 
 
 def _motion(values: Array) -> tuple[Rotation, Array]:
@@ -196,16 +215,19 @@ def estimate_drift(names: list[str], time_s: Array, references: Array) -> Tracke
         each = np.isfinite(refs).all(axis=2).sum(axis=1)
         seldom = ", ".join(f"{n} at {int(c)}" for n, c in zip(names, each) if c < MIN_READS)
         each_text = f" ({seldom} of {refs.shape[1]})" if seldom else ""
-        raise TooFewReads(f"references read together at {int(read.sum())} poses: a drift needs "
-                         f"{MIN_READS}{each_text}")  # fmt: skip
+        raise TooFewReads(
+            f"references read together at {int(read.sum())} poses: a drift needs "
+            f"{MIN_READS}{each_text}"
+        )
     refs, t = refs[:, read], t[read]
     rigid = len(names) >= 3
     start = np.median(refs[:, :START_READS], axis=1)  # (R, 3): first places
     motions = np.zeros((len(t), 6))
     for k in range(len(t)):
         if rigid:
-            rotation, _ = Rotation.align_vectors(refs[:, k] - refs[:, k].mean(0),
-                                                 start - start.mean(0))  # fmt: skip
+            rotation, _ = Rotation.align_vectors(
+                refs[:, k] - refs[:, k].mean(0), start - start.mean(0)
+            )
             motions[k, :3] = rotation.as_rotvec()
             motions[k, 3:] = refs[:, k].mean(0) - rotation.apply(start.mean(0))
         else:
@@ -229,19 +251,34 @@ def estimate_drift(names: list[str], time_s: Array, references: Array) -> Tracke
     dof = max(leftover.size - n_coef - start.size, 1)
     noise = float(np.sqrt(np.sum(leftover**2) / dof))
     if noise > MAX_SCATTER_M:
-        raise NoDrift(f"the references scatter by {noise * 1e3:.4f} mm per axis about their "
-                      f"smoothest drift (a tracker's noise is below {MAX_SCATTER_M * 1e3:g} "
-                      "mm): a reflector moved in its nest or nests swapped? No drift "
-                      "removed")  # fmt: skip
+        raise NoDrift(
+            f"the references scatter by {noise * 1e3:.4f} mm per axis about their "
+            f"smoothest drift (a tracker's noise is below {MAX_SCATTER_M * 1e3:g} "
+            "mm): a reflector moved in its nest or nests swapped? No drift "
+            "removed"
+        )
     # a fitted curve of D + 1 terms through m reads of noise sigma per axis wanders by about
     # sigma sqrt((D + 1) / m) per axis (more near its ends): what a still tracker shows
-    wander = max(noise * np.sqrt(3.0 * len(s.coefficients[0]) / max(int((~jumped).sum()), 1))
-                 for s in drift.segments)  # fmt: skip
-    return TrackerDrift(list(names), float(shift.max()) * 1e3, float(shift[:, -1].max()) * 1e3,
-                        noise * 1e3, rigid, drift.segments, [float(t[0]), float(t[-1])],
-                        int(read.sum()), len(read), start.tolist(), int(jumped.sum()),
-                        [float(t[c]) for c in cuts], sizes,
-                        SIGNIFICANT * wander * 1e3)  # fmt: skip
+    wander = max(
+        noise * np.sqrt(3.0 * len(s.coefficients[0]) / max(int((~jumped).sum()), 1))
+        for s in drift.segments
+    )
+    return TrackerDrift(
+        list(names),
+        float(shift.max()) * 1e3,
+        float(shift[:, -1].max()) * 1e3,
+        noise * 1e3,
+        rigid,
+        drift.segments,
+        [float(t[0]), float(t[-1])],
+        int(read.sum()),
+        len(read),
+        start.tolist(),
+        int(jumped.sum()),
+        [float(t[c]) for c in cuts],
+        sizes,
+        SIGNIFICANT * wander * 1e3,
+    )
 
 
 def _steps(refs: Array) -> tuple[list[int], list[float]]:
@@ -259,16 +296,24 @@ def _steps(refs: Array) -> tuple[list[int], list[float]]:
         after = refs[:, k + 1 : k + 1 + STEP_WINDOW]
         if before.shape[1] < 2 or after.shape[1] < 2:
             continue  # too near an end to tell a step from a jump
-        shift = float(np.linalg.norm(np.median(after, axis=1) - np.median(before, axis=1),
-                                     axis=1).max())  # fmt: skip
+        shift = float(
+            np.linalg.norm(np.median(after, axis=1) - np.median(before, axis=1), axis=1).max()
+        )
         if shift > STEP_K * scale and (not cuts or k + 1 - cuts[-1] >= 2):
             cuts.append(int(k) + 1)
             sizes.append(shift * 1e3)
     return cuts, sizes
 
 
-def _fitted(names: list[str], rigid: bool, t: Array, motions: Array, use: NDArray[np.bool_],
-            start: Array, cuts: list[int]) -> TrackerDrift:  # fmt: skip
+def _fitted(
+    names: list[str],
+    rigid: bool,
+    t: Array,
+    motions: Array,
+    use: NDArray[np.bool_],
+    start: Array,
+    cuts: list[int],
+) -> TrackerDrift:
     """The drift whose stretches (cut at the reads `cuts`) are the polynomials fitted to
     the per-read motions (n, 6) at times t (n,) [s] of the rows `use` (each stretch's
     degree at most DRIFT_DEGREE, lower where it has few reads; figures left 0)."""
@@ -286,8 +331,16 @@ def _fitted(names: list[str], rigid: bool, t: Array, motions: Array, use: NDArra
         basis = np.vander(u, degree + 1, increasing=True)
         coef = np.linalg.lstsq(basis, motions[rows], rcond=None)[0]  # (degree + 1, 6)
         segments.append(DriftSegment(span, coef.T.tolist()))
-    return TrackerDrift(list(names), 0.0, 0.0, 0.0, rigid, segments, [float(t[0]), float(t[-1])],
-                        start_m=start.tolist())  # fmt: skip
+    return TrackerDrift(
+        list(names),
+        0.0,
+        0.0,
+        0.0,
+        rigid,
+        segments,
+        [float(t[0]), float(t[-1])],
+        start_m=start.tolist(),
+    )
 
 
 @dataclass(frozen=True)
@@ -310,8 +363,9 @@ class ReferenceReads:
     note: str = ""
 
     @classmethod
-    def estimated(cls, source: int, names: tuple[str, ...], stamp_ns: IntArray,
-                  points: Array) -> ReferenceReads:  # fmt: skip
+    def estimated(
+        cls, source: int, names: tuple[str, ...], stamp_ns: IntArray, points: Array
+    ) -> ReferenceReads:
         """The reads with the drift they show (None with a `note` when they cannot give
         one)."""
         try:

@@ -46,8 +46,10 @@ def holdout_mask(
     taken = picked[: int(np.searchsorted(np.cumsum(sizes), k)) + 1]  # whole poses, >= k
     mask = np.isin(group, taken)
     if mask.all():
-        raise InputError(f"{param('fraction', fraction)}: every measurement is of a pose held out "
-                         "(its other reads): nothing left to fit")  # fmt: skip
+        raise InputError(
+            f"{param('fraction', fraction)}: every measurement is of a pose held out "
+            "(its other reads): nothing left to fit"
+        )
     return mask
 
 

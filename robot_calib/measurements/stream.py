@@ -215,16 +215,22 @@ def stream_recording(
     sweeps (they need stop-and-go poses): every point is a general pose. InputError when
     no point remains."""
     if every < 1 or not np.isfinite(latency_s) or not max_gap_s > 0:
-        raise InputError(f"{stream.source}: stream options: every {every} >= 1, latency "
-                         f"{latency_s} s finite, max gap {max_gap_s} s > 0")  # fmt: skip
+        raise InputError(
+            f"{stream.source}: stream options: every {every} >= 1, latency "
+            f"{latency_s} s finite, max gap {max_gap_s} s > 0"
+        )
     keep = np.arange(0, len(stream.point_ns), every)
     at_ns = (stream.point_ns[keep] + latency_s * 1e9).astype(np.float64)
     q, velocity, inside, in_gap = joints_at(stream, at_ns, max_gap_s)
     ok = inside & ~in_gap
     pairing = StreamPairing(
-        latency_s, every, len(stream.point_ns), len(keep),
-        int((~inside).sum()), int(in_gap.sum()),
-    )  # fmt: skip
+        latency_s,
+        every,
+        len(stream.point_ns),
+        len(keep),
+        int((~inside).sum()),
+        int(in_gap.sum()),
+    )
     if not ok.any():
         raise InputError(
             f"{stream.source}: none of {len(keep)} points lies inside the joint-state stream "
@@ -263,8 +269,9 @@ def stream_recording(
 STREAM_ADVICE = f"use {param('stream', True)} (msgs_doc/stream.md)"
 
 
-def stream_hint(js_ns: IntArray, q: Array, n_points: int, source: str,
-                point_ns: IntArray | None = None) -> str | None:  # fmt: skip
+def stream_hint(
+    js_ns: IntArray, q: Array, n_points: int, source: str, point_ns: IntArray | None = None
+) -> str | None:
     """A warning line when a bag looks like a stream (more than STREAM_RATIO points per
     joint state while the robot moves between most joint states), for which the
     contract's nearest-stamp pairing is off by up to half a joint-state period of motion:

@@ -80,9 +80,9 @@ class JointStateEncoder:
         if (
             len(data) != end + len(suffix)
             or data[:4] != ENCAPSULATION
-            or data[head:head + len(prefix)] != prefix
+            or data[head : head + len(prefix)] != prefix
             or data[end:] != suffix
-        ):  # fmt: skip
+        ):
             return None
         _, sec, nanosec = self._head.unpack_from(data)
         return sec, nanosec, self._doubles.unpack_from(data, head + len(prefix))

@@ -42,8 +42,7 @@ _TYPES = {
 }
 
 
-def declare(node: Node, name: str, default: Any, description: str,
-            read_only: bool = True) -> Any:  # fmt: skip
+def declare(node: Node, name: str, default: Any, description: str, read_only: bool = True) -> Any:
     """Declare a typed ROS parameter with a description (units in the text), read-only
     unless `read_only` is False (a run-time parameter: the node validates changes), and
     return its value. A float parameter also takes an integer (`-p rate:=1`)."""
@@ -64,8 +63,7 @@ def declare(node: Node, name: str, default: Any, description: str,
     except ParameterUninitializedException:  # the empty-list default, not overridden
         return []
     except ParameterException as exc:  # e.g. `-p qos_depth:=many`
-        hint = (f" (a list: -p \"{name}:=['a.mcap']\")" if isinstance(default, list)
-                else "")  # fmt: skip
+        hint = f" (a list: -p \"{name}:=['a.mcap']\")" if isinstance(default, list) else ""
         raise InputError(f"{node.get_name()}: parameter {name!r}: {exc}{hint}") from None
     if isinstance(default, float):
         return parameter_number(node.get_name(), name, value)
@@ -146,8 +144,10 @@ def check_overrides(node: Node) -> None:
     if unknown:
         close = difflib.get_close_matches(unknown[0], sorted(declared), n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise InputError(f"parameter {unknown[0]!r} is not one of {node.get_name()}'s{hint}: "
-                         f"{', '.join(sorted(declared))}")  # fmt: skip
+        raise InputError(
+            f"parameter {unknown[0]!r} is not one of {node.get_name()}'s{hint}: "
+            f"{', '.join(sorted(declared))}"
+        )
 
 
 def _unprefixed(name: str | None, exc: Exception) -> str:
@@ -162,8 +162,10 @@ def ros_arguments_error(exc: Exception) -> str:
     match = re.search(r"Couldn't parse parameter override rule: '([^']*)'", text)
     if match:
         rule = match.group(1).removeprefix("-p").strip()
-        return (f"the ROS argument {match.group(1)!r} has no value: write an empty value "
-                f"quoted, -p \"{rule}''\", or leave the parameter out (its default)")  # fmt: skip
+        return (
+            f"the ROS argument {match.group(1)!r} has no value: write an empty value "
+            f"quoted, -p \"{rule}''\", or leave the parameter out (its default)"
+        )
     return f"the ROS arguments could not be read ({text.split(', at ')[0]})"
 
 
@@ -224,8 +226,11 @@ def run_node(
         if executor is not None:
             executor.shutdown(timeout_sec=0)  # no new callbacks; a running one may finish
         if node is not None and getattr(node, "busy", False):
-            print(f"{name}: stopping; the running solve ends first (Ctrl-C again to abort)",
-                  file=sys.stderr, flush=True)  # fmt: skip
+            print(
+                f"{name}: stopping; the running solve ends first (Ctrl-C again to abort)",
+                file=sys.stderr,
+                flush=True,
+            )
         try:
             if node is not None:
                 if on_stop is not None:

@@ -123,10 +123,12 @@ class CalibratorNode(LifecycleNode):
         try:
             self.settings = declare_parameters(self)
             autostart: bool = declare(
-                self, "autostart", True,
+                self,
+                "autostart",
+                True,
                 "configure and activate at once (false: stay unconfigured for a lifecycle "
                 "manager: ros2 lifecycle set NODE configure, then activate)",
-            )  # fmt: skip
+            )
         except RobotCalibError:
             super().destroy_node()
             raise
@@ -179,15 +181,19 @@ class CalibratorNode(LifecycleNode):
         self.create_service(Trigger, "~/reset", self._on_reset, callback_group=group)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         if autostart:
-            for name, transition in (("configure", self.trigger_configure),
-                                     ("activate", self.trigger_activate)):  # fmt: skip
+            for name, transition in (
+                ("configure", self.trigger_configure),
+                ("activate", self.trigger_activate),
+            ):
                 if transition() != TransitionCallbackReturn.SUCCESS:
                     super().destroy_node()
-                    raise InputError(f"{node_name}: the lifecycle transition {name} failed "
-                                     "at start (autostart)")  # fmt: skip
+                    raise InputError(
+                        f"{node_name}: the lifecycle transition {name} failed at start (autostart)"
+                    )
         else:
-            self.get_logger().info("unconfigured: waiting for the lifecycle transitions "
-                                   "configure and activate")  # fmt: skip
+            self.get_logger().info(
+                "unconfigured: waiting for the lifecycle transitions configure and activate"
+            )
 
     # --- lifecycle (rclpy.lifecycle: configure / activate / deactivate / cleanup) ------------
 
@@ -198,14 +204,17 @@ class CalibratorNode(LifecycleNode):
             self.get_logger().info(
                 f"calibrating {self.settings.model_spec} from {', '.join(self.settings.bags)}"
             )
-            self._status = self._health(waiting="configured: calibrating from the bags once "
-                                        "active")  # fmt: skip
+            self._status = self._health(
+                waiting="configured: calibrating from the bags once active"
+            )
             return TransitionCallbackReturn.SUCCESS
         group = self._solver_group
-        self._live = LiveInputs(self, self.settings.robot, self.settings.targets,
-                                self.settings.qos_depth, group)  # fmt: skip
-        self._solve_topic = self.create_subscription(Empty, "~/solve", self._on_solve, 10,
-                                                     callback_group=group)  # fmt: skip
+        self._live = LiveInputs(
+            self, self.settings.robot, self.settings.targets, self.settings.qos_depth, group
+        )
+        self._solve_topic = self.create_subscription(
+            Empty, "~/solve", self._on_solve, 10, callback_group=group
+        )
         self._start_idle_timer()
         topics = [JOINT_STATES_TOPIC, *self.settings.targets.topics]
         self.get_logger().info(
@@ -224,15 +233,17 @@ class CalibratorNode(LifecycleNode):
             self._live.drain()  # delivered while inactive: dropped, not taken now
             self._live.enabled = True
         if self.settings.bags and self.calibration is None and self._once is None:
-            self._once = self.create_timer(0.0, self._solve_bags, clock=self._steady,
-                                           callback_group=self._solver_group)  # fmt: skip
+            self._once = self.create_timer(
+                0.0, self._solve_bags, clock=self._steady, callback_group=self._solver_group
+            )
         return super().on_activate(state)
 
     def _refuse_while_solving(self, transition: str) -> bool:
         """True (and said) when a solve is running: a transition waits for its end."""
         if self.busy:
-            self.get_logger().warning(f"{transition} refused: a solve is running; try again "
-                                      "when it has ended")  # fmt: skip
+            self.get_logger().warning(
+                f"{transition} refused: a solve is running; try again when it has ended"
+            )
         return self.busy
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -271,11 +282,17 @@ class CalibratorNode(LifecycleNode):
     def _start_idle_timer(self) -> None:
         """Live mode with solve_after_idle_s > 0: the timer that checks for the idle solve
         (none otherwise: no callback every tick for nothing)."""
-        if self._idle_timer is None and self._live is not None and (
-                self.settings.solve_after_idle_s > 0):  # fmt: skip
-            self._idle_timer = self.create_timer(IDLE_CHECK_S, self._check_idle,
-                                                 clock=self._steady,
-                                                 callback_group=self._solver_group)  # fmt: skip
+        if (
+            self._idle_timer is None
+            and self._live is not None
+            and (self.settings.solve_after_idle_s > 0)
+        ):
+            self._idle_timer = self.create_timer(
+                IDLE_CHECK_S,
+                self._check_idle,
+                clock=self._steady,
+                callback_group=self._solver_group,
+            )
 
     def _idle_text(self) -> str:
         idle = self.settings.solve_after_idle_s
@@ -292,11 +309,11 @@ class CalibratorNode(LifecycleNode):
         message received, both modes the last result (bag mode then solves its bags again
         when active)."""
         counts = {} if self._live is None else self._live.clear()
-        self._clear_results("reset: collecting live topics" if self._live is not None else
-                            "reset")  # fmt: skip
+        self._clear_results("reset: collecting live topics" if self._live is not None else "reset")
         if self.settings.bags and self.active:
-            self._once = self.create_timer(0.0, self._solve_bags, clock=self._steady,
-                                           callback_group=self._solver_group)  # fmt: skip
+            self._once = self.create_timer(
+                0.0, self._solve_bags, clock=self._steady, callback_group=self._solver_group
+            )
         dropped = ", ".join(f"{t}={n}" for t, n in counts.items()) or "no live messages"
         response.success = True
         response.message = f"reset: dropped {dropped} and the last result"
@@ -465,8 +482,9 @@ class CalibratorNode(LifecycleNode):
                 best = ladder.rungs[-1].calibration
                 if settings.publish == "best" and ladder.recording is not None:
                     published, fitted_on = best, ladder.recording
-                    self.get_logger().info(f"publishing the diagnosis's model {best.name} "
-                                           f"(parameter publish: best)")  # fmt: skip
+                    self.get_logger().info(
+                        f"publishing the diagnosis's model {best.name} (parameter publish: best)"
+                    )
                 note = left_by_published(published.name, diagnosis)
                 if note:
                     self.get_logger().warning(note)
@@ -558,11 +576,13 @@ class CalibratorNode(LifecycleNode):
             if not self._said_no_rsp:  # once: a launch without urdf:= starts none
                 self._said_no_rsp = True
                 hint = "start robot_state_publisher on the URDF: calibrator.launch.py urdf:=FILE"
-                self.get_logger().warning(f"{name}: not available: TF does not follow the "
-                                          f"calibration ({hint})")  # fmt: skip
+                self.get_logger().warning(
+                    f"{name}: not available: TF does not follow the calibration ({hint})"
+                )
             return
-        request = SetParameters.Request(parameters=[
-            Parameter("robot_description", value=urdf).to_parameter_msg()])  # fmt: skip
+        request = SetParameters.Request(
+            parameters=[Parameter("robot_description", value=urdf).to_parameter_msg()]
+        )
         future = self._rsp_client.call_async(request)
 
         def said(done: Any) -> None:  # noqa: ANN401 - an rclpy Future
@@ -586,7 +606,8 @@ class CalibratorNode(LifecycleNode):
                     self._said_no_tf = True
                     self.get_logger().info(
                         "tf2_ros is not installed: the tracker frame is not on /tf_static "
-                        "(its place is in ~/parameters, base2tracker)")  # fmt: skip
+                        "(its place is in ~/parameters, base2tracker)"
+                    )
                 return
             self._static_tf = StaticTransformBroadcaster(self)
         from geometry_msgs.msg import TransformStamped
@@ -604,11 +625,16 @@ class CalibratorNode(LifecycleNode):
     def _health(self, waiting: str = "") -> DiagnosticStatus:
         """The node's status on /diagnostics from its last result or error."""
         return calibration_status(
-            status_name(self.get_name()), self.settings.robot.name, self.calibration, self.error,
-            held_out=self.held_out, params_path=self.settings.output,
-            description=self._description_note, waiting=waiting,
+            status_name(self.get_name()),
+            self.settings.robot.name,
+            self.calibration,
+            self.error,
+            held_out=self.held_out,
+            params_path=self.settings.output,
+            description=self._description_note,
+            waiting=waiting,
             diagnosis=self.diagnosis_note,
-        )  # fmt: skip
+        )
 
     def _publish_status(self, status: DiagnosticStatus | None = None) -> None:
         """Publish `status` (kept as the last one), or the last one again (the timer)."""
@@ -651,8 +677,9 @@ def left_by_published(published: str, diagnosis: Diagnosis) -> str:
     chosen = diagnosis.ladder[-1].model if diagnosis.ladder else published
     if chosen == published:
         return ""
-    mine = (f"{scores[published]:.4f} mm" if published in scores
-            else "not on the diagnosis's ladder")  # fmt: skip
+    mine = (
+        f"{scores[published]:.4f} mm" if published in scores else "not on the diagnosis's ladder"
+    )
     floor = diagnosis.noise.floor_abs_rms_mm
     against = "" if floor is None else f", noise floor {floor:.4f} mm"
     return (
@@ -662,8 +689,9 @@ def left_by_published(published: str, diagnosis: Diagnosis) -> str:
     )
 
 
-def solve_verdict(cal: Calibration | None, error: RobotCalibError | None,
-                  note: str = "") -> tuple[bool, str]:  # fmt: skip
+def solve_verdict(
+    cal: Calibration | None, error: RobotCalibError | None, note: str = ""
+) -> tuple[bool, str]:
     """What a service answers for a solve's result: (usable, one line). None (nothing could
     be fitted, the data are not enough): False and the error; an implausible calibration
     (readings in degrees, a residual 1000 x the noise, parameters beyond physics): False and

@@ -90,9 +90,13 @@ class LiveInputs:
     their type. Thread-safe: the subscriptions append while a solve takes a snapshot."""
 
     def __init__(
-        self, node: Node, robot: RobotDescription, targets: LiveTargets, qos_depth: int,
+        self,
+        node: Node,
+        robot: RobotDescription,
+        targets: LiveTargets,
+        qos_depth: int,
         group: CallbackGroup | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         self._node = node
         self._group = group  # the solver's: no callback of ours runs while a solve drains
         self._subscriptions: list[tuple[Subscription, Any]] = []
@@ -122,8 +126,9 @@ class LiveInputs:
             if name in targets.points:
                 self._subscribe(PointStamped, target_topic(name), partial(self._on_point, k))
         # a pose topic's type (PoseStamped or PoseWithCovarianceStamped) comes from the graph
-        self._pending_poses = {pose_topic(t): k for k, t in enumerate(targets.names)
-                               if t in targets.six_dof}  # fmt: skip
+        self._pending_poses = {
+            pose_topic(t): k for k, t in enumerate(targets.names) if t in targets.six_dof
+        }
         if self._pending_poses:
             self._discovery_timer = node.create_timer(
                 DISCOVERY_PERIOD_S,
@@ -142,8 +147,14 @@ class LiveInputs:
         """Forget every message buffered (a new set begins); the counts dropped per topic."""
         with self._lock:
             dropped = {t: n for t, n in self._counts.items() if n}
-            for buffer in (self._js_ns, self._js_q, self._js_v, self._pt_ns, self._pt_xyz,
-                           self._pt_target):  # fmt: skip
+            for buffer in (
+                self._js_ns,
+                self._js_q,
+                self._js_v,
+                self._pt_ns,
+                self._pt_xyz,
+                self._pt_target,
+            ):
                 buffer.clear()
             for by_stamp in self._poses:
                 by_stamp.clear()
@@ -167,8 +178,9 @@ class LiveInputs:
         taken = 0
         for subscription, callback in self._subscriptions:
             with subscription.handle:
-                while (found := subscription.handle.take_message(subscription.msg_type,
-                                                                 False)) is not None:  # fmt: skip
+                while (
+                    found := subscription.handle.take_message(subscription.msg_type, False)
+                ) is not None:
                     callback(found[0])
                     taken += 1
         return taken
@@ -190,12 +202,20 @@ class LiveInputs:
         # a pose joins the point of its target and stamp, as in a bag (msgs_doc/six_dof.md)
         stamped = join_poses(source, targets, pt_ns, pt_xyz, pt_target, poses, set(pt_target))
         return recording_from_stream(
-            js_ns, js_q, js_v, stamped.point_ns, stamped.points, pair_tolerance,
-            source=source, robot=self._robot,
+            js_ns,
+            js_q,
+            js_v,
+            stamped.point_ns,
+            stamped.points,
+            pair_tolerance,
+            source=source,
+            robot=self._robot,
             point_target=stamped.point_target if len(targets) > 1 else None,
-            target_names=targets, rotation=stamped.rotation, sigma=stamped.sigma,
+            target_names=targets,
+            rotation=stamped.rotation,
+            sigma=stamped.sigma,
             received=np.arange(len(js_ns)),  # appended as they arrived: the visiting order
-        )  # fmt: skip
+        )
 
     def idle(self, seconds: float) -> str | None:
         """What awaits a solve ('N points[ and M poses]') once no new point arrived for

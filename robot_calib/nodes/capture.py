@@ -125,8 +125,12 @@ class CaptureNode(Node):
         # the robot's latest joint state when each move is sent (`_send`)
         moves, refused = plan_moves(plan.q[todo], home, robot.limits, settings.joint_names, rules)
         self.moves = [Move(int(todo[m.pose]), m.waypoints) for m in moves]
-        self.skipped = [Skipped(int(todo[r.pose]), r.reason.replace(
-            f"pose {r.pose}:", f"pose {todo[r.pose]}:", 1)) for r in refused]  # fmt: skip
+        self.skipped = [
+            Skipped(
+                int(todo[r.pose]), r.reason.replace(f"pose {r.pose}:", f"pose {todo[r.pose]}:", 1)
+            )
+            for r in refused
+        ]
         for skip in self.skipped:
             self.get_logger().warning(f"refused {skip.reason}")
         self.n_already = int(done.sum())
@@ -164,8 +168,10 @@ class CaptureNode(Node):
             start = "; ".join(
                 f"{n}={v:.1f}" for n, v in zip(settings.joint_names, np.degrees(home))
             )
-            log.info(f"dry run: from the home pose ({start} deg); a real run plans each move "
-                     "from where the robot stands")  # fmt: skip
+            log.info(
+                f"dry run: from the home pose ({start} deg); a real run plans each move "
+                "from where the robot stands"
+            )
             for line in describe(self.moves, settings.joint_names):
                 log.info(f"dry run: {line}")
             log.info("dry run: nothing moved, nothing written")
@@ -189,8 +195,10 @@ class CaptureNode(Node):
         if settings.trigger_service:
             self.trigger = self.create_client(Trigger, settings.trigger_service)
         self._timer = self.create_timer(0.01, self._step)
-        log.info(f"commands on {trajectory_topic(settings.controller)}; the bag "
-                 f"{self.bag_path} is written from the first pose measured")  # fmt: skip
+        log.info(
+            f"commands on {trajectory_topic(settings.controller)}; the bag "
+            f"{self.bag_path} is written from the first pose measured"
+        )
         self.report()
 
     # --- callbacks ------------------------------------------------------------------------
@@ -241,9 +249,12 @@ class CaptureNode(Node):
             self._state = "send"
             return
         if time.monotonic() - self._started > self.settings.connect_timeout:
-            missing = (f"no controller subscribes {self.command.topic_name} (parameter "
-                       "controller: is it running?)" if self.command.get_subscription_count()
-                       < 1 else f"no joint state on {JOINT_STATES_TOPIC}")  # fmt: skip
+            missing = (
+                f"no controller subscribes {self.command.topic_name} (parameter "
+                "controller: is it running?)"
+                if self.command.get_subscription_count() < 1
+                else f"no joint state on {JOINT_STATES_TOPIC}"
+            )
             raise InputError(f"{missing} after {self.settings.connect_timeout:g} s")
 
     def _send(self) -> None:
@@ -253,8 +264,13 @@ class CaptureNode(Node):
 
         pose = self.moves[self._index]
         here = self._states[-1][1]
-        planned, _ = plan_moves(self.plan_q[[pose.pose]], here, self.settings.robot.limits,
-                                self.settings.joint_names, self.settings.rules)  # fmt: skip
+        planned, _ = plan_moves(
+            self.plan_q[[pose.pose]],
+            here,
+            self.settings.robot.limits,
+            self.settings.joint_names,
+            self.settings.rules,
+        )
         waypoints = planned[0].waypoints
         times = waypoint_times(here, waypoints, self.settings.speed_rad_s, self.settings.move_time)
         msg = JointTrajectory()
@@ -412,12 +428,16 @@ class CaptureNode(Node):
         if self._durations and left and not self.finished:
             eta = (len(self.moves) - self._index) * float(np.mean(self._durations))
         return CaptureProgress(
-            measured=self.measured, total=len(self.moves), earlier=self.n_already,
+            measured=self.measured,
+            total=len(self.moves),
+            earlier=self.n_already,
             current_pose=self.moves[self._index].pose if left else None,
             step="dry run" if dry_run else "finished" if self.finished else self._state,
-            skipped=tuple(s.reason for s in self.skipped), bag=str(self.bag_path),
-            eta_s=eta, error=error,
-        )  # fmt: skip
+            skipped=tuple(s.reason for s in self.skipped),
+            bag=str(self.bag_path),
+            eta_s=eta,
+            error=error,
+        )
 
     def report(self) -> None:
         """Publish the progress on /diagnostics and ~/progress (on each step and every
@@ -428,8 +448,7 @@ class CaptureNode(Node):
         progress = self.progress()
         status = capture_status(name, robot, progress)
         self._diagnostics.publish(diagnostic_array(status, self.get_clock().now().to_msg()))
-        doc = {**asdict(progress), "skipped": list(progress.skipped),
-               "cancelled": self.cancelled}  # fmt: skip
+        doc = {**asdict(progress), "skipped": list(progress.skipped), "cancelled": self.cancelled}
         self._progress.publish(String(data=json.dumps(doc)))
 
     def _on_cancel(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
@@ -455,8 +474,10 @@ class CaptureNode(Node):
             text += f"; {len(self.skipped)} skipped: " + "; ".join(s.reason for s in self.skipped)
         left = len(self.moves) - self._index
         if left > 0:
-            text += (f"; stopped with {left} pose(s) to go (robot told to hold): run again "
-                     "with the same plan and output to resume")  # fmt: skip
+            text += (
+                f"; stopped with {left} pose(s) to go (robot told to hold): run again "
+                "with the same plan and output to resume"
+            )
         return text
 
     def destroy_node(self) -> None:

@@ -102,15 +102,19 @@ def declare_parameters(node: Node) -> CaptureParameters:
     )
     overshoot = declare(node, "approach_overshoot", 1.0, "approach start before the pose [deg]")
     speed = declare(
-        node, "speed", 20.0,
+        node,
+        "speed",
+        20.0,
         "joint speed of the moves [deg/s]: the trajectories' times (a joint_trajectory_"
         "controller follows the times it is given and has no speed limit of its own)",
-    )  # fmt: skip
+    )
     move_time = declare(node, "move_time", 0.0, "every move takes at least this [s]")
     connect_timeout = declare(
-        node, "connect_timeout", 10.0,
+        node,
+        "connect_timeout",
+        10.0,
         "no controller subscriber or no joint state this long at the start: error [s]",
-    )  # fmt: skip
+    )
     trigger_retries = declare(
         node, "trigger_retries", 3, "trigger calls per pose while the tracker says no"
     )
@@ -118,10 +122,14 @@ def declare_parameters(node: Node) -> CaptureParameters:
     seed = declare(node, "seed", 0, "seed of the random plan")
     if not str(output) or output.suffix != ".mcap":
         raise InputError("parameter 'output' must name a .mcap bag")
-    for name, value in (("position_tolerance", tolerance), ("settle_time", settle_s),
-                        ("move_timeout", move_timeout), ("speed", speed),
-                        ("measure_timeout", measure_timeout),
-                        ("connect_timeout", connect_timeout)):  # fmt: skip
+    for name, value in (
+        ("position_tolerance", tolerance),
+        ("settle_time", settle_s),
+        ("move_timeout", move_timeout),
+        ("speed", speed),
+        ("measure_timeout", measure_timeout),
+        ("connect_timeout", connect_timeout),
+    ):
         if not value > 0:
             raise InputError(f"parameter {name!r} must be > 0, not {value}")
     for name, value in (("max_step", max_step), ("approach_overshoot", overshoot)):
@@ -140,10 +148,22 @@ def declare_parameters(node: Node) -> CaptureParameters:
         np.radians(max_step), parse_approach(approach, robot.n_joints), np.radians(overshoot)
     )
     return CaptureParameters(
-        plan=plan_name, robot=robot, joint_names=joint_names, output=output,
-        controller=controller, tolerance=tolerance, settle_s=settle_s,
-        move_timeout=move_timeout, measure_timeout=measure_timeout, trigger_service=trigger,
-        targets=targets, rules=rules, speed_rad_s=float(np.radians(speed)),
-        move_time=move_time, connect_timeout=connect_timeout,
-        trigger_retries=trigger_retries, dry_run=dry_run, seed=seed,
-    )  # fmt: skip
+        plan=plan_name,
+        robot=robot,
+        joint_names=joint_names,
+        output=output,
+        controller=controller,
+        tolerance=tolerance,
+        settle_s=settle_s,
+        move_timeout=move_timeout,
+        measure_timeout=measure_timeout,
+        trigger_service=trigger,
+        targets=targets,
+        rules=rules,
+        speed_rad_s=float(np.radians(speed)),
+        move_time=move_time,
+        connect_timeout=connect_timeout,
+        trigger_retries=trigger_retries,
+        dry_run=dry_run,
+        seed=seed,
+    )

@@ -109,35 +109,47 @@ class CompensatorNode(Node):
             self, "output_topic", OUTPUT_TOPIC, "corrected JointTrajectory (to the controller)"
         )
         joint_names: list[str] = declare(
-            self, "joint_names", [],
+            self,
+            "joint_names",
+            [],
             "the trajectory's names of the calibration's joints 1..J, in order (default: the "
             "robot description's names)",
-        )  # fmt: skip
+        )
         temperature: float = declare(
-            self, "temperature_c", float("nan"),
+            self,
+            "temperature_c",
+            float("nan"),
             "the robot's temperature [deg C], for a model that follows it (default: none)",
-        )  # fmt: skip
+        )
         depth: int = declare(self, "qos_depth", 10, "queue depth of both topics")
         self.max_correction = declare(
-            self, "max_correction", LARGE_CHANGE_DEG,
+            self,
+            "max_correction",
+            LARGE_CHANGE_DEG,
             "a trajectory with a point corrected by more than this [deg] (near a singularity) "
             "or not reached is dropped, not sent",
-        )  # fmt: skip
+        )
         use_anyway: bool = declare(
-            self, "force", False,
+            self,
+            "force",
+            False,
             "use a PARAMS.json marked plausible: false (a fit that ended in nonsense) anyway",
-        )  # fmt: skip
+        )
         states_topic: str = declare(
-            self, "joint_states_topic", JOINT_STATES_TOPIC,
+            self,
+            "joint_states_topic",
+            JOINT_STATES_TOPIC,
             "the robot's joint states: where a trajectory starts and each joint's last "
             "approach direction (backlash); '' = not read, the first point's directions +1",
-        )  # fmt: skip
+        )
         action_controller: str = declare(
-            self, "action_controller", "",
+            self,
+            "action_controller",
+            "",
             "the controller's control_msgs/FollowJointTrajectory action (e.g. "
             "/joint_trajectory_controller/follow_joint_trajectory): serve "
             "~/follow_joint_trajectory in front of it, goals compensated ('' = none)",
-        )  # fmt: skip
+        )
         if not params_file:
             raise InputError(f"{self.get_name()}: parameter 'params' (PARAMS.json) is required")
         # the one loader of PARAMS.json (a hybrid calibration's learned correction included,
@@ -183,9 +195,11 @@ class CompensatorNode(Node):
 
                 self.adapter = FollowJointTrajectoryAdapter(self, action_controller)
             except ImportError as exc:
-                raise InputError(f"{self.get_name()}: parameter 'action_controller': "
-                                 f"control_msgs is not installed ({exc.name}): install "
-                                 "ros-jazzy-control-msgs, or leave it ''") from None  # fmt: skip
+                raise InputError(
+                    f"{self.get_name()}: parameter 'action_controller': "
+                    f"control_msgs is not installed ({exc.name}): install "
+                    "ros-jazzy-control-msgs, or leave it ''"
+                ) from None
         self.get_logger().info(
             f"compensating {self.subscription.topic_name} -> {self.publisher.topic_name} "
             f"with {params_file} ({self.model.robot.name}, joints "
@@ -228,13 +242,22 @@ class CompensatorNode(Node):
         said = error.replace("dropped a trajectory, not sent: ", "dropped, not sent: ")
         self._report(DiagnosticStatus.ERROR, said, msg)
 
-    def _report(self, level: bytes, message: str, msg: JointTrajectory,
-                values: Sequence[tuple[str, str]] = ()) -> None:  # fmt: skip
+    def _report(
+        self,
+        level: bytes,
+        message: str,
+        msg: JointTrajectory,
+        values: Sequence[tuple[str, str]] = (),
+    ) -> None:
         """One trajectory's outcome on ~/status: level, one line, the trajectory's stamp
         and points (which trajectory it was), and `values`."""
         stamp = f"{msg.header.stamp.sec}.{msg.header.stamp.nanosec:09d}"
-        status = DiagnosticStatus(level=level, name=f"{self.get_name()}: trajectory",
-                                  message=message, hardware_id=self.model.robot.name)  # fmt: skip
+        status = DiagnosticStatus(
+            level=level,
+            name=f"{self.get_name()}: trajectory",
+            message=message,
+            hardware_id=self.model.robot.name,
+        )
         every = (("stamp", stamp), ("points", str(len(msg.points))), *values)
         status.values = [KeyValue(key=k, value=v) for k, v in every]
         self.status.publish(status)
@@ -268,21 +291,31 @@ class CompensatorNode(Node):
             bad = np.flatnonzero(~result.converged).tolist()
             self._drop(
                 f"dropped a trajectory, not sent: points {bad[:10]} not reached by the "
-                f"calibrated model (singularity or out of reach)" if bad else
-                f"dropped a trajectory, not sent: point {k} {names[j]} would be corrected by "
+                f"calibrated model (singularity or out of reach)"
+                if bad
+                else f"dropped a trajectory, not sent: point {k} {names[j]} would be corrected by "
                 f"{np.degrees(change[k, j]):.3f} deg > max_correction {self.max_correction:g} "
-                "deg (near a singularity?)", msg,
-            )  # fmt: skip
+                "deg (near a singularity?)",
+                msg,
+            )
             return None
         self.published += 1
         self.last = result
-        line = (f"{len(q)} points compensated; largest correction {change[k, j] * 1e3:.3f} "
-                f"mrad ({names[j]}, point {k}); model error max "
-                f"{result.error_m.max() * 1e6:.3f} um")  # fmt: skip
+        line = (
+            f"{len(q)} points compensated; largest correction {change[k, j] * 1e3:.3f} "
+            f"mrad ({names[j]}, point {k}); model error max "
+            f"{result.error_m.max() * 1e6:.3f} um"
+        )
         self.get_logger().info(line)
-        self._report(DiagnosticStatus.OK, f"corrected: {line}", msg,
-                     (("largest_correction_mrad", f"{change[k, j] * 1e3:.6f}"),
-                      ("model_error_max_um", f"{result.error_m.max() * 1e6:.6f}")))  # fmt: skip
+        self._report(
+            DiagnosticStatus.OK,
+            f"corrected: {line}",
+            msg,
+            (
+                ("largest_correction_mrad", f"{change[k, j] * 1e3:.6f}"),
+                ("model_error_max_um", f"{result.error_m.max() * 1e6:.6f}"),
+            ),
+        )
         return corrected_trajectory(msg, result.q, names)
 
 

@@ -36,13 +36,18 @@ class FollowJointTrajectoryAdapter:
         self._node = node
         self._action = FollowJointTrajectory
         group = ReentrantCallbackGroup()  # a goal awaits the controller while others arrive
-        self._client = ActionClient(node, FollowJointTrajectory, controller_action,
-                                    callback_group=group)  # fmt: skip
+        self._client = ActionClient(
+            node, FollowJointTrajectory, controller_action, callback_group=group
+        )
         self._server = ActionServer(
-            node, FollowJointTrajectory, "~/follow_joint_trajectory",
-            execute_callback=self._execute, goal_callback=lambda _goal: GoalResponse.ACCEPT,
-            cancel_callback=self._cancel, callback_group=group,
-        )  # fmt: skip
+            node,
+            FollowJointTrajectory,
+            "~/follow_joint_trajectory",
+            execute_callback=self._execute,
+            goal_callback=lambda _goal: GoalResponse.ACCEPT,
+            cancel_callback=self._cancel,
+            callback_group=group,
+        )
         self.controller_action = controller_action
         self._forwarded: dict[bytes, Any] = {}  # our goal's id -> the controller's goal
 
@@ -64,19 +69,24 @@ class FollowJointTrajectoryAdapter:
         where = f"{self._node.get_name()}/follow_joint_trajectory"
         corrected = self._node.compensated(request.trajectory, where)
         if corrected is None:
-            return self._aborted(goal_handle, result_type.INVALID_GOAL,
-                                 self._node.last_error or "dropped")  # fmt: skip
+            return self._aborted(
+                goal_handle, result_type.INVALID_GOAL, self._node.last_error or "dropped"
+            )
         if not self._client.server_is_ready():  # never block the executor waiting for it
-            return self._aborted(goal_handle, result_type.INVALID_GOAL,
-                                 f"{self.controller_action}: no action server")  # fmt: skip
+            return self._aborted(
+                goal_handle,
+                result_type.INVALID_GOAL,
+                f"{self.controller_action}: no action server",
+            )
         goal = copy.copy(request)
         goal.trajectory = corrected
         sent = await self._client.send_goal_async(
             goal, feedback_callback=lambda msg: goal_handle.publish_feedback(msg.feedback)
         )
         if not sent.accepted:
-            return self._aborted(goal_handle, result_type.INVALID_GOAL,
-                                 f"{self.controller_action}: goal rejected")  # fmt: skip
+            return self._aborted(
+                goal_handle, result_type.INVALID_GOAL, f"{self.controller_action}: goal rejected"
+            )
         key = bytes(goal_handle.goal_id.uuid)
         self._forwarded[key] = sent
         if goal_handle.is_cancel_requested:  # cancelled before the controller accepted it

@@ -105,8 +105,11 @@ class LaunchSpec:
     @property
     def all_arguments(self) -> tuple[Argument, ...]:
         """`params_file` and the launch file's own arguments, in declaration order."""
-        params = Argument(PARAMS_FILE, ShareFile(*PARAMS_YAML),
-                          "parameters YAML of the nodes (the arguments below win)")  # fmt: skip
+        params = Argument(
+            PARAMS_FILE,
+            ShareFile(*PARAMS_YAML),
+            "parameters YAML of the nodes (the arguments below win)",
+        )
         return (params, *self.arguments)
 
 
@@ -217,12 +220,12 @@ CALIBRATOR = LaunchSpec(
             "the robot's URDF: robot_state_publisher starts on it and each "
             "plausible calibration is written into it and set as its robot_description "
             "(TF and RViz follow the calibration); '' = none",
-        ),  # fmt: skip
+        ),
         Argument(
             "state_publisher",
             STATE_PUBLISHER,
             "the robot_state_publisher node the calibrator updates ('' = none)",
-        ),  # fmt: skip
+        ),
     ),
     (
         # bag mode
@@ -242,7 +245,7 @@ CALIBRATOR = LaunchSpec(
             {"robot_description": FileText("urdf")},
             package="robot_state_publisher",
             when=When("urdf", "given"),
-        ),  # fmt: skip
+        ),
         NodeSpec(
             "rviz2", package="rviz2", when=When("rviz"), arguments=("-d", ShareFile(*RVIZ_CONFIG))
         ),
@@ -276,8 +279,9 @@ def launch_description(spec: LaunchSpec) -> Any:  # noqa: ANN401 - a launch.Laun
 
     def value(given: Value) -> Any:  # noqa: ANN401 - a launch substitution or a constant
         if isinstance(given, FileText):
-            return ParameterValue(Command(["cat ", LaunchConfiguration(given.argument)]),
-                                  value_type=str)  # fmt: skip
+            return ParameterValue(
+                Command(["cat ", LaunchConfiguration(given.argument)]), value_type=str
+            )
         if not isinstance(given, FromArgument):
             return given
         argument = LaunchConfiguration(given.argument)

@@ -218,8 +218,9 @@ class RecorderNode(Node):
         self._writer.close()
         if not sum(self._counts.values()):  # an empty bag says nothing and blocks a rerun
             Path(self.output).unlink(missing_ok=True)
-            self.get_logger().warning(f"recorded nothing on {', '.join(self._topics)}: "
-                                      f"{self.output} not written")  # fmt: skip
+            self.get_logger().warning(
+                f"recorded nothing on {', '.join(self._topics)}: {self.output} not written"
+            )
             return
         self.get_logger().info(self.summary())
 

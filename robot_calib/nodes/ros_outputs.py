@@ -140,8 +140,9 @@ def score_held_out(cal: Calibration, recording: Recording, holdout: Recording) -
     in_sample, judged_by = cal.accuracy, "the calibration's in-sample rms"
     if cal.correction is not None:  # the model applied: physical + learned correction
         in_sample, judged_by = hybrid_in_sample(cal, recording), "the hybrid model's in-sample rms"
-    result = score(cal, holdout, in_sample=in_sample, fitted=recording.sources,
-                   judged_by=judged_by)  # fmt: skip
+    result = score(
+        cal, holdout, in_sample=in_sample, fitted=recording.sources, judged_by=judged_by
+    )
     where = ", ".join(holdout.sources)
     noise = held_out_warnings(cal, result.accuracy.absolute_rms_mm, where)
     return HeldOut(result, tuple(holdout.sources), (*result.warnings, *noise))

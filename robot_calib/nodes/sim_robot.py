@@ -88,8 +88,10 @@ class SimRobotNode(Node):
             "sim_tracker, as in the README's recipe)",
         )
         if self.wait_for < 0:
-            raise InputError(f"{self.get_name()}: parameter 'wait_for_subscribers' must be "
-                             f">= 0, not {self.wait_for}")  # fmt: skip
+            raise InputError(
+                f"{self.get_name()}: parameter 'wait_for_subscribers' must be "
+                f">= 0, not {self.wait_for}"
+            )
         publish_clock = declare(
             self, "publish_clock", False, "also publish /clock = measurement time (simulated time)"
         )
@@ -133,14 +135,18 @@ class SimRobotNode(Node):
         from trajectory_msgs.msg import JointTrajectory
 
         controller = declare(
-            self, "controller", "joint_trajectory_controller",
+            self,
+            "controller",
+            "joint_trajectory_controller",
             "controller name: commands on /<controller>/joint_trajectory",
-        )  # fmt: skip
+        )
         state_rate = declare(self, "state_rate", 50.0, "joint states per second [Hz]")
         self.speed_fraction = declare(
-            self, "speed_fraction", 0.25,
+            self,
+            "speed_fraction",
+            0.25,
             "top speed as a fraction of the world's max joint speeds (> 1: faster than real)",
-        )  # fmt: skip
+        )
         if not state_rate > 0 or not self.speed_fraction > 0:
             raise InputError("sim_robot: parameters 'state_rate' and 'speed_fraction' must be > 0")
         robot = self.world.model.robot

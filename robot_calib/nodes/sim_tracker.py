@@ -90,13 +90,18 @@ class SimTrackerNode(Node):
             self.create_publisher(PointStamped, reference_topic(name), QOS)
             for name in self.world.references
         ]
-        self.all_publishers = [*self.point_publishers, *self.pose_publishers.values(),
-                               *self.reference_publishers]  # fmt: skip
+        self.all_publishers = [
+            *self.point_publishers,
+            *self.pose_publishers.values(),
+            *self.reference_publishers,
+        ]
         self.triggered = declare(
-            self, "triggered", False,
+            self,
+            "triggered",
+            False,
             "measure only on a std_srvs/Trigger call of ~/measure (the latest joint state), "
             "as a tracker driver with a trigger service; false: one measurement per reading",
-        )  # fmt: skip
+        )
         self._latest: tuple[int, TrackerReading | None] | None = None
         if self.triggered:
             from std_srvs.srv import Trigger
@@ -252,8 +257,10 @@ class SimTrackerNode(Node):
             first += zip(self.reference_publishers, reading.references.tolist())
         points = [(stamp_ns, p, xyz) for p, xyz in first]
         for k, again in enumerate([] if reading.rereads is None else reading.rereads, start=1):
-            points += [(stamp_ns + k * REREAD_STEP_NS, p, xyz)
-                       for p, xyz in zip(self.point_publishers, again.tolist())]  # fmt: skip
+            points += [
+                (stamp_ns + k * REREAD_STEP_NS, p, xyz)
+                for p, xyz in zip(self.point_publishers, again.tolist())
+            ]
         for at, publisher, xyz in points:
             s, ns = ns_to_sec_nanosec(at)
             if encoder is not None:

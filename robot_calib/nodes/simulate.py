@@ -252,8 +252,9 @@ def _simulate_bag(
 ) -> dict[str, int]:
     context = Context()
     with discovery_off():  # its own nodes only, whoever else is on the domain
-        rclpy.init(context=context, domain_id=domain_id,
-                   signal_handler_options=SignalHandlerOptions.NO)  # fmt: skip
+        rclpy.init(
+            context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO
+        )
     sim_time = Parameter("use_sim_time", value=True)
     world_param = Parameter("world", value=str(world) if world else "")
     nodes: list[Node] = []

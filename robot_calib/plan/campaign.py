@@ -102,8 +102,9 @@ def plan_figures(
     of `trials` simulated calibrations (none when trials is 0)."""
     holdout = None
     if trials:
-        holdout = simulated_holdout(world, problem, model_spec, plan, rng, trials, n_holdout,
-                                    floor_z_m, ecc_order)  # fmt: skip
+        holdout = simulated_holdout(
+            world, problem, model_spec, plan, rng, trials, n_holdout, floor_z_m, ecc_order
+        )
     hours = float(plan_times(plan, world.timing)[-1]) / 3600.0
     return PlanFigures(plan, predict(problem, plan, noise_m), holdout, hours)
 
@@ -136,8 +137,20 @@ def plan_campaign(
     out = []
     for name, rows in (("planned", q), ("random", problem.candidates[:n_poses])):
         say(f"plan: {name} poses: predicted 1-sigma, {trials} simulated calibration(s)")
-        out.append(plan_figures(world, problem, model_spec, problem.plan(rows, name), noise,
-                                rng, trials, n_holdout, floor_z_m, ecc_order))  # fmt: skip
+        out.append(
+            plan_figures(
+                world,
+                problem,
+                model_spec,
+                problem.plan(rows, name),
+                noise,
+                rng,
+                trials,
+                n_holdout,
+                floor_z_m,
+                ecc_order,
+            )
+        )
     return Campaign(model_spec, problem, out[0], out[1], seed, seconds)
 
 
@@ -146,14 +159,18 @@ def _prediction_dict(figures: PlanFigures) -> dict[str, Any]:
     worst = pred.worst
     doc: dict[str, Any] = {
         "noise_m": pred.noise_m,
-        "worst": {"name": pred.names[worst], "unit": pred.units[worst],
-                  "std": float(pred.std[worst]), "rms_m": float(pred.rms_m[worst])},
+        "worst": {
+            "name": pred.names[worst],
+            "unit": pred.units[worst],
+            "std": float(pred.std[worst]),
+            "rms_m": float(pred.rms_m[worst]),
+        },
         "parameters": [
             {"name": n, "unit": u, "std": float(s), "rms_m": float(r)}
             for n, u, s, r in zip(pred.names, pred.units, pred.std, pred.rms_m)
         ],
         "campaign_hours": round(figures.hours, 4),
-    }  # fmt: skip
+    }
     if figures.holdout is not None:
         doc["holdout"] = {
             "abs_rms_mm": figures.holdout.abs_rms_mm,
@@ -184,5 +201,11 @@ def campaign_yaml(campaign: Campaign, floor_z_m: float) -> str:
     predicted["random_same_n"] = {
         k: v for k, v in _prediction_dict(campaign.random).items() if k != "parameters"
     }
-    return plan_text(problem.model.robot, campaign.model, campaign.planned.plan.q,
-                     problem.speed_fraction, design, predicted)  # fmt: skip
+    return plan_text(
+        problem.model.robot,
+        campaign.model,
+        campaign.planned.plan.q,
+        problem.speed_fraction,
+        design,
+        predicted,
+    )

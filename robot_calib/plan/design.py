@@ -164,8 +164,16 @@ def design_problem(
         {p.name: frames[p.name] for p in nominal.parameters if p.group == "frames"}
     )
     candidates = draw_candidates(model, params, n_candidates, rng, floor_z_m)
-    problem = DesignProblem(model, params, candidates, np.ones(int(params.free.sum())), (),
-                            False, timing, speed_fraction)  # fmt: skip
+    problem = DesignProblem(
+        model,
+        params,
+        candidates,
+        np.ones(int(params.free.sum())),
+        (),
+        False,
+        timing,
+        speed_fraction,
+    )
     # every candidate visited in the order drawn: the directions and times of a campaign
     everything = problem.poses(problem.plan(candidates))
     jac = model.jacobian(params, everything)[1]
@@ -267,8 +275,9 @@ def _worst_exchange(
         best: tuple[float, list[int]] | None = None
         for add in np.argsort(after)[:tries]:
             trial = [*chosen, int(add)]
-            removed = criterion(_variances_after(jac[trial], _information_inverse(jac, trial, p),
-                                                 -1.0))  # fmt: skip
+            removed = criterion(
+                _variances_after(jac[trial], _information_inverse(jac, trial, p), -1.0)
+            )
             removed[-1] = np.inf  # not the one just added
             drop = int(np.argmin(removed))
             if best is None or removed[drop] < best[0]:

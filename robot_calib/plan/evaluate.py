@@ -99,8 +99,13 @@ def predict(problem: DesignProblem, plan: Plan, noise_m: float) -> Prediction:
     p = jac.shape[2]
     std = noise_m * np.sqrt(np.maximum(np.diag(unit_covariance(jac.reshape(-1, p))), 0.0))
     free = [par for par in problem.params.parameters if par.free]
-    return Prediction(tuple(par.name for par in free), tuple(par.unit for par in free), std,
-                      std * problem.scale, noise_m)  # fmt: skip
+    return Prediction(
+        tuple(par.name for par in free),
+        tuple(par.unit for par in free),
+        std,
+        std * problem.scale,
+        noise_m,
+    )
 
 
 @dataclass(frozen=True)
@@ -159,5 +164,6 @@ def simulated_holdout(
         rms.append(score.absolute_rms_mm)
         pairwise.append(score.pairwise_mean_mm)
         model.append(accuracy(exact, predicted).absolute_rms_mm)
-    return HoldoutScore(float(np.mean(rms)), float(np.mean(pairwise)), float(np.mean(model)),
-                        trials, n_holdout)  # fmt: skip
+    return HoldoutScore(
+        float(np.mean(rms)), float(np.mean(pairwise)), float(np.mean(model)), trials, n_holdout
+    )

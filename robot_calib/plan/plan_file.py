@@ -109,8 +109,14 @@ def load_plan(path: str | Path, robot: RobotDescription) -> PlanFile:
     speed = doc.get("speed_fraction", DEFAULT_SPEED_FRACTION)
     if isinstance(speed, bool) or not isinstance(speed, int | float) or not 0 < speed <= 1:
         raise InputError(f"{where}: speed_fraction must be a number in (0, 1], got {speed!r}")
-    return PlanFile(where, str(doc["robot"]), tuple(map(str, names)), str(doc.get("model", "")),
-                    q, float(speed))  # fmt: skip
+    return PlanFile(
+        where,
+        str(doc["robot"]),
+        tuple(map(str, names)),
+        str(doc.get("model", "")),
+        q,
+        float(speed),
+    )
 
 
 def _readings(rows: Any, n_joints: int, where: str) -> Array:  # noqa: ANN401 - YAML

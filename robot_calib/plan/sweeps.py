@@ -31,8 +31,9 @@ BACK_JITTER_STEPS = 0.2  # way back: midpoints moved by up to this share of a st
 GOOD_ENOUGH = 0.5  # a draw whose most alike pair of orders correlates below this is kept
 
 
-def sweep_readings(start: float, end: float, points: int, max_order: int,
-                   rng: np.random.Generator) -> Array:  # fmt: skip
+def sweep_readings(
+    start: float, end: float, points: int, max_order: int, rng: np.random.Generator
+) -> Array:
     """One joint's readings [deg] in visiting order, forth then back (2 `points`), from
     `start` to `end` [deg], End read again, then back between the forward readings,
     resolving orders up to `max_order` if any of DESIGN_TRIALS draws does (module
@@ -56,8 +57,9 @@ def sweep_readings(start: float, end: float, points: int, max_order: int,
     return best[2]
 
 
-def irregular_sweeps(test: int, max_order: int = MAX_ORDER, seed: int = 0,
-                     home_deg: tuple[float, ...] = HOME_DEG) -> Plan:  # fmt: skip
+def irregular_sweeps(
+    test: int, max_order: int = MAX_ORDER, seed: int = 0, home_deg: tuple[float, ...] = HOME_DEG
+) -> Plan:
     """The seed's Table 2 test `test` (1-6) in irregular steps (module docstring): joint
     variables q (n, J) [rad] (a robot's readings: `RobotDescription.readings`), each row
     labelled with the joint it sweeps, at the test's speed."""

@@ -86,8 +86,13 @@ COMBINATIONS = (
     "transmission_error+gravity_compliance",
     "backlash+eccentricity+thermal_warmup",
 )
-FORMS = ("compliance_payload", "drift_exponential", "ripple_order5", "harmonics_high",
-         "harmonics_aliased")  # fmt: skip
+FORMS = (
+    "compliance_payload",
+    "drift_exponential",
+    "ripple_order5",
+    "harmonics_high",
+    "harmonics_aliased",
+)
 #: the joint-angle harmonics of harmonics_high and harmonics_aliased: joint -> orders
 HIGH_HARMONICS: dict[str, dict[int, tuple[int, ...]]] = {
     "harmonics_high": {2: (11, 27), 1: (17,)},
@@ -104,8 +109,10 @@ CARRIED_TOOL_OFFSET_M = (0.10, 0.15)
 #: the out-of-vocabulary UR10 cases: kind -> (effect name, joint, magnitude): the
 #: play [rad] of gravity_backlash, the flange deflection [m rms] of link_bending (whose
 #: compliance is sized for it); geometric alone leaves about 60 x and 20 x the noise floor
-OOV_UR10 = {"gravity_backlash": ("gravity_backlash", 2, 2.0e-3),
-            "link_bending": ("link_bending", 3, 200e-6)}  # fmt: skip
+OOV_UR10 = {
+    "gravity_backlash": ("gravity_backlash", 2, 2.0e-3),
+    "link_bending": ("link_bending", 3, 200e-6),
+}
 #: what a diagnosis may answer for each form (effect names it may name on the joints)
 FORM_ANSWERS = {
     "compliance_payload": ("compliance", "gravity_compliance"),
@@ -191,8 +198,9 @@ def _withheld(name: str, world: World, rng: np.random.Generator) -> Withheld:
     return world, effects, values
 
 
-def _high_harmonics(world: World, harmonics: dict[int, tuple[int, ...]],
-                    rng: np.random.Generator) -> Withheld:  # fmt: skip
+def _high_harmonics(
+    world: World, harmonics: dict[int, tuple[int, ...]], rng: np.random.Generator
+) -> Withheld:
     """The world with joint harmonics (`harmonics`: joint -> orders), each of a random
     amplitude in joint_harmonics' DRAW_RANGE (50-300 urad) and a random phase."""
     effects: list[Effect] = []
@@ -232,10 +240,20 @@ def make_case(effect: str, seed: int, n_holdout: int = 200) -> Case:
     plan = paper_test_plan(2)
     if effect in GENERAL_POSE_CLASSES:
         general = random_plan(robot, GENERAL_POSES, rng)
-        plan = Plan(f"{plan.name}+random", np.concatenate([plan.q, general.q]),
-                    np.concatenate([plan.sweep, general.sweep]), plan.speed_fraction)  # fmt: skip
-    return Case(effect, tuple(withheld), values, record_plan(world, plan, rng),
-                record_plan(world, holdout_plan, rng), world)  # fmt: skip
+        plan = Plan(
+            f"{plan.name}+random",
+            np.concatenate([plan.q, general.q]),
+            np.concatenate([plan.sweep, general.sweep]),
+            plan.speed_fraction,
+        )
+    return Case(
+        effect,
+        tuple(withheld),
+        values,
+        record_plan(world, plan, rng),
+        record_plan(world, holdout_plan, rng),
+        world,
+    )
 
 
 def right_model_rms_mm(case: Case) -> float:
@@ -251,10 +269,14 @@ def right_model_rms_mm(case: Case) -> float:
             dict(zip(geo.parameters.names, geo.parameters.values))
         )
         fits = [
-            fit_model(model, start.with_values({k: v for part in starts for k, v in part.items()}),
-                      case.calibration.poses, case.calibration.points)
+            fit_model(
+                model,
+                start.with_values({k: v for part in starts for k, v in part.items()}),
+                case.calibration.poses,
+                case.calibration.points,
+            )
             for starts in itertools.product(*(e.fit_starts(robot) for e in case.withheld))
-        ]  # fmt: skip
+        ]
         best = min(fits, key=lambda f: f.solver.cost_m2 or 0.0)
         predicted = model.target_points(best.parameters, case.holdout.poses)
     return accuracy(case.holdout.points, predicted).absolute_rms_mm
@@ -356,8 +378,9 @@ def judge_evidence(case: Case, where: WhereItLies) -> EvidenceVerdict:
         elif all(shown.get(j, 0.0) < EVIDENCE_Z for j in e.diagnosed_joints()):
             missed += list(e.joints)
     missed = sorted(set(missed))
-    timed = case.effect == "drift_exponential" or any(e.name in TIME_EFFECTS
-                                                      for e in case.withheld)  # fmt: skip
+    timed = case.effect == "drift_exponential" or any(
+        e.name in TIME_EFFECTS for e in case.withheld
+    )
     sig = where.strongest_signature
     if sig is None or sig.significance < EVIDENCE_Z:
         ok = not case.withheld or (not case.joints and not timed)
@@ -383,8 +406,9 @@ def _joints_named(withheld: tuple[Effect, ...], joints: list[int]) -> bool:
     )
 
 
-def _options_found(withheld: tuple[Effect, ...], terms: list[Effect],
-                   robot: RobotDescription) -> bool:  # fmt: skip
+def _options_found(
+    withheld: tuple[Effect, ...], terms: list[Effect], robot: RobotDescription
+) -> bool:
     """True when the chosen rung's `terms` hold every parameter of each withheld effect
     whose options come from the residuals (joint_harmonics: its joints and orders)."""
     for effect in withheld:
@@ -420,8 +444,10 @@ def run_case(effect: str, seed: int) -> dict[str, Any]:
     whether its best model's PARAMS.json loads (`best_loads`, `best_model_loads`)."""
     case = make_case(effect, seed)
     diagnosis, ladder = diagnose(case.calibration, load_world().model.robot, case.holdout)
-    return {**judge(case, diagnosis, right_model_rms_mm(case)),
-            "best_loads": best_model_loads(ladder, diagnosis)}  # fmt: skip
+    return {
+        **judge(case, diagnosis, right_model_rms_mm(case)),
+        "best_loads": best_model_loads(ladder, diagnosis),
+    }
 
 
 def best_model_loads(ladder: Ladder, diagnosis: Diagnosis) -> str:
@@ -439,8 +465,13 @@ def best_model_loads(ladder: Ladder, diagnosis: Diagnosis) -> str:
     chosen = ladder.rungs[-1].calibration
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "params_best.json"
-        document = selected_document(marked_implausible(chosen, diagnosis), recording,
-                                     "blind harness", diagnosis.scored_on, {})  # fmt: skip
+        document = selected_document(
+            marked_implausible(chosen, diagnosis),
+            recording,
+            "blind harness",
+            diagnosis.scored_on,
+            {},
+        )
         write_json_atomic(document, path)
         try:
             check_loads(path, path, chosen, recording)

@@ -31,8 +31,9 @@ def line_of_sight(p_in_tracker: Array) -> tuple[Array, Array, Array, Array]:
     return distance, radial, across1, np.cross(radial, across1)
 
 
-def tracker_noise(noise: NoiseModel, p_in_tracker: Array, rng: np.random.Generator,
-                  reads: int = 1) -> Array:  # fmt: skip
+def tracker_noise(
+    noise: NoiseModel, p_in_tracker: Array, rng: np.random.Generator, reads: int = 1
+) -> Array:
     """Noise vectors (n, 3) [m] for points p_in_tracker (n, 3) (tracker at the origin).
     `reads`: the rows are that many reads of the same n / reads targets in turn (a still
     pose read again): the target's centring error drawn once per target, shared by its
@@ -206,29 +207,38 @@ class StreamingTracker:
             None if frames is None else frames[None],
             noise,
         )
-        return self._reading(points[0], None if frames is None else frames[0], sigma, latency,
-                             None if refs is None else refs[0])  # fmt: skip
+        return self._reading(
+            points[0],
+            None if frames is None else frames[0],
+            sigma,
+            latency,
+            None if refs is None else refs[0],
+        )
 
     def _rows(self) -> tuple[int, IntArray | None]:
         """The rows a pose is measured in (every target, `reads_per_pose` times over) and
         their target indices (None for a single row)."""
         n_targets = len(self.world.model.targets)
         n_rows = n_targets * self.world.tracker.reads_per_pose
-        return n_rows, (np.tile(np.arange(n_targets), n_rows // n_targets) if n_rows > 1
-                        else None)  # fmt: skip
+        return n_rows, (np.tile(np.arange(n_targets), n_rows // n_targets) if n_rows > 1 else None)
 
-    def _reading(self, points: Array, frames: Array | None, sigma: Array, latency: float,
-                 refs: Array | None) -> TrackerReading:  # fmt: skip
+    def _reading(
+        self, points: Array, frames: Array | None, sigma: Array, latency: float, refs: Array | None
+    ) -> TrackerReading:
         """One pose's reading from its rows (`_rows`): the first read's points (T, 3),
         frames and stated accuracies, the further reads as `rereads`."""
         n_targets = len(self.world.model.targets)
-        rereads = (points[n_targets:].reshape(-1, n_targets, 3)
-                   if len(points) > n_targets else None)  # fmt: skip
-        return TrackerReading(points[:n_targets], None if frames is None else frames[:n_targets],
-                              sigma[:n_targets], latency, refs, rereads)  # fmt: skip
+        rereads = points[n_targets:].reshape(-1, n_targets, 3) if len(points) > n_targets else None
+        return TrackerReading(
+            points[:n_targets],
+            None if frames is None else frames[:n_targets],
+            sigma[:n_targets],
+            latency,
+            refs,
+            rereads,
+        )
 
-    def _point_accuracy(self, index: IntArray, points: Array,
-                        sigma: Array) -> tuple[Array, Array]:  # fmt: skip
+    def _point_accuracy(self, index: IntArray, points: Array, sigma: Array) -> tuple[Array, Array]:
         """Points (m R, 3) [m] of the measured poses `index` (m,) (R rows each) and their
         stated accuracies (m R, 2) with each point's own accuracy (`point_sigma_range_m`):
         drawn per pose from a generator of the world's seed and the pose's index (the same
@@ -266,8 +276,14 @@ class StreamingTracker:
         sigma = self.world.noise.tracker_sigma_m  # a nest's centring error is its place
         return np.stack([self.rng.normal(0.0, sigma, (n_refs, 3)) for _ in range(m)])
 
-    def _drifted(self, index: IntArray, time_s: Array, points: Array, frames: Array | None,
-                 ref_noise: Array | None) -> tuple[Array, Array | None, Array | None]:  # fmt: skip
+    def _drifted(
+        self,
+        index: IntArray,
+        time_s: Array,
+        points: Array,
+        frames: Array | None,
+        ref_noise: Array | None,
+    ) -> tuple[Array, Array | None, Array | None]:
         """Points (m, T, 3) [m] and frames (m, T, 3, 3) of the measured poses `index` (m,)
         (0-based) read at times (m,) [s] since the first measurement, with the world's
         events (`SimEvent`) and the tracker's drift in them, and the references (m, R, 3)
@@ -291,8 +307,9 @@ class StreamingTracker:
         assert len(points) == m
         return points, frames, refs
 
-    def _events(self, index: IntArray, points: Array,
-                refs: Array | None) -> tuple[Array, Array | None]:  # fmt: skip
+    def _events(
+        self, index: IntArray, points: Array, refs: Array | None
+    ) -> tuple[Array, Array | None]:
         """Points (m, T, 3) and references (m, R, 3) [m, tracker frame] of the measured
         poses `index` (m,) moved by the world's events there (before the drift)."""
         points = points.copy()
@@ -324,8 +341,14 @@ class StreamingTracker:
         if self._batch_ok is False or len(q) == 0:
             return [self.measure_all(q[k], float(stamps[k])) for k in range(len(q))]
         if self._batch_ok is None:
-            reference = StreamingTracker(self.world, copy.deepcopy(self.rng), self._last_q,
-                                         self._direction, self._t0, self.count)  # fmt: skip
+            reference = StreamingTracker(
+                self.world,
+                copy.deepcopy(self.rng),
+                self._last_q,
+                self._direction,
+                self._t0,
+                self.count,
+            )
             state = copy.deepcopy(self.rng.bit_generator.state)
             before = (self._last_q, self._direction, self._t0, self.count)
             readings = self._measure_batch(q, stamps)
@@ -357,8 +380,9 @@ class StreamingTracker:
         step = q - np.concatenate([previous, q[:-1]])
         moved = np.abs(step) > JOINT_CHANGE_TOLERANCE
         last = np.maximum.accumulate(np.where(moved, np.arange(m)[:, None], -1), axis=0)
-        direction = np.where(last >= 0, np.sign(step)[np.maximum(last, 0), np.arange(n_joints)],
-                             start)  # fmt: skip
+        direction = np.where(
+            last >= 0, np.sign(step)[np.maximum(last, 0), np.arange(n_joints)], start
+        )
         self._direction, self._last_q = direction[-1].copy(), q[-1].copy()
         assert self._t0 is not None
         # the draws, pose by pose
@@ -370,13 +394,18 @@ class StreamingTracker:
             if rng.random() < options.dropout_probability:
                 continue
             measured[k] = True
-            pose = [rng.normal(0.0, noise.joint_sigma_rad, (1, n_joints)),
-                    np.tile(rng.normal(0.0, noise.target_sigma_m, (n_targets // reads, 3)),
-                            (reads, 1))]  # fmt: skip
+            pose = [
+                rng.normal(0.0, noise.joint_sigma_rad, (1, n_joints)),
+                np.tile(
+                    rng.normal(0.0, noise.target_sigma_m, (n_targets // reads, 3)), (reads, 1)
+                ),
+            ]
             if noise.anisotropic:
-                pose += [rng.normal(0.0, noise.tracker_radial_sigma_m, (n_targets, 1)),
-                         rng.normal(0.0, 1.0, (n_targets, 1)),
-                         rng.normal(0.0, 1.0, (n_targets, 1))]  # fmt: skip
+                pose += [
+                    rng.normal(0.0, noise.tracker_radial_sigma_m, (n_targets, 1)),
+                    rng.normal(0.0, 1.0, (n_targets, 1)),
+                    rng.normal(0.0, 1.0, (n_targets, 1)),
+                ]
             else:
                 pose.append(rng.normal(0.0, noise.tracker_sigma_m, (n_targets, 3)))
             if model.oriented:
@@ -424,15 +453,20 @@ class StreamingTracker:
         ref_noise = columns[-1].reshape(k, -1, 3) if world.references else None
         index = self.count - k + np.arange(k)  # the measured poses' 0-based count
         drifted, drifted_frames, refs = self._drifted(
-            index, stamps[rows] - self._t0, points.reshape(k, n_targets, 3),
-            None if frames is None else frames.reshape(k, n_targets, 3, 3), ref_noise,
-        )  # fmt: skip
+            index,
+            stamps[rows] - self._t0,
+            points.reshape(k, n_targets, 3),
+            None if frames is None else frames.reshape(k, n_targets, 3, 3),
+            ref_noise,
+        )
         for i, row in enumerate(rows.tolist()):
-            out[row] = self._reading(drifted[i],
-                                     None if drifted_frames is None else drifted_frames[i],
-                                     sigma[i * n_targets:(i + 1) * n_targets],
-                                     float(latency[row]),
-                                     None if refs is None else refs[i])  # fmt: skip
+            out[row] = self._reading(
+                drifted[i],
+                None if drifted_frames is None else drifted_frames[i],
+                sigma[i * n_targets : (i + 1) * n_targets],
+                float(latency[row]),
+                None if refs is None else refs[i],
+            )
         assert n == len(rows) * n_targets
         return out
 
@@ -504,6 +538,9 @@ def record_plan(world: World, plan: Plan, rng: np.random.Generator) -> Recording
     celsius = None if world.temperature is None else world.temperature.at(time)
     poses = replace(Poses.from_readings(plan.q, time=time), temperature=celsius)
     return recording_from_arrays(
-        plan.q, physical_points(world, poses, rng), time, robot=world.model.robot,
+        plan.q,
+        physical_points(world, poses, rng),
+        time,
+        robot=world.model.robot,
         temperature=celsius,
-    )  # fmt: skip
+    )

@@ -34,19 +34,73 @@ from robot_calib.sim.world import Timing
 
 # Seed Table 2: per test, per joint (start, end) [deg] and points; and % of max speed.
 PAPER_TESTS: dict[int, tuple[list[tuple[float, float, int]], float]] = {
-    1: ([(167, -167, 10), (-5, -162, 10), (145, -114, 10), (177, -177, 10), (90, -90, 10),
-         (178, -178, 10)], 0.03),
-    2: ([(167, -167, 60), (-5, -162, 30), (145, -114, 50), (177, -177, 60), (90, -90, 30),
-         (178, -178, 60)], 0.03),
-    3: ([(167, -167, 30), (-5, -162, 15), (145, -114, 25), (177, -177, 30), (90, -90, 15),
-         (178, -178, 30)], 0.03),
-    4: ([(80, -80, 30), (-40, -120, 15), (80, -50, 25), (90, -90, 30), (45, -45, 15),
-         (90, -90, 30)], 0.01),
-    5: ([(80, -80, 30), (-40, -120, 15), (80, -50, 25), (90, -90, 30), (45, -45, 15),
-         (90, -90, 30)], 0.03),
-    6: ([(80, -80, 30), (-40, -120, 15), (80, -50, 25), (90, -90, 30), (45, -45, 15),
-         (90, -90, 30)], 0.10),
-}  # fmt: skip
+    1: (
+        [
+            (167, -167, 10),
+            (-5, -162, 10),
+            (145, -114, 10),
+            (177, -177, 10),
+            (90, -90, 10),
+            (178, -178, 10),
+        ],
+        0.03,
+    ),
+    2: (
+        [
+            (167, -167, 60),
+            (-5, -162, 30),
+            (145, -114, 50),
+            (177, -177, 60),
+            (90, -90, 30),
+            (178, -178, 60),
+        ],
+        0.03,
+    ),
+    3: (
+        [
+            (167, -167, 30),
+            (-5, -162, 15),
+            (145, -114, 25),
+            (177, -177, 30),
+            (90, -90, 15),
+            (178, -178, 30),
+        ],
+        0.03,
+    ),
+    4: (
+        [
+            (80, -80, 30),
+            (-40, -120, 15),
+            (80, -50, 25),
+            (90, -90, 30),
+            (45, -45, 15),
+            (90, -90, 30),
+        ],
+        0.01,
+    ),
+    5: (
+        [
+            (80, -80, 30),
+            (-40, -120, 15),
+            (80, -50, 25),
+            (90, -90, 30),
+            (45, -45, 15),
+            (90, -90, 30),
+        ],
+        0.03,
+    ),
+    6: (
+        [
+            (80, -80, 30),
+            (-40, -120, 15),
+            (80, -50, 25),
+            (90, -90, 30),
+            (45, -45, 15),
+            (90, -90, 30),
+        ],
+        0.10,
+    ),
+}
 
 PLAN_NAMES = (*(f"paper-test{k}" for k in PAPER_TESTS), "random", "iso9283")
 
@@ -76,8 +130,12 @@ def paper_test_number(name: str) -> int:
     return int(test)
 
 
-def sweep_plan(name: str, test: int, angles: Callable[[int, float, float, int], Array],
-               home_deg: tuple[float, ...] = HOME_DEG) -> Plan:  # fmt: skip
+def sweep_plan(
+    name: str,
+    test: int,
+    angles: Callable[[int, float, float, int], Array],
+    home_deg: tuple[float, ...] = HOME_DEG,
+) -> Plan:
     """Table 2 test `test`'s single-joint sweeps, each joint in turn through the readings
     `angles(joint, start, end, points)` ((m,) [deg], in visiting order) of its row, the other
     joints at `home_deg`; the plan `name` of joint variables [rad], rows labelled with the
@@ -128,9 +186,15 @@ def inverse_kinematics(
     """Readings (J,) [rad] that put the flange at `goal2base` (4, 4), position and
     orientation, from `q_seed` (J,) (`ik.solve_ik`, one pose); raises InputError if it
     fails."""
-    found = solve_ik(model, params, Poses.from_readings(np.asarray(q_seed, dtype=float)[None]),
-                     goal2base[None], np.eye(4), tolerance_m=1e-12,
-                     max_iterations=iterations)  # fmt: skip
+    found = solve_ik(
+        model,
+        params,
+        Poses.from_readings(np.asarray(q_seed, dtype=float)[None]),
+        goal2base[None],
+        np.eye(4),
+        tolerance_m=1e-12,
+        max_iterations=iterations,
+    )
     if not found.converged[0]:
         raise InputError("inverse kinematics did not converge (goal out of reach?)")
     return found.q[0]

@@ -28,10 +28,21 @@ FANUC_SWEEPS = ((-60, 60), (-35, 35), (-35, 35), (-360, 360), (-90, 60), (-360, 
 FANUC_HOME_DEG = (0.0, 0.0, 0.0, 0.0, -45.0, 0.0)
 # True deviations from the nominal table, of the size of the seed's Table 3 [m, rad].
 FANUC_DEVIATIONS = {
-    "a1": -3.0e-4, "a2": 4.5e-4, "a3": 2.6e-4, "d4": -3.5e-4, "theta2": -6.0e-4,
-    "theta3": 8.0e-4, "theta4": 2.1e-3, "theta5": -1.2e-3, "alpha1": 4.0e-4,
-    "alpha3": -5.2e-4, "alpha4": 5.1e-4, "alpha5": -3.0e-4, "beta2": 7.0e-4, "d5": 1.5e-4,
-}  # fmt: skip
+    "a1": -3.0e-4,
+    "a2": 4.5e-4,
+    "a3": 2.6e-4,
+    "d4": -3.5e-4,
+    "theta2": -6.0e-4,
+    "theta3": 8.0e-4,
+    "theta4": 2.1e-3,
+    "theta5": -1.2e-3,
+    "alpha1": 4.0e-4,
+    "alpha3": -5.2e-4,
+    "alpha4": 5.1e-4,
+    "alpha5": -3.0e-4,
+    "beta2": 7.0e-4,
+    "d5": 1.5e-4,
+}
 
 
 @dataclass(frozen=True)
@@ -60,8 +71,12 @@ def fanuc_world(seed: int = 0, robot: str = FANUC_ROBOT) -> World:
     )
 
 
-def sweep_plan(world: World, sweeps: tuple[tuple[float, float], ...], points: int = 6,
-               home_deg: tuple[float, ...] = FANUC_HOME_DEG) -> Plan:  # fmt: skip
+def sweep_plan(
+    world: World,
+    sweeps: tuple[tuple[float, float], ...],
+    points: int = 6,
+    home_deg: tuple[float, ...] = FANUC_HOME_DEG,
+) -> Plan:
     """Single-joint sweeps of the DH joint variables (start, end) [deg] in `points` equal
     steps, the other joints at `home_deg`, turned into the robot's readings."""
     robot = world.model.robot
@@ -79,9 +94,14 @@ def sweep_plan(world: World, sweeps: tuple[tuple[float, float], ...], points: in
 def _recording(world: World, q: Array, time: Array, seed: int, source: str) -> Recording:
     poses, points = measure_every_target(world, q, time, np.random.default_rng(seed))
     return recording_from_arrays(
-        poses.q, points, poses.time, source, world.model.robot, poses.target,
+        poses.q,
+        points,
+        poses.time,
+        source,
+        world.model.robot,
+        poses.target,
         world.model.targets,
-    )  # fmt: skip
+    )
 
 
 def fanuc_like(seed: int = 0, n_holdout: int = 100, robot: str = FANUC_ROBOT) -> Scenario:
@@ -119,17 +139,38 @@ UR10_ROBOT = "ur10"
 UR10_RANGES_DEG = ((-170, 170), (-160, -20), (-150, 150), (-180, 180), (-180, 180), (-180, 180))
 # True deviations from the nominal table, of a calibrated UR10's size [m, rad].
 UR10_DEVIATIONS = {
-    "a2": 6.0e-4, "a3": -4.0e-4, "d1": 3.0e-4, "d4": -2.5e-4, "d5": 2.0e-4, "d6": -1.5e-4,
-    "theta1": 4.0e-4, "theta2": -1.1e-3, "theta3": 9.0e-4, "theta4": 1.3e-3, "theta5": -7.0e-4,
-    "alpha1": 6.0e-4, "alpha4": -4.0e-4, "alpha5": 5.0e-4, "beta2": 3.0e-4, "beta3": -2.0e-4,
-}  # fmt: skip
+    "a2": 6.0e-4,
+    "a3": -4.0e-4,
+    "d1": 3.0e-4,
+    "d4": -2.5e-4,
+    "d5": 2.0e-4,
+    "d6": -1.5e-4,
+    "theta1": 4.0e-4,
+    "theta2": -1.1e-3,
+    "theta3": 9.0e-4,
+    "theta4": 1.3e-3,
+    "theta5": -7.0e-4,
+    "alpha1": 6.0e-4,
+    "alpha4": -4.0e-4,
+    "alpha5": 5.0e-4,
+    "beta2": 3.0e-4,
+    "beta3": -2.0e-4,
+}
 # What the arm hides: joint-angle harmonics of gear stages [rad]
 UR10_HARMONICS = (
-    {"name": "joint_harmonics", "joints": [1], "orders": [17],
-     "values": {"jh1_c17": 1.2e-4, "jh1_s17": -0.8e-4}},
-    {"name": "joint_harmonics", "joints": [2], "orders": [11, 27],
-     "values": {"jh2_c11": 2.0e-4, "jh2_s11": 1.5e-4, "jh2_c27": -0.6e-4, "jh2_s27": 0.9e-4}},
-)  # fmt: skip
+    {
+        "name": "joint_harmonics",
+        "joints": [1],
+        "orders": [17],
+        "values": {"jh1_c17": 1.2e-4, "jh1_s17": -0.8e-4},
+    },
+    {
+        "name": "joint_harmonics",
+        "joints": [2],
+        "orders": [11, 27],
+        "values": {"jh2_c11": 2.0e-4, "jh2_s11": 1.5e-4, "jh2_c27": -0.6e-4, "jh2_s27": 0.9e-4},
+    },
+)
 
 
 def ur10_world(seed: int = 0, effects: tuple[dict, ...] = UR10_HARMONICS) -> World:  # type: ignore[type-arg]
@@ -154,8 +195,12 @@ def ur10_random_plan(n: int, rng: np.random.Generator) -> Plan:
     return Plan("random", rng.uniform(lo, hi, (n, len(lo))), np.zeros(n, dtype=int), 0.1)
 
 
-def ur10_random(seed: int = 0, n: int = 2773, holdout_share: float = 0.3,
-                effects: tuple[dict, ...] = UR10_HARMONICS) -> Scenario:  # type: ignore[type-arg]  # fmt: skip
+def ur10_random(
+    seed: int = 0,
+    n: int = 2773,
+    holdout_share: float = 0.3,
+    effects: tuple[dict, ...] = UR10_HARMONICS,
+) -> Scenario:  # type: ignore[type-arg]
     """A UR10 random-pose campaign: `n` random poses (UR10_RANGES_DEG) measured in
     `ur10_world(seed, effects)`, split at random into calibration and hold-out
     (`holdout_share` of the poses), as a user splits a real data set."""

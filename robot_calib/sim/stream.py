@@ -58,9 +58,12 @@ def simulate_stream(
         raise InputError("stream rates must be > 0 Hz")
     speed = world.timing.speeds(waypoints.shape[1])
     motion = follow(
-        0.0, waypoints[0], waypoints[1:], np.zeros(len(waypoints) - 1),
+        0.0,
+        waypoints[0],
+        waypoints[1:],
+        np.zeros(len(waypoints) - 1),
         speed * options.speed_fraction,
-    )  # fmt: skip
+    )
     # real time tau [s] since the start; the joint states sample a grid shifted off the points'
     tau_js = np.arange(0.0, motion.end_s, 1.0 / options.joint_rate_hz) + 0.37e-3
     tau_pt = np.arange(0.0, motion.end_s, 1.0 / options.point_rate_hz)

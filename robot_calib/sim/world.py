@@ -38,12 +38,27 @@ DEG = np.pi / 180.0
 
 # Seed Table 3, column "Avg. 2-6" (circle point parameters of the real KR5) [mm, deg].
 SEED_TABLE3_AVG_2_6 = {
-    "d1": 335.2389, "d3": -0.3457, "d4": 295.2779, "d5": 0.0063,
-    "theta1": 0.0803, "theta2": -0.0288, "theta3": 89.9488, "theta4": 0.2123, "theta5": 180.0611,
-    "a1": 74.8367, "a2": 270.3405, "a3": 90.2756, "a4": -0.0318, "a5": -0.0003,
-    "alpha1": 90.0171, "alpha2": 0.0077, "alpha3": 89.9702, "alpha4": 90.0290, "alpha5": 90.0182,
+    "d1": 335.2389,
+    "d3": -0.3457,
+    "d4": 295.2779,
+    "d5": 0.0063,
+    "theta1": 0.0803,
+    "theta2": -0.0288,
+    "theta3": 89.9488,
+    "theta4": 0.2123,
+    "theta5": 180.0611,
+    "a1": 74.8367,
+    "a2": 270.3405,
+    "a3": 90.2756,
+    "a4": -0.0318,
+    "a5": -0.0003,
+    "alpha1": 90.0171,
+    "alpha2": 0.0077,
+    "alpha3": 89.9702,
+    "alpha4": 90.0290,
+    "alpha5": 90.0182,
     "beta2": 0.0541,
-}  # fmt: skip
+}
 
 
 @dataclass(frozen=True)
@@ -100,8 +115,10 @@ class TrackerOptions:
         """The tracker frame's motion at times (n,) [s] since its first measurement:
         rotation and translation (n, 3) [m]."""
         t = np.asarray(time_s, dtype=float)[:, None]
-        return (Rotation.from_rotvec(t * np.asarray(self.drift_rad_per_s)),
-                t * np.asarray(self.drift_m_per_s))  # fmt: skip
+        return (
+            Rotation.from_rotvec(t * np.asarray(self.drift_rad_per_s)),
+            t * np.asarray(self.drift_m_per_s),
+        )
 
     @property
     def drifts(self) -> bool:
@@ -211,10 +228,24 @@ class World:
 
 
 TOP_KEYS = (
-    "robot", "seed", "geometry", "deviations", "base2tracker", "target_in_flange_m", "targets",
-    "effects", "truth", "noise", "tracker", "timing", "six_dof", "payload", "temperature",
-    "references", "events",
-)  # fmt: skip
+    "robot",
+    "seed",
+    "geometry",
+    "deviations",
+    "base2tracker",
+    "target_in_flange_m",
+    "targets",
+    "effects",
+    "truth",
+    "noise",
+    "tracker",
+    "timing",
+    "six_dof",
+    "payload",
+    "temperature",
+    "references",
+    "events",
+)
 EVENT_KEYS = ("kind", "poses", "offset_m")
 PAYLOAD_KEYS = ("mass_kg", "com_m")
 FIRST_TARGET_KEY = "first"  # the first target's key in `six_dof` (its name is '')
@@ -257,8 +288,9 @@ def _section(data: dict[str, Any], key: str, cls: type, source: str) -> dict[str
     (timing also takes `max_joint_speed_deg_s`)."""
     value = dict(_mapping(data, key, source))
     known = tuple(f.name for f in fields(cls))
-    check_keys(value, known + (("max_joint_speed_deg_s",) if cls is Timing else ()),
-               f"{source}: {key}")  # fmt: skip
+    check_keys(
+        value, known + (("max_joint_speed_deg_s",) if cls is Timing else ()), f"{source}: {key}"
+    )
     return value
 
 
@@ -294,8 +326,11 @@ def _speeds(value: Any, n_joints: int, where: str) -> tuple[float, ...]:  # noqa
     return tuple(float(v) for v in value)
 
 
-def _targets(value: Any, source: str,  # noqa: ANN401 - YAML
-             key: str = "targets") -> dict[str, tuple[float, float, float]]:  # fmt: skip
+def _targets(
+    value: Any,
+    source: str,  # noqa: ANN401 - YAML
+    key: str = "targets",
+) -> dict[str, tuple[float, float, float]]:
     """Further targets on the flange of a world file (`targets: {NAME: [x, y, z]}` [m], each
     measured on /laser_tracker/NAME/point beside the first, msgs_doc/targets.md), or with
     `key` 'references' the reference reflectors in the robot base frame [m]
@@ -348,11 +383,15 @@ def _event(spec: Any, source: str) -> SimEvent:  # noqa: ANN401 - YAML
     if kind not in EVENT_KINDS:
         raise InputError(f"{where}: kind must be one of {', '.join(EVENT_KINDS)}, got {kind!r}")
     poses = spec.get("poses")
-    if (not isinstance(poses, list) or len(poses) != 2
-            or not all(isinstance(p, int) and not isinstance(p, bool) for p in poses)
-            or not 0 <= poses[0] <= poses[1]):  # fmt: skip
-        raise InputError(f"{where}: poses must be [first, last], 0 <= first <= last, got "
-                         f"{poses!r}")  # fmt: skip
+    if (
+        not isinstance(poses, list)
+        or len(poses) != 2
+        or not all(isinstance(p, int) and not isinstance(p, bool) for p in poses)
+        or not 0 <= poses[0] <= poses[1]
+    ):
+        raise InputError(
+            f"{where}: poses must be [first, last], 0 <= first <= last, got {poses!r}"
+        )
     return SimEvent(kind, poses[0], poses[1], _triple(spec.get("offset_m"), f"{where}.offset_m"))
 
 
@@ -364,26 +403,44 @@ MAX_REFERENCE_M = 30.0  # a reference reflector's distance from the robot's base
 MAX_EVENT_M = 0.1  # an event's offset
 
 
-def _check_magnitudes(noise: NoiseModel, tracker: TrackerOptions,
-                      references: dict[str, tuple[float, float, float]],
-                      events: tuple[SimEvent, ...], source: str) -> None:  # fmt: skip
+def _check_magnitudes(
+    noise: NoiseModel,
+    tracker: TrackerOptions,
+    references: dict[str, tuple[float, float, float]],
+    events: tuple[SimEvent, ...],
+    source: str,
+) -> None:
     """InputError naming the key when a world's tracker figure is beyond any tracker (the
     MAX_* bounds): most likely a unit slip."""
     checks = [
         (noise.point_sigma_range_m[1], MAX_POINT_SIGMA_M, "noise.point_sigma_range_m", "m"),
-        (float(np.linalg.norm(tracker.drift_m_per_s)), MAX_DRIFT_M_PER_S,
-         "tracker.drift_m_per_s", "m/s (50 um/h is 1.39e-8)"),
-        (float(np.linalg.norm(tracker.drift_rad_per_s)), MAX_DRIFT_RAD_PER_S,
-         "tracker.drift_rad_per_s", "rad/s"),
-        *((float(np.linalg.norm(xyz)), MAX_REFERENCE_M, f"references.{name}", "m")
-          for name, xyz in references.items()),
-        *((float(np.linalg.norm(e.offset_m)), MAX_EVENT_M, "events.offset_m", "m")
-          for e in events),
-    ]  # fmt: skip
+        (
+            float(np.linalg.norm(tracker.drift_m_per_s)),
+            MAX_DRIFT_M_PER_S,
+            "tracker.drift_m_per_s",
+            "m/s (50 um/h is 1.39e-8)",
+        ),
+        (
+            float(np.linalg.norm(tracker.drift_rad_per_s)),
+            MAX_DRIFT_RAD_PER_S,
+            "tracker.drift_rad_per_s",
+            "rad/s",
+        ),
+        *(
+            (float(np.linalg.norm(xyz)), MAX_REFERENCE_M, f"references.{name}", "m")
+            for name, xyz in references.items()
+        ),
+        *(
+            (float(np.linalg.norm(e.offset_m)), MAX_EVENT_M, "events.offset_m", "m")
+            for e in events
+        ),
+    ]
     for value, bound, key, unit in checks:
         if value > bound:
-            raise InputError(f"{source}: {key}: {value:.4g} is beyond any tracker's (at most "
-                             f"{bound:g} {unit}): a unit slip?")  # fmt: skip
+            raise InputError(
+                f"{source}: {key}: {value:.4g} is beyond any tracker's (at most "
+                f"{bound:g} {unit}): a unit slip?"
+            )
 
 
 def _pair(value: Any, where: str) -> tuple[float, float]:  # noqa: ANN401 - YAML
@@ -442,9 +499,11 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         geometry = data.get("geometry", "seed_table3_avg_2_6")
         if geometry == "seed_table3_avg_2_6":
             if robot.name != "kr5_sixx_r650":
-                raise InputError(f"{source}: geometry {geometry} (the default) is the "
-                                 f"kr5_sixx_r650's: for {robot.name} write geometry: nominal "
-                                 "(and any deviations)")  # fmt: skip
+                raise InputError(
+                    f"{source}: geometry {geometry} (the default) is the "
+                    f"kr5_sixx_r650's: for {robot.name} write geometry: nominal "
+                    "(and any deviations)"
+                )
             truth = truth.with_values(
                 {
                     k: v * (DEG if k.startswith(("theta", "alpha", "beta")) else 1e-3)
@@ -480,29 +539,39 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         )
         reads = tracker.reads_per_pose
         if isinstance(reads, bool) or not isinstance(reads, int) or not 1 <= reads <= MAX_READS:
-            raise InputError(f"{source}: tracker.reads_per_pose: a whole number 1-{MAX_READS}, "
-                             f"got {reads!r}")  # fmt: skip
-        noise = replace(noise, point_sigma_range_m=_pair(
-            noise.point_sigma_range_m, f"{source}: noise.point_sigma_range_m"))  # fmt: skip
+            raise InputError(
+                f"{source}: tracker.reads_per_pose: a whole number 1-{MAX_READS}, got {reads!r}"
+            )
+        noise = replace(
+            noise,
+            point_sigma_range_m=_pair(
+                noise.point_sigma_range_m, f"{source}: noise.point_sigma_range_m"
+            ),
+        )
         low, high = noise.point_sigma_range_m
-        if high > 0 and (noise.anisotropic or not noise.base_sigma_m <= low <= high
-                         or reads > 1 or model.oriented):  # fmt: skip
+        if high > 0 and (
+            noise.anisotropic
+            or not noise.base_sigma_m <= low <= high
+            or reads > 1
+            or model.oriented
+        ):
             raise InputError(
                 f"{source}: noise.point_sigma_range_m [{low:g}, {high:g}]: needs "
                 f"{noise.base_sigma_m:.3g} (the tracker and target noise) <= low <= high, "
                 "isotropic noise, one read per pose and no six_dof probe"
             )
         if reads > 1 and model.oriented:
-            raise InputError(f"{source}: tracker.reads_per_pose {reads} with six_dof probes: "
-                             "not simulated (one read per pose)")  # fmt: skip
+            raise InputError(
+                f"{source}: tracker.reads_per_pose {reads} with six_dof probes: "
+                "not simulated (one read per pose)"
+            )
         references = _targets(data.get("references"), source, "references")
         clash = sorted(set(references) & set(extra))
         if clash:
             raise InputError(f"{source}: references.{clash[0]}: also a target's name")
         events_data = data.get("events", []) or []
         if not isinstance(events_data, list):
-            raise InputError(f"{source}: events: expected a list of mappings, got "
-                             f"{events_data!r}")  # fmt: skip
+            raise InputError(f"{source}: events: expected a list of mappings, got {events_data!r}")
         events = tuple(_event(e, source) for e in events_data)
         _check_magnitudes(noise, tracker, references, events, source)
         if not tracker.dropout_probability < 1.0:
@@ -546,8 +615,9 @@ def build_world(data: dict[str, Any], source: str = "built-in default") -> World
         raise InputError(str(exc) if named else f"{source}: {exc}") from None
     except (TypeError, KeyError, ValueError) as exc:
         raise InputError(f"{source}: malformed world ({type(exc).__name__}: {exc})") from None
-    return World(model, truth, noise, tracker, timing, seed, source, temperature, references,
-                 events)  # fmt: skip
+    return World(
+        model, truth, noise, tracker, timing, seed, source, temperature, references, events
+    )
 
 
 def world_to_dict(world: World) -> dict[str, Any]:

@@ -26,8 +26,12 @@ CELLS = [
 def test_the_api_runs_in_a_jupyter_kernel(tmp_path: Path) -> None:
     notebook = nbformat.v4.new_notebook()
     notebook.cells = [nbformat.v4.new_code_cell(c.format(folder=str(tmp_path))) for c in CELLS]
-    NotebookClient(notebook, timeout=180, kernel_name="python3",
-                   resources={"metadata": {"path": str(tmp_path)}}).execute()  # fmt: skip
+    NotebookClient(
+        notebook,
+        timeout=180,
+        kernel_name="python3",
+        resources={"metadata": {"path": str(tmp_path)}},
+    ).execute()
     outputs = [out for cell in notebook.cells for out in cell.get("outputs", [])]
     printed = "".join(out.get("text", "") for out in outputs if out.get("name") == "stdout")
     lines = dict(line.split(" ", 1) for line in printed.splitlines() if " " in line)

@@ -22,15 +22,25 @@ def test_every_public_name_resolves() -> None:
 
 def test_importing_robot_calib_loads_no_numpy() -> None:
     code = "import sys, robot_calib; print('numpy' in sys.modules, 'scipy' in sys.modules)"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, env=dict(os.environ))  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        check=True,
+        env=dict(os.environ),
+    )
     assert out.stdout.split() == ["False", "False"], out.stdout
 
 
 def test_the_example_script_calibrates_from_python(tmp_path: Path) -> None:
-    run = subprocess.run([sys.executable, str(ROOT / "docs/examples/python_api.py"),
-                          str(tmp_path)], capture_output=True, text=True, timeout=120,
-                         check=False, env=dict(os.environ))  # fmt: skip
+    run = subprocess.run(
+        [sys.executable, str(ROOT / "docs/examples/python_api.py"), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        env=dict(os.environ),
+    )
     assert run.returncode == 0, run.stderr[-2000:]
     lines = dict(line.split(": ", 1) for line in run.stdout.splitlines() if ": " in line)
     geometric = float(lines["geometric"].split()[2])
@@ -93,8 +103,9 @@ def test_importing_the_library_tunes_nothing_and_the_programs_do() -> None:
     )
 
     def run(*argv: str) -> list[str]:
-        out = subprocess.run([sys.executable, "-c", probe, *argv], capture_output=True,
-                             text=True, check=True)  # fmt: skip
+        out = subprocess.run(
+            [sys.executable, "-c", probe, *argv], capture_output=True, text=True, check=True
+        )
         return out.stdout.split("\n")[:2]
 
     assert run() == ["None True", "1"]  # the library: untouched; a node: one thread

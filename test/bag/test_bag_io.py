@@ -227,16 +227,31 @@ def test_message_definition_is_rosbag2s_concatenation() -> None:
     rule = "=" * 80 + "\n"
     joint_state_text = (
         msg("sensor_msgs", "JointState")
-        + "\n" + rule + "MSG: std_msgs/Header\n" + msg("std_msgs", "Header")
-        + "\n" + rule + "MSG: builtin_interfaces/Time\n" + msg("builtin_interfaces", "Time")
-    )  # fmt: skip
+        + "\n"
+        + rule
+        + "MSG: std_msgs/Header\n"
+        + msg("std_msgs", "Header")
+        + "\n"
+        + rule
+        + "MSG: builtin_interfaces/Time\n"
+        + msg("builtin_interfaces", "Time")
+    )
     assert message_definition(JS_TYPE) == ("ros2msg", joint_state_text)
     point_text = (
         msg("geometry_msgs", "PointStamped")
-        + "\n" + rule + "MSG: geometry_msgs/Point\n" + msg("geometry_msgs", "Point")
-        + "\n" + rule + "MSG: std_msgs/Header\n" + msg("std_msgs", "Header")
-        + "\n" + rule + "MSG: builtin_interfaces/Time\n" + msg("builtin_interfaces", "Time")
-    )  # fmt: skip
+        + "\n"
+        + rule
+        + "MSG: geometry_msgs/Point\n"
+        + msg("geometry_msgs", "Point")
+        + "\n"
+        + rule
+        + "MSG: std_msgs/Header\n"
+        + msg("std_msgs", "Header")
+        + "\n"
+        + rule
+        + "MSG: builtin_interfaces/Time\n"
+        + msg("builtin_interfaces", "Time")
+    )
     assert message_definition(PS_TYPE) == ("ros2msg", point_text)
 
 
@@ -273,8 +288,14 @@ def test_qos_yaml_is_rosbag2s() -> None:
 def test_yaml_dump_quotes_what_needs_it() -> None:
     text = dump_yaml({"a": "", "b": "yes", "c": "/x/y", "d": None, "e": "1.5", "f": []})
     assert text == 'a: ""\nb: "yes"\nc: /x/y\nd: ~\ne: "1.5"\nf:\n  []'
-    assert yaml.safe_load(text) == {"a": "", "b": "yes", "c": "/x/y", "d": None, "e": "1.5",
-                                    "f": []}  # fmt: skip
+    assert yaml.safe_load(text) == {
+        "a": "",
+        "b": "yes",
+        "c": "/x/y",
+        "d": None,
+        "e": "1.5",
+        "f": [],
+    }
 
 
 def test_never_overwrites(bag: tuple[Path, list]) -> None:

@@ -182,9 +182,11 @@ def test_layouts_not_shared_or_not_walked_fall_back_to_the_same_result(
         stamp = types["builtin_interfaces/msg/Time"](*divmod(stamps[k], 1_000_000_000))
         msg = types[JOINT_STATE_TYPE](
             header=types["std_msgs/msg/Header"](stamp=stamp, frame_id="base"),
-            name=list(order), position=q[k][at],
-            velocity=np.ones(6) if velocity else np.empty(0), effort=np.zeros(6),
-        )  # fmt: skip
+            name=list(order),
+            position=q[k][at],
+            velocity=np.ones(6) if velocity else np.empty(0),
+            effort=np.zeros(6),
+        )
         return bytes(store.serialize_cdr(msg, JOINT_STATE_TYPE, little_endian=le))
 
     def pt(k: int, le: bool = True, value: np.ndarray | None = None) -> bytes:
@@ -192,38 +194,51 @@ def test_layouts_not_shared_or_not_walked_fall_back_to_the_same_result(
         msg = types[POINT_TYPE](
             header=types["std_msgs/msg/Header"](stamp=stamp, frame_id="laser_tracker"),
             point=types["geometry_msgs/msg/Point"](*(pts[k] if value is None else value)),
-        )  # fmt: skip
+        )
         return bytes(store.serialize_cdr(msg, POINT_TYPE, little_endian=le))
 
     def temp(k: int) -> bytes:
         stamp = types["builtin_interfaces/msg/Time"](*divmod(stamps[k], 1_000_000_000))
         msg = types[TEMPERATURE_TYPE](
             header=types["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
-            temperature=20.0 + k, variance=0.5,
-        )  # fmt: skip
+            temperature=20.0 + k,
+            variance=0.5,
+        )
         return bytes(store.serialize_cdr(msg, TEMPERATURE_TYPE))
 
     shuffled = tuple(reversed(names))
-    big = hand_written_bag(tmp_path / "big_endian.mcap", [js(k, le=False) for k in range(N)],
-                           [pt(k, le=False) for k in range(N)],
-                           [temp(k) for k in range(N)])  # fmt: skip
+    big = hand_written_bag(
+        tmp_path / "big_endian.mcap",
+        [js(k, le=False) for k in range(N)],
+        [pt(k, le=False) for k in range(N)],
+        [temp(k) for k in range(N)],
+    )
     assert_same_reading(big, UR10, bulk=True)  # big-endian CDR: the same views, '>' dtypes
-    reordered = hand_written_bag(tmp_path / "reordered.mcap",
-                                 [js(k, shuffled, True) for k in range(N)],
-                                 [pt(k) for k in range(N)])  # fmt: skip
+    reordered = hand_written_bag(
+        tmp_path / "reordered.mcap",
+        [js(k, shuffled, True) for k in range(N)],
+        [pt(k) for k in range(N)],
+    )
     assert_same_reading(reordered, UR10, bulk=True)
-    mixed = hand_written_bag(tmp_path / "mixed.mcap",
-                             [js(k, names if k % 2 else shuffled) for k in range(N)],
-                             [pt(k) for k in range(N)])  # fmt: skip
+    mixed = hand_written_bag(
+        tmp_path / "mixed.mcap",
+        [js(k, names if k % 2 else shuffled) for k in range(N)],
+        [pt(k) for k in range(N)],
+    )
     assert_same_reading(mixed, UR10, bulk=False)  # same size, other names: fallback
-    sometimes = hand_written_bag(tmp_path / "velocity_sometimes.mcap",
-                                 [js(k, velocity=k > 3) for k in range(N)],
-                                 [pt(k) for k in range(N)])  # fmt: skip
+    sometimes = hand_written_bag(
+        tmp_path / "velocity_sometimes.mcap",
+        [js(k, velocity=k > 3) for k in range(N)],
+        [pt(k) for k in range(N)],
+    )
     assert_same_reading(sometimes, UR10, bulk=False)  # sizes differ: fallback
     # errors: the message-by-message reading's, whatever the bulk reading saw first
     bad = np.array([np.nan, 0, 0])
-    nan = hand_written_bag(tmp_path / "nan.mcap", [js(k) for k in range(N)],
-                           [pt(k, value=bad if k == 9 else None) for k in range(N)])  # fmt: skip
+    nan = hand_written_bag(
+        tmp_path / "nan.mcap",
+        [js(k) for k in range(N)],
+        [pt(k, value=bad if k == 9 else None) for k in range(N)],
+    )
     assert_same_reading(nan, UR10, bulk=False)
     with pytest.raises(BagError, match="message 10 is not finite"):
         bag_read._bag_messages(nan, UR10)
@@ -249,9 +264,14 @@ def test_columns_are_the_decoded_fields(tmp_path: Path, poses: dict[str, np.ndar
     """Every numeric field of every message equals mcap_ros2's decoding of it."""
     bag = tmp_path / "all.mcap"
     write_measurement_bag(
-        bag, poses["q"], poses["points"], UR10.joint_names, poses["time"],
-        direction=np.sign(poses["q"]), temperature=np.arange(N) + 20.0,
-    )  # fmt: skip
+        bag,
+        poses["q"],
+        poses["points"],
+        UR10.joint_names,
+        poses["time"],
+        direction=np.sign(poses["q"]),
+        temperature=np.arange(N) + 20.0,
+    )
     with BagReader(bag) as reader:
         table = reader.channel_messages(reader.topics)
         assert table is not None
@@ -277,13 +297,19 @@ def graph_bags(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
 
     folder = tmp_path_factory.mktemp("graph_bags")
     worlds = {
-        "covariance": {"seed": 3, "six_dof": {"first": [10, 20, 30]},
-                       "targets": {"smr2": [-0.04, 0.05, 0.03]},
-                       "noise": {"orientation_sigma_rad": 1e-4}},
-        "poses": {"seed": 4, "six_dof": {"first": [10, 20, 30], "smr2": [0, 0, 90]},
-                  "targets": {"smr2": [-0.04, 0.05, 0.03]}},
+        "covariance": {
+            "seed": 3,
+            "six_dof": {"first": [10, 20, 30]},
+            "targets": {"smr2": [-0.04, 0.05, 0.03]},
+            "noise": {"orientation_sigma_rad": 1e-4},
+        },
+        "poses": {
+            "seed": 4,
+            "six_dof": {"first": [10, 20, 30], "smr2": [0, 0, 90]},
+            "targets": {"smr2": [-0.04, 0.05, 0.03]},
+        },
         "temperature": {"seed": 5, "temperature": {}},
-    }  # fmt: skip
+    }
     bags = []
     for name, spec in worlds.items():
         world = folder / f"{name}.world.yaml"

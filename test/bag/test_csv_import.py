@@ -33,8 +33,16 @@ def test_ur5_dataset_calibrates_far_below_nominal(tmp_path: Path) -> None:
     bags = {}
     for name, csv in (("grid", GRID), ("random", RANDOM)):
         bags[name] = tmp_path / f"{name}.mcap"
-        proc = run("import", str(csv), "--preset", "ur5_jacobi2025", "--robot", "ur5",
-                   "-o", str(bags[name]))  # fmt: skip
+        proc = run(
+            "import",
+            str(csv),
+            "--preset",
+            "ur5_jacobi2025",
+            "--robot",
+            "ur5",
+            "-o",
+            str(bags[name]),
+        )
         assert proc.returncode == 0, proc.stderr
         assert "0 bad rows" in proc.stdout
     with AnyReader([bags["grid"]]) as reader:  # the contract's bag, read independently
@@ -62,22 +70,48 @@ def test_ur5_dataset_calibrates_far_below_nominal(tmp_path: Path) -> None:
 
 def test_csv_options_and_bad_rows(tmp_path: Path) -> None:
     csv = tmp_path / "export.csv"
-    rows = ["0,5;0,1;0,2;0,3;0,4;0,5;0,6;1250,5;20,0;-300,25",  # t; q1..q6 rad; x,y,z mm
-            "1,0;0,1;0,2;0,3;0,4;0,5;0,6;1251,5;20,0;-300,25",
-            "2,0;0,1;oops;0,3;0,4;0,5;0,6;1252,5;20,0;-300,25",
-            "3,0;0,1;0,2"]  # fmt: skip
+    rows = [
+        "0,5;0,1;0,2;0,3;0,4;0,5;0,6;1250,5;20,0;-300,25",  # t; q1..q6 rad; x,y,z mm
+        "1,0;0,1;0,2;0,3;0,4;0,5;0,6;1251,5;20,0;-300,25",
+        "2,0;0,1;oops;0,3;0,4;0,5;0,6;1252,5;20,0;-300,25",
+        "3,0;0,1;0,2",
+    ]
     csv.write_text("\n".join(rows) + "\n")
-    fmt = CsvFormat(joints=("1", "2", "3", "4", "5", "6"), point=("7", "8", "9"), time="0",
-                    separator=";", decimal_comma=True, angle_unit="rad", length_unit="mm",
-                    header=False)  # fmt: skip
+    fmt = CsvFormat(
+        joints=("1", "2", "3", "4", "5", "6"),
+        point=("7", "8", "9"),
+        time="0",
+        separator=";",
+        decimal_comma=True,
+        angle_unit="rad",
+        length_unit="mm",
+        header=False,
+    )
     table = read_measurement_csv(csv, fmt)
     assert len(table.q) == 2 and [line for line, _ in table.bad_rows] == [3, 4]
     np.testing.assert_allclose(table.points[1], [1.2515, 0.020, -0.30025])
     np.testing.assert_allclose(table.time, [0.5, 1.0])
     out = tmp_path / "export.mcap"
-    proc = run("import", str(csv), "--joints", "1,2,3,4,5,6", "--point", "7,8,9", "--time", "0",
-               "--sep", ";", "--decimal-comma", "--angle-unit", "rad", "--length-unit", "mm",
-               "--no-header", "-o", str(out))  # fmt: skip
+    proc = run(
+        "import",
+        str(csv),
+        "--joints",
+        "1,2,3,4,5,6",
+        "--point",
+        "7,8,9",
+        "--time",
+        "0",
+        "--sep",
+        ";",
+        "--decimal-comma",
+        "--angle-unit",
+        "rad",
+        "--length-unit",
+        "mm",
+        "--no-header",
+        "-o",
+        str(out),
+    )
     assert proc.returncode == 0, proc.stderr
     assert f"{csv}:3: column 2 'oops' is not a number: row skipped" in proc.stderr
     assert f"{csv}:4: 3 fields" in proc.stderr
@@ -86,7 +120,15 @@ def test_csv_options_and_bad_rows(tmp_path: Path) -> None:
 
     bad = tmp_path / "bad.csv"
     bad.write_text("a,b\nx,y\n")
-    proc = run("import", str(bad), "--joints", "a,b,c,d,e,f", "--point", "a,b,c", "-o",
-               str(tmp_path / "bad.mcap"))  # fmt: skip
+    proc = run(
+        "import",
+        str(bad),
+        "--joints",
+        "a,b,c,d,e,f",
+        "--point",
+        "a,b,c",
+        "-o",
+        str(tmp_path / "bad.mcap"),
+    )
     assert proc.returncode == 2 and "bad.csv: no column 'c'" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and not (tmp_path / "bad.mcap").exists()

@@ -26,9 +26,24 @@ def test_a_temperature_column_is_imported_onto_its_topic(tmp_path: Path) -> None
         cells = [*q[k], *points[k], 10.0 * k, celsius[k]]
         rows.append(";".join(f"{v:.9f}".replace(".", ",") for v in cells))
     (tmp_path / "in.csv").write_text("\n".join(rows) + "\n")
-    proc = cli("import", "in.csv", "--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z",
-               "--time", "t", "--temperature", "temp", "--sep", ";", "--decimal-comma",
-               "-o", "out.mcap", cwd=tmp_path)  # fmt: skip
+    proc = cli(
+        "import",
+        "in.csv",
+        "--joints",
+        "q1,q2,q3,q4,q5,q6",
+        "--point",
+        "x,y,z",
+        "--time",
+        "t",
+        "--temperature",
+        "temp",
+        "--sep",
+        ";",
+        "--decimal-comma",
+        "-o",
+        "out.mcap",
+        cwd=tmp_path,
+    )
     assert proc.returncode == 0, proc.stderr
     bag = tmp_path / "out.mcap"
     with BagReader(bag) as reader:

@@ -31,8 +31,19 @@ JOINTS = ("A1", "A2", "A3", "A4", "A5", "A6")
 N = 150
 POSITION_SIGMA = float(np.hypot(WORLD.noise.tracker_sigma_m, WORLD.noise.target_sigma_m))
 NO_ORIENTATION, NO_SR, NO_SP = 10, 11, 12  # rows with some 6-DoF cells left empty
-CSV_OPTIONS = ("--sep", ";", "--decimal-comma", "--angle-unit", "deg", "--length-unit", "mm",
-               "--joints", ",".join(JOINTS), "--point", "X,Y,Z")  # fmt: skip
+CSV_OPTIONS = (
+    "--sep",
+    ";",
+    "--decimal-comma",
+    "--angle-unit",
+    "deg",
+    "--length-unit",
+    "mm",
+    "--joints",
+    ",".join(JOINTS),
+    "--point",
+    "X,Y,Z",
+)
 
 
 def measure(world: World, n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -50,8 +61,9 @@ def export(path: Path, columns: dict[str, np.ndarray]) -> Path:
     order; NaN: an empty cell."""
     lines = [";".join(columns)]
     for k in range(len(next(iter(columns.values())))):
-        cells = ("" if np.isnan(v[k]) else f"{v[k]:.17g}".replace(".", ",")
-                 for v in columns.values())  # fmt: skip
+        cells = (
+            "" if np.isnan(v[k]) else f"{v[k]:.17g}".replace(".", ",") for v in columns.values()
+        )
         lines.append(";".join(cells))
     path.write_text("\n".join(lines) + "\n")
     return path
@@ -91,12 +103,19 @@ def first_target_columns(orientation: str = "quaternion") -> dict[str, np.ndarra
     return columns
 
 
-QUATERNION_ARGS = ("--orientation", "QX,QY,QZ,QW", "--sigma", "SP,SR", "--sigma-unit", "um",
-                   "--sigma-angle-unit", "mdeg")  # fmt: skip
+QUATERNION_ARGS = (
+    "--orientation",
+    "QX,QY,QZ,QW",
+    "--sigma",
+    "SP,SR",
+    "--sigma-unit",
+    "um",
+    "--sigma-angle-unit",
+    "mdeg",
+)
 # roll-pitch-yaw in rad while the joints are in deg; sigmas in the defaults: --length-unit
 # (mm) and the orientation unit (rad)
-RPY_ARGS = ("--orientation-rpy", "Roll,Pitch,Yaw", "--orientation-unit", "rad", "--sigma",
-            "SP,SR")  # fmt: skip
+RPY_ARGS = ("--orientation-rpy", "Roll,Pitch,Yaw", "--orientation-unit", "rad", "--sigma", "SP,SR")
 
 
 def expected_six_dof() -> tuple[np.ndarray, np.ndarray]:
@@ -150,8 +169,9 @@ def test_quaternion_and_rpy_columns_round_trip_and_calibrate(tmp_path: Path) -> 
 def test_a_further_target_takes_its_own_orientation_and_sigma(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    world = build_world({"seed": 3, "targets": {"smr2": [0.03, -0.02, 0.12]},
-                         "six_dof": {"smr2": [10, -20, 40]}})  # fmt: skip
+    world = build_world(
+        {"seed": 3, "targets": {"smr2": [0.03, -0.02, 0.12]}, "six_dof": {"smr2": [10, -20, 40]}}
+    )
     n, missing, point_only = 20, 3, 5
     q, points, frames = measure(world, n, seed=4)
     points, frames = points.reshape(n, 2, 3) * 1e3, frames.reshape(n, 2, 3, 3)[:, 1]
@@ -167,9 +187,19 @@ def test_a_further_target_takes_its_own_orientation_and_sigma(
         columns[c][point_only] = np.nan  # seen, but the orientation not measured
     csv = export(tmp_path / "two.csv", columns)
     bag = tmp_path / "two.mcap"
-    proc = cli("import", str(csv), *CSV_OPTIONS, "--target", "smr2:X2,Y2,Z2",
-               "--orientation-rpy", "smr2:R2,P2,W2", "--sigma", "smr2:S2",
-               "-o", str(bag))  # fmt: skip
+    proc = cli(
+        "import",
+        str(csv),
+        *CSV_OPTIONS,
+        "--target",
+        "smr2:X2,Y2,Z2",
+        "--orientation-rpy",
+        "smr2:R2,P2,W2",
+        "--sigma",
+        "smr2:S2",
+        "-o",
+        str(bag),
+    )
     assert proc.returncode == 0, proc.stderr
     assert "target smr2: 18 orientations, 19 rows with stated" in proc.stdout
     recording = read_recording([bag], ROBOT)
@@ -193,9 +223,17 @@ def test_a_further_target_takes_its_own_orientation_and_sigma(
             broken[column][row] = 1.0
         bad = export(tmp_path / "bad.csv", broken)
         status, stderr = main_in_process(
-            capsys, "import", str(bad), *CSV_OPTIONS, "--target", "smr2:X2,Y2,Z2",
-            "--orientation-rpy", "smr2:R2,P2,W2", "-o", str(tmp_path / "bad.mcap"),
-        )  # fmt: skip
+            capsys,
+            "import",
+            str(bad),
+            *CSV_OPTIONS,
+            "--target",
+            "smr2:X2,Y2,Z2",
+            "--orientation-rpy",
+            "smr2:R2,P2,W2",
+            "-o",
+            str(tmp_path / "bad.mcap"),
+        )
         assert status == 2 and f"{bad}:{row + 2}: {message}" in stderr, stderr
         assert not (tmp_path / "bad.mcap").exists()
 
@@ -227,34 +265,56 @@ def test_bad_six_dof_input_is_one_line_exit_2_and_no_bag(
     path = str(export(tmp_path / "good.csv", good))
     both = ("--orientation-rpy", "QX,QY,QZ")
     cases = [  # (CSV, options, what the message says); line = row + 2 (header, 1-based)
-        (broken("norm", "QX", 20, QUAT[20, 0] + 0.05), QUATERNION_ARGS, ":22: quaternion "
-         "QX,QY,QZ,QW (x, y, z, w) of the first target has norm"),
-        (broken("zero", "SP", 30, 0.0), QUATERNION_ARGS, ":32: position standard deviation "
-         "SP of the first target is 0: need a finite number > 0"),
-        (broken("negative", "SR", 31, -2.0), QUATERNION_ARGS, ":33: orientation standard "
-         "deviation SR of the first target is -2"),
-        (broken("infinite", "SP", 40, np.inf), QUATERNION_ARGS, ":42: position standard "
-         "deviation SP of the first target is inf"),
-        (broken("partial", "QY", 50, np.nan), QUATERNION_ARGS, ":52: the first target has "
-         "some of its orientation cells (QX,QY,QZ,QW) empty"),
+        (
+            broken("norm", "QX", 20, QUAT[20, 0] + 0.05),
+            QUATERNION_ARGS,
+            ":22: quaternion QX,QY,QZ,QW (x, y, z, w) of the first target has norm",
+        ),
+        (
+            broken("zero", "SP", 30, 0.0),
+            QUATERNION_ARGS,
+            ":32: position standard deviation "
+            "SP of the first target is 0: need a finite number > 0",
+        ),
+        (
+            broken("negative", "SR", 31, -2.0),
+            QUATERNION_ARGS,
+            ":33: orientation standard deviation SR of the first target is -2",
+        ),
+        (
+            broken("infinite", "SP", 40, np.inf),
+            QUATERNION_ARGS,
+            ":42: position standard deviation SP of the first target is inf",
+        ),
+        (
+            broken("partial", "QY", 50, np.nan),
+            QUATERNION_ARGS,
+            ":52: the first target has some of its orientation cells (QX,QY,QZ,QW) empty",
+        ),
         (path, ("--orientation", "QX,QY,QZ,NOPE"), "no column 'NOPE'"),
         (path, ("--orientation", "QX,QY,QZ,QW", "--sigma", "NOPE"), "no column 'NOPE'"),
         (path, ("--orientation", "smr9:QX,QY,QZ,QW"), "no target smr9 among the targets"),
         (path, ("--sigma", "smr9:SP"), "no target smr9 among the targets of --target"),
         (path, ("--orientation", "QX,QY,QZ,QW", *both), "one orientation per target"),
         (path, ("--sigma", "SP,SR"), "an orientation standard deviation, but no --orientation"),
-    ]  # fmt: skip
+    ]
     lines = (tmp_path / "good.csv").read_text().splitlines()
     cells = lines[3].split(";")
     cells[list(good).index("SR")] = "nan"  # spelled out: not an empty cell ('not stated')
     lines[3] = ";".join(cells)
     (tmp_path / "nan.csv").write_text("\n".join(lines) + "\n")
-    cases.append((str(tmp_path / "nan.csv"), QUATERNION_ARGS, ":4: orientation standard "
-                  "deviation SR of the first target is nan"))  # fmt: skip
+    cases.append(
+        (
+            str(tmp_path / "nan.csv"),
+            QUATERNION_ARGS,
+            ":4: orientation standard deviation SR of the first target is nan",
+        )
+    )
     out = tmp_path / "out.mcap"
     for csv, options, message in cases:
-        status, stderr = main_in_process(capsys, "import", csv, *CSV_OPTIONS, *options, "-o",
-                                         str(out))  # fmt: skip
+        status, stderr = main_in_process(
+            capsys, "import", csv, *CSV_OPTIONS, *options, "-o", str(out)
+        )
         assert status == 2, (options, stderr)
         assert message in stderr and f"robot-calib import: error: {csv}" in stderr, stderr
         assert len(stderr.strip().splitlines()) == 1, stderr
@@ -273,8 +333,17 @@ def test_implausible_sigmas_and_empty_orientations_get_warnings(tmp_path: Path) 
     for c in ("QW", "QX", "QY", "QZ"):
         columns[c][:] = np.nan
     csv = export(tmp_path / "um.csv", columns)
-    proc = cli("import", str(csv), *CSV_OPTIONS, "--orientation", "QX,QY,QZ,QW",
-               "--sigma", "SP", "-o", str(tmp_path / "um.mcap"))  # fmt: skip
+    proc = cli(
+        "import",
+        str(csv),
+        *CSV_OPTIONS,
+        "--orientation",
+        "QX,QY,QZ,QW",
+        "--sigma",
+        "SP",
+        "-o",
+        str(tmp_path / "um.mcap"),
+    )
     assert proc.returncode == 0, proc.stderr
     assert "position standard deviations SP of the first target have a median of 0.0048" in (
         proc.stderr

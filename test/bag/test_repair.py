@@ -221,9 +221,13 @@ def small_chunks_copy(path: Path) -> None:
     """The sample written again in 4 KiB chunks (it has one chunk of 128 KiB)."""
     with BagReader(SAMPLE) as reader, BagWriter(path, chunk_size=4096) as writer:
         for info in reader.topics.values():
-            writer.add_topic(info.topic, info.type_name, offered_qos=info.offered_qos,
-                             type_hash=info.type_hash,
-                             definition=(info.schema_encoding, info.definition))  # fmt: skip
+            writer.add_topic(
+                info.topic,
+                info.type_name,
+                offered_qos=info.offered_qos,
+                type_hash=info.type_hash,
+                definition=(info.schema_encoding, info.definition),
+            )
         for m in reader.messages():
             writer.write(m.topic, m.data, m.log_time_ns, m.publish_time_ns, m.sequence)
 

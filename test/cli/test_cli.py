@@ -36,30 +36,49 @@ def one_line_error(proc: subprocess.CompletedProcess[str], text: str) -> None:
 @pytest.mark.parametrize(
     ("args", "text"),
     [
-        (["calibrate", "x.mcap", "--ecc-order", "-1", "--model", "geometric+eccentricity",
-          "-o", "p.json"], "argument --ecc-order: -1 < 1"),
-        (["calibrate", "x.mcap", "--model", "geometric+eccentricity:1:order=0", "-o", "p.json"],
-         "order must be an integer >= 1"),
-        (["import", "x.csv", "--preset", "ur5_jacobi2025", "--angle-unit", "grad", "-o", "b"],
-         "invalid choice: 'grad'"),
+        (
+            [
+                "calibrate",
+                "x.mcap",
+                "--ecc-order",
+                "-1",
+                "--model",
+                "geometric+eccentricity",
+                "-o",
+                "p.json",
+            ],
+            "argument --ecc-order: -1 < 1",
+        ),
+        (
+            ["calibrate", "x.mcap", "--model", "geometric+eccentricity:1:order=0", "-o", "p.json"],
+            "order must be an integer >= 1",
+        ),
+        (
+            ["import", "x.csv", "--preset", "ur5_jacobi2025", "--angle-unit", "grad", "-o", "b"],
+            "invalid choice: 'grad'",
+        ),
         (["simulate", "--plan", "nosuch", "-o", "t.mcap"], "--plan nosuch: unknown plan"),
-        (["simulate", "--effects", "eccentricity:1:ordr=2", "-o", "t.mcap"],
-         "unknown option 'ordr' (did you mean 'order'?)"),
+        (
+            ["simulate", "--effects", "eccentricity:1:ordr=2", "-o", "t.mcap"],
+            "unknown option 'ordr' (did you mean 'order'?)",
+        ),
         (["simulate", "--effects", "backlash:9", "-o", "t.mcap"], "joints [9] outside 1..6"),
         (["simulate", "--effects", "backlash:4,4", "-o", "t.mcap"], "must be distinct"),
         (["simulate", "--effects", "thermal_drift:3", "-o", "t.mcap"], "belongs to no joint"),
         (["simulate", "--effects", "compliance:2=nan", "-o", "t.mcap"], "must be finite"),
         (["simulate", "--plan", "random", "--n-random", "-5", "-o", "t.mcap"], "-5 < 1"),
         (["simulate", "--seed", "-1", "-o", "t.mcap"], "-1 < 0"),
-        (["calibrate", "x.mcap", "--model", "geometric+backlash:99", "-o", "p.json"],
-         "joints [99] outside 1..6"),
+        (
+            ["calibrate", "x.mcap", "--model", "geometric+backlash:99", "-o", "p.json"],
+            "joints [99] outside 1..6",
+        ),
         (["run", "-o", "out", "--effects", "foo:1"], "unknown effect 'foo'"),
         (["run", "-o", "out", "--plan", "nosuch"], "--plan nosuch: unknown plan"),
         (["run", "-o", "out", "--holdout", "0"], "0 < 1"),
         # a --holdout without a bag once meant k-fold without a word
         (["diagnose", "x.mcap", "--holdout", "-o", "d.json"], "--holdout: expected at least one"),
     ],
-)  # fmt: skip
+)
 def test_bad_arguments_are_one_line_and_write_nothing(
     tmp_path: Path, args: list[str], text: str
 ) -> None:
@@ -72,8 +91,18 @@ def test_import_names_the_line_where_time_goes_back(tmp_path: Path) -> None:
     csv.write_text(
         "t,a,b,c,d,e,f,x,y,z\n0,0,0,0,0,0,0,1,1,1\n2,0,0,0,0,0,0,1,1,1\n1,0,0,0,0,0,0,1,1,1\n"
     )
-    proc = run("import", str(csv), "--joints", "a,b,c,d,e,f", "--point", "x,y,z", "--time", "t",
-               "-o", str(tmp_path / "t.mcap"))  # fmt: skip
+    proc = run(
+        "import",
+        str(csv),
+        "--joints",
+        "a,b,c,d,e,f",
+        "--point",
+        "x,y,z",
+        "--time",
+        "t",
+        "-o",
+        str(tmp_path / "t.mcap"),
+    )
     one_line_error(proc, f"{csv}:4: time 1 s does not increase")
     assert not (tmp_path / "t.mcap").exists()
 
@@ -85,11 +114,20 @@ def test_a_robot_from_a_yaml_file_round_trips_through_params(tmp_path: Path) -> 
     robot.write_text(robot.read_text().replace("name: kr5_sixx_r650", "name: my_kr5"))
     work = tmp_path / "work"
     work.mkdir()
-    proc = run("simulate", "--robot", "robots/my_kr5.yaml", "--plan", "paper-test3",
-               "-o", "b.mcap", cwd=tmp_path)  # fmt: skip
+    proc = run(
+        "simulate",
+        "--robot",
+        "robots/my_kr5.yaml",
+        "--plan",
+        "paper-test3",
+        "-o",
+        "b.mcap",
+        cwd=tmp_path,
+    )
     assert proc.returncode == 0, proc.stderr
-    proc = run("calibrate", "b.mcap", "--robot", "robots/my_kr5.yaml", "-o", "p.json",
-               cwd=tmp_path)  # fmt: skip
+    proc = run(
+        "calibrate", "b.mcap", "--robot", "robots/my_kr5.yaml", "-o", "p.json", cwd=tmp_path
+    )
     assert proc.returncode == 0, proc.stderr
     assert json.loads((tmp_path / "p.json").read_text())["robot"] == str(robot.resolve())
     (work / "j.csv").write_text("q1,q2,q3,q4,q5,q6\n0,-1.5,1.5,0,0.7,0\n")
@@ -154,8 +192,12 @@ def test_a_robot_file_edited_after_calibration_is_noticed(tmp_path: Path) -> Non
     sample = ROOT / "bags" / "paper_test3.mcap"
     assert run("calibrate", str(sample), "--robot", str(robot), "-o", str(params)).returncode == 0
     joints.write_text("q1,q2,q3,q4,q5,q6\n0,-1.5,1.5,0,0.7,0\n")
-    assert run("predict", str(params), "--joints", str(joints), "-o",
-               str(tmp_path / "a.csv")).returncode == 0  # fmt: skip
+    assert (
+        run(
+            "predict", str(params), "--joints", str(joints), "-o", str(tmp_path / "a.csv")
+        ).returncode
+        == 0
+    )
     text = robot.read_text()
     robot.write_text(
         text.replace(
@@ -205,9 +247,13 @@ def test_a_python_warning_is_one_line_naming_the_verb(capsys: pytest.CaptureFixt
     from robot_calib import cli as cli_package
 
     before = warnings.showwarning
-    cli_package._warning_line("predict", RuntimeWarning("learned correction: 3 of 9 poses\n"
-                                                        "predicted beyond 10 mm"), RuntimeWarning,
-                              "/x/correction_structured.py", 220)  # fmt: skip
+    cli_package._warning_line(
+        "predict",
+        RuntimeWarning("learned correction: 3 of 9 poses\npredicted beyond 10 mm"),
+        RuntimeWarning,
+        "/x/correction_structured.py",
+        220,
+    )
     err = capsys.readouterr().err
     assert err == "warning: learned correction: 3 of 9 poses predicted beyond 10 mm\n"
     assert cli_package.main(["score", "no_such_file.json", "no_such.mcap"]) == 2
@@ -219,5 +265,6 @@ def test_a_bag_where_the_parameter_file_belongs_is_named(tmp_path: Path) -> None
     codec can't decode byte 0x89 ...)'; it says which comes first."""
     (tmp_path / "hold.mcap").write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)))
     (tmp_path / "p.json").write_text("{}")
-    one_line_error(run("score", "hold.mcap", "p.json", cwd=tmp_path),
-                   "hold.mcap: a bag, not a parameter file")  # fmt: skip
+    one_line_error(
+        run("score", "hold.mcap", "p.json", cwd=tmp_path), "hold.mcap: a bag, not a parameter file"
+    )

@@ -44,11 +44,12 @@ def test_a_parser_built_for_one_verb_gives_that_verb_the_same_options() -> None:
         alone = build_parser(verb.NAME)._subparsers._group_actions[0].choices  # noqa: SLF001
         assert list(alone) == list(full)
         for name, sub in alone.items():
-            actions = [(a.dest, tuple(a.option_strings), a.default, a.nargs)
-                       for a in sub._actions]  # fmt: skip  # noqa: SLF001
+            actions = [(a.dest, tuple(a.option_strings), a.default, a.nargs) for a in sub._actions]  # noqa: SLF001
             if name == verb.NAME:
-                assert actions == [(a.dest, tuple(a.option_strings), a.default, a.nargs)
-                                   for a in full[name]._actions]  # fmt: skip  # noqa: SLF001
+                assert actions == [
+                    (a.dest, tuple(a.option_strings), a.default, a.nargs)
+                    for a in full[name]._actions
+                ]  # noqa: SLF001
                 assert len(actions) > 4
             else:
                 assert [dest for dest, *_ in actions] == ["help"]

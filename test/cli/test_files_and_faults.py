@@ -157,7 +157,7 @@ def test_two_calibrates_of_one_output_at_once_never_replace_a_result(tmp_path: P
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
-        )  # fmt: skip
+        )
         for model in ("geometric", "cpa")
     ]
     results = [(p.wait(timeout=300), *p.communicate()) for p in runs]
@@ -193,9 +193,12 @@ def test_ctrl_c_while_the_program_starts_is_one_line_and_130(tmp_path: Path) -> 
             output = tmp_path / f"p{i}.json"
             run = subprocess.Popen(
                 [*program, "calibrate", str(SAMPLE), "-o", str(output)],
-                cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                cwd=tmp_path,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
                 preexec_fn=as_from_a_shell,
-            )  # fmt: skip
+            )
             time.sleep(0.02 * i)
             run.send_signal(signal.SIGINT)
             _, err = run.communicate(timeout=120)
@@ -258,9 +261,14 @@ def test_a_stream_kept_whole_says_all_points_not_every_1th(tmp_path: Path) -> No
     text = whole.stdout + whole.stderr
     assert "every 1th" not in text and re.search(r"stream pairing: .*, all \d+ points", text)
     half = cli(
-        "calibrate", str(bag), "--stream", "--stream-max-points", "600", "-o",
+        "calibrate",
+        str(bag),
+        "--stream",
+        "--stream-max-points",
+        "600",
+        "-o",
         str(tmp_path / "b.json"),
-    )  # fmt: skip
+    )
     assert half.returncode == 0, half.stderr
     assert "every 2nd of" in half.stdout + half.stderr
 
@@ -307,8 +315,9 @@ def ur5_params(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A PARAMS.json of a simulated UR5 (40 random poses)."""
     folder = tmp_path_factory.mktemp("ur5")
     bag, params = folder / "ur5.mcap", folder / "p.json"
-    made = cli("simulate", "--robot", "ur5", "--plan", "random", "--n-random", "40",
-               "-o", str(bag))  # fmt: skip
+    made = cli(
+        "simulate", "--robot", "ur5", "--plan", "random", "--n-random", "40", "-o", str(bag)
+    )
     assert made.returncode == 0, made.stderr
     fitted = cli("calibrate", str(bag), "--robot", "ur5", "-o", str(params))
     assert fitted.returncode == 0, fitted.stderr
@@ -328,11 +337,13 @@ def test_an_unexpanded_xacro_in_either_namespace_is_refused(
     nothing written. An expanded URDF that still declares the namespace is fine."""
     urdf = (ROOT / "test" / "data" / "ur5.urdf").read_text()
     xacro = tmp_path / "ur5.urdf.xacro"
-    xacro.write_text(urdf.replace(
-        '<robot name="ur5">',
-        f'<robot name="ur5" xmlns:xacro="{namespace}">'
-        '<xacro:include filename="gripper.xacro"/>',
-    ))  # fmt: skip
+    xacro.write_text(
+        urdf.replace(
+            '<robot name="ur5">',
+            f'<robot name="ur5" xmlns:xacro="{namespace}">'
+            '<xacro:include filename="gripper.xacro"/>',
+        )
+    )
     out = tmp_path / "out.urdf"
     result = cli(
         "export", str(ur5_params), "--format", "urdf", "--nominal-urdf", str(xacro), "-o", str(out)
@@ -405,9 +416,13 @@ def node_process(name: str, cwd: Path, *ros_args: str) -> subprocess.Popen[str]:
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     return subprocess.Popen(
         [sys.executable, "-m", f"robot_calib.nodes.{name}", "--ros-args", *ros_args],
-        cwd=cwd, env=env, text=True, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        cwd=cwd,
+        env=env,
+        text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
         preexec_fn=as_from_a_shell,
-    )  # fmt: skip
+    )
 
 
 @pytest.mark.slow
@@ -417,8 +432,16 @@ def test_capture_interrupted_mid_plan_exits_130_with_its_summary(tmp_path: Path)
     interrupted campaign looked finished) and 'capture: interrupted: N poses measured ->
     BAG; stopped with K pose(s) to go ... resume'; the bag holds the N poses."""
     bag = tmp_path / "c.mcap"
-    robot = node_process("sim_robot", tmp_path, "-p", "mode:=controller",
-                         "-p", "speed_fraction:=3.0", "-p", "state_rate:=100.0")  # fmt: skip
+    robot = node_process(
+        "sim_robot",
+        tmp_path,
+        "-p",
+        "mode:=controller",
+        "-p",
+        "speed_fraction:=3.0",
+        "-p",
+        "state_rate:=100.0",
+    )
     tracker = node_process("sim_tracker", tmp_path)
     capture = node_process("capture", tmp_path, "-p", "plan:=paper-test1", "-p", f"output:={bag}")
     lines: list[str] = []
@@ -472,9 +495,13 @@ def interrupted_diagnose(folder: Path, *extra: str) -> subprocess.CompletedProce
     env = dict(os.environ, ROBOT_CALIB_TEST_RENAME_PAUSE_S="1.0")
     run = subprocess.Popen(
         [sys.executable, "-m", "robot_calib", "diagnose", str(SAMPLE), "-o", "d.json", *extra],
-        cwd=folder, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        cwd=folder,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
         preexec_fn=as_from_a_shell,
-    )  # fmt: skip
+    )
     deadline = time.monotonic() + 240
     while diagnose_set(folder) == before and run.poll() is None:
         assert time.monotonic() < deadline
@@ -514,8 +541,12 @@ def test_a_set_killed_between_its_renames_is_found_by_the_next_write(tmp_path: P
     env = dict(os.environ, ROBOT_CALIB_TEST_RENAME_PAUSE_S="1.0")
     run = subprocess.Popen(
         [sys.executable, "-m", "robot_calib", "diagnose", str(SAMPLE), "-o", "d.json"],
-        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + 240
     while not diagnose_set(tmp_path) and run.poll() is None:
         assert time.monotonic() < deadline
@@ -554,14 +585,15 @@ def test_the_docs_cite_the_projects_own_specification_not_a_missing_file() -> No
         "## 4. Diagnosis",
         "## 5. Accuracy",
     ):
-        assert heading in spec, heading  # fmt: skip
+        assert heading in spec, heading
     cited = [
         f"{path.relative_to(ROOT)}"
         for folder in ("robot_calib", "msgs_doc", "bags", "test")
         for path in (ROOT / folder).rglob("*")
-        if path.suffix in (".py", ".md") and path.name != "test_files_and_faults.py"
+        if path.suffix in (".py", ".md")
+        and path.name != "test_files_and_faults.py"
         and "CONTRACT" in path.read_text()
-    ]  # fmt: skip
+    ]
     cited += ["README.md"] * ("CONTRACT" in (ROOT / "README.md").read_text())
     assert cited == []
     assert "(specification.md)" in (ROOT / "msgs_doc" / "README.md").read_text()
@@ -576,8 +608,12 @@ def test_a_staging_folder_of_a_killed_writer_goes_with_the_next_write(tmp_path: 
 
     from robot_calib.atomic import OWNER_FILE, staged_outputs
 
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
-                          capture_output=True, text=True, check=True).stdout.strip()  # fmt: skip
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
     host = socket.gethostname()
     me = os.getpid()
     owners = {
@@ -597,5 +633,6 @@ def test_a_staging_folder_of_a_killed_writer_goes_with_the_next_write(tmp_path: 
         with staged_outputs(tmp_path) as second:
             (second / "y.txt").write_text("y")
     left = sorted(p.name for p in tmp_path.iterdir())
-    assert left == [".robot-calib-live.partial", ".robot-calib-other.partial", "x.txt",
-                    "y.txt"], left  # fmt: skip
+    assert left == [".robot-calib-live.partial", ".robot-calib-other.partial", "x.txt", "y.txt"], (
+        left
+    )

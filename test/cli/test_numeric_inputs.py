@@ -22,8 +22,7 @@ def sim(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[list[float
     from robot_calib.kinematics.loader import load_robot
 
     bag = tmp_path_factory.mktemp("sim") / "r60.mcap"
-    run = cli("simulate", "--plan", "random", "--n-random", "60", "--seed", "3",
-              "-o", str(bag))  # fmt: skip
+    run = cli("simulate", "--plan", "random", "--n-random", "60", "--seed", "3", "-o", str(bag))
     assert run.returncode == 0, run.stderr
     rec = read_recording([bag], load_robot("kr5_sixx_r650"))
     return bag, [[*q, *p] for q, p in zip(rec.poses.q.tolist(), rec.points.tolist())]
@@ -37,8 +36,12 @@ def _csv(path: Path, rows: list[list[float]], header: str = "q1,q2,q3,q4,q5,q6,x
 COLUMNS = ("--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z")
 
 
-def _bag(path: Path, rows: list[list[float]], order: list[int] | None = None,
-         stamp_of: list[int] | None = None) -> Path:  # fmt: skip
+def _bag(
+    path: Path,
+    rows: list[list[float]],
+    order: list[int] | None = None,
+    stamp_of: list[int] | None = None,
+) -> Path:
     """A contract bag of `rows`, stamped 1 s apart; `order`: the receive (file) order;
     `stamp_of`: row k's stamp number (default k)."""
     from robot_calib.bag.mcap_writer import BagWriter
@@ -56,9 +59,11 @@ def _bag(path: Path, rows: list[list[float]], order: list[int] | None = None,
         for n, k in enumerate(order or range(len(rows))):
             stamp = t0 + (k if stamp_of is None else stamp_of[k]) * 1_000_000_000
             received = t0 + n * 1_000_000_000
-            writer.write(JOINT_STATES_TOPIC,
-                         joint_state_cdr(store, stamp, names, np.array(rows[k][:6]), np.zeros(0)),
-                         received)  # fmt: skip
+            writer.write(
+                JOINT_STATES_TOPIC,
+                joint_state_cdr(store, stamp, names, np.array(rows[k][:6]), np.zeros(0)),
+                received,
+            )
             writer.write(POINT_TOPIC, point_cdr(store, stamp, np.array(rows[k][6:])), received + 1)
     return path
 
@@ -79,16 +84,20 @@ def test_a_csv_given_twice_or_copied_rows_are_refused(
     _, rows = sim
     a = _csv(tmp_path / "a.csv", rows)
     out = tmp_path / "aa.mcap"
-    _one_line_error(cli("import", str(a), str(a), *COLUMNS, "-o", str(out)),
-                    "a.csv", "given twice")  # fmt: skip
+    _one_line_error(
+        cli("import", str(a), str(a), *COLUMNS, "-o", str(out)), "a.csv", "given twice"
+    )
     x10 = _csv(tmp_path / "x10.csv", [r for r in rows for _ in range(10)])
-    _one_line_error(cli("import", str(x10), *COLUMNS, "-o", str(out)),
-                    "x10.csv:3", "x10.csv:2", "540 of 600 rows")  # fmt: skip
+    _one_line_error(
+        cli("import", str(x10), *COLUMNS, "-o", str(out)),
+        "x10.csv:3",
+        "x10.csv:2",
+        "540 of 600 rows",
+    )
     assert not out.exists()
     # the tracker measuring again (a new point at the same readings) is a repeat, kept
     again = [r[:6] + [v + 2e-6 for v in r[6:]] for r in rows[:5]]
-    run = cli("import", str(a), str(_csv(tmp_path / "b.csv", again)), *COLUMNS,
-              "-o", str(out))  # fmt: skip
+    run = cli("import", str(a), str(_csv(tmp_path / "b.csv", again)), *COLUMNS, "-o", str(out))
     assert run.returncode == 0, run.stderr
 
 
@@ -115,8 +124,7 @@ def test_stamps_going_backwards_are_said(
     run = cli("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
     assert run.returncode == 0, run.stderr
     assert re.search(r"back\.mcap: /joint_states: 1 of 60 stamps go backwards", run.stderr)
-    ok = cli("calibrate", str(_bag(tmp_path / "ok.mcap", rows)), "-o",
-             str(tmp_path / "q.json"))  # fmt: skip
+    ok = cli("calibrate", str(_bag(tmp_path / "ok.mcap", rows)), "-o", str(tmp_path / "q.json"))
     assert ok.returncode == 0 and "backwards" not in ok.stderr
 
 
@@ -130,8 +138,19 @@ def test_approach_sides_follow_the_receive_order(tmp_path: Path) -> None:
     from robot_calib.kinematics.loader import load_robot
 
     clean = tmp_path / "clean.mcap"
-    run = cli("simulate", "--plan", "random", "--n-random", "120", "--seed", "5",
-                      "--effects", "backlash:4", "-o", str(clean))  # fmt: skip
+    run = cli(
+        "simulate",
+        "--plan",
+        "random",
+        "--n-random",
+        "120",
+        "--seed",
+        "5",
+        "--effects",
+        "backlash:4",
+        "-o",
+        str(clean),
+    )
     assert run.returncode == 0, run.stderr
     robot = load_robot("kr5_sixx_r650")
     rec = read_recording([clean], robot)
@@ -149,8 +168,7 @@ def test_approach_sides_follow_the_receive_order(tmp_path: Path) -> None:
     fits = []
     for name, source in (("a", same), ("b", bag)):
         out = tmp_path / f"{name}.json"
-        run = cli("calibrate", str(source), "--model", "geometric+backlash:4", "-o",
-                          str(out))  # fmt: skip
+        run = cli("calibrate", str(source), "--model", "geometric+backlash:4", "-o", str(out))
         assert run.returncode == 0, run.stderr
         found = re.search(r"absolute mean ([0-9.]+) / max", run.stdout)
         assert found, run.stdout
@@ -180,8 +198,10 @@ def test_one_point_measured_on_every_pose_is_refused(
 ) -> None:
     """Item 4: every tracker point identical on random poses: a collapsed robot (exit 0)."""
     _, rows = sim
-    bag = _bag(tmp_path / "same.mcap", [r[:6] + [v + 1e-7 * k for v in rows[0][6:]]
-                                        for k, r in enumerate(rows)])  # fmt: skip
+    bag = _bag(
+        tmp_path / "same.mcap",
+        [r[:6] + [v + 1e-7 * k for v in rows[0][6:]] for k, r in enumerate(rows)],
+    )
     run = cli("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
     _one_line_error(run, "same.mcap", "tracker points stay within", "measured one point")
     assert not (tmp_path / "p.json").exists()
@@ -189,17 +209,20 @@ def test_one_point_measured_on_every_pose_is_refused(
 
 @pytest.mark.parametrize(
     ("header", "joints", "needle"),
-    [("q1,q2,q3,q4,q5,q6,x,y,z", "q1,q1,q3,q4,q5,q6", "'q1' is given twice"),
-     ("q1,q2,q3,q4,q5,q6,x,x,z", "q1,q2,q3,q4,q5,q6", "2 columns named 'x'")],
-)  # fmt: skip
+    [
+        ("q1,q2,q3,q4,q5,q6,x,y,z", "q1,q1,q3,q4,q5,q6", "'q1' is given twice"),
+        ("q1,q2,q3,q4,q5,q6,x,x,z", "q1,q2,q3,q4,q5,q6", "2 columns named 'x'"),
+    ],
+)
 def test_duplicate_columns_are_refused(
     sim: tuple[Path, list[list[float]]], tmp_path: Path, header: str, joints: str, needle: str
 ) -> None:
     """Item 5: `--joints q1,q1,...` and a header with two x columns were read silently."""
     _, rows = sim
     csv = _csv(tmp_path / "d.csv", rows, header)
-    run = cli("import", str(csv), "--joints", joints, "--point", "x,y,z", "-o",
-              str(tmp_path / "d.mcap"))  # fmt: skip
+    run = cli(
+        "import", str(csv), "--joints", joints, "--point", "x,y,z", "-o", str(tmp_path / "d.mcap")
+    )
     _one_line_error(run, "d.csv", needle)
     assert not (tmp_path / "d.mcap").exists()
 
@@ -244,11 +267,16 @@ def test_every_option_of_the_units_table_refuses_out_of_range(
         "plan": ["--poses", "20", "--trials", "0", "-o", f"{out}.yaml"],
         "calibrate": [str(bag), "-o", f"{out}.json"],
         "diagnose": [str(bag), "-o", f"{out}.json"],
-        "split": [str(bag), "--calibration-out", f"{out}.c.mcap", "--holdout-out",
-                  f"{out}.h.mcap"],
+        "split": [
+            str(bag),
+            "--calibration-out",
+            f"{out}.c.mcap",
+            "--holdout-out",
+            f"{out}.h.mcap",
+        ],
         "score": [str(tmp_path / "missing.json"), str(bag)],
         "run": ["-o", str(out)],
-    }[verb]  # fmt: skip
+    }[verb]
     run = cli(verb, *base, f"{option}={value}", timeout=120)
     _one_line_error(run, option)
     assert not list(tmp_path.iterdir())
@@ -283,13 +311,29 @@ def test_rounded_rereads_of_a_still_pose_import_and_a_pasted_block_does_not(
     assert len(recording) == 180 and "copies" not in " ".join(recording.warnings)
     assert len(np.unique(reading_groups(recording.poses.q))) == 60  # 3 reads: one pose
     reversed_block = reads[:90] + reads[59:29:-1]  # a block pasted again, reversed
-    _one_line_error(cli("import", str(_csv(tmp_path / "rev.csv", reversed_block)), *COLUMNS,
-                        "-o", str(tmp_path / "r.mcap")), "a pasted block")  # fmt: skip
+    _one_line_error(
+        cli(
+            "import",
+            str(_csv(tmp_path / "rev.csv", reversed_block)),
+            *COLUMNS,
+            "-o",
+            str(tmp_path / "r.mcap"),
+        ),
+        "a pasted block",
+    )
     timed = [[*r, float(k)] for k, r in enumerate(reads[:90] + reads[30:60])]  # new times
-    _one_line_error(cli("import", str(_csv(tmp_path / "timed.csv", timed,
-                                           "q1,q2,q3,q4,q5,q6,x,y,z,t")),
-                        *COLUMNS, "--time", "t", "-o", str(tmp_path / "t.mcap")),
-                    "a pasted block")  # fmt: skip
+    _one_line_error(
+        cli(
+            "import",
+            str(_csv(tmp_path / "timed.csv", timed, "q1,q2,q3,q4,q5,q6,x,y,z,t")),
+            *COLUMNS,
+            "--time",
+            "t",
+            "-o",
+            str(tmp_path / "t.mcap"),
+        ),
+        "a pasted block",
+    )
     pasted = reads[:90] + reads[30:60]  # a block of 30 rows pasted again
     _one_line_error(
         cli(
@@ -329,16 +373,33 @@ def test_reference_reflectors_remove_the_trackers_drift(
     truth = np.array([r[6:] for r in rows])
     fixed = np.array([[2.0, 0.5, -0.8], [2.2, -0.6, -0.8], [1.8, 0.0, -0.2]])
     read = rotation.apply(truth) + shift
-    refs = [rotation.apply(np.tile(p, (n, 1))) + shift + rng.normal(0, 12.5e-6, (n, 3))
-            for p in fixed]  # fmt: skip
-    table = [[*r[:6], *read[k], hours[k] * 3600.0, *(v for ref in refs for v in ref[k])]
-             for k, r in enumerate(rows)]  # fmt: skip
-    names = ",".join([*(f"q{j}" for j in range(1, 7)), "x", "y", "z", "t",
-                      *(f"{c}{i}" for i in range(3) for c in "uvw")])  # fmt: skip
+    refs = [
+        rotation.apply(np.tile(p, (n, 1))) + shift + rng.normal(0, 12.5e-6, (n, 3)) for p in fixed
+    ]
+    table = [
+        [*r[:6], *read[k], hours[k] * 3600.0, *(v for ref in refs for v in ref[k])]
+        for k, r in enumerate(rows)
+    ]
+    names = ",".join(
+        [
+            *(f"q{j}" for j in range(1, 7)),
+            "x",
+            "y",
+            "z",
+            "t",
+            *(f"{c}{i}" for i in range(3) for c in "uvw"),
+        ]
+    )
     csv = _csv(tmp_path / "refs.csv", table, names)
     out = tmp_path / "refs.mcap"
-    references = ("--reference", "a:u0,v0,w0", "--reference", "b:u1,v1,w1",
-                  "--reference", "c:u2,v2,w2")  # fmt: skip
+    references = (
+        "--reference",
+        "a:u0,v0,w0",
+        "--reference",
+        "b:u1,v1,w1",
+        "--reference",
+        "c:u2,v2,w2",
+    )
     run = cli("import", str(csv), *COLUMNS, "--time", "t", *references, "-o", str(out))
     assert run.returncode == 0, run.stderr
     drifted = float(np.linalg.norm(read - truth, axis=1).max())
@@ -358,8 +419,16 @@ def test_reference_reflectors_remove_the_trackers_drift(
         lines[k] = ",".join(cells[:-3] + ["", "", ""])
     hidden = tmp_path / "hidden.csv"
     hidden.write_text("\n".join(lines) + "\n")
-    run = cli("import", str(hidden), *COLUMNS, "--time", "t", *references,
-              "-o", str(tmp_path / "hidden.mcap"))  # fmt: skip
+    run = cli(
+        "import",
+        str(hidden),
+        *COLUMNS,
+        "--time",
+        "t",
+        *references,
+        "-o",
+        str(tmp_path / "hidden.mcap"),
+    )
     assert run.returncode == 0, run.stderr
     assert f"read together at {n - 10} of {n} poses" in run.stdout, run.stdout
     bad = cli("import", str(csv), *COLUMNS, "--reference", "a:u0,v0", "-o", str(out) + "x")
@@ -380,8 +449,11 @@ def test_stated_accuracy_per_point_weighs_the_fit(
     _, rows = sim
     robot = load_robot("kr5_sixx_r650")
     rng = np.random.default_rng(7)
-    sigma = np.where(rng.random(len(rows)) < 1 / 3, rng.uniform(40e-6, 60e-6, len(rows)),
-                     rng.uniform(1e-6, 5e-6, len(rows)))  # fmt: skip
+    sigma = np.where(
+        rng.random(len(rows)) < 1 / 3,
+        rng.uniform(40e-6, 60e-6, len(rows)),
+        rng.uniform(1e-6, 5e-6, len(rows)),
+    )
     truth = np.array([r[6:] for r in rows])
     noisy = truth + rng.normal(0.0, 1.0, truth.shape) * sigma[:, None]
     table = [[*r[:6], *noisy[k], sigma[k] * 1e6] for k, r in enumerate(rows)]

@@ -57,8 +57,18 @@ def test_plan_refuses_a_wrong_format_or_a_floor_in_mm(
 
 
 def test_plan_takes_a_plausible_floor(tmp_path: Path) -> None:
-    proc = cli("plan", "--poses", "12", "--candidates", "200", "--floor-z", "-0.5",
-               "-o", "p.yml", cwd=tmp_path)  # fmt: skip
+    proc = cli(
+        "plan",
+        "--poses",
+        "12",
+        "--candidates",
+        "200",
+        "--floor-z",
+        "-0.5",
+        "-o",
+        "p.yml",
+        cwd=tmp_path,
+    )
     assert proc.returncode == 0, proc.stderr
     assert "poses:" in (tmp_path / "p.yml").read_text()
 

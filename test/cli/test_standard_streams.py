@@ -24,8 +24,9 @@ def shell(line: str, cwd: Path) -> subprocess.CompletedProcess[str]:
     (pipefail off: PIPESTATUS[0] is printed last on stdout as `status=N`)."""
     program = f"{shlex.quote(sys.executable)} -m robot_calib"
     script = line.replace("RC", program) + '; echo "status=${PIPESTATUS[0]}"'
-    return subprocess.run(["bash", "-c", script], cwd=cwd, capture_output=True, text=True,
-                          timeout=120)  # fmt: skip
+    return subprocess.run(
+        ["bash", "-c", script], cwd=cwd, capture_output=True, text=True, timeout=120
+    )
 
 
 def status(result: subprocess.CompletedProcess[str]) -> int:
@@ -108,9 +109,11 @@ def test_ctrl_c_while_starting_with_a_full_stderr_is_130(tmp_path: Path) -> None
         with open("/dev/full", "w") as full:
             run = subprocess.Popen(
                 [sys.executable, "-m", "robot_calib", "calibrate", str(SAMPLE), "-o", f"{i}.json"],
-                cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=full,
+                cwd=tmp_path,
+                stdout=subprocess.DEVNULL,
+                stderr=full,
                 preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-            )  # fmt: skip
+            )
             deadline = time.monotonic() + 60
             while not loading_numpy(run.pid) and run.poll() is None:
                 assert time.monotonic() < deadline

@@ -62,8 +62,7 @@ def test_the_compensate_command(tmp_path: Path) -> None:
     q = random_plan(ROBOT, 20, np.random.default_rng(6)).q
     joints = tmp_path / "j.csv"
     np.savetxt(joints, q, delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
-    proc = cli("compensate", str(params), "--joints", str(joints), "-o", "out.csv",
-               cwd=tmp_path)  # fmt: skip
+    proc = cli("compensate", str(params), "--joints", str(joints), "-o", "out.csv", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "20 compensated commands" in proc.stdout
     with (tmp_path / "out.csv").open() as handle:
@@ -74,12 +73,10 @@ def test_the_compensate_command(tmp_path: Path) -> None:
     change = np.abs(corrected - q).max(axis=1)  # per command [rad]
     assert change.min() > 0 and np.median(change) < 0.01  # mrad, more only near the wrist
     # singularity (joint 5 near 0: joints 4 and 6 trade a small orientation error)
-    again = cli("compensate", str(params), "--joints", str(joints), "-o", "out.csv",
-                cwd=tmp_path)  # fmt: skip
+    again = cli("compensate", str(params), "--joints", str(joints), "-o", "out.csv", cwd=tmp_path)
     assert again.returncode == 2 and "exists" in again.stderr
     np.savetxt(joints, np.degrees(q), delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
-    degrees = cli("compensate", str(params), "--joints", str(joints), "-o", "d.csv",
-                  cwd=tmp_path)  # fmt: skip
+    degrees = cli("compensate", str(params), "--joints", str(joints), "-o", "d.csv", cwd=tmp_path)
     assert degrees.returncode == 2 and "degrees?" in degrees.stderr
     assert not (tmp_path / "d.csv").exists()
 
@@ -116,7 +113,7 @@ def test_the_true_robot_reaches_the_targets(oriented: bool) -> None:
     cal, _ = calibrated()
     q, goal = target_poses(150, 7)
     seed = q + np.random.default_rng(8).uniform(-0.05, 0.05, q.shape)
-    found = compensate_targets(cal, targets_of(goal, oriented, seed), goal)  # fmt: skip
+    found = compensate_targets(cal, targets_of(goal, oriented, seed), goal)
     assert found.reached.all() and found.compensated.error_m.max() < 1e-8
     assert found.nominal.converged.all()
     if oriented:  # the solution near the seed: the pose the targets came from (but near a
@@ -170,8 +167,9 @@ def test_targets_of_poses_within_the_limits_are_reached_within_them() -> None:
     targets = targets_of(goal, False, None)
     found = compensate_targets(cal, targets, goal)
     limits = ROBOT.limits
-    inside = np.all((found.compensated.q >= limits[:, 0]) & (found.compensated.q <= limits[:, 1]),
-                    axis=1)  # fmt: skip
+    inside = np.all(
+        (found.compensated.q >= limits[:, 0]) & (found.compensated.q <= limits[:, 1]), axis=1
+    )
     assert found.reached.all() and inside.all(), (found.reached.sum(), inside.sum())
 
 
@@ -187,7 +185,7 @@ def test_a_path_behind_the_robot_stays_on_one_branch() -> None:
     q = a + np.linspace(0.0, 1.0, 20)[:, None] * (b - a)  # steps of < 0.01 rad
     nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     goal = tool2base(nominal, nominal_params, Poses.from_readings(q), tool)
-    found = compensate_targets(cal, targets_of(goal, False, None), goal)  # fmt: skip
+    found = compensate_targets(cal, targets_of(goal, False, None), goal)
     limits = ROBOT.limits
     commands = found.compensated.q
     assert found.reached.all()
@@ -223,9 +221,21 @@ def test_the_compensate_command_with_targets(tmp_path: Path) -> None:
     np.savetxt(targets, table, delimiter=",", comments="", header="x,y,z,qx,qy,qz,qw")
     seeds = tmp_path / "s.csv"
     np.savetxt(seeds, q + 0.02, delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
-    proc = cli("compensate", str(params), "--targets", str(targets), "--frame",
-               "tracker", "--unit", "mm", "--seed-joints", str(seeds), "-o", "out.csv",
-               cwd=tmp_path)  # fmt: skip
+    proc = cli(
+        "compensate",
+        str(params),
+        "--targets",
+        str(targets),
+        "--frame",
+        "tracker",
+        "--unit",
+        "mm",
+        "--seed-joints",
+        str(seeds),
+        "-o",
+        "out.csv",
+        cwd=tmp_path,
+    )
     assert proc.returncode == 0, proc.stderr
     assert "12 commands (rad) for target poses (tracker frame" in proc.stdout
     assert "11/12 reached" in proc.stdout
@@ -283,8 +293,9 @@ def row_by_row(
         jump = np.abs(q[i] - q[i - 1]).max()
         if not (ok[i] and ok[i - 1]) or jump <= BRANCH_JUMP_RAD:
             continue
-        again = solve(replace(start.subset(np.array([i])), q=q[i - 1 : i]), goal2base[[i]],
-                      oriented[[i]])  # fmt: skip
+        again = solve(
+            replace(start.subset(np.array([i])), q=q[i - 1 : i]), goal2base[[i]], oriented[[i]]
+        )
         inside = np.all((again.q >= limits[:, 0]) & (again.q <= limits[:, 1]))
         if again.converged[0] and inside and np.abs(again.q[0] - q[i - 1]).max() < jump:
             q[i] = again.q[0]
@@ -311,8 +322,9 @@ def test_the_rows_of_a_program_follow_the_row_by_row_rule(seed: int) -> None:
         nearest = np.argmin(np.abs(branches[rows] - poses.q[:, None, :]).max(axis=2), axis=1)
         q = branches[rows, nearest]
         zero = np.zeros(len(rows))
-        return IKSolution(q, zero, zero, np.ones(len(rows), dtype=np.int64),
-                          np.ones(len(rows), dtype=bool))  # fmt: skip
+        return IKSolution(
+            q, zero, zero, np.ones(len(rows), dtype=np.int64), np.ones(len(rows), dtype=bool)
+        )
 
     seeds = branches[np.arange(n), rng.integers(0, 3, n)]  # each row alone: any branch
     start = Poses(seeds, np.ones_like(seeds), np.zeros(n))
@@ -335,7 +347,7 @@ def test_oriented_targets_without_seeds_are_reached_in_orientation_or_said_not()
     turned = np.eye(4)
     turned[1:3, 1:3] = [[0.5, -np.sqrt(0.75)], [np.sqrt(0.75), 0.5]]
     goal[::2] = goal[::2] @ turned
-    found = compensate_targets(cal, targets_of(goal, True, None), goal)  # fmt: skip
+    found = compensate_targets(cal, targets_of(goal, True, None), goal)
     tool = first_tool2flange(cal.model, cal.parameters)
     at = replace(Poses.from_readings(found.compensated.q), direction=found.direction)
     actual = tool2base(cal.model, cal.parameters, at, tool)

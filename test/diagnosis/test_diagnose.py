@@ -150,8 +150,14 @@ def test_kfold_of_a_warm_up_is_not_spoilt_by_its_time_constant() -> None:
     start = calibrate(case.calibration, robot, base, log=None, screen_outliers=False)
     cv = {}
     for thermal in ("thermal_warmup", "thermal_drift"):
-        cal = calibrate(case.calibration, robot, f"{base}+{thermal}", log=None, start=start,
-                        screen_outliers=False)  # fmt: skip
+        cal = calibrate(
+            case.calibration,
+            robot,
+            f"{base}+{thermal}",
+            log=None,
+            start=start,
+            screen_outliers=False,
+        )
         cv[thermal] = score_rung(cal, case.calibration, None)[0].absolute_rms_mm
     assert cv["thermal_warmup"] < 0.95 * cv["thermal_drift"], cv
     assert cv["thermal_warmup"] < 1.5 * 0.0089, cv  # about the noise floor of the world

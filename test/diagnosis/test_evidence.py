@@ -17,17 +17,19 @@ from robot_calib.sim.blind import EVIDENCE_Z, judge_evidence, make_case
 from robot_calib.sim.world import load_world
 
 
-@pytest.mark.parametrize(("effect", "seed"), [
-    ("backlash", 1002),  # joint 4, as the README's run
-    ("compliance", 1000),  # joint 3: seen on a short arc as its gravity, reading, 1st harmonic
-    ("thermal_drift", 1000),  # time, no joint
-    ("none", 1000),
-    ("link_bending", 1000),  # link 2 twisting under an unknown tool: joint 3's housing turns
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("effect", "seed"),
+    [
+        ("backlash", 1002),  # joint 4, as the README's run
+        ("compliance", 1000),  # joint 3: seen on a short arc as its gravity, reading, 1st harmonic
+        ("thermal_drift", 1000),  # time, no joint
+        ("none", 1000),
+        ("link_bending", 1000),  # link 2 twisting under an unknown tool: joint 3's housing turns
+    ],
+)
 def test_structure_only_where_the_world_has_it(effect: str, seed: int) -> None:
     case = make_case(effect, seed)
-    geo = calibrate(case.calibration, load_world().model.robot, "geometric",
-                    screen_outliers=False)  # fmt: skip
+    geo = calibrate(case.calibration, load_world().model.robot, "geometric", screen_outliers=False)
     where = where_it_lies(geo.model, geo.parameters, case.calibration, geo.residuals, 5e-6)
     verdict = judge_evidence(case, where)
     assert verdict.false_rows == [], (verdict, where.strongest_signature)
@@ -52,8 +54,7 @@ def test_a_term_the_poses_cannot_resolve_has_no_value() -> None:
     its reading's slope are collinear there; they get no amplitude (an arc 4035.8 urad
     'harmonic' beside an rms of 12.6 urad was printed before) and no significance."""
     case = make_case("none", 1000)
-    geo = calibrate(case.calibration, load_world().model.robot, "geometric",
-                    screen_outliers=False)  # fmt: skip
+    geo = calibrate(case.calibration, load_world().model.robot, "geometric", screen_outliers=False)
     evidence = joint_evidence(geo.model, geo.parameters, case.calibration, geo.residuals)
     unresolved = [t for t in evidence.terms if not t.resolvable]
     assert unresolved, "some terms of a short arc must be unresolvable"

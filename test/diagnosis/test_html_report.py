@@ -39,8 +39,9 @@ SECTIONS = ("accuracy", "ladder", "where", "vectors", "iso9283", "parameters", "
 
 def recorded(plan: Plan, seed: int, blunder: int | None = None) -> Recording:
     time = plan_times(plan, WORLD.timing)
-    points = physical_points(WORLD, Poses.from_readings(plan.q, time=time),
-                             np.random.default_rng(seed))  # fmt: skip
+    points = physical_points(
+        WORLD, Poses.from_readings(plan.q, time=time), np.random.default_rng(seed)
+    )
     if blunder is not None:
         points[blunder] += [0.004, -0.002, 0.001]
     return recording_from_arrays(plan.q, points, time, robot=ROBOT)
@@ -51,8 +52,10 @@ def diagnosed() -> tuple[Diagnosis, Ladder, Recording]:
     calibration = recorded(paper_test_plan(2), 1, BLUNDER)
     rnd = random_plan(ROBOT, 60, np.random.default_rng(5))
     cube = iso9283_plan(WORLD.model, WORLD.truth, cycles=3)
-    held = recorded(Plan("holdout", np.vstack([rnd.q, cube.q]),
-                         np.concatenate([rnd.sweep, cube.sweep]), 0.1), 2)  # fmt: skip
+    held = recorded(
+        Plan("holdout", np.vstack([rnd.q, cube.q]), np.concatenate([rnd.sweep, cube.sweep]), 0.1),
+        2,
+    )
     diagnosis, ladder = diagnose_recordings(calibration, ROBOT, held)
     return diagnosis, ladder, calibration
 
@@ -173,12 +176,26 @@ def test_the_report_renders_in_a_headless_browser(report: Path, tmp_path: Path) 
     shot = tmp_path / "report.png"
     browser = _browser()
     proc = subprocess.run(
-        [browser, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-         "--no-first-run", "--disable-background-networking", "--disable-component-update",
-         "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}", "--window-size=1280,2000",
-         f"--screenshot={shot}", report.as_uri()],
-        capture_output=True, text=True, timeout=120, check=False,
-    )  # fmt: skip
+        [
+            browser,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--window-size=1280,2000",
+            f"--screenshot={shot}",
+            report.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert proc.returncode == 0 and shot.exists(), proc.stderr[-2000:]
     pixels = matplotlib.image.imread(shot)[:, :, :3]
     assert pixels.shape[:2] == (2000, 1280)

@@ -19,8 +19,9 @@ ROBOT = WORLD.model.robot
 
 
 def recorded(world: World, plan: Plan, seed: int) -> Recording:
-    poses, points = measure_every_target(world, plan.q, plan_times(plan, world.timing),
-                                         np.random.default_rng(seed))  # fmt: skip
+    poses, points = measure_every_target(
+        world, plan.q, plan_times(plan, world.timing), np.random.default_rng(seed)
+    )
     return recording_from_arrays(poses.q, points, poses.time, robot=ROBOT)
 
 
@@ -55,5 +56,9 @@ def test_figures_by_hand_and_no_figures_without_repeats() -> None:
     distance = np.linalg.norm(points[:3] - centre, axis=1)
     rp = distance.mean() + 3 * distance.std(ddof=1)
     assert figures.rp_max_mm == pytest.approx(rp * 1e3)
-    assert iso9283(recording.subset(np.array([True, False, False, True])), predicted[[0, 3]],
-                   "m", "x") is None  # fmt: skip
+    assert (
+        iso9283(
+            recording.subset(np.array([True, False, False, True])), predicted[[0, 3]], "m", "x"
+        )
+        is None
+    )

@@ -34,8 +34,11 @@ def test_text_form_takes_any_orders() -> None:
     assert effect.spec == "joint_harmonics:2:orders=11,27"
     assert effect.parameter_names  # noqa: B018 - named per order
     assert parse_effect("joint_harmonics:1:orders=64", 6).orders == (64,)
-    for bad in ("joint_harmonics:2:orders=0", "joint_harmonics:2:orders=300",
-                "joint_harmonics:2:orders=x"):  # fmt: skip
+    for bad in (
+        "joint_harmonics:2:orders=0",
+        "joint_harmonics:2:orders=300",
+        "joint_harmonics:2:orders=x",
+    ):
         with pytest.raises(InputError):
             parse_effect(bad, 6)
     assert "gear" in meaning(17) and "strain-wave" in meaning(2) and "encoder" in meaning(1)
@@ -69,8 +72,9 @@ def test_fit_recovers_the_harmonics(scenario) -> None:  # type: ignore[no-untype
 
 def test_diagnosis_names_joints_and_orders_and_reaches_the_floor(scenario) -> None:  # type: ignore[no-untyped-def]
     robot = scenario.world.model.robot
-    diagnosis, ladder = diagnose(scenario.calibration, robot, scenario.holdout,
-                                 tracker_sigma_m=STATED_SIGMA_M)  # fmt: skip
+    diagnosis, ladder = diagnose(
+        scenario.calibration, robot, scenario.holdout, tracker_sigma_m=STATED_SIGMA_M
+    )
     assert diagnosis.dominant_effect is not None
     assert diagnosis.dominant_effect.effect == "joint_harmonics"
     best = ladder.rungs[-1]
@@ -233,8 +237,7 @@ def test_the_holdout_tells_aliases_apart() -> None:
         effect = JointHarmonics(joints=(4,), orders=(order,))
         still = load_world()  # no repeatability noise: the harmonic at the grid's readings
         still = replace(still, noise=replace(still.noise, joint_sigma_rad=0.0))
-        world = with_effect(still, effect, {f"jh4_c{order}": 1e-4,
-                                            f"jh4_s{order}": sign * 0.5e-4})  # fmt: skip
+        world = with_effect(still, effect, {f"jh4_c{order}": 1e-4, f"jh4_s{order}": sign * 0.5e-4})
         calibration = blind.record_plan(world, plan, rng)
         holdout = blind.record_plan(world, blind.random_plan(robot, 200, rng), rng)
         diagnosis, ladder = diagnose(calibration, robot, holdout)

@@ -20,8 +20,9 @@ ANSWERS = {"gravity_backlash": {2}, "link_bending": {3, 4}}  # diagnosed_joints 
 def test_physical_diagnosis_names_the_joint_and_the_vocabulary_gap(kind: str) -> None:
     scenario = ur10_out_of_vocabulary(kind, seed=1, n=800)
     robot = scenario.world.model.robot
-    diagnosis, ladder = diagnose(scenario.calibration, robot, scenario.holdout,
-                                 tracker_sigma_m=STATED_SIGMA_M)  # fmt: skip
+    diagnosis, ladder = diagnose(
+        scenario.calibration, robot, scenario.holdout, tracker_sigma_m=STATED_SIGMA_M
+    )
     floor = noise_rms_mm(scenario.world, scenario.holdout)
     physical = [r for r in diagnosis.ladder if not r.learned]
     assert min(r.holdout_abs_rms_mm for r in physical) > 5 * floor  # no rung explains it

@@ -74,8 +74,9 @@ def test_re_reads_give_the_tracker_floor_and_say_so() -> None:
     rng = np.random.default_rng(5)
     rows = np.concatenate([np.arange(20), np.arange(20)])
     points = first.points[rows] + rng.normal(0.0, POSE_SIGMA_M, (len(rows), 3))
-    moved = estimate_noise(recording_from_arrays(first.poses.q[rows], points,
-                                                 np.arange(len(rows), dtype=float)))  # fmt: skip
+    moved = estimate_noise(
+        recording_from_arrays(first.poses.q[rows], points, np.arange(len(rows), dtype=float))
+    )
     assert moved.source == "repeat poses"
     assert 0.7 * POSE_SIGMA_M < moved.sigma_m < 1.3 * POSE_SIGMA_M, moved
 
@@ -115,8 +116,9 @@ def test_split_holds_out_the_share_asked_for_when_poses_repeat(by: str) -> None:
     at random) are held out instead: 30 % of the measurements, whole poses."""
     first = ur10_out_of_vocabulary("link_bending", seed=0, n=100).calibration
     rows = np.concatenate([np.arange(50), np.arange(50)])
-    twice = recording_from_arrays(first.poses.q[rows], first.points[rows],
-                                  np.arange(len(rows), dtype=float))  # fmt: skip
+    twice = recording_from_arrays(
+        first.poses.q[rows], first.points[rows], np.arange(len(rows), dtype=float)
+    )
     mask = holdout_mask(twice, 0.3, by)
     assert 0.29 <= mask.mean() <= 0.32, mask.mean()
     group = reading_groups(twice.poses.q)
@@ -130,8 +132,9 @@ def test_re_reads_far_beyond_any_tracker_are_no_floor() -> None:
     rows = np.repeat(np.arange(40), 2)
     points = first.points[rows].copy()
     points[1::2, 0] += 5e-3
-    noise = estimate_noise(recording_from_arrays(first.poses.q[rows], points,
-                                                 np.arange(len(rows), dtype=float)))  # fmt: skip
+    noise = estimate_noise(
+        recording_from_arrays(first.poses.q[rows], points, np.arange(len(rows), dtype=float))
+    )
     assert noise.source == "unknown", noise  # no other evidence here: the floor is unknown
     # 5 mm along x between the reads: sqrt(25 / 6) = 2.041 mm per axis
     assert noise.warning.startswith("warning: re-reads of still poses differ by 2.041 mm")

@@ -90,8 +90,10 @@ def test_the_ladder_axis_is_logarithmic_when_the_rungs_span_decades() -> None:
 
 def test_the_histogram_legend_lies_beside_the_data() -> None:
     rng = np.random.default_rng(0)
-    errors = [(name, np.abs(rng.normal(v, v / 3, 200)))
-              for name, v in (("nominal", 1.0), ("geometric", 0.2), (LONG, 0.01))]  # fmt: skip
+    errors = [
+        (name, np.abs(rng.normal(v, v / 3, 200)))
+        for name, v in (("nominal", 1.0), ("geometric", 0.2), (LONG, 0.01))
+    ]
     fig = error_histogram_figure(errors, "hold-out bags")
     fig.canvas.draw()
     ax = fig.axes[0]
@@ -119,8 +121,16 @@ def test_the_residual_vectors_have_a_colour_bar_in_mm() -> None:
     pyplot().close(fig)
 
 
-@pytest.mark.parametrize("name", [LONG, "geometric", "geometric+joint_harmonics:2:orders=11,27",
-                                  "geometric+thermal_drift+learned", "a+"])  # fmt: skip
+@pytest.mark.parametrize(
+    "name",
+    [
+        LONG,
+        "geometric",
+        "geometric+joint_harmonics:2:orders=11,27",
+        "geometric+thermal_drift+learned",
+        "a+",
+    ],
+)
 @pytest.mark.parametrize("width", [1, 12, 24, 200])
 def test_model_names_break_only_between_terms_or_after_commas(name: str, width: int) -> None:
     wrapped = wrap_name(name, width)
@@ -195,11 +205,20 @@ def test_a_scanned_order_the_physical_model_leaves_no_trace_of_is_said_an_image(
         return WhereItLies([], [], None, TimeTrend([], 0.0), Workspace([]), 0.0, list(spectra))
 
     def spectrum(joint: int, orders: list[int]) -> JointSpectrum:
-        return JointSpectrum(joint, True, 100.0, [0.0] * 64, orders, [1.0] * len(orders),
-                             [9.0] * len(orders), ["?"] * len(orders))  # fmt: skip
+        return JointSpectrum(
+            joint,
+            True,
+            100.0,
+            [0.0] * 64,
+            orders,
+            [1.0] * len(orders),
+            [9.0] * len(orders),
+            ["?"] * len(orders),
+        )
 
-    removed = removed_signatures([make_effect("backlash", [4]),
-                                  make_effect("joint_harmonics", [2], orders=(11,))])  # fmt: skip
+    removed = removed_signatures(
+        [make_effect("backlash", [4]), make_effect("joint_harmonics", [2], orders=(11,))]
+    )
     after = where(spectrum(1, [17]))
     model = "geometric+backlash:4+joint_harmonics:2:orders=11"
     image = scan_order_note(removed, 6, 5, after, model)
@@ -215,8 +234,9 @@ ROBOT = WORLD.model.robot
 
 def recorded(plan: Plan, seed: int) -> Recording:
     time = plan_times(plan, WORLD.timing)
-    points = physical_points(WORLD, Poses.from_readings(plan.q, time=time),
-                             np.random.default_rng(seed))  # fmt: skip
+    points = physical_points(
+        WORLD, Poses.from_readings(plan.q, time=time), np.random.default_rng(seed)
+    )
     return recording_from_arrays(plan.q, points, time, robot=ROBOT)
 
 
@@ -238,8 +258,7 @@ def test_joint_4_backlash_is_said_removed_by_the_best_model(tmp_path: Path) -> N
     edge = "signal variance at the upper edge of its range (an example)"
     diagnosis = replace(diagnosis, learnable=replace(diagnosis.learnable, warnings=[edge]))
     assert "1 warning(s) in the reports" in diagnosis.learnable.line()
-    write_diagnosis(diagnosis, ladder, calibration, out, compared=compared,
-                    warnings=warnings)  # fmt: skip
+    write_diagnosis(diagnosis, ladder, calibration, out, compared=compared, warnings=warnings)
     assert f"learnable bound (learned correction): {edge}" in out.with_suffix(".md").read_text()
     assert f"learnable bound (learned correction): {edge}" in html_report_path(out).read_text()
     note = f"{REMOVED}: direction (backlash:4)"
@@ -251,8 +270,11 @@ def test_joint_4_backlash_is_said_removed_by_the_best_model(tmp_path: Path) -> N
     markdown = out.with_suffix(".md").read_text()
     rows = [line for line in markdown.splitlines() if line.startswith("| 4 |")]
     assert len(rows) == 2 and all(row.endswith(f"| {note} |") for row in rows), rows
-    assert not [line for line in markdown.splitlines()
-                if line.startswith(("| 1 |", "| 2 |")) and REMOVED in line]  # fmt: skip
+    assert not [
+        line
+        for line in markdown.splitlines()
+        if line.startswith(("| 1 |", "| 2 |")) and REMOVED in line
+    ]
     assert "| geometric+<wbr>backlash:4 |" in markdown
     page = html_report_path(out).read_text()
     where = page[page.index('id="where"') : page.index('id="vectors"')]
@@ -323,6 +345,11 @@ def test_figures_drawn_aside_are_the_figures_drawn_here() -> None:
     import subprocess
     import sys
 
-    done = subprocess.run([sys.executable, "-c", ASIDE_CHECK], capture_output=True, text=True,
-                          timeout=120, check=False)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", ASIDE_CHECK],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert done.returncode == 0 and done.stdout.strip() == "OK", done.stderr[-2000:]

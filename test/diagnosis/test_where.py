@@ -21,8 +21,9 @@ ROBOT = build_world({}).model.robot
 
 def recorded(world: World, plan: Plan, seed: int) -> Recording:
     time = plan_times(plan, world.timing)
-    points = physical_points(world, Poses.from_readings(plan.q, time=time),
-                             np.random.default_rng(seed))  # fmt: skip
+    points = physical_points(
+        world, Poses.from_readings(plan.q, time=time), np.random.default_rng(seed)
+    )
     return recording_from_arrays(plan.q, points, time, robot=ROBOT)
 
 

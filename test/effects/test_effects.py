@@ -43,8 +43,9 @@ def random_poses(rng: np.random.Generator, n: int) -> Poses:
     """n random poses within the limits, both approach directions, an hour of time and a
     recorded temperature (20-30 deg C, for effects that follow it)."""
     lo, hi = ROBOT.limits.T
-    poses = Poses.from_readings(rng.uniform(lo, hi, (n, ROBOT.n_joints)),
-                                time=np.sort(rng.uniform(0, 3600, n)))  # fmt: skip
+    poses = Poses.from_readings(
+        rng.uniform(lo, hi, (n, ROBOT.n_joints)), time=np.sort(rng.uniform(0, 3600, n))
+    )
     return replace(poses, temperature=rng.uniform(20.0, 30.0, n))
 
 
@@ -107,8 +108,9 @@ def check_params_round_trip(cls: type[Effect], tmp_path: Path) -> None:
     poses = Poses.from_readings(q, time=np.arange(len(q)) * 3.0)
     celsius = 22.0 + 6.0 * np.sin(poses.time / 300.0)  # a recorded temperature
     poses = replace(poses, temperature=celsius)
-    recording = recording_from_arrays(q, physical_points(world, poses, rng), poses.time,
-                                      temperature=celsius)  # fmt: skip
+    recording = recording_from_arrays(
+        q, physical_points(world, poses, rng), poses.time, temperature=celsius
+    )
     spec = "geometric+" + effect.spec
     if cls.in_vocabulary:
         assert parse_model(spec, ROBOT)[1] == [effect]
@@ -176,7 +178,7 @@ def test_registry_order_and_vocabulary_are_the_contracts() -> None:
         "gravity_compliance",
         "thermal_warmup",
         "thermal_temperature",
-    } | {"joint_harmonics"}  # fmt: skip
+    } | {"joint_harmonics"}
     assert set(vocabulary()) == contract | added
     assert "joint_ripple" not in vocabulary()
     base, effects = parse_model("geometric+eccentricity:6:order=3+thermal_drift", ROBOT)

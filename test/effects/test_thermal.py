@@ -49,13 +49,21 @@ def test_expansion_follows_the_recorded_temperature_through_a_bag(tmp_path: Path
     /temperature is read back per point, alpha is identified, and the diagnosis names
     thermal_temperature, not a drift in time."""
     effect = parse_effect("thermal_temperature", ROBOT.n_joints)
-    world = replace(with_effect(BASE, effect, {"thermal_temperature_alpha": 2.5e-5}),
-                    temperature=TemperatureProfile())  # fmt: skip
+    world = replace(
+        with_effect(BASE, effect, {"thermal_temperature_alpha": 2.5e-5}),
+        temperature=TemperatureProfile(),
+    )
     sim = recorded(world, paper_test_plan(2), 2)
     assert sim.poses.temperature is not None
     bag = tmp_path / "warm.mcap"
-    write_measurement_bag(bag, sim.poses.q, sim.points, ROBOT.joint_names, sim.poses.time,
-                          temperature=sim.poses.temperature)  # fmt: skip
+    write_measurement_bag(
+        bag,
+        sim.poses.q,
+        sim.points,
+        ROBOT.joint_names,
+        sim.poses.time,
+        temperature=sim.poses.temperature,
+    )
     recording = read_recording([bag], ROBOT)
     assert recording.poses.temperature is not None
     np.testing.assert_allclose(recording.poses.temperature, sim.poses.temperature, atol=1e-9)
@@ -78,13 +86,18 @@ def test_points_a_thermal_effect_explains_are_no_blunders() -> None:
     from robot_calib.sim.measure import record_plan
     from robot_calib.sim.world import build_world
 
-    world = build_world({
-        "robot": "ur10", "geometry": "nominal", "temperature": {"start_c": 21.0},
-        "effects": [{"name": "thermal_temperature",
-                     "values": {"thermal_temperature_alpha": 2e-5}}],
-        "base2tracker": {"xyz_m": [2.5, 0.5, -0.2], "rpy_deg": [0, 0, 180]},
-        "target_in_flange_m": [0.05, 0.02, 0.08],
-    })  # fmt: skip
+    world = build_world(
+        {
+            "robot": "ur10",
+            "geometry": "nominal",
+            "temperature": {"start_c": 21.0},
+            "effects": [
+                {"name": "thermal_temperature", "values": {"thermal_temperature_alpha": 2e-5}}
+            ],
+            "base2tracker": {"xyz_m": [2.5, 0.5, -0.2], "rpy_deg": [0, 0, 180]},
+            "target_in_flange_m": [0.05, 0.02, 0.08],
+        }
+    )
     robot = world.model.robot
     rng = np.random.default_rng(1)
     recording = record_plan(world, random_plan(robot, 600, rng), rng)

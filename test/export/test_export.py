@@ -196,8 +196,9 @@ def test_the_json_export_is_a_flat_mapping_with_units_and_sigma() -> None:
 def ur_chain(kinematics: dict[str, dict[str, float]], q: np.ndarray) -> np.ndarray:
     """wrist_3_link in base_link_inertia (n, 4, 4): each entry's origin then Rz(q_j)."""
     out = np.tile(np.eye(4), (len(q), 1, 1))
-    for j, entry in enumerate(("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2",
-                               "wrist_3")):  # fmt: skip
+    for j, entry in enumerate(
+        ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
+    ):
         e = kinematics[entry]
         origin = np.eye(4)
         origin[:3, :3] = Rotation.from_euler("xyz", [e["roll"], e["pitch"], e["yaw"]]).as_matrix()
@@ -259,10 +260,12 @@ def test_the_export_verb_writes_every_format_and_keeps_the_overwrite_policy(
 
     world = build_world({"robot": "ur10", "geometry": "nominal", "seed": 2})
     plan = paper_test_plan(3)
-    poses, points = measure_every_target(world, plan.q, plan_times(plan, world.timing),
-                                         np.random.default_rng(2))  # fmt: skip
-    write_measurement_bag(tmp_path / "x.mcap", poses.q, points, world.model.robot.joint_names,
-                          poses.time)  # fmt: skip
+    poses, points = measure_every_target(
+        world, plan.q, plan_times(plan, world.timing), np.random.default_rng(2)
+    )
+    write_measurement_bag(
+        tmp_path / "x.mcap", poses.q, points, world.model.robot.joint_names, poses.time
+    )
     assert run("calibrate", "x.mcap", "--robot", "ur10", "-o", "p.json").returncode == 0
     for fmt, name in (("urdf", "r.urdf"), ("dh", "r.csv"), ("ur", "r.yaml"), ("json", "r.json")):
         proc = run("export", "p.json", "--format", fmt, "-o", name)
@@ -332,9 +335,12 @@ def test_the_calibration_written_into_the_nominal_urdf_keeps_it_and_is_the_model
     # the nominal calibration written into the nominal file gives its origins back (to 1 nm:
     # the fixture rounds its roll to 1.570796327 and has 1e-11 m terms)
     nominal_params = model.parameters().with_values(
-        {p.name: cal.parameters[p.name] for p in model.parameters().parameters
-         if p.group == "frames"}
-    )  # fmt: skip
+        {
+            p.name: cal.parameters[p.name]
+            for p in model.parameters().parameters
+            if p.group == "frames"
+        }
+    )
     same = render_on_nominal(replace(cal, parameters=nominal_params), "p.json", nominal_file)
     before = {j.name: j for j in URDF.from_xml_string(nominal_file.read_bytes()).joints}
     after = URDF.from_xml_string(same.encode())
@@ -344,8 +350,9 @@ def test_the_calibration_written_into_the_nominal_urdf_keeps_it_and_is_the_model
             assert np.allclose(joint.origin.xyz, old.xyz, atol=1e-9), joint.name
             assert np.allclose(
                 Rotation.from_euler("xyz", joint.origin.rpy).as_matrix(),
-                Rotation.from_euler("xyz", old.rpy).as_matrix(), atol=1e-9,
-            ), joint.name  # fmt: skip
+                Rotation.from_euler("xyz", old.rpy).as_matrix(),
+                atol=1e-9,
+            ), joint.name
     # the calibration: the file's tcp seen from its laser_tracker is the model's point
     text = render_on_nominal(cal, "p.json", nominal_file)
     q = random_plan(model.robot, N_POSES, np.random.default_rng(3)).q
@@ -375,11 +382,15 @@ def test_a_xacro_or_another_robots_urdf_is_refused_as_nominal(tmp_path: Path) ->
 
     cal = calibration("ur5")
     xacro = tmp_path / "ur.urdf.xacro"
-    xacro.write_text((DATA / "ur5.urdf").read_text().replace(
-        '<robot name="ur5">',
-        '<robot name="ur5" xmlns:xacro="http://www.ros.org/wiki/xacro"><xacro:property '
-        'name="d1" value="0.1"/>',
-    ))  # fmt: skip
+    xacro.write_text(
+        (DATA / "ur5.urdf")
+        .read_text()
+        .replace(
+            '<robot name="ur5">',
+            '<robot name="ur5" xmlns:xacro="http://www.ros.org/wiki/xacro"><xacro:property '
+            'name="d1" value="0.1"/>',
+        )
+    )
     with pytest.raises(InputError, match="a xacro file, not a URDF: expand it first"):
         render_on_nominal(cal, "p.json", xacro)
     with pytest.raises(InputError, match=r"not robot ur5's nominal kinematics: .* mm"):

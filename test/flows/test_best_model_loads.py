@@ -30,16 +30,14 @@ def test_the_best_model_loads_in_predict_score_and_compensate(effect: str, tmp_p
     diagnosis, ladder = diagnose(case.calibration, robot, case.holdout)
     out = tmp_path / "d.json"
     compared, warnings = compare_before_after(ladder)
-    write_diagnosis(diagnosis, ladder, case.calibration, out, compared=compared,
-                    warnings=warnings)  # fmt: skip
+    write_diagnosis(diagnosis, ladder, case.calibration, out, compared=compared, warnings=warnings)
     best = best_params_path(out)
     back = load_calibration(best)
     assert back.label == ladder.rungs[-1].model
     held = case.holdout
     expected = ladder.rungs[-1].calibration.predict(held.poses)
     assert np.max(np.abs(back.predict(held.poses) - expected)) < 1e-9
-    write_measurement_bag(tmp_path / "held.mcap", held.poses.q, held.points,
-                          robot.joint_names)  # fmt: skip
+    write_measurement_bag(tmp_path / "held.mcap", held.poses.q, held.points, robot.joint_names)
     (tmp_path / "program.csv").write_text(PROGRAM)
     force = ["--force"] if diagnosis.implausible else []
     for args in (

@@ -28,8 +28,14 @@ def campaign() -> Recording:
     return ur10_random(seed=4, n=300, holdout_share=0.0).calibration
 
 
-NAMES = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
-         "wrist_2_joint", "wrist_3_joint")  # the UR10 description's  # fmt: skip
+NAMES = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)  # the UR10 description's
 
 
 def _bag(path: Path, recording: Recording, swap: bool = False) -> Path:
@@ -93,9 +99,14 @@ def test_the_childs_reading_and_reference_models_are_those_computed_here(
     bad = tmp_path / "bad.mcap"
     bad.write_text("not a bag")
     env = {**os.environ, "TMPDIR": str(tmp_path)}
-    done = subprocess.run([sys.executable, "-c", CHILD_CHECK, str(good), str(bad)],
-                          capture_output=True, text=True, timeout=300, check=False,
-                          env=env)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", CHILD_CHECK, str(good), str(bad)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        env=env,
+    )
     assert done.returncode == 0 and done.stdout.strip() == "OK", done.stderr[-3000:]
     assert not list(tmp_path.glob("robot_calib-aside-*"))  # the children's folders removed
 
@@ -108,8 +119,16 @@ def test_a_reading_warning_is_printed_once_before_a_hold_out_error(
     bag = _bag(tmp_path / "swapped.mcap", campaign, swap=True)
     bad = tmp_path / "bad.mcap"
     bad.write_text("not a bag")
-    run = robot_calib("diagnose", str(bag), "--holdout", str(bad), "--robot", "ur10",
-                      "-o", str(tmp_path / "d.json"))  # fmt: skip
+    run = robot_calib(
+        "diagnose",
+        str(bag),
+        "--holdout",
+        str(bad),
+        "--robot",
+        "ur10",
+        "-o",
+        str(tmp_path / "d.json"),
+    )
     assert run.returncode == 2
     lines = run.stderr.strip().splitlines()
     warned = [k for k, line in enumerate(lines) if "go backwards" in line]

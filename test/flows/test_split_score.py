@@ -24,8 +24,20 @@ ROBOT = load_robot("kr5_sixx_r650")
 @pytest.mark.parametrize("by", ["random", "order", "time"])
 def test_split_keeps_every_measurement_once_with_its_direction(tmp_path: Path, by: str) -> None:
     cal, hold = tmp_path / "cal.mcap", tmp_path / "hold.mcap"
-    proc = cli("split", str(SAMPLE), "--holdout", "0.3", "--by", by, "--seed", "4",
-               "--calibration-out", str(cal), "--holdout-out", str(hold))  # fmt: skip
+    proc = cli(
+        "split",
+        str(SAMPLE),
+        "--holdout",
+        "0.3",
+        "--by",
+        by,
+        "--seed",
+        "4",
+        "--calibration-out",
+        str(cal),
+        "--holdout-out",
+        str(hold),
+    )
     assert proc.returncode == 0, proc.stderr
     whole = read_recording([SAMPLE], ROBOT)
     parts = [read_recording([path], ROBOT) for path in (cal, hold)]
@@ -56,8 +68,12 @@ def test_split_keeps_every_measurement_once_with_its_direction(tmp_path: Path, b
 
 def test_score_is_the_error_on_a_bag_not_fitted(tmp_path: Path) -> None:
     cal, hold, params = tmp_path / "cal.mcap", tmp_path / "hold.mcap", tmp_path / "p.json"
-    assert cli("split", str(SAMPLE), "--calibration-out", str(cal), "--holdout-out",
-               str(hold)).returncode == 0  # fmt: skip
+    assert (
+        cli(
+            "split", str(SAMPLE), "--calibration-out", str(cal), "--holdout-out", str(hold)
+        ).returncode
+        == 0
+    )
     assert cli("calibrate", str(cal), "-o", str(params)).returncode == 0
     table = tmp_path / "points.csv"
     proc = cli("score", str(params), str(hold), "--points-csv", str(table))
@@ -81,13 +97,17 @@ def test_score_is_the_error_on_a_bag_not_fitted(tmp_path: Path) -> None:
     ("args", "message"),
     [
         (["split", str(SAMPLE), "--holdout", "1.5"], "a fraction between 0 and 1"),
-        (["split", str(SAMPLE), "--calibration-out", "x.mcap", "--holdout-out", "x.mcap"],
-         "name one file"),
+        (
+            ["split", str(SAMPLE), "--calibration-out", "x.mcap", "--holdout-out", "x.mcap"],
+            "name one file",
+        ),
         (["score", "nosuch.json", str(SAMPLE)], "no such parameter file"),
-        (["split", str(SAMPLE), "--calibration-out", "a/x.mcap", "--holdout-out", "y.mcap"],
-         "no such folder"),
+        (
+            ["split", str(SAMPLE), "--calibration-out", "a/x.mcap", "--holdout-out", "y.mcap"],
+            "no such folder",
+        ),
     ],
-)  # fmt: skip
+)
 def test_bad_split_and_score_inputs(tmp_path: Path, args: list[str], message: str) -> None:
     proc = cli(*args, cwd=tmp_path)
     assert proc.returncode == 2 and message in proc.stderr, proc.stderr

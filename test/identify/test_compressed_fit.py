@@ -25,8 +25,11 @@ def problems(monkeypatch: pytest.MonkeyPatch) -> tuple[fit._Problem, fit._Proble
     monkeypatch.setattr(fit, "BLOCK_POSES", 40)  # several blocks from 150 poses
     poses, points = measured(n=150)
     recording = as_recording(poses, points)
-    model = KinematicModel(SIX_DOF_WORLD.model.robot, targets=recording.target_names,
-                           oriented=recording.oriented_targets)  # fmt: skip
+    model = KinematicModel(
+        SIX_DOF_WORLD.model.robot,
+        targets=recording.target_names,
+        oriented=recording.oriented_targets,
+    )
     assert model.oriented
     start = model.parameters()
     args = (model, start, recording.poses, recording.points, AbsoluteObjective())
@@ -45,8 +48,11 @@ def test_the_compressed_rows_have_the_rows_normal_equations(
     scale = np.linalg.norm(full, axis=0)
     np.testing.assert_allclose(f @ f, r @ r, rtol=1e-10)
     np.testing.assert_allclose((jac.T @ f) / scale, (full.T @ r) / scale, rtol=1e-8, atol=1e-14)
-    np.testing.assert_allclose((jac.T @ jac) / np.outer(scale, scale),
-                               (full.T @ full) / np.outer(scale, scale), atol=1e-10)  # fmt: skip
+    np.testing.assert_allclose(
+        (jac.T @ jac) / np.outer(scale, scale),
+        (full.T @ full) / np.outer(scale, scale),
+        atol=1e-10,
+    )
     # the data's rows alone (the prior's left out) as the identifiability analysis sees them
     rc, jc, mc = compressed.data_rows(x)
     rr, jr, mr = rows.data_rows(x)
@@ -64,10 +70,12 @@ class _Rows(fit._Problem):
         super().__init__(*args[:7], **kwargs)  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize("model", ["geometric", "geometric+transmission_error:2:order=4",
-                                   "geometric+compliance:2,3"])  # fmt: skip
-def test_a_compressed_fit_ends_where_the_rows_fit_ends(monkeypatch: pytest.MonkeyPatch,
-                                                       model: str) -> None:  # fmt: skip
+@pytest.mark.parametrize(
+    "model", ["geometric", "geometric+transmission_error:2:order=4", "geometric+compliance:2,3"]
+)
+def test_a_compressed_fit_ends_where_the_rows_fit_ends(
+    monkeypatch: pytest.MonkeyPatch, model: str
+) -> None:
     scenario = ur10_random(seed=2, n=600)
     robot = scenario.world.model.robot
     lean = calibrate(scenario.calibration, robot, model)
@@ -79,5 +87,8 @@ def test_a_compressed_fit_ends_where_the_rows_fit_ends(monkeypatch: pytest.Monke
     assert np.max(np.abs(lean.parameters.values - reference.parameters.values) / scale) < 1e-7
     np.testing.assert_allclose(lean.std[free], reference.std[free], rtol=1e-6)
     np.testing.assert_allclose(lean.residuals, reference.residuals, rtol=0, atol=1e-10)
-    np.testing.assert_allclose(lean.identifiability.condition_number,
-                               reference.identifiability.condition_number, rtol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        lean.identifiability.condition_number,
+        reference.identifiability.condition_number,
+        rtol=1e-6,
+    )

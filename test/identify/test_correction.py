@@ -32,8 +32,9 @@ from robot_calib.sim.scenarios import Scenario, ur10_random
 
 # compliance of joints 2 and 3 (gravity bends them): smooth in the readings, not in the
 # geometric model: about 0.9 mm rms of geometric's held-out error
-COMPLIANCE = ({"name": "compliance", "joints": [2, 3],
-               "values": {"compliance2": 2e-5, "compliance3": 2e-5}},)  # fmt: skip
+COMPLIANCE = (
+    {"name": "compliance", "joints": [2, 3], "values": {"compliance2": 2e-5, "compliance3": 2e-5}},
+)
 
 
 def rms_mm(residuals: Array) -> float:
@@ -51,8 +52,9 @@ def compliant() -> tuple[Scenario, Calibration]:
 
 def smooth(q: Array) -> Array:
     """(n, 3) [m]: a residual of joints 2 and 3 only."""
-    return np.column_stack([1e-4 * np.sin(q[:, 1]), 5e-5 * np.cos(q[:, 1] + q[:, 2]),
-                            2e-5 * np.sin(2 * q[:, 2])])  # fmt: skip
+    return np.column_stack(
+        [1e-4 * np.sin(q[:, 1]), 5e-5 * np.cos(q[:, 1] + q[:, 2]), 2e-5 * np.sin(2 * q[:, 2])]
+    )
 
 
 def test_smooth_structure_is_recovered_and_the_other_joints_found_irrelevant() -> None:
@@ -99,8 +101,9 @@ def test_the_likelihood_and_its_gradient_are_those_of_the_distance_form(n_target
         np.sum(np.log(np.diag(np.linalg.cholesky(k))))
     )
     assert value == pytest.approx(expected, rel=1e-12)
-    numeric = approx_fprime(theta, lambda t: _negative_log_likelihood(t, inputs, y, n_joints)[0],
-                            1e-6)  # fmt: skip
+    numeric = approx_fprime(
+        theta, lambda t: _negative_log_likelihood(t, inputs, y, n_joints)[0], 1e-6
+    )
     assert np.max(np.abs(grad - numeric)) < 1e-4 * np.max(np.abs(numeric))
 
 
@@ -142,8 +145,9 @@ def test_compliance_the_geometry_lacks_is_learnable(
 ) -> None:
     scenario, geo = compliant
     no_folds = np.zeros(len(scenario.calibration), int)
-    bound = learnable_bound(geo, scenario.calibration, scenario.holdout, no_folds, {},
-                            "hold-out bags")  # fmt: skip
+    bound = learnable_bound(
+        geo, scenario.calibration, scenario.holdout, no_folds, {}, "hold-out bags"
+    )
     assert bound.learnable_share > 0.65, bound.line()
     assert bound.holdout_abs_rms_mm < 0.35 * bound.geometric_abs_rms_mm
     # compliance is linear in the gravity torque: the load-driven geometry learns it (joints
@@ -163,8 +167,9 @@ def test_gear_harmonics_of_joint_2_are_partly_learnable_on_the_ur10_gear_world()
     scenario = ur10_random(seed=0)
     geo = calibrate(scenario.calibration, scenario.world.model.robot, "geometric")
     no_folds = np.zeros(len(scenario.calibration), int)
-    bound = learnable_bound(geo, scenario.calibration, scenario.holdout, no_folds, {},
-                            "hold-out bags")  # fmt: skip
+    bound = learnable_bound(
+        geo, scenario.calibration, scenario.holdout, no_folds, {}, "hold-out bags"
+    )
     assert bound.learnable_share > 0.4, bound.line()
     joint2 = bound.length_scales_deg[1]
     assert joint2 is not None and joint2 < 10, bound.length_scales_deg  # period 13 deg
@@ -196,8 +201,9 @@ def test_a_correction_survives_json_exactly() -> None:
     correction = fit_correction(poses, residual, 2)
     text = json.dumps(correction.to_dict())
     back = ResidualCorrection.from_dict(json.loads(text), "PARAMS.json: correction")
-    new = replace(Poses.from_readings(rng.uniform(-np.pi, np.pi, (200, 6))),
-                  target=rng.integers(0, 2, 200))  # fmt: skip
+    new = replace(
+        Poses.from_readings(rng.uniform(-np.pi, np.pi, (200, 6))), target=rng.integers(0, 2, 200)
+    )
     assert np.allclose(back.predict(new), correction.predict(new), rtol=0, atol=1e-12)
     assert back.length_scales_deg == correction.length_scales_deg
     doc = json.loads(text)
@@ -205,8 +211,9 @@ def test_a_correction_survives_json_exactly() -> None:
     with pytest.raises(InputError, match=r"^x.json: correction: malformed .*dual"):
         ResidualCorrection.from_dict(doc, "x.json: correction")
     with pytest.raises(InputError, match="x.json: correction: not a learned correction"):
-        ResidualCorrection.from_dict({**doc, "format": "robot_calib.correction/99"},
-                                     "x.json: correction")  # fmt: skip
+        ResidualCorrection.from_dict(
+            {**doc, "format": "robot_calib.correction/99"}, "x.json: correction"
+        )
     # finite but absurd: a predicted correction of kilometres, or NaN, is never applied
     good = json.loads(text)
     for change, said in (
@@ -234,8 +241,7 @@ def test_the_hybrid_model_round_trips_through_params_json(
     assert len(json.dumps(doc, indent=2)) < 1_000_000
     back = Calibration.from_dict(doc, "hybrid.json")
     assert back.correction is not None
-    assert np.allclose(back.predict(held.poses), hybrid.predict(held.poses), rtol=0,
-                       atol=1e-12)  # fmt: skip
+    assert np.allclose(back.predict(held.poses), hybrid.predict(held.poses), rtol=0, atol=1e-12)
     assert rms_mm(back.predict(held.poses) - held.points) < 0.5 * rms_mm(
         geo.predict(held.poses) - held.points
     )
@@ -279,8 +285,12 @@ def test_compensating_with_the_hybrid_model_puts_the_true_tool_nearer(
     # converged, and it says so of every row here (measured: 1e-9 m)
     assert found.converged.all()
     assert np.abs(hybrid.predict(at) - goal_in_tracker).max() < 1e-7
-    assert np.allclose(found.error_m, np.linalg.norm(hybrid.predict(at) - goal_in_tracker,
-                                                     axis=1), rtol=0, atol=1e-12)  # fmt: skip
+    assert np.allclose(
+        found.error_m,
+        np.linalg.norm(hybrid.predict(at) - goal_in_tracker, axis=1),
+        rtol=0,
+        atol=1e-12,
+    )
     assert errors["hybrid"] < 0.5 * errors["physical"], errors
 
 

@@ -34,18 +34,22 @@ def rms_mm(residuals: Array) -> float:
 def hybrid_ratio(scenario: Scenario, model: str) -> tuple[float, float, StructuredCorrection]:
     """Held-out rms / noise floor of the physical model and of the hybrid."""
     cal = calibrate(scenario.calibration, scenario.world.model.robot, model)
-    correction = fit_structured(cal.model, cal.parameters, scenario.calibration.poses,
-                                cal.residuals)  # fmt: skip
+    correction = fit_structured(
+        cal.model, cal.parameters, scenario.calibration.poses, cal.residuals
+    )
     floor = noise_rms_mm(scenario.world, scenario.holdout)
     held = cal.predict(scenario.holdout.poses) - scenario.holdout.points
     after = held - correction.predict(scenario.holdout.poses)
     return rms_mm(held) / floor, rms_mm(after) / floor, correction
 
 
-@pytest.mark.parametrize(("kind", "joint", "motion"), [
-    ("gravity_backlash", 2, "rz"),  # joint 2's angle steps with its gravity torque's sign
-    ("link_bending", 4, "rx"),  # joint 4's housing tilts about link 3's axis
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("kind", "joint", "motion"),
+    [
+        ("gravity_backlash", 2, "rz"),  # joint 2's angle steps with its gravity torque's sign
+        ("link_bending", 4, "rx"),  # joint 4's housing tilts about link 3's axis
+    ],
+)
 def test_out_of_vocabulary_effects_come_to_the_floor(kind: str, joint: int, motion: str) -> None:
     scenario = ur10_out_of_vocabulary(kind, seed=0, n=1000)
     physical, hybrid, correction = hybrid_ratio(scenario, "geometric")
@@ -74,8 +78,9 @@ def load(doc: dict[str, Any]) -> StructuredCorrection:
     """The structured correction of a PARAMS.json document `doc` ('bad.json'), checked
     against the file's own parameters."""
     cal = Calibration.from_dict(doc, "bad.json")  # the file's model and parameters
-    out = correction_from_dict(doc["correction"], cal.model, "bad.json: correction",
-                               cal.parameters)  # fmt: skip
+    out = correction_from_dict(
+        doc["correction"], cal.model, "bad.json: correction", cal.parameters
+    )
     assert isinstance(out, StructuredCorrection)
     return out
 
@@ -89,8 +94,7 @@ def test_the_structured_correction_round_trips_through_params_json() -> None:
     doc = json.loads(json.dumps(hybrid.to_dict(recording)))
     assert doc["correction"]["format"] == "robot_calib.correction/2"
     back = Calibration.from_dict(doc, "hybrid.json")
-    assert np.allclose(back.predict(held.poses), hybrid.predict(held.poses), rtol=0,
-                       atol=1e-12)  # fmt: skip
+    assert np.allclose(back.predict(held.poses), hybrid.predict(held.poses), rtol=0, atol=1e-12)
     assert rms_mm(back.predict(held.poses) - held.points) < 0.5 * rms_mm(
         geo.predict(held.poses) - held.points
     )
@@ -99,8 +103,9 @@ def test_the_structured_correction_round_trips_through_params_json() -> None:
     assert old["correction"]["format"] == "robot_calib.correction/1"
     loaded = Calibration.from_dict(old, "old.json").correction
     assert loaded is not None and not isinstance(loaded, StructuredCorrection)
-    assert np.allclose(loaded.predict(held.poses), hybrid.correction.gp.predict(held.poses),
-                       rtol=0, atol=1e-12)  # fmt: skip
+    assert np.allclose(
+        loaded.predict(held.poses), hybrid.correction.gp.predict(held.poses), rtol=0, atol=1e-12
+    )
     structured = doc["correction"]["structured"]
     parameters = structured["parameters"]
     changed = dict(parameters, **{k: v + 1e-9 for k, v in list(parameters.items())[:1]})
@@ -109,17 +114,21 @@ def test_the_structured_correction_round_trips_through_params_json() -> None:
         ({"parameters": {"bogus": 0.0}}, "do not match"),
         ({"rms_m": 1.0}, "beyond"),
         # beyond physics: what it predicts at its own poses, against its stored size
-        ({"coefficients": [1e4 * c for c in structured["coefficients"]]},
-         "predicts .* mm at its own poses"),
-        ({"coefficients": [1.5 * c for c in structured["coefficients"]]},
-         "structured.rms_m .* it predicts"),
+        (
+            {"coefficients": [1e4 * c for c in structured["coefficients"]]},
+            "predicts .* mm at its own poses",
+        ),
+        (
+            {"coefficients": [1.5 * c for c in structured["coefficients"]]},
+            "structured.rms_m .* it predicts",
+        ),
         ({"rms_m": 0.5 * structured["rms_m"]}, "structured.rms_m .* it predicts"),
         ({"ridge": -5.0}, "ridge must be >= 0"),
         ({"degrees_of_freedom": -1.0}, "degrees_of_freedom must be >= 0"),
         ({"ridge": None}, "coefficients must be zero with ridge null"),
         # its own parameters: those of the file
         ({"parameters": changed}, "differ from the file's parameters"),
-    ):  # fmt: skip
+    ):
         bad = json.loads(json.dumps(doc))
         bad["correction"]["structured"].update(change)
         with pytest.raises(InputError, match=f"^bad.json: correction: .*{said}"):

@@ -57,6 +57,13 @@ def test_a_target_near_an_axis_is_warned_about() -> None:
     points = physical_points(world, Poses.from_readings(q), np.random.default_rng(1))
     cal = calibrate(recording_from_arrays(q, points), ROBOT, "cpa")
     assert any("sweep of joint 6" in w and "too close" in w for w in cal.cpa.warnings)
-    assert not any("too close" in w for w in calibrate(recording_from_arrays(
-        q, physical_points(WORLD, Poses.from_readings(q), np.random.default_rng(1))), ROBOT,
-        "cpa").cpa.warnings)  # fmt: skip
+    assert not any(
+        "too close" in w
+        for w in calibrate(
+            recording_from_arrays(
+                q, physical_points(WORLD, Poses.from_readings(q), np.random.default_rng(1))
+            ),
+            ROBOT,
+            "cpa",
+        ).cpa.warnings
+    )

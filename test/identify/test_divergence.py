@@ -92,8 +92,9 @@ def strings(family: str) -> tuple[str, ...]:
     if family in FAMILIES:
         return FAMILIES[family]
     scenario, rec = campaign()
-    return tuple(e.spec for e in EFFECTS[family].ladder_candidates(scenario.world.model.robot,
-                                                                   rec.poses))  # fmt: skip
+    return tuple(
+        e.spec for e in EFFECTS[family].ladder_candidates(scenario.world.model.robot, rec.poses)
+    )
 
 
 @pytest.mark.parametrize("family", sorted({*vocabulary(), *FAMILIES}))
@@ -114,8 +115,9 @@ def test_every_family_of_the_vocabulary_is_guarded() -> None:
     robot = scenario.world.model.robot
     for family in vocabulary():
         assert strings(family), family  # no family without a string (a ladder candidate)
-    named = {t.split(":")[0] for terms in FAMILIES.values() for term in terms
-             for t in term.split("+")}  # fmt: skip
+    named = {
+        t.split(":")[0] for terms in FAMILIES.values() for term in terms for t in term.split("+")
+    }
     assert named <= set(vocabulary()) and robot.n_joints == len(ALL)
 
 
@@ -126,10 +128,13 @@ def flipped_by_hand(cal: Calibration, joint: int) -> Calibration:
     """`cal` with DH frame `joint` turned by pi about its z axis: theta_j + pi, a_j,
     alpha_j, beta_j negated, theta_{j+1} - pi (identify.canonical's docstring)."""
     p = cal.parameters
-    updates = {f"theta{joint}": p[f"theta{joint}"] + np.pi,
-               f"theta{joint + 1}": p[f"theta{joint + 1}"] - np.pi}  # fmt: skip
-    updates |= {f"{f}{joint}": -p[f"{f}{joint}"] for f in ("a", "alpha", "beta")
-                if f"{f}{joint}" in p}  # fmt: skip
+    updates = {
+        f"theta{joint}": p[f"theta{joint}"] + np.pi,
+        f"theta{joint + 1}": p[f"theta{joint + 1}"] - np.pi,
+    }
+    updates |= {
+        f"{f}{joint}": -p[f"{f}{joint}"] for f in ("a", "alpha", "beta") if f"{f}{joint}" in p
+    }
     return replace(cal, parameters=p.with_values(updates))
 
 

@@ -142,8 +142,9 @@ def test_eccentricity_needs_general_poses_and_then_reaches_the_noise_floor() -> 
 
     # Sweeps alone: the fit is perfect in-sample but leaves more terms unidentified and
     # generalises worse; the output says which terms it fixed.
-    sweeps_only = calibrate(recording_from_arrays(plan.q, points[: len(plan.q)]), ROBOT,
-                            "geometric+eccentricity")  # fmt: skip
+    sweeps_only = calibrate(
+        recording_from_arrays(plan.q, points[: len(plan.q)]), ROBOT, "geometric+eccentricity"
+    )
     assert len(sweeps_only.identifiability.fixed) > len(ecc.identifiability.fixed)
     assert accuracy(h_points, sweeps_only.predict(h_poses)).pairwise_mean_mm > 3 * (
         ecc_h.pairwise_mean_mm

@@ -92,8 +92,9 @@ def test_the_diagnosis_never_calls_a_blunder_an_effect() -> None:
     case = make_case("none", 1)
     rng = np.random.default_rng(2)
     points, index = corrupt(case.calibration.points, np.full(3, 5e-3), rng)
-    calibration = recording_from_arrays(case.calibration.poses.q, points,
-                                        case.calibration.poses.time, source="cal")  # fmt: skip
+    calibration = recording_from_arrays(
+        case.calibration.poses.q, points, case.calibration.poses.time, source="cal"
+    )
     h_points, h_index = corrupt(case.holdout.points, np.array([5e-3]), rng)
     holdout = recording_from_arrays(case.holdout.poses.q, h_points, source="hold")
     diagnosis, _ = diagnose(calibration, ROBOT, holdout)
@@ -128,9 +129,13 @@ def test_the_calibration_command_lists_outliers(tmp_path: Path) -> None:
 def test_a_target_far_from_the_flange_is_found_from_any_start(model: str) -> None:
     """0.34 m off the flange, tracker turned far from the default: the frames come out of a
     global start, nothing is fixed as 'not identifiable', the residual is the model's."""
-    world = build_world({"target_in_flange_m": [0.34, 0.0, 0.0],
-                         "base2tracker": {"xyz_m": [3.0, -2.0, 1.0], "rpy_deg": [170, -30, 95]}},
-                        "far target")  # fmt: skip
+    world = build_world(
+        {
+            "target_in_flange_m": [0.34, 0.0, 0.0],
+            "base2tracker": {"xyz_m": [3.0, -2.0, 1.0], "rpy_deg": [170, -30, 95]},
+        },
+        "far target",
+    )
     rng = np.random.default_rng(0)
     q = random_plan(ROBOT, 300, rng).q
     recording = recording_from_arrays(q, physical_points(world, Poses.from_readings(q), rng))

@@ -139,8 +139,7 @@ def test_calibrate_of_readings_in_degrees_exits_3_and_the_file_is_refused(tmp_pa
         assert proc.returncode == 2 and not (tmp_path / "out").exists(), proc.stderr
         assert "p.json: fitted, implausible (readings of joint(s) 1 (" in proc.stderr
         assert "--force to use it anyway" in proc.stderr
-    proc = cli("predict", "p.json", "--joints", "j.csv", "--force", "-o", "out.csv",
-               cwd=tmp_path)  # fmt: skip
+    proc = cli("predict", "p.json", "--joints", "j.csv", "--force", "-o", "out.csv", cwd=tmp_path)
     assert proc.returncode == 0 and (tmp_path / "out.csv").exists(), proc.stderr
     assert "warning: p.json: fitted, implausible (" in proc.stderr
 
@@ -172,8 +171,9 @@ def test_diagnose_of_readings_in_degrees_exits_3_without_a_traceback(tmp_path: P
     scenario = ur10_random(seed=4, n=150, holdout_share=0.0)
     rec = scenario.calibration
     robot = scenario.world.model.robot
-    write_measurement_bag(tmp_path / "deg.mcap", np.degrees(rec.poses.q), rec.points,
-                          robot.joint_names)  # fmt: skip
+    write_measurement_bag(
+        tmp_path / "deg.mcap", np.degrees(rec.poses.q), rec.points, robot.joint_names
+    )
     proc = cli("diagnose", "deg.mcap", "--robot", "ur10", "-o", "d.json", cwd=tmp_path)
     assert proc.returncode == 3, proc.stderr
     assert "Traceback" not in proc.stderr
@@ -195,12 +195,27 @@ def test_diagnose_with_hold_out_readings_in_degrees_exits_3(tmp_path: Path) -> N
     scenario = ur10_random(seed=5, n=200, holdout_share=0.3)
     robot, cal, held = scenario.world.model.robot, scenario.calibration, scenario.holdout
     stamps = START_NS + np.arange(len(cal) + len(held)) * STEP_NS
-    write_measurements(tmp_path / "cal.mcap", cal.poses.q, cal.points, robot.joint_names,
-                       stamps[: len(cal)])  # fmt: skip
-    write_measurements(tmp_path / "deg.mcap", np.degrees(held.poses.q), held.points,
-                       robot.joint_names, stamps[len(cal) :])  # fmt: skip
-    proc = cli("diagnose", "cal.mcap", "--holdout", "deg.mcap", "--robot", "ur10",
-               "-o", "d.json", cwd=tmp_path)  # fmt: skip
+    write_measurements(
+        tmp_path / "cal.mcap", cal.poses.q, cal.points, robot.joint_names, stamps[: len(cal)]
+    )
+    write_measurements(
+        tmp_path / "deg.mcap",
+        np.degrees(held.poses.q),
+        held.points,
+        robot.joint_names,
+        stamps[len(cal) :],
+    )
+    proc = cli(
+        "diagnose",
+        "cal.mcap",
+        "--holdout",
+        "deg.mcap",
+        "--robot",
+        "ur10",
+        "-o",
+        "d.json",
+        cwd=tmp_path,
+    )
     assert proc.returncode == 3, proc.stderr
     doc = json.loads((tmp_path / "d.json").read_text())
     assert any("hold-out readings" in r and "degrees" in r for r in doc["implausible"])

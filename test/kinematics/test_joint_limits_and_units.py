@@ -47,8 +47,11 @@ def test_one_check_one_message_in_rad_and_deg() -> None:
     with pytest.raises(JointLimitError, match=r"pose 0: joint_a5 = 1.74533 rad \(100.00 deg\)"):
         ROBOT.check_joints(np.degrees(beyond), "t", unit="deg")
     ROBOT.check_joints(np.degrees(INSIDE), "t", unit="deg")
-    with pytest.raises(JointLimitError, match="joint_a2 = -90 rad is beyond any reading of "
-                       "this joint in rad .* degrees\\? joint readings take rad"):  # fmt: skip
+    with pytest.raises(
+        JointLimitError,
+        match="joint_a2 = -90 rad is beyond any reading of "
+        "this joint in rad .* degrees\\? joint readings take rad",
+    ):
         ROBOT.check_joints(np.degrees(INSIDE), "t")
     nan = INSIDE.copy()
     nan[2] = np.nan
@@ -118,8 +121,13 @@ def test_the_compensator_forwards_no_degrees_and_nothing_beyond_the_limits(
     beyond[4, 1] = np.radians(10.0)  # joint_a2's limits: [-162, -5] deg
     errors = []
     try:
-        spin_until(executor, lambda: publisher.get_subscription_count() > 0
-                   and compensator.publisher.get_subscription_count() > 0)  # fmt: skip
+        spin_until(
+            executor,
+            lambda: (
+                publisher.get_subscription_count() > 0
+                and compensator.publisher.get_subscription_count() > 0
+            ),
+        )
         for k, sent in enumerate((np.degrees(q), beyond, q), start=1):
             publisher.publish(trajectory(sent))
             spin_until(executor, lambda k=k: compensator.received == k)
@@ -152,8 +160,9 @@ def test_compensate_flags_commands_beyond_the_limits(tmp_path: Path, params_file
     q[2, 1] = np.radians(10.0)
     joints = tmp_path / "j.csv"
     np.savetxt(joints, q, delimiter=",", comments="", header="q1,q2,q3,q4,q5,q6")
-    proc = cli("compensate", str(params_file), "--joints", str(joints), "-o", "out.csv",
-               cwd=tmp_path)  # fmt: skip
+    proc = cli(
+        "compensate", str(params_file), "--joints", str(joints), "-o", "out.csv", cwd=tmp_path
+    )
     assert proc.returncode == 0, proc.stderr
     with (tmp_path / "out.csv").open() as handle:
         status = [row["status"] for row in csv.DictReader(handle)]

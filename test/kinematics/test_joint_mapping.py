@@ -132,8 +132,18 @@ def test_coupled_robot_calibrates_from_raw_readings(tmp_path: Path) -> None:
     (tmp_path / "w.yaml").write_text(
         f"robot: {robot_file}\ngeometry: nominal\ndeviations: {DEVIATIONS}\n"
     )
-    sim = run("simulate", "--world", "w.yaml", "--plan", "paper-test2", "--seed", "3",
-              "-o", "b.mcap", cwd=tmp_path)  # fmt: skip
+    sim = run(
+        "simulate",
+        "--world",
+        "w.yaml",
+        "--plan",
+        "paper-test2",
+        "--seed",
+        "3",
+        "-o",
+        "b.mcap",
+        cwd=tmp_path,
+    )
     assert sim.returncode == 0, sim.stderr
     cal = run("calibrate", "b.mcap", "--robot", str(robot_file), "-o", "p.json", cwd=tmp_path)
     assert cal.returncode == 0, cal.stderr

@@ -53,20 +53,27 @@ def model_flange(robot: RobotDescription, q: np.ndarray) -> np.ndarray:
 
 def _write(path: Path, rows: list[dict[str, float]], **extra: object) -> Path:
     joints = [{"name": f"j{i + 1}", **row, "limits": [-3.0, 3.0]} for i, row in enumerate(rows)]
-    path.write_text(yaml.safe_dump({"name": "mdh_arm", "convention": "modified_dh",
-                                    "joints": joints, **extra}))  # fmt: skip
+    path.write_text(
+        yaml.safe_dump({"name": "mdh_arm", "convention": "modified_dh", "joints": joints, **extra})
+    )
     return path
 
 
-def random_craig_rows(rng: np.random.Generator, theta1: float,
-                      d1: float) -> list[dict[str, float]]:  # fmt: skip
+def random_craig_rows(
+    rng: np.random.Generator, theta1: float, d1: float
+) -> list[dict[str, float]]:
     """A random 6-joint Craig table (rad, m): row 1 on the base axis (alpha_0 = a_0 = 0,
     theta1, d1), rows 2-6 drawn, each twist well away from 0 and pi."""
     rows = [{"alpha": 0.0, "a": 0.0, "theta": theta1, "d": d1}]
     for _ in range(5):
-        rows.append({"alpha": float(rng.choice([-1, 1]) * rng.uniform(0.3, 2.8)),
-                     "a": float(rng.uniform(-0.5, 0.5)), "theta": float(rng.uniform(-3, 3)),
-                     "d": float(rng.uniform(-0.5, 0.5))})  # fmt: skip
+        rows.append(
+            {
+                "alpha": float(rng.choice([-1, 1]) * rng.uniform(0.3, 2.8)),
+                "a": float(rng.uniform(-0.5, 0.5)),
+                "theta": float(rng.uniform(-3, 3)),
+                "d": float(rng.uniform(-0.5, 0.5)),
+            }
+        )
     return rows
 
 
@@ -100,22 +107,28 @@ def test_the_kr5_written_as_modified_dh_is_the_kr5() -> None:
         alpha, a = np.radians(entry["alpha"]), entry["a"]  # standard frame i -> modified i
         com = np.array(entry.get("com", [0.0, 0.0, 0.0]))
         c, s = np.cos(alpha), np.sin(alpha)
-        row["com"] = [float(com[0] + a), float(c * com[1] - s * com[2]),
-                      float(s * com[1] + c * com[2])]  # fmt: skip
+        row["com"] = [
+            float(com[0] + a),
+            float(c * com[1] - s * com[2]),
+            float(s * com[1] + c * com[2]),
+        ]
         modified.append(row)
     doc["joints"], doc["convention"] = modified, "modified_dh"
     from robot_calib.kinematics.description import parse_robot
 
     again = parse_robot(doc, "kr5_modified.yaml")
     for field in ("theta", "d", "a", "alpha", "beta", "link_mass", "link_com"):
-        np.testing.assert_allclose(getattr(again, field), getattr(kr5, field), atol=1e-12,
-                                   err_msg=field)  # fmt: skip
+        np.testing.assert_allclose(
+            getattr(again, field), getattr(kr5, field), atol=1e-12, err_msg=field
+        )
     assert again.hayati.tolist() == kr5.hayati.tolist()
 
 
 def test_a_modified_table_off_the_base_axis_is_refused(tmp_path: Path) -> None:
-    rows = [{"alpha": 0.2, "a": 0.0, "theta": 0.0, "d": 0.4}, {"alpha": 1.0, "a": 0.1,
-            "theta": 0.0, "d": 0.0}]  # fmt: skip
+    rows = [
+        {"alpha": 0.2, "a": 0.0, "theta": 0.0, "d": 0.4},
+        {"alpha": 1.0, "a": 0.1, "theta": 0.0, "d": 0.0},
+    ]
     with pytest.raises(RobotDescriptionError, match="alpha .* must be 0"):
         load_robot(str(_write(tmp_path / "off.yaml", rows)))
     with pytest.raises(RobotDescriptionError, match="convention must be one of"):
@@ -125,19 +138,39 @@ def test_a_modified_table_off_the_base_axis_is_refused(tmp_path: Path) -> None:
 def test_a_modified_table_calibrates_and_exports_as_urdf(tmp_path: Path) -> None:
     """Simulated, calibrated (nominal) and exported as a URDF: the URDF's chain from its base
     to its flange is the table's, to 1e-9 m (the URDF's decimals)."""
-    rows = [{"alpha": 0.0, "a": 0.0, "theta": 0.0, "d": 0.4},
-            {"alpha": -np.pi / 2, "a": 0.15, "theta": -np.pi / 2, "d": 0.0},
-            {"alpha": 0.0, "a": 0.55, "theta": 0.0, "d": 0.0},
-            {"alpha": -np.pi / 2, "a": 0.12, "theta": 0.0, "d": 0.62},
-            {"alpha": np.pi / 2, "a": 0.0, "theta": 0.0, "d": 0.0},
-            {"alpha": -np.pi / 2, "a": 0.0, "theta": 0.0, "d": 0.1}]  # fmt: skip
+    rows = [
+        {"alpha": 0.0, "a": 0.0, "theta": 0.0, "d": 0.4},
+        {"alpha": -np.pi / 2, "a": 0.15, "theta": -np.pi / 2, "d": 0.0},
+        {"alpha": 0.0, "a": 0.55, "theta": 0.0, "d": 0.0},
+        {"alpha": -np.pi / 2, "a": 0.12, "theta": 0.0, "d": 0.62},
+        {"alpha": np.pi / 2, "a": 0.0, "theta": 0.0, "d": 0.0},
+        {"alpha": -np.pi / 2, "a": 0.0, "theta": 0.0, "d": 0.1},
+    ]
     arm = _write(tmp_path / "arm.yaml", rows)
-    for args in (("simulate", "--robot", str(arm), "--plan", "random", "--n-random", "40",
-                  "-o", str(tmp_path / "m.mcap")),
-                 ("calibrate", str(tmp_path / "m.mcap"), "--robot", str(arm), "--model",
-                  "nominal", "-o", str(tmp_path / "n.json")),
-                 ("export", str(tmp_path / "n.json"), "--format", "urdf",
-                  "-o", str(tmp_path / "arm.urdf"))):  # fmt: skip
+    for args in (
+        (
+            "simulate",
+            "--robot",
+            str(arm),
+            "--plan",
+            "random",
+            "--n-random",
+            "40",
+            "-o",
+            str(tmp_path / "m.mcap"),
+        ),
+        (
+            "calibrate",
+            str(tmp_path / "m.mcap"),
+            "--robot",
+            str(arm),
+            "--model",
+            "nominal",
+            "-o",
+            str(tmp_path / "n.json"),
+        ),
+        ("export", str(tmp_path / "n.json"), "--format", "urdf", "-o", str(tmp_path / "arm.urdf")),
+    ):
         run = cli(*args)
         assert run.returncode == 0, (args, run.stderr)
     from robot_calib.kinematics.urdf import load_urdf
@@ -161,8 +194,10 @@ def test_a_modified_table_as_csv_gives_its_own_forward_kinematics(tmp_path: Path
     table of the KR5 as CSV is the built-in KR5."""
     rng = np.random.default_rng(8)
     rows = random_craig_rows(rng, theta1=0.2, d1=0.35)
-    table = [[np.degrees(r["alpha"]), r["a"] * 1e3, np.degrees(r["theta"]), r["d"] * 1e3, -170.0,
-              170.0] for r in rows]  # fmt: skip
+    table = [
+        [np.degrees(r["alpha"]), r["a"] * 1e3, np.degrees(r["theta"]), r["d"] * 1e3, -170.0, 170.0]
+        for r in rows
+    ]
     path = _csv(
         tmp_path / "craig.csv",
         "alpha_{i-1} [deg],a_{i-1} [mm],theta [deg],d [mm],min [deg],max [deg]",
@@ -177,33 +212,47 @@ def test_a_modified_table_as_csv_gives_its_own_forward_kinematics(tmp_path: Path
     np.testing.assert_allclose(np.degrees(robot.limits), [[-170.0, 170.0]] * 6)
     kr5 = load_robot("kr5_sixx_r650")
     doc = yaml.safe_load((ROOT / "robot_calib/kinematics/robots/kr5_sixx_r650.yaml").read_text())
-    standard = [[j["name"], j["theta"], j["d"], j["a"], j["alpha"], *j["limits"]]
-                for j in doc["joints"]]  # fmt: skip
+    standard = [
+        [j["name"], j["theta"], j["d"], j["a"], j["alpha"], *j["limits"]] for j in doc["joints"]
+    ]
     dh = tmp_path / "kr5.csv"
     lines = [",".join(str(v) for v in row) for row in standard]
     dh.write_text("\n".join(["name,theta_deg,d_m,a_m,alpha_deg,min_deg,max_deg", *lines]) + "\n")
     again = load_robot(str(dh))
     for field in ("theta", "d", "a", "alpha", "beta", "limits"):
-        np.testing.assert_allclose(getattr(again, field), getattr(kr5, field), atol=1e-12,
-                                   err_msg=field)  # fmt: skip
+        np.testing.assert_allclose(
+            getattr(again, field), getattr(kr5, field), atol=1e-12, err_msg=field
+        )
     assert again.hayati.tolist() == kr5.hayati.tolist() and again.joint_names == kr5.joint_names
 
 
 @pytest.mark.parametrize(
     ("header", "row", "said"),
     [
-        ("alpha_prev,a_prev [mm],theta [deg],d [mm]", "0,0,0,400", "column 'alpha_prev' has no "
-         "unit: write it as 'alpha_prev [deg or rad]'"),
-        ("alpha_prev [deg],a_prev [mm],theta [deg],d [mm],offset [deg]", "0,0,0,400,0",
-         "column 'offset [deg]' is none of"),
-        ("alpha_prev [deg],a_prev [mm],a [mm],theta [deg],d [mm]", "0,0,0,0,400",
-         "not both a and a_prev"),
+        (
+            "alpha_prev,a_prev [mm],theta [deg],d [mm]",
+            "0,0,0,400",
+            "column 'alpha_prev' has no unit: write it as 'alpha_prev [deg or rad]'",
+        ),
+        (
+            "alpha_prev [deg],a_prev [mm],theta [deg],d [mm],offset [deg]",
+            "0,0,0,400,0",
+            "column 'offset [deg]' is none of",
+        ),
+        (
+            "alpha_prev [deg],a_prev [mm],a [mm],theta [deg],d [mm]",
+            "0,0,0,0,400",
+            "not both a and a_prev",
+        ),
         ("alpha [deg],a [mm],theta [deg],d [mm]", "0,0,zero,400", "joint 1: theta: 'zero' is no"),
         ("alpha [deg],a [mm],theta [deg],d [inch]", "0,0,0,400", "column 'd [inch]' has unit"),
-        ("alpha [deg],a [mm],theta [deg],d [mm],min [deg]", "0,0,0,400,-10",
-         "limits need both min and max"),
+        (
+            "alpha [deg],a [mm],theta [deg],d [mm],min [deg]",
+            "0,0,0,400,-10",
+            "limits need both min and max",
+        ),
     ],
-)  # fmt: skip
+)
 def test_a_bad_csv_table_is_one_line_naming_the_file(
     tmp_path: Path, header: str, row: str, said: str
 ) -> None:
@@ -217,13 +266,39 @@ def test_a_bad_csv_table_is_one_line_naming_the_file(
 def test_a_csv_table_calibrates_and_its_result_carries_the_table(tmp_path: Path) -> None:
     """Simulated and calibrated with --robot arm.csv: PARAMS.json carries the table's text,
     so it loads (and predicts) with the CSV file gone."""
-    arm = _csv(tmp_path / "arm.csv", "alpha_prev [deg],a_prev [m],theta [deg],d [m],mass [kg]",
-               [[0, 0, 0, 0.4, 10], [-90, 0.15, -90, 0, 8], [0, 0.55, 0, 0, 5],
-                [-90, 0.12, 0, 0.62, 3], [90, 0, 0, 0, 1], [-90, 0, 0, 0.1, 0.3]])  # fmt: skip
-    for args in (("simulate", "--robot", str(arm), "--plan", "random", "--n-random", "40",
-                  "-o", str(tmp_path / "m.mcap")),
-                 ("calibrate", str(tmp_path / "m.mcap"), "--robot", str(arm),
-                  "-o", str(tmp_path / "p.json"))):  # fmt: skip
+    arm = _csv(
+        tmp_path / "arm.csv",
+        "alpha_prev [deg],a_prev [m],theta [deg],d [m],mass [kg]",
+        [
+            [0, 0, 0, 0.4, 10],
+            [-90, 0.15, -90, 0, 8],
+            [0, 0.55, 0, 0, 5],
+            [-90, 0.12, 0, 0.62, 3],
+            [90, 0, 0, 0, 1],
+            [-90, 0, 0, 0.1, 0.3],
+        ],
+    )
+    for args in (
+        (
+            "simulate",
+            "--robot",
+            str(arm),
+            "--plan",
+            "random",
+            "--n-random",
+            "40",
+            "-o",
+            str(tmp_path / "m.mcap"),
+        ),
+        (
+            "calibrate",
+            str(tmp_path / "m.mcap"),
+            "--robot",
+            str(arm),
+            "-o",
+            str(tmp_path / "p.json"),
+        ),
+    ):
         run = cli(*args)
         assert run.returncode == 0, (args, run.stderr)
     text = arm.read_text()
@@ -241,6 +316,7 @@ def test_the_example_table_as_csv_is_the_example_yaml() -> None:
     csv_arm = load_robot(str(ROOT / "docs/examples/craig_arm.csv"))
     yaml_arm = load_robot(str(ROOT / "docs/examples/craig_arm.yaml"))
     for field in ("theta", "d", "a", "alpha", "beta", "limits", "link_mass", "link_com"):
-        np.testing.assert_allclose(getattr(csv_arm, field), getattr(yaml_arm, field),
-                                   atol=1e-12, err_msg=field)  # fmt: skip
+        np.testing.assert_allclose(
+            getattr(csv_arm, field), getattr(yaml_arm, field), atol=1e-12, err_msg=field
+        )
     assert csv_arm.joint_names == yaml_arm.joint_names

@@ -106,17 +106,21 @@ def test_urdf_model_matches_urdf_and_yaml_forward_kinematics(name: str) -> None:
 
     # (i) our model built from the URDF-derived table vs the URDF's own kinematics
     direct = np.array(
-        [urdf_tip2base(path, BASE_LINK[name], "tool0", dict(zip(robot.joint_names, qi)))
-         for qi in q]
-    )  # fmt: skip
+        [
+            urdf_tip2base(path, BASE_LINK[name], "tool0", dict(zip(robot.joint_names, qi)))
+            for qi in q
+        ]
+    )
     ours = urdf.dh02base @ model_flange2base(robot, q) @ urdf.tip2flange
     gap_urdf = np.linalg.norm(points(ours) - points(direct), axis=-1).max()
     # (ii) the URDF-derived table vs the built-in YAML table: the same flange
     gap_yaml = np.linalg.norm(
         points(model_flange2base(robot, q)) - points(model_flange2base(yaml_robot, q)), axis=-1
     ).max()
-    print(f"{name}: max |URDF FK - model| {gap_urdf / UM:.2e} um, "
-          f"|URDF table - YAML table| {gap_yaml / UM:.2e} um")  # fmt: skip
+    print(
+        f"{name}: max |URDF FK - model| {gap_urdf / UM:.2e} um, "
+        f"|URDF table - YAML table| {gap_yaml / UM:.2e} um"
+    )
     assert gap_urdf < UM and gap_yaml < UM
     # tool0 is DH frame 6 and the base (z up, on axis 1) DH frame 0: no leftovers
     np.testing.assert_allclose(urdf.tip2flange, np.eye(4), atol=1e-9)
@@ -127,11 +131,18 @@ def test_urdf_model_matches_urdf_and_yaml_forward_kinematics(name: str) -> None:
 # transcribed (joint origins, axes, limits; `base` = the manufacturer's base frame, `tool0` =
 # the flange frame).
 MANUFACTURER_URDFS = [
-    "kr6_r900_sixx", "kr16_2", "kr210_r2700_extra",
-    "irb120_3_58", "irb2600_12_165", "irb6700_200_260",
-    "r2000ic_165f", "m20ia",
-    "gp7", "gp8", "gp25",
-]  # fmt: skip
+    "kr6_r900_sixx",
+    "kr16_2",
+    "kr210_r2700_extra",
+    "irb120_3_58",
+    "irb2600_12_165",
+    "irb6700_200_260",
+    "r2000ic_165f",
+    "m20ia",
+    "gp7",
+    "gp8",
+    "gp25",
+]
 # FANUC: the URDF's joint_3 (upper arm to forearm) is J2 + J3 of the controller's readings
 # (ROS-Industrial's fanuc_driver, J23_factor 1); the YAML declares that coupling.
 FANUC_J23 = {"r2000ic_165f", "m20ia"}
@@ -166,8 +177,10 @@ def test_built_in_robot_is_the_manufacturers_urdf(name: str) -> None:
     gap_yaml = np.linalg.norm(points(model_flange2base(robot, q)) - points(direct), axis=-1)
     converted = urdf.dh02base @ model_flange2base(urdf.description, q_urdf) @ urdf.tip2flange
     gap_urdf = np.linalg.norm(points(converted) - points(direct), axis=-1)
-    print(f"{name}: max |URDF FK - YAML model| {gap_yaml.max() / UM:.2e} um, "
-          f"|URDF FK - URDF model| {gap_urdf.max() / UM:.2e} um")  # fmt: skip
+    print(
+        f"{name}: max |URDF FK - YAML model| {gap_yaml.max() / UM:.2e} um, "
+        f"|URDF FK - URDF model| {gap_urdf.max() / UM:.2e} um"
+    )
     assert gap_yaml.max() < UM and gap_urdf.max() < UM
 
 
@@ -207,9 +220,11 @@ def test_other_tip_and_default_base_keep_the_kinematics() -> None:
     q = random_readings(urdf.description, seed=3)
     ours = urdf.dh02base @ model_flange2base(urdf.description, q) @ urdf.tip2flange
     direct = np.array(
-        [urdf_tip2base(path, "base_link", "flange", dict(zip(urdf.description.joint_names, qi)))
-         for qi in q]
-    )  # fmt: skip
+        [
+            urdf_tip2base(path, "base_link", "flange", dict(zip(urdf.description.joint_names, qi)))
+            for qi in q
+        ]
+    )
     assert np.linalg.norm(points(ours) - points(direct), axis=-1).max() < UM
 
 
@@ -225,8 +240,9 @@ def test_masses_and_centres_of_mass_come_from_the_inertials() -> None:
     for qi, f in zip(q, frames):
         upper_arm = urdf_tip2base(path, "base", "upper_arm_link", dict(zip(robot.joint_names, qi)))
         expected = upper_arm[:3, :3] @ [-0.2125, 0, 0.12] + upper_arm[:3, 3]
-        np.testing.assert_allclose(f[2, :3, :3] @ robot.link_com[1] + f[2, :3, 3], expected,
-                                   atol=1e-12)  # fmt: skip
+        np.testing.assert_allclose(
+            f[2, :3, :3] @ robot.link_com[1] + f[2, :3, 3], expected, atol=1e-12
+        )
 
 
 def _write(tmp_path: Path, body: str) -> Path:
@@ -239,8 +255,10 @@ LINKS = '<link name="a"/><link name="b"/><link name="c"/>'
 
 
 def _joint(name: str, parent: str, child: str, kind: str = "continuous", extra: str = "") -> str:
-    return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
-            f'<child link="{child}"/><axis xyz="0 0 1"/>{extra}</joint>')  # fmt: skip
+    return (
+        f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
+        f'<child link="{child}"/><axis xyz="0 0 1"/>{extra}</joint>'
+    )
 
 
 @pytest.mark.parametrize(
@@ -248,15 +266,24 @@ def _joint(name: str, parent: str, child: str, kind: str = "continuous", extra: 
     [
         ("<robot", {}, "not a valid URDF"),
         (LINKS + _joint("j1", "a", "b"), {}, "exactly one root link"),
-        (LINKS + _joint("j1", "a", "b") + _joint("j2", "b", "c", "prismatic"), {},
-         "j2 is prismatic"),
+        (
+            LINKS + _joint("j1", "a", "b") + _joint("j2", "b", "c", "prismatic"),
+            {},
+            "j2 is prismatic",
+        ),
         (LINKS + _joint("j1", "a", "b") + _joint("j2", "b", "c"), {}, "coincide"),
-        (LINKS + _joint("j1", "a", "b") + _joint("j2", "b", "c"), {"tip_link": "x"},
-         "no tip link 'x'"),
-        (LINKS + _joint("j1", "a", "b") + _joint("j2", "b", "c"), {"base_link": "c"},
-         "0 moving joint"),
+        (
+            LINKS + _joint("j1", "a", "b") + _joint("j2", "b", "c"),
+            {"tip_link": "x"},
+            "no tip link 'x'",
+        ),
+        (
+            LINKS + _joint("j1", "a", "b") + _joint("j2", "b", "c"),
+            {"base_link": "c"},
+            "0 moving joint",
+        ),
     ],
-)  # fmt: skip
+)
 def test_bad_urdf_is_one_error_naming_the_file(
     tmp_path: Path, body: str, options: dict[str, str], message: str
 ) -> None:
@@ -270,8 +297,18 @@ def test_cli_calibrate_then_predict_with_a_urdf(tmp_path: Path) -> None:
     reloads it; a broken URDF is one line and exit 2."""
     urdf = DATA / "kr5_sixx_r650.urdf"
     params = tmp_path / "params.json"
-    proc = cli("calibrate", str(ROOT / "bags" / "paper_test3.mcap"), "--model", "cpa",
-               "--robot", str(urdf), "--tip-link", "tool0", "-o", str(params))  # fmt: skip
+    proc = cli(
+        "calibrate",
+        str(ROOT / "bags" / "paper_test3.mcap"),
+        "--model",
+        "cpa",
+        "--robot",
+        str(urdf),
+        "--tip-link",
+        "tool0",
+        "-o",
+        str(params),
+    )
     assert proc.returncode == 0, proc.stderr
     reference = json.loads(params.read_text())["robot"]
     assert reference == f"{urdf}#base_link=base_link&tip_link=tool0"
@@ -382,10 +419,14 @@ def test_a_mass_model_beyond_physics_is_named_and_replaced(tmp_path: Path) -> No
     assert gravity_joints(robot) == gravity_joints(sane) != ()
     kr5 = (ROOT / "robot_calib/kinematics/robots/kr5_sixx_r650.yaml").read_text()
     builtin = load_robot("kr5_sixx_r650")
-    for name, doc, value in (("heavy", kr5.replace("mass: 9.0,", "mass: 1000000.0,", 1),
-                              "1e+06 kg in all for a reach of 1.15 m"),
-                             ("massless", kr5.replace("mass: 9.0,", "mass: 0.0,", 1),
-                              "mass 0 kg")):  # fmt: skip
+    for name, doc, value in (
+        (
+            "heavy",
+            kr5.replace("mass: 9.0,", "mass: 1000000.0,", 1),
+            "1e+06 kg in all for a reach of 1.15 m",
+        ),
+        ("massless", kr5.replace("mass: 9.0,", "mass: 0.0,", 1), "mass 0 kg"),
+    ):
         path = tmp_path / f"{name}.yaml"
         path.write_text(doc)
         robot, said = loaded(str(path))
@@ -418,15 +459,24 @@ def test_the_verdict_is_the_same_with_an_absurd_urdf_and_the_builtin_arm(tmp_pat
 
     sane_com = '<origin xyz="0.2247 0.00015 0.00041"/>'
     shipped = tmp_path / "irb120_absurd_com.urdf"
-    shipped.write_text((DATA / "irb120_3_58.urdf").read_text().replace(
-        sane_com, sane_com.replace("0.2247", "500.2247")))  # fmt: skip
+    shipped.write_text(
+        (DATA / "irb120_3_58.urdf")
+        .read_text()
+        .replace(sane_com, sane_com.replace("0.2247", "500.2247"))
+    )
     world = build_world(
-        {"robot": "irb120_3_58", "seed": 4, "geometry": "nominal",
-         "deviations": {"a2": 0.0004, "d4": -0.0003, "theta3": 0.001},
-         "effects": [{"name": "compliance", "joints": [2], "values": {"compliance2": 1.0e-4}},
-                     {"name": "backlash", "joints": [1], "values": {"backlash1": 0.001}}]},
+        {
+            "robot": "irb120_3_58",
+            "seed": 4,
+            "geometry": "nominal",
+            "deviations": {"a2": 0.0004, "d4": -0.0003, "theta3": 0.001},
+            "effects": [
+                {"name": "compliance", "joints": [2], "values": {"compliance2": 1.0e-4}},
+                {"name": "backlash", "joints": [1], "values": {"backlash1": 0.001}},
+            ],
+        },
         "IRB 120 bending at joint 2",
-    )  # fmt: skip
+    )
     rng = np.random.default_rng(1)
     recording = record_plan(world, random_plan(world.model.robot, 240, rng), rng)
     verdicts = []

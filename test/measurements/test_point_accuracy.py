@@ -23,8 +23,9 @@ def _world(point_sigma: list[float], seed: int) -> World:
     """The KR5 with each point's accuracy drawn from `point_sigma` [m]; (0, 0): measured
     to 1 um (a check of the truth)."""
     noise = {"point_sigma_range_m": point_sigma, **({} if point_sigma[1] else EXACT)}
-    return build_world({"robot": "kr5_sixx_r650", "seed": seed, "noise": noise},
-                       "stated accuracy per point")  # fmt: skip
+    return build_world(
+        {"robot": "kr5_sixx_r650", "seed": seed, "noise": noise}, "stated accuracy per point"
+    )
 
 
 def test_stated_accuracies_are_the_points_noise_and_weigh_the_fit(tmp_path: Path) -> None:
@@ -48,8 +49,10 @@ def test_stated_accuracies_are_the_points_noise_and_weigh_the_fit(tmp_path: Path
     exact = tmp_path / "exact.mcap"
     simulate(exact, "random", _world([0.0, 0.0], 3), seed=9, n_random=150)
     check = read_recording([exact], robot)
-    error = {name: float(np.sqrt(np.mean((cal.predict(check.poses) - check.points) ** 2)))
-             for name, cal in (("weighted", weighted), ("plain", plain))}  # fmt: skip
+    error = {
+        name: float(np.sqrt(np.mean((cal.predict(check.poses) - check.points) ** 2)))
+        for name, cal in (("weighted", weighted), ("plain", plain))
+    }
     assert error["weighted"] < 0.8 * error["plain"], error
 
 

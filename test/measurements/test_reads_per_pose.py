@@ -20,10 +20,14 @@ from robot_calib.sim.world import World, build_world
 
 def _world(seed: int) -> World:
     return build_world(
-        {"robot": "kr5_sixx_r650", "seed": seed, "tracker": {"reads_per_pose": 3},
-         "effects": [{"name": "backlash", "joints": [4]}]},
+        {
+            "robot": "kr5_sixx_r650",
+            "seed": seed,
+            "tracker": {"reads_per_pose": 3},
+            "effects": [{"name": "backlash", "joints": [4]}],
+        },
         "three reads per pose",
-    )  # fmt: skip
+    )
 
 
 def test_three_reads_per_pose_are_one_pose_and_the_trackers_noise(tmp_path: Path) -> None:

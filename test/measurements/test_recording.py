@@ -138,8 +138,16 @@ def test_joint_names_map_another_naming(tmp_path: Path) -> None:
         (s.joint, s.index.tolist()) for s in expected.sweeps
     ]
     out = tmp_path / "p.json"
-    proc = cli("calibrate", str(other), "--model", "nominal", "--joint-names", ",".join(names),
-               "-o", str(out))  # fmt: skip
+    proc = cli(
+        "calibrate",
+        str(other),
+        "--model",
+        "nominal",
+        "--joint-names",
+        ",".join(names),
+        "-o",
+        str(out),
+    )
     assert proc.returncode == 0 and out.exists(), proc.stderr
     # The calibration is of the same robot: score and predict read it (names aside).
     joints = tmp_path / "joints.csv"

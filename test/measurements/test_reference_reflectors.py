@@ -28,13 +28,15 @@ def _world(references: bool = True) -> World:
         {
             "robot": "kr5_sixx_r650",
             "seed": 5,
-            "tracker": {"drift_m_per_s": [0.6 * RATE_M_PER_S, 0.8 * RATE_M_PER_S, 0.0],
-                        "drift_rad_per_s": [0.0, 0.0, TURN_RAD_PER_S]},
+            "tracker": {
+                "drift_m_per_s": [0.6 * RATE_M_PER_S, 0.8 * RATE_M_PER_S, 0.0],
+                "drift_rad_per_s": [0.0, 0.0, TURN_RAD_PER_S],
+            },
             "timing": {"settle_s": 60.0},  # a pose a minute: two hours of drift
             **({"references": FLOOR} if references else {}),
         },
         "drifting tracker",
-    )  # fmt: skip
+    )
 
 
 def recorded(world: World, bag: Path, poses: int = 80) -> Recording:
@@ -114,13 +116,18 @@ def test_references_tell_a_tracker_jump_from_a_robot_error(tmp_path: Path) -> No
     offset = [0.002, -0.0012, 0.0008]
     robot_poses, jump = (10, 30, 50), 65
     world = build_world(
-        {"robot": "kr5_sixx_r650", "seed": 2, "references": FLOOR,
-         "targets": {"smr2": [0.0, 0.07, 0.04], "smr3": [-0.05, -0.04, 0.06]},
-         "events": [*({"kind": "robot", "poses": [p, p], "offset_m": offset}
-                      for p in robot_poses),
-                    {"kind": "tracker", "poses": [jump, jump], "offset_m": offset}]},
+        {
+            "robot": "kr5_sixx_r650",
+            "seed": 2,
+            "references": FLOOR,
+            "targets": {"smr2": [0.0, 0.07, 0.04], "smr3": [-0.05, -0.04, 0.06]},
+            "events": [
+                *({"kind": "robot", "poses": [p, p], "offset_m": offset} for p in robot_poses),
+                {"kind": "tracker", "poses": [jump, jump], "offset_m": offset},
+            ],
+        },
         "three SMRs",
-    )  # fmt: skip
+    )
     recording = recorded(world, tmp_path / "three.mcap")
     (refs,) = recording.references
     assert recording.stamp_ns is not None and refs.drift is not None
@@ -155,18 +162,22 @@ def test_a_world_with_references_drift_and_events_reads_back(tmp_path: Path) -> 
     from robot_calib.sim.world import load_world, save_world
 
     world = build_world(
-        {**{"references": FLOOR, "tracker": {"drift_m_per_s": [1e-8, 0.0, 0.0]}},
-         "events": [{"kind": "tracker", "poses": [0, 11], "offset_m": [0.0, 0.005, 0.0]}]},
+        {
+            **{"references": FLOOR, "tracker": {"drift_m_per_s": [1e-8, 0.0, 0.0]}},
+            "events": [{"kind": "tracker", "poses": [0, 11], "offset_m": [0.0, 0.005, 0.0]}],
+        },
         "events",
-    )  # fmt: skip
+    )
     save_world(world, tmp_path / "w.yaml")
     again = load_world(tmp_path / "w.yaml")
     assert again.references == world.references and again.events == world.events
     assert again.tracker == world.tracker
     zero = [0, 0, 0]
-    for bad, said in (({"kind": "robto", "poses": [1, 2], "offset_m": zero}, "kind must"),
-                      ({"kind": "robot", "poses": [5, 2], "offset_m": zero}, "first <= last"),
-                      ({"kind": "robot", "poses": [1, 2]}, "expected three")):  # fmt: skip
+    for bad, said in (
+        ({"kind": "robto", "poses": [1, 2], "offset_m": zero}, "kind must"),
+        ({"kind": "robot", "poses": [5, 2], "offset_m": zero}, "first <= last"),
+        ({"kind": "robot", "poses": [1, 2]}, "expected three"),
+    ):
         with pytest.raises(InputError, match=said):
             build_world({"events": [bad]}, "bad.yaml")
 
@@ -191,8 +202,9 @@ def test_a_still_tracker_shows_no_drift_and_a_real_one_is_found() -> None:
         rng = np.random.default_rng(seed)
         t = np.linspace(0.0, 3600.0, 120)
         shift = np.outer(t / 3600.0 * 50e-6, [0.6, 0.8, 0.0])
-        reads = np.stack([np.tile(p, (120, 1)) + shift + rng.normal(0, 12.5e-6, (120, 3))
-                          for p in fixed])  # fmt: skip
+        reads = np.stack(
+            [np.tile(p, (120, 1)) + shift + rng.normal(0, 12.5e-6, (120, 3)) for p in fixed]
+        )
         drift = estimate_drift(names, t, reads)
         assert drift.significant, drift.line()  # and as large as it is, to its uncertainty
         assert drift.max_mm == pytest.approx(0.05, abs=drift.uncertainty_mm), drift.line()
@@ -204,10 +216,14 @@ def test_a_tracker_knocked_for_good_is_a_step_not_a_drift(tmp_path: Path) -> Non
     geometric fit of the corrected points lies at the noise; the floor stays the
     reflectors' noise (where a smooth drift through the step made it ten times that)."""
     world = build_world(
-        {"robot": "kr5_sixx_r650", "seed": 5, "references": FLOOR,
-         "events": [{"kind": "tracker", "poses": [40, 79], "offset_m": [3e-4, 4e-4, 0.0]}]},
+        {
+            "robot": "kr5_sixx_r650",
+            "seed": 5,
+            "references": FLOOR,
+            "events": [{"kind": "tracker", "poses": [40, 79], "offset_m": [3e-4, 4e-4, 0.0]}],
+        },
         "knocked tracker",
-    )  # fmt: skip
+    )
     recording = recorded(world, tmp_path / "knock.mcap")
     (refs,) = recording.references
     assert refs.drift is not None and len(refs.drift.step_mm) == 1

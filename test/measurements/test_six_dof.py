@@ -109,9 +109,13 @@ def test_orientation_makes_the_tool_frame_identifiable_where_points_cannot() -> 
 def write_poses(tmp_path: Path, poses: Poses, points: np.ndarray, name: str = "a") -> Path:
     bag = tmp_path / f"{name}.mcap"
     write_measurement_bag(
-        bag, poses.q, points, ROBOT.joint_names, poses.time,
+        bag,
+        poses.q,
+        points,
+        ROBOT.joint_names,
+        poses.time,
         six_dof={"": (poses.rotation, np.full((len(poses), 2), np.nan))},
-    )  # fmt: skip
+    )
     return bag
 
 
@@ -130,8 +134,9 @@ def test_a_pose_topic_is_readable_by_rosbags_and_read_back(tmp_path: Path) -> No
     assert recording.poses.oriented.all() and recording.poses.sigma is None
 
 
-def write_raw(path: Path, q: np.ndarray, points: np.ndarray | None, poses: np.ndarray,
-              quats: np.ndarray) -> Path:  # fmt: skip
+def write_raw(
+    path: Path, q: np.ndarray, points: np.ndarray | None, poses: np.ndarray, quats: np.ndarray
+) -> Path:
     """A bag written message by message: joint states, points (None: no point topic) and
     PoseStamped of positions `poses` (n, 3) and quaternions `quats` (n, 4) x, y, z, w."""
     store = typestore(JOINT_STATE_TYPE, POINT_TYPE, POSE_TYPE)
@@ -146,9 +151,12 @@ def write_raw(path: Path, q: np.ndarray, points: np.ndarray | None, poses: np.nd
             stamp = t["builtin_interfaces/msg/Time"](ns // 10**9, ns % 10**9)
             header = t["std_msgs/msg/Header"](stamp=stamp, frame_id="laser_tracker")
             js = t[JOINT_STATE_TYPE](
-                header=header, name=list(ROBOT.joint_names), position=q[k],
-                velocity=np.empty(0), effort=np.empty(0),
-            )  # fmt: skip
+                header=header,
+                name=list(ROBOT.joint_names),
+                position=q[k],
+                velocity=np.empty(0),
+                effort=np.empty(0),
+            )
             writer.write("/joint_states", store.serialize_cdr(js, JOINT_STATE_TYPE), ns)
             if points is not None:
                 pt = t[POINT_TYPE](header=header, point=t["geometry_msgs/msg/Point"](*points[k]))
@@ -166,8 +174,9 @@ def write_raw(path: Path, q: np.ndarray, points: np.ndarray | None, poses: np.nd
 def test_a_bag_of_poses_alone_reads_and_bad_poses_are_one_line_errors(tmp_path: Path) -> None:
     poses, points = measured(n=20)
     quats = Rotation.from_matrix(poses.rotation).as_quat()
-    alone = read_recording([write_raw(tmp_path / "alone.mcap", poses.q, None, points, quats)],
-                           ROBOT)  # fmt: skip
+    alone = read_recording(
+        [write_raw(tmp_path / "alone.mcap", poses.q, None, points, quats)], ROBOT
+    )
     np.testing.assert_allclose(alone.points, points, atol=1e-12)
     assert alone.poses.oriented.all()
     moved = points.copy()
@@ -206,8 +215,9 @@ def test_split_calibrate_and_score_keep_the_orientations(tmp_path: Path) -> None
     assert doc["targets"][0]["six_dof"] is True
     assert doc["orientation_residuals"]["n_measurements"] == len(parts[0])
     table = tmp_path / "points.csv"
-    proc = cli("score", str(params), str(tmp_path / "probe.holdout.mcap"),
-               "--points-csv", str(table))  # fmt: skip
+    proc = cli(
+        "score", str(params), str(tmp_path / "probe.holdout.mcap"), "--points-csv", str(table)
+    )
     assert proc.returncode == 0, proc.stderr
     line = next(x for x in proc.stdout.splitlines() if "orientation error angle" in x)
     rms_urad = float(line.split("per axis rms ")[1].split(" ")[0])
@@ -218,8 +228,9 @@ def test_split_calibrate_and_score_keep_the_orientations(tmp_path: Path) -> None
     # predict gives the probe frame as a quaternion beside the point
     joints = tmp_path / "joints.csv"
     q_cal = parts[1].poses.q
-    np.savetxt(joints, q_cal, delimiter=",", comments="",
-               header=",".join(f"q{j + 1}" for j in range(6)))  # fmt: skip
+    np.savetxt(
+        joints, q_cal, delimiter=",", comments="", header=",".join(f"q{j + 1}" for j in range(6))
+    )
     out = tmp_path / "points_out.csv"
     proc = cli("predict", str(params), "--joints", str(joints), "-o", str(out))
     assert proc.returncode == 0 and "qx,qy,qz,qw" in proc.stdout, proc.stderr
@@ -232,13 +243,19 @@ def test_split_calibrate_and_score_keep_the_orientations(tmp_path: Path) -> None
 def test_a_probe_with_a_further_target_keeps_its_frame_to_itself() -> None:
     """What the further targets add is judged on the rows the fit sees: the probe's
     orientation rows identify its frame, so the frame is not credited to the SMR."""
-    world = build_world({"seed": 3, "six_dof": {"first": PROBE_RPY_DEG},
-                         "targets": {"smr2": [0.0, 0.08, 0.04]}})  # fmt: skip
+    world = build_world(
+        {"seed": 3, "six_dof": {"first": PROBE_RPY_DEG}, "targets": {"smr2": [0.0, 0.08, 0.04]}}
+    )
     poses, points = measured(world, n=80)
     recording = recording_from_arrays(
-        poses.q, points, poses.time, robot=ROBOT, target=poses.target,
-        target_names=world.model.targets, rotation=poses.rotation,
-    )  # fmt: skip
+        poses.q,
+        points,
+        poses.time,
+        robot=ROBOT,
+        target=poses.target,
+        target_names=world.model.targets,
+        rotation=poses.rotation,
+    )
     cal = calibrate(recording, ROBOT, "geometric")
     assert cal.model.oriented == ("",)
     assert not set(tool_rotation_parameters("")) & set(cal.by_extra_targets)
@@ -256,9 +273,11 @@ def test_diagnose_takes_6dof_measurements() -> None:
     poses, points = measured(n=120, seed=21)
     held_poses, held_points = measured(n=60, seed=22)
     diagnosis, ladder = diagnose(
-        as_recording(poses, points), ROBOT, as_recording(held_poses, held_points),
+        as_recording(poses, points),
+        ROBOT,
+        as_recording(held_poses, held_points),
         tracker_sigma_m=4.8e-6,
-    )  # fmt: skip
+    )
     assert ladder.rungs[0].calibration.model.oriented == ("",)
     assert diagnosis.dominant_effect is None
 
@@ -271,8 +290,9 @@ def test_orientation_columns_mixed_up_are_flagged_and_the_points_calibrate_alone
     quat = Rotation.from_matrix(poses.rotation).as_quat()  # x, y, z, w
     wrong = Rotation.from_quat(np.roll(quat, 1, axis=1)).as_matrix()  # w, x, y, z as x..w
     stated = np.tile([5e-6, ORIENTATION_SIGMA], (len(poses), 1))
-    cal = calibrate(as_recording(replace(poses, rotation=wrong), points, stated), ROBOT,
-                    "geometric")  # fmt: skip
+    cal = calibrate(
+        as_recording(replace(poses, rotation=wrong), points, stated), ROBOT, "geometric"
+    )
     warning = next(w for w in cal.warnings if "orientations disagree" in w)
     assert "quaternion order" in warning and "points alone" in warning
     assert cal.model.oriented == () and "target_rx" not in cal.parameters
@@ -290,8 +310,9 @@ def test_orientation_blunders_are_left_out_their_points_kept() -> None:
             Rotation.from_rotvec(np.radians(5.0) * np.array(axis)).as_matrix() @ rotation[k]
         )
     stated = np.tile([5e-6, ORIENTATION_SIGMA], (len(poses), 1))
-    cal = calibrate(as_recording(replace(poses, rotation=rotation), points, stated), ROBOT,
-                    "geometric")  # fmt: skip
+    cal = calibrate(
+        as_recording(replace(poses, rotation=rotation), points, stated), ROBOT, "geometric"
+    )
     warning = next(w for w in cal.warnings if "6-DoF orientation(s)" in w)
     assert warning.startswith("warning: outliers: 3 6-DoF orientation(s)")
     assert cal.orientation_residuals is not None

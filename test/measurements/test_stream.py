@@ -112,9 +112,14 @@ def test_stream_bag_round_trip_hint_and_cli(simulated: SimulatedStream, tmp_path
     js = s.js_ns < s.point_ns[0] + 4_100_000_000
     bag = tmp_path / "stream.mcap"
     counts = write_stream_bag(
-        bag, s.js_ns[js], s.q[js], simulated.velocity[js], s.point_ns[short], s.points[short],
+        bag,
+        s.js_ns[js],
+        s.q[js],
+        simulated.velocity[js],
+        s.point_ns[short],
+        s.points[short],
         robot.joint_names,
-    )  # fmt: skip
+    )
     assert counts == {"/joint_states": int(js.sum()), "/laser_tracker/point": int(short.sum())}
     back = read_stream(bag, robot)
     assert np.array_equal(back.point_ns, s.point_ns[short])
@@ -124,9 +129,16 @@ def test_stream_bag_round_trip_hint_and_cli(simulated: SimulatedStream, tmp_path
     assert any("`stream=True`" in w for w in paired.warnings)
     out = tmp_path / "PARAMS.json"
     run = cli(
-        "calibrate", str(bag), "--stream", "--latency", "0.002", "--stream-max-points", "500",
-        "-o", str(out),
-    )  # fmt: skip
+        "calibrate",
+        str(bag),
+        "--stream",
+        "--latency",
+        "0.002",
+        "--stream-max-points",
+        "500",
+        "-o",
+        str(out),
+    )
     assert run.returncode == 0, run.stderr
     assert "latency 2.0000 ms (given)" in run.stdout
     doc = json.loads(out.read_text())

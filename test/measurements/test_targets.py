@@ -42,9 +42,13 @@ def simulated(world: World, seed: int = 1, plan_name: str = "test2") -> Recordin
         world, plan.q, plan_times(plan, world.timing), np.random.default_rng(seed)
     )
     return recording_from_arrays(
-        poses.q, points, poses.time, robot=ROBOT, target=poses.target,
+        poses.q,
+        points,
+        poses.time,
+        robot=ROBOT,
+        target=poses.target,
         target_names=world.model.targets,
-    )  # fmt: skip
+    )
 
 
 def test_every_target_offset_and_the_shared_tracker_pose_come_out_exactly() -> None:
@@ -106,13 +110,21 @@ def test_bag_round_trip_keeps_the_contract_topic_and_adds_one_per_target(tmp_pat
     extra = {name: per_target[:, k + 1] for k, name in enumerate(TARGETS)}
     extra["smr3"][5] = np.nan  # smr3 not measured at pose 6 (line of sight)
     bag = tmp_path / "three.mcap"
-    counts = write_measurement_bag(bag, plan.q, per_target[:, 0], ROBOT.joint_names,
-                                   plan_times(plan, WORLD.timing), extra_points=extra)  # fmt: skip
+    counts = write_measurement_bag(
+        bag,
+        plan.q,
+        per_target[:, 0],
+        ROBOT.joint_names,
+        plan_times(plan, WORLD.timing),
+        extra_points=extra,
+    )
     n = len(plan.q)
     assert counts == {
-        "/joint_states": n, "/laser_tracker/point": n, "/laser_tracker/smr2/point": n,
+        "/joint_states": n,
+        "/laser_tracker/point": n,
+        "/laser_tracker/smr2/point": n,
         "/laser_tracker/smr3/point": n - 1,
-    }  # fmt: skip
+    }
     with BagReader(bag) as reader:  # a single-target reader sees the contract's topic as ever
         assert reader.topics["/laser_tracker/point"].message_count == n
     recording = read_recording([bag], ROBOT)
@@ -127,8 +139,10 @@ def test_bag_round_trip_keeps_the_contract_topic_and_adds_one_per_target(tmp_pat
     assert "targets: 3 (/laser_tracker/point" in proc.stderr + proc.stdout
     doc = json.loads(params.read_text())
     assert [t["topic"] for t in doc["targets"]] == [
-        "/laser_tracker/point", "/laser_tracker/smr2/point", "/laser_tracker/smr3/point"
-    ]  # fmt: skip
+        "/laser_tracker/point",
+        "/laser_tracker/smr2/point",
+        "/laser_tracker/smr3/point",
+    ]
     assert [t["measurements"] for t in doc["targets"]] == [n, n, n - 1]
     model, fitted = (loaded := Calibration.load(params)).model, loaded.parameters
     assert model.targets == ("", "smr2", "smr3")
@@ -136,8 +150,16 @@ def test_bag_round_trip_keeps_the_contract_topic_and_adds_one_per_target(tmp_pat
     assert abs(fitted["target_smr3_z"] - truth["target_smr3_z"]) < 1e-5
     # split keeps each pose's targets together; score uses every target.
     cal, hold = tmp_path / "cal.mcap", tmp_path / "hold.mcap"
-    proc = cli("split", str(bag), "--holdout", "0.3", "--calibration-out", str(cal),
-               "--holdout-out", str(hold))  # fmt: skip
+    proc = cli(
+        "split",
+        str(bag),
+        "--holdout",
+        "0.3",
+        "--calibration-out",
+        str(cal),
+        "--holdout-out",
+        str(hold),
+    )
     assert proc.returncode == 0, proc.stderr
     parts = [read_recording([p], ROBOT) for p in (cal, hold)]
     assert sum(len(p) for p in parts) == len(recording)
@@ -148,8 +170,10 @@ def test_bag_round_trip_keeps_the_contract_topic_and_adds_one_per_target(tmp_pat
     with table.open() as handle:
         rows = list(csv.DictReader(handle))
     assert {r["target"] for r in rows} == {
-        "/laser_tracker/point", "/laser_tracker/smr2/point", "/laser_tracker/smr3/point"
-    }  # fmt: skip
+        "/laser_tracker/point",
+        "/laser_tracker/smr2/point",
+        "/laser_tracker/smr3/point",
+    }
     assert max(float(r["error_m"]) for r in rows) < 5e-5
 
 
@@ -166,10 +190,27 @@ def test_import_takes_one_column_triple_per_target(tmp_path: Path) -> None:
         lines.append(";".join(c.replace(".", ",") for c in cells))
     path.write_text("\n".join(lines) + "\n")
     bag = tmp_path / "imported.mcap"
-    proc = cli("import", str(path), "--sep", ";", "--decimal-comma", "--angle-unit",
-               "deg", "--length-unit", "mm", "--joints", "q1,q2,q3,q4,q5,q6",
-               "--point", "x,y,z", "--target", "smr2:x2,y2,z2", "--target",
-               "smr3:x3,y3,z3", "-o", str(bag))  # fmt: skip
+    proc = cli(
+        "import",
+        str(path),
+        "--sep",
+        ";",
+        "--decimal-comma",
+        "--angle-unit",
+        "deg",
+        "--length-unit",
+        "mm",
+        "--joints",
+        "q1,q2,q3,q4,q5,q6",
+        "--point",
+        "x,y,z",
+        "--target",
+        "smr2:x2,y2,z2",
+        "--target",
+        "smr3:x3,y3,z3",
+        "-o",
+        str(bag),
+    )
     assert proc.returncode == 0, proc.stderr
     recording = read_recording([bag], ROBOT)
     assert recording.target_names == ("", "smr2", "smr3") and len(recording) == 119
@@ -183,15 +224,31 @@ def test_import_takes_one_column_triple_per_target(tmp_path: Path) -> None:
     broken = tmp_path / "broken.csv"
     broken.write_text("\n".join(text) + "\n")
     for args, message in [
-        ((str(broken), "--target", "smr2:x2,y2,z2", "--target", "smr3:x3,y3,z3"),
-         "some of its x, y, z cells empty"),
+        (
+            (str(broken), "--target", "smr2:x2,y2,z2", "--target", "smr3:x3,y3,z3"),
+            "some of its x, y, z cells empty",
+        ),
         ((str(path), "--target", "2bad:x2,y2,z2"), "expected NAME:X,Y,Z"),
         ((str(path), "--target", "smr2:x2,y2"), "expected NAME:X,Y,Z"),
         ((str(path), "--target", "smr2:x2,y2,nope"), "no column 'nope'"),
-    ]:  # fmt: skip
-        proc = cli("import", *args, "--sep", ";", "--decimal-comma", "--angle-unit",
-                   "deg", "--length-unit", "mm", "--joints", "q1,q2,q3,q4,q5,q6",
-                   "--point", "x,y,z", "-o", str(tmp_path / "x.mcap"))  # fmt: skip
+    ]:
+        proc = cli(
+            "import",
+            *args,
+            "--sep",
+            ";",
+            "--decimal-comma",
+            "--angle-unit",
+            "deg",
+            "--length-unit",
+            "mm",
+            "--joints",
+            "q1,q2,q3,q4,q5,q6",
+            "--point",
+            "x,y,z",
+            "-o",
+            str(tmp_path / "x.mcap"),
+        )
         assert proc.returncode == 2 and message in proc.stderr, proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
         assert not (tmp_path / "x.mcap").exists()
@@ -222,8 +279,16 @@ def test_predict_takes_the_target_of_a_several_target_calibration(tmp_path: Path
         k = WORLD.model.targets.index(name)
         measured = recording.points[recording.poses.target_index == k][: len(q)]
         assert np.abs(predicted - measured).max() < 5e-5  # the noise, not another target
-    proc = cli("predict", str(params), "--joints", str(joints), "-o",
-               str(tmp_path / "x.csv"), "--target", "smr9")  # fmt: skip
+    proc = cli(
+        "predict",
+        str(params),
+        "--joints",
+        str(joints),
+        "-o",
+        str(tmp_path / "x.csv"),
+        "--target",
+        "smr9",
+    )
     assert proc.returncode == 2 and "no target 'smr9'" in proc.stderr
 
 

@@ -317,8 +317,11 @@ def test_deprecated_selftest_service_still_answers_and_warns_once(
     try:
         spin_until(executor, lambda: calibrator.calibration is not None)
         spin_until(executor, lambda: old.service_is_ready() and new.service_is_ready())
-        for client, request in ((old, SelfTest.Request()), (old, SelfTest.Request()),
-                                (new, Trigger.Request())):  # fmt: skip
+        for client, request in (
+            (old, SelfTest.Request()),
+            (old, SelfTest.Request()),
+            (new, Trigger.Request()),
+        ):
             future = client.call_async(request)
             spin_until(executor, future.done)
             answers.append(future.result())
@@ -372,9 +375,12 @@ def test_live_pairing_gives_the_bags_recording() -> None:
     rng = np.random.default_rng(0)
     a, b = rng.permutation(len(js_ns)), rng.permutation(len(pt_ns))
     live = recording_from_stream(
-        np.array(js_ns)[a], np.array(js_q)[a], np.array(js_v)[a], np.array(pt_ns)[b],
+        np.array(js_ns)[a],
+        np.array(js_q)[a],
+        np.array(js_v)[a],
+        np.array(pt_ns)[b],
         np.array(pts)[b],
-    )  # fmt: skip
+    )
     bag = read_recording([SAMPLE], robot)
     for field in ("q", "direction", "time"):
         np.testing.assert_array_equal(getattr(live.poses, field), getattr(bag.poses, field))
@@ -402,9 +408,19 @@ def test_bag_mode_runs_the_diagnosis_and_latches_its_summary(
     bag, holdout = tmp_path / "cal.mcap", tmp_path / "hold.mcap"
     for cmd in (
         ["--plan", "paper-test3", "--effects", "backlash:4", "--seed", "2", "-o", str(bag)],
-        ["--plan", "random", "--n-random", "100", "--world",
-         str(bag.with_suffix(".world.yaml")), "--seed", "3", "-o", str(holdout)],
-    ):  # fmt: skip
+        [
+            "--plan",
+            "random",
+            "--n-random",
+            "100",
+            "--world",
+            str(bag.with_suffix(".world.yaml")),
+            "--seed",
+            "3",
+            "-o",
+            str(holdout),
+        ],
+    ):
         made = cli("simulate", *cmd)
         assert made.returncode == 0, made.stderr
     calibrator = CalibratorNode(

@@ -33,8 +33,10 @@ class Graph:
 
     def __init__(self, context: Context, **parameters: Any) -> None:  # noqa: ANN401
         self.context = context
-        overrides = [Parameter("autostart", value=False),
-                     *(Parameter(k, value=v) for k, v in parameters.items())]  # fmt: skip
+        overrides = [
+            Parameter("autostart", value=False),
+            *(Parameter(k, value=v) for k, v in parameters.items()),
+        ]
         self.calibrator = CalibratorNode(context=context, parameter_overrides=overrides)
         self.manager = Node("manager", context=context)
         self.executor = SingleThreadedExecutor(context=context)
@@ -53,9 +55,13 @@ class Graph:
         return future.result()
 
     def transition(self, transition_id: int) -> bool:
-        return bool(self.call(ChangeState, "change_state",
-                              ChangeState.Request(transition=Transition(id=transition_id))
-                              ).success)  # fmt: skip
+        return bool(
+            self.call(
+                ChangeState,
+                "change_state",
+                ChangeState.Request(transition=Transition(id=transition_id)),
+            ).success
+        )
 
     def state(self) -> int:
         return int(self.call(GetState, "get_state", GetState.Request()).current_state.id)
@@ -135,8 +141,11 @@ def test_a_run_time_parameter_takes_effect_at_the_next_solve(context: Context) -
         assert not bad.successful and "parameter 'model' geometrc" in bad.reason, bad.reason
         (fixed,) = calibrator.set_parameters([Parameter("robot", value="ur10")])
         assert not fixed.successful  # read-only: the node's configuration
-        for name, value in (("residual_scale", "abc"), ("pair_tolerance", float("nan")),
-                            ("pair_tolerance", True)):  # fmt: skip
+        for name, value in (
+            ("residual_scale", "abc"),
+            ("pair_tolerance", float("nan")),
+            ("pair_tolerance", True),
+        ):
             (odd,) = calibrator.set_parameters([Parameter(name, value=value)])
             assert not odd.successful, (name, value)  # refused, the node alive
         assert calibrator.settings.model_spec == "geometric+backlash:4"

@@ -27,8 +27,11 @@ def test_robot_state_publisher_follows_each_calibration(context: Context) -> Non
     real one declares): after the bag's solve it holds the calibrated URDF, as published."""
     state_publisher = Node("robot_state_publisher", context=context)
     state_publisher.declare_parameter("robot_description", "<robot name='nominal'/>")
-    calibrator = CalibratorNode(bags=[SAMPLE], context=context, parameter_overrides=[
-        Parameter("robot_state_publisher", value="/robot_state_publisher")])  # fmt: skip
+    calibrator = CalibratorNode(
+        bags=[SAMPLE],
+        context=context,
+        parameter_overrides=[Parameter("robot_state_publisher", value="/robot_state_publisher")],
+    )
     executor = SingleThreadedExecutor(context=context)
     for node in (state_publisher, calibrator):
         executor.add_node(node)

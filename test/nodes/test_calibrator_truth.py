@@ -99,8 +99,9 @@ def _solved(context: Context, bag: Path, **settings: object) -> tuple[Calibrator
     calibrator = CalibratorNode(bags=[bag], context=context, parameter_overrides=overrides)
     listener = Node("listener", context=context)
     got: dict[str, String] = {}
-    listener.create_subscription(String, "/calibrator/parameters",
-                                 lambda m: got.__setitem__("doc", m), LATCHED)  # fmt: skip
+    listener.create_subscription(
+        String, "/calibrator/parameters", lambda m: got.__setitem__("doc", m), LATCHED
+    )
     executor = SingleThreadedExecutor(context=context)
     for node in (calibrator, listener):
         executor.add_node(node)
@@ -135,8 +136,9 @@ def test_publish_best_publishes_the_diagnosis_model(context: Context, backlash_b
     assert calibrator.calibration is not None and calibrator.calibration.name == doc["model"]
     assert calibrator._status.level == DiagnosticStatus.OK, calibrator._status.message
     with pytest.raises(InputError, match="set diagnose to true"):
-        CalibratorNode(bags=[backlash_bag], context=context,
-                       parameter_overrides=[_param("publish", "best")])  # fmt: skip
+        CalibratorNode(
+            bags=[backlash_bag], context=context, parameter_overrides=[_param("publish", "best")]
+        )
 
 
 def _param(name: str, value: object):  # noqa: ANN202 - rclpy Parameter
@@ -157,12 +159,12 @@ def test_the_nodes_diagnosis_is_the_command_lines(
     world = build_world({"seed": 9, "effects": [{"name": "backlash", "joints": [4]}]}, "hold")
     holdout = tmp_path / "holdout.mcap"
     simulate(holdout, "random", world, seed=19, n_random=60)
-    run = cli("diagnose", str(backlash_bag), "--holdout", str(holdout),
-              "-o", str(tmp_path / "d.json"))  # fmt: skip
+    run = cli(
+        "diagnose", str(backlash_bag), "--holdout", str(holdout), "-o", str(tmp_path / "d.json")
+    )
     assert run.returncode == 0, run.stderr
     by_cli = json.loads((tmp_path / "d.json").read_text())
-    calibrator, _ = _solved(context, backlash_bag, diagnose=True,
-                            holdout_bags=[str(holdout)])  # fmt: skip
+    calibrator, _ = _solved(context, backlash_bag, diagnose=True, holdout_bags=[str(holdout)])
     assert calibrator.diagnosis is not None
     by_node = json.loads(json.dumps(calibrator.diagnosis.to_dict()))
     assert by_node["warnings"] == by_cli["warnings"]

@@ -137,8 +137,24 @@ def test_a_planned_campaign_captured_in_the_graph_calibrates_to_the_noise_floor(
     # 60 poses: the model error of a 30-pose plan exceeds the floor in ~5 % of noise draws
     # (offline, 20 draws: median 5.7 um, max 11.1 um); 60 poses: max 6.2 um of 40
     plan = tmp_path / "plan.yaml"
-    assert main(["plan", "--model", "geometric", "--poses", "60", "--candidates", "300",
-                 "--trials", "1", "-o", str(plan)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "plan",
+                "--model",
+                "geometric",
+                "--poses",
+                "60",
+                "--candidates",
+                "300",
+                "--trials",
+                "1",
+                "-o",
+                str(plan),
+            ]
+        )
+        == 0
+    )
     bag = tmp_path / "campaign.mcap"
     capture = run_graph(
         context, [Parameter("plan", value=str(plan)), Parameter("output", value=str(bag))]
@@ -264,11 +280,15 @@ def test_dry_run_moves_nothing_and_bad_parameters_are_refused(
     assert status.level == DiagnosticStatus.OK and values(status)["step"] == "dry run"
     for overrides, message in (
         ([], "parameter 'output' must name a .mcap bag"),
-        ([Parameter("output", value="x.mcap"), Parameter("settle_time", value=0.0)],
-         "'settle_time' must be > 0"),
-        ([Parameter("output", value="x.mcap"), Parameter("plan", value="nope")],
-         "unknown plan 'nope'"),
-    ):  # fmt: skip
+        (
+            [Parameter("output", value="x.mcap"), Parameter("settle_time", value=0.0)],
+            "'settle_time' must be > 0",
+        ),
+        (
+            [Parameter("output", value="x.mcap"), Parameter("plan", value="nope")],
+            "unknown plan 'nope'",
+        ),
+    ):
         with pytest.raises(InputError, match=message):
             CaptureNode(context=context, parameter_overrides=overrides)
 
@@ -405,9 +425,12 @@ def test_capture_cancelled_through_its_service_keeps_the_poses_measured(
     bag = tmp_path / "cancel.mcap"
     operator = Node("operator", context=context)
     progress: list[dict] = []
-    operator.create_subscription(String, "/capture/progress",
-                                 lambda m: progress.append(json.loads(m.data)),
-                                 ROBOT_DESCRIPTION_QOS)  # fmt: skip
+    operator.create_subscription(
+        String,
+        "/capture/progress",
+        lambda m: progress.append(json.loads(m.data)),
+        ROBOT_DESCRIPTION_QOS,
+    )
     client = operator.create_client(Trigger, "/capture/cancel")
     answers: list = []  # the future of the one ~/cancel call
 
@@ -416,10 +439,13 @@ def test_capture_cancelled_through_its_service_keeps_the_poses_measured(
             answers.append(client.call_async(Trigger.Request()))
         return False  # the campaign ends by itself once cancelled
 
-    capture = run_graph(context, [Parameter("plan", value="paper-test1"),
-                                  Parameter("output", value=str(bag))],
-                        stop=cancel_at_four, listeners=[operator],
-                        settled=lambda: bool(answers) and answers[0].done())  # fmt: skip
+    capture = run_graph(
+        context,
+        [Parameter("plan", value="paper-test1"), Parameter("output", value=str(bag))],
+        stop=cancel_at_four,
+        listeners=[operator],
+        settled=lambda: bool(answers) and answers[0].done(),
+    )
     operator.destroy_node()
     assert capture.cancelled and capture.finished
     assert answers and answers[0].done() and answers[0].result().success

@@ -98,12 +98,20 @@ def test_a_trajectory_comes_back_compensated(context: Context, params_file: Path
     # the robot stands at the first point, joint 4 having come down to it (backlash side -1):
     # a joint that keeps still keeps that side, which the node must take from /joint_states
     start = (q[0], np.array([1.0, 1.0, 1.0, -1.0, 1.0, 1.0]))
-    standing = JointState(name=list(ROBOT.joint_names), position=start[0].tolist(),
-                          velocity=(start[1] * 1e-9).tolist())  # fmt: skip
+    standing = JointState(
+        name=list(ROBOT.joint_names),
+        position=start[0].tolist(),
+        velocity=(start[1] * 1e-9).tolist(),
+    )
     try:
-        spin_until(executor, lambda: publisher.get_subscription_count() > 0
-                   and compensator.publisher.get_subscription_count() > 0
-                   and states.get_subscription_count() > 0)  # fmt: skip
+        spin_until(
+            executor,
+            lambda: (
+                publisher.get_subscription_count() > 0
+                and compensator.publisher.get_subscription_count() > 0
+                and states.get_subscription_count() > 0
+            ),
+        )
         states.publish(standing)
         spin_until(executor, lambda: compensator.robot_state is not None)
         publisher.publish(trajectory(q, names))
@@ -121,8 +129,9 @@ def test_a_trajectory_comes_back_compensated(context: Context, params_file: Path
     assert list(out.joint_names) == names and out.header.stamp.sec == 42
     assert out.header.frame_id == "base_link" and len(out.points) == len(q)
     corrected = np.array([p.positions for p in out.points])[:, np.argsort(ORDER)]  # model order
-    seconds = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec
-                        for p in out.points])  # fmt: skip
+    seconds = np.array(
+        [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in out.points]
+    )
     np.testing.assert_allclose(seconds, 0.5 * np.arange(len(q)), rtol=0, atol=1e-9)  # sec + ns
     assert [list(p.velocities) for p in out.points] == [
         list(p.velocities) for p in trajectory(q, names).points
@@ -165,8 +174,13 @@ def test_a_trajectory_corrected_beyond_max_correction_is_not_sent(
     for node in (compensator, client):
         executor.add_node(node)
     try:
-        spin_until(executor, lambda: publisher.get_subscription_count() > 0
-                   and compensator.publisher.get_subscription_count() > 0)  # fmt: skip
+        spin_until(
+            executor,
+            lambda: (
+                publisher.get_subscription_count() > 0
+                and compensator.publisher.get_subscription_count() > 0
+            ),
+        )
         q = random_plan(ROBOT, 5, np.random.default_rng(2)).q
         publisher.publish(trajectory(q, [ROBOT.joint_names[j] for j in ORDER]))
         spin_until(executor, lambda: compensator.received == 1)
@@ -194,8 +208,13 @@ def test_each_trajectory_outcome_is_reported_on_status(
         executor.add_node(node)
     names = [ROBOT.joint_names[j] for j in ORDER]
     try:
-        spin_until(executor, lambda: publisher.get_subscription_count() > 0
-                   and compensator.status.get_subscription_count() > 0)  # fmt: skip
+        spin_until(
+            executor,
+            lambda: (
+                publisher.get_subscription_count() > 0
+                and compensator.status.get_subscription_count() > 0
+            ),
+        )
         q = random_plan(ROBOT, 4, np.random.default_rng(5)).q
         publisher.publish(trajectory(q, names))
         spin_until(executor, lambda: len(statuses) == 1)
@@ -230,5 +249,8 @@ def test_the_follow_joint_trajectory_adapter_needs_control_msgs(
     except ImportError:
         pass
     with pytest.raises(InputError, match="parameter 'action_controller': control_msgs is not"):
-        nodes(context, params_file,
-              Parameter("action_controller", value="/jtc/follow_joint_trajectory"))  # fmt: skip
+        nodes(
+            context,
+            params_file,
+            Parameter("action_controller", value="/jtc/follow_joint_trajectory"),
+        )

@@ -157,8 +157,10 @@ def declared_defaults(context: Context, tmp_path: Path) -> dict[str, dict[str, A
     for executable in setup_nodes():
         params = parameters_started(executable, context, tmp_path)
         if executable == "sim_robot":  # plan mode's values first
-            params = {**parameters_started(executable, context, tmp_path, mode="controller"),
-                      **params}  # fmt: skip
+            params = {
+                **parameters_started(executable, context, tmp_path, mode="controller"),
+                **params,
+            }
         for name in required_values(executable, tmp_path):
             params[name] = ""  # refused when not given (test below)
         out[executable] = params
@@ -250,9 +252,11 @@ def test_launch_files_import_only_the_helper_and_start_its_spec() -> None:
     """Each launch file compiles, imports robot_calib.nodes.launch_support and nothing else
     (not launch, not launch_ros: the helper does, when the description is built) and builds
     the helper's spec of its own name."""
-    assert {p.name for p in LAUNCH_FILES} == set(SPECS) == {
-        "sim_graph.launch.py", "capture.launch.py", "calibrator.launch.py"
-    }  # fmt: skip
+    assert (
+        {p.name for p in LAUNCH_FILES}
+        == set(SPECS)
+        == {"sim_graph.launch.py", "capture.launch.py", "calibrator.launch.py"}
+    )
     for path in LAUNCH_FILES:
         code = compile(path.read_text(), str(path), "exec")
         assert "generate_launch_description" in code.co_names
@@ -268,8 +272,13 @@ def test_importing_the_helper_needs_no_launch_package() -> None:
         "import sys, robot_calib.nodes.launch_support\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] in ('launch', 'launch_ros')))"
     )
-    run = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
-                         check=True, cwd=ROOT / "test")  # fmt: skip
+    run = subprocess.run(
+        [sys.executable, "-c", probe],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT / "test",
+    )
     assert run.stdout.strip() == "[]"
 
 
@@ -397,20 +406,26 @@ def _signatures() -> dict[str, dict[str, Any]]:
 
     return {
         "launch": {"LaunchDescription": launch_description},
-        "launch.actions": {"DeclareLaunchArgument": declare_launch_argument,
-                           "EmitEvent": emit_event, "RegisterEventHandler": register_event_handler,
-                           "TimerAction": timer_action},
+        "launch.actions": {
+            "DeclareLaunchArgument": declare_launch_argument,
+            "EmitEvent": emit_event,
+            "RegisterEventHandler": register_event_handler,
+            "TimerAction": timer_action,
+        },
         "launch.conditions": {"IfCondition": if_condition},
         "launch.event_handlers": {"OnProcessExit": on_process_exit},
         "launch.events": {"Shutdown": shutdown},
-        "launch.substitutions": {"Command": command,
-                                 "EqualsSubstitution": equals, "NotEqualsSubstitution": equals,
-                                 "LaunchConfiguration": launch_configuration,
-                                 "PathJoinSubstitution": path_join},
+        "launch.substitutions": {
+            "Command": command,
+            "EqualsSubstitution": equals,
+            "NotEqualsSubstitution": equals,
+            "LaunchConfiguration": launch_configuration,
+            "PathJoinSubstitution": path_join,
+        },
         "launch_ros.actions": {"Node": node},
         "launch_ros.parameter_descriptions": {"ParameterValue": parameter_value},
         "launch_ros.substitutions": {"FindPackageShare": find_package_share},
-    }  # fmt: skip
+    }
 
 
 class StandIn:
@@ -463,17 +478,30 @@ def test_launch_descriptions_build_with_stand_ins_of_the_jazzy_api(
     """The builder against constructors of launch/launch_ros's signatures: every launch
     file builds; our nodes load the YAML first, then their parameters; string parameters as
     text; the shutdown after sim_robot (1 s later) and capture (at once)."""
-    config = ("PathJoinSubstitution", {"substitutions": [
-        ("FindPackageShare", {"package": PACKAGE}), "config", "robot_calib.yaml"]})  # fmt: skip
+    config = (
+        "PathJoinSubstitution",
+        {
+            "substitutions": [
+                ("FindPackageShare", {"package": PACKAGE}),
+                "config",
+                "robot_calib.yaml",
+            ]
+        },
+    )
     text = {}
     for path in LAUNCH_FILES:
         (kind, given) = render(built_with_stand_ins(path, monkeypatch))
         assert kind == "LaunchDescription", path.name
         entities = given["initial_entities"]
         first = entities[0]
-        assert first == ("DeclareLaunchArgument", {
-            "name": "params_file", "default_value": config,
-            "description": "parameters YAML of the nodes (the arguments below win)"})  # fmt: skip
+        assert first == (
+            "DeclareLaunchArgument",
+            {
+                "name": "params_file",
+                "default_value": config,
+                "description": "parameters YAML of the nodes (the arguments below win)",
+            },
+        )
         for kind, args in entities:
             if kind == "Node":
                 assert set(args) - {"package", "executable", "parameters", "arguments"} <= (
@@ -485,17 +513,23 @@ def test_launch_descriptions_build_with_stand_ins_of_the_jazzy_api(
                     assert yaml_file == ("LaunchConfiguration", {"variable_name": "params_file"})
                     assert isinstance(own, dict) and own, args
         text[path.name] = repr(entities)
-    assert "('ParameterValue', {'value': ('LaunchConfiguration', {'variable_name': 'plan'}), " \
-        "'value_type': <class 'str'>})" in text["sim_graph.launch.py"]  # fmt: skip
+    assert (
+        "('ParameterValue', {'value': ('LaunchConfiguration', {'variable_name': 'plan'}), "
+        "'value_type': <class 'str'>})" in text["sim_graph.launch.py"]
+    )
     assert "'period': 1.0" in text["sim_graph.launch.py"]
     assert "'reason': 'plan done'" in text["sim_graph.launch.py"]
     assert "'reason': 'capture ended'" in text["capture.launch.py"]
     assert "TimerAction" not in text["capture.launch.py"]
     calibrator = text["calibrator.launch.py"]  # bag mode if bags given, else live mode
-    assert "('NotEqualsSubstitution', {'left': ('LaunchConfiguration', {'variable_name': " \
-        "'bags'}), 'right': ''})" in calibrator  # fmt: skip
-    assert "('EqualsSubstitution', {'left': ('LaunchConfiguration', {'variable_name': " \
-        "'bags'}), 'right': ''})" in calibrator  # fmt: skip
+    assert (
+        "('NotEqualsSubstitution', {'left': ('LaunchConfiguration', {'variable_name': "
+        "'bags'}), 'right': ''})" in calibrator
+    )
+    assert (
+        "('EqualsSubstitution', {'left': ('LaunchConfiguration', {'variable_name': "
+        "'bags'}), 'right': ''})" in calibrator
+    )
 
 
 def test_launch_descriptions_build_where_launch_is_installed() -> None:

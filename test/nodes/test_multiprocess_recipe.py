@@ -46,11 +46,25 @@ def test_recipe_as_separate_processes_records_every_pose(tmp_path: Path) -> None
     bag = tmp_path / "run.mcap"
     # The robot first and the recorder last: the worst start order for a robot that
     # started on its first reader. No wait_for_subscribers given: the defaults must do.
-    robot = node("sim_robot", tmp_path, "-p", f"plan:={PLAN}", "-p", "rate:=0.0",
-                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT)  # fmt: skip
+    robot = node(
+        "sim_robot",
+        tmp_path,
+        "-p",
+        f"plan:={PLAN}",
+        "-p",
+        "rate:=0.0",
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
     tracker = node("sim_tracker", tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    recorder = node("recorder", tmp_path, "-p", f"output:={bag}",
-                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT)  # fmt: skip
+    recorder = node(
+        "recorder",
+        tmp_path,
+        "-p",
+        f"output:={bag}",
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
     try:
         robot_out, _ = robot.communicate(timeout=30)
         assert robot.returncode == 0, robot_out[-2000:]

@@ -18,8 +18,15 @@ BIN = Path(sys.executable).parent
 
 
 def _run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([str(BIN / args[0]), *args[1:]], env=dict(os.environ), cwd=cwd,
-                          capture_output=True, text=True, timeout=30, check=False)  # fmt: skip
+    return subprocess.run(
+        [str(BIN / args[0]), *args[1:]],
+        env=dict(os.environ),
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
+    )
 
 
 def _errors(stderr: str) -> list[str]:
@@ -40,20 +47,33 @@ def test_an_empty_parameter_value_is_one_error_line(node: str) -> None:
 @pytest.mark.parametrize(
     ("node", "args", "said"),
     [
-        ("calibrator", ["-p", "model:=geometrc", "-p", "bags:=['x.mcap']"],
-         "calibrator: error: parameter 'model' geometrc"),
+        (
+            "calibrator",
+            ["-p", "model:=geometrc", "-p", "bags:=['x.mcap']"],
+            "calibrator: error: parameter 'model' geometrc",
+        ),
         ("compensator", ["-p", "params:=/nonexistent.json"], "compensator: error: "),
-        ("calibrator", ["-p", "ecc_order:=0", "-p", "bags:=['x.mcap']"],
-         "calibrator: error: parameter 'ecc_order' must be >= 1"),  # named once
-        ("calibrator", ["-p", "modle:=geometric+backlash:4"],
-         "calibrator: error: parameter 'modle' is not one of calibrator's (did you mean "
-         "'model'?)"),  # a misspelt name is not ignored
-        ("sim_robot", ["-p", "wait_for_subscribers:=-1"],
-         "sim_robot: error: parameter 'wait_for_subscribers' must be >= 0"),
+        (
+            "calibrator",
+            ["-p", "ecc_order:=0", "-p", "bags:=['x.mcap']"],
+            "calibrator: error: parameter 'ecc_order' must be >= 1",
+        ),  # named once
+        (
+            "calibrator",
+            ["-p", "modle:=geometric+backlash:4"],
+            "calibrator: error: parameter 'modle' is not one of calibrator's (did you mean "
+            "'model'?)",
+        ),  # a misspelt name is not ignored
+        (
+            "sim_robot",
+            ["-p", "wait_for_subscribers:=-1"],
+            "sim_robot: error: parameter 'wait_for_subscribers' must be >= 0",
+        ),
     ],
-)  # fmt: skip
-def test_node_errors_name_parameters_under_one_prefix(node: str, args: list[str],
-                                                      said: str) -> None:  # fmt: skip
+)
+def test_node_errors_name_parameters_under_one_prefix(
+    node: str, args: list[str], said: str
+) -> None:
     result = _run(node, "--ros-args", *args)
     assert result.returncode == 2, result.stderr
     (line,) = _errors(result.stderr)

@@ -95,8 +95,12 @@ def foreign_graph(*domains: int) -> subprocess.Popen[str]:
     """Another process (a robot, a user's sim_robot) publishing /joint_states and /clock at
     1 kHz on each of `domains`, with ROS 2's default discovery; up on return."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("ROS_AUTOMATIC")}
-    foreign = subprocess.Popen([sys.executable, "-c", FOREIGN, *map(str, domains)],
-                               stdout=subprocess.PIPE, text=True, env=env)  # fmt: skip
+    foreign = subprocess.Popen(
+        [sys.executable, "-c", FOREIGN, *map(str, domains)],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     assert foreign.stdout is not None and foreign.stdout.readline() == "publishing\n"
     time.sleep(1.0)  # discovery: the foreign graph is up before a simulation starts
     return foreign
@@ -135,7 +139,7 @@ def test_two_simulations_beside_foreign_publishers_on_every_domain(tmp_path: Pat
                 stdout=subprocess.PIPE,
                 stderr=subprocess.PIPE,
                 text=True,
-            )  # fmt: skip
+            )
             for k in (1, 2)
         ]
         results = [run.communicate(timeout=120) for run in runs]

@@ -21,8 +21,13 @@ ROUNDS = 20
 def test_replay_then_solve_never_loses_the_end_of_the_bag(context: Context) -> None:
     for round_ in range(ROUNDS):
         calibrator = CalibratorNode(context=context, node_name=f"calibrator_{round_}")
-        replay = ReplayNode(bag=SAMPLE, rate=0.0, wait_for_subscribers=1, context=context,
-                            node_name=f"replay_{round_}")  # fmt: skip
+        replay = ReplayNode(
+            bag=SAMPLE,
+            rate=0.0,
+            wait_for_subscribers=1,
+            context=context,
+            node_name=f"replay_{round_}",
+        )
         executor = SingleThreadedExecutor(context=context)
         for node in (calibrator, replay):
             executor.add_node(node)

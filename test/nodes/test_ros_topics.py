@@ -130,8 +130,10 @@ def holdout_bag(path: Path, shift_m: float = 0.0) -> Path:
 def dh_row(params: ParameterVector, j: int) -> np.ndarray:
     """Rz(theta_j) Tz(d_j) Tx(a_j) Rx(alpha_j) Ry(beta_j) of the calibrated parameters (beta 0
     where the joint has none): joint j+1's origin in a URDF of the chain."""
-    rz, rx, ry = (f([params.get(f"{n}{j}", 0.0)])[0] for f, n in
-                  ((rot_z, "theta"), (rot_x, "alpha"), (rot_y, "beta")))  # fmt: skip
+    rz, rx, ry = (
+        f([params.get(f"{n}{j}", 0.0)])[0]
+        for f, n in ((rot_z, "theta"), (rot_x, "alpha"), (rot_y, "beta"))
+    )
     row = np.eye(4)
     row[:3, :3] = rz @ rx @ ry
     row[:3, 3] = rz @ [params[f"a{j}"], 0.0, 0.0] + [0.0, 0.0, params[f"d{j}"]]

@@ -95,8 +95,9 @@ def test_the_python_caller_reads_keywords_and_the_command_line_flags(tmp_path: P
     with pytest.raises(InputError, match=r"`model='geometric\+frobnicate:4'`: unknown effect"):
         api.calibrate(None, api.load_robot("kr5_sixx_r650"), model="geometric+frobnicate:4")  # type: ignore[arg-type]
     bag = PACKAGE.parent / "bags" / "paper_test3.mcap"
-    run = cli("calibrate", str(bag), "--model", "geometric+frobnicate:4", "-o", "p.json",
-              cwd=tmp_path)  # fmt: skip
+    run = cli(
+        "calibrate", str(bag), "--model", "geometric+frobnicate:4", "-o", "p.json", cwd=tmp_path
+    )
     assert run.returncode == 2
     assert "--model geometric+frobnicate:4: unknown effect" in run.stderr
     assert "`" not in run.stderr

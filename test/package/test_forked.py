@@ -125,8 +125,14 @@ def _fresh(code: str) -> str:
 
     with tempfile.TemporaryDirectory() as own:
         env = {**os.environ, "TMPDIR": own}
-        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                              timeout=300, check=False, env=env)  # fmt: skip
+        done = subprocess.run(
+            [sys.executable, "-c", code],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+            env=env,
+        )
     assert done.returncode == 0, done.stderr[-3000:]
     return done.stdout.strip()
 
@@ -209,8 +215,7 @@ def test_children_of_a_killed_process_end_and_remove_their_folders() -> None:
     import signal
     import time
 
-    run = subprocess.Popen([sys.executable, "-c", KILLED_CHECK], stdout=subprocess.PIPE,
-                           text=True)  # fmt: skip
+    run = subprocess.Popen([sys.executable, "-c", KILLED_CHECK], stdout=subprocess.PIPE, text=True)
     assert run.stdout is not None
     fields = run.stdout.readline().split()
     children, folders = [int(p) for p in fields[:2]], [Path(f) for f in fields[2:]]
@@ -218,9 +223,14 @@ def test_children_of_a_killed_process_end_and_remove_their_folders() -> None:
     run.send_signal(signal.SIGKILL)
     run.wait(timeout=30)
     deadline = time.monotonic() + 30
-    while time.monotonic() < deadline and (any(f.exists() for f in folders) or any(
-            Path(f"/proc/{p}").exists() and "Z" not in Path(f"/proc/{p}/stat").read_text()
-            .split(")")[-1].split()[:1] for p in children)):  # fmt: skip
+    while time.monotonic() < deadline and (
+        any(f.exists() for f in folders)
+        or any(
+            Path(f"/proc/{p}").exists()
+            and "Z" not in Path(f"/proc/{p}/stat").read_text().split(")")[-1].split()[:1]
+            for p in children
+        )
+    ):
         time.sleep(0.2)
     assert not any(f.exists() for f in folders), folders
     for pid in children:
@@ -291,8 +301,12 @@ def test_a_folder_left_by_a_killed_process_is_removed_by_the_next(tmp_path: Path
     from robot_calib import atomic
     from robot_calib.forked import FOLDER_PREFIX
 
-    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
-                           capture_output=True, text=True, check=True)  # fmt: skip
+    ended = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     left = tmp_path / f"{FOLDER_PREFIX}left"
     left.mkdir()
     (left / atomic.OWNER_FILE).write_text(f"{socket.gethostname()} {ended.stdout.strip()} 1")

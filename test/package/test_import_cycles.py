@@ -34,8 +34,10 @@ def import_graph(package: Path) -> dict[str, set[str]]:
             elif isinstance(node, ast.ImportFrom):
                 base = here.rsplit(".", node.level - 1)[0] if node.level else ""
                 module = ".".join(p for p in (base, node.module or "") if p)
-                targets = [f"{module}.{a.name}" if f"{module}.{a.name}" in files else module
-                           for a in node.names]  # fmt: skip
+                targets = [
+                    f"{module}.{a.name}" if f"{module}.{a.name}" in files else module
+                    for a in node.names
+                ]
             else:
                 continue
             graph[name] |= {t for t in targets if t in files and t != name}

@@ -93,8 +93,9 @@ def test_diagnose_does_not_import_the_simulator() -> None:
     diagnose = [m for m in core_modules() if m.startswith("robot_calib.diagnosis.")]
     probe = f"import {', '.join(diagnose)}, sys\n"
     probe += "print([m for m in sys.modules if m.startswith('robot_calib.sim')])"
-    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
-                         check=True).stdout  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True
+    ).stdout
     assert out.strip() == "[]"
 
 

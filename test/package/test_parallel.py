@@ -52,8 +52,9 @@ def test_sequential_computes_here_and_forked_elsewhere_with_the_same_results() -
     here, pids = run_tasks()  # nothing installed: SEQUENTIAL
     assert here == [10, 11, 14] and pids == {os.getpid()}
     code = CHOICES.format(here=str(Path(__file__).parent))
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True).stdout.splitlines()  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.splitlines()
     assert out == [
         "([10, 11, 14], 'here')",  # nothing installed
         "([10, 11, 14], 'child')",  # FORKED: the same values from the child

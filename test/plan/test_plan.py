@@ -37,10 +37,11 @@ def test_d_optimal_worst_sigma_at_least_2x_smaller_than_random(problem) -> None:
     planned = predict(problem, problem.plan(d_optimal(problem, n)), noise)
     rng = np.random.default_rng(1)
     random_worst = [
-        predict(problem, problem.plan(problem.candidates[rng.choice(600, n, replace=False)]),
-                noise).rms_m.max()
+        predict(
+            problem, problem.plan(problem.candidates[rng.choice(600, n, replace=False)]), noise
+        ).rms_m.max()
         for _ in range(15)
-    ]  # fmt: skip
+    ]
     assert len(planned.names) == 27  # the geometric parameters of the KR5 with a point target
     assert np.median(random_worst) / planned.rms_m.max() >= 2.0
 
@@ -71,8 +72,7 @@ def test_predicted_sigma_matches_the_spread_of_simulated_calibrations(problem) -
 @pytest.mark.slow
 def test_plan_file_round_trip_through_simulate_and_run(tmp_path: Path) -> None:
     plan = tmp_path / "plan.yaml"
-    made = cli("plan", "--poses", "20", "--candidates", "300", "--trials", "0",
-               "-o", str(plan))  # fmt: skip
+    made = cli("plan", "--poses", "20", "--candidates", "300", "--trials", "0", "-o", str(plan))
     assert made.returncode == 0, made.stderr
     assert "x smaller than random poses at equal N" in made.stdout
     q = load_plan(plan, WORLD.model.robot).q
@@ -114,16 +114,19 @@ def test_sweeps_in_irregular_steps_tell_every_order_apart(tmp_path: Path) -> Non
     # the seed's sweeps reach below the KR5's mounting plane: said, and kept in the file
     assert "poses put a joint centre, the flange or the target below z = 0 m" in made.stdout
     assert "below z = 0 m" in plan.read_text()
-    clear = cli("plan", "--sweeps", "paper-test2", "--floor-z=-inf",
-                "-o", str(tmp_path / "c.yaml"))  # fmt: skip
+    clear = cli(
+        "plan", "--sweeps", "paper-test2", "--floor-z=-inf", "-o", str(tmp_path / "c.yaml")
+    )
     assert clear.returncode == 0 and "warning" not in clear.stdout, clear.stdout
-    for bad, words in ((["--sweeps", "paper-test9"], "--sweeps paper-test9: not one of"),
-                       (["--sweeps", "test2"], "--sweeps test2"),
-                       (["--sweeps", "paper-test2", "--max-order", "65"], "--max-order 65"),
-                       (["--sweeps", "paper-test2", "--poses", "20"], "either --poses"),
-                       (["--sweeps", "paper-test2", "--candidates", "5"], "--candidates belong"),
-                       (["--poses", "20", "--max-order", "10"], "--max-order belongs"),
-                       ([], "either --poses")):  # fmt: skip
+    for bad, words in (
+        (["--sweeps", "paper-test9"], "--sweeps paper-test9: not one of"),
+        (["--sweeps", "test2"], "--sweeps test2"),
+        (["--sweeps", "paper-test2", "--max-order", "65"], "--max-order 65"),
+        (["--sweeps", "paper-test2", "--poses", "20"], "either --poses"),
+        (["--sweeps", "paper-test2", "--candidates", "5"], "--candidates belong"),
+        (["--poses", "20", "--max-order", "10"], "--max-order belongs"),
+        ([], "either --poses"),
+    ):
         out = cli("plan", *bad, "-o", str(tmp_path / "x.yaml"))
         assert out.returncode == 2 and words in out.stderr, (bad, out.stderr)
         assert len(out.stderr.strip().splitlines()) == 1 and not (tmp_path / "x.yaml").exists()
@@ -189,6 +192,7 @@ def test_candidates_keep_every_joint_centre_above_the_floor() -> None:
     assert heights.min() >= 0.1 - 1e-9
     from robot_calib.sim.plans import random_plan
 
-    unchecked = chain(model.dh_table(params, random_plan(model.robot, 400,
-                                                         np.random.default_rng(4)).q))  # fmt: skip
+    unchecked = chain(
+        model.dh_table(params, random_plan(model.robot, 400, np.random.default_rng(4)).q)
+    )
     assert (unchecked[:, 1:-1, 2, 3] < 0.1).any()  # the check has something to remove

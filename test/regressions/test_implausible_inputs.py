@@ -31,8 +31,9 @@ def _bag(path: Path, world_seed: int, n: int, shift_m: float = 0.0) -> None:
     rng = np.random.default_rng(world_seed)
     plan = random_plan(UR10, n, rng)
     poses, points = measure_every_target(world, plan.q, plan_times(plan, world.timing), rng)
-    write_measurement_bag(path, poses.q, np.asarray(points) + [shift_m, 0.0, 0.0],
-                          UR10.joint_names, poses.time)  # fmt: skip
+    write_measurement_bag(
+        path, poses.q, np.asarray(points) + [shift_m, 0.0, 0.0], UR10.joint_names, poses.time
+    )
 
 
 @pytest.fixture(scope="module")
@@ -56,8 +57,18 @@ def test_a_hold_out_bag_of_elsewhere_is_implausible(work: Path, accuracy: list[s
     model's PARAMS.json is `plausible: false` with that reason (item 6) and `export`
     refuses it."""
     out = f"d{len(accuracy)}.json"
-    proc = cli("diagnose", "cal.mcap", "--holdout", "moved.mcap", "--robot", "ur10",
-               *accuracy, "-o", out, cwd=work)  # fmt: skip
+    proc = cli(
+        "diagnose",
+        "cal.mcap",
+        "--holdout",
+        "moved.mcap",
+        "--robot",
+        "ur10",
+        *accuracy,
+        "-o",
+        out,
+        cwd=work,
+    )
     assert proc.returncode == 3, proc.stderr
     last = proc.stderr.strip().splitlines()[-1]
     assert "Traceback" not in proc.stderr
@@ -75,16 +86,26 @@ def test_a_hold_out_bag_of_elsewhere_is_implausible(work: Path, accuracy: list[s
     assert "<h1>IMPLAUSIBLE: " in (work / f"{stem}.html").read_text()
     best = json.loads((work / f"{stem}.params_best.json").read_text())
     assert best["plausible"] is False and reason in best["implausible"]
-    proc = cli("export", f"{stem}.params_best.json", "--format", "dh", "-o", "x.csv",
-               cwd=work)  # fmt: skip
+    proc = cli("export", f"{stem}.params_best.json", "--format", "dh", "-o", "x.csv", cwd=work)
     assert proc.returncode == 2 and "do not belong" in proc.stderr
     assert not (work / "x.csv").exists()
 
 
 def test_a_hold_out_bag_that_belongs_is_not_flagged(work: Path) -> None:
     """The same poses where the tracker stood: plausible, exit 0, params_best plausible."""
-    proc = cli("diagnose", "cal.mcap", "--holdout", "ho.mcap", "--robot", "ur10",
-               "--tracker-accuracy", "0.005", "-o", "ok.json", cwd=work)  # fmt: skip
+    proc = cli(
+        "diagnose",
+        "cal.mcap",
+        "--holdout",
+        "ho.mcap",
+        "--robot",
+        "ur10",
+        "--tracker-accuracy",
+        "0.005",
+        "-o",
+        "ok.json",
+        cwd=work,
+    )
     assert proc.returncode == 0, proc.stderr
     assert json.loads((work / "ok.json").read_text())["implausible"] == []
     assert json.loads((work / "ok.params_best.json").read_text())["plausible"] is True
@@ -160,8 +181,13 @@ def test_score_judges_a_hybrid_by_its_own_in_sample_rms(tmp_path: Path) -> None:
     assert physical > 0.3 and own < 0.03  # the correction learns the gravity backlash
     held = sc.holdout
     for name, shift in (("ho.mcap", 0.0), ("moved.mcap", 0.002)):
-        write_measurement_bag(tmp_path / name, held.poses.q, held.points + [shift, 0.0, 0.0],
-                              robot.joint_names, held.poses.time)  # fmt: skip
+        write_measurement_bag(
+            tmp_path / name,
+            held.poses.q,
+            held.points + [shift, 0.0, 0.0],
+            robot.joint_names,
+            held.poses.time,
+        )
     proc = cli("score", "h.json", "ho.mcap", cwd=tmp_path)
     assert proc.returncode == 0 and IMPLAUSIBLE_HINT not in proc.stderr, proc.stderr
     proc = cli("score", "h.json", "moved.mcap", cwd=tmp_path)
@@ -171,8 +197,13 @@ def test_score_judges_a_hybrid_by_its_own_in_sample_rms(tmp_path: Path) -> None:
     assert 2.0 - 0.05 < float(line.split("rms ")[1].split(" mm")[0]) < 2.0 + 0.05
     # Item 8's messages on corrections: an unknown format names both known ones; an
     # inducing table of 5 columns names that table, not only the length scales
-    np.savetxt(tmp_path / "j.csv", held.poses.q[:3], delimiter=",",
-               header="q1,q2,q3,q4,q5,q6", comments="")  # fmt: skip
+    np.savetxt(
+        tmp_path / "j.csv",
+        held.poses.q[:3],
+        delimiter=",",
+        header="q1,q2,q3,q4,q5,q6",
+        comments="",
+    )
     unknown = json.loads(json.dumps(doc))
     unknown["correction"]["format"] = "robot_calib.correction/9"
     five = json.loads(json.dumps(doc))
@@ -193,16 +224,18 @@ def test_model_terms_say_their_defaults_and_repeats(work: Path) -> None:
     joint) every joint without a word; a repeated term said 'duplicate parameter names'
     without naming --model. Now the log says each default, the error names both terms."""
     model = "geometric+joint_harmonics:2+joint_harmonics:orders=11"
-    proc = cli("calibrate", "cal.mcap", "--robot", "ur10", "--model", model,
-               "-o", "jh.json", cwd=work)  # fmt: skip
+    proc = cli(
+        "calibrate", "cal.mcap", "--robot", "ur10", "--model", model, "-o", "jh.json", cwd=work
+    )
     assert proc.returncode in (0, 3), proc.stderr
     assert "joint_harmonics:2 is joint_harmonics:2:orders=2 (the default order 2" in proc.stderr
     assert "joint_harmonics:orders=11 is joint_harmonics:1,2,3,4,5,6:orders=11 (every joint" in (
         proc.stderr
     )
     model = "geometric+joint_harmonics:2:orders=11,27+joint_harmonics:2:orders=11"
-    proc = cli("calibrate", "cal.mcap", "--robot", "ur10", "--model", model,
-               "-o", "dup.json", cwd=work)  # fmt: skip
+    proc = cli(
+        "calibrate", "cal.mcap", "--robot", "ur10", "--model", model, "-o", "dup.json", cwd=work
+    )
     assert proc.returncode == 2 and not (work / "dup.json").exists()
     (line,) = proc.stderr.strip().splitlines()
     assert line.startswith(f"robot-calib calibrate: error: --model {model}: terms ")
@@ -255,8 +288,7 @@ def test_force_replaces_the_whole_output_set(work: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     assert (folder / "d_angle.png").exists()
     (folder / "d_x_angle.png").write_bytes(b"another set")
-    proc = cli("diagnose", "cal.mcap", "--robot", "ur10", "-o", "st/d.json", "--force",
-               cwd=work)  # fmt: skip
+    proc = cli("diagnose", "cal.mcap", "--robot", "ur10", "-o", "st/d.json", "--force", cwd=work)
     assert proc.returncode == 0, proc.stderr
     assert not (folder / "d_angle.png").exists()
     report = (folder / "d.md").read_text()

@@ -19,8 +19,19 @@ def backlash_bags(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]
     and hold-out bags."""
     work = tmp_path_factory.mktemp("backlash")
     for name, n, seed in (("cal.mcap", "150", "1"), ("held.mcap", "100", "2")):
-        run = cli("simulate", "--plan", "random", "--n-random", n, "--effects",
-                  "backlash:4", "--seed", seed, "-o", str(work / name))  # fmt: skip
+        run = cli(
+            "simulate",
+            "--plan",
+            "random",
+            "--n-random",
+            n,
+            "--effects",
+            "backlash:4",
+            "--seed",
+            seed,
+            "-o",
+            str(work / name),
+        )
         assert run.returncode == 0, run.stderr
     return work / "cal.mcap", work / "held.mcap"
 
@@ -34,8 +45,9 @@ def test_a_stated_accuracy_in_the_wrong_unit_hides_no_effect(
     never 'null (geometric reaches the noise level)'."""
     cal, held = backlash_bags
     out = tmp_path / "d.json"
-    run = cli("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy", "5",
-              "-o", str(out))  # fmt: skip
+    run = cli(
+        "diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy", "5", "-o", str(out)
+    )
     assert run.returncode == 0, run.stderr
     warning = next(line for line in run.stdout.splitlines() if "stated tracker accuracy" in line)
     assert warning.startswith("warning: ") and "5 mm per axis" in warning
@@ -56,8 +68,9 @@ def test_a_stated_accuracy_a_few_times_the_residual_is_used_and_said(
     naming both figures; the verdict says the floor rests on the stated accuracy alone."""
     cal, held = backlash_bags
     out = tmp_path / "d.json"
-    run = cli("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy",
-              "0.2", "-o", str(out))  # fmt: skip
+    run = cli(
+        "diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy", "0.2", "-o", str(out)
+    )
     assert run.returncode == 0, run.stderr
     doc = json.loads(out.read_text())
     assert doc["noise"]["floor_known"] is True
@@ -77,8 +90,16 @@ def test_the_calibrate_warning_inside_diagnose_uses_the_stated_accuracy(
     above 20 x that; the warning compares it with the stated 0.0020 mm, not an assumed
     0.0100 mm."""
     cal, held = backlash_bags
-    run = cli("diagnose", str(cal), "--holdout", str(held), "--tracker-accuracy",
-              "0.002", "-o", str(tmp_path / "d.json"))  # fmt: skip
+    run = cli(
+        "diagnose",
+        str(cal),
+        "--holdout",
+        str(held),
+        "--tracker-accuracy",
+        "0.002",
+        "-o",
+        str(tmp_path / "d.json"),
+    )
     assert run.returncode == 0, run.stderr
     assert "(0.0020 mm, stated tracker accuracy (given by the user))" in run.stderr
     assert "assumed tracker noise" not in run.stderr
@@ -91,8 +112,7 @@ def test_on_a_bag_with_sweeps_a_stated_accuracy_is_never_ignored_without_a_word(
     """paper-test2 (sweeps and repeat poses) with --tracker-accuracy 5: the measured noise
     (about 0.005 mm per axis) is the floor, and a warning names both figures."""
     bag = tmp_path / "sw.mcap"
-    run = cli("simulate", "--plan", "paper-test2", "--effects", "backlash:4", "-o",
-              str(bag))  # fmt: skip
+    run = cli("simulate", "--plan", "paper-test2", "--effects", "backlash:4", "-o", str(bag))
     assert run.returncode == 0, run.stderr
     out = tmp_path / "d.json"
     run = cli("diagnose", str(bag), "--tracker-accuracy", "5", "-o", str(out))
@@ -104,8 +124,7 @@ def test_on_a_bag_with_sweeps_a_stated_accuracy_is_never_ignored_without_a_word(
     assert "x that" in warning and warning in run.stdout
     assert doc["dominant_effect"] == {"effect": "backlash", "joints": [4]}
     # a consistent stated accuracy is a note, still a word
-    run = cli("diagnose", str(bag), "--tracker-accuracy", "0.005", "-o",
-              str(tmp_path / "ok.json"))  # fmt: skip
+    run = cli("diagnose", str(bag), "--tracker-accuracy", "0.005", "-o", str(tmp_path / "ok.json"))
     note = json.loads((tmp_path / "ok.json").read_text())["noise"]["warning"]
     assert note.startswith("note: ") and "not used" in note
 
@@ -116,8 +135,9 @@ def test_three_targets_per_pose_are_no_stream(tmp_path: Path) -> None:
     world = tmp_path / "w3.yaml"
     world.write_text("targets:\n  smr2: [0.0, 0.08, 0.04]\n  smr3: [-0.05, -0.05, 0.06]\n")
     bag = tmp_path / "t3.mcap"
-    run = cli("simulate", "--world", str(world), "--plan", "random", "--n-random",
-              "36", "-o", str(bag))  # fmt: skip
+    run = cli(
+        "simulate", "--world", str(world), "--plan", "random", "--n-random", "36", "-o", str(bag)
+    )
     assert run.returncode == 0, run.stderr
     run = cli("calibrate", str(bag), "-o", str(tmp_path / "p.json"))
     assert run.returncode == 0, run.stderr
@@ -132,15 +152,19 @@ def measured_rows(tmp_path_factory: pytest.TempPathFactory) -> list[list[float]]
     from robot_calib.kinematics.loader import load_robot
 
     bag = tmp_path_factory.mktemp("rows") / "r60.mcap"
-    run = cli("simulate", "--plan", "random", "--n-random", "60", "--seed", "3", "-o",
-              str(bag))  # fmt: skip
+    run = cli("simulate", "--plan", "random", "--n-random", "60", "--seed", "3", "-o", str(bag))
     assert run.returncode == 0, run.stderr
     rec = read_recording([bag], load_robot("kr5_sixx_r650"))
     return [[*q, *p] for q, p in zip(rec.poses.q.tolist(), rec.points.tolist())]
 
 
-def _write_csv(path: Path, rows: list[list[float]], header: str | None, sep: str = ",",
-               time0: float | None = None) -> Path:  # fmt: skip
+def _write_csv(
+    path: Path,
+    rows: list[list[float]],
+    header: str | None,
+    sep: str = ",",
+    time0: float | None = None,
+) -> Path:
     lines = [] if header is None else [header]
     for k, row in enumerate(rows):
         cells = ([] if time0 is None else [f"{time0 + 2.0 * k:.3f}"]) + [f"{v:.9f}" for v in row]
@@ -165,14 +189,12 @@ def test_two_halves_of_one_csv_are_calibration_and_hold_out(
         bags.append(tmp_path / f"{name}.mcap")
         run = cli("import", str(csv), *COLUMNS, "-o", str(bags[-1]))
         assert run.returncode == 0, run.stderr
-    run = cli("diagnose", str(bags[0]), "--holdout", str(bags[1]), "-o",
-              str(tmp_path / "d.json"))  # fmt: skip
+    run = cli("diagnose", str(bags[0]), "--holdout", str(bags[1]), "-o", str(tmp_path / "d.json"))
     assert run.returncode == 0, run.stderr
     again = tmp_path / "a_again.mcap"
     run = cli("import", str(tmp_path / "a.csv"), *COLUMNS, "-o", str(again))
     assert run.returncode == 0, run.stderr
-    run = cli("diagnose", str(bags[0]), "--holdout", str(again), "-o",
-              str(tmp_path / "x.json"))  # fmt: skip
+    run = cli("diagnose", str(bags[0]), "--holdout", str(again), "-o", str(tmp_path / "x.json"))
     assert run.returncode == 2 and "the same measurements twice" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1 and not (tmp_path / "x.json").exists()
 
@@ -185,8 +207,7 @@ def test_an_absolute_time_column_is_kept(measured_rows: list[list[float]], tmp_p
     epoch = 1_790_000_000.0
     cols = (*COLUMNS, "--time", "t")
     for name, time0 in (("abs", epoch), ("rel", 0.0)):
-        csv = _write_csv(tmp_path / f"{name}.csv", measured_rows[:10], "t," + HEADER,
-                         time0=time0)  # fmt: skip
+        csv = _write_csv(tmp_path / f"{name}.csv", measured_rows[:10], "t," + HEADER, time0=time0)
         run = cli("import", str(csv), *cols, "-o", str(tmp_path / f"{name}.mcap"))
         assert run.returncode == 0, run.stderr
     with BagReader(tmp_path / "abs.mcap") as reader:
@@ -245,8 +266,9 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
     robot = made / f"my.{kind}"
     robot.write_bytes(source.read_bytes())
     bag, params = made / "u.mcap", made / "p.json"
-    run = cli("simulate", "--robot", str(robot), "--plan", "random", "--n-random", "60",
-              "-o", str(bag))  # fmt: skip
+    run = cli(
+        "simulate", "--robot", str(robot), "--plan", "random", "--n-random", "60", "-o", str(bag)
+    )
     assert run.returncode == 0, run.stderr
     run = cli("calibrate", str(bag), "--robot", str(robot), "-o", str(params))
     assert run.returncode == 0, run.stderr
@@ -254,14 +276,16 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
     assert doc["robot_description"] == {"format": kind, "text": source.read_text()}
     joints = tmp_path / "j.csv"
     joints.write_text("q1,q2,q3,q4,q5,q6\n0.1,-1.2,1.0,0.3,0.5,0.2\n-0.4,-1.6,1.3,0.2,-0.7,0.9\n")
-    before = cli("predict", str(params), "--joints", str(joints), "-o",
-                 str(tmp_path / "before.csv"))  # fmt: skip
+    before = cli(
+        "predict", str(params), "--joints", str(joints), "-o", str(tmp_path / "before.csv")
+    )
     assert before.returncode == 0, before.stderr
     old = dict(doc)
     del old["robot_description"]  # a file written before the section: the path still loads
     (made / "old.json").write_text(json.dumps(old))
-    run = cli("predict", str(made / "old.json"), "--joints", str(joints), "-o",
-              str(tmp_path / "old.csv"))  # fmt: skip
+    run = cli(
+        "predict", str(made / "old.json"), "--joints", str(joints), "-o", str(tmp_path / "old.csv")
+    )
     assert run.returncode == 0, run.stderr
     (moved / "p.json").write_bytes(params.read_bytes())
     for path in made.iterdir():
@@ -279,8 +303,7 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
     for fmt in ("urdf", "dh", "json"):
         run = cli("export", str(at), "--format", fmt, "-o", str(moved / f"e.{fmt}"))
         assert run.returncode == 0, run.stderr
-    run = cli("compensate", str(at), "--joints", str(joints), "-o",
-              str(moved / "c.csv"))  # fmt: skip
+    run = cli("compensate", str(at), "--joints", str(joints), "-o", str(moved / "c.csv"))
     assert run.returncode == 0, run.stderr
     # the section is the description: edited, the file is refused (fingerprint), exit 2
     edited = json.loads(at.read_text())
@@ -288,8 +311,9 @@ def test_a_params_file_carries_its_robot_description(kind: str, tmp_path: Path) 
     edited["robot_description"]["text"] = text.replace("-0.612", "-0.613")  # a2 of the UR10
     assert edited["robot_description"]["text"] != doc["robot_description"]["text"]
     (moved / "edited.json").write_text(json.dumps(edited))
-    run = cli("predict", str(moved / "edited.json"), "--joints", str(joints), "-o",
-              str(moved / "y.csv"))  # fmt: skip
+    run = cli(
+        "predict", str(moved / "edited.json"), "--joints", str(joints), "-o", str(moved / "y.csv")
+    )
     assert run.returncode == 2 and "is not the one it was calibrated with" in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1
 

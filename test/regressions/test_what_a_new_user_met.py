@@ -44,16 +44,30 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A UR10 bag with a 6-DoF probe (ur10.mcap) and its calibration (p10.json, a probe),
     and a KR5 calibration of the sample bag (p5.json, points only)."""
     folder = tmp_path_factory.mktemp("new_user")
-    world = build_world({"robot": "ur10", "geometry": "nominal", "seed": 1,
-                         "six_dof": {"first": [0, 90, 0]},
-                         "target_in_flange_m": [0, 0, 0.12]})  # fmt: skip
+    world = build_world(
+        {
+            "robot": "ur10",
+            "geometry": "nominal",
+            "seed": 1,
+            "six_dof": {"first": [0, 90, 0]},
+            "target_in_flange_m": [0, 0, 0.12],
+        }
+    )
     rng = np.random.default_rng(1)
     plan = random_plan(UR10, 40, rng)
     poses, points = measure_every_target(world, plan.q, plan_times(plan, world.timing), rng)
-    write_measurement_bag(folder / "ur10.mcap", poses.q, points, UR10.joint_names, poses.time,
-                          six_dof={"": (poses.rotation, np.full((40, 2), np.nan))})  # fmt: skip
-    for args in (["ur10.mcap", "--robot", "ur10", "-o", "p10.json"],
-                 [str(SAMPLE), "-o", "p5.json"]):  # fmt: skip
+    write_measurement_bag(
+        folder / "ur10.mcap",
+        poses.q,
+        points,
+        UR10.joint_names,
+        poses.time,
+        six_dof={"": (poses.rotation, np.full((40, 2), np.nan))},
+    )
+    for args in (
+        ["ur10.mcap", "--robot", "ur10", "-o", "p10.json"],
+        [str(SAMPLE), "-o", "p5.json"],
+    ):
         proc = cli("calibrate", *args, cwd=folder)
         assert proc.returncode == 0, proc.stderr
     return folder
@@ -63,8 +77,16 @@ def test_score_flags_another_robot_in_every_output(work: Path) -> None:
     """The user's case: a UR10 bag scored with KR5 parameters (its joints renamed) gave
     1082 mm and no word; now stderr, stdout and the per-point table each say it, and that
     the bag's orientations are not scored (the KR5 calibration has no probe)."""
-    proc = cli("score", "p5.json", "ur10.mcap", "--joint-names", UR_NAMES,
-               "--points-csv", "points.csv", cwd=work)  # fmt: skip
+    proc = cli(
+        "score",
+        "p5.json",
+        "ur10.mcap",
+        "--joint-names",
+        UR_NAMES,
+        "--points-csv",
+        "points.csv",
+        cwd=work,
+    )
     assert proc.returncode == 0, proc.stderr
     implausible = [x for x in proc.stderr.splitlines() if IMPLAUSIBLE_HINT in x]
     assert len(implausible) == 1 and implausible[0].startswith("warning: ur10.mcap: absolute")
@@ -99,8 +121,9 @@ def test_the_implausibility_threshold(work: Path) -> None:
     assert not warned(30.0, 4.0)  # within 10 x: a poor calibration, honestly scored
     # A tracker moved by 5 mm since the calibration: flagged; where it stood: not (the
     # sample bag is the calibration's own: only that is said).
-    shifted = recording_from_arrays(recording.poses.q, recording.points + [0.005, 0, 0],
-                                    recording.poses.time, robot=KR5)  # fmt: skip
+    shifted = recording_from_arrays(
+        recording.poses.q, recording.points + [0.005, 0, 0], recording.poses.time, robot=KR5
+    )
     assert any(IMPLAUSIBLE_HINT in w for w in score(cal, shifted, in_sample=fitted).warnings)
     (only,) = cal.score(recording).warnings
     assert "looks like a bag this calibration was fitted on" in only
@@ -118,13 +141,17 @@ def test_predict_refuses_degrees_and_another_robot(work: Path) -> None:
     )
     assert "degrees?" in proc.stderr and not (work / "out.csv").exists()
     # The same readings in rad are read as they are.
-    np.savetxt(work / "rad.csv", np.radians(q), delimiter=",", fmt="%.12f", header=header,
-               comments="")  # fmt: skip
-    np.testing.assert_allclose(read_joints_csv(work / "rad.csv", 6, UR10.limits).q,
-                               np.radians(q), atol=1e-11)  # fmt: skip
+    np.savetxt(
+        work / "rad.csv", np.radians(q), delimiter=",", fmt="%.12f", header=header, comments=""
+    )
+    np.testing.assert_allclose(
+        read_joints_csv(work / "rad.csv", 6, UR10.limits).q, np.radians(q), atol=1e-11
+    )
     # --robot is checked against the calibration's robot, the default robot's name too.
-    for verb in (["predict", "p10.json", "--joints", "rad.csv", "-o", "out.csv"],
-                 ["score", "p10.json", "ur10.mcap"]):  # fmt: skip
+    for verb in (
+        ["predict", "p10.json", "--joints", "rad.csv", "-o", "out.csv"],
+        ["score", "p10.json", "ur10.mcap"],
+    ):
         proc = cli(*verb, "--robot", "kr5_sixx_r650", cwd=work)
         assert proc.returncode == 2, proc.stderr
         assert "p10.json: identified for robot ur10, not --robot kr5_sixx_r650" in proc.stderr
@@ -142,24 +169,37 @@ def test_a_joint_state_of_another_built_in_robot_suggests_robot_first(work: Path
     with pytest.raises(InputError) as info:
         read_recording([work / "ur10.mcap"], KR5)
     message = str(info.value)
-    assert "they are the joints of built-in robots ur10, ur10e, ur16e, ur3, ur3e, ur5, ur5e: " \
-           "give `robot='ur10'` (or another of them" in message  # fmt: skip
+    assert (
+        "they are the joints of built-in robots ur10, ur10e, ur16e, ur3, ur3e, ur5, ur5e: "
+        "give `robot='ur10'` (or another of them" in message
+    )
     assert message.index("`robot=") < message.index("`joint_names=")
     # names of no built-in robot: only --joint-names
     renamed = tuple(f"axis{j}" for j in range(1, 7))
-    write_measurement_bag(work / "axes.mcap", np.zeros((2, 6)) + [[0.1], [0.2]],
-                          np.array([[1.0, 0, 0], [1.1, 0, 0]]), renamed)  # fmt: skip
+    write_measurement_bag(
+        work / "axes.mcap",
+        np.zeros((2, 6)) + [[0.1], [0.2]],
+        np.array([[1.0, 0, 0], [1.1, 0, 0]]),
+        renamed,
+    )
     with pytest.raises(InputError, match="; map them with `joint_names=") as info:
         read_recording([work / "axes.mcap"], KR5)
     assert "robot" not in str(info.value).split("; map them")[1]
 
 
-ROWS = ["t;q1;q2;q3;q4;q5;q6;x;y;z",
-        "0.0;0.1;0.2;0.3;0.4;0.5;0.6;1250.5;20.0;-300.25",
-        "1.0;0.1;;0.3;0.4;0.5;0.6;1251.5;;-300.25",
-        "2.0;0.1;0.2;0.3;0.4;0.5;0.6;1252.5;20.0;x"]  # fmt: skip
-FMT = CsvFormat(joints=tuple(f"q{j}" for j in range(1, 7)), point=("x", "y", "z"), time="t",
-                separator=";", length_unit="mm")  # fmt: skip
+ROWS = [
+    "t;q1;q2;q3;q4;q5;q6;x;y;z",
+    "0.0;0.1;0.2;0.3;0.4;0.5;0.6;1250.5;20.0;-300.25",
+    "1.0;0.1;;0.3;0.4;0.5;0.6;1251.5;;-300.25",
+    "2.0;0.1;0.2;0.3;0.4;0.5;0.6;1252.5;20.0;x",
+]
+FMT = CsvFormat(
+    joints=tuple(f"q{j}" for j in range(1, 7)),
+    point=("x", "y", "z"),
+    time="t",
+    separator=";",
+    length_unit="mm",
+)
 
 
 def test_import_says_which_column_makes_a_row_bad(tmp_path: Path) -> None:
@@ -171,18 +211,33 @@ def test_import_says_which_column_makes_a_row_bad(tmp_path: Path) -> None:
     path.write_text("\n".join([ROWS[0], *ROWS[2:]]) + "\n")
     with pytest.raises(InputError) as info:
         read_measurement_csv(path, FMT)
-    assert str(info.value) == (f"{path}:2: columns q2, y are empty (the first of 2 bad rows: no "
-                               "usable row)")  # fmt: skip
+    assert str(info.value) == (
+        f"{path}:2: columns q2, y are empty (the first of 2 bad rows: no usable row)"
+    )
     path.write_text(ROWS[0] + "\n02.03.2026 09:00:00;0.1;0.2;0.3;0.4;0.5;0.6;1.0;2.0;3.0\n")
     with pytest.raises(InputError) as info:
         read_measurement_csv(path, FMT)
-    assert str(info.value) == (f"{path}:2: column t '02.03.2026 09:00:00' is not a number (the "
-                               "only row: no usable row)")  # fmt: skip
+    assert str(info.value) == (
+        f"{path}:2: column t '02.03.2026 09:00:00' is not a number (the only row: no usable row)"
+    )
     # one bad row of three: "1 bad row", not "1 bad rows"
     path.write_text("\n".join(ROWS[:3]) + "\n" + ROWS[1].replace("0.0;", "3.0;", 1) + "\n")
-    proc = cli("import", str(path), "--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z",
-               "--time", "t", "--sep", ";", "--length-unit", "mm", "-o",
-               str(tmp_path / "e.mcap"))  # fmt: skip
+    proc = cli(
+        "import",
+        str(path),
+        "--joints",
+        "q1,q2,q3,q4,q5,q6",
+        "--point",
+        "x,y,z",
+        "--time",
+        "t",
+        "--sep",
+        ";",
+        "--length-unit",
+        "mm",
+        "-o",
+        str(tmp_path / "e.mcap"),
+    )
     assert proc.returncode == 0, proc.stderr
     assert f"{path}: 2 rows imported, 1 bad row skipped" in proc.stdout
     assert f"warning: {path}:3: columns q2, y are empty: row skipped" in proc.stderr
@@ -200,14 +255,32 @@ def test_a_header_of_one_column_suggests_the_separator(
     assert str(info.value).endswith(f"(separator ','): give {hint}")
     # the hint works: tab spelt 'tab' on the command line
     args = ["--joints", "q1,q2,q3,q4,q5,q6", "--point", "x,y,z", "--length-unit", "mm"]
-    proc = cli("import", str(path), *args, "--sep", "tab" if sep == "\t" else sep,
-               "-o", str(tmp_path / "e.mcap"))  # fmt: skip
+    proc = cli(
+        "import",
+        str(path),
+        *args,
+        "--sep",
+        "tab" if sep == "\t" else sep,
+        "-o",
+        str(tmp_path / "e.mcap"),
+    )
     assert proc.returncode == 0, proc.stderr
 
 
 def test_a_separator_of_two_characters_is_a_usage_error(tmp_path: Path) -> None:
-    proc = cli("import", "e.csv", "--sep", ";;", "--joints", "a", "--point", "x,y,z",
-               "-o", "e.mcap", cwd=tmp_path)  # fmt: skip
+    proc = cli(
+        "import",
+        "e.csv",
+        "--sep",
+        ";;",
+        "--joints",
+        "a",
+        "--point",
+        "x,y,z",
+        "-o",
+        "e.mcap",
+        cwd=tmp_path,
+    )
     assert proc.returncode == 2 and "argument --sep: ';;': one character" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
 
@@ -259,8 +332,17 @@ def test_no_file_a_simulation_or_plan_reads_is_ever_overwritten(
 
     data = Path(__file__).parents[1] / "data"
     (tmp_path / "ur.urdf").write_bytes((data / "ur10.urdf").read_bytes())
-    plan = ["plan", "--model", "geometric", "--poses", "12", "--candidates", "200",
-            "--trials", "1"]  # fmt: skip
+    plan = [
+        "plan",
+        "--model",
+        "geometric",
+        "--poses",
+        "12",
+        "--candidates",
+        "200",
+        "--trials",
+        "1",
+    ]
     assert main([*plan, "--robot", str(tmp_path / "ur.urdf"), "-o", str(tmp_path / "p.yaml")]) == 0
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     urdf, yaml_plan = str(tmp_path / "ur.urdf"), str(tmp_path / "p.yaml")
@@ -306,11 +388,21 @@ def test_an_interrupted_run_leaves_no_half_folder(tmp_path: Path) -> None:
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        run(tmp_path / "o", plan="paper-test1", n_holdout=20, progress=interrupt,
-            say=lambda text: None)  # fmt: skip
+        run(
+            tmp_path / "o",
+            plan="paper-test1",
+            n_holdout=20,
+            progress=interrupt,
+            say=lambda text: None,
+        )
     assert "random" in calls and not (tmp_path / "o").exists()  # the folder it made: gone
     (tmp_path / "mine").mkdir()  # a folder the user made stays, empty
     with pytest.raises(KeyboardInterrupt):
-        run(tmp_path / "mine", plan="paper-test1", n_holdout=20, progress=interrupt,
-            say=lambda text: None)  # fmt: skip
+        run(
+            tmp_path / "mine",
+            plan="paper-test1",
+            n_holdout=20,
+            progress=interrupt,
+            say=lambda text: None,
+        )
     assert list((tmp_path / "mine").iterdir()) == []

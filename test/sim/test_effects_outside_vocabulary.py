@@ -164,8 +164,14 @@ def test_link_bending_tilts_the_wrist_plane_out_of_the_arm_plane() -> None:
     angle = np.arccos(np.clip((np.trace(turn, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
     twist = carried_moment(UR10, poses.q, 3) @ twist_axis(UR10, 3)
     np.testing.assert_allclose(angle, values["link_bending3"] * np.abs(twist), rtol=1e-6)
-    about = np.stack([turn[:, 2, 1] - turn[:, 1, 2], turn[:, 0, 2] - turn[:, 2, 0],
-                      turn[:, 1, 0] - turn[:, 0, 1]], axis=1)  # fmt: skip
+    about = np.stack(
+        [
+            turn[:, 2, 1] - turn[:, 1, 2],
+            turn[:, 0, 2] - turn[:, 2, 0],
+            turn[:, 1, 0] - turn[:, 0, 1],
+        ],
+        axis=1,
+    )
     about /= np.linalg.norm(about, axis=1, keepdims=True)
     np.testing.assert_allclose(np.abs(np.einsum("na,na->n", about, forearm)), 1.0, atol=1e-9)
     spread = Poses.from_readings(_spread(UR10))
@@ -195,10 +201,12 @@ def test_both_are_registered_outside_the_vocabulary() -> None:
     "kind, vocabulary_models",
     [
         ("gravity_backlash", ("compliance:2,3", "gravity_compliance:2,3", "backlash:2,3")),
-        ("link_bending", ("compliance:3,4,5", "gravity_compliance:3,4,5",
-                          "eccentricity:4,5:order=2")),
+        (
+            "link_bending",
+            ("compliance:3,4,5", "gravity_compliance:3,4,5", "eccentricity:4,5:order=2"),
+        ),
     ],
-)  # fmt: skip
+)
 def test_no_vocabulary_model_absorbs_it(kind: str, vocabulary_models: tuple[str, ...]) -> None:
     """On 400 random UR10 poses (280 calibrate, 120 held out) geometric leaves >= 15 x the
     noise floor held out, and so does each vocabulary model of the joints it acts on
@@ -214,8 +222,14 @@ def test_no_vocabulary_model_absorbs_it(kind: str, vocabulary_models: tuple[str,
     geo = calibrate(scenario.calibration, robot, "geometric", log=None, screen_outliers=False)
     assert held_out(geo) >= 15.0
     for spec in vocabulary_models:
-        cal = calibrate(scenario.calibration, robot, f"geometric+{spec}", log=None,
-                        start=geo, screen_outliers=False)  # fmt: skip
+        cal = calibrate(
+            scenario.calibration,
+            robot,
+            f"geometric+{spec}",
+            log=None,
+            start=geo,
+            screen_outliers=False,
+        )
         assert held_out(cal) >= 15.0, spec
 
 
@@ -271,8 +285,10 @@ def test_make_case_builds_the_new_classes(effect: str) -> None:
             JointHarmonics(joints=(2,), orders=(11, 27)),
             JointHarmonics(joints=(1,), orders=(17,)),
         }
-        amplitudes = [np.hypot(case.values[f"jh{j}_c{k}"], case.values[f"jh{j}_s{k}"])
-                      for j, k in ((2, 11), (2, 27), (1, 17))]  # fmt: skip
+        amplitudes = [
+            np.hypot(case.values[f"jh{j}_c{k}"], case.values[f"jh{j}_s{k}"])
+            for j, k in ((2, 11), (2, 27), (1, 17))
+        ]
         assert all(50e-6 <= a <= 300e-6 for a in amplitudes)
     else:
         assert names == {effect}
@@ -289,11 +305,17 @@ def diagnosis(joints: list[int] | None, model: str, effect: str = "unknown") -> 
     """A stand-in with what `judge` reads: the dominant effect, the chosen rung, the ratio."""
     dominant = None if joints is None else DominantEffect(effect, joints)
     rung = SimpleNamespace(model=model, holdout_abs_rms_mm=0.01, learned=False)
-    return cast(Diagnosis, SimpleNamespace(
-        dominant_effect=dominant, ladder=[rung], outliers=[], physical_model=model,
-        unexplained=SimpleNamespace(ratio_to_noise_floor=1.2),
-        where=SimpleNamespace(evidence=[], strongest_signature=None),
-    ))  # fmt: skip
+    return cast(
+        Diagnosis,
+        SimpleNamespace(
+            dominant_effect=dominant,
+            ladder=[rung],
+            outliers=[],
+            physical_model=model,
+            unexplained=SimpleNamespace(ratio_to_noise_floor=1.2),
+            where=SimpleNamespace(evidence=[], strongest_signature=None),
+        ),
+    )
 
 
 def test_judge_names_harmonics_by_joints_and_orders() -> None:

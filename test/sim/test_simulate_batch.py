@@ -19,22 +19,40 @@ from robot_calib.sim.world import World, build_world
 
 WORLDS = {
     "default": {},
-    "effects": {"effects": [{"name": "backlash", "joints": [2, 4]}, {"name": "thermal_drift"},
-                            {"name": "eccentricity", "joints": [1, 2]}]},
-    "six_dof": {"seed": 3, "six_dof": {"first": [20.0, 35.0, -30.0]},
-                "targets": {"smr2": [-0.04, 0.05, 0.03]}},
+    "effects": {
+        "effects": [
+            {"name": "backlash", "joints": [2, 4]},
+            {"name": "thermal_drift"},
+            {"name": "eccentricity", "joints": [1, 2]},
+        ]
+    },
+    "six_dof": {
+        "seed": 3,
+        "six_dof": {"first": [20.0, 35.0, -30.0]},
+        "targets": {"smr2": [-0.04, 0.05, 0.03]},
+    },
     "six_dof_alone": {"six_dof": {"first": [20.0, 35.0, -30.0]}},
-    "dropouts": {"noise": {"anisotropic": True}, "tracker": {"dropout_probability": 0.3},
-                 "targets": {"smr2": [-0.04, 0.05, 0.03]}},
+    "dropouts": {
+        "noise": {"anisotropic": True},
+        "tracker": {"dropout_probability": 0.3},
+        "targets": {"smr2": [-0.04, 0.05, 0.03]},
+    },
     "references_reads_events": {
         "targets": {"smr2": [-0.04, 0.05, 0.03]},
         "references": {"r1": [0.6, 0.7, -0.1], "r2": [0.7, -0.6, -0.1]},
-        "tracker": {"reads_per_pose": 3, "dropout_probability": 0.1,
-                    "drift_m_per_s": [1e-8, 0.0, 2e-9], "drift_rad_per_s": [0.0, 0.0, 5e-9]},
-        "events": [{"kind": "robot", "poses": [30, 31], "offset_m": [0.002, 0.0, 0.0]},
-                   {"kind": "tracker", "poses": [150, 259], "offset_m": [0.0, 0.001, 0.0]}]},
+        "tracker": {
+            "reads_per_pose": 3,
+            "dropout_probability": 0.1,
+            "drift_m_per_s": [1e-8, 0.0, 2e-9],
+            "drift_rad_per_s": [0.0, 0.0, 5e-9],
+        },
+        "events": [
+            {"kind": "robot", "poses": [30, 31], "offset_m": [0.002, 0.0, 0.0]},
+            {"kind": "tracker", "poses": [150, 259], "offset_m": [0.0, 0.001, 0.0]},
+        ],
+    },
     "point_accuracy": {"noise": {"point_sigma_range_m": [5e-6, 60e-6]}},
-}  # fmt: skip
+}
 
 
 def _readings(world: World, n: int, seed: int = 5) -> tuple[np.ndarray, np.ndarray]:
@@ -122,8 +140,10 @@ def test_cdr_templates_send_the_bytes_of_rclpys_messages(context: Any) -> None: 
         decode_joint_state,
     )
 
-    for names in (["joint_a1", "joint_a2", "joint_a3", "joint_a4", "joint_a5", "joint_a6"],
-                  ["shoulder_pan_joint", "x", "elbow"]):  # fmt: skip
+    for names in (
+        ["joint_a1", "joint_a2", "joint_a3", "joint_a4", "joint_a5", "joint_a6"],
+        ["shoulder_pan_joint", "x", "elbow"],
+    ):
         encoder = JointStateEncoder(names)
         positions = [0.1 * k - 0.3 for k in range(len(names))]
         msg = encoder.message(1_790_000_000, 123_456_789, positions)
