@@ -107,7 +107,7 @@ def main(args: argparse.Namespace) -> int:
                 )
             targets = dataclasses.replace(targets, seed=seeds)
         goals = goals_in_base(targets, args.frame or "base", model, params)
-        check_reach(goals, model, args.targets)
+        check_reach(goals, model, args.targets, args.unit or "m", args.frame or "base")
         output = output_path(args.output, "JOINTS.csv", inputs, args.force)
         found = compensate_targets(cal, targets, goals)
         result = found.compensated

@@ -29,6 +29,9 @@ ALIASES = {
     "header=False": "no_header",  # CsvFormat(header=False): `import --no-header`
 }
 
+# keywords of an option another verb has (the verb run has none): that verb's command
+ELSEWHERE = {"stream": "robot-calib calibrate --stream"}
+
 # values the command line spells otherwise, by destination
 SPELLED = {"sep": {"\t": "tab"}}
 
@@ -37,11 +40,18 @@ _negated: dict[str, str] = {}  # destination -> its --no-X option (a store_false
 
 
 def learn(parser: argparse.ArgumentParser, verb: str) -> None:
-    """Take the flags of `verb`'s parser (a sub-command of `parser`) and `parser`'s own."""
+    """Take the flags of `verb`'s parser (a sub-command of `parser`) and `parser`'s own, in
+    place of those of a verb run before in this process."""
+    _flags.clear()
+    _negated.clear()
+    _take(parser, verb)
+
+
+def _take(parser: argparse.ArgumentParser, verb: str) -> None:
     for action in parser._actions:  # argparse has no public accessor for its actions
         if isinstance(action, argparse._SubParsersAction):
             if verb in action.choices:
-                learn(action.choices[verb], verb)
+                _take(action.choices[verb], verb)
             continue
         longs = [s for s in action.option_strings if s.startswith("--")]
         if not longs or action.dest in ("help", argparse.SUPPRESS):
@@ -64,6 +74,8 @@ def _as_flag(match: re.Match[str]) -> str:
         return _flags[spelled]
     dest = name if name in _flags or name in _negated else ALIASES.get(name, name)
     flag = _flags.get(dest)
+    if flag is None and dest not in _negated and name in ELSEWHERE:
+        return ELSEWHERE[name]
     if text is None:
         return flag or _negated.get(dest) or match.group(0)
     value = keyword_value(text)

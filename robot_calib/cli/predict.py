@@ -47,7 +47,7 @@ def main(args: argparse.Namespace) -> int:
     model, params, correction = cal.model, cal.parameters, cal.correction
     args.target = model.targets[0] if args.target is None else args.target
     if args.target not in model.targets:
-        known = ", ".join(repr(t) for t in model.targets)
+        known = ", ".join(target_topic(t) for t in model.targets)
         raise InputError(f"{args.params}: no target {args.target!r} (its targets: {known})")
     poses = read_joints_csv(args.joints, model.robot.n_joints, model.robot.limits)
     index = np.full(len(poses), model.targets.index(args.target))

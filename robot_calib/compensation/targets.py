@@ -122,10 +122,17 @@ def goals_in_base(
 REACH_MARGIN = 1.5  # targets beyond this x the robot's longest possible reach: units?
 
 
-def check_reach(goal2base: Array, model: KinematicModel, source: str | Path) -> None:
+def check_reach(
+    goal2base: Array,
+    model: KinematicModel,
+    source: str | Path,
+    unit: str = "m",
+    frame: str = "base",
+) -> None:
     """InputError naming `source` when every goal (n, 4, 4) [m] lies beyond REACH_MARGIN x
     the robot's reach (the sum of its link lengths |a| + |d| and the first target's
-    offset): targets in mm read as m, or in the tracker frame read as base, never reach."""
+    offset): targets in mm read as m, or in the tracker frame read as base, never reach.
+    `unit`, `frame`: what the targets were read as (the message suggests the others)."""
     robot = model.robot
     reach = float(np.sum(np.abs(robot.a)) + np.sum(np.abs(robot.d)))
     distance = np.linalg.norm(goal2base[:, :3, 3], axis=1)
@@ -133,5 +140,6 @@ def check_reach(goal2base: Array, model: KinematicModel, source: str | Path) -> 
         raise InputError(
             f"{source}: every target is out of robot {robot.name}'s reach (median "
             f"{np.median(distance):.4g} m from its base, reach about {reach:.2f} m): targets in "
-            f"mm ({param('unit', 'mm')}) or in the tracker frame ({param('frame', 'tracker')})?"
+            f"another unit ({param('unit', 'mm' if unit == 'm' else 'm')}) or frame "
+            f"({param('frame', 'tracker' if frame == 'base' else 'base')})?"
         )

@@ -452,7 +452,7 @@ def generalisation_warnings(scores: Sequence[tuple[str, float]]) -> list[str]:
     that scores worse than the one before it: a richer model that generalises worse."""
     warnings = []
     for (simple, a), (rich, b) in zip(scores, scores[1:]):
-        if b > a:
+        if b > a and f"{b:.4f}" != f"{a:.4f}":  # worse by what is printed, not a tie
             warnings.append(
                 f"warning: {rich} generalises worse than {simple} ({b:.4f} vs {a:.4f} mm "
                 f"held-out abs rms): its extra parameters fit the calibration poses, not the "

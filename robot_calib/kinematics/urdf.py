@@ -101,7 +101,7 @@ def urdf_reference(path: str | Path, base_link: str | None, tip_link: str | None
     if not is_urdf_reference(path):
         raise InputError(
             f"{param('base_link')}/{param('tip_link')} need {param('robot', 'FILE.urdf')}, "
-            f"not {str(path)!r}"
+            + (f"not {str(path)!r}" if str(path) else "none given")
         )
     file, _, fragment = str(path).partition("#")
     options = dict(_fragment(fragment, file))

@@ -228,9 +228,9 @@ def checked_parameters(
         raise InputError(f"{output}: no such folder for the parameter file")
     targets = live_targets(name, list(v["targets"]), list(v["six_dof_targets"]))  # type: ignore[call-overload]
     return CalibratorParameters(
-        bags=list(v["bags"]),
+        bags=list(v["bags"]),  # type: ignore[call-overload]
         model_spec=model_spec,
-        ecc_order=ecc_order,  # type: ignore[call-overload]
+        ecc_order=ecc_order,
         robot=robot,
         pair_tolerance=pair_tolerance,
         output=output,

@@ -101,3 +101,33 @@ def test_the_python_caller_reads_keywords_and_the_command_line_flags(tmp_path: P
     assert run.returncode == 2
     assert "--model geometric+frobnicate:4: unknown effect" in run.stderr
     assert "`" not in run.stderr
+
+
+@pytest.mark.parametrize(
+    ("verb", "message", "printed"),
+    [
+        ("calibrate", "`model='geometric+x'`: unknown", "--model geometric+x: unknown"),
+        ("calibrate", "use `force=True`", "use --force"),
+        ("import", "give `header=False`", "give --no-header"),
+        ("import", "give `separator='\\t'`", "give --sep tab"),
+        ("import", "the `targets` names", "the --target names"),
+        ("split", "`fraction=1.5`: a fraction", "--holdout 1.5: a fraction"),
+        ("calibrate", "pairs badly: use `stream=True`", "pairs badly: use --stream"),
+        (
+            "score",
+            "pairs badly: use `stream=True`",
+            "pairs badly: use robot-calib calibrate --stream",
+        ),
+        ("score", "a keyword of no verb `frobnicate=3`", "a keyword of no verb `frobnicate=3`"),
+    ],
+)
+def test_each_keyword_is_printed_as_the_verbs_flag(verb: str, message: str, printed: str) -> None:
+    """The command line's rewrite (cli/flags.py) from the verb's own parser: its flags, the
+    aliases where Python names an option otherwise, another verb's command where this one
+    has no such option."""
+    from robot_calib.cli import flags
+    from robot_calib.cli.registry import build_parser
+
+    flags.learn(build_parser("compensate"), "compensate")  # another verb's flags: forgotten
+    flags.learn(build_parser(verb), verb)
+    assert flags.in_flags(message) == printed
