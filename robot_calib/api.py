@@ -95,9 +95,10 @@ def simulate(
     nominal geometry); `effects`: e.g. ['backlash:4', 'compliance:2=2e-5']."""
     from robot_calib.flows.simulate import simulate as run
     from robot_calib.flows.simulate import simulation_world
+    from robot_calib.nodes.simulate import simulate_bag
 
     built = simulation_world(world, robot, effects, seed)  # robot None: the world's
-    return run(output, plan, built, seed, n_random, force=force)
+    return run(output, plan, built, seed, n_random, force=force, record=simulate_bag)
 
 
 def calibrate(

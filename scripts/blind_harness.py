@@ -26,9 +26,8 @@ import statistics
 import sys
 import time
 
-from robot_calib.forked import FORKED
-from robot_calib.parallel import using
-from robot_calib.sim.blind import classes, run_case
+from robot_calib.flows.blind import run_case
+from robot_calib.sim.blind import classes
 
 
 def main() -> int:
@@ -44,8 +43,7 @@ def main() -> int:
         to_right: list[float] = []
         started = time.perf_counter()
         for seed in range(args.cases):
-            with using(FORKED):  # the other core, as the command line's diagnosis
-                r = run_case(effect, 1000 + seed)
+            r = run_case(effect, 1000 + seed)
             results.append(r)
             hits += r["hit"]
             named += r["named"]

@@ -53,6 +53,7 @@ def main(args: argparse.Namespace) -> int:
     Every run writes a new folder under --output."""
     from robot_calib.flows.run import run
     from robot_calib.identify.calibration import summary
+    from robot_calib.nodes.simulate import simulate_bag
     from robot_calib.sim.plans import check_plan
 
     robot = load_robot(args.robot)
@@ -70,6 +71,7 @@ def main(args: argparse.Namespace) -> int:
         say=print,
         log=log,
         progress=progress(),
+        record=simulate_bag,  # the simulated graph in-process
     )
     geometric = result.models["geometric"].calibration
     text = summary(geometric, result.recording)

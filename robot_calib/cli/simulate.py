@@ -97,8 +97,17 @@ def main(args: argparse.Namespace) -> int:
             args.output, plan, world, args.seed, args.n_random, options, args.force
         )
     else:
+        from robot_calib.nodes.simulate import simulate_bag
+
         sim = flow.simulate(
-            args.output, args.plan, world, args.seed, args.n_random, progress(), args.force
+            args.output,
+            args.plan,
+            world,
+            args.seed,
+            args.n_random,
+            progress(),
+            args.force,
+            record=simulate_bag,
         )
     print(
         f"{sim.bag}: {', '.join(f'{t}={n}' for t, n in sim.counts.items())} messages "

@@ -188,15 +188,15 @@ ASIDE_FIRST = ("histogram", "map")
 def started_figures() -> FigureCache:
     """A figure cache for `write_diagnosis` whose helper process starts now (when this
     process runs no other thread) and gets matplotlib ready while the diagnosis runs
-    (`FigureCache.started`): call it before reading the bags; close it on every way out
+    (`FiguresAside.started`): call it before reading the bags; close it on every way out
     (a context manager). The modules of the diagnosis and its reports are imported here
     first (this process needs them anyway): the helper inherits them instead of importing
     them again (0.45 s)."""
     import robot_calib.diagnosis.html_report  # noqa: F401 - inherited by the helper
     import robot_calib.diagnosis.report  # noqa: F401 - inherited by the helper
-    from robot_calib.diagnosis.figures import FigureCache
+    from robot_calib.flows.figures import FiguresAside
 
-    return FigureCache.started()
+    return FiguresAside.started()
 
 
 def draw_figures(
@@ -207,7 +207,7 @@ def draw_figures(
     compared: Sequence[ModelErrors],
 ) -> None:
     """Start drawing every figure of both reports (`report_figures`, `page_figures`) in
-    other processes (`FigureCache.draw_aside`: the helper and its twin, two groups of
+    other processes (`FiguresAside.draw_aside`: the helper and its twin, two groups of
     about equal cost, 2773 poses: 0.4-0.5 s each, each in the order the HTML page asks
     for them); `fitted`: the measurements the ladder was fitted on, `floor_mm` the noise
     floor [mm] (None: unknown), `compared` the before/after models. Once per cache."""

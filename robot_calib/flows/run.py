@@ -35,7 +35,7 @@ from robot_calib.flows.diagnose import (
     started_figures,
     write_diagnosis,
 )
-from robot_calib.flows.simulate import Simulation, simulate, simulation_world
+from robot_calib.flows.simulate import Recorder, Simulation, simulate, simulation_world
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.log import Log
 
@@ -92,11 +92,14 @@ def run(
     say: Log = _quiet,
     log: Log | None = None,
     progress: Progress | None = None,
+    *,
+    record: Recorder,
 ) -> RunResult:
     """The main job: simulate + record a calibration bag (`plan`, `effects`; default the
-    main job's joint-4 backlash) and `n_holdout` random hold-out poses in the same world,
-    calibrate RUN_MODELS, score each on the hold-out poses, diagnose. Writes a new folder
-    `run-<time>` under `output_dir`; `say` gets one line per step.
+    main job's joint-4 backlash) and `n_holdout` random hold-out poses in the same world
+    (`record`: the simulated graph, as `simulate`'s), calibrate RUN_MODELS, score each on
+    the hold-out poses, diagnose. Writes a new folder `run-<time>` under `output_dir`; `say`
+    gets one line per step.
 
     Returns
     -------
@@ -168,6 +171,7 @@ def run(
                 lambda m: say(final_paths(m)),
                 log_final,
                 progress,
+                record,
             )
             _name_final_paths(folder, final)
             os.rename(folder, final)  # onto the empty reserved folder
@@ -258,6 +262,7 @@ def _run_in(
     say: Callable[[str], None],
     log: Log | None,
     progress: Callable[[str, int, int], None] | None,
+    record: Recorder,
 ) -> RunResult:
     """`run`'s work, written into `folder` (renamed to `final` by `run` when complete;
     messages name the final paths)."""
@@ -267,13 +272,13 @@ def _run_in(
     bag, holdout = folder / "calibration.mcap", folder / "holdout.mcap"
     steps = 4
     say(f"[1/{steps}] simulate + record: {plan} in the default world -> {final / bag.name}")
-    first = simulate(bag, plan, world, seed, n_holdout, progress)
+    first = simulate(bag, plan, world, seed, n_holdout, progress, record=record)
     say(
         f"[2/{steps}] simulate + record: {n_holdout} random hold-out poses -> "
         f"{final / holdout.name}"
     )
     truth = simulation_world(first.world_file, robot, (), seed + 1)
-    second = simulate(holdout, "random", truth, seed + 1, n_holdout, progress)
+    second = simulate(holdout, "random", truth, seed + 1, n_holdout, progress, record=record)
     recording = read_bags([bag], description, log=log)
     held = read_bags([holdout], description, log=log)
     # cpa needs a circle sweep of every joint: a plan of general poses (PLAN.yaml, random)

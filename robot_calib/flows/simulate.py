@@ -1,14 +1,20 @@
 """The simulation flow: a world (the truth), a simulated recording of a plan in it and
-the world file beside the bag (`robot-calib simulate`; `plan` and `run` use its world)."""
+the world file beside the bag (`robot-calib simulate`; `plan` and `run` use its world).
+
+The recording itself is made by a `Recorder` the caller gives: the simulated robot, tracker
+and recorder nodes run in-process (`robot_calib.nodes.simulate.simulate_bag`, what the
+command line, the public API and the tests give), so that a simulated bag is recorded as a
+real campaign's; this layer imports no node.
+"""
 
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -19,6 +25,22 @@ from robot_calib.flows import DEFAULT_PLAN, DEFAULT_ROBOT, N_RANDOM_POSES, Progr
 if TYPE_CHECKING:
     from robot_calib.sim.stream import StreamOptions
     from robot_calib.sim.world import World
+
+
+class Recorder(Protocol):
+    """Records `plan` (a name or a PLAN.yaml) in the world of the file `world` into the new
+    bag `output`: its messages per topic (`robot_calib.nodes.simulate.simulate_bag`).
+    `seed` -1: the world's own; `progress(done, total)` per pose."""
+
+    def __call__(
+        self,
+        output: Path,
+        plan: str,
+        world: str | Path | None,
+        seed: int,
+        n_random: int,
+        progress: Callable[[int, int], None] | None,
+    ) -> dict[str, int]: ...
 
 
 @dataclass(frozen=True)
@@ -83,8 +105,10 @@ def simulate(
     n_random: int = N_RANDOM_POSES,
     progress: Progress | None = None,
     force: bool = False,
+    *,
+    record: Recorder,
 ) -> Simulation:
-    """Run the simulated graph (sim_robot, sim_tracker, recorder, in-process) over `plan`
+    """Run the simulated graph (`record`: sim_robot, sim_tracker, recorder) over `plan`
     in `world` (default: `simulation_world()`) and record the bag `output` (in an existing
     folder; an existing bag or world file is replaced only with `force`, the world file
     read never) and its world file beside it. Both are written in a staging folder and
@@ -109,7 +133,6 @@ def simulate(
     """
     from robot_calib.atomic import staged_outputs
     from robot_calib.messages import POINT_TOPIC
-    from robot_calib.nodes.simulate import simulate_bag
     from robot_calib.sim.world import save_world
 
     world = world if world is not None else simulation_world(seed=seed)
@@ -117,7 +140,7 @@ def simulate(
     started = time.monotonic()
     with staged_outputs(bag.parent, force) as stage:
         save_world(world, stage / world_file.name)
-        counts = simulate_bag(
+        counts = record(
             stage / bag.name,
             plan,
             stage / world_file.name,

@@ -51,9 +51,8 @@ from typing import Any
 import numpy as np
 
 from robot_calib.accuracy import accuracy
-from robot_calib.diagnosis.diagnosis import Diagnosis, diagnose
+from robot_calib.diagnosis.diagnosis import Diagnosis
 from robot_calib.diagnosis.evidence import STRUCTURE_Z
-from robot_calib.diagnosis.ladder import Ladder
 from robot_calib.diagnosis.signatures import WhereItLies
 from robot_calib.effects import EFFECTS, Effect, effect_class, parse_effect
 from robot_calib.effects.base import signed_uniform
@@ -437,44 +436,3 @@ def ur10_out_of_vocabulary(
         value = compliance_for(robot, joint, size) if name == "link_bending" else size
         entries.append({"name": name, "joints": [joint], "values": {f"{name}{joint}": value}})
     return ur10_random(seed, n, holdout_share, (*(UR10_HARMONICS if harmonics else ()), *entries))
-
-
-def run_case(effect: str, seed: int) -> dict[str, Any]:
-    """Make, diagnose and judge one blind case (with its right model's held-out error), and
-    whether its best model's PARAMS.json loads (`best_loads`, `best_model_loads`)."""
-    case = make_case(effect, seed)
-    diagnosis, ladder = diagnose(case.calibration, load_world().model.robot, case.holdout)
-    return {
-        **judge(case, diagnosis, right_model_rms_mm(case)),
-        "best_loads": best_model_loads(ladder, diagnosis),
-    }
-
-
-def best_model_loads(ladder: Ladder, diagnosis: Diagnosis) -> str:
-    """'' when the ladder's chosen model, written as `diagnose` writes params_best.json,
-    loads back and predicts as it did (`flows.diagnose.check_loads`), else why not."""
-    import tempfile
-    from pathlib import Path
-
-    from robot_calib.errors import WrittenFileError
-    from robot_calib.flows.diagnose import check_loads, marked_implausible, selected_document
-    from robot_calib.identify.params_file import write_json_atomic
-
-    recording = ladder.recording
-    assert recording is not None
-    chosen = ladder.rungs[-1].calibration
-    with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "params_best.json"
-        document = selected_document(
-            marked_implausible(chosen, diagnosis),
-            recording,
-            "blind harness",
-            diagnosis.scored_on,
-            {},
-        )
-        write_json_atomic(document, path)
-        try:
-            check_loads(path, path, chosen, recording)
-        except WrittenFileError as exc:
-            return str(exc)
-    return ""

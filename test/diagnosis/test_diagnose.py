@@ -12,8 +12,9 @@ from cli_runner import cli
 
 from robot_calib.diagnosis.diagnosis import Diagnosis, DominantEffect, diagnose, small_holdout
 from robot_calib.diagnosis.report import write_report
+from robot_calib.flows.blind import run_case
 from robot_calib.identify.calibration import Calibration
-from robot_calib.sim.blind import judge, make_case, run_case
+from robot_calib.sim.blind import judge, make_case
 from robot_calib.sim.world import load_world
 
 ROBOT = load_world().model.robot

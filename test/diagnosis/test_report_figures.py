@@ -291,6 +291,7 @@ ASIDE_CHECK = """
 import os, signal
 import numpy as np
 from robot_calib.diagnosis.figures import FigureCache, pyplot
+from robot_calib.flows.figures import FiguresAside
 
 parent = os.getpid()
 
@@ -312,20 +313,20 @@ def killed_in_a_child():  # the child dies mid-way (SIGKILL)
 
 here = FigureCache()
 expected = {f"f{k}": here.png(f"f{k}", lambda k=k: line(k)) for k in range(3)}
-aside = FigureCache()
+aside = FiguresAside()
 aside.draw_aside([*((f"f{k}", lambda k=k: line(k)) for k in range(3)), ("bad", fails_in_a_child)])
 got = {f"f{k}": aside.png(f"f{k}", lambda: None) for k in range(3)}  # never drawn here
 assert got == expected and all(got.values())
 assert aside.png("bad", fails_in_a_child) == here.png("bad", fails_in_a_child)
 aside.close()
-dying = FigureCache()
+dying = FiguresAside()
 dying.draw_aside([("f0", lambda: line(0)), ("dies", killed_in_a_child), ("f1", lambda: line(1))])
 assert dying.png("f0", lambda: None) == expected["f0"]  # sent before it died
 assert dying.png("dies", killed_in_a_child) == here.png("dies", killed_in_a_child)
 assert dying.png("f1", lambda: line(1)) == expected["f1"]  # drawn here instead
 dying.close()
 from functools import partial
-started = FigureCache.started()  # the helper and its twin (pickled draws)
+started = FiguresAside.started()  # the helper and its twin (pickled draws)
 started.draw_aside([("f0", partial(line, 0)), ("f1", partial(line, 1))],
                    [("f2", partial(line, 2))])
 assert started._asides and started._asides[0].forked
@@ -337,7 +338,7 @@ print("OK")
 
 
 def test_figures_drawn_aside_are_the_figures_drawn_here() -> None:
-    """FigureCache.draw_aside, in a fresh interpreter (it forks only a process without other
+    """FiguresAside.draw_aside, in a fresh interpreter (it forks only a process without other
     threads): a forked child draws some figures while the process goes on, or the helper
     of `FigureCache.started` and its twin; their PNG bytes equal those drawn here; a
     figure the child failed on, or did not send because it was killed mid-way, is drawn

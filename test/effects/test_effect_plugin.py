@@ -23,11 +23,12 @@ from test_effects import (
 import robot_calib.effects
 from robot_calib.effects import EFFECTS, Effect, discover_effects, registered, vocabulary
 from robot_calib.effects.base import JointOffsetEffect
+from robot_calib.flows.blind import run_case
 from robot_calib.identify.calibrate import parse_model
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.poses import Poses
-from robot_calib.sim.blind import classes, run_case
+from robot_calib.sim.blind import classes
 from robot_calib.sim.world import build_world
 
 

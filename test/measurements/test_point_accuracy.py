@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from robot_calib.bag.read import read_recording
-from robot_calib.flows.simulate import simulate
+from robot_calib.flows.simulate import simulate as simulate_world
 from robot_calib.identify.calibrate import calibrate
+from robot_calib.nodes.simulate import simulate_bag
 from robot_calib.sim.world import World, build_world
 
 EXACT = {"tracker_sigma_m": 1e-6, "target_sigma_m": 0.0, "joint_sigma_rad": 0.0}
@@ -31,7 +32,7 @@ def _world(point_sigma: list[float], seed: int) -> World:
 def test_stated_accuracies_are_the_points_noise_and_weigh_the_fit(tmp_path: Path) -> None:
     world = _world([5e-6, 60e-6], 3)
     bag = tmp_path / "leica.mcap"
-    sim = simulate(bag, "random", world, n_random=300)
+    sim = simulate_world(bag, "random", world, n_random=300, record=simulate_bag)
     assert sim.counts["/laser_tracker/pose"] == 300  # the accuracies ride on the pose topic
     recording = read_recording([bag], world.model.robot)
     sigma = recording.poses.sigma
@@ -47,7 +48,9 @@ def test_stated_accuracies_are_the_points_noise_and_weigh_the_fit(tmp_path: Path
     assert float(np.sqrt(np.mean(scaled**2))) == pytest.approx(1.0, abs=0.25)
     # scored on 150 other poses measured to 1 um: the weighted fit is closer to the truth
     exact = tmp_path / "exact.mcap"
-    simulate(exact, "random", _world([0.0, 0.0], 3), seed=9, n_random=150)
+    simulate_world(
+        exact, "random", _world([0.0, 0.0], 3), seed=9, n_random=150, record=simulate_bag
+    )
     check = read_recording([exact], robot)
     error = {
         name: float(np.sqrt(np.mean((cal.predict(check.poses) - check.points) ** 2)))

@@ -13,7 +13,8 @@ import pytest
 from robot_calib.bag.read import read_recording
 from robot_calib.diagnosis.noise import REREADS, estimate_noise
 from robot_calib.flows.diagnose import diagnose_recordings
-from robot_calib.flows.simulate import simulate
+from robot_calib.flows.simulate import simulate as simulate_world
+from robot_calib.nodes.simulate import simulate_bag
 from robot_calib.poses import reading_groups
 from robot_calib.sim.world import World, build_world
 
@@ -33,7 +34,7 @@ def _world(seed: int) -> World:
 def test_three_reads_per_pose_are_one_pose_and_the_trackers_noise(tmp_path: Path) -> None:
     world = _world(3)
     bag = tmp_path / "reads.mcap"
-    sim = simulate(bag, "random", world, n_random=120)
+    sim = simulate_world(bag, "random", world, n_random=120, record=simulate_bag)
     assert sim.counts["/laser_tracker/point"] == 3 * sim.counts["/joint_states"] == 360
     recording = read_recording([bag], world.model.robot)
     assert not recording.warnings  # no stream, no copies: re-reads
@@ -44,7 +45,7 @@ def test_three_reads_per_pose_are_one_pose_and_the_trackers_noise(tmp_path: Path
     assert noise.sigma_m == pytest.approx(world.noise.tracker_sigma_m, rel=0.15)
     # k-fold over poses (reads together) against a true hold-out of 120 new poses
     holdout_bag = tmp_path / "holdout.mcap"
-    simulate(holdout_bag, "random", _world(4), seed=44, n_random=120)
+    simulate_world(holdout_bag, "random", _world(4), seed=44, n_random=120, record=simulate_bag)
     holdout = read_recording([holdout_bag], world.model.robot)
     kfold, _ = diagnose_recordings(recording, world.model.robot)
     held, _ = diagnose_recordings(recording, world.model.robot, holdout)

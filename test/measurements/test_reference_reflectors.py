@@ -13,9 +13,10 @@ import pytest
 
 from robot_calib.bag.read import read_recording
 from robot_calib.diagnosis.noise import REFERENCES, estimate_noise
-from robot_calib.flows.simulate import simulate
+from robot_calib.flows.simulate import simulate as simulate_world
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.measurements import Recording
+from robot_calib.nodes.simulate import simulate_bag
 from robot_calib.sim.world import World, build_world
 
 RATE_M_PER_S = 50e-6 / 3600.0  # 50 um/h
@@ -41,7 +42,7 @@ def _world(references: bool = True) -> World:
 
 def recorded(world: World, bag: Path, poses: int = 80) -> Recording:
     """`poses` random poses of `world` simulated into `bag` and read back."""
-    simulate(bag, "random", world, n_random=poses)
+    simulate_world(bag, "random", world, n_random=poses, record=simulate_bag)
     return read_recording([bag], world.model.robot)
 
 
@@ -100,7 +101,7 @@ def test_a_world_without_references_publishes_none(tmp_path: Path) -> None:
     (the drift stays in the points, as on a real tracker without references)."""
     world = _world(references=False)
     bag = tmp_path / "plain.mcap"
-    sim = simulate(bag, "random", world, n_random=20)
+    sim = simulate_world(bag, "random", world, n_random=20, record=simulate_bag)
     assert not any("reference" in topic for topic in sim.counts)
     assert read_recording([bag], world.model.robot).references == ()
 

@@ -23,9 +23,10 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from robot_calib.errors import InputError
-from robot_calib.flows.simulate import simulate
+from robot_calib.flows.simulate import simulate as simulate_world
 from robot_calib.messages import JOINT_STATES_TOPIC, POINT_TOPIC, ns_to_sec_nanosec
 from robot_calib.nodes.calibrator import LATCHED, CalibratorNode
+from robot_calib.nodes.simulate import simulate_bag
 from robot_calib.poses import Poses
 from robot_calib.sim.measure import physical_points
 from robot_calib.sim.plans import random_plan
@@ -88,7 +89,7 @@ def test_a_solve_of_joints_in_degrees_answers_failure(context: Context) -> None:
 def backlash_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     world = build_world({"seed": 4, "effects": [{"name": "backlash", "joints": [4]}]}, "backlash")
     bag = tmp_path_factory.mktemp("backlash") / "backlash.mcap"
-    simulate(bag, "paper-test2", world)
+    simulate_world(bag, "paper-test2", world, record=simulate_bag)
     return bag
 
 
@@ -158,7 +159,7 @@ def test_the_nodes_diagnosis_is_the_command_lines(
 
     world = build_world({"seed": 9, "effects": [{"name": "backlash", "joints": [4]}]}, "hold")
     holdout = tmp_path / "holdout.mcap"
-    simulate(holdout, "random", world, seed=19, n_random=60)
+    simulate_world(holdout, "random", world, seed=19, n_random=60, record=simulate_bag)
     run = cli(
         "diagnose", str(backlash_bag), "--holdout", str(holdout), "-o", str(tmp_path / "d.json")
     )

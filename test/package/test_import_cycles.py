@@ -87,3 +87,38 @@ def test_the_walker_finds_a_cycle_closed_by_a_lazy_relative_import(tmp_path: Pat
     assert find_cycle(graph) == ["pkg.a", "pkg.sub.b", "pkg.sub.c", "pkg.a"]
     (package / "sub" / "c.py").write_text("def f():\n    pass\n")
     assert find_cycle(import_graph(package)) is None
+
+
+FRONT_ENDS = ("robot_calib.cli", "robot_calib.nodes", "robot_calib.api")
+# the science and the formats: pure functions of their inputs, run on whatever runner the
+# caller installed (robot_calib.parallel), never a flow's or the process machinery's
+SCIENCE = (
+    "robot_calib.kinematics", "robot_calib.effects", "robot_calib.model", "robot_calib.poses",
+    "robot_calib.measurements", "robot_calib.identify", "robot_calib.diagnosis",
+    "robot_calib.compensation", "robot_calib.export", "robot_calib.sim", "robot_calib.plan",
+    "robot_calib.bag",
+)  # fmt: skip
+
+
+def within(module: str, packages: tuple[str, ...]) -> bool:
+    return any(module == p or module.startswith(p + ".") for p in packages)
+
+
+def test_no_arrow_back_up() -> None:
+    """Layers point down: nothing below the front ends (the command line, the nodes, the
+    public API) imports one, and the science imports neither `flows/` nor the forked
+    processes (`robot_calib.forked`), lazily or not."""
+    graph = import_graph(PACKAGE)
+    up = sorted(
+        f"{module} -> {dep}"
+        for module, deps in graph.items()
+        for dep in deps
+        if (
+            not within(module, FRONT_ENDS)
+            and module not in ("robot_calib", "robot_calib.__main__")
+            and within(dep, FRONT_ENDS)
+        )
+        or (within(module, SCIENCE) and within(dep, ("robot_calib.flows", "robot_calib.forked")))
+    )
+    assert up == []
+    assert within("robot_calib.identify.fit", SCIENCE) and not within("robot_calib.flows", SCIENCE)

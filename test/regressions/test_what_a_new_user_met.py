@@ -379,6 +379,7 @@ def test_an_interrupted_run_leaves_no_half_folder(tmp_path: Path) -> None:
     a hidden folder and renamed when complete; interrupted, nothing of it stays (not even
     the output folder, when the run made it)."""
     from robot_calib.flows.run import run
+    from robot_calib.nodes.simulate import simulate_bag
 
     calls = []
 
@@ -393,6 +394,7 @@ def test_an_interrupted_run_leaves_no_half_folder(tmp_path: Path) -> None:
             plan="paper-test1",
             n_holdout=20,
             progress=interrupt,
+            record=simulate_bag,
             say=lambda text: None,
         )
     assert "random" in calls and not (tmp_path / "o").exists()  # the folder it made: gone
@@ -403,6 +405,7 @@ def test_an_interrupted_run_leaves_no_half_folder(tmp_path: Path) -> None:
             plan="paper-test1",
             n_holdout=20,
             progress=interrupt,
+            record=simulate_bag,
             say=lambda text: None,
         )
     assert list((tmp_path / "mine").iterdir()) == []
