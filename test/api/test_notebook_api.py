@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import nbformat
+import pytest
 from nbclient import NotebookClient
 
 CELLS = [
@@ -23,6 +24,7 @@ CELLS = [
 ]
 
 
+@pytest.mark.slow
 def test_the_api_runs_in_a_jupyter_kernel(tmp_path: Path) -> None:
     notebook = nbformat.v4.new_notebook()
     notebook.cells = [nbformat.v4.new_code_cell(c.format(folder=str(tmp_path))) for c in CELLS]

@@ -99,6 +99,7 @@ def sample_params(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.parametrize("bit", [31, 20, 36])
+@pytest.mark.slow
 def test_a_flipped_bit_in_a_chunk_length_is_a_one_line_error(
     tmp_path: Path, sample_params: Path, bit: int
 ) -> None:
@@ -248,6 +249,7 @@ def test_a_run_names_its_final_folder_not_the_one_it_was_built_in(tmp_path: Path
 # --- item 9: messages ---
 
 
+@pytest.mark.slow
 def test_a_stream_kept_whole_says_all_points_not_every_1th(tmp_path: Path) -> None:
     """A stream of fewer points than --stream-max-points: 'every 1th of 976 points' ->
     'all 976 points'; a decimated one says 'every 2nd of'."""

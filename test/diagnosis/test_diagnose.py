@@ -68,6 +68,7 @@ def test_diagnosis_document_report_and_ladder() -> None:
     assert Diagnosis.from_dict(doc) == diagnosis
 
 
+@pytest.mark.slow
 def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:
     bag = Path(__file__).resolve().parents[2] / "bags" / "paper_test3.mcap"
     out = tmp_path / "diagnosis.json"
@@ -97,6 +98,7 @@ def test_diagnose_command_writes_json_and_report(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("effect", ["harmonics_high", "joint_harmonics"])
+@pytest.mark.slow
 def test_gear_harmonics_of_the_blind_harness_are_diagnosed(effect: str) -> None:
     """Joint-angle harmonics at gear orders (harmonics_high: 11 and 27 on joint 2, 17 on
     joint 1; joint_harmonics: two random orders 7-59 on a random joint), 50-300 urad: the

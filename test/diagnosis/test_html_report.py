@@ -169,6 +169,7 @@ def _browser() -> str:
     pytest.skip("chromium not found: .ci/run installs it with apt-get install chromium")
 
 
+@pytest.mark.slow
 def test_the_report_renders_in_a_headless_browser(report: Path, tmp_path: Path) -> None:
     """Debian's Chromium draws the page: a screenshot with ink and colours, not blank."""
     import matplotlib.image

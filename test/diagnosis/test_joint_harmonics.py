@@ -170,6 +170,7 @@ def test_aliases_of_regular_steps_and_none_of_irregular_ones() -> None:
 
 
 @pytest.mark.parametrize("irregular", [False, True])
+@pytest.mark.slow
 def test_sweeps_alone_alias_high_orders_unless_their_steps_are_irregular(irregular: bool) -> None:
     """Orders 17, 23 and 11 on joints 1-3, calibrated on the seed's Test 2 sweeps alone
     (k-fold, no hold-out): in regular steps the diagnosis finds the orders the sweeps show

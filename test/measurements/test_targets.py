@@ -82,6 +82,7 @@ def test_extra_targets_identify_what_one_target_cannot() -> None:
     assert single.parameters.free.sum() < three.parameters.free.sum() - 3 * 2  # offsets aside
 
 
+@pytest.mark.slow
 def test_a_target_on_the_last_axis_gives_way_to_the_others() -> None:
     """SMR smr2 on the joint-6 axis: its circle cannot fix the axis direction; CPA says so
     and leans on the other two targets, so the geometry stays exact."""

@@ -71,6 +71,7 @@ def test_an_empty_parameter_value_is_one_error_line(node: str) -> None:
         ),
     ],
 )
+@pytest.mark.slow
 def test_node_errors_name_parameters_under_one_prefix(
     node: str, args: list[str], said: str
 ) -> None:

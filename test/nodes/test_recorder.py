@@ -203,6 +203,7 @@ def test_recorder_process_refuses_an_existing_file(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     "signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=["SIGINT", "SIGTERM", "SIGHUP"]
 )
+@pytest.mark.slow
 def test_recorder_process_finalises_bag_on_signal(
     source: Node, tmp_path: Path, signum: int
 ) -> None:

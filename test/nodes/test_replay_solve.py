@@ -7,6 +7,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import pytest
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 
@@ -18,6 +19,7 @@ SAMPLE = Path(__file__).resolve().parents[2] / "bags" / "paper_test3.mcap"
 ROUNDS = 20
 
 
+@pytest.mark.slow
 def test_replay_then_solve_never_loses_the_end_of_the_bag(context: Context) -> None:
     for round_ in range(ROUNDS):
         calibrator = CalibratorNode(context=context, node_name=f"calibrator_{round_}")

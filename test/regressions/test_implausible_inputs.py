@@ -50,6 +50,7 @@ def work(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.parametrize("accuracy", [["--tracker-accuracy", "0.005"], []])
+@pytest.mark.slow
 def test_a_hold_out_bag_of_elsewhere_is_implausible(work: Path, accuracy: list[str]) -> None:
     """Item 2: 1 m held-out (> 1000 x the floor; the floor unknown: > 1000 x the geometric
     in-sample rms) exited 0 with 'unknown (outside the vocabulary)'. Now exit 3, the reason

@@ -32,6 +32,7 @@ from robot_calib.effects.link_bending import (
     twist_axis,
 )
 from robot_calib.errors import InputError
+from robot_calib.flows.blind import run_case
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.kinematics.loader import load_robot
 from robot_calib.kinematics.parameters import ParameterVector
@@ -44,7 +45,6 @@ from robot_calib.sim.blind import (
     classes,
     judge,
     make_case,
-    run_case,
     ur10_out_of_vocabulary,
 )
 from robot_calib.sim.plans import paper_test_plan
