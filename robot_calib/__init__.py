@@ -105,6 +105,28 @@ def one_blas_thread() -> None:
         os.environ.setdefault(name, "1")
 
 
+#: the nodes' programs (setup.py's console scripts beside robot-calib, `ros2 run robot_calib
+#: NODE`): started as these, or as `python -m robot_calib.nodes.NODE`, they get
+#: `one_blas_thread` before any module imports numpy
+NODE_PROGRAMS = (
+    "sim_robot",
+    "sim_tracker",
+    "recorder",
+    "replay",
+    "calibrator",
+    "compensator",
+    "capture",
+)
+
+
+def _node_program() -> bool:
+    """True when this process is one of the nodes' programs (NODE_PROGRAMS)."""
+    argv = getattr(sys, "orig_argv", [])
+    modules = [b for a, b in zip(argv, argv[1:]) if a == "-m"]
+    program = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else ""
+    return program in NODE_PROGRAMS or any(m.startswith("robot_calib.nodes.") for m in modules)
+
+
 def _console_program() -> bool:
     """True when the package is loaded by the `robot-calib` program or `python -m
     robot_calib` (not imported by a test, a node or another program)."""
@@ -138,6 +160,9 @@ def _keep_freed_memory() -> None:
     mallopt(-3, 16 << 20)  # M_MMAP_THRESHOLD
     mallopt(-1, 64 << 20)  # M_TRIM_THRESHOLD
 
+
+if _node_program():
+    one_blas_thread()
 
 if _console_program():  # before the heavy imports of robot_calib.cli (numpy, ...: ~0.3 s)
     one_blas_thread()

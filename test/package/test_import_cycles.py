@@ -93,11 +93,19 @@ FRONT_ENDS = ("robot_calib.cli", "robot_calib.nodes", "robot_calib.api")
 # the science and the formats: pure functions of their inputs, run on whatever runner the
 # caller installed (robot_calib.parallel), never a flow's or the process machinery's
 SCIENCE = (
-    "robot_calib.kinematics", "robot_calib.effects", "robot_calib.model", "robot_calib.poses",
-    "robot_calib.measurements", "robot_calib.identify", "robot_calib.diagnosis",
-    "robot_calib.compensation", "robot_calib.export", "robot_calib.sim", "robot_calib.plan",
+    "robot_calib.kinematics",
+    "robot_calib.effects",
+    "robot_calib.model",
+    "robot_calib.poses",
+    "robot_calib.measurements",
+    "robot_calib.identify",
+    "robot_calib.diagnosis",
+    "robot_calib.compensation",
+    "robot_calib.export",
+    "robot_calib.sim",
+    "robot_calib.plan",
     "robot_calib.bag",
-)  # fmt: skip
+)
 
 
 def within(module: str, packages: tuple[str, ...]) -> bool:

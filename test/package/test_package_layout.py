@@ -140,3 +140,19 @@ def test_colcon_build_installs_executables_and_ament_index(tmp_path: Path) -> No
         assert installed == files, folder
         for name in files:
             assert (share / folder / name).read_bytes() == (REPO / folder / name).read_bytes()
+
+
+def test_the_node_programs_are_setups_console_scripts() -> None:
+    """`robot_calib.NODE_PROGRAMS` (the programs tuned at start-up) are the nodes setup.py
+    installs, no more, no fewer."""
+    import ast
+
+    import robot_calib
+
+    tree = ast.parse((REPO / "setup.py").read_text())
+    nodes = next(
+        ast.literal_eval(n.value)
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Assign) and getattr(n.targets[0], "id", "") == "NODES"
+    )
+    assert sorted(nodes) == sorted(robot_calib.NODE_PROGRAMS)
