@@ -13,8 +13,12 @@
     print(diagnosis.summary())
     commands = rc.compensate(again, q)  # nominal joint commands (n, J) [rad] -> corrected
 
+The science runs on this process alone unless the caller installs a runner: `with
+robot_calib.parallel.using(robot_calib.forked.FORKED): rc.diagnose(...)` puts its
+independent work (folds, joints' scans) on the other core, as the command line does.
+
 Every function here is one call into the same core the command line and the nodes use
-(`flows/`, `identify/`, `diagnose/`, `compensate/`), with keyword-only options and SI units
+(`flows/`, `identify/`, `diagnosis/`, `compensation/`), with keyword-only options and SI units
 (rad, m, s). Errors are `robot_calib.errors.RobotCalibError` subclasses (InputError for bad
 input) with one line naming the file or value. Importing `robot_calib` stays light: these
 functions load numpy, scipy and the rest when first called (`robot_calib.__getattr__`).

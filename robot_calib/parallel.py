@@ -8,8 +8,10 @@ caller's choice, installed for a block with `using(runner)`:
 
 - `SEQUENTIAL` (nothing installed: a library call, a notebook): each task is computed here
   when its result is asked; no process is forked, no thread started;
-- `robot_calib.forked.FORKED`: a forked child on the machine's other core (the command
-  line, the nodes and `flows/` install it with `by_default`, unless their caller chose).
+- `robot_calib.forked.FORKED`: a forked child on the machine's other core (what the
+  command line and the calibrator node install; a script may too:
+  `with using(FORKED): rc.diagnose(...)`). A process with other Python threads (a
+  notebook's kernel) never forks: its tasks are computed here all the same.
 
 The results are the same either way; only when they arrive differs.
 """

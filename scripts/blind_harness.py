@@ -27,6 +27,8 @@ import sys
 import time
 
 from robot_calib.flows.blind import run_case
+from robot_calib.forked import FORKED
+from robot_calib.parallel import using
 from robot_calib.sim.blind import classes
 
 
@@ -43,7 +45,8 @@ def main() -> int:
         to_right: list[float] = []
         started = time.perf_counter()
         for seed in range(args.cases):
-            r = run_case(effect, 1000 + seed)
+            with using(FORKED):  # the other core, as the command line's diagnosis
+                r = run_case(effect, 1000 + seed)
             results.append(r)
             hits += r["hit"]
             named += r["named"]

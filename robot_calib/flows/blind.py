@@ -1,6 +1,6 @@
 """The blind harness's flow: one blind case (`sim.blind`: a world drawn at random from an
-effect class) made, diagnosed as `robot-calib diagnose` diagnoses (`diagnose_recordings`:
-the forked runner by default), judged against its truth, and its best model written as
+effect class) made, diagnosed as `robot-calib diagnose` diagnoses (`diagnose_recordings`,
+on the runner the caller installed), judged against its truth, and its best model written as
 params_best.json and read back (scripts/blind_harness.py runs many)."""
 
 from __future__ import annotations

@@ -47,20 +47,17 @@ def diagnose_recordings(
         The rungs behind it, each with its calibration and held-out scores.
     """
     from robot_calib.diagnosis.diagnosis import diagnose
-    from robot_calib.forked import FORKED
-    from robot_calib.parallel import by_default
 
     if holdout is not None:  # index the hold-out's targets as the calibration's
         holdout = holdout.with_targets(recording.target_names)
-    with by_default(FORKED):  # the other core, unless the caller chose (`parallel.using`)
-        diagnosis, ladder = diagnose(
-            recording,
-            robot,
-            holdout,
-            log=log,
-            tracker_sigma_m=tracker_sigma_m,
-            on_ladder=on_ladder,
-        )
+    diagnosis, ladder = diagnose(
+        recording,
+        robot,
+        holdout,
+        log=log,
+        tracker_sigma_m=tracker_sigma_m,
+        on_ladder=on_ladder,
+    )
     if on_ladder is None and holdout is not None:
         # the warnings every front end gives (a richer model that generalises worse): the
         # command line's hook (`FiguresWhenClimbed`) adds them with its reports' figures

@@ -4,7 +4,7 @@ robot (msgs_doc/compensator.md).
 Subscribes a trajectory_msgs/JointTrajectory (parameter `input_topic`), maps its
 joint_names to the calibration's joints by name (any order; parameter `joint_names` renames
 the model's joints to the controller's), compensates every point's positions with
-`compensate.compensate_commands` (approach directions from the motion between consecutive
+`compensation.compensate_commands` (approach directions from the motion between consecutive
 points, the first point's from where the robot stands and how it got there, as
 /joint_states last showed it; time from time_from_start), and republishes the trajectory
 (parameter `output_topic`) with the same header, joint_names, times, velocities,

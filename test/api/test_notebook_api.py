@@ -1,6 +1,7 @@
 """The public API in a Jupyter kernel (nbclient driving an ipykernel, as a notebook runs):
 simulate, calibrate, save, load, diagnose and compensate with `import robot_calib` alone,
-while the kernel's own threads run (the diagnosis forks helpers: a kernel must not hang)."""
+while the kernel's own threads run (a kernel must not hang: with other threads running
+nothing forks, and a library call installs no forked runner anyway)."""
 
 from __future__ import annotations
 
