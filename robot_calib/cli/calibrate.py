@@ -19,7 +19,6 @@ from robot_calib.cli.options import (
 )
 from robot_calib.errors import ImplausibleError, InputError
 from robot_calib.identify import DEFAULT_ECC_ORDER, DEFAULT_MODEL
-from robot_calib.kinematics.description import RobotDescription
 
 NAME = "calibrate"
 HELP = "identify a model from bags -> PARAMS.json"
@@ -59,12 +58,13 @@ def main(args: argparse.Namespace) -> int:
     """Identify a model from bags; write PARAMS.json; print a summary in mm/deg."""
     from robot_calib.atomic import output_path
     from robot_calib.flows.calibrate import calibrate_bags, calibrate_stream_bag
+    from robot_calib.identify.calibrate import parse_model
     from robot_calib.identify.calibration import summary
     from robot_calib.identify.params_file import write_json_atomic
 
     robot = robot_of(args)
     output = output_path(args.output, "PARAMS.json", [*args.bags, *robot_files(args)], args.force)
-    check_model_terms(args.model, robot, args.ecc_order)
+    parse_model(args.model, robot, args.ecc_order)  # a bad model: its error before any work
     started = time.perf_counter()
     if args.stream:
         if args.objective != "absolute":
@@ -101,38 +101,3 @@ def main(args: argparse.Namespace) -> int:
     if not cal.plausible:  # written for inspection; predict, compensate, export refuse it
         raise ImplausibleError(f"{'; '.join(cal.implausible)} ({output}: plausible false)")
     return 0
-
-
-def check_model_terms(spec: str, robot: RobotDescription, ecc_order: int) -> None:
-    """Before any fit: InputError naming --model and the terms when two terms give the same
-    parameters (`joint_harmonics:2:orders=11,27+joint_harmonics:2:orders=11`), and a log
-    line for each joint_harmonics term that leaves its defaults to be guessed (no
-    `orders=`: order 2 alone; no joints: every joint; msgs_doc/effects.md)."""
-    from robot_calib.identify.calibrate import parse_model
-    from robot_calib.identify.model_spec import ModelSpec
-
-    _, effects = parse_model(spec, robot, ecc_order)
-    terms = ModelSpec.parse(spec).terms
-    owner: dict[str, str] = {}
-    for text, effect in zip(terms, effects):
-        for name in effect.parameter_names(robot):
-            if name in owner:
-                raise InputError(
-                    f"--model {spec}: terms {owner[name]!r} and {text!r} both "
-                    f"give parameter {name}: give each joint (and order) "
-                    "once"
-                )
-            owner[name] = text
-        if effect.name != "joint_harmonics":
-            continue
-        options = text.split(":")[1:]
-        guessed = [
-            what
-            for what, given in (
-                ("the default order 2 alone", any(o.startswith("orders=") for o in options)),
-                ("every joint", any(not o.startswith("orders=") for o in options)),
-            )
-            if not given
-        ]
-        if guessed:
-            log(f"--model: {text} is {effect.spec} ({' and '.join(guessed)}: msgs_doc/effects.md)")

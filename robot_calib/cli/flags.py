@@ -53,7 +53,8 @@ def _take(parser: argparse.ArgumentParser, verb: str) -> None:
             if verb in action.choices:
                 _take(action.choices[verb], verb)
             continue
-        longs = [s for s in action.option_strings if s.startswith("--")]
+        # as the verb's --help spells it first (-o for -o/--output)
+        longs = list(action.option_strings)
         if not longs or action.dest in ("help", argparse.SUPPRESS):
             continue
         if isinstance(action, argparse._StoreFalseAction):

@@ -36,8 +36,10 @@ def calibrate_recording(
     calibration : Calibration
         As `robot_calib.identify.calibrate.calibrate`.
     """
-    from robot_calib.identify.calibrate import calibrate
+    from robot_calib.identify.calibrate import calibrate, model_notes
 
+    for note in model_notes(model, robot, ecc_order):
+        (log or (lambda _line: None))(note)
     if objective == "seed":
         check_seed_objective_memory(len(recording), robot, model, ecc_order)
     return calibrate(recording, robot, model, ecc_order, log=log, objective=objective)

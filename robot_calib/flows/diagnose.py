@@ -5,6 +5,7 @@ model's PARAMS.json), written together (`robot-calib diagnose`, the calibrator n
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
@@ -12,7 +13,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.flows.bags import ReadBags, read_inputs
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.log import Log
@@ -48,6 +49,13 @@ def diagnose_recordings(
     """
     from robot_calib.diagnosis.diagnosis import diagnose
 
+    if tracker_sigma_m is not None and not (
+        math.isfinite(tracker_sigma_m) and 1e-7 <= tracker_sigma_m < 1e-2
+    ):
+        raise InputError(
+            f"{param('tracker_sigma_m', tracker_sigma_m)}: a 1-sigma per axis in m, 1e-07 "
+            "(0.1 um) to 0.01"
+        )
     if holdout is not None:  # index the hold-out's targets as the calibration's
         holdout = holdout.with_targets(recording.target_names)
     diagnosis, ladder = diagnose(
@@ -265,8 +273,9 @@ def report_path(output: str | Path) -> Path:
     output = Path(output)
     if output.suffix.lower() == ".md":
         raise InputError(
-            f"-o {output}: names DIAGNOSIS.json, and its Markdown report goes beside it as "
-            f"<name>.md; give e.g. -o {output.with_suffix('.json')}"
+            f"{param('output', str(output))}: names DIAGNOSIS.json, and its Markdown report goes "
+            f"beside it as <name>.md; give e.g. "
+            f"{param('output', str(output.with_suffix('.json')))}"
         )
     return output.with_suffix(".md")
 
@@ -283,8 +292,9 @@ def html_report_path(output: str | Path) -> Path:
     output = Path(output)
     if output.suffix.lower() in (".html", ".htm"):
         raise InputError(
-            f"-o {output}: names DIAGNOSIS.json, and its HTML report goes beside it as "
-            f"<name>.html; give e.g. -o {output.with_suffix('.json')}"
+            f"{param('output', str(output))}: names DIAGNOSIS.json, and its HTML report goes "
+            f"beside it as <name>.html; give e.g. "
+            f"{param('output', str(output.with_suffix('.json')))}"
         )
     return output.with_suffix(".html")
 

@@ -98,17 +98,51 @@ def parse_model(
             f"geometric+EFFECT[:joints] (effects: {known})"
         )
     effects: list[Effect] = []
-    for extra in extras:
-        name = extra.split(":")[0]
+    owner: dict[str, str] = {}  # parameter -> the term that gives it
+    for extra, name in zip(extras, parsed.effect_names):
         if name not in vocabulary():
             raise InputError(f"{param('model', spec)}: unknown effect {name!r} ({known})")
         try:
-            # --ecc-order is eccentricity's default order, no other effect's
+            # ecc_order is eccentricity's default order, no other effect's
             defaults = {"order": ecc_order} if name == Eccentricity.name else {}
             effects.append(parse_effect(extra, robot.n_joints, **defaults))
         except InputError as exc:
             raise InputError(f"{param('model', spec)}: {exc}") from None
+        for parameter in effects[-1].parameter_names(robot):
+            if parameter in owner:
+                raise InputError(
+                    f"{param('model', spec)}: terms {owner[parameter]!r} and {extra!r} both "
+                    f"give parameter {parameter}: give each joint (and order) once"
+                )
+            owner[parameter] = extra
     return base, effects
+
+
+def model_notes(
+    spec: str, robot: RobotDescription, ecc_order: int = DEFAULT_ECC_ORDER
+) -> list[str]:
+    """A line for each joint_harmonics term of `spec` that leaves its defaults to be guessed
+    (no `orders=`: order 2 alone; no joints: every joint; msgs_doc/effects.md)."""
+    _, effects = parse_model(spec, robot, ecc_order)
+    notes = []
+    for text, effect in zip(ModelSpec.parse(spec).terms, effects):
+        if effect.name != "joint_harmonics":
+            continue
+        options = ModelSpec.term_parts(text)[1]
+        guessed = [
+            what
+            for what, given in (
+                ("the default order 2 alone", any(o.startswith("orders=") for o in options)),
+                ("every joint", any(not o.startswith("orders=") for o in options)),
+            )
+            if not given
+        ]
+        if guessed:
+            notes.append(
+                f"{param('model', spec)}: {text} is {effect.spec} ({' and '.join(guessed)}: "
+                "msgs_doc/effects.md)"
+            )
+    return notes
 
 
 def _from_fit(

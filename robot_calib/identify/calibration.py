@@ -9,7 +9,7 @@ labelled.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -132,7 +132,8 @@ class Calibration:
         fitted = fitted.subset(keep)
         residuals = self.model.target_points(self.parameters, fitted.poses) - fitted.points
         learned = fit_structured(self.model, self.parameters, fitted.poses, residuals)
-        return replace(self, correction=learned)
+        hybrid = replace(self, correction=learned)
+        return replace(hybrid, hybrid_accuracy=hybrid_in_sample(hybrid, recording))
 
     def to_dict(self, recording: Recording) -> dict[str, Any]:
         """The PARAMS.json document (msgs_doc/parameters.md) of this calibration from
@@ -154,15 +155,20 @@ class Calibration:
         end uses for a whole calibration."""
         return load_calibration(path)
 
-    def score(self, recording: Recording) -> Score:
+    def score(self, recording: Recording, *, fitted: Sequence[str] | None = None) -> Score:
         """This calibration's errors on `recording` (held out, or its own): absolute and
-        seed-criterion figures [mm], residuals, suspect points (`robot_calib.identify.score`)."""
-        from robot_calib.identify.score import score
+        seed-criterion figures [mm], residuals, suspect points (`robot_calib.identify.score`),
+        and the warnings every front end gives: far above the applied model's in-sample
+        figures, a bag it was fitted on (`fitted`, default: the PARAMS.json's `recordings`),
+        far above the tracker's noise (`held_out_warnings`)."""
+        from robot_calib.identify.score import held_out_warnings, score
 
         in_sample, judged_by = self.applied_accuracy()
-        return score(
-            self, recording, in_sample=in_sample, fitted=self.recordings, judged_by=judged_by
-        )
+        fitted = self.recordings if fitted is None else fitted
+        scored = score(self, recording, in_sample=in_sample, fitted=fitted, judged_by=judged_by)
+        where = ", ".join(recording.sources)
+        noise = held_out_warnings(self, scored.accuracy.absolute_rms_mm, where)
+        return replace(scored, warnings=(*scored.warnings, *noise))
 
     @classmethod
     def from_dict(cls, doc: Mapping[str, Any], where: str = "PARAMS.json") -> Calibration:

@@ -31,7 +31,14 @@ class ModelSpec:
     @property
     def effect_names(self) -> tuple[str, ...]:
         """Each term's effect name (the text before its first ':')."""
-        return tuple(term.split(":")[0] for term in self.terms)
+        return tuple(self.term_parts(term)[0] for term in self.terms)
+
+    @staticmethod
+    def term_parts(term: str) -> tuple[str, tuple[str, ...]]:
+        """A term's effect name and its ':'-separated parts after it (joints, options):
+        'joint_harmonics:2:orders=11' -> ('joint_harmonics', ('2', 'orders=11'))."""
+        name, *parts = term.split(":")
+        return name, tuple(parts)
 
     def added_to(self, simpler: ModelSpec) -> str:
         """The terms this model has beyond `simpler`, joined with '+' ('' when none)."""

@@ -19,6 +19,10 @@ from robot_calib.identify.params_file import (
     beyond_physics,
     far_from_nominal_values,
 )
+from robot_calib.identify.score import (
+    RESIDUAL_FACTOR,
+    noise_per_axis,
+)
 from robot_calib.identify.weights import DEFAULT_ORIENTATION_SIGMA_RAD
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.measurements import Recording
@@ -30,13 +34,6 @@ if TYPE_CHECKING:
 #: a geometric parameter this far from nominal is no manufacturing tolerance
 FAR_LENGTH_M = 0.020
 FAR_ANGLE_RAD = np.radians(2.0)
-#: the in-sample residual per axis may exceed the noise by this factor before a warning
-#: (an unmodelled joint effect such as 2 mrad of backlash leaves about 10 x)
-RESIDUAL_FACTOR = 20.0
-#: tracker + target noise per axis [m] assumed when the data cannot tell (no circle fits)
-DEFAULT_NOISE_M = 10e-6
-#: the circle fits' noise is taken as at least this [m]: no tracker resolves finer
-MIN_NOISE_M = 1e-6
 #: readings beyond the joint limits by more than this [rad] are reported
 LIMIT_MARGIN_RAD = np.radians(2.0)
 HINT = "a wrong robot description, two joints' readings swapped, or readings in other units?"
@@ -137,25 +134,6 @@ def degrees_reason(recording: Recording, robot: RobotDescription, what: str = "r
     return f"{what} of joint(s) {joints} look like degrees; the contract wants rad"
 
 
-def noise_per_axis(cal: Calibration, stated_sigma_m: float | None = None) -> tuple[float, str]:
-    """What the tracker alone leaves per axis [m], and where that figure comes from: the
-    circle fits of the sweeps (pooled rms over 3 components, at least MIN_NOISE_M) when
-    CPA ran, else the
-    user's stated accuracy `stated_sigma_m` [m] (`--tracker-accuracy`), else the assumed
-    DEFAULT_NOISE_M."""
-    if cal.cpa is not None and cal.cpa.sweeps:
-        total = sum(
-            float(np.sum(s.circle.plane_residuals**2 + s.circle.radial_residuals**2))
-            for s in cal.cpa.sweeps
-        )
-        count = sum(2 * len(s.circle.plane_residuals) for s in cal.cpa.sweeps)
-        # exact (simulated) points fit their circles to round-off: no tracker's noise
-        return max(float(np.sqrt(total / count)), MIN_NOISE_M), "circle fits"
-    if stated_sigma_m is not None:
-        return float(stated_sigma_m), "stated tracker accuracy (given by the user)"
-    return DEFAULT_NOISE_M, "assumed tracker noise"
-
-
 def far_from_nominal(
     cal: Calibration,
     length_m: float,
@@ -192,22 +170,6 @@ def calibration_warnings(
                 f"diagnose`), {HINT}"
             )
     return out
-
-
-def held_out_warnings(cal: Calibration, held_out_rms_mm: float, where: str) -> list[str]:
-    """A warning when the calibration's held-out absolute rms [mm] (measurements it was
-    not fitted on, from `where`) is more than RESIDUAL_FACTOR times the noise per axis
-    (`noise_per_axis`; the rms over 3 axes compared per axis, as in-sample), else none."""
-    noise, source = noise_per_axis(cal)
-    per_axis = held_out_rms_mm * 1e-3 / np.sqrt(3.0)
-    if per_axis <= RESIDUAL_FACTOR * noise:
-        return []
-    return [
-        f"warning: {where}: held-out residual {per_axis * 1e3:.4f} mm per axis is "
-        f"{per_axis / noise:.0f} x the noise ({noise * 1e3:.4f} mm, {source}): the model "
-        "does not generalise to these poses (an unmodelled effect: see `robot-calib "
-        "diagnose`), or the tracker moved since the calibration"
-    ]
 
 
 #: Beyond these a result is no robot of this table at all, but nonsense (PARAMS.json

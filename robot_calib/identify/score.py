@@ -12,6 +12,7 @@ import io
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -24,11 +25,22 @@ from robot_calib.measurements import Recording
 from robot_calib.messages import target_topic
 from robot_calib.model import Calibrated, KinematicModel
 
+if TYPE_CHECKING:
+    from robot_calib.identify.cpa import CPAResult
+
 #: a held-out rms this many times the calibration's in-sample rms, and above
 #: IMPLAUSIBLE_MM, is no generalisation gap: the calibration does not describe these data
 IMPLAUSIBLE_FACTOR = 10.0
 IMPLAUSIBLE_MM = 1.0
 IMPLAUSIBLE_HINT = "wrong robot, wrong bag, or the tracker moved since the calibration?"
+
+#: the in-sample residual per axis may exceed the noise by this factor before a warning
+#: (an unmodelled joint effect such as 2 mrad of backlash leaves about 10 x)
+RESIDUAL_FACTOR = 20.0
+#: tracker + target noise per axis [m] assumed when the data cannot tell (no circle fits)
+DEFAULT_NOISE_M = 10e-6
+#: the circle fits' noise is taken as at least this [m]: no tracker resolves finer
+MIN_NOISE_M = 1e-6
 
 
 @dataclass(frozen=True)
@@ -185,3 +197,45 @@ def _rotation_cells(error: Array) -> list[str]:
     if not np.all(np.isfinite(error)):
         return ["", "", "", ""]
     return [repr(float(v)) for v in (*error, np.linalg.norm(error))]
+
+
+class WithCircles(Protocol):
+    """A calibration whose CPA's circle fits (None: no CPA ran) tell the tracker's noise."""
+
+    @property
+    def cpa(self) -> CPAResult | None: ...
+
+
+def noise_per_axis(cal: WithCircles, stated_sigma_m: float | None = None) -> tuple[float, str]:
+    """What the tracker alone leaves per axis [m], and where that figure comes from: the
+    circle fits of the sweeps (pooled rms over 3 components, at least MIN_NOISE_M) when
+    CPA ran, else the
+    user's stated accuracy `stated_sigma_m` [m] (`--tracker-accuracy`), else the assumed
+    DEFAULT_NOISE_M."""
+    if cal.cpa is not None and cal.cpa.sweeps:
+        total = sum(
+            float(np.sum(s.circle.plane_residuals**2 + s.circle.radial_residuals**2))
+            for s in cal.cpa.sweeps
+        )
+        count = sum(2 * len(s.circle.plane_residuals) for s in cal.cpa.sweeps)
+        # exact (simulated) points fit their circles to round-off: no tracker's noise
+        return max(float(np.sqrt(total / count)), MIN_NOISE_M), "circle fits"
+    if stated_sigma_m is not None:
+        return float(stated_sigma_m), "stated tracker accuracy (given by the user)"
+    return DEFAULT_NOISE_M, "assumed tracker noise"
+
+
+def held_out_warnings(cal: WithCircles, held_out_rms_mm: float, where: str) -> list[str]:
+    """A warning when the calibration's held-out absolute rms [mm] (measurements it was
+    not fitted on, from `where`) is more than RESIDUAL_FACTOR times the noise per axis
+    (`noise_per_axis`; the rms over 3 axes compared per axis, as in-sample), else none."""
+    noise, source = noise_per_axis(cal)
+    per_axis = held_out_rms_mm * 1e-3 / np.sqrt(3.0)
+    if per_axis <= RESIDUAL_FACTOR * noise:
+        return []
+    return [
+        f"warning: {where}: held-out residual {per_axis * 1e3:.4f} mm per axis is "
+        f"{per_axis / noise:.0f} x the noise ({noise * 1e3:.4f} mm, {source}): the model "
+        "does not generalise to these poses (an unmodelled effect: see `robot-calib "
+        "diagnose`), or the tracker moved since the calibration"
+    ]

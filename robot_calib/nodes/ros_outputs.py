@@ -131,21 +131,9 @@ class HeldOut:
 
 def score_held_out(cal: Calibration, recording: Recording, holdout: Recording) -> HeldOut:
     """`cal` (fitted on `recording`) scored on `holdout` as `robot-calib score` scores it
-    (a hybrid model judged against its own in-sample figures), with the held-out warnings
-    against the tracker's noise (`identify.plausibility.held_out_warnings`)."""
-    from robot_calib.identify.calibration import hybrid_in_sample
-    from robot_calib.identify.plausibility import held_out_warnings
-    from robot_calib.identify.score import score
-
-    in_sample, judged_by = cal.accuracy, "the calibration's in-sample rms"
-    if cal.correction is not None:  # the model applied: physical + learned correction
-        in_sample, judged_by = hybrid_in_sample(cal, recording), "the hybrid model's in-sample rms"
-    result = score(
-        cal, holdout, in_sample=in_sample, fitted=recording.sources, judged_by=judged_by
-    )
-    where = ", ".join(holdout.sources)
-    noise = held_out_warnings(cal, result.accuracy.absolute_rms_mm, where)
-    return HeldOut(result, tuple(holdout.sources), (*result.warnings, *noise))
+    (`Calibration.score`: its warnings included)."""
+    result = cal.score(holdout, fitted=recording.sources)
+    return HeldOut(result, tuple(holdout.sources), result.warnings)
 
 
 def calibration_status(

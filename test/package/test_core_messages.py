@@ -4,7 +4,8 @@ backquotes (`errors.param`), and the command line prints its flag instead (cli/f
 
 Every string literal of every module outside `cli/`, `nodes/` and the console entry is read
 with `ast` (docstrings aside: they document the command line too); only a whole command for
-the reader to run ('robot-calib export ... --format urdf', in a report) may carry flags."""
+the reader to run ('robot-calib export ... --format urdf' in a report, `robot-calib repair
+X -o FIXED.mcap` in a message) may carry flags."""
 
 from __future__ import annotations
 
@@ -20,7 +21,10 @@ import robot_calib
 PACKAGE = Path(robot_calib.__file__).parent
 FRONT_ENDS = ("cli", "nodes")
 CONSOLE_ENTRY = ("__init__.py", "__main__.py")
-FLAG = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]+")
+# a whole command for the reader to run, in backquotes
+COMMAND = re.compile(r"`robot-calib [^`]*`")
+# a long flag (--model) or a short one (-o) followed by a space or the end
+FLAG = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]+|(?<![\w-])-[a-zA-Z](?=\s|$)")
 
 
 def core_modules() -> list[Path]:
@@ -60,6 +64,7 @@ def flag_strings(path: Path) -> list[str]:
             text = node.value
         else:
             continue
+        text = COMMAND.sub("", text)  # a whole command to run may carry its flags
         if text.startswith("robot-calib ") or not FLAG.search(text):
             continue
         found.append(f"{node.lineno}: {text[:100]!r}")
@@ -78,8 +83,11 @@ def test_the_walk_reads_the_core_and_finds_a_flag_where_there_is_one(tmp_path: P
         '    raise ValueError(f"--model {spec}: unknown")\n'
         'HINT = "a wrong --robot?"\n'
         'NEXT = "robot-calib export p.json --format urdf"\n'
+        'SHORT = f"-o {spec}: names a file"\n'
+        'DASH = "x-y z - w, -1"\n'
+        'RUN = f"truncated: run `robot-calib repair {spec} -o FIXED.mcap` first"\n'
     )
-    assert [line.split(":")[0] for line in flag_strings(sample)] == ["4", "5"]
+    assert [line.split(":")[0] for line in flag_strings(sample)] == ["4", "5", "7"]
 
 
 @pytest.mark.parametrize("path", core_modules(), ids=lambda p: str(p.relative_to(PACKAGE)))
