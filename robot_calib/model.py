@@ -177,6 +177,13 @@ class PointCorrection(Protocol):
     def predict(self, poses: Poses) -> Array: ...
 
 
+def corrected(points: Array, poses: Poses, correction: PointCorrection | None) -> Array:
+    """`points` (n, 3) [m, tracker frame] at `poses` (the model's, or its residuals) less
+    the residual the learned `correction` predicts there: the hybrid model's (`points` when
+    there is none). The one place a learned correction is applied to points."""
+    return points if correction is None else points - correction.predict(poses)
+
+
 class Calibrated(Protocol):
     """What applying a calibration takes: its model, its parameters and its learned
     correction (None: the model alone). `identify.calibration.Calibration` is one, as loaded
@@ -367,7 +374,7 @@ class KinematicModel:
             for start in range(0, n, CHAIN_BLOCK_POSES):
                 rows = slice(start, min(start + CHAIN_BLOCK_POSES, n))
                 out[rows] = self._evaluate(params, poses.subset(rows), with_jacobian=False)[0]
-        return out if correction is None else out - correction.predict(poses)
+        return corrected(out, poses, correction)
 
     def jacobian(self, params: ParameterVector, poses: Poses) -> tuple[Array, Array]:
         """Points (n, 3) [m] and d points / d parameters, shape (n, 3, P), full vector order

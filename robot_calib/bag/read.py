@@ -12,7 +12,7 @@ Bad input raises `BagError` naming the file and the problem (one line, exit stat
 from __future__ import annotations
 
 import shlex
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
@@ -26,6 +26,7 @@ from robot_calib.bag.mcap_reader import BagReader
 from robot_calib.errors import BagError, InputError, TruncatedBagError, param
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array, IntArray
+from robot_calib.log import Log
 from robot_calib.measurements.recording import (
     MAX_COORDINATE_M,
     MAX_READING_RAD,
@@ -613,7 +614,7 @@ def read_recording(
     paths: Sequence[str | Path],
     robot: RobotDescription,
     pair_tolerance: float = PAIR_TOLERANCE_S,
-    log: Callable[[str], None] | None = None,
+    log: Log | None = None,
 ) -> Recording:
     """Read and pair the measurements of one or more bags (each bag its own time origin and
     direction history). Raises BagError on unusable input; warnings go to `log` and into the

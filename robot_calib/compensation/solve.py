@@ -100,7 +100,9 @@ def solve_corrected(
         seed = poses.subset(rows)
         reached = np.isfinite(q[rows]).all(axis=1, keepdims=True)  # others: at their seed
         at = replace(seed, q=np.where(reached, q[rows], seed.q), target=None)
-        shift = correction.predict(at) @ rotation  # R^T r, row-wise (base frame)
+        # `model.corrected` of tool frames: the predicted residual R^T r, row-wise, in the
+        # base frame, taken off the model's tool positions
+        shift = correction.predict(at) @ rotation
         achieved = tool2base(model, params, at, tool2flange)
         achieved[:, :3, 3] -= shift
         error[rows] = weight[rows] * pose_error(achieved, goal2base[rows])

@@ -45,6 +45,7 @@ from robot_calib.identify.outliers import Outlier
 from robot_calib.identify.plausibility import degrees_reason
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.masses import mass_model_line
+from robot_calib.log import Log
 from robot_calib.measurements import Recording
 from robot_calib.measurements.references import TrackerDrift
 from robot_calib.poses import reading_groups
@@ -428,7 +429,7 @@ def diagnose(
     recording: Recording,
     robot: RobotDescription,
     holdout: Recording | None = None,
-    log: Callable[[str], None] | None = None,
+    log: Log | None = None,
     tracker_sigma_m: float | None = None,
     on_ladder: Callable[[Ladder, Recording, float | None], object] | None = None,
 ) -> tuple[Diagnosis, Ladder]:

@@ -18,6 +18,7 @@ from robot_calib.diagnosis.names import wrap_name
 from robot_calib.diagnosis.signatures import arc_angle_errors
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.measurements import Recording
+from robot_calib.model import corrected
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -56,9 +57,7 @@ def insample_residuals(rung: Rung, recording: Recording) -> Array:
     """A rung's in-sample residuals (n, 3) [m] on `recording`: its calibration's, less its
     learned correction's prediction for the hybrid rung."""
     cal = rung.calibration
-    if cal.correction is None:
-        return cal.residuals
-    return cal.residuals - cal.correction.predict(recording.poses)
+    return corrected(cal.residuals, recording.poses, cal.correction)
 
 
 class FigureCache:

@@ -55,6 +55,7 @@ from robot_calib.identify.correction_structured_fit import (
 from robot_calib.kinematics.frames import Array, IntArray
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.measurements import Recording
+from robot_calib.model import corrected
 from robot_calib.parallel import Box, aside, mailbox
 from robot_calib.records import Record
 
@@ -192,7 +193,7 @@ def corrected_heldout(
         before = cal.model.target_points(cal.parameters, holdout.poses) - holdout.points
         with np.errstate(over="ignore", invalid="ignore"):  # a model beyond physics (1e9 m
             # of backlash): its inf / nan figures are flagged implausible, not a warning line
-            return before, before - correction.predict(holdout.poses), correction
+            return before, corrected(before, holdout.poses, correction), correction
     before, after = np.zeros_like(points), np.zeros_like(points)
     folds = list(fold_parameters)
     seeds = rng.integers(0, 2**63, size=len(folds))  # each fold its own stream: any order

@@ -405,10 +405,9 @@ def check_loads(path: Path, name: Path, cal: Calibration, recording: Recording) 
 
     from robot_calib.errors import RobotCalibError, WrittenFileError
     from robot_calib.identify.calibration import Calibration
-    from robot_calib.identify.params_file import read_document
 
     try:
-        back = Calibration.from_dict(read_document(path), str(name))
+        back = Calibration.load(path, str(name))
     except RobotCalibError as exc:
         raise WrittenFileError(f"{name} would not load: {exc}") from None
     poses = recording.poses

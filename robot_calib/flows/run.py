@@ -259,7 +259,7 @@ def _run_in(
     seed: int,
     n_holdout: int,
     robot: str,
-    say: Callable[[str], None],
+    say: Log,
     log: Log | None,
     progress: Callable[[str, int, int], None] | None,
     record: Recorder,

@@ -150,10 +150,10 @@ class Calibration:
         return path
 
     @classmethod
-    def load(cls, path: str | Path) -> Calibration:
+    def load(cls, path: str | Path, where: str | None = None) -> Calibration:
         """The calibration of a PARAMS.json file (`from_dict`): the one loader every front
-        end uses for a whole calibration."""
-        return load_calibration(path)
+        end uses for a whole calibration; messages name `where` (default: `path`)."""
+        return load_calibration(path, where)
 
     def score(self, recording: Recording, *, fitted: Sequence[str] | None = None) -> Score:
         """This calibration's errors on `recording` (held out, or its own): absolute and
@@ -335,10 +335,11 @@ def hybrid_in_sample(cal: Calibration, recording: Recording) -> Accuracy:
     return accuracy(fitted.points, cal.predict(fitted.poses))
 
 
-def load_calibration(path: str | Path) -> Calibration:
-    """The `Calibration` of a PARAMS.json file (see `Calibration.from_dict`)."""
+def load_calibration(path: str | Path, where: str | None = None) -> Calibration:
+    """The `Calibration` of a PARAMS.json file (see `Calibration.from_dict`); messages name
+    `where` (default: `path`)."""
     path = Path(path)
-    return Calibration.from_dict(read_document(path), str(path))
+    return Calibration.from_dict(read_document(path), str(path) if where is None else where)
 
 
 def probe_lines(cal: Calibration) -> list[str]:

@@ -16,7 +16,6 @@ the standard deviation of every free parameter comes from the Jacobian and the r
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import cast
 
@@ -36,11 +35,10 @@ from robot_calib.identify.prior import prior_sigmas
 from robot_calib.identify.weights import orientation_errors, row_weights
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.log import Log
 from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses
 from robot_calib.records import Record
-
-Progress = Callable[[str], None]
 
 
 @dataclass(frozen=True)
@@ -108,7 +106,7 @@ class _Solved:
 def _solve(
     problem: _Problem,
     x0: Array,
-    progress: Progress | None,
+    progress: Log | None,
     robust_scale: float | None,
     rough: bool = False,
 ) -> _Solved:
@@ -581,7 +579,7 @@ def fit_model(
     start: ParameterVector,
     poses: Poses,
     points: Array,
-    progress: Progress | None = None,
+    progress: Log | None = None,
     check_identifiability: bool = True,
     objective: Objective | None = None,
     robust_scale: float | None = None,

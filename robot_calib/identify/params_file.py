@@ -244,16 +244,15 @@ def beyond_physics(robot_name: str, far: Sequence[str]) -> str:
 def implausible_of(
     doc: Mapping[str, Any],
     where: str | Path,
-    model: KinematicModel | None = None,
-    params: ParameterVector | None = None,
+    model: KinematicModel,
+    params: ParameterVector,
 ) -> tuple[str, ...]:
     """Why the calibration of a PARAMS.json document is nonsense (`plausible: false`, its
     `implausible` reasons), empty when it is plausible; InputError naming `where` when they
     are malformed or disagree. A file that says `plausible: true`, or says nothing (it
     predates the fields, or was written by hand), is re-checked: geometric parameters beyond
     PHYSICAL_LENGTH_M / PHYSICAL_ANGLE_RAD of the robot's nominal make it implausible all
-    the same (`model`, `params`: the file's, as `params_from_dict`; read from `doc` when
-    not given)."""
+    the same (`model`, `params`: the file's, as `params_from_dict` read them)."""
     plausible, reasons = doc.get("plausible", True), doc.get("implausible", [])
     if not isinstance(plausible, bool) or not (
         isinstance(reasons, list) and all(isinstance(r, str) for r in reasons)
@@ -265,8 +264,6 @@ def implausible_of(
         raise InputError(f"{where}: 'plausible' is true but 'implausible' gives reasons")
     if not plausible:
         return tuple(reasons) or ("marked plausible: false",)
-    if model is None or params is None:
-        model, params = params_from_dict(doc, str(where))
     far = far_from_nominal_values(
         params, PHYSICAL_LENGTH_M, PHYSICAL_ANGLE_RAD, nominal=model.parameters()
     )

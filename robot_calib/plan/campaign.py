@@ -5,7 +5,6 @@ the PLAN.yaml document of the result."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -14,6 +13,7 @@ import numpy as np
 from robot_calib.errors import InputError, param
 from robot_calib.identify import DEFAULT_ECC_ORDER
 from robot_calib.identify.calibrate import parse_model
+from robot_calib.log import Log
 from robot_calib.model import KinematicModel
 from robot_calib.plan.design import (
     DEFAULT_CANDIDATES,
@@ -36,7 +36,6 @@ from robot_calib.sim.world import World
 
 DEFAULT_TRIALS = 1
 DEFAULT_HOLDOUT = 200
-Progress = Callable[[str], None]
 
 
 @dataclass(frozen=True)
@@ -120,7 +119,7 @@ def plan_campaign(
     ecc_order: int = DEFAULT_ECC_ORDER,
     trials: int = DEFAULT_TRIALS,
     n_holdout: int = DEFAULT_HOLDOUT,
-    progress: Progress | None = None,
+    progress: Log | None = None,
 ) -> Campaign:
     """Plan `n_poses` of `n_candidates` for `model_spec` in `world` and evaluate the plan
     and `n_poses` random candidates (the first drawn) the same way; `noise_m` [m] per

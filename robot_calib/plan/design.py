@@ -37,7 +37,6 @@ depend on the scaling, its numerics do).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -48,6 +47,7 @@ from robot_calib.identify.identifiability import fix_unidentifiable
 from robot_calib.kinematics.dh import chain
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
+from robot_calib.log import Log
 from robot_calib.model import KinematicModel
 from robot_calib.plan.plan_file import DEFAULT_SPEED_FRACTION
 from robot_calib.poses import Poses, approach_directions, next_direction
@@ -61,7 +61,6 @@ RIDGE = 1e-6  # start of the greedy choice: information of unit-rms columns, far
 WORST_POWER = 32
 FLOOR_SLACK_M = 1e-9  # a point exactly on the floor (rounding) is above it
 MAX_DRAW_ROUNDS = 50  # batches of candidates drawn before giving up on the floor
-Progress = Callable[[str], None]
 
 
 @dataclass(frozen=True)
@@ -210,7 +209,7 @@ def _information_inverse(jac: Array, chosen: list[int], p: int) -> Array:
     return np.asarray(np.linalg.inv(RIDGE * np.eye(p) + rows.T @ rows))
 
 
-def _greedy(jac: Array, n: int, progress: Progress | None) -> list[int]:
+def _greedy(jac: Array, n: int, progress: Log | None) -> list[int]:
     """Greedy D-optimal choice of n of the candidates' scaled Jacobians jac (M, 3, p)."""
     p = jac.shape[2]
     chosen: list[int] = []
@@ -288,7 +287,7 @@ def _worst_exchange(
     return chosen
 
 
-def _sequential(problem: DesignProblem, n: int, progress: Progress | None) -> list[int]:
+def _sequential(problem: DesignProblem, n: int, progress: Log | None) -> list[int]:
     """Greedy choice in visiting order: each step scores every candidate with the approach
     direction and time it would have if measured next."""
     q = problem.candidates
@@ -324,7 +323,7 @@ def _tour(q: Array, timing: Timing, speed_fraction: float) -> NDArray[np.intp]:
 
 
 def d_optimal(
-    problem: DesignProblem, n: int, progress: Progress | None = None, exchange_rounds: int = 0
+    problem: DesignProblem, n: int, progress: Log | None = None, exchange_rounds: int = 0
 ) -> Array:
     """The D-optimal plan of `n` poses from the problem's candidates: readings (n, J)
     [rad] in visiting order. `exchange_rounds`: Fedorov exchanges after the greedy choice
