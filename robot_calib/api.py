@@ -133,13 +133,15 @@ def diagnose(
     """The sim-to-real gap diagnosis (msgs_doc/diagnosis.md): the ladder of models scored
     on `holdout` (else k-fold over poses), the noise floor, the dominant effect and what
     remains. `Diagnosis.summary()` in words, `.to_dict()` the DIAGNOSIS.json document,
-    `.save(path)` writes it."""
+    `.save(path)` writes it, `.report(path)` writes it with the Markdown and HTML reports
+    and the best model's PARAMS.json beside it (as `robot-calib diagnose -o path`)."""
     from robot_calib.flows.diagnose import diagnose_recordings
+    from robot_calib.flows.reportable import ReportableDiagnosis
 
-    diagnosis, _ = diagnose_recordings(
+    diagnosis, ladder = diagnose_recordings(
         recording, robot, holdout, log=log, tracker_sigma_m=tracker_sigma_m
     )
-    return diagnosis
+    return ReportableDiagnosis.of(diagnosis, ladder, recording)
 
 
 def compensate(

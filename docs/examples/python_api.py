@@ -34,6 +34,8 @@ def main(folder: Path) -> None:
     diagnosis = rc.diagnose(recording, robot, holdout=holdout)
     diagnosis.save(folder / "diagnosis.json")
     print(f"dominant effect: {diagnosis.verdict}")
+    page = diagnosis.report(folder / "DIAGNOSIS.json")  # + Markdown, HTML, best model
+    print(f"report: {page.name}")
     commands = rc.compensate(again, holdout.poses.q[:5])
     moved = np.degrees(np.abs(commands.q - holdout.poses.q[:5]).max())
     print(

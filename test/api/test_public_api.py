@@ -50,6 +50,13 @@ def test_the_example_script_calibrates_from_python(tmp_path: Path) -> None:
     assert "plausible True" in run.stdout and "all reached: True" in run.stdout
     for written in ("run.mcap", "holdout.mcap", "params.json", "diagnosis.json"):
         assert (tmp_path / written).is_file(), written
+    # Diagnosis.report: the set `robot-calib diagnose -o DIAGNOSIS.json` writes
+    assert "report: DIAGNOSIS.html" in run.stdout
+    page = (tmp_path / "DIAGNOSIS.html").read_text()
+    assert "backlash" in page and "<html" in page.lower()
+    assert (tmp_path / "DIAGNOSIS.md").is_file() and (tmp_path / "DIAGNOSIS.json").is_file()
+    best = rc.Calibration.load(tmp_path / "DIAGNOSIS.params_best.json")
+    assert best.name == "geometric+backlash:4"
     again = rc.Calibration.load(tmp_path / "params.json")  # written by the script, read here
     assert again.name == "geometric+backlash:4"
     import json
