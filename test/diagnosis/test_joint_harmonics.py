@@ -215,10 +215,11 @@ def test_the_holdout_tells_aliases_apart() -> None:
     from dataclasses import replace
 
     import robot_calib.sim.blind as blind
+    from robot_calib.flows.blind import run_case
     from robot_calib.sim.plans import paper_test_plan, sweep_plan
     from robot_calib.sim.world import load_world, with_effect
 
-    judged = blind.run_case("harmonics_aliased", 0)
+    judged = run_case("harmonics_aliased", 0)
     assert judged["named"] and judged["ratio_to_right"] <= 1.5, judged
     assert judged["chosen_model"].count("joint_harmonics") == 3, judged["chosen_model"]
     assert not judged["best_loads"], judged["best_loads"]
