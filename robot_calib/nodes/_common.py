@@ -42,10 +42,16 @@ _TYPES = {
 }
 
 
+#: the parameters the nodes of this process declared (`declare`): the core's keywords of
+#: these are named as parameters, the others as the command line's (`in_ros_terms`)
+_DECLARED: set[str] = set()
+
+
 def declare(node: Node, name: str, default: Any, description: str, read_only: bool = True) -> Any:
     """Declare a typed ROS parameter with a description (units in the text), read-only
     unless `read_only` is False (a run-time parameter: the node validates changes), and
     return its value. A float parameter also takes an integer (`-p rate:=1`)."""
+    _DECLARED.add(name)
     if isinstance(default, float):
         descriptor = ParameterDescriptor(
             description=description, read_only=read_only, dynamic_typing=True
@@ -118,11 +124,18 @@ def qos_to_record(qos: QoSProfile) -> QosProfile:
 
 def in_ros_terms(text: object) -> str:
     """A core message in a node's terms: a keyword the core names (`errors.param`:
-    `` `model='x'` ``) as the node's parameter of that name (parameter 'model' x)."""
+    `` `model='x'` ``) as the node's parameter of that name (parameter 'model' x), or,
+    where no node here has that parameter, as the command line's option (`robot-calib
+    calibrate --stream`: `cli.flags.ELSEWHERE`) or in words (name=value)."""
     return KEYWORD.sub(_as_parameter, str(text))
 
 
 def _as_parameter(match: re.Match[str]) -> str:
+    from robot_calib.cli.flags import ELSEWHERE
+
+    if match.group(1) not in _DECLARED:
+        name, text = match.group(1), match.group(2)
+        return ELSEWHERE.get(name) or (name if text is None else f"{name}={text}")
     if match.group(2) is None:
         return f"parameter '{match.group(1)}'"
     value = keyword_value(match.group(2))

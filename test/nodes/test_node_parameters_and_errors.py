@@ -89,3 +89,22 @@ def test_a_recorder_that_recorded_nothing_leaves_no_file(context: Context, tmp_p
     assert not output.exists()  # a rerun with the same name is not blocked
     again = RecorderNode(output=str(output), context=context)
     again.destroy_node()
+
+
+def test_core_keywords_are_named_as_this_nodes_parameters_or_said_otherwise() -> None:
+    """A keyword of the core's message (`errors.param`) is the node's parameter when a node
+    here declared it; else the command line's option where one exists, else in words: a
+    node user is never told of a parameter the node does not have."""
+    from robot_calib.nodes import _common
+
+    _common._DECLARED.add("model")
+    assert (
+        _common.in_ros_terms("`model='geometrc'`: unknown")
+        == "parameter 'model' geometrc: unknown"
+    )
+    assert "stream" not in _common._DECLARED
+    assert (
+        _common.in_ros_terms("moves: use `stream=True`")
+        == "moves: use robot-calib calibrate --stream"
+    )
+    assert _common.in_ros_terms("`frobnicate=3` and `twiddle`") == "frobnicate=3 and twiddle"
