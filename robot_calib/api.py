@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from robot_calib.errors import InputError, param
 from robot_calib.log import Log
 
 if TYPE_CHECKING:
@@ -63,6 +64,8 @@ def read_recording(
     from robot_calib.measurements import PAIR_TOLERANCE_S
 
     tolerance = PAIR_TOLERANCE_S if pair_tolerance is None else pair_tolerance
+    if not 0.0 < tolerance <= 10.0:  # NaN included
+        raise InputError(f"{param('pair_tolerance', tolerance)}: seconds, above 0 and at most 10")
     return read([Path(b) for b in bags], robot, tolerance, log)
 
 
@@ -119,6 +122,8 @@ def calibrate(
     (`Calibration.plausible`)."""
     from robot_calib.flows.calibrate import calibrate_recording
 
+    if isinstance(ecc_order, bool) or not isinstance(ecc_order, int) or ecc_order < 1:
+        raise InputError(f"{param('ecc_order', ecc_order)}: a Fourier order, an integer >= 1")
     return calibrate_recording(recording, robot, model, ecc_order, log=log)
 
 
@@ -162,6 +167,13 @@ def compensate(
     from robot_calib.poses import Poses, approach_directions
 
     q = np.asarray(q, dtype=float)
+    n_joints = calibration.model.robot.n_joints
+    if q.ndim != 2 or q.shape[1] != n_joints:
+        raise InputError(
+            f"{param('q')}: joint commands of shape (n, {n_joints}) [rad], got {q.shape}"
+        )
+    if not np.isfinite(q).all():
+        raise InputError(f"{param('q')}: joint commands must be finite numbers [rad]")
     commands = Poses.from_readings(
         q, approach_directions(q) if directions is None else directions, time
     )

@@ -10,6 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 import robot_calib as rc
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -117,3 +119,24 @@ def test_importing_the_library_tunes_nothing_and_the_programs_do() -> None:
     assert run() == "None True"  # the library: untouched
     assert run("/opt/ros/lib/robot_calib/calibrator") == "1 True"  # a node: one thread
     assert run("/usr/bin/robot-calib") == "1 False"  # the program: its handlers as well
+
+
+def test_bad_arguments_are_input_errors_naming_the_keyword() -> None:
+    """A notebook user's wrong argument is one InputError naming the keyword they typed, not
+    a numpy error from deep inside."""
+    import numpy as np
+
+    robot = rc.load_robot("kr5_sixx_r650")
+    sample = Path(rc.__file__).parents[1] / "bags" / "paper_test3.mcap"
+    with pytest.raises(rc.InputError, match=r"^`pair_tolerance=-1`"):
+        rc.read_recording(sample, robot=robot, pair_tolerance=-1)
+    recording = rc.read_recording(sample, robot=robot)
+    with pytest.raises(rc.InputError, match=r"^`ecc_order=0`"):
+        rc.calibrate(recording, robot, ecc_order=0)
+    with pytest.raises(rc.InputError, match=r"^`model='geometric\+backlash:4\+backlash:4'`"):
+        rc.calibrate(recording, robot, model="geometric+backlash:4+backlash:4")
+    cal = rc.calibrate(recording, robot)
+    with pytest.raises(rc.InputError, match=r"^`q`: joint commands of shape \(n, 6\)"):
+        rc.compensate(cal, np.zeros((3, 5)))
+    with pytest.raises(rc.InputError, match=r"^`tracker_sigma_m=-0.001`"):
+        rc.diagnose(recording, robot, tracker_sigma_m=-1e-3)
