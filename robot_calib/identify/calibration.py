@@ -19,9 +19,6 @@ from numpy.typing import NDArray
 
 from robot_calib.accuracy import Accuracy, accuracy, orientation_accuracy
 from robot_calib.errors import InputError, RobotCalibError
-from robot_calib.identify.correction import fitting_rows
-from robot_calib.identify.correction_structured import LearnedCorrection
-from robot_calib.identify.correction_structured_fit import fit_structured
 from robot_calib.identify.fit import SolverReport
 from robot_calib.identify.identifiability import Identifiability
 from robot_calib.identify.outliers import Outlier
@@ -42,7 +39,8 @@ from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.messages import target_topic
 from robot_calib.model import KinematicModel, target_parameters
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the learned correction's modules load when one is fitted or read
+    from robot_calib.identify.correction_structured import LearnedCorrection
     from robot_calib.identify.cpa import CPAResult
     from robot_calib.identify.score import Score
     from robot_calib.measurements import Recording
@@ -126,6 +124,9 @@ class Calibration:
         of `recording` (its calibration recording) it fitted (load-driven geometry, then a
         Gaussian process: `identify.correction_structured`, the hybrid model); `accuracy`
         and `residuals` stay the physical model's."""
+        from robot_calib.identify.correction import fitting_rows
+        from robot_calib.identify.correction_structured_fit import fit_structured
+
         fitted = recording if self.inliers is None else recording.subset(self.inliers)
         keep = np.zeros(len(fitted), dtype=bool)
         keep[fitting_rows(len(fitted))] = True  # at most MAX_FIT_POSES of them
