@@ -50,10 +50,9 @@ def main() -> None:
         robot,
         "geometric+backlash:4",
     )
-    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)
     commands = Poses.from_readings(random_plan(robot, args.poses, np.random.default_rng(5)).q)
     started = time.perf_counter()
-    result = compensate_commands(cal.model, cal.parameters, nominal, nominal_params, commands)
+    result = compensate_commands(cal, commands)
     seconds = time.perf_counter() - started
     rate = args.poses / seconds
     verdict = "PASS" if rate >= TARGET_POSES_PER_S else "FAIL"
@@ -67,6 +66,7 @@ def main() -> None:
     # targets: the tool frames the nominal model reaches at other random readings
     q = random_plan(robot, args.poses, np.random.default_rng(6)).q
     tool = first_tool2flange(cal.model, cal.parameters)
+    nominal, nominal_params = nominal_counterpart(cal.model, cal.parameters)  # the program's
     in_tracker = cal.model.base2tracker(cal.parameters) @ tool2base(
         nominal, nominal_params, Poses.from_readings(q), tool
     )
@@ -81,7 +81,7 @@ def main() -> None:
     )
     started = time.perf_counter()
     goals = goals_in_base(targets, "tracker", cal.model, cal.parameters)
-    found = compensate_targets(cal.model, cal.parameters, nominal, nominal_params, targets, goals)
+    found = compensate_targets(cal, targets, goals)
     seconds = time.perf_counter() - started
     rate = args.poses / seconds
     verdict = "PASS" if rate >= TARGET_POSES_PER_S else "FAIL"
