@@ -19,9 +19,7 @@ from numpy.typing import NDArray
 
 from robot_calib.accuracy import Accuracy, accuracy, orientation_accuracy
 from robot_calib.errors import InputError, RobotCalibError
-from robot_calib.identify.fit import SolverReport
 from robot_calib.identify.identifiability import Identifiability
-from robot_calib.identify.outliers import Outlier
 from robot_calib.identify.params_file import (
     FORMAT,
     correction_of,
@@ -34,6 +32,7 @@ from robot_calib.identify.params_file import (
     params_from_dict,
     read_document,
 )
+from robot_calib.identify.reports import Outlier, SolverReport
 from robot_calib.kinematics.frames import Array, matrix_to_rpy
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.messages import target_topic

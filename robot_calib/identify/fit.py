@@ -32,46 +32,13 @@ from robot_calib.identify.identifiability import (
 )
 from robot_calib.identify.objectives import AbsoluteObjective, Objective
 from robot_calib.identify.prior import prior_sigmas
+from robot_calib.identify.reports import SolverReport
 from robot_calib.identify.weights import orientation_errors, row_weights
 from robot_calib.kinematics.frames import Array
 from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.log import Log
 from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses
-from robot_calib.records import Record
-
-
-@dataclass(frozen=True)
-class SolverReport(Record):
-    """How the parameters were found: the PARAMS.json `solver` section.
-
-    method : the algorithm; objective : what it minimised (None for closed forms such as
-    CPA); the rest is scipy `least_squares`'s result (None where no solver ran):
-    status : its termination code (> 0 converged, 0 max evaluations, -1 bad input);
-    message : its reason in words; success : status > 0; nfev, njev : function and
-    Jacobian evaluations it made; optimality : first-order optimality (gradient
-    infinity-norm at the solution); cost_m2 : half the sum of squared residuals [m^2];
-    evaluations : model evaluations of ours (residuals and Jacobian together);
-    time_s : wall time of the fit [s].
-    """
-
-    method: str
-    objective: str | None = None
-    status: int | None = None
-    message: str | None = None
-    success: bool | None = None
-    nfev: int | None = None
-    njev: int | None = None
-    optimality: float | None = None
-    cost_m2: float | None = None
-    evaluations: int | None = None
-    time_s: float | None = None
-
-    def line(self) -> str:
-        """One human line, e.g. 'solver: `ftol` ... (12 evaluations, 0.081 s)'."""
-        if self.time_s is None:
-            return f"solver: {self.method}"
-        return f"solver: {self.message} ({self.evaluations} evaluations, {self.time_s:.3f} s)"
 
 
 @dataclass(frozen=True)
