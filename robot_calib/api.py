@@ -35,12 +35,42 @@ from robot_calib.log import Log
 
 if TYPE_CHECKING:
     from robot_calib.compensation import Compensation
-    from robot_calib.diagnosis.diagnosis import Diagnosis
+    from robot_calib.flows.reportable import ReportableDiagnosis
     from robot_calib.flows.simulate import Simulation
     from robot_calib.identify.calibration import Calibration
     from robot_calib.kinematics.description import RobotDescription
     from robot_calib.kinematics.frames import Array
     from robot_calib.measurements import Recording
+
+
+def _robot(robot: object) -> RobotDescription:
+    """`robot` as a description: one already loaded, or a name or path `load_robot` reads;
+    anything else an InputError naming the keyword."""
+    from robot_calib.kinematics.description import RobotDescription
+
+    if isinstance(robot, RobotDescription):
+        return robot
+    if isinstance(robot, str | Path):
+        return load_robot(robot)
+    raise InputError(f"{param('robot')}: a robot description (rc.load_robot) or its name")
+
+
+def _number(name: str, value: object) -> float:
+    """`value` as a float, else an InputError naming the keyword `name`."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(f"{param(name, value)}: a number")
+    return float(value)
+
+
+def _recording(name: str, value: object) -> Recording:
+    """`value` if it is a Recording (rc.read_recording), else an InputError naming `name`."""
+    from robot_calib.measurements import Recording
+
+    if not isinstance(value, Recording):
+        raise InputError(
+            f"{param(name)}: a recording (rc.read_recording), not {type(value).__name__}"
+        )
+    return value
 
 
 def load_robot(name_or_path: str | Path) -> RobotDescription:
@@ -52,21 +82,26 @@ def load_robot(name_or_path: str | Path) -> RobotDescription:
 
 
 def read_recording(
-    *bags: str | Path,
-    robot: RobotDescription,
+    *bags: str | Path | Sequence[str | Path],
+    robot: RobotDescription | str,
     pair_tolerance: float | None = None,
     log: Log | None = None,
 ) -> Recording:
     """The paired measurements of one or more MCAP bags (msgs_doc/specification.md): each
     tracker point with the joint state nearest in stamp (within `pair_tolerance` [s],
-    default 0.05), reference reflectors' drift removed (msgs_doc/references.md)."""
+    default 0.05), reference reflectors' drift removed (msgs_doc/references.md). `bags`:
+    paths, or one list of them; `robot`: a description or its name."""
     from robot_calib.bag.read import read_recording as read
     from robot_calib.measurements import PAIR_TOLERANCE_S
 
+    paths = [p for b in bags for p in ([b] if isinstance(b, str | Path) else b)]
+    if not paths:
+        raise InputError("read_recording: no bag given")
     tolerance = PAIR_TOLERANCE_S if pair_tolerance is None else pair_tolerance
+    tolerance = _number("pair_tolerance", tolerance)
     if not 0.0 < tolerance <= 10.0:  # NaN included
         raise InputError(f"{param('pair_tolerance', tolerance)}: seconds, above 0 and at most 10")
-    return read([Path(b) for b in bags], robot, tolerance, log)
+    return read([Path(p) for p in paths], _robot(robot), tolerance, log)
 
 
 def recording_from_arrays(
@@ -110,7 +145,7 @@ def simulate(
 
 def calibrate(
     recording: Recording,
-    robot: RobotDescription,
+    robot: RobotDescription | str,
     *,
     model: str = "geometric",
     ecc_order: int = 1,
@@ -119,22 +154,25 @@ def calibrate(
     """Identify `model` ('nominal', 'cpa', 'geometric', 'geometric+EFFECT[:joints]...',
     msgs_doc/effects.md) from `recording`: CPA, then Levenberg-Marquardt; tracker blunders
     left out and listed (`Calibration.outliers`), an implausible result marked
-    (`Calibration.plausible`)."""
+    (`Calibration.plausible`). `log` (e.g. `print`) gets its progress and notes."""
     from robot_calib.flows.calibrate import calibrate_recording
 
     if isinstance(ecc_order, bool) or not isinstance(ecc_order, int) or ecc_order < 1:
         raise InputError(f"{param('ecc_order', ecc_order)}: a Fourier order, an integer >= 1")
-    return calibrate_recording(recording, robot, model, ecc_order, log=log)
+    if not isinstance(model, str):
+        raise InputError(f"{param('model', model)}: a model name, e.g. 'geometric+backlash:4'")
+    recording = _recording("recording", recording)
+    return calibrate_recording(recording, _robot(robot), model, ecc_order, log=log)
 
 
 def diagnose(
     recording: Recording,
-    robot: RobotDescription,
+    robot: RobotDescription | str,
     *,
     holdout: Recording | None = None,
     tracker_sigma_m: float | None = None,
     log: Log | None = None,
-) -> Diagnosis:
+) -> ReportableDiagnosis:
     """The sim-to-real gap diagnosis (msgs_doc/diagnosis.md): the ladder of models scored
     on `holdout` (else k-fold over poses), the noise floor, the dominant effect and what
     remains. `Diagnosis.summary()` in words, `.to_dict()` the DIAGNOSIS.json document,
@@ -143,8 +181,11 @@ def diagnose(
     from robot_calib.flows.diagnose import diagnose_recordings
     from robot_calib.flows.reportable import ReportableDiagnosis
 
+    recording = _recording("recording", recording)
+    holdout = None if holdout is None else _recording("holdout", holdout)
+    sigma = None if tracker_sigma_m is None else _number("tracker_sigma_m", tracker_sigma_m)
     diagnosis, ladder = diagnose_recordings(
-        recording, robot, holdout, log=log, tracker_sigma_m=tracker_sigma_m
+        recording, _robot(robot), holdout, log=log, tracker_sigma_m=sigma
     )
     return ReportableDiagnosis.of(diagnosis, ladder, recording)
 
@@ -166,7 +207,10 @@ def compensate(
     from robot_calib.compensation import compensate_commands
     from robot_calib.poses import Poses, approach_directions
 
-    q = np.asarray(q, dtype=float)
+    try:
+        q = np.asarray(q, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{param('q')}: joint commands, numbers [rad]") from None
     n_joints = calibration.model.robot.n_joints
     if q.ndim != 2 or q.shape[1] != n_joints:
         raise InputError(

@@ -28,6 +28,11 @@ def param(name: str, value: object = _UNSET) -> str:
 KEYWORD = re.compile(r"`([a-z_][a-z0-9_]*)(?:=([^`]*))?`")
 
 
+#: keywords whose option only one command has: that command, for a front end without it
+#: (another verb of the command line, a node)
+ELSEWHERE = {"stream": "robot-calib calibrate --stream"}
+
+
 def keyword_value(text: str) -> object:
     """The value of a keyword as `param` wrote it (its repr read back), else `text`."""
     try:

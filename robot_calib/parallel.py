@@ -9,9 +9,9 @@ caller's choice, installed for a block with `using(runner)`:
 - `SEQUENTIAL` (nothing installed: a library call, a notebook): each task is computed here
   when its result is asked; no process is forked, no thread started;
 - `robot_calib.forked.FORKED`: a forked child on the machine's other core (what the
-  command line and the calibrator node install; a script may too:
-  `with using(FORKED): rc.diagnose(...)`). A process with other Python threads (a
-  notebook's kernel) never forks: its tasks are computed here all the same.
+  command line installs; a script may too: `with using(FORKED): rc.diagnose(...)`). A
+  process with other Python threads (a notebook's kernel, a node's executor) never forks:
+  its tasks are computed here all the same.
 
 The results are the same either way; only when they arrive differs.
 """
@@ -156,13 +156,3 @@ def using(runner: Runner) -> Iterator[None]:
         yield
     finally:
         _runner.reset(token)
-
-
-@contextlib.contextmanager
-def by_default(runner: Runner) -> Iterator[None]:
-    """`using(runner)` unless the caller installed one (SEQUENTIAL included)."""
-    if _runner.get() is not None:
-        yield
-        return
-    with using(runner):
-        yield

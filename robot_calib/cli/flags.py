@@ -15,7 +15,7 @@ import argparse
 import re
 import shlex
 
-from robot_calib.errors import KEYWORD, keyword_value
+from robot_calib.errors import ELSEWHERE, KEYWORD, keyword_value
 
 # Python keyword -> the argparse destination of the flag that sets it (where they differ)
 ALIASES = {
@@ -28,9 +28,6 @@ ALIASES = {
     "references": "reference",
     "header=False": "no_header",  # CsvFormat(header=False): `import --no-header`
 }
-
-# keywords of an option another verb has (the verb run has none): that verb's command
-ELSEWHERE = {"stream": "robot-calib calibrate --stream"}
 
 # values the command line spells otherwise, by destination
 SPELLED = {"sep": {"\t": "tab"}}

@@ -536,6 +536,7 @@ def _learn_the_rest(
     cal = replace(physical.calibration, correction=correction)
     acc = accuracy(measured, measured + after)
     insample = accuracy(scored.points, cal.predict(scored.poses))
+    cal = replace(cal, hybrid_accuracy=insample)  # what its scores are judged against
     rows = None if keep is None or holdout is not None else np.flatnonzero(keep)
     return bound, Rung(
         physical.model + LEARNED_SUFFIX,

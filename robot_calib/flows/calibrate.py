@@ -4,6 +4,7 @@ one stream bag (`robot-calib calibrate`, the calibrator node, `run`)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -42,7 +43,8 @@ def calibrate_recording(
         (log or (lambda _line: None))(note)
     if objective == "seed":
         check_seed_objective_memory(len(recording), robot, model, ecc_order)
-    return calibrate(recording, robot, model, ecc_order, log=log, objective=objective)
+    cal = calibrate(recording, robot, model, ecc_order, log=log, objective=objective)
+    return replace(cal, recordings=tuple(recording.sources))  # what it was fitted on
 
 
 SEED_OBJECTIVE_MEMORY_LIMIT = 2 * 1024**3  # bytes of pairwise rows `--objective seed` may take

@@ -38,7 +38,7 @@ from robot_calib.kinematics.parameters import ParameterVector
 from robot_calib.messages import target_topic
 from robot_calib.model import KinematicModel, target_parameters
 
-if TYPE_CHECKING:  # the learned correction's modules load when one is fitted or read
+if TYPE_CHECKING:
     from robot_calib.identify.correction_structured import LearnedCorrection
     from robot_calib.identify.cpa import CPAResult
     from robot_calib.identify.score import Score
@@ -166,6 +166,8 @@ class Calibration:
         in_sample, judged_by = self.applied_accuracy()
         fitted = self.recordings if fitted is None else fitted
         scored = score(self, recording, in_sample=in_sample, fitted=fitted, judged_by=judged_by)
+        if set(recording.sources) & set(fitted):  # its own measurements: not held out
+            return scored
         where = ", ".join(recording.sources)
         noise = held_out_warnings(self, scored.accuracy.absolute_rms_mm, where)
         return replace(scored, warnings=(*scored.warnings, *noise))

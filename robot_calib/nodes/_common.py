@@ -27,7 +27,7 @@ from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
 from robot_calib.bag.ros2_formats import QosProfile, duration_from_ns
-from robot_calib.errors import KEYWORD, InputError, RobotCalibError, keyword_value
+from robot_calib.errors import ELSEWHERE, KEYWORD, InputError, RobotCalibError, keyword_value
 
 N = TypeVar("N", bound=Node)
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
@@ -126,13 +126,11 @@ def in_ros_terms(text: object) -> str:
     """A core message in a node's terms: a keyword the core names (`errors.param`:
     `` `model='x'` ``) as the node's parameter of that name (parameter 'model' x), or,
     where no node here has that parameter, as the command line's option (`robot-calib
-    calibrate --stream`: `cli.flags.ELSEWHERE`) or in words (name=value)."""
+    calibrate --stream`: `errors.ELSEWHERE`) or in words (name=value)."""
     return KEYWORD.sub(_as_parameter, str(text))
 
 
 def _as_parameter(match: re.Match[str]) -> str:
-    from robot_calib.cli.flags import ELSEWHERE
-
     if match.group(1) not in _DECLARED:
         name, text = match.group(1), match.group(2)
         return ELSEWHERE.get(name) or (name if text is None else f"{name}={text}")

@@ -54,7 +54,6 @@ from robot_calib.errors import InputError, RobotCalibError
 from robot_calib.flows.bags import read_bags
 from robot_calib.flows.calibrate import calibrate_recording
 from robot_calib.flows.diagnose import diagnose_recordings
-from robot_calib.forked import FORKED
 from robot_calib.identify.calibration import Calibration, summary
 from robot_calib.identify.params_file import write_json_atomic
 from robot_calib.measurements import Recording
@@ -81,7 +80,6 @@ from robot_calib.nodes.ros_outputs import (
     status_name,
     tracker_in_base,
 )
-from robot_calib.parallel import using
 
 # late joiners (RViz, a test, `ros2 topic echo`) get the last result: KEEP_LAST 1, RELIABLE,
 # TRANSIENT_LOCAL, the profile robot_state_publisher gives /robot_description
@@ -531,8 +529,8 @@ class CalibratorNode(LifecycleNode):
         """Run the diagnosis on `recording` (scored on `holdout`, the `holdout_bags`, or
         k-fold) and publish the DIAGNOSIS.json document and its one-paragraph summary; the
         diagnosis and its ladder (None when the node is being destroyed)."""
-        with using(FORKED):  # the science's independent work on the other core, as the CLI's
-            diagnosis, ladder = diagnose_recordings(recording, self.settings.robot, holdout)
+        # on this process alone: the executor's threads run (a fork would copy their locks)
+        diagnosis, ladder = diagnose_recordings(recording, self.settings.robot, holdout)
         if self.stopping:
             return None, None
         self.diagnosis = diagnosis

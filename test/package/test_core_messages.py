@@ -100,9 +100,10 @@ def test_the_python_caller_reads_keywords_and_the_command_line_flags(tmp_path: P
     from robot_calib import api
     from robot_calib.errors import InputError
 
-    with pytest.raises(InputError, match=r"`model='geometric\+frobnicate:4'`: unknown effect"):
-        api.calibrate(None, api.load_robot("kr5_sixx_r650"), model="geometric+frobnicate:4")  # type: ignore[arg-type]
     bag = PACKAGE.parent / "bags" / "paper_test3.mcap"
+    recording = api.read_recording(bag, robot="kr5_sixx_r650")
+    with pytest.raises(InputError, match=r"`model='geometric\+frobnicate:4'`: unknown effect"):
+        api.calibrate(recording, "kr5_sixx_r650", model="geometric+frobnicate:4")
     run = cli(
         "calibrate", str(bag), "--model", "geometric+frobnicate:4", "-o", "p.json", cwd=tmp_path
     )

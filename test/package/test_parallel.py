@@ -1,6 +1,6 @@
 """The runner the caller owns (robot_calib/parallel.py): the science's independent tasks give
 the same results computed here (SEQUENTIAL, nothing installed: a library call) and in a
-forked child (forked.FORKED, what flows/ install); a caller's choice is kept."""
+forked child (forked.FORKED, what the command line installs); the innermost choice holds."""
 
 from __future__ import annotations
 
@@ -41,10 +41,9 @@ def where():
 print(where())
 with parallel.using(FORKED):
     print(where())
-with parallel.using(parallel.SEQUENTIAL), parallel.by_default(FORKED):
+with parallel.using(FORKED), parallel.using(parallel.SEQUENTIAL):
     print(where())
-with parallel.by_default(FORKED):
-    print(where())
+print(where())
 """
 
 
@@ -58,6 +57,6 @@ def test_sequential_computes_here_and_forked_elsewhere_with_the_same_results() -
     assert out == [
         "([10, 11, 14], 'here')",  # nothing installed
         "([10, 11, 14], 'child')",  # FORKED: the same values from the child
-        "([10, 11, 14], 'here')",  # by_default keeps the caller's SEQUENTIAL
-        "([10, 11, 14], 'child')",  # by_default installs FORKED when none is
+        "([10, 11, 14], 'here')",  # the innermost choice holds
+        "([10, 11, 14], 'here')",  # and none is installed after the blocks
     ]
