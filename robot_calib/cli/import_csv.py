@@ -202,6 +202,11 @@ def main(args: argparse.Namespace) -> int:
             )
     if len(fmt.point) != 3 or (fmt.dif is not None and len(fmt.dif) != 3):
         raise InputError("--point and --dif take three columns: x,y,z")
+    if len(fmt.joints) != robot.n_joints:  # before any file is read or counted
+        raise InputError(
+            f"--joints {','.join(fmt.joints)}: {len(fmt.joints)} columns for robot "
+            f"{robot.name} with {robot.n_joints} joints"
+        )
     tables = []
     check_no_copies(args.csv, [])  # a CSV given twice, before any is read
     for csv_path in args.csv:

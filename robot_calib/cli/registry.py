@@ -71,7 +71,7 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
             module.NAME,
             help=module.HELP,
             description=module.HELP,
-            epilog=OVERWRITE_POLICY,
+            epilog=getattr(module, "FILES", OVERWRITE_POLICY),  # a verb's own policy
             formatter_class=RequiredHelpFormatter,
         )
         if verb in (None, module.NAME):

@@ -20,6 +20,11 @@ from robot_calib.kinematics.loader import load_robot
 
 NAME = "run"
 HELP = "the main job on built-in defaults"
+# what it writes: a new folder each time, never an existing one (no --force to replace)
+FILES = (
+    "Files: each run writes a new folder run-<date>-<time> under --output (-o) and never "
+    "replaces one; a failed or interrupted run leaves nothing behind."
+)
 ROBOT = None  # --robot's default: DEFAULT_ROBOT
 
 

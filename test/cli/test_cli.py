@@ -268,3 +268,32 @@ def test_a_bag_where_the_parameter_file_belongs_is_named(tmp_path: Path) -> None
     one_line_error(
         run("score", "hold.mcap", "p.json", cwd=tmp_path), "hold.mcap: a bag, not a parameter file"
     )
+
+
+def test_run_help_states_its_own_file_policy() -> None:
+    """`run` has no --force (each run writes a new folder): its --help says so, and does
+    not offer the other verbs' --force."""
+    run = cli("run", "--help")
+    text = " ".join(run.stdout.split())
+    assert run.returncode == 0 and "writes a new folder" in text and "--force" not in text
+
+
+def test_import_refuses_a_joint_count_before_reading_anything(tmp_path: Path) -> None:
+    """Three joint columns for a six-joint robot: one line naming --joints, before any file
+    is read (no 'rows imported' line first), and no bag."""
+    csv = tmp_path / "m.csv"
+    csv.write_text("q1,q2,q3,x,y,z\n0.1,0.2,0.3,1.0,0.0,0.5\n")
+    run = cli(
+        "import",
+        str(csv),
+        "--joints",
+        "q1,q2,q3",
+        "--point",
+        "x,y,z",
+        "-o",
+        "m.mcap",
+        cwd=tmp_path,
+    )
+    assert run.returncode == 2 and "imported" not in run.stdout
+    assert "--joints q1,q2,q3: 3 columns for robot kr5_sixx_r650 with 6 joints" in run.stderr
+    assert not (tmp_path / "m.mcap").exists()
