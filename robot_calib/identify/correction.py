@@ -2,7 +2,7 @@
 
 Why one module: one Gaussian process. Its features and kernel (`_phi`, `_kernel`) serve the
 hyperparameter search, both fits (exact, subset of regressors) and
-`ResidualCorrection.predict`, and its file format is that fitted state; the hybrid model
+`GaussianProcessCorrection.predict`, and its file format is that fitted state; the hybrid model
 builds on it from outside (`identify.correction_structured`).
 
 The residual r = predicted - measured [m] of a calibration is modelled as a function of
@@ -407,7 +407,7 @@ def _blocks(n: int, width: int) -> list[slice]:
 
 
 @dataclass(frozen=True)
-class ResidualCorrection(Record):
+class GaussianProcessCorrection(Record):
     """A fitted residual correction: what it predicts needs only these arrays.
 
     inducing_q : shape (m, J), the joint readings of the poses the prediction is built on
@@ -514,7 +514,9 @@ class ResidualCorrection(Record):
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], where: str = "correction") -> ResidualCorrection:
+    def from_dict(
+        cls, data: Mapping[str, Any], where: str = "correction"
+    ) -> GaussianProcessCorrection:
         """The correction of a `to_dict` mapping; InputError naming `where` when it is of
         another format, lacks a field, or has arrays of inconsistent shapes or values that
         are not finite."""
@@ -618,13 +620,13 @@ class ResidualCorrection(Record):
 class FittedCorrection:
     """`fit_correction_at`'s result: the correction and what its fit computed anyway.
 
-    correction : the fitted ResidualCorrection
+    correction : the fitted GaussianProcessCorrection
     fitted : shape (n, 3), its predicted residual at the fitted poses [m, tracker frame]
     phi : shape (n, F), the fitted poses' scaled features (`_phi`; exact fits; None for a
         subset of regressors): what `exact_holdout` builds the halves' kernels from
     """
 
-    correction: ResidualCorrection
+    correction: GaussianProcessCorrection
     fitted: Array
     phi: Array | None
 
@@ -639,7 +641,7 @@ def fit_correction(
     min_length_scale_rad: float = MIN_LENGTH_SCALE_RAD,
     max_points: int = MAX_POINTS,
     max_learn: int = MAX_LEARN,
-) -> ResidualCorrection:
+) -> GaussianProcessCorrection:
     """The correction of `residuals` (n, 3) [m, tracker frame, predicted - measured] at
     `poses` (readings (n, J) [rad], targets below `n_targets`).
 
@@ -655,7 +657,7 @@ def fit_correction(
 
     Returns
     -------
-    correction : ResidualCorrection; `predict` gives the predicted residual (n, 3) [m]
+    correction : GaussianProcessCorrection; `predict` gives the predicted residual (n, 3) [m]
     """
     return fit_correction_at(
         poses, residuals, n_targets, rng, hyper, start, min_length_scale_rad, max_points, max_learn
@@ -730,7 +732,7 @@ def fit_correction_at(
         "joint readings, one length scale per joint, white noise; "
         f"{learned}; {how})"
     )
-    correction = ResidualCorrection(
+    correction = GaussianProcessCorrection(
         q[inducing].copy(),
         target[inducing].copy(),
         dual,

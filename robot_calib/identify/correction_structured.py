@@ -74,8 +74,8 @@ import numpy as np
 from robot_calib.errors import InputError, check_keys
 from robot_calib.identify.correction import (
     MAX_CORRECTION_M,
+    GaussianProcessCorrection,
     Hyperparameters,
-    ResidualCorrection,
 )
 from robot_calib.identify.load_features import (
     FEATURES,
@@ -159,7 +159,7 @@ class StructuredCorrection:
     structured_rms_m : rms norm of the structured part at the fitted poses [m]
     gp : the Gaussian process of what the structure leaves (`identify.correction`: its
         hyperparameters, length scales, noise, number of targets and of fitted poses)
-    rms_m, method, warnings : as `ResidualCorrection`'s
+    rms_m, method, warnings : as `GaussianProcessCorrection`'s
     """
 
     model: KinematicModel
@@ -170,7 +170,7 @@ class StructuredCorrection:
     ridge: float
     dof: float
     structured_rms_m: float
-    gp: ResidualCorrection
+    gp: GaussianProcessCorrection
     rms_m: float
     method: str
     warnings: tuple[str, ...] = ()
@@ -354,7 +354,7 @@ class StructuredCorrection:
         if not isinstance(part, Mapping):
             raise InputError(f"{where}: malformed learned correction: no `structured` section")
         check_keys(part, STRUCTURED_KEYS, f"{where}: structured")
-        process = ResidualCorrection.from_dict(
+        process = GaussianProcessCorrection.from_dict(
             data.get("gaussian_process", {}), f"{where}: gaussian_process"
         )
         try:
@@ -457,7 +457,7 @@ class StructuredCorrection:
     def with_own_rms(self) -> StructuredCorrection:
         """This correction with its stored rms (structured.rms_m, rms_m) measured as the
         loader checks them, when its inducing poses are all its fitted poses: at the
-        readings as stored (rounded, `ResidualCorrection.inducing_q`), not at the fitted
+        readings as stored (rounded, `GaussianProcessCorrection.inducing_q`), not at the fitted
         ones, so that a file this writes passes its own check whatever the conditioning of
         the structured part (a ridge of 1e-12 amplifies the 1e-12 rad rounding of the
         readings far above a relative 1e-6)."""
@@ -497,8 +497,9 @@ class StructuredCorrection:
                 )
 
 
-#: a correction of the hybrid model: the process alone (format 1) or structured (format 2)
-LearnedCorrection = ResidualCorrection | StructuredCorrection
+#: the learned correction (what makes the hybrid model), in one of its two forms: a Gaussian
+#: process alone (files of format 1) or load-driven geometry and a process (format 2)
+LearnedCorrection = GaussianProcessCorrection | StructuredCorrection
 
 
 def correction_from_dict(
@@ -511,7 +512,7 @@ def correction_from_dict(
     `parameters`: the file's (format 2 stores those it was fitted at: they must be these)."""
     if isinstance(data, Mapping) and data.get("format") == FORMAT:
         return StructuredCorrection.from_dict(data, model, where, parameters)
-    return ResidualCorrection.from_dict(data, where)
+    return GaussianProcessCorrection.from_dict(data, where)
 
 
 def rms_norm(values: Array) -> float:

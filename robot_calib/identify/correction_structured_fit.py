@@ -16,8 +16,8 @@ from robot_calib.errors import InputError
 from robot_calib.identify.correction import (
     MAX_LEARN,
     FittedCorrection,
+    GaussianProcessCorrection,
     Hyperparameters,
-    ResidualCorrection,
     exact_holdout,
     fit_correction,
     fit_correction_at,
@@ -233,7 +233,7 @@ def _empty(
     """A structured correction with zero coefficients and a placeholder process (to
     evaluate the structured part of given coefficients)."""
     size = model.robot.n_joints * 6 * len(FEATURES) + len(columns)
-    placeholder = ResidualCorrection(
+    placeholder = GaussianProcessCorrection(
         np.zeros((1, model.robot.n_joints)),
         np.zeros(1, dtype=np.int64),
         np.zeros((1, 3)),

@@ -22,7 +22,7 @@ from robot_calib.diagnosis.learnable import corrected_heldout, learnable_bound
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.calibration import Calibration
-from robot_calib.identify.correction import ResidualCorrection, fit_correction
+from robot_calib.identify.correction import GaussianProcessCorrection, fit_correction
 from robot_calib.identify.correction_structured import StructuredCorrection
 from robot_calib.identify.score import score
 from robot_calib.ik import first_tool2flange, tool2base
@@ -200,7 +200,7 @@ def test_a_correction_survives_json_exactly() -> None:
     residual = smooth(q) + 3e-5 * target[:, None] + rng.normal(0.0, 1e-6, (250, 3))
     correction = fit_correction(poses, residual, 2)
     text = json.dumps(correction.to_dict())
-    back = ResidualCorrection.from_dict(json.loads(text), "PARAMS.json: correction")
+    back = GaussianProcessCorrection.from_dict(json.loads(text), "PARAMS.json: correction")
     new = replace(
         Poses.from_readings(rng.uniform(-np.pi, np.pi, (200, 6))), target=rng.integers(0, 2, 200)
     )
@@ -209,9 +209,9 @@ def test_a_correction_survives_json_exactly() -> None:
     doc = json.loads(text)
     doc["dual"] = doc["dual"][:-1]
     with pytest.raises(InputError, match=r"^x.json: correction: malformed .*dual"):
-        ResidualCorrection.from_dict(doc, "x.json: correction")
+        GaussianProcessCorrection.from_dict(doc, "x.json: correction")
     with pytest.raises(InputError, match="x.json: correction: not a learned correction"):
-        ResidualCorrection.from_dict(
+        GaussianProcessCorrection.from_dict(
             {**doc, "format": "robot_calib.correction/99"}, "x.json: correction"
         )
     # finite but absurd: a predicted correction of kilometres, or NaN, is never applied
@@ -224,7 +224,7 @@ def test_a_correction_survives_json_exactly() -> None:
         ({"bogus": 1}, "unknown key 'bogus'"),
     ):
         with pytest.raises(InputError, match=said):
-            ResidualCorrection.from_dict({**good, **change}, "x.json: correction")
+            GaussianProcessCorrection.from_dict({**good, **change}, "x.json: correction")
 
 
 def test_the_hybrid_model_round_trips_through_params_json(
