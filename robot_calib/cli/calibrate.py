@@ -84,8 +84,17 @@ def main(args: argparse.Namespace) -> int:
         print(summary(cal, recording))
         write_json_atomic(fit.document(), output)
     else:
-        if args.latency != "auto":
-            raise InputError("--latency applies with --stream only")
+        given = [
+            flag
+            for flag, set_ in (
+                ("--latency", args.latency != "auto"),
+                ("--stream-max-points", args.stream_max_points is not None),
+                ("--max-gap", args.max_gap is not None),
+            )
+            if set_
+        ]
+        if given:  # a stream's option on poses at rest would be ignored without a word
+            raise InputError(f"{', '.join(given)} applies with --stream only")
         cal, recording = calibrate_bags(
             args.bags,
             robot,

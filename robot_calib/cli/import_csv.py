@@ -191,6 +191,14 @@ def main(args: argparse.Namespace) -> int:
         sigma_unit=args.sigma_unit,
         sigma_angle_unit=args.sigma_angle_unit,
     )
+    rpy = any(o.kind == "rpy" for o in fmt.orientations)
+    for unit, needs, what in (
+        (fmt.sigma_unit, fmt.sigmas, "--sigma-unit goes with --sigma"),
+        (fmt.sigma_angle_unit, fmt.sigmas, "--sigma-angle-unit goes with --sigma"),
+        (fmt.orientation_unit, rpy, "--orientation-unit goes with --orientation-rpy"),
+    ):
+        if unit is not None and not needs:  # a unit of no column: ignored without a word
+            raise InputError(f"{what} (the columns it is the unit of)")
     reference_names = {name for name, _ in references}
     sides: list[SigmaColumns | OrientationColumns] = [*fmt.sigmas, *fmt.orientations]
     for side in sides:

@@ -218,7 +218,7 @@ def add_stream(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--stream-max-points",
         type=positive,
-        default=STREAM_MAX_POINTS,
+        default=None,  # STREAM_MAX_POINTS with --stream; given without it: refused
         metavar="N",
         help=f"with --stream: fit every k-th point, k chosen so that at most N remain "
         f"(default {STREAM_MAX_POINTS})",
@@ -226,7 +226,7 @@ def add_stream(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--max-gap",
         type=tolerance,
-        default=STREAM_MAX_GAP_S,
+        default=None,  # STREAM_MAX_GAP_S with --stream; given without it: refused
         metavar="SECONDS",
         help="with --stream: points between two joint states further apart than this are "
         f"dropped and counted [s] (default {STREAM_MAX_GAP_S})",

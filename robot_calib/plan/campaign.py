@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -15,6 +15,10 @@ from robot_calib.identify import DEFAULT_ECC_ORDER
 from robot_calib.identify.calibrate import parse_model
 from robot_calib.log import Log
 from robot_calib.model import KinematicModel
+
+if TYPE_CHECKING:
+    from robot_calib.effects.base import Effect
+    from robot_calib.kinematics.description import RobotDescription
 from robot_calib.plan.design import (
     DEFAULT_CANDIDATES,
     DEFAULT_FLOOR_Z_M,
@@ -63,6 +67,20 @@ class Campaign:
     design_seconds: float
 
 
+def plan_effects(
+    model_spec: str, robot: RobotDescription, ecc_order: int = DEFAULT_ECC_ORDER
+) -> tuple[Effect, ...]:
+    """The effects of `model_spec` when it is a model a plan is made for (geometric plus
+    effects); InputError naming `model` otherwise."""
+    base, effects = parse_model(model_spec, robot, ecc_order)
+    if base != "geometric":
+        raise InputError(
+            f"{param('model', model_spec)}: plans are made for geometric[+EFFECT...] models (cpa "
+            "needs circle sweeps: the paper-test plans; nominal fits only the frames)"
+        )
+    return tuple(effects)
+
+
 def planning_problem(
     world: World,
     model_spec: str,
@@ -74,13 +92,7 @@ def planning_problem(
     """The design problem of `model_spec` (a geometric model of the ladder) on `world`'s
     robot with its tracker pose and target offset; InputError for other models."""
     robot = world.model.robot
-    base, effects = parse_model(model_spec, robot, ecc_order)
-    if base != "geometric":
-        raise InputError(
-            f"{param('model', model_spec)}: plans are made for geometric[+EFFECT...] models (cpa "
-            "needs circle sweeps: the paper-test plans; nominal fits only the frames)"
-        )
-    model = KinematicModel(robot, tuple(effects))
+    model = KinematicModel(robot, plan_effects(model_spec, robot, ecc_order))
     generator = rng if rng is not None else np.random.default_rng(0)
     return design_problem(model, world.truth, n_candidates, generator, world.timing, floor_z_m)
 
@@ -127,6 +139,7 @@ def plan_campaign(
     say = progress or (lambda _m: None)
     rng = np.random.default_rng(seed)
     started = time.perf_counter()
+    plan_effects(model_spec, world.model.robot, ecc_order)  # a bad model: before any work
     say(f"plan: {n_candidates} candidate poses, identifiability of {model_spec}")
     problem = planning_problem(world, model_spec, n_candidates, rng, floor_z_m, ecc_order)
     say(f"plan: D-optimal choice of {n_poses} poses ({len(problem.scale)} free parameters)")

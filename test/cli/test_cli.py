@@ -297,3 +297,48 @@ def test_import_refuses_a_joint_count_before_reading_anything(tmp_path: Path) ->
     assert run.returncode == 2 and "imported" not in run.stdout
     assert "--joints q1,q2,q3: 3 columns for robot kr5_sixx_r650 with 6 joints" in run.stderr
     assert not (tmp_path / "m.mcap").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (
+            ["calibrate", "{bag}", "--max-gap", "0.1", "-o", "p.json"],
+            "--max-gap applies with --stream only",
+        ),
+        (
+            ["calibrate", "{bag}", "--stream-max-points", "5", "-o", "p.json"],
+            "--stream-max-points applies",
+        ),
+        (
+            [
+                "import",
+                "{csv}",
+                "--joints",
+                "q1,q2,q3,q4,q5,q6",
+                "--point",
+                "x,y,z",
+                "--sigma-unit",
+                "um",
+                "-o",
+                "p.json",
+            ],
+            "--sigma-unit goes with --sigma",
+        ),
+        (
+            ["plan", "--poses", "30", "--model", "geometric+frobnicate", "-o", "plan.yaml"],
+            "--model geometric+frobnicate: unknown effect",
+        ),
+    ],
+)
+def test_an_option_that_would_be_ignored_or_a_bad_model_is_refused_first(
+    args: list[str], said: str, tmp_path: Path
+) -> None:
+    """An option of a mode not asked for (a stream's on poses at rest, a unit of no column)
+    is refused, not ignored; a plan's bad model is refused before any work is printed."""
+    csv = tmp_path / "m.csv"
+    csv.write_text("q1,q2,q3,q4,q5,q6,x,y,z\n" + "0.1,-1.5,1.5,0,0.5,0,1.0,0.0,0.5\n" * 3)
+    bag = Path(__file__).resolve().parents[2] / "bags" / "paper_test3.mcap"
+    run = cli(*[a.format(bag=bag, csv=csv) for a in args], cwd=tmp_path)
+    assert run.returncode == 2 and said in run.stderr, run.stderr
+    assert run.stdout == "" and len(run.stderr.strip().splitlines()) == 1
