@@ -9,7 +9,8 @@ caller's choice, installed for a block with `using(runner)`:
 - `SEQUENTIAL` (nothing installed: a library call, a notebook): each task is computed here
   when its result is asked; no process is forked, no thread started;
 - `robot_calib.forked.FORKED`: a forked child on the machine's other core (what the
-  command line installs; a script may too: `with using(FORKED): rc.diagnose(...)`). A
+  command line's `diagnose` and `run` install; a script may too:
+  `with using(FORKED): rc.diagnose(...)`). A
   process with other Python threads (a notebook's kernel, a node's executor) never forks:
   its tasks are computed here all the same.
 

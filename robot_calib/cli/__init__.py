@@ -26,8 +26,6 @@ from robot_calib.cli.flags import in_flags, learn
 from robot_calib.cli.options import OVERWRITE_POLICY
 from robot_calib.cli.registry import VERB_NAMES, build_parser
 from robot_calib.errors import RobotCalibError
-from robot_calib.forked import FORKED
-from robot_calib.parallel import using
 
 __all__ = ["OVERWRITE_POLICY", "build_parser", "main", "run"]
 
@@ -94,8 +92,7 @@ def _run_verb(args: argparse.Namespace) -> int:
             from robot_calib.kinematics.urdf import urdf_reference
 
             args.robot = urdf_reference(args.robot or "", args.base_link, args.tip_link)
-        with using(FORKED):  # the science's independent work on the other core
-            status = int(args.func(args))
+        status = int(args.func(args))
         if _SIGNALLED:  # the interrupt fell in a callback that swallowed it
             raise KeyboardInterrupt
         return status

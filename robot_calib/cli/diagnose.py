@@ -60,10 +60,16 @@ def main(args: argparse.Namespace) -> int:
     """The sim-to-real gap diagnosis -> DIAGNOSIS.json + a Markdown report with plots + a
     self-contained HTML report."""
     from robot_calib.flows.diagnose import ReadAside
+    from robot_calib.forked import FORKED
+    from robot_calib.parallel import using
 
     robot = robot_of(args)
-    # the bags read by a child while this process loads the diagnosis' modules
-    with ReadAside(args.bags, args.holdout or (), robot, args.pair_tolerance, log) as reading:
+    # the bags read by a child while this process loads the diagnosis' modules; the
+    # diagnosis's independent work (folds, joints' scans) on the other core
+    with (
+        ReadAside(args.bags, args.holdout or (), robot, args.pair_tolerance, log) as reading,
+        using(FORKED),
+    ):
         return _diagnose(args, robot, reading)
 
 

@@ -57,8 +57,10 @@ def main(args: argparse.Namespace) -> int:
     bag, calibrate the models of the ladder, score them on the hold-out poses, diagnose.
     Every run writes a new folder under --output."""
     from robot_calib.flows.run import run
+    from robot_calib.forked import FORKED
     from robot_calib.identify.calibration import summary
     from robot_calib.nodes.simulate import simulate_bag
+    from robot_calib.parallel import using
     from robot_calib.sim.plans import check_plan
 
     robot = load_robot(args.robot)
@@ -66,18 +68,19 @@ def main(args: argparse.Namespace) -> int:
     check_run_folder(Path(args.output))
     print(robot_table(robot))
     started = time.perf_counter()
-    result = run(
-        args.output,
-        args.robot,
-        args.plan,
-        args.effects,
-        args.seed,
-        args.holdout,
-        say=print,
-        log=log,
-        progress=progress(),
-        record=simulate_bag,  # the simulated graph in-process
-    )
+    with using(FORKED):  # the diagnosis's independent work on the other core
+        result = run(
+            args.output,
+            args.robot,
+            args.plan,
+            args.effects,
+            args.seed,
+            args.holdout,
+            say=print,
+            log=log,
+            progress=progress(),
+            record=simulate_bag,  # the simulated graph in-process
+        )
     geometric = result.models["geometric"].calibration
     text = summary(geometric, result.recording)
     for source in result.recording.sources:  # read while staged: named where it now lies
