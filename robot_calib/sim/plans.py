@@ -33,73 +33,26 @@ from robot_calib.poses import Poses
 from robot_calib.sim.world import Timing
 
 # Seed Table 2: per test, per joint (start, end) [deg] and points; and % of max speed.
+#: the joints' (start, end) [deg] of Tests 1-3 (whole ranges) and of Tests 4-6 (reduced)
+WHOLE_RANGES = ((167, -167), (-5, -162), (145, -114), (177, -177), (90, -90), (178, -178))
+REDUCED_RANGES = ((80, -80), (-40, -120), (80, -50), (90, -90), (45, -45), (90, -90))
+
+
+def _sweeps(
+    ranges: tuple[tuple[int, int], ...], points: tuple[int, ...]
+) -> list[tuple[float, float, int]]:
+    """Table 2's row of one test: each joint's (start, end) [deg] and its points."""
+    return [(start, end, n) for (start, end), n in zip(ranges, points)]
+
+
+HALF_POINTS = (30, 15, 25, 30, 15, 30)  # Tests 3-6
 PAPER_TESTS: dict[int, tuple[list[tuple[float, float, int]], float]] = {
-    1: (
-        [
-            (167, -167, 10),
-            (-5, -162, 10),
-            (145, -114, 10),
-            (177, -177, 10),
-            (90, -90, 10),
-            (178, -178, 10),
-        ],
-        0.03,
-    ),
-    2: (
-        [
-            (167, -167, 60),
-            (-5, -162, 30),
-            (145, -114, 50),
-            (177, -177, 60),
-            (90, -90, 30),
-            (178, -178, 60),
-        ],
-        0.03,
-    ),
-    3: (
-        [
-            (167, -167, 30),
-            (-5, -162, 15),
-            (145, -114, 25),
-            (177, -177, 30),
-            (90, -90, 15),
-            (178, -178, 30),
-        ],
-        0.03,
-    ),
-    4: (
-        [
-            (80, -80, 30),
-            (-40, -120, 15),
-            (80, -50, 25),
-            (90, -90, 30),
-            (45, -45, 15),
-            (90, -90, 30),
-        ],
-        0.01,
-    ),
-    5: (
-        [
-            (80, -80, 30),
-            (-40, -120, 15),
-            (80, -50, 25),
-            (90, -90, 30),
-            (45, -45, 15),
-            (90, -90, 30),
-        ],
-        0.03,
-    ),
-    6: (
-        [
-            (80, -80, 30),
-            (-40, -120, 15),
-            (80, -50, 25),
-            (90, -90, 30),
-            (45, -45, 15),
-            (90, -90, 30),
-        ],
-        0.10,
-    ),
+    1: (_sweeps(WHOLE_RANGES, (10,) * 6), 0.03),
+    2: (_sweeps(WHOLE_RANGES, (60, 30, 50, 60, 30, 60)), 0.03),
+    3: (_sweeps(WHOLE_RANGES, HALF_POINTS), 0.03),
+    4: (_sweeps(REDUCED_RANGES, HALF_POINTS), 0.01),
+    5: (_sweeps(REDUCED_RANGES, HALF_POINTS), 0.03),
+    6: (_sweeps(REDUCED_RANGES, HALF_POINTS), 0.10),
 }
 
 PLAN_NAMES = (*(f"paper-test{k}" for k in PAPER_TESTS), "random", "iso9283")
