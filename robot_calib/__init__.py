@@ -7,28 +7,14 @@ The core imports numpy/scipy only; ROS lives in `robot_calib.nodes`.
 import _signal  # the C module: `signal` takes ~10 ms to import (its enums)
 import os
 import sys
+from collections.abc import Callable
 
 __version__ = "0.1.0"
 
-#: the public Python API (robot_calib/api.py), loaded on first use: `import robot_calib`
-#: stays light (no numpy or scipy until a function is called)
-__all__ = [
-    "Calibration",
-    "Diagnosis",
-    "InputError",
-    "ModelSpec",
-    "Recording",
-    "RobotCalibError",
-    "calibrate",
-    "compensate",
-    "diagnose",
-    "load_robot",
-    "read_recording",
-    "recording_from_arrays",
-    "simulate",
-    "__version__",
-]
 _API = "robot_calib.api"
+#: the public Python API (robot_calib/api.py): each name and the module that defines it,
+#: loaded on first use: `import robot_calib` stays light (no numpy or scipy until a
+#: function is called)
 _LAZY = {
     **dict.fromkeys(
         (
@@ -49,16 +35,25 @@ _LAZY = {
     "RobotCalibError": "robot_calib.errors",
     "InputError": "robot_calib.errors",
 }
+__all__ = [*_LAZY, "__version__"]
 
 
-def __getattr__(name: str) -> object:
-    """The public API's names (`__all__`), imported when first used."""
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'robot_calib' has no attribute {name!r}")
-    import importlib
+def lazy_exports(package: str, exports: dict[str, str]) -> Callable[[str], object]:
+    """A package's module `__getattr__` (PEP 562): each name of `exports` imported from
+    its module when first used, so that importing the package loads none of them."""
 
-    return getattr(importlib.import_module(module), name)
+    def __getattr__(name: str) -> object:
+        module = exports.get(name)
+        if module is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        import importlib
+
+        return getattr(importlib.import_module(module), name)
+
+    return __getattr__
+
+
+__getattr__ = lazy_exports(__name__, _LAZY)
 
 
 def program_and_verb() -> str:

@@ -9,8 +9,10 @@ into a new, complete bag. Nothing is imported until used (PEP 562), so importing
 
 from __future__ import annotations
 
-import importlib
+from collections.abc import Callable
 from typing import Any
+
+from robot_calib import lazy_exports
 
 _EXPORTS = {
     "BagMessage": "robot_calib.bag.mcap_reader",
@@ -26,11 +28,7 @@ _EXPORTS = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'robot_calib.bag' has no attribute {name!r}")
-    return getattr(importlib.import_module(module), name)
+__getattr__: Callable[[str], Any] = lazy_exports(__name__, _EXPORTS)
 
 
 __all__ = sorted(_EXPORTS)
