@@ -15,7 +15,10 @@ from robot_calib.cli.options import CALIBRATION_ROBOT, add_force, add_output
 from robot_calib.errors import InputError, RobotCalibError
 
 NAME = "compensate"
-HELP = "nominal joint commands (JOINTS.csv) or targets (TARGETS.csv) -> compensated commands"
+HELP = (
+    "nominal joint commands (JOINTS.csv), targets (TARGETS.csv) or a robot program (KRL, "
+    "RAPID, FANUC TP, URScript) -> compensated commands or program"
+)
 ROBOT = CALIBRATION_ROBOT  # --robot's default, in words
 
 
@@ -34,6 +37,34 @@ def add_arguments(comp: argparse.ArgumentParser) -> None:
         help="TARGETS.csv: header x,y,z (the tool point, --unit), optional qx,qy,qz,qw (the "
         "tool frame's orientation; without: positions only), optional q1..qJ [rad] seeds, t "
         "[s], dir1..dirJ, temp_c (msgs_doc/compensate.md; this or --joints is required)",
+    )
+    given.add_argument(
+        "--program",
+        metavar="PROGRAM",
+        help="a robot program: KUKA .src (with its .dat), ABB .mod, FANUC .ls or URScript "
+        ".script; every motion target replaced by the one the nominal controller must be "
+        "given, every other byte kept (msgs_doc/programs.md)",
+    )
+    comp.add_argument(
+        "--language",
+        choices=("krl", "rapid", "fanuc_tp", "urscript"),
+        help="with --program: its language (default: from the file's suffix)",
+    )
+    comp.add_argument(
+        "--tool",
+        action="append",
+        metavar="[KEY=]VALUES",
+        help="with --program: a tool frame in the program's own pose notation (KRL X,Y,Z,A,B,C; "
+        "RAPID x,y,z,q1,q2,q3,q4; FANUC X,Y,Z,W,P,R; URScript x,y,z,rx,ry,rz), for tool KEY "
+        "(KRL/FANUC: its number; RAPID: its tooldata name) or, without KEY=, for every "
+        "target; over the program's own; repeatable",
+    )
+    comp.add_argument(
+        "--base",
+        action="append",
+        metavar="[KEY=]VALUES",
+        help="with --program: a base (user) frame in the robot base frame, as --tool (KRL "
+        "BASE_DATA number, RAPID wobjdata name, FANUC UF number)",
     )
     comp.add_argument(
         "--frame",
@@ -56,7 +87,8 @@ def add_arguments(comp: argparse.ArgumentParser) -> None:
         comp,
         "JOINTS.csv to write: q1..qJ [rad] compensated, dir1..dirJ (the approach "
         "directions assumed), error_mm and error_urad (the calibrated model's remaining "
-        "error), iterations",
+        "error), iterations; with --program: the compensated program (a KRL .dat is "
+        "written beside its .src), and a per-target table NAME.targets.csv beside it",
     )
     add_force(comp, implausible=True)
 
@@ -72,6 +104,13 @@ def main(args: argparse.Namespace) -> int:
 
     cal = calibration_of(args)
     plausible_or_forced(cal.implausible, args)
+    if args.program:
+        from robot_calib.cli.compensate_program import compensate_program_file
+
+        return compensate_program_file(args, cal)
+    for option in ("language", "tool", "base"):
+        if getattr(args, option) is not None:
+            raise InputError(f"--{option} goes with --program")
     model, params, correction = cal.model, cal.parameters, cal.correction
     n_joints, limits = model.robot.n_joints, model.robot.limits
     source = args.joints or args.targets

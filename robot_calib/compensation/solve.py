@@ -132,16 +132,19 @@ def solve_corrected(
     )
 
 
-def compensate_commands(calibration: Calibrated, commands: Poses) -> Compensation:
+def compensate_commands(
+    calibration: Calibrated, commands: Poses, tool2flange: Array | None = None
+) -> Compensation:
     """The compensated readings of `commands` (readings (n, J) [rad], approach directions
     and times of the nominal program; see the module docstring) for `calibration` (its
-    model, parameters and learned correction, the hybrid model's). The nominal model
-    (`nominal_counterpart`) has the calibrated first target as its tool; both models in the
+    model, parameters and learned correction, the hybrid model's). The tool, in both
+    models, is `tool2flange` (4, 4) [m] (a program's TCP in the flange frame), else the
+    calibrated first target; the nominal model is `nominal_counterpart`; both in the
     robot base frame."""
     calibrated, params = calibration.model, calibration.parameters
     correction = calibration.correction
     nominal, nominal_params = nominal_counterpart(calibrated, params)
-    tool = first_tool2flange(calibrated, params)
+    tool = first_tool2flange(calibrated, params) if tool2flange is None else tool2flange
     goal = tool2base(nominal, nominal_params, replace(commands, rotation=None), tool)
     full = solve_corrected(calibrated, params, commands, goal, tool, correction=correction)
     swing = np.abs(full.q - commands.q).max(axis=1)
@@ -239,7 +242,7 @@ def _merged(
     return replace(found, iterations=iterations, **out)
 
 
-def _nominal_ik(
+def nominal_ik(
     nominal: KinematicModel,
     nominal_params: ParameterVector,
     start: Poses,
@@ -247,12 +250,15 @@ def _nominal_ik(
     tool: Array,
     oriented: NDArray[np.bool_],
     program: bool,
+    pinned: NDArray[np.bool_] | None = None,
 ) -> IKSolution:
     """The nominal inverse kinematics from `start`'s readings, shifted into the joint limits
     by whole turns; targets it does not reach (or only beyond the limits) are tried once more
     from the solution of the nearest target (tool point) it reached within them, then from
     seeds on the arm's other branches (`_other_branches`); with `program` (rows of a
-    program, no seeds given) the rows are kept on one branch (`_follow_the_rows`)."""
+    program, no seeds given) the rows are kept on one branch (`_follow_the_rows`), rows
+    `pinned` (n,) (a program's axis targets: their seeds are their solutions) never
+    moved."""
     limits = nominal.robot.limits
 
     def solve(poses: Poses, goal: Array, which: NDArray[np.bool_]) -> IKSolution:
@@ -283,7 +289,9 @@ def _nominal_ik(
                 again.converged,
                 np.where(again.converged, again.iterations, 0),
             )
-    return _follow_the_rows(first, start, goal2base, oriented, solve, limits) if program else first
+    if not program:
+        return first
+    return _follow_the_rows(first, start, goal2base, oriented, solve, limits, pinned)
 
 
 #: a change of any joint by more than this between consecutive rows of a program [rad]
@@ -298,12 +306,14 @@ def _follow_the_rows(
     oriented: NDArray[np.bool_],
     solve: Callable[[Poses, Array, NDArray[np.bool_]], IKSolution],
     limits: Array,
+    pinned: NDArray[np.bool_] | None = None,
 ) -> IKSolution:
     """`found` (the nominal IK of the rows of a program, solved each on its own) with every
-    row that jumps more than BRANCH_JUMP_RAD from the row before solved again from that
-    row's solution (`solve`), kept where it converges within the limits and moves less: a
-    program of close targets stays on one branch (elbow up or down, reaching forwards or
-    over backwards) instead of switching between them from one target to the next.
+    row (but those `pinned`) that jumps more than BRANCH_JUMP_RAD from the row before solved
+    again from that row's solution (`solve`), kept where it converges within the limits
+    and moves less: a program of close targets stays on one branch (elbow up or down,
+    reaching forwards or over backwards) instead of switching between them from one target
+    to the next.
 
     The row-by-row rule (each row decided from the row before as it finally stands, from its
     own solution in `found`) in batched rounds: every candidate row starts over from `found`,
@@ -315,7 +325,8 @@ def _follow_the_rows(
     q = found.q.copy()
     fields = {name: getattr(found, name).copy() for name in names}
     ok = found.converged & _inside(found.q, limits)
-    candidates = np.arange(1, len(q))
+    free = np.ones(len(q), dtype=bool) if pinned is None else ~np.asarray(pinned, dtype=bool)
+    candidates = np.flatnonzero(free[1:]) + 1
     while candidates.size:
         before = q[candidates].copy()
         q[candidates] = found.q[candidates]  # start over: the row before may have changed
@@ -346,6 +357,7 @@ def _follow_the_rows(
             np.any(now != before, axis=1) | np.any(now != found.q[candidates], axis=1)
         ]
         candidates = moved[moved + 1 < len(q)] + 1
+        candidates = candidates[free[candidates]]
     return replace(found, q=q, **fields)
 
 
@@ -425,7 +437,7 @@ def compensate_targets(
     ones = np.ones_like(seed)
     start = Poses(seed, ones, targets.time, temperature=targets.temperature)
     # without seeds: rows of a program, kept on one branch
-    first = _nominal_ik(
+    first = nominal_ik(
         nominal, nominal_params, start, goal2base, tool, oriented, program=targets.seed is None
     )
     direction = approach_directions(first.q) if targets.direction is None else targets.direction

@@ -1,0 +1,437 @@
+"""A robot program, compensated: every motion target replaced by the one the nominal
+controller must be given so that the calibrated robot puts the program's tool where the
+program meant it (msgs_doc/programs.md).
+
+For each target, in the order the program first moves to it:
+
+1. what the program means: a pose target is the tool's pose in its base frame, in the
+   robot base frame G = base2robot x target; an axis target is where the nominal model
+   puts the tool at those axis values, G = flange_nominal(q) x tool;
+2. the nominal controller's solution q_nom: the axis values, or the nominal inverse
+   kinematics of G on the configuration the target gives (the vendor's configuration
+   data), else on the program's branch (rows followed as `nominal_ik` does);
+3. the compensated readings q_cal at which the calibrated model (every effect, with the
+   program's approach directions) puts the tool at G (`compensate_commands`, the tool
+   the program's);
+4. the new target: the axis values q_cal, or the pose the nominal model gives at q_cal,
+   inv(base2robot) x flange_nominal(q_cal) x tool, which the controller turns back into
+   q_cal on the same configuration. A target whose q_cal needs another configuration is
+   left as it was and marked.
+
+The calibration's measured target (the SMR) is not the program's tool: the tool frame is
+the program's (or an option's) in the flange frame of the calibrated model. What a point
+target cannot observe (the flange's roll about joint 6 and its offset along it, taken as
+nominal) is carried into a tool away from the SMR as it is on the robot.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robot_calib.compensation.solve import (
+    BRANCH_SHARES,
+    DIRECTION_ROUNDS,
+    compensate_commands,
+    home_readings,
+    nominal_counterpart,
+    nominal_ik,
+    within_limits,
+)
+from robot_calib.compensation.write import LARGE_CHANGE_DEG, row_status
+from robot_calib.errors import InputError, param
+from robot_calib.ik import solve_ik
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.frames import Array
+from robot_calib.model import Calibrated
+from robot_calib.poses import Poses, approach_directions
+from robot_calib.programs.language import Language
+from robot_calib.programs.source import Frame, Program, Target, rewrite
+
+#: statuses of targets written compensated; every other target is left as it was
+WRITTEN = ("ok", "position_only")
+EVERY = "*"  # the key of a frame given for every target
+TURNS = (-1, 0, 1)  # whole turns tried on axes 1, 4 and 6 to meet a configuration
+
+
+@dataclass(frozen=True)
+class TargetRow:
+    """One target's outcome.
+
+    target : as read
+    status : `ok`, `position_only` (near a singularity: the tool point only), or, left as
+        it was: `large_change` (an axis would move more than LARGE_CHANGE_DEG),
+        `not_reached`, `beyond_limits`, `configuration` (the calibrated solution needs
+        another configuration than the target's, or the nominal one reaches none),
+        `unused` (no motion goes to it), `left` (a note says why)
+    values : the numbers written (the old ones where left)
+    moved_mm : a pose target: how far its position moved [mm]; an axis target: how far
+        the nominal model's tool moves between the old and new values [mm]
+    turned_deg : a pose target: the angle between its old and new orientation [deg]; an
+        axis target: the largest axis change [deg]
+    error_m : the calibrated model's remaining tool error at q_cal [m] (nan where not
+        solved)
+    reason : the note, or why the status is not `ok`, in words
+    """
+
+    target: Target
+    status: str
+    values: tuple[float, ...]
+    moved_mm: float
+    turned_deg: float
+    error_m: float
+    reason: str
+
+
+@dataclass(frozen=True)
+class ProgramCompensation:
+    """A compensated program: its files' new texts (same names as `program.texts`) and a
+    row per target, in the program's order."""
+
+    program: Program
+    texts: dict[str, str]
+    rows: tuple[TargetRow, ...]
+
+    def count(self, *statuses: str) -> int:
+        return sum(row.status in statuses for row in self.rows)
+
+
+def frames_of(
+    program: Program, given_tools: dict[str, Frame], given_bases: dict[str, Frame]
+) -> tuple[dict[str, Frame], dict[str, Frame]]:
+    """The program's frames with the given ones over them (a frame keyed EVERY serves
+    every target); InputError naming the first target moved to with a frame declared by
+    neither."""
+    tools, bases = {**program.tools, **given_tools}, {**program.bases, **given_bases}
+    for target in program.targets:
+        if not target.used or target.note:
+            continue
+        for key, known, what in ((target.tool, tools, "tools"), (target.base, bases, "bases")):
+            if key is not None and key not in known and EVERY not in known:
+                raise InputError(
+                    f"{target.where}: {target.name} is moved to with {key}, which "
+                    f"{' and '.join(program.texts)} does not declare: give it "
+                    f"({param(what, key + '=...')})"
+                )
+    return tools, bases
+
+
+def compensate_program(
+    calibration: Calibrated,
+    program: Program,
+    language: Language,
+    tools: dict[str, Frame] | None = None,
+    bases: dict[str, Frame] | None = None,
+) -> ProgramCompensation:
+    """`program` compensated for `calibration` (module docstring); `tools` and `bases`:
+    frames by key, over the program's own (`frames_of`)."""
+    all_tools, all_bases = frames_of(program, tools or {}, bases or {})
+    model, params = calibration.model, calibration.parameters
+    nominal, nominal_params = nominal_counterpart(model, params)
+    robot = model.robot
+    rows = [k for k, t in enumerate(program.targets) if t.used and not t.note and t.values]
+    n = len(rows)
+    tool = np.array([_pose(all_tools, t.tool) for t in _at(program, rows)])
+    base = np.array([_pose(all_bases, t.base) for t in _at(program, rows)])
+    joints = np.array([program.targets[k].kind == "joints" for k in rows], dtype=bool)
+    q_nom = np.zeros((n, robot.n_joints))
+    for j in np.flatnonzero(joints).tolist():
+        q_nom[j] = np.asarray(program.targets[rows[j]].values) * language.joint_unit
+    poses = np.flatnonzero(~joints)
+    goal = np.zeros((n, 4, 4))
+    if poses.size:
+        values = np.array([program.targets[rows[j]].values for j in poses])
+        goal[poses] = base[poses] @ language.pose_to_base(values)
+    solved = np.ones(n, dtype=bool)
+    if poses.size:
+        q_nom, solved = _nominal_solutions(
+            calibration, program, language, rows, joints, q_nom, goal, tool
+        )
+    if joints.any():  # what the program means at its axis values
+        at = Poses.from_readings(q_nom[joints])
+        goal[joints] = nominal.flange2base(nominal_params, at) @ tool[joints]
+    q_cal, error, status = _compensated(calibration, q_nom, solved, tool)
+    reason = [""] * n
+    for row in np.flatnonzero(~solved).tolist():
+        status[row], reason[row] = "configuration", _unreached(program.targets[rows[row]])
+    _check_configuration(program, language, robot, rows, q_cal, status, reason)
+    new: dict[int, tuple[float, ...]] = {}
+    out_rows = {}
+    for j, k in enumerate(rows):
+        target = program.targets[k]
+        old = np.asarray(target.values)
+        if status[j] not in WRITTEN:
+            reason[j] = reason[j] or _why(status[j])
+            out_rows[k] = TargetRow(
+                target, status[j], target.values, 0.0, 0.0, error[j], reason[j]
+            )
+            continue
+        at = Poses.from_readings(q_cal[j][None])
+        if joints[j]:
+            values = q_cal[j] / language.joint_unit
+            before = Poses.from_readings(q_nom[j][None])
+            shift = (
+                nominal.flange2base(nominal_params, at)[0] @ tool[j]
+                - nominal.flange2base(nominal_params, before)[0] @ tool[j]
+            )[:3, 3]
+            moved = np.linalg.norm(shift) * 1e3
+            turned = np.degrees(np.abs(q_cal[j] - q_nom[j]).max())
+        else:
+            pose = np.linalg.inv(base[j]) @ nominal.flange2base(nominal_params, at)[0] @ tool[j]
+            values = language.base_to_pose(pose[None], old[None])[0]
+            was = language.pose_to_base(old[None])[0]
+            moved = np.linalg.norm(pose[:3, 3] - was[:3, 3]) * 1e3
+            cos = (np.trace(was[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
+            turned = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        new[k] = tuple(float(v) for v in values)
+        out_rows[k] = TargetRow(
+            target, status[j], new[k], float(moved), float(turned), float(error[j]), reason[j]
+        )
+    for k, target in enumerate(program.targets):
+        if k not in out_rows:
+            left = "unused" if not target.used else "left"
+            why = target.note or "no motion goes to it"
+            out_rows[k] = TargetRow(target, left, target.values, 0.0, 0.0, np.nan, why)
+    places = {
+        k: language.places(program.targets[k].kind, len(program.targets[k].values)) for k in new
+    }
+    texts = rewrite(program, new, places)
+    return ProgramCompensation(program, texts, tuple(out_rows[k] for k in range(len(out_rows))))
+
+
+def _at(program: Program, rows: list[int]) -> list[Target]:
+    return [program.targets[k] for k in rows]
+
+
+def _directions(q: Array, solved: NDArray[np.bool_]) -> Array:
+    """(n, J) approach directions of the rows' readings (n, J) [rad] in program order, an
+    unsolved row standing where the row before it stands."""
+    steady = np.nan_to_num(q.copy())
+    for row in range(1, len(q)):
+        if not solved[row]:
+            steady[row] = steady[row - 1]
+    return approach_directions(steady) if len(q) else np.zeros_like(q)
+
+
+def _compensated(
+    calibration: Calibrated, q_nom: Array, solved: NDArray[np.bool_], tool: Array
+) -> tuple[Array, Array, list[str]]:
+    """Compensated readings (n, J) [rad] of the solved rows of the nominal readings q_nom
+    (nan elsewhere), the calibrated model's remaining tool error (n,) [m] and each row's
+    status (`row_status`; `not_reached` where not solved): one solve per tool frame (n,
+    4, 4), with the approach directions of the nominal rows, then again (at most
+    DIRECTION_ROUNDS times) with those of the compensated rows where they differ (a joint
+    that barely moves between two targets may turn the other way once compensated)."""
+    robot = calibration.model.robot
+    n = len(q_nom)
+    q_cal = np.full_like(q_nom, np.nan)
+    error = np.full(n, np.nan)
+    status = ["not_reached"] * n
+    keys = [_key(t) for t in tool]
+    direction = _directions(q_nom, solved)
+    for _ in range(DIRECTION_ROUNDS + 1):
+        commands = Poses(q_nom, direction, np.zeros(n))
+        for key in sorted(set(keys)):  # one solve per tool
+            group = np.flatnonzero(np.array([k == key for k in keys]) & solved)
+            if not group.size:
+                continue
+            found = compensate_commands(calibration, commands.subset(group), tool[group[0]])
+            inside = within_limits(robot, found.q) & within_limits(robot, q_nom[group])
+            flags = row_status(found, q_nom[group], inside)
+            q_cal[group], error[group] = found.q, found.error_m
+            for i, row in enumerate(group.tolist()):
+                status[row] = flags[i]
+        reached = solved & np.isfinite(q_cal).all(axis=1)
+        after = _directions(np.where(reached[:, None], q_cal, q_nom), solved)
+        if np.array_equal(after, direction):
+            break
+        direction = after
+    return q_cal, error, status
+
+
+def _pose(frames: dict[str, Frame], key: str | None) -> Array:
+    """The frame serving a target whose program names `key` (None: the flange or base)."""
+    if EVERY in frames:
+        return frames[EVERY].pose
+    return frames[key].pose if key is not None else np.eye(4)
+
+
+def _key(tool: Array) -> bytes:
+    return np.round(tool, 12).tobytes()
+
+
+def _why(status: str) -> str:
+    return {
+        "large_change": f"an axis would move more than {LARGE_CHANGE_DEG:g} deg: left as it "
+        "was (near a singularity?)",
+        "not_reached": "the calibrated robot does not reach it (out of reach or singular)",
+        "beyond_limits": "reached only beyond the axis limits",
+    }.get(status, status)
+
+
+def _unreached(target: Target) -> str:
+    if target.configuration is None:
+        return "the nominal model reaches no solution within the axis limits"
+    return (
+        f"the nominal model reaches no solution within the axis limits on its "
+        f"configuration {target.configuration}"
+    )
+
+
+def _matches(found: tuple[int, ...], wanted: tuple[int, ...]) -> bool:
+    """A configuration equals the wanted one where that gives a value (-1: not given)."""
+    return all(w < 0 or f == w for f, w in zip(found, wanted))
+
+
+def _check_configuration(
+    program: Program,
+    language: Language,
+    robot: RobotDescription,
+    rows: list[int],
+    q_cal: Array,
+    status: list[str],
+    reason: list[str],
+) -> None:
+    """Mark `configuration` the written pose targets whose compensated readings have
+    another configuration than the target gives."""
+    if language.configuration is None:
+        return
+    check = [
+        j
+        for j, k in enumerate(rows)
+        if status[j] in WRITTEN
+        and program.targets[k].kind == "pose"
+        and program.targets[k].configuration is not None
+    ]
+    if not check:
+        return
+    found = language.configuration(robot, q_cal[check])
+    for j, config in zip(check, found):
+        wanted = program.targets[rows[j]].configuration
+        assert wanted is not None
+        if not _matches(config, wanted):
+            status[j] = "configuration"
+            reason[j] = (
+                f"the calibrated solution needs configuration {config}, the target gives "
+                f"{wanted} (at a configuration boundary: left as it was)"
+            )
+
+
+def _nominal_solutions(
+    calibration: Calibrated,
+    program: Program,
+    language: Language,
+    rows: list[int],
+    joints: NDArray[np.bool_],
+    q_nom: Array,
+    goal: Array,
+    tool: Array,
+) -> tuple[Array, NDArray[np.bool_]]:
+    """The nominal controller's readings (n, J) [rad] for the pose rows (the axis rows as
+    given) and which rows have one: rows followed from the axis targets before them
+    (`nominal_ik` as for a program), then, where a target's configuration is not met,
+    solved again from every branch seed with whole turns of axes 1, 4, 6 until one is."""
+    model, params = calibration.model, calibration.parameters
+    nominal, nominal_params = nominal_counterpart(model, params)
+    robot = model.robot
+    limits = robot.limits
+    n = len(rows)
+    flange_goal = goal @ np.linalg.inv(tool)
+    seed = q_nom.copy()
+    pose_rows = np.flatnonzero(~joints)
+    eye = np.eye(4)
+    seed[pose_rows] = home_readings(nominal, nominal_params, flange_goal[pose_rows], eye)
+    # a pose row after an axis target starts at that target (the arm is there)
+    last = np.maximum.accumulate(np.where(joints, np.arange(n), -1))
+    after = np.flatnonzero(~joints & (last >= 0))
+    seed[after] = q_nom[last[after]]
+    flange_goal[joints] = nominal.flange2base(nominal_params, Poses.from_readings(q_nom[joints]))
+    start = Poses(seed, np.ones_like(seed), np.zeros(n))
+    found = nominal_ik(
+        nominal,
+        nominal_params,
+        start,
+        flange_goal,
+        eye,
+        np.ones(n, dtype=bool),
+        program=True,
+        pinned=joints,
+    )
+    q = np.where(joints[:, None], q_nom, found.q)
+    ok = found.converged & (within_limits(robot, q) & np.isfinite(q).all(axis=1))
+    ok |= joints
+    wanted = [program.targets[k].configuration for k in rows]
+    if language.configuration is None:
+        return q, ok
+    need = [j for j in pose_rows.tolist() if wanted[j] is not None]
+    if not need:
+        return q, ok
+    met = np.ones(n, dtype=bool)
+    met[need] = False
+    _meet(language, robot, q, ok, met, wanted, need)
+    for choice in [(turn, shares) for turn in (0.0, np.pi) for shares in BRANCH_SHARES]:
+        left = np.array([j for j in need if not met[j]], dtype=int)
+        if not left.size:
+            break
+        turn, shares = choice
+        start_q = seed[left].copy()
+        start_q[:, 0] = np.angle(np.exp(1j * (start_q[:, 0] + turn)))
+        start_q[:, 3:] = 0.0
+        for joint, share in zip((1, 2, 4), shares):
+            start_q[:, joint] = limits[joint, 0] + share * (limits[joint, 1] - limits[joint, 0])
+        again = solve_ik(
+            nominal,
+            nominal_params,
+            Poses.from_readings(start_q),
+            flange_goal[left],
+            eye,
+            max_iterations=100,
+        )
+        trial = q.copy()
+        trial[left] = again.q
+        trial_ok = ok.copy()
+        trial_ok[left] = again.converged
+        before = met.copy()
+        _meet(language, robot, trial, trial_ok, met, wanted, [int(j) for j in left])
+        newly = left[met[left] & ~before[left]]
+        q[newly], ok[newly] = trial[newly], True
+    bad = np.array([j for j in need if not met[j]], dtype=int)
+    ok[bad] = False
+    return q, ok
+
+
+def _meet(
+    language: Language,
+    robot: RobotDescription,
+    q: Array,
+    ok: NDArray[np.bool_],
+    met: NDArray[np.bool_],
+    wanted: list[tuple[int, ...] | None],
+    rows: list[int],
+) -> None:
+    """For `rows` solved (`ok`), the variant of q with whole turns on axes 1, 4, 6 (within
+    the limits) whose configuration is the wanted one: q updated and `met` set there."""
+    assert language.configuration is not None
+    limits = robot.limits
+    rows = [j for j in rows if ok[j] and not met[j]]
+    if not rows:
+        return
+    shifts = np.array([(a, b, c) for a in TURNS for b in TURNS for c in TURNS]) * 2 * np.pi
+    shifts = shifts[np.argsort(np.abs(shifts).sum(axis=1), kind="stable")]  # no turn first
+    for shift in shifts:
+        left = [j for j in rows if not met[j]]
+        if not left:
+            return
+        trial = q[left].copy()
+        trial[:, [0, 3, 5]] += shift
+        inside = np.all((trial >= limits[:, 0]) & (trial <= limits[:, 1]), axis=1)
+        found = language.configuration(robot, trial)
+        for i, j in enumerate(left):
+            wanted_j = wanted[j]
+            if inside[i] and wanted_j is not None and _matches(found[i], wanted_j):
+                q[j], met[j] = trial[i], True
+
+
+__all__ = ["ProgramCompensation", "TargetRow", "compensate_program"]
