@@ -128,14 +128,23 @@ def _report(
         f"at ({smr[0]:.1f}, {smr[1]:.1f}, {smr[2]:.1f}) mm in the flange"
         + ("; the learned correction applied" if cal.correction is not None else "")
     )
-    for status in ("configuration", "not_reached", "beyond_limits", "large_change", "left"):
+    for status in (
+        "configuration",
+        "not_reached",
+        "beyond_limits",
+        "large_change",
+        "left",
+        "position_only",
+        "near_singular",
+    ):
         hit = [r for r in rows if r.status == status]
         if hit:
             names = ", ".join(f"{r.target.name} ({r.target.where})" for r in hit[:SHOWN])
             more = f" and {len(hit) - SHOWN} more" if len(hit) > SHOWN else ""
+            done = "written" if status in WRITTEN else "left as they were"
             print(
-                f"warning: {args.program}: {len(hit)} target(s) left as they were, "
-                f"{status}: {names}{more}: {hit[0].reason}",
+                f"warning: {args.program}: {len(hit)} target(s) {done}, {status}: "
+                f"{names}{more}: {hit[0].reason}",
                 file=sys.stderr,
             )
     for remark in getattr(program, "remarks", ()):

@@ -47,11 +47,15 @@ from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.model import Calibrated
 from robot_calib.poses import Poses, approach_directions
+from robot_calib.programs.configuration import singular_margin
 from robot_calib.programs.language import Language
 from robot_calib.programs.source import Frame, Program, Target, rewrite
 
 #: statuses of targets written compensated; every other target is left as it was
-WRITTEN = ("ok", "position_only")
+WRITTEN = ("ok", "position_only", "near_singular")
+#: `singular_margin` below this [m] at the nominal solution: the controller may take
+#: another solution close by, the target is written but named
+NEAR_SINGULAR_M = 0.01
 EVERY = "*"  # the key of a frame given for every target
 TURNS = (-1, 0, 1)  # whole turns tried on axes 1, 4 and 6 to meet a configuration
 
@@ -61,8 +65,9 @@ class TargetRow:
     """One target's outcome.
 
     target : as read
-    status : `ok`, `position_only` (near a singularity: the tool point only), or, left as
-        it was: `large_change` (an axis would move more than LARGE_CHANGE_DEG),
+    status : `ok`, `position_only` (near the wrist singularity: the tool point only),
+        `near_singular` (written; within NEAR_SINGULAR_M of a singularity), or, left as it
+        was: `large_change` (an axis would move more than LARGE_CHANGE_DEG),
         `not_reached`, `beyond_limits`, `configuration` (the calibrated solution needs
         another configuration than the target's, or the nominal one reaches none),
         `unused` (no motion goes to it), `left` (a note says why)
@@ -157,6 +162,16 @@ def compensate_program(
     for row in np.flatnonzero(~solved).tolist():
         status[row], reason[row] = "configuration", _unreached(program.targets[rows[row]])
     _check_configuration(program, language, robot, rows, q_cal, status, reason)
+    if n:
+        margin = singular_margin(robot, np.nan_to_num(q_nom))
+        for row in np.flatnonzero(margin < NEAR_SINGULAR_M).tolist():
+            if status[row] == "ok":
+                status[row] = "near_singular"
+                reason[row] = (
+                    f"{margin[row] * 1e3:.1f} mm from a singularity (the Jacobian's smallest "
+                    "singular value): written, but the controller may take another solution "
+                    "close by; check it"
+                )
     new: dict[int, tuple[float, ...]] = {}
     out_rows = {}
     for j, k in enumerate(rows):

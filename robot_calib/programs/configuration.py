@@ -62,23 +62,20 @@ def posture(robot: RobotDescription, q: Array, reference_deg: tuple[float, ...])
     )
 
 
-def clear_of_singularities(
-    robot: RobotDescription, q: Array, angle_deg: float, reach_m: float
-) -> NDArray[np.bool_]:
-    """(n,) readings q (n, J) [rad] at least `angle_deg` from the wrist singularity (axis 5
-    at 0 or 180 deg) and from the stretched or folded elbow, with the wrist centre at
-    least `reach_m` off axis 1 (the shoulder singularity)."""
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    frames = robot.nominal_frames(q)
-    wrist = frames[:, WRIST_FRAME, :3, 3]
-    joint2, joint3 = frames[:, 1, :3, 3], frames[:, 2, :3, 3]
-    upper, fore = joint3 - joint2, wrist - joint3
-    sine = np.linalg.norm(np.cross(upper, fore), axis=1) / (
-        np.linalg.norm(upper, axis=1) * np.linalg.norm(fore, axis=1)
+#: the lever the Jacobian's rotation rows are scaled by [m]: a rotation counts as the
+#: motion it gives half a metre out
+ROTATION_LEVER_M = 0.5
+
+
+def singular_margin(robot: RobotDescription, q: Array) -> Array:
+    """(n,) how far readings q (n, J) [rad] are from a singularity of the nominal arm [m]:
+    the smallest singular value of the flange's Jacobian, position rows [m/rad] and rotation
+    rows x ROTATION_LEVER_M (0 at a singularity: the wrist's, the elbow's stretched or
+    folded, the shoulder's; ~0.1 m at a typical pose of a 1.5 m arm)."""
+    frames = robot.nominal_frames(np.atleast_2d(np.asarray(q, dtype=float)))
+    flange = frames[:, -1, :3, 3]
+    axes, origins = frames[:, :-1, :3, 2], frames[:, :-1, :3, 3]
+    jacobian = np.concatenate(
+        [np.cross(axes, flange[:, None] - origins), ROTATION_LEVER_M * axes], axis=2
     )
-    least = np.sin(np.radians(angle_deg))
-    return (
-        (np.abs(np.sin(q[:, 4])) >= least)
-        & (sine >= least)
-        & (np.linalg.norm(wrist[:, :2], axis=1) >= reach_m)
-    )
+    return np.linalg.svd(jacobian, compute_uv=False)[:, -1]

@@ -19,12 +19,11 @@ import numpy as np
 
 from robot_calib.kinematics.description import RobotDescription, random_readings
 from robot_calib.kinematics.frames import Array
-from robot_calib.programs.configuration import clear_of_singularities
+from robot_calib.programs.configuration import singular_margin
 from robot_calib.programs.language import Language
 
 STEP_DEG = 12.0  # largest step of an axis between consecutive taught targets
-CLEAR_DEG = 12.0  # from the wrist and elbow singularities at least
-CLEAR_M = 0.2  # the wrist centre off axis 1 at least (the shoulder singularity)
+CLEAR_M = 0.04  # `singular_margin` at least: clear of the singularities
 MARGIN = 0.1  # share of each axis range kept clear at both ends
 
 
@@ -49,17 +48,17 @@ class TaughtProgram:
 
 def taught_path(robot: RobotDescription, n: int, rng: np.random.Generator) -> Array:
     """(n, J) readings [rad]: a random walk inside the limits (MARGIN in from both ends),
-    clear of the singularities (CLEAR_DEG, CLEAR_M), steps of at most STEP_DEG."""
+    clear of the singularities (`singular_margin` >= CLEAR_M), steps of at most STEP_DEG."""
     limits = robot.limits
     low = limits[:, 0] + MARGIN * (limits[:, 1] - limits[:, 0])
     high = limits[:, 1] - MARGIN * (limits[:, 1] - limits[:, 0])
     out = np.zeros((n, robot.n_joints))
     starts = random_readings(robot, 200, rng, 0.3)
-    q = starts[np.flatnonzero(clear_of_singularities(robot, starts, CLEAR_DEG, CLEAR_M))[0]]
+    q = starts[np.flatnonzero(singular_margin(robot, starts) >= CLEAR_M)[0]]
     step = np.radians(STEP_DEG)
     for k in range(n):
         trials = np.clip(q + rng.uniform(-step, step, (50, len(q))), low, high)
-        clear = np.flatnonzero(clear_of_singularities(robot, trials, CLEAR_DEG, CLEAR_M))
+        clear = np.flatnonzero(singular_margin(robot, trials) >= CLEAR_M)
         q = trials[clear[0]] if clear.size else q
         out[k] = q
     return out

@@ -1,0 +1,142 @@
+"""The program tests' worlds: one vendor arm per language, its true geometry off the
+nominal by tenths of a millimetre and milliradian, with joint 2-3 backlash and gravity
+compliance under a 15 kg tool; calibrated once per process (geometric + backlash +
+compliance) on 300 random poses, scored on 200 others (the held-out error), and a taught
+program of 50 targets per language. `drive` is the true robot run by the nominal
+controller: where the tool really goes for a program's targets."""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from robot_calib.compensation.solve import nominal_counterpart
+from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.calibration import Calibration
+from robot_calib.ik import solve_ik
+from robot_calib.kinematics.frames import Array
+from robot_calib.measurements import recording_from_arrays
+from robot_calib.poses import Poses, approach_directions
+from robot_calib.programs.language import Language
+from robot_calib.programs.registry import language_for
+from robot_calib.programs.source import Frame, Program
+from robot_calib.sim.measure import measure_every_target
+from robot_calib.sim.plans import plan_times, random_plan
+from robot_calib.sim.programs import TaughtProgram, taught_program
+from robot_calib.sim.world import World, build_world
+
+#: the arm each language's test uses
+ROBOTS = {"krl": "kr16_2", "rapid": "irb2600_12_165", "fanuc_tp": "m20ia", "urscript": "ur10"}
+MODEL = "geometric+backlash:2,3+compliance:2,3"
+EFFECTS = [
+    {"name": "backlash", "joints": [2, 3], "values": {"backlash2": 6e-5, "backlash3": 6e-5}},
+    {"name": "compliance", "joints": [2, 3], "values": {"compliance2": 1e-6, "compliance3": 1e-6}},
+]
+DEVIATIONS = {  # identifiable geometry: offsets and link lengths [rad, m]
+    "a1": 8e-5,
+    "a2": -6e-5,
+    "alpha1": 6e-5,
+    "theta2": 1e-4,
+    "theta3": -8e-5,
+    "d4": 6e-5,
+    "theta4": 8e-5,
+    "theta5": -1e-4,
+    "alpha3": 4e-5,
+}
+
+
+@dataclass(frozen=True)
+class ProgramWorld:
+    world: World
+    calibration: Calibration
+    held_out_rms_m: float  # the calibration's rms error on the 200 held-out poses
+
+
+@functools.cache
+def program_world(language: str) -> ProgramWorld:
+    world = build_world(
+        {
+            "robot": ROBOTS[language],
+            "geometry": "nominal",
+            "seed": 3,
+            "payload": {"mass_kg": 15.0, "com_m": [0.0, 0.0, 0.1]},
+            "effects": EFFECTS,
+            "deviations": DEVIATIONS,
+        }
+    )
+    robot = world.model.robot
+    rng = np.random.default_rng(2)
+    recordings = []
+    for n in (300, 200):
+        plan = random_plan(robot, n, rng)
+        poses, points = measure_every_target(world, plan.q, plan_times(plan, world.timing), rng)
+        recordings.append(recording_from_arrays(poses.q, points, poses.time, robot=robot))
+    calibration = calibrate(recordings[0], robot, MODEL)
+    held_out = calibration.score(recordings[1]).accuracy.absolute_rms_mm * 1e-3
+    return ProgramWorld(world, calibration, held_out)
+
+
+def taught(language: str, folder: Path, n: int = 50, seed: int = 5) -> tuple[TaughtProgram, Path]:
+    """A taught program of `n` targets for the language's arm, written into `folder`;
+    returns it and the path of its main file."""
+    lang = language_for("x", language)
+    robot = program_world(language).world.model.robot
+    program = taught_program(robot, lang, n, np.random.default_rng(seed))
+    for name, text in program.texts.items():
+        (folder / name).write_bytes(text.encode())
+    main = next(name for name in program.texts if Path(name).suffix in lang.suffixes)
+    return program, folder / main
+
+
+def frame_options(
+    language: str, program: TaughtProgram
+) -> tuple[dict[str, Frame], dict[str, Frame]]:
+    """The frames a FANUC program cannot hold (UT 1, UF 1: the controller's), as options."""
+    if language != "fanuc_tp":
+        return {}, {}
+    return (
+        {"UT 1": Frame("UT 1", program.tool2flange, "test")},
+        {"UF 1": Frame("UF 1", program.base2robot, "test")},
+    )
+
+
+def drive(
+    language: Language,
+    program: Program,
+    taught_q: Array,
+    world: ProgramWorld,
+    tool2flange: Array,
+    base2robot: Array,
+) -> Array:
+    """(n, 4, 4) where the true robot puts the tool at each target of `program` (program
+    order) driven by the nominal controller: axis targets as written; pose targets by the
+    nominal inverse kinematics from the taught readings (the nearest solution, on the
+    taught configuration), with the approach directions of the sequence."""
+    cal = world.calibration
+    nominal, params = nominal_counterpart(cal.model, cal.parameters)
+    q = np.array(taught_q, dtype=float)
+    kinds = np.array([t.kind for t in program.targets])
+    poses = np.flatnonzero(kinds == "pose")
+    joints = np.flatnonzero(kinds == "joints")
+    if poses.size:
+        values = np.array([program.targets[k].values for k in poses])
+        goal = base2robot @ language.pose_to_base(values) @ np.linalg.inv(tool2flange)
+        found = solve_ik(
+            nominal,
+            params,
+            Poses.from_readings(q[poses]),
+            goal,
+            np.eye(4),
+            tolerance_m=1e-12,
+            max_iterations=50,
+        )
+        assert found.converged.all()
+        q[poses] = found.q
+    if joints.size:
+        q[joints] = np.array([program.targets[k].values for k in joints]) * language.joint_unit
+    truth = world.world
+    at = Poses(q, approach_directions(q), np.zeros(len(q)))
+    return truth.model.flange2base(truth.truth, at) @ tool2flange
