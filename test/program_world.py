@@ -18,7 +18,7 @@ from robot_calib.identify.calibrate import calibrate
 from robot_calib.identify.calibration import Calibration
 from robot_calib.ik import solve_ik
 from robot_calib.kinematics.frames import Array
-from robot_calib.measurements import recording_from_arrays
+from robot_calib.measurements import Recording, recording_from_arrays
 from robot_calib.poses import Poses, approach_directions
 from robot_calib.programs.language import Language
 from robot_calib.programs.registry import language_for
@@ -52,14 +52,16 @@ DEVIATIONS = {  # identifiable geometry: offsets and link lengths [rad, m]
 class ProgramWorld:
     world: World
     calibration: Calibration
+    recording: Recording  # what it was calibrated on
     held_out_rms_m: float  # the calibration's rms error on the 200 held-out poses
 
 
 @functools.cache
-def program_world(language: str) -> ProgramWorld:
+def program_world(language: str, robot: str | None = None) -> ProgramWorld:
+    """The world of a language's arm (or of `robot`), calibrated and scored."""
     world = build_world(
         {
-            "robot": ROBOTS[language],
+            "robot": robot or ROBOTS[language],
             "geometry": "nominal",
             "seed": 3,
             "payload": {"mass_kg": 15.0, "com_m": [0.0, 0.0, 0.1]},
@@ -76,7 +78,7 @@ def program_world(language: str) -> ProgramWorld:
         recordings.append(recording_from_arrays(poses.q, points, poses.time, robot=robot))
     calibration = calibrate(recordings[0], robot, MODEL)
     held_out = calibration.score(recordings[1]).accuracy.absolute_rms_mm * 1e-3
-    return ProgramWorld(world, calibration, held_out)
+    return ProgramWorld(world, calibration, recordings[0], held_out)
 
 
 def taught(language: str, folder: Path, n: int = 50, seed: int = 5) -> tuple[TaughtProgram, Path]:

@@ -58,6 +58,9 @@ WRITTEN = ("ok", "position_only", "near_singular")
 NEAR_SINGULAR_M = 0.01
 EVERY = "*"  # the key of a frame given for every target
 TURNS = (-1, 0, 1)  # whole turns tried on axes 1, 4 and 6 to meet a configuration
+#: readings this close to a boundary of the configuration data (a sign, a quadrant) meet
+#: either side [deg]: the rounding of a taught target's numbers moves its solution by ~1e-3
+BOUNDARY_DEG = 0.005
 
 
 @dataclass(frozen=True)
@@ -300,6 +303,17 @@ def _matches(found: tuple[int, ...], wanted: tuple[int, ...]) -> bool:
     return all(w < 0 or f == w for f, w in zip(found, wanted))
 
 
+def _configurations(
+    language: Language, robot: RobotDescription, q: Array
+) -> list[list[tuple[int, ...]]]:
+    """Per row of readings q (n, J) [rad], its configuration and those of q moved by
+    +-BOUNDARY_DEG on every axis (a row at a boundary meets either side)."""
+    assert language.configuration is not None
+    step = np.radians(BOUNDARY_DEG)
+    sides = [language.configuration(robot, q + shift) for shift in (0.0, step, -step)]
+    return [list(row) for row in zip(*sides)]
+
+
 def _check_configuration(
     program: Program,
     language: Language,
@@ -322,11 +336,12 @@ def _check_configuration(
     ]
     if not check:
         return
-    found = language.configuration(robot, q_cal[check])
-    for j, config in zip(check, found):
+    found = _configurations(language, robot, q_cal[check])
+    for j, configs in zip(check, found):
         wanted = program.targets[rows[j]].configuration
         assert wanted is not None
-        if not _matches(config, wanted):
+        if not any(_matches(config, wanted) for config in configs):
+            config = configs[0]
             status[j] = "configuration"
             reason[j] = (
                 f"the calibrated solution needs configuration {config}, the target gives "
@@ -442,10 +457,10 @@ def _meet(
         trial = q[left].copy()
         trial[:, [0, 3, 5]] += shift
         inside = np.all((trial >= limits[:, 0]) & (trial <= limits[:, 1]), axis=1)
-        found = language.configuration(robot, trial)
+        found = _configurations(language, robot, trial)
         for i, j in enumerate(left):
             wanted_j = wanted[j]
-            if inside[i] and wanted_j is not None and _matches(found[i], wanted_j):
+            if inside[i] and wanted_j is not None and any(_matches(c, wanted_j) for c in found[i]):
                 q[j], met[j] = trial[i], True
 
 

@@ -128,7 +128,9 @@ def read(path: Path) -> Program:
         book.use(label, line, target.tool, target.base)
         rest = text[m.end() : text.find("\n", m.end())]
         if re.search(r"\b(Offset|Tool_Offset|INC)\b", rest):
-            book.noted(label, f"moved to with an offset on line {line}")
+            remarks.append(
+                f"{name}:{line}: a motion to {label} with an offset: it gets {label}'s correction"
+            )
     return Program("fanuc_tp", {name: text}, book.targets(), remarks=tuple(remarks))
 
 

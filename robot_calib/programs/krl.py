@@ -192,7 +192,7 @@ def read(path: Path) -> Program:
             if arg.startswith("{"):
                 parts, _ = _components(code, m.start(group) + 1, src, f"{src}:{line}")
                 kind_ = "joints" if any(k in parts for k in AXIS_KEYS) else "pose"
-                name = f"line {line}"
+                name = book.inline_name(line)
                 book.declare(_target(name, kind_, parts, src, line))
             else:
                 name = arg

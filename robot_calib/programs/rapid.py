@@ -114,6 +114,7 @@ def read(path: Path) -> Program:
     book = TargetBook()
     tools: dict[str, Frame] = {}
     bases: dict[str, Frame] = {}
+    remarks: list[str] = []
     for m in _DECL.finditer(code):
         kind, declared = m.group(2).lower(), m.group(3)
         if code[m.end() : m.end() + 1] != "[":
@@ -143,7 +144,7 @@ def read(path: Path) -> Program:
             if argument.startswith("["):
                 start = code.index("[", a)
                 kind = "joints" if m.group(1).lower() == "moveabsj" else "pose"
-                target = f"line {line_of(code, start)}"
+                target = book.inline_name(line_of(code, start))
                 close = _bracket_end(code, start, name)
                 book.declare(_target(target, kind, code, start, close, name))
                 book.use(target, line, tool_key, base_key)
@@ -158,10 +159,15 @@ def read(path: Path) -> Program:
                 used = re.search(r"\(\s*(\w+)", argument)
                 if used and book.known(used.group(1)):
                     book.use(used.group(1), line, tool_key, base_key)
-                    book.noted(
-                        used.group(1), f"used in an expression on line {line} ({argument[:30]})"
+                    remarks.append(
+                        f"{name}:{line}: {argument[:40]} moves relative to {used.group(1)}: it "
+                        f"gets {used.group(1)}'s correction"
                     )
-    return Program("rapid", {name: text}, book.targets(), tools, bases)
+                else:
+                    remarks.append(f"{name}:{line}: {argument[:40]}: not compensated")
+            else:
+                remarks.append(f"{name}:{line}: {m.group(1)} to {argument[:40]}: not compensated")
+    return Program("rapid", {name: text}, book.targets(), tools, bases, tuple(remarks))
 
 
 def pose_to_base(values: Array) -> Array:

@@ -198,6 +198,15 @@ class TargetBook:
             self._declared[key] = target
             self._order.append(key)
 
+    def inline_name(self, line: int) -> str:
+        """A name for a target written inside the motion on `line`: 'line N', then
+        'line N (2)', ... for more on that line (a circular motion's two)."""
+        name, count = f"line {line}", 1
+        while self.known(name):
+            count += 1
+            name = f"line {line} ({count})"
+        return name
+
     def known(self, name: str) -> bool:
         return name.upper() in self._declared
 

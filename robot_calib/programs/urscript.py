@@ -95,7 +95,7 @@ def read(path: Path) -> Program:
                 assert argument is not None  # the pattern matches the empty string
                 if argument.group(2) is not None:
                     start = at + argument.start(2)
-                    key = f"line {line_of(code, start)}"
+                    key = book.inline_name(line_of(code, start))
                     close, pose = at + argument.end(2), bool(argument.group(1))
                     book.declare(_literal(key, pose, code, start, close, name))
                     book.use(key, line, tool, None)
@@ -108,9 +108,8 @@ def read(path: Path) -> Program:
                         )
                     book.use(current[variable], line, tool, None)
                 else:
-                    remarks.append(
-                        f"{name}:{line}: {m.group(1)} to an expression: not compensated"
-                    )
+                    shown = code[at : code.find("\n", at)].strip()[:40]
+                    remarks.append(f"{name}:{line}: {m.group(1)} to {shown}: not compensated")
                     break
                 comma = code.find(",", at + argument.end())
                 at = comma + 1 if comma >= 0 else len(code)
