@@ -25,27 +25,12 @@ from robot_calib.programs.registry import language_for
 from robot_calib.programs.source import Frame, Program
 from robot_calib.sim.measure import measure_every_target
 from robot_calib.sim.plans import plan_times, random_plan
-from robot_calib.sim.programs import TaughtProgram, taught_program
+from robot_calib.sim.programs import TaughtProgram, shop_world, taught_program
 from robot_calib.sim.world import World, build_world
 
 #: the arm each language's test uses
 ROBOTS = {"krl": "kr16_2", "rapid": "irb2600_12_165", "fanuc_tp": "m20ia", "urscript": "ur10"}
 MODEL = "geometric+backlash:2,3+compliance:2,3"
-EFFECTS = [
-    {"name": "backlash", "joints": [2, 3], "values": {"backlash2": 6e-5, "backlash3": 6e-5}},
-    {"name": "compliance", "joints": [2, 3], "values": {"compliance2": 1e-6, "compliance3": 1e-6}},
-]
-DEVIATIONS = {  # identifiable geometry: offsets and link lengths [rad, m]
-    "a1": 8e-5,
-    "a2": -6e-5,
-    "alpha1": 6e-5,
-    "theta2": 1e-4,
-    "theta3": -8e-5,
-    "d4": 6e-5,
-    "theta4": 8e-5,
-    "theta5": -1e-4,
-    "alpha3": 4e-5,
-}
 
 
 @dataclass(frozen=True)
@@ -59,16 +44,7 @@ class ProgramWorld:
 @functools.cache
 def program_world(language: str, robot: str | None = None) -> ProgramWorld:
     """The world of a language's arm (or of `robot`), calibrated and scored."""
-    world = build_world(
-        {
-            "robot": robot or ROBOTS[language],
-            "geometry": "nominal",
-            "seed": 3,
-            "payload": {"mass_kg": 15.0, "com_m": [0.0, 0.0, 0.1]},
-            "effects": EFFECTS,
-            "deviations": DEVIATIONS,
-        }
-    )
+    world = build_world(shop_world(robot or ROBOTS[language]))
     robot = world.model.robot
     rng = np.random.default_rng(2)
     recordings = []

@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 from robot_calib.compensation.solve import (
     BRANCH_SHARES,
     DIRECTION_ROUNDS,
+    NOMINAL_ITERATIONS,
     compensate_commands,
     home_readings,
     nominal_counterpart,
@@ -177,31 +178,37 @@ def compensate_program(
                 )
     new: dict[int, tuple[float, ...]] = {}
     out_rows = {}
+    done = np.array([s in WRITTEN for s in status], dtype=bool)
+    # the nominal model's tool at the compensated and the nominal readings, in one batch
+    safe = np.where(done[:, None], q_cal, q_nom)
+    after = nominal.flange2base(nominal_params, Poses.from_readings(np.nan_to_num(safe))) @ tool
+    before = nominal.flange2base(nominal_params, Poses.from_readings(np.nan_to_num(q_nom)))
+    before = before @ tool
+    written = np.linalg.inv(base) @ after  # Cartesian targets as the program holds them
+    cartesian = np.flatnonzero(done & ~joints)
+    pose_values: dict[int, Array] = {}
+    if cartesian.size:
+        old_values = np.array([program.targets[rows[j]].values for j in cartesian])
+        converted = language.base_to_pose(written[cartesian], old_values)
+        pose_values = dict(zip(cartesian.tolist(), converted))
     for j, k in enumerate(rows):
         target = program.targets[k]
         old = np.asarray(target.values)
-        if status[j] not in WRITTEN:
+        if not done[j]:
             reason[j] = reason[j] or _why(status[j])
             out_rows[k] = TargetRow(
-                target, status[j], target.values, 0.0, 0.0, error[j], reason[j]
+                target, status[j], target.values, 0.0, 0.0, float(error[j]), reason[j]
             )
             continue
-        at = Poses.from_readings(q_cal[j][None])
         if joints[j]:
             values = q_cal[j] / language.joint_unit
-            before = Poses.from_readings(q_nom[j][None])
-            shift = (
-                nominal.flange2base(nominal_params, at)[0] @ tool[j]
-                - nominal.flange2base(nominal_params, before)[0] @ tool[j]
-            )[:3, 3]
-            moved = np.linalg.norm(shift) * 1e3
+            moved = np.linalg.norm(after[j, :3, 3] - before[j, :3, 3]) * 1e3
             turned = np.degrees(np.abs(q_cal[j] - q_nom[j]).max())
         else:
-            pose = np.linalg.inv(base[j]) @ nominal.flange2base(nominal_params, at)[0] @ tool[j]
-            values = language.base_to_pose(pose[None], old[None])[0]
+            values = pose_values[j]
             was = language.pose_to_base(old[None])[0]
-            moved = np.linalg.norm(pose[:3, 3] - was[:3, 3]) * 1e3
-            cos = (np.trace(was[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
+            moved = np.linalg.norm(written[j, :3, 3] - was[:3, 3]) * 1e3
+            cos = (np.trace(was[:3, :3].T @ written[j, :3, :3]) - 1.0) / 2.0
             turned = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
         new[k] = tuple(float(v) for v in values)
         out_rows[k] = TargetRow(
@@ -249,10 +256,11 @@ def _compensated(
     status = ["not_reached"] * n
     keys = [_key(t) for t in tool]
     direction = _directions(q_nom, solved)
+    again = solved.copy()  # rows to solve (again): all, then those whose directions changed
     for _ in range(DIRECTION_ROUNDS + 1):
         commands = Poses(q_nom, direction, np.zeros(n))
         for key in sorted(set(keys)):  # one solve per tool
-            group = np.flatnonzero(np.array([k == key for k in keys]) & solved)
+            group = np.flatnonzero(np.array([k == key for k in keys]) & again)
             if not group.size:
                 continue
             found = compensate_commands(calibration, commands.subset(group), tool[group[0]])
@@ -263,7 +271,8 @@ def _compensated(
                 status[row] = flags[i]
         reached = solved & np.isfinite(q_cal).all(axis=1)
         after = _directions(np.where(reached[:, None], q_cal, q_nom), solved)
-        if np.array_equal(after, direction):
+        again = solved & (after != direction).any(axis=1)
+        if not again.any():
             break
         direction = after
     return q_cal, error, status
@@ -417,7 +426,7 @@ def _nominal_solutions(
             Poses.from_readings(start_q),
             flange_goal[left],
             eye,
-            max_iterations=100,
+            max_iterations=NOMINAL_ITERATIONS,
         )
         trial = q.copy()
         trial[left] = again.q
@@ -450,18 +459,27 @@ def _meet(
         return
     shifts = np.array([(a, b, c) for a in TURNS for b in TURNS for c in TURNS]) * 2 * np.pi
     shifts = shifts[np.argsort(np.abs(shifts).sum(axis=1), kind="stable")]  # no turn first
-    for shift in shifts:
-        left = [j for j in rows if not met[j]]
-        if not left:
-            return
-        trial = q[left].copy()
-        trial[:, [0, 3, 5]] += shift
-        inside = np.all((trial >= limits[:, 0]) & (trial <= limits[:, 1]), axis=1)
-        found = _configurations(language, robot, trial)
-        for i, j in enumerate(left):
-            wanted_j = wanted[j]
-            if inside[i] and wanted_j is not None and any(_matches(c, wanted_j) for c in found[i]):
-                q[j], met[j] = trial[i], True
+    plain = _configurations(language, robot, q[rows])  # most rows meet it as solved
+    for i, j in enumerate(list(rows)):
+        wanted_j = wanted[j]
+        if wanted_j is not None and any(_matches(c, wanted_j) for c in plain[i]):
+            met[j] = bool(np.all((q[j] >= limits[:, 0]) & (q[j] <= limits[:, 1])))
+    rows = [j for j in rows if not met[j]]
+    if not rows:
+        return
+    trial = np.repeat(q[rows][:, None, :], len(shifts), axis=1)  # (m, 27, J)
+    trial[:, :, [0, 3, 5]] += shifts[None]
+    flat = trial.reshape(-1, q.shape[1])
+    inside = np.all((flat >= limits[:, 0]) & (flat <= limits[:, 1]), axis=1)
+    found = _configurations(language, robot, flat)
+    for i, j in enumerate(rows):
+        wanted_j = wanted[j]
+        assert wanted_j is not None
+        for variant in range(len(shifts)):
+            at = i * len(shifts) + variant
+            if inside[at] and any(_matches(c, wanted_j) for c in found[at]):
+                q[j], met[j] = trial[i, variant], True
+                break
 
 
 __all__ = ["ProgramCompensation", "TargetRow", "compensate_program"]

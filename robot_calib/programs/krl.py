@@ -50,7 +50,7 @@ _DATA = re.compile(r"\b(TOOL_DATA|BASE_DATA)\s*\[\s*(\d+)\s*\]\s*=\s*\{", re.IGN
 _FDAT = re.compile(r"\bDECL\s+(?:GLOBAL\s+)?FDAT\s+(\w+)\s*=\s*\{([^}]*)\}", re.IGNORECASE)
 _COMPONENT = re.compile(r"(\w+)\s+('[BH][0-9A-F]+'|" + NUMBER + ")", re.IGNORECASE)
 _MOTION = re.compile(
-    r"\b(S?PTP|S?LIN|S?CIRC)(_REL)?\s+(\{[^}]*\}|\$?\w+)(?:\s*,\s*(\{[^}]*\}|\$?\w+))?",
+    r"\b(S?PTP|S?LIN|S?CIRC)(_REL)?\s+(\{[^}\n]*\}?|\$?\w+)(?:\s*,\s*(\{[^}\n]*\}?|\$?\w+))?",
     re.IGNORECASE,
 )
 _SETTINGS = re.compile(
@@ -73,9 +73,9 @@ def _components(
 ) -> tuple[dict[str, tuple[float, Span]], int]:
     """The components of the aggregate whose `{` ends at `start`: name -> (value, span),
     and the index of its `}`."""
-    end = text.find("}", start)
-    if end < 0:
-        raise InputError(f"{where}: aggregate without its closing '}}'")
+    end, newline = text.find("}", start), text.find("\n", start)
+    if end < 0 or 0 <= newline < end:
+        raise InputError(f"{where}: aggregate without its closing '}}' on its line")
     out = {}
     for m in _COMPONENT.finditer(text, start, end):
         out[m.group(1).upper()] = (

@@ -8,6 +8,8 @@ they were. A parse followed by `rewrite` with no change gives the files back byt
 
 from __future__ import annotations
 
+import bisect
+import functools
 import re
 import warnings
 from dataclasses import dataclass, field, replace
@@ -108,8 +110,14 @@ def read_text(path: str | Path) -> str:
 
 
 def line_of(text: str, index: int) -> int:
-    """The 1-based line of character `index` in `text`."""
-    return text.count("\n", 0, index) + 1
+    """The 1-based line of character `index` in `text` (the newlines' offsets are found
+    once per text: a reader asks for thousands of lines)."""
+    return bisect.bisect_left(_newlines(text), index) + 1
+
+
+@functools.lru_cache(maxsize=8)
+def _newlines(text: str) -> list[int]:
+    return [m.start() for m in re.finditer("\n", text)]
 
 
 def numbers_in(text: str, start: int, end: int, file: str) -> list[tuple[float, Span]]:
@@ -128,7 +136,9 @@ def decimals(text: str) -> int:
 
 def formatted(value: float, old: str, at_least: int) -> str:
     """`value` written with the decimals of the number it replaces (`old`), at least
-    `at_least` of them; '-0.000' is written '0.000'."""
+    `at_least` of them ('-0.000' as '0.000'); `old` itself where it reads as `value`."""
+    if float(old) == value:
+        return old
     places = max(decimals(old), at_least)
     out = f"{value:.{places}f}"
     if float(out) == 0.0:
@@ -189,14 +199,13 @@ class TargetBook:
     cannot serve both)."""
 
     def __init__(self) -> None:
-        self._declared: dict[str, Target] = {}
-        self._order: list[str] = []
+        self._declared: dict[str, Target] = {}  # in the order declared
+        self._used: list[str] = []  # in the order first moved to
 
     def declare(self, target: Target) -> None:
         key = target.name.upper()
         if key not in self._declared:
             self._declared[key] = target
-            self._order.append(key)
 
     def inline_name(self, line: int) -> str:
         """A name for a target written inside the motion on `line`: 'line N', then
@@ -233,8 +242,7 @@ class TargetBook:
             note=note,
         )
         if first:  # program order: first use
-            self._order.remove(key)
-            self._order.insert(sum(bool(self._declared[k].used) for k in self._order), key)
+            self._used.append(key)
 
     def noted(self, name: str, note: str) -> None:
         """Mark the declared target `name` as not compensable (`note` says why)."""
@@ -244,7 +252,8 @@ class TargetBook:
 
     def targets(self) -> tuple[Target, ...]:
         """Used targets in the order first moved to, then those never moved to."""
-        return tuple(self._declared[k] for k in self._order)
+        unused = [k for k, t in self._declared.items() if not t.used]
+        return tuple(self._declared[k] for k in (*self._used, *unused))
 
 
 def euler_to_base(values: Array, order: str, unit_m: float) -> Array:

@@ -14,6 +14,7 @@ what each target means (the tool's pose in the robot base).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -25,6 +26,39 @@ from robot_calib.programs.language import Language
 STEP_DEG = 12.0  # largest step of an axis between consecutive taught targets
 CLEAR_M = 0.04  # `singular_margin` at least: clear of the singularities
 MARGIN = 0.1  # share of each axis range kept clear at both ends
+
+
+#: the shop-floor world the programs run in: the true arm's geometry off the nominal by
+#: tenths of a millimetre and milliradian (identifiable offsets and lengths [rad, m]), with
+#: joint 2-3 backlash and gravity compliance under a 15 kg tool
+SHOP_EFFECTS = (
+    {"name": "backlash", "joints": [2, 3], "values": {"backlash2": 6e-5, "backlash3": 6e-5}},
+    {"name": "compliance", "joints": [2, 3], "values": {"compliance2": 1e-6, "compliance3": 1e-6}},
+)
+SHOP_DEVIATIONS = {
+    "a1": 8e-5,
+    "a2": -6e-5,
+    "alpha1": 6e-5,
+    "theta2": 1e-4,
+    "theta3": -8e-5,
+    "d4": 6e-5,
+    "theta4": 8e-5,
+    "theta5": -1e-4,
+    "alpha3": 4e-5,
+}
+
+
+def shop_world(robot: str) -> dict[str, Any]:
+    """The world-file mapping of `robot` on the shop floor (SHOP_EFFECTS, SHOP_DEVIATIONS,
+    a 15 kg payload 0.1 m out of the flange); `sim.world.build_world` builds it."""
+    return {
+        "robot": robot,
+        "geometry": "nominal",
+        "seed": 3,
+        "payload": {"mass_kg": 15.0, "com_m": [0.0, 0.0, 0.1]},
+        "effects": [dict(effect) for effect in SHOP_EFFECTS],
+        "deviations": dict(SHOP_DEVIATIONS),
+    }
 
 
 @dataclass(frozen=True)

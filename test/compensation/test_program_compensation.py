@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from program_world import drive, frame_options, program_world, taught
+
 from robot_calib.compensation.program import compensate_program
 from robot_calib.programs.registry import language_for
 
@@ -89,7 +89,7 @@ def test_a_target_on_a_configuration_boundary_is_left_and_marked(tmp_path: Path)
     s, t = language.configuration(robot, q)[0]  # type: ignore[misc]
     numbers = ",".join(f"{k} {v:.6f}" for k, v in zip("XYZABC", values))
     (tmp_path / "edge.src").write_text(
-        f"DEF edge()\nPTP {{A1 10,A2 -80,A3 100,A4 0,A5 40,A6 30}}\nPTP P1\nEND\n"
+        "DEF edge()\nPTP {A1 10,A2 -80,A3 100,A4 0,A5 40,A6 30}\nPTP P1\nEND\n"
     )
     (tmp_path / "edge.dat").write_text(
         f"DEFDAT edge\nDECL E6POS P1={{{numbers},S {s},T {t}}}\nENDDAT\n"

@@ -1,0 +1,206 @@
+"""The robot-program languages: vendor conventions as known answers, byte-identical round
+trips of programs in each language's documented syntax, and bad programs."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robot_calib.errors import InputError
+from robot_calib.kinematics.loader import load_robot
+from robot_calib.programs.registry import language_for
+from robot_calib.programs.source import rewrite
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "docs" / "examples" / "programs"
+MAIN = {
+    "krl": "pick_place.src",
+    "rapid": "pick_place.mod",
+    "fanuc_tp": "pick_place.ls",
+    "urscript": "pick_place.script",
+}
+
+
+def _flange(robot: str, degrees: list[float]) -> np.ndarray:
+    return load_robot(robot).nominal_frames(np.radians([degrees]))[:, -1]
+
+
+# Each vendor's pose at a pose its documentation draws, from the published dimensions
+# (the description's comment names them): KUKA's home {A1 0, A2 -90, A3 90, A4 0, A5 0,
+# A6 0}, ABB's calibration position (all axes 0), FANUC's J5 = -90 (the faceplate down),
+# Universal Robots' upright pose (shoulder and wrist 1 at -90 deg).
+KNOWN = [
+    ("krl", "kr16_2", [0, -90, 90, 0, 0, 0], [1088.0, 0.0, 1320.0, 0.0, 90.0, 0.0], (2, 2)),
+    (
+        "rapid",
+        "irb2600_12_165",
+        [0, 0, 0, 0, 0, 0],
+        [1030.0, 0.0, 1260.0, np.sqrt(0.5), 0.0, np.sqrt(0.5), 0.0],
+        (0, 0, 0, 0),
+    ),
+    (
+        "fanuc_tp",
+        "m20ia",
+        [0, 0, 0, 0, -90, 0],
+        [985.0, 0.0, 940.0, 180.0, 0.0, 0.0],
+        (0, 1, 1, 0, 0, 0),
+    ),
+    (
+        "urscript",
+        "ur10",
+        [0, -90, 0, -90, 0, 0],
+        [0.0, -0.2561, 1.4273, 0.0, np.pi / np.sqrt(2), -np.pi / np.sqrt(2)],
+        None,
+    ),
+]
+
+
+@pytest.mark.parametrize(("name", "robot", "degrees", "expected", "config"), KNOWN)
+def test_vendor_pose_of_a_documented_pose(
+    name: str, robot: str, degrees: list[float], expected: list[float], config: object
+) -> None:
+    language = language_for("x", name)
+    old = np.array([expected])
+    values = language.base_to_pose(_flange(robot, degrees), old)[0]
+    tolerance = np.array([1e-3] * 3 + [1e-6] * (len(expected) - 3))  # mm (UR m), deg/1
+    if name in ("krl", "fanuc_tp"):
+        tolerance[3:] = 1e-6
+        values[3:] = (values[3:] - old[0, 3:] + 180.0) % 360.0 - 180.0 + old[0, 3:]
+    np.testing.assert_allclose(values, expected, atol=float(tolerance.max()) * 10)
+    if config is not None:
+        assert language.configuration is not None
+        assert language.configuration(load_robot(robot), np.radians([degrees]))[0] == config
+
+
+def test_euler_and_quaternion_rules() -> None:
+    """KUKA A, B, C turn about z, the new y, the newest x; FANUC W, P, R about the fixed
+    x, y, z; ABB's quaternion is [w, x, y, z]; URScript's a rotation vector."""
+    krl, fanuc = language_for("x", "krl"), language_for("x", "fanuc_tp")
+    rapid, ur = language_for("x", "rapid"), language_for("x", "urscript")
+    a90 = krl.pose_to_base(np.array([[0, 0, 0, 90.0, 0, 0]]))[0, :3, :3]
+    np.testing.assert_allclose(a90 @ [1, 0, 0], [0, 1, 0], atol=1e-12)  # x turned onto y
+    b90 = krl.pose_to_base(np.array([[0, 0, 0, 0, 90.0, 0]]))[0, :3, :3]
+    np.testing.assert_allclose(b90 @ [0, 0, 1], [1, 0, 0], atol=1e-12)  # z forward
+    both = krl.pose_to_base(np.array([[0, 0, 0, 90.0, 90.0, 0]]))[0, :3, :3]
+    np.testing.assert_allclose(both, a90 @ b90, atol=1e-12)  # B about the turned y
+    wpr = fanuc.pose_to_base(np.array([[0, 0, 0, 90.0, 90.0, 0]]))[0, :3, :3]
+    w90 = fanuc.pose_to_base(np.array([[0, 0, 0, 90.0, 0, 0]]))[0, :3, :3]
+    np.testing.assert_allclose(wpr, b90 @ w90, atol=1e-12)  # P about the fixed y, after W
+    down = rapid.pose_to_base(np.array([[0, 0, 0, 0, 0, 1.0, 0]]))[0, :3, :3]  # [w x y z]
+    np.testing.assert_allclose(down @ [0, 0, 1], [0, 0, -1], atol=1e-12)
+    np.testing.assert_allclose(
+        ur.pose_to_base(np.array([[0, 0, 0, 0, np.pi, 0]]))[0, :3, :3], down, atol=1e-12
+    )
+    assert krl.pose_to_base(np.array([[1000.0, 0, 0, 0, 0, 0]]))[0, 0, 3] == pytest.approx(1.0)
+    assert ur.pose_to_base(np.array([[1.0, 0, 0, 0, 0, 0]]))[0, 0, 3] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("name", sorted(MAIN))
+def test_round_trip_is_byte_identical(name: str, tmp_path: Path) -> None:
+    language = language_for("x", name)
+    for path in EXAMPLES.glob("pick_place.*"):
+        shutil.copy(path, tmp_path)
+    program = language.read(tmp_path / MAIN[name])
+    assert program.targets and all(t.used for t in program.targets)
+    for file, text in program.texts.items():
+        assert text.encode() == (tmp_path / file).read_bytes()
+    same = {k: t.values for k, t in enumerate(program.targets)}  # written again as read
+    places = {k: tuple(0 for _ in t.values) for k, t in enumerate(program.targets)}
+    again = rewrite(program, same, places)
+    for file, text in again.items():
+        original = (tmp_path / file).read_bytes()
+        if name == "rapid" or name == "krl":
+            assert b"\r\n" in original  # the controllers' own line ends
+        assert text.encode() == original
+
+
+def test_rewrite_keeps_crlf_and_comments(tmp_path: Path) -> None:
+    language = language_for("x", "rapid")
+    text = (
+        "MODULE m ! a comment with [1,2,3] in it\r\n"
+        "  CONST jointtarget j1:=[[1,2,3,4,5,6],[9E9,9E9,9E9,9E9,9E9,9E9]]; ! MoveL j2\r\n"
+        "  PROC main()\r\n    MoveAbsJ j1, v100, fine, tool0;\r\n  ENDPROC\r\nENDMODULE\r\n"
+    )
+    (tmp_path / "m.mod").write_bytes(text.encode())
+    program = language.read(tmp_path / "m.mod")
+    (target,) = program.targets
+    out = rewrite(program, {0: (1.5, 2, 3, 4, 5, 6)}, {0: (3,) * 6})["m.mod"]
+    assert out == text.replace("[[1,2,3,4,5,6]", "[[1.500,2,3,4,5,6]")  # the rest as it was
+
+
+def _ls(position: str) -> str:
+    """A FANUC .ls moving to P[1] with the /POS body `position` (P[1] on line 5)."""
+    return f"/PROG P\n/MN\n 1:J P[1] 100% FINE ;\n/POS\nP[1]{{\n GP1:\n{position}\n}};\n/END\n"
+
+
+def _mod(body: str) -> str:
+    return f"MODULE m\n{body}\nENDMODULE\n"
+
+
+XYZ = " X = 1 mm, Y = 2 mm, Z = 3 mm,\n W = 0 deg, P = 0 deg"
+MOVE_P1 = " PROC main()\n  MoveL p1, v100, fine, tool0;\n ENDPROC"
+BAD = [
+    (
+        "krl",
+        {"p.src": "DEF p()\nPTP XP9\nEND\n", "p.dat": "DEFDAT p\nENDDAT\n"},
+        "p.src:2: PTP to XP9: no such position declared",
+    ),
+    ("krl", {"p.src": "DEF p()\nPTP {A1 0,A2 -90\nEND\n"}, "p.src:2: aggregate without"),
+    ("rapid", {"m.mod": _mod(MOVE_P1)}, "m.mod:3: MoveL to p1: no robtarget or jointtarget"),
+    (
+        "rapid",
+        {"m.mod": _mod(" CONST robtarget p1:=[[1,2,3],[1,0,0,0]];")},
+        "m.mod:2: p1: robtarget with 7 numbers, expected at least 11",
+    ),
+    (
+        "rapid",
+        {"m.mod": _mod(" CONST robtarget p1:=[[1,2,3],[1,0,0,0],[0,0,0,0];")},
+        "m.mod:2: '[' without its closing ']'",
+    ),
+    (
+        "fanuc_tp",
+        {"p.ls": "/PROG P\n/MN\n 1:J P[2] 100% FINE ;\n/POS\n/END\n"},
+        "p.ls:3: a motion to P[2]: not in the /POS section",
+    ),
+    ("fanuc_tp", {"p.ls": _ls(" UF : 0, UT : 0,\n" + XYZ)}, "p.ls:5: P[1] lacks R"),
+    (
+        "fanuc_tp",
+        {"p.ls": _ls(" UF : 0, UT : 0, CONFIG : 'Q U T, 0, 0, 0',\n" + XYZ + ", R = 0 deg")},
+        "CONFIG 'Q U T, 0, 0, 0': expected",
+    ),
+    (
+        "urscript",
+        {"s.script": "def s():\n  movel(target, a=1)\nend\n"},
+        "s.script:2: movel to target: not assigned",
+    ),
+    (
+        "urscript",
+        {"s.script": "def s():\n  movel(p[0.1, 0.2, 0.3], a=1)\nend\n"},
+        "s.script:2: line 2: p[...] with 3 numbers, expected 6",
+    ),
+]
+
+
+@pytest.mark.parametrize(("name", "files", "message"), BAD)
+def test_bad_programs_name_file_and_line(
+    name: str, files: dict[str, str], message: str, tmp_path: Path
+) -> None:
+    for file, text in files.items():
+        (tmp_path / file).write_text(text)
+    language = language_for("x", name)
+    main = next(f for f in files if Path(f).suffix in language.suffixes)
+    with pytest.raises(InputError, match=None) as raised:
+        language.read(tmp_path / main)
+    assert message in str(raised.value)
+    assert "\n" not in str(raised.value)
+
+
+def test_language_from_suffix_and_unknown_suffix() -> None:
+    assert language_for("a/b/PROG.SRC").name == "krl"
+    assert language_for("x.modx").name == "rapid"
+    with pytest.raises(InputError, match=r"prog\.txt: no robot-program language reads \.txt"):
+        language_for("prog.txt")
+    with pytest.raises(InputError, match="`language='cobol'`"):
+        language_for("x.src", "cobol")
