@@ -59,6 +59,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     named = argv[0] if argv and argv[0] in VERB_NAMES else None  # only its options built
     parser = build_parser(named)
     args = parser.parse_args(argv)
+    args.argv = argv  # the exact command, for the reports' header
     learn(parser, args.command)  # the core's messages name keywords: printed as its flags
     signal.signal(signal.SIGTERM, _interrupt)
     if signal.getsignal(signal.SIGHUP) is signal.SIG_DFL:  # not under nohup (ignored)

@@ -20,6 +20,7 @@ from robot_calib.kinematics.loader import load_robot
 
 if TYPE_CHECKING:
     from robot_calib.diagnosis.diagnosis import Diagnosis
+    from robot_calib.diagnosis.header import HeaderFields
     from robot_calib.identify.calibration import Calibration
 
 
@@ -155,3 +156,14 @@ def print_diagnosis(diagnosis: Diagnosis, output: Path, report: Path, seconds: f
             print(warning if warning.startswith(("warning", "note")) else f"warning: {warning}")
     print(f"{output}, {report} in {seconds:.1f} s")
     print(f"HTML report (self-contained, open in a browser): {html_report_path(output)}")
+
+
+def header_fields(args: argparse.Namespace) -> HeaderFields:
+    """The report header's fields of a verb's args (--serial, --operator, --instrument) and
+    the exact command (as a shell would take it back)."""
+    import shlex
+
+    from robot_calib.diagnosis.header import HeaderFields
+
+    command = shlex.join(["robot-calib", *getattr(args, "argv", sys.argv[1:])])
+    return HeaderFields(args.serial, args.operator, args.instrument, command)

@@ -10,13 +10,14 @@ import math
 import time
 from typing import TYPE_CHECKING
 
-from robot_calib.cli.common import log, print_diagnosis, robot_files, robot_of
+from robot_calib.cli.common import header_fields, log, print_diagnosis, robot_files, robot_of
 from robot_calib.cli.options import (
     add_force,
     add_joint_names,
     add_output,
     add_pair_tolerance,
     add_payload,
+    add_report_header,
 )
 from robot_calib.errors import ImplausibleError, InputError
 
@@ -48,10 +49,12 @@ def add_arguments(diag: argparse.ArgumentParser) -> None:
         "when the data have no repeat poses or circle sweeps (default: none; then the floor "
         "is unknown and said so)",
     )
+    add_report_header(diag)
     add_output(
         diag,
         "DIAGNOSIS.json to write; the reports go beside it as <name>.md (+ "
-        "<name>_*.png) and <name>.html (self-contained), so -o may not end in .md or .html",
+        "<name>_*.png), <name>.html (self-contained) and with --pdf <name>.pdf, so -o may "
+        "not end in .md, .html or .pdf",
     )
     add_force(diag)
 
@@ -75,12 +78,14 @@ def main(args: argparse.Namespace) -> int:
 
 def _diagnose(args: argparse.Namespace, robot: RobotDescription, reading: ReadAside) -> int:
     from robot_calib.atomic import output_path, refuse_input
+    from robot_calib.diagnosis.header import report_header
     from robot_calib.diagnosis.report import plot_paths
     from robot_calib.flows.diagnose import (
         FiguresWhenClimbed,
         best_params_path,
         diagnose_read,
         html_report_path,
+        pdf_report_path,
         report_path,
         started_figures,
         write_diagnosis,
@@ -90,6 +95,11 @@ def _diagnose(args: argparse.Namespace, robot: RobotDescription, reading: ReadAs
     output = output_path(args.output, "DIAGNOSIS.json", inputs, args.force)
     report = output_path(report_path(output), "the report", inputs, args.force)
     output_path(html_report_path(output), "the HTML report", inputs, args.force)
+    if args.pdf:
+        from robot_calib.diagnosis.pdf import browser
+
+        browser()  # no Chromium: said before any work
+        output_path(pdf_report_path(output), "the PDF report", inputs, args.force)
     for figure in plot_paths(report.with_suffix("")):  # written with --force: never an input
         refuse_input(figure, inputs)
     best = output_path(
@@ -107,7 +117,15 @@ def _diagnose(args: argparse.Namespace, robot: RobotDescription, reading: ReadAs
             read, robot, log, None if accuracy is None else accuracy * 1e-3, on_ladder=early
         )
         compared, warnings = early.before_after(ladder)
-        diagnosis = dataclasses.replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
+        header = report_header(
+            robot.name,
+            [recording, *([ladder.holdout] if ladder.holdout is not None else [])],
+            header_fields(args),
+            None if accuracy is None else accuracy * 1e-3,
+        )
+        diagnosis = dataclasses.replace(
+            diagnosis, warnings=[*diagnosis.warnings, *warnings], header=header
+        )
         report = write_diagnosis(
             diagnosis,
             ladder,
@@ -117,6 +135,7 @@ def _diagnose(args: argparse.Namespace, robot: RobotDescription, reading: ReadAs
             warnings=warnings,
             compared=compared,
             figures=figures,
+            pdf=args.pdf,
         )
     print_diagnosis(diagnosis, output, report, time.perf_counter() - started)
     for warning in warnings:

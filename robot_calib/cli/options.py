@@ -254,3 +254,24 @@ def add_payload(p: argparse.ArgumentParser) -> None:
         "in the flange frame [m] (default: none), e.g. 3:0,0,0.08; gravity compliance then "
         "includes it; PARAMS.json keeps it",
     )
+
+
+def add_report_header(p: argparse.ArgumentParser) -> None:
+    """The report's header (`diagnosis.header.ReportHeader`) and its PDF."""
+    p.add_argument(
+        "--serial", help="the robot's serial number, for the report's header (default: not given)"
+    )
+    p.add_argument(
+        "--operator", help="who ran the campaign, for the report's header (default: not given)"
+    )
+    p.add_argument(
+        "--instrument",
+        help="the measuring instrument, e.g. 'Leica AT960-MR #123', for the report's header "
+        "(default: not given)",
+    )
+    p.add_argument(
+        "--pdf",
+        action="store_true",
+        help="also print the HTML report to <name>.pdf with a headless Chromium (Debian: "
+        "apt-get install chromium; default: no PDF)",
+    )

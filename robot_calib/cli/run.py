@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_calib.cli.common import log, print_diagnosis, progress
-from robot_calib.cli.options import count, positive
+from robot_calib.cli.common import header_fields, log, print_diagnosis, progress
+from robot_calib.cli.options import add_report_header, count, positive
 from robot_calib.errors import ImplausibleError, InputError
 from robot_calib.flows import RUN_HOLDOUT_POSES, RUN_PLAN
 from robot_calib.kinematics.description import RobotDescription
@@ -50,6 +50,7 @@ def add_arguments(run: argparse.ArgumentParser) -> None:
         default=RUN_HOLDOUT_POSES,
         help=f"random hold-out poses ({RUN_HOLDOUT_POSES})",
     )
+    add_report_header(run)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -66,6 +67,10 @@ def main(args: argparse.Namespace) -> int:
     robot = load_robot(args.robot)
     check_plan(args.plan, robot)  # a bad plan: its error before any output
     check_run_folder(Path(args.output))
+    if args.pdf:
+        from robot_calib.diagnosis.pdf import browser
+
+        browser()  # no Chromium: said before any work
     print(robot_table(robot))
     started = time.perf_counter()
     with using(FORKED):  # the diagnosis's independent work on the other core
@@ -80,6 +85,8 @@ def main(args: argparse.Namespace) -> int:
             log=log,
             progress=progress(),
             record=simulate_bag,  # the simulated graph in-process
+            header=header_fields(args),
+            pdf=args.pdf,
         )
     geometric = result.models["geometric"].calibration
     text = summary(geometric, result.recording)

@@ -18,6 +18,7 @@ import numpy as np
 from robot_calib.accuracy import NO_PAIR
 from robot_calib.diagnosis.concentration import Region, Stretch, regions, stretches
 from robot_calib.diagnosis.frequency import MAX_SCAN_ORDER, alias_warnings
+from robot_calib.diagnosis.header import ReportHeader
 from robot_calib.diagnosis.iso9283 import Iso9283, iso9283, repeat_groups
 from robot_calib.diagnosis.ladder import (
     AT_FLOOR,
@@ -254,6 +255,9 @@ class Diagnosis(Record):
     # the per-joint signature families of `where` (geometric's residuals) the chosen model
     # has an effect for: what it removed (the reports say so in those rows); empty: none
     removed_by_best_model: list[RemovedSignature] = field(default_factory=list)
+    # what a quality system files the report under: date, robot and serial, instrument,
+    # operator, temperatures, software, command (None: a diagnosis not written as a report)
+    header: ReportHeader | None = None
     format: str = FORMAT
 
     def to_dict(self) -> dict[str, Any]:

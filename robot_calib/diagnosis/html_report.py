@@ -143,6 +143,9 @@ pre{background:#1d2733;color:#e8eef5;padding:10px 14px;border-radius:4px;overflo
 code{font-family:"DejaVu Sans Mono",monospace;font-size:13px}
 ul.tight li{margin:2px 0}.muted{color:#7a8794}
 td>.note{display:block;text-align:left;color:#2e6b45;min-width:160px}
+table.header td{text-align:left;overflow-wrap:anywhere}table.header th{text-align:left}
+@media print{body{background:#fff}main{max-width:none;padding:0}section{break-inside:auto}
+ figure,table{break-inside:avoid}}
 """
     + MODEL_CSS
 )
@@ -731,6 +734,17 @@ def _problems(diagnosis: Diagnosis, warnings: Sequence[str]) -> str:
     return "".join(out)
 
 
+def _header(diagnosis: Diagnosis) -> str:
+    """The report's header (`ReportHeader`) as a table, '' without one."""
+    if diagnosis.header is None:
+        return ""
+    rows = "".join(
+        f"<tr><th>{_e(label)}</th><td>{_e(text)}</td></tr>"
+        for label, text in diagnosis.header.rows()
+    )
+    return f"<table class='header'>{rows}</table>"
+
+
 def html_report(
     diagnosis: Diagnosis,
     ladder: Ladder,
@@ -793,6 +807,7 @@ def html_report(
         f"{_e(best.model.robot.name)}; recordings {_e(', '.join(diagnosis.recordings))}; "
         f"scored on {_e(diagnosis.scored_on)}{_e(held)}. Units: positions and errors in mm, "
         "angles in deg, scale errors in ppm.</p>"
+        + _header(diagnosis)
         + _verdict(diagnosis, compared, best, best_params, every)
         + f"<p class='sub'>{nav}</p>"
         + body

@@ -403,6 +403,11 @@ def write_report(
     lines = [
         "# Sim-to-real gap diagnosis" + (" — IMPLAUSIBLE" if diagnosis.implausible else ""),
         "",
+        *(
+            [*(f"- **{label}**: {text}" for label, text in diagnosis.header.rows()), ""]
+            if diagnosis.header is not None
+            else []
+        ),
         f"Recordings: {', '.join(diagnosis.recordings)}; scored on {diagnosis.scored_on}"
         + (f" ({', '.join(diagnosis.holdout)})" if diagnosis.holdout else "")
         + ".",

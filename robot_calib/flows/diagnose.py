@@ -310,10 +310,11 @@ def write_diagnosis(
     warnings: Sequence[str] = (),
     compared: list[ModelErrors] | None = None,
     figures: FigureCache | None = None,
+    pdf: bool = False,
 ) -> Path:
     """Write DIAGNOSIS.json at `output`, the Markdown report (+ plots) and the HTML report
-    beside it, and (without `best`) the ladder's chosen rung as `best_params_path(output)`,
-    all together
+    beside it (with `pdf`, also that page printed, `pdf_report_path(output)`), and (without
+    `best`) the ladder's chosen rung as `best_params_path(output)`, all together
     (staged, then moved in; an existing file is replaced only with `force`).
     `calibrations`: nominal / cpa models already identified from `recording` (else the HTML
     report identifies them); `best`: the model the HTML report recommends and the PARAMS.json
@@ -370,6 +371,10 @@ def write_diagnosis(
                 recommended,
                 warnings,
             )
+            if pdf:
+                from robot_calib.diagnosis.pdf import print_pdf
+
+                print_pdf(stage / page.name, stage / pdf_report_path(output).name)
         except BaseException:
             figures.close(abort=True)  # an error or Ctrl-C here: the children go at once
             raise
@@ -393,6 +398,18 @@ def write_diagnosis(
             if stale.name not in written:
                 stale.unlink(missing_ok=True)
     return report
+
+
+def pdf_report_path(output: str | Path) -> Path:
+    """The PDF report beside DIAGNOSIS.json `output`: the HTML report's name, .pdf
+    (`output` itself may not end in '.pdf')."""
+    if Path(output).suffix.lower() == ".pdf":
+        raise InputError(
+            f"{param('output', str(output))}: names DIAGNOSIS.json, and its PDF report goes "
+            f"beside it as <name>.pdf; give e.g. "
+            f"{param('output', str(Path(output).with_suffix('.json')))}"
+        )
+    return html_report_path(output).with_suffix(".pdf")
 
 
 def check_loads(path: Path, name: Path, cal: Calibration, recording: Recording) -> None:

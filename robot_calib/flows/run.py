@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from robot_calib.diagnosis.header import HeaderFields, report_header
 from robot_calib.errors import InputError, param
 from robot_calib.flows import (
     DEFAULT_ROBOT,
@@ -94,12 +95,15 @@ def run(
     progress: Progress | None = None,
     *,
     record: Recorder,
+    header: HeaderFields | None = None,
+    pdf: bool = False,
 ) -> RunResult:
     """The main job: simulate + record a calibration bag (`plan`, `effects`; default the
     main job's joint-4 backlash) and `n_holdout` random hold-out poses in the same world
     (`record`: the simulated graph, as `simulate`'s), calibrate RUN_MODELS, score each on
     the hold-out poses, diagnose. Writes a new folder `run-<time>` under `output_dir`; `say`
-    gets one line per step.
+    gets one line per step. `header`: the report header's fields (default: none given,
+    the instrument the simulated tracker); `pdf`: also print the HTML report to PDF.
 
     Returns
     -------
@@ -172,6 +176,8 @@ def run(
                 log_final,
                 progress,
                 record,
+                header or HeaderFields(),
+                pdf,
             )
             _name_final_paths(folder, final)
             os.rename(folder, final)  # onto the empty reserved folder
@@ -263,6 +269,8 @@ def _run_in(
     log: Log | None,
     progress: Callable[[str, int, int], None] | None,
     record: Recorder,
+    header: HeaderFields,
+    pdf: bool,
 ) -> RunResult:
     """`run`'s work, written into `folder` (renamed to `final` by `run` when complete;
     messages name the final paths)."""
@@ -300,7 +308,13 @@ def _run_in(
         early = FiguresWhenClimbed(figures, calibrations)  # drawn while written up
         diagnosis, ladder = diagnose_recordings(recording, description, held, log, on_ladder=early)
         best, warnings = _best_model(models, ladder)
-        diagnosis = replace(diagnosis, warnings=[*diagnosis.warnings, *warnings])
+        fields = replace(header, instrument=header.instrument or "simulated laser tracker")
+        stated = world.noise.tracker_sigma_m  # what the simulated tracker is built with
+        diagnosis = replace(
+            diagnosis,
+            warnings=[*diagnosis.warnings, *warnings],
+            header=report_header(description.name, [recording, held], fields, stated),
+        )
         report = write_diagnosis(
             diagnosis,
             ladder,
@@ -311,6 +325,7 @@ def _run_in(
             warnings=warnings,
             compared=early.before_after(ladder)[0],
             figures=figures,
+            pdf=pdf,
         )
     scores = {n: m.holdout.absolute_rms_mm for n, m in models.items()}
     scores.update({r.model: r.heldout.absolute_rms_mm for r in ladder.rungs})
