@@ -41,6 +41,7 @@ from robot_calib.diagnosis.signatures import (
 from robot_calib.effects.compliance import gravity_torques
 from robot_calib.errors import InputError
 from robot_calib.identify.calibrate import calibrate
+from robot_calib.identify.fit import orientation_residuals
 from robot_calib.identify.model_spec import ModelSpec
 from robot_calib.identify.outliers import Outlier
 from robot_calib.identify.plausibility import degrees_reason
@@ -744,7 +745,8 @@ def _iso9283(ladder: Ladder, recording: Recording, robot: RobotDescription) -> l
     best = ladder.rungs[-1]
     out = []
     for name, cal in (("nominal", nominal), (best.model, best.calibration)):
-        figures = iso9283(scored, cal.predict(scored.poses), name, where, groups)
+        turned = orientation_residuals(cal.model, cal.parameters, scored.poses)
+        figures = iso9283(scored, cal.predict(scored.poses), name, where, groups, turned)
         if figures is not None:
             out.append(figures)
     return out

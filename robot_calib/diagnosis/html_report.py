@@ -666,14 +666,34 @@ def _iso(diagnosis: Diagnosis) -> str:
             "ISO 9283 figures. The <code>iso9283</code> plan records them.</p>"
         )
     figures = diagnosis.iso9283
+    oriented = figures[0].rp_orientation_max_deg is not None
     rows = [
-        [_model(f.model), len(f.poses), f"{f.ap_max_mm:.4f}", f"{f.rp_max_mm:.4f}"]
+        [
+            _model(f.model),
+            len(f.poses),
+            f"{f.ap_max_mm:.4f}",
+            f"{f.rp_max_mm:.4f}",
+            *(
+                [
+                    f"{f.ap_orientation_max_deg or 0.0:.4f}",
+                    f"{f.rp_orientation_max_deg or 0.0:.4f}",
+                ]
+                if oriented
+                else []
+            ),
+        ]
         for f in figures
     ]
+    header = ["model", "repeated poses", "AP max [mm]", "RP max [mm]"]
+    if oriented:
+        header += ["AP a/b/c max [deg]", "RP a/b/c max [deg]"]
+    what = (
+        "positions and orientations (ISO 9283 a, b, c: about x, y, z)" if oriented else "positions"
+    )
     out = [
-        f"<p>Pose accuracy AP and repeatability RP (positions), {_e(figures[0].scored_on)}, "
+        f"<p>Pose accuracy AP and repeatability RP ({what}), {_e(figures[0].scored_on)}, "
         "before (nominal) and after calibration.</p>",
-        _table(["model", "repeated poses", "AP max [mm]", "RP max [mm]"], rows),
+        _table(header, rows),
     ]
     out.append(_table(*iso_pose_table(figures)))
     return "".join(out)

@@ -1,6 +1,7 @@
-"""ISO 9283 pose accuracy (AP) and pose repeatability (RP), positions only, from repeat
-poses: the robot commanded to the same readings several times (the `iso9283` plan's cube
-points P1..P5 over its cycles, or any pose a recording revisits).
+"""ISO 9283 pose accuracy (AP) and pose repeatability (RP), of positions and, where a
+6-DoF probe measured them, of orientations, from repeat poses: the robot commanded to the
+same readings several times (the `iso9283` plan's cube points P1..P5 over its cycles, or
+any pose a recording revisits).
 
 For a pose j measured n times at points x_i (tracker frame) and the position x_c a model
 says the robot is at (the "command" of ISO 9283: the nominal model before calibration, the
@@ -9,6 +10,12 @@ calibrated one after):
   RP_j = mean(l_i) + 3 S_l, l_i = |x_i - mean(x_i)|, S_l their sample standard deviation
 RP does not depend on the model: it is the robot's (and the tracker's) repeatability; AP
 is where calibration shows.
+
+Orientation (ISO 9283 7.2.2 and 7.2.3, its a, b, c about the x, y, z axes): with e_i the
+rotation vector of the model's orientation against the measured one (small angles: its
+components are the deviations about x, y, z of the tracker frame),
+  AP_a = |mean(e_a)|,  RP_a = 3 S_a  (S_a the sample standard deviation of e_a),
+and the same for b and c, in degrees.
 """
 
 from __future__ import annotations
@@ -27,13 +34,16 @@ MIN_REPEATS = 3  # measurements of one pose for its figures (ISO 9283 asks for 3
 
 @dataclass(frozen=True)
 class PoseFigures(Record):
-    """One repeated pose: its measurements `n`, AP and RP [mm], and its first measurement's
-    index in the recording scored (0-based)."""
+    """One repeated pose: its measurements `n`, AP and RP [mm], its first measurement's
+    index in the recording scored (0-based), and where its orientation was measured at
+    least MIN_REPEATS times, AP_a, AP_b, AP_c and RP_a, RP_b, RP_c [deg] (None: not)."""
 
     first_index: int
     n: int
     ap_mm: float
     rp_mm: float
+    ap_abc_deg: tuple[float, float, float] | None = None
+    rp_abc_deg: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -45,11 +55,20 @@ class Iso9283(Record):
     poses: list[PoseFigures]
     ap_max_mm: float
     rp_max_mm: float
+    # the largest AP_a/b/c and RP_a/b/c over the poses [deg]; None without orientations
+    ap_orientation_max_deg: float | None = None
+    rp_orientation_max_deg: float | None = None
 
     def line(self) -> str:
+        orientation = (
+            ""
+            if self.ap_orientation_max_deg is None or self.rp_orientation_max_deg is None
+            else f"; orientation AP max {self.ap_orientation_max_deg:.4f} deg, RP max "
+            f"{self.rp_orientation_max_deg:.4f} deg"
+        )
         return (
             f"ISO 9283 ({self.model}, {len(self.poses)} repeated poses, {self.scored_on}): "
-            f"AP max {self.ap_max_mm:.4f} mm, RP max {self.rp_max_mm:.4f} mm"
+            f"AP max {self.ap_max_mm:.4f} mm, RP max {self.rp_max_mm:.4f} mm{orientation}"
         )
 
 
@@ -77,10 +96,13 @@ def iso9283(
     model: str,
     scored_on: str,
     groups: list[IntArray] | None = None,
+    orientation_errors: Array | None = None,
 ) -> Iso9283 | None:
     """AP and RP of every repeated pose of `recording` (`groups`, default its
-    `repeat_groups`) for a model predicting `predicted` (n, 3) [m] at its measurements;
-    None when no pose is repeated MIN_REPEATS times."""
+    `repeat_groups`) for a model predicting `predicted` (n, 3) [m] at its measurements, and
+    of orientation from `orientation_errors` (n, 3), the rotation vectors of the model's
+    orientation against the measured one [rad] (NaN where none was measured; None:
+    none); None when no pose is repeated MIN_REPEATS times."""
     figures = []
     for group in repeat_groups(recording) if groups is None else groups:
         measured = recording.points[group]
@@ -88,16 +110,44 @@ def iso9283(
         command = predicted[group].mean(axis=0)
         distance = np.linalg.norm(measured - centre, axis=1)
         rp = distance.mean() + 3.0 * distance.std(ddof=1)
+        ap_abc, rp_abc = _orientation(
+            None if orientation_errors is None else orientation_errors[group]
+        )
         figures.append(
             PoseFigures(
                 int(group[0]),
                 len(group),
                 float(np.linalg.norm(centre - command) * 1e3),
                 float(rp * 1e3),
+                ap_abc,
+                rp_abc,
             )
         )
     if not figures:
         return None
+    oriented = [f for f in figures if f.ap_abc_deg is not None and f.rp_abc_deg is not None]
     return Iso9283(
-        model, scored_on, figures, max(f.ap_mm for f in figures), max(f.rp_mm for f in figures)
+        model,
+        scored_on,
+        figures,
+        max(f.ap_mm for f in figures),
+        max(f.rp_mm for f in figures),
+        max((max(f.ap_abc_deg) for f in oriented if f.ap_abc_deg), default=None),
+        max((max(f.rp_abc_deg) for f in oriented if f.rp_abc_deg), default=None),
     )
+
+
+Triple = tuple[float, float, float]
+
+
+def _orientation(errors: Array | None) -> tuple[Triple | None, Triple | None]:
+    """AP_a, AP_b, AP_c and RP_a, RP_b, RP_c [deg] of one pose's orientation errors (m, 3)
+    [rad] (rows with NaN left out); (None, None) with fewer than MIN_REPEATS."""
+    if errors is None:
+        return None, None
+    rows = errors[np.isfinite(errors).all(axis=1)]
+    if len(rows) < MIN_REPEATS:
+        return None, None
+    ap = np.degrees(np.abs(rows.mean(axis=0)))
+    rp = np.degrees(3.0 * rows.std(axis=0, ddof=1))
+    return (float(ap[0]), float(ap[1]), float(ap[2])), (float(rp[0]), float(rp[1]), float(rp[2]))

@@ -301,13 +301,16 @@ def parameter_rows(cal: Calibration) -> list[list[str]]:
 
 def iso_pose_table(figures: Sequence[Iso9283]) -> tuple[list[str], list[list[object]]]:
     """ISO 9283 per repeated pose (both reports): the header and a row per pose (its
-    first measurement, n, the AP of every model of `figures`, the RP) [mm]."""
+    first measurement, n, the AP of every model of `figures`, the RP) [mm]; where
+    orientations were measured, also AP_a/b/c of every model and RP_a/b/c [deg]."""
+    oriented = any(p.rp_abc_deg is not None for p in figures[0].poses)
     header = [
         "pose",
         "first measurement",
         "n",
         *(f"AP {f.model} [mm]" for f in figures),
         "RP [mm]",
+        *([*(f"AP a/b/c {f.model} [deg]" for f in figures), "RP a/b/c [deg]"] if oriented else []),
     ]
     rows: list[list[object]] = [
         [
@@ -316,10 +319,25 @@ def iso_pose_table(figures: Sequence[Iso9283]) -> tuple[list[str], list[list[obj
             p.n,
             *(f"{f.poses[k].ap_mm:.4f}" for f in figures),
             f"{p.rp_mm:.4f}",
+            *(
+                [*(_abc(f.poses[k].ap_abc_deg) for f in figures), _abc(p.rp_abc_deg)]
+                if oriented
+                else []
+            ),
         ]
         for k, p in enumerate(figures[0].poses)
     ]
     return header, rows
+
+
+def max_deg(value: float | None) -> str:
+    """A largest orientation figure [deg], '-' without orientations."""
+    return "-" if value is None else f"{value:.4f}"
+
+
+def _abc(values: tuple[float, float, float] | None) -> str:
+    """'0.0012 / 0.0008 / 0.0031' [deg], '-' where none."""
+    return "-" if values is None else " / ".join(f"{v:.4f}" for v in values)
 
 
 def _markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> list[str]:
@@ -474,11 +492,13 @@ def write_report(
             "ISO 9283 pose accuracy (AP) and repeatability (RP) of the repeated poses, "
             f"{diagnosis.iso9283[0].scored_on}, before and after calibration:",
             "",
-            "| model | poses | AP max [mm] | RP max [mm] |",
-            "|---|---|---|---|",
+            "| model | poses | AP max [mm] | RP max [mm] | AP a/b/c max [deg] | "
+            "RP a/b/c max [deg] |",
+            "|---|---|---|---|---|---|",
         ]
         lines += [
-            f"| {with_breaks(f.model)} | {len(f.poses)} | {f.ap_max_mm:.4f} | {f.rp_max_mm:.4f} |"
+            f"| {with_breaks(f.model)} | {len(f.poses)} | {f.ap_max_mm:.4f} | {f.rp_max_mm:.4f} "
+            f"| {max_deg(f.ap_orientation_max_deg)} | {max_deg(f.rp_orientation_max_deg)} |"
             for f in diagnosis.iso9283
         ]
         lines += ["", *_markdown_table(*iso_pose_table(diagnosis.iso9283))]
