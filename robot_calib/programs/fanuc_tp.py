@@ -23,7 +23,6 @@ from robot_calib.kinematics.frames import Array
 from robot_calib.programs.configuration import posture
 from robot_calib.programs.language import Language, single_output
 from robot_calib.programs.source import (
-    NUMBER,
     Program,
     Span,
     Target,
@@ -31,6 +30,7 @@ from robot_calib.programs.source import (
     base_to_euler,
     euler_to_base,
     line_of,
+    number,
     read_text,
 )
 
@@ -38,10 +38,12 @@ ZERO_DEG = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # FANUC's zero position: 'U' and 'T'
 
 _POSITION = re.compile(r'^\s*P\[(\d+)(?::"[^"]*")?\]\s*\{', re.MULTILINE)
 _GROUP = re.compile(r"\bGP(\d+)\s*:")
-_COMPONENT = re.compile(r"\b(X|Y|Z|W|P|R|J\d)\s*=\s*(" + NUMBER + ")")
 _CONFIG = re.compile(r"CONFIG\s*:\s*'([^']*)'")
-_FRAMES = re.compile(r"\bUF\s*:\s*(\d+)\s*,\s*UT\s*:\s*(\d+)")
-_MOTION = re.compile(r"^\s*\d*\s*:\s*([JLCA])?\s*(P|PR)\[(\d+)(?::[^\]]*)?\]", re.MULTILINE)
+#: a motion instruction's position: 'N:J P[n] ...' or the continuation line ':  P[n]' of a
+#: circular motion (an assignment 'PR[2]=P[1]' is no motion)
+_MOTION = re.compile(
+    r"^\s*(?:\d+\s*:\s*([JLCA])\s+|:\s*)(P|PR)\[(\d+|\w+\[\d+\])(?::[^\]]*)?\]", re.MULTILINE
+)
 POSE_KEYS = ("X", "Y", "Z", "W", "P", "R")
 AXIS_KEYS = ("J1", "J2", "J3", "J4", "J5", "J6")
 
@@ -60,7 +62,7 @@ def _config(text: str, where: str) -> tuple[int, ...]:
     parts = [p.strip() for p in text.replace(",", " ").split()]
     letters = [p for p in parts if p.isalpha()]
     turns = [int(p) for p in parts if re.fullmatch(r"[-+]?\d+", p)]
-    if len(letters) != 3 or any(len(p) != 1 for p in letters) or len(turns) > 3:
+    if len(letters) != 3 or any(len(p) != 1 for p in letters) or len(turns) != 3:
         raise InputError(f"{where}: CONFIG '{text}': expected 'N|F U|D T|B, t1, t4, t6'")
     flip, up, front = (p.upper() for p in letters)
     if flip not in "NF" or up not in "UD" or front not in "TB":
@@ -68,39 +70,83 @@ def _config(text: str, where: str) -> tuple[int, ...]:
     return (int(flip == "F"), int(up == "U"), int(front == "T"), *(turns + [0, 0, 0])[:3])
 
 
+def _body(text: str, start: int, end: int, file: str, where: str) -> dict[str, tuple[float, Span]]:
+    """The components of a position's group 1, text[start:end]: 'UF : u', 'UT : t',
+    'CONFIG : ...', 'X = v mm' (X, Y, Z), 'W = v deg' (W, P, R), 'Jn = v deg' or 'En = v
+    mm|deg', separated by commas; InputError naming `where` for anything else, a component
+    given twice or a number that is none."""
+    code = _CONFIG.sub(lambda c: " " * len(c.group()), text[start:end])  # its commas
+    out: dict[str, tuple[float, Span]] = {}
+    at = start
+    for piece in code.split(","):
+        part = re.fullmatch(r"\s*(UF|UT)\s*:\s*(\S+)\s*|\s*(\w+)\s*=\s*(\S+)\s*(\w+)\s*", piece)
+        if piece.strip() and part is None:
+            raise InputError(f"{where}: {piece.strip()[:30]!r}: expected NAME = value unit")
+        if part is not None:
+            key = part.group(1) or part.group(3)
+            value_group = 2 if part.group(1) else 4
+            unit = part.group(5)
+            expected = _UNITS.get(key[0] if key[0] in "JE" else key)
+            if expected is None or (unit is not None and unit not in expected):
+                raise InputError(
+                    f"{where}: {piece.strip()[:30]!r}: expected "
+                    + (f"{key} in {' or '.join(expected)}" if expected else "a known component")
+                )
+            if key in out:
+                raise InputError(f"{where}: {key} given twice")
+            value = number(part.group(value_group), where)
+            span = Span(file, at + part.start(value_group), at + part.end(value_group))
+            out[key] = (value, span)
+        at += len(piece) + 1
+    return out
+
+
+#: each component's unit(s): positions in mm, angles in deg; axes in deg (E: mm or deg)
+_UNITS = {
+    "UF": ("",),
+    "UT": ("",),
+    "X": ("mm",),
+    "Y": ("mm",),
+    "Z": ("mm",),
+    "W": ("deg",),
+    "P": ("deg",),
+    "R": ("deg",),
+    "J": ("deg",),
+    "E": ("mm", "deg"),
+}
+
+
 def read(path: Path) -> Program:
     """The program `path` (.ls)."""
     name = Path(path).name
-    text = read_text(path)
+    text, encoding = read_text(path)
     book = TargetBook()
     start, end = _section(text, "POS")
     for m in _POSITION.finditer(text, start, end):
         close = text.find("};", m.end(), end)
         line = line_of(text, m.start())
+        label = f"P[{m.group(1)}]"
+        where = f"{name}:{line}"
         if close < 0:
-            raise InputError(f"{name}:{line}: P[{m.group(1)}] without its closing '}};'")
+            raise InputError(f"{where}: {label} without its closing '}};'")
         groups = list(_GROUP.finditer(text, m.end(), close))
         if not groups or groups[0].group(1) != "1":
-            raise InputError(f"{name}:{line}: P[{m.group(1)}] has no group 1 (GP1:)")
+            raise InputError(f"{where}: {label} has no group 1 (GP1:)")
         body_end = groups[1].start() if len(groups) > 1 else close
-        body = (groups[0].end(), body_end)
-        parts = {
-            c.group(1): (float(c.group(2)), Span(name, c.start(2), c.end(2)))
-            for c in _COMPONENT.finditer(text, *body)
-        }
-        frames = _FRAMES.search(text, *body)
-        where = f"{name}:{line}"
-        if frames is None:
-            raise InputError(f"{where}: P[{m.group(1)}] has no 'UF : u, UT : t'")
+        parts = _body(text, groups[0].end(), body_end, name, where)
+        if "UF" not in parts or "UT" not in parts:
+            raise InputError(f"{where}: {label} has no 'UF : u, UT : t'")
         keys = POSE_KEYS if "X" in parts else AXIS_KEYS
         missing = [k for k in keys if k not in parts]
         if missing:
-            raise InputError(f"{where}: P[{m.group(1)}] lacks {', '.join(missing)}")
-        config = _CONFIG.search(text, *body)
-        uf, ut = int(frames.group(1)), int(frames.group(2))
+            raise InputError(f"{where}: {label} lacks {', '.join(missing)}")
+        config = _CONFIG.search(text, groups[0].end(), body_end)
+        uf, ut = int(parts["UF"][0]), int(parts["UT"][0])
+        if book.known(label):
+            raise InputError(f"{where}: {label} declared twice")
         book.declare(
             Target(
-                f"P[{m.group(1)}]",
+                label,
                 name,
                 line,
                 "pose" if keys == POSE_KEYS else "joints",
@@ -115,23 +161,36 @@ def read(path: Path) -> Program:
     start, end = _section(text, "MN")
     for m in _MOTION.finditer(text, start, end):
         line = line_of(text, m.start())
-        if m.group(2) == "PR":
+        index = m.group(3)
+        if m.group(2) == "PR" or not index.isdigit():
+            what = (
+                "a position register (not in the program)"
+                if m.group(2) == "PR"
+                else ("an indirect position")
+            )
             remarks.append(
-                f"{name}:{line}: a motion to PR[{m.group(3)}], a position register (not in the "
-                "program): not compensated"
+                f"{name}:{line}: a motion to {m.group(2)}[{index}], {what}: not compensated"
             )
             continue
-        label = f"P[{m.group(3)}]"
+        label = f"P[{index}]"
         if not book.known(label):
             raise InputError(f"{name}:{line}: a motion to {label}: not in the /POS section")
         target = book.get(label)
         book.use(label, line, target.tool, target.base)
         rest = text[m.end() : text.find("\n", m.end())]
-        if re.search(r"\b(Offset|Tool_Offset|INC)\b", rest):
+        if re.search(r"\bINC\b", rest):
+            book.noted(label, f"an incremental motion (INC) on line {line}")
+        elif re.search(r"\b(Offset|Tool_Offset)\b", rest):
             remarks.append(
                 f"{name}:{line}: a motion to {label} with an offset: it gets {label}'s correction"
             )
-    return Program("fanuc_tp", {name: text}, book.targets(), remarks=tuple(remarks))
+    return Program(
+        "fanuc_tp",
+        {name: text},
+        book.targets(),
+        remarks=tuple(remarks),
+        encodings={name: encoding},
+    )
 
 
 def pose_to_base(values: Array) -> Array:

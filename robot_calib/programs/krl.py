@@ -23,7 +23,6 @@ from robot_calib.kinematics.frames import Array
 from robot_calib.programs.configuration import posture
 from robot_calib.programs.language import Language
 from robot_calib.programs.source import (
-    NUMBER,
     Frame,
     Program,
     Span,
@@ -33,6 +32,7 @@ from robot_calib.programs.source import (
     blank_comments,
     euler_to_base,
     line_of,
+    number,
     read_text,
 )
 
@@ -48,40 +48,58 @@ _DECL = re.compile(
 )
 _DATA = re.compile(r"\b(TOOL_DATA|BASE_DATA)\s*\[\s*(\d+)\s*\]\s*=\s*\{", re.IGNORECASE)
 _FDAT = re.compile(r"\bDECL\s+(?:GLOBAL\s+)?FDAT\s+(\w+)\s*=\s*\{([^}]*)\}", re.IGNORECASE)
-_COMPONENT = re.compile(r"(\w+)\s+('[BH][0-9A-F]+'|" + NUMBER + ")", re.IGNORECASE)
-_MOTION = re.compile(
-    r"\b(S?PTP|S?LIN|S?CIRC)(_REL)?\s+(\{[^}\n]*\}?|\$?\w+)(?:\s*,\s*(\{[^}\n]*\}?|\$?\w+))?",
+_MOTION = re.compile(r"\b(S?PTP|S?LIN|S?CIRC)(_REL)?\b[ \t]*([^\r\n]*)", re.IGNORECASE)
+_ARGUMENT = re.compile(r"\s*(\{[^}\n]*\}?|\$?\w+(?:\s*\[[^\]]*\])?)(\s*:\s*\{)?")
+#: $TOOL / $BASE set to a frame: TOOL_DATA[n], BASE_DATA[n], $NULLFRAME, STOOL2(FPn),
+#: SBASE(FPn.BASE_NO); anything else is refused (a frame the reader cannot resolve)
+_ASSIGN = re.compile(r"\$(TOOL|BASE)\s*=\s*([^,\r\n;]*)", re.IGNORECASE)
+_FRAME_VALUE = re.compile(
+    r"(?:(TOOL_DATA|BASE_DATA)\s*\[\s*(\d+)\s*\]|(\$NULLFRAME)"
+    r"|(?:STOOL2|SBASE)\s*\(\s*(\w+)(?:\.\w+)?\s*\))\s*$",
     re.IGNORECASE,
 )
 _SETTINGS = re.compile(
-    r"\$(TOOL|BASE)\s*=\s*(?:(TOOL_DATA|BASE_DATA)\s*\[\s*(\d+)\s*\]|(\$NULLFRAME))"
-    r"|\bBAS\s*\(\s*#(TOOL|BASE)\s*,\s*(\d+)\s*\)"
-    r"|\bFDAT_ACT\s*=\s*(\w+)",
-    re.IGNORECASE,
+    r"\bBAS\s*\(\s*#(TOOL|BASE)\s*,\s*(\d+)\s*\)|\bFDAT_ACT\s*=\s*(\w+)", re.IGNORECASE
 )
 
 
-def _number(text: str) -> float:
-    """A KRL number: decimal, or a 'B0101' / 'H1F' literal."""
-    if text.startswith("'"):
-        return float(int(text[2:-1], 2 if text[1] in "bB" else 16))
-    return float(text)
+def _number(token: str, where: str) -> float:
+    """A KRL number: decimal, or a 'B0101' / 'H1F' literal (S and T are written so)."""
+    literal = re.fullmatch(r"'([BH])([0-9A-F]+)'", token.strip(), re.IGNORECASE)
+    if literal:
+        base = 2 if literal.group(1).upper() == "B" else 16
+        try:
+            return float(int(literal.group(2), base))
+        except ValueError:
+            raise InputError(f"{where}: {token.strip()} is not a binary or hex number") from None
+    return number(token, where)
 
 
-def _components(
-    text: str, start: int, file: str, where: str
-) -> tuple[dict[str, tuple[float, Span]], int]:
+def _components(text: str, start: int, file: str) -> tuple[dict[str, tuple[float, Span]], int]:
     """The components of the aggregate whose `{` ends at `start`: name -> (value, span),
-    and the index of its `}`."""
+    and the index of its `}`; InputError naming the line for a component that is not
+    `NAME number`, twice given, or an aggregate not closed on its line."""
+    where = f"{file}:{line_of(text, start)}"
     end, newline = text.find("}", start), text.find("\n", start)
     if end < 0 or 0 <= newline < end:
         raise InputError(f"{where}: aggregate without its closing '}}' on its line")
-    out = {}
-    for m in _COMPONENT.finditer(text, start, end):
-        out[m.group(1).upper()] = (
-            _number(m.group(2)),
-            Span(file, m.start(2), m.end(2)),
-        )
+    out: dict[str, tuple[float, Span]] = {}
+    at = start
+    for piece in text[start:end].split(","):
+        part = re.fullmatch(r"\s*(\w+)(\[\])?\s+(\S+)\s*", piece)
+        if piece.strip() and part is None:
+            if re.fullmatch(r"\s*\w+\[\]\s*\"[^\"]*\"\s*", piece):  # POINT2[] " "
+                at += len(piece) + 1
+                continue
+            raise InputError(f"{where}: {piece.strip()[:30]!r}: expected NAME value")
+        if part is not None:
+            name = part.group(1).upper()
+            if name in out:
+                raise InputError(f"{where}: component {name} given twice")
+            if part.group(2) is None:
+                value = _number(part.group(3), where)
+                out[name] = (value, Span(file, at + part.start(3), at + part.end(3)))
+        at += len(piece) + 1
     return out, end
 
 
@@ -109,8 +127,58 @@ def _target(
 
 
 def _frame_of(parts: dict[str, tuple[float, Span]], key: str, where: str) -> Frame:
-    values = np.array([[parts.get(k, (0.0, None))[0] for k in POSE_KEYS]])
+    missing = [k for k in POSE_KEYS if k not in parts]
+    if missing:  # KRL keeps the old value of a component left out: unknown here
+        raise InputError(f"{where}: {key} without {', '.join(missing)}")
+    values = np.array([[parts[k][0] for k in POSE_KEYS]])
     return Frame(key, pose_to_base(values)[0], where)
+
+
+class _Frames:
+    """The tool and base in force while the .src is read in program order."""
+
+    def __init__(self, fdat: dict[str, tuple[int, int, str]], src: str, code: str) -> None:
+        self.fdat, self.src, self.code = fdat, src, code
+        self.tool: str | None = None
+        self.base: str | None = None
+        self.external = ""
+
+    def key(self, kind: str, number: int) -> str | None:
+        return f"{kind.upper()}_DATA[{number}]" if number else None
+
+    def from_fdat(self, name: str, line: int) -> tuple[str | None, str | None]:
+        """The tool and base of FDAT `name`; one declared elsewhere ($config.dat's FHOME)
+        gives keys no frame has: a target moved to with them is refused by name."""
+        if name.upper() not in self.fdat:
+            self.external = ""
+            return f"TOOL_NO of {name} (not in the program)", f"BASE_NO of {name}"
+        tool_no, base_no, frame = self.fdat[name.upper()]
+        self.external = "" if frame == "BASE" else f"IPO_FRAME #{frame} (a fixed tool)"
+        return self.key("TOOL", tool_no), self.key("BASE", base_no)
+
+    def value(self, which: str, text: str, line: int) -> str | None:
+        """The key of `$TOOL = text` / `$BASE = text`; InputError when unresolvable."""
+        found = _FRAME_VALUE.match(text.strip())
+        if found is None:
+            raise InputError(
+                f"{self.src}:{line}: ${which.upper()} = {text.strip()[:40]}: a frame this "
+                "reader cannot resolve (TOOL_DATA[n], BASE_DATA[n], STOOL2(FPn) or "
+                "SBASE(FPn.BASE_NO) only)"
+            )
+        if found.group(3):
+            return None
+        if found.group(4):
+            tool, base = self.from_fdat(found.group(4), line)
+            return tool if which.upper() == "TOOL" else base
+        if found.group(1).upper()[:4] != which.upper():
+            raise InputError(f"{self.src}:{line}: ${which.upper()} = {found.group(1).upper()}")
+        return self.key(which, int(found.group(2)))
+
+    def assign(self, which: str, text: str, line: int) -> None:
+        if which.upper() == "TOOL":
+            self.tool = self.value(which, text, line)
+        else:
+            self.base = self.value(which, text, line)
 
 
 def read(path: Path) -> Program:
@@ -118,27 +186,31 @@ def read(path: Path) -> Program:
     path = Path(path)
     if path.suffix.lower() == ".dat":
         raise InputError(f"{path}: give the program's .src (its .dat is read beside it)")
-    texts = {path.name: read_text(path)}
+    texts, encodings = {}, {}
+    texts[path.name], encodings[path.name] = read_text(path)
     for suffix in (".dat", ".DAT", ".Dat"):
         dat = path.with_suffix(suffix)
         if dat.exists():
-            texts[dat.name] = read_text(dat)
+            texts[dat.name], encodings[dat.name] = read_text(dat)
             break
     book = TargetBook()
     tools: dict[str, Frame] = {}
     bases: dict[str, Frame] = {}
     fdat: dict[str, tuple[int, int, str]] = {}
     codes = {name: blank_comments(text, ";") for name, text in texts.items()}
-    for name, code in codes.items():  # declarations, .dat first
+    for name in sorted(codes, key=lambda n: not n.lower().endswith(".dat")):  # .dat first
+        code = codes[name]
         for m in _DECL.finditer(code):
             kind = "pose" if m.group(1).upper() in POSE_TYPES else "joints"
-            where = f"{name}:{line_of(code, m.start())}"
-            parts, _ = _components(code, m.end(), name, where)
-            book.declare(_target(m.group(2), kind, parts, name, line_of(code, m.start())))
+            parts, _ = _components(code, m.end(), name)
+            target = _target(m.group(2), kind, parts, name, line_of(code, m.start()))
+            if book.known(target.name):
+                raise InputError(f"{target.where}: {target.name} declared twice")
+            book.declare(target)
         for m in _DATA.finditer(code):
             key = f"{m.group(1).upper()}[{m.group(2)}]"
             where = f"{name}:{line_of(code, m.start())}"
-            parts, _ = _components(code, m.end(), name, where)
+            parts, _ = _components(code, m.end(), name)
             (tools if key.startswith("TOOL") else bases)[key] = _frame_of(parts, key, where)
         for m in _FDAT.finditer(code):
             body = m.group(2).upper()
@@ -152,67 +224,78 @@ def read(path: Path) -> Program:
             )
     src = path.name
     code = codes[src]
-    tool: str | None = None
-    base: str | None = None
-    external = ""
+    frames = _Frames(fdat, src, code)
     remarks = []
     events = sorted(
-        [(m.start(), "set", m) for m in _SETTINGS.finditer(code)]
+        [(m.start(), "assign", m) for m in _ASSIGN.finditer(code)]
+        + [(m.start(), "set", m) for m in _SETTINGS.finditer(code)]
         + [(m.start(), "move", m) for m in _MOTION.finditer(code)],
         key=lambda e: e[0],
     )
-    for _, kind, m in events:
-        line = line_of(code, m.start())
-        if kind == "set":
-            if m.group(1):  # $TOOL = / $BASE =
-                number = 0 if m.group(4) else int(m.group(3))
-                chosen = f"{m.group(1).upper()}_DATA[{number}]" if number else None
-                if m.group(1).upper() == "TOOL":
-                    tool = chosen
-                else:
-                    base = chosen
-            elif m.group(5):  # BAS(#TOOL, n)
-                number = int(m.group(6))
-                chosen = f"{m.group(5).upper()}_DATA[{number}]" if number else None
-                if m.group(5).upper() == "TOOL":
-                    tool = chosen
-                else:
-                    base = chosen
-            elif m.group(7).upper() in fdat:
-                tool_number, base_number, frame = fdat[m.group(7).upper()]
-                tool = f"TOOL_DATA[{tool_number}]" if tool_number else None
-                base = f"BASE_DATA[{base_number}]" if base_number else None
-                external = "" if frame == "BASE" else f"IPO_FRAME #{frame} (a fixed tool)"
+    in_with: set[int] = set()  # assignments of a motion's WITH clause: that motion only
+    for start, kind, m in events:
+        line = line_of(code, start)
+        if kind == "assign":
+            if start not in in_with:
+                frames.assign(m.group(1), m.group(2), line)
             continue
-        relative = bool(m.group(2))
-        for group in (3, 4):
-            arg = m.group(group)
-            if arg is None:
-                continue
+        if kind == "set":
+            if m.group(1):  # BAS(#TOOL, n) / BAS(#BASE, n)
+                frames.assign(m.group(1), f"{m.group(1).upper()}_DATA[{m.group(2)}]", line)
+            else:
+                frames.tool, frames.base = frames.from_fdat(m.group(3), line)
+            continue
+        motion, relative, rest = m.group(1).upper(), bool(m.group(2)), m.group(3)
+        tool, base = frames.tool, frames.base
+        clause = re.search(r"\bWITH\b(.*)", rest, re.IGNORECASE)
+        if clause:  # a spline motion's own frames
+            offset = m.start(3) + clause.start(1)
+            for a in _ASSIGN.finditer(code, offset, m.end(3)):
+                in_with.add(a.start())
+                value = frames.value(a.group(1), a.group(2), line)
+                tool, base = (value, base) if a.group(1).upper() == "TOOL" else (tool, value)
+        at = m.start(3)
+        for _ in range(2 if motion.endswith("CIRC") else 1):
+            argument = _ARGUMENT.match(code, at)
+            if argument is None or not argument.group(1):
+                break
+            arg = argument.group(1)
             if arg.startswith("{"):
-                parts, _ = _components(code, m.start(group) + 1, src, f"{src}:{line}")
-                kind_ = "joints" if any(k in parts for k in AXIS_KEYS) else "pose"
+                parts, _ = _components(code, argument.start(1) + 1, src)
+                target_kind = "joints" if any(k in parts for k in AXIS_KEYS) else "pose"
                 name = book.inline_name(line)
-                book.declare(_target(name, kind_, parts, src, line))
+                book.declare(_target(name, target_kind, parts, src, line))
+            elif "[" in arg:
+                remarks.append(
+                    f"{src}:{line}: {motion} {arg}, an element of an array: not compensated"
+                )
+                break
+            elif not book.known(arg):
+                if arg.startswith("$") or arg.upper() in ("HOME", "XHOME"):
+                    remarks.append(
+                        f"{src}:{line}: {motion} {arg}, the controller's own position (not "
+                        "in the program): not compensated"
+                    )
+                    break
+                hint = "" if len(texts) > 1 else f" (no {path.with_suffix('.dat').name} beside it)"
+                raise InputError(
+                    f"{src}:{line}: {motion} to {arg}: no such position declared in "
+                    f"{' or '.join(texts)}{hint}"
+                )
             else:
                 name = arg
-                if not book.known(name):
-                    if name.startswith("$") or name.upper() in ("HOME", "XHOME"):
-                        remarks.append(
-                            f"{src}:{line}: {m.group(1).upper()} {name}, the controller's own "
-                            "position (not in the program): not compensated"
-                        )
-                        continue
-                    raise InputError(
-                        f"{src}:{line}: {m.group(1).upper()} to {name}: no such position "
-                        f"declared in {' or '.join(texts)}"
-                    )
             book.use(name, line, tool, base)
             if relative:
-                book.noted(name, f"{m.group(1).upper()}_REL: a relative motion")
-            elif external:
-                book.noted(name, external)
-    return Program("krl", texts, book.targets(), tools, bases, tuple(remarks))
+                book.noted(name, f"{motion}_REL: a relative motion")
+            elif argument.group(2):
+                book.noted(name, f"moved to through the geometric operator ':' on line {line}")
+            elif frames.external:
+                book.noted(name, frames.external)
+            comma = code.find(",", argument.end(1), m.end(3))
+            if comma < 0:
+                break
+            at = comma + 1
+    return Program("krl", texts, book.targets(), tools, bases, tuple(remarks), encodings)
 
 
 def pose_to_base(values: Array) -> Array:

@@ -13,6 +13,7 @@ the object frame: base <- uframe <- oframe). tool0 and wobj0 are the flange and 
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -21,41 +22,35 @@ from scipy.spatial.transform import Rotation
 from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
+from robot_calib.messages import QUATERNION_TOLERANCE
 from robot_calib.programs.configuration import posture
 from robot_calib.programs.language import Language, single_output
 from robot_calib.programs.source import (
+    LARGEST,
     Frame,
     Program,
+    Span,
     Target,
     TargetBook,
     blank_comments,
     line_of,
-    numbers_in,
+    number,
     read_text,
 )
 
 ZERO_DEG = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # ABB's calibration position: cfx 0
+NOT_USED = 9.1e9  # an external axis that is not used is written 9E9: allowed there
 
 _DECL = re.compile(
     r"\b(?:(?:LOCAL|TASK)\s+)?(CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)"
     r"\s+(\w+)\s*:=\s*",
     re.IGNORECASE,
 )
-_MOTION = re.compile(r"\b(MoveJ|MoveL|MoveC|MoveAbsJ)(DO|AO|GO|Sync)?\s+", re.IGNORECASE)
+_MOTION = re.compile(r"\b(MoveJ|MoveL|MoveC|MoveAbsJ)(DO|AO|GO|Sync)?(?=[\s\\,])", re.IGNORECASE)
+#: an assignment to a declared target (or a part of it) in the program: it changes at
+#: run time, its declared value is not what the robot goes to
+_CHANGED = re.compile(r"\b(\w+)(?:\.\w+)*\s*:=", re.IGNORECASE)
 _EXPRESSION = re.compile(r"\b(Offs|RelTool|CRobT|CJointT|CalcRobT|CalcJointT)\s*\(", re.I)
-
-
-def _bracket_end(code: str, start: int, where: str) -> int:
-    """The index after the `]` closing the `[` at `start`."""
-    depth = 0
-    for k in range(start, len(code)):
-        if code[k] == "[":
-            depth += 1
-        elif code[k] == "]":
-            depth -= 1
-            if depth == 0:
-                return k + 1
-    raise InputError(f"{where}: '[' without its closing ']'")
 
 
 def _split_arguments(code: str, start: int, end: int) -> list[tuple[int, int]]:
@@ -73,43 +68,143 @@ def _split_arguments(code: str, start: int, end: int) -> list[tuple[int, int]]:
     return pieces
 
 
-def _target(name: str, kind: str, code: str, start: int, end: int, file: str) -> Target:
-    """A robtarget / jointtarget from its aggregate code[start:end]."""
+@dataclass(frozen=True)
+class _Leaf:
+    """A token of an aggregate and where it is written."""
+
+    text: str
+    start: int
+    end: int
+
+
+_Node = list["_Node | _Leaf"]
+
+
+def _tree(code: str, start: int, where: str) -> tuple[_Node, int]:
+    """The aggregate whose `[` is at `start` as nested lists of tokens, and the index after
+    its `]`; InputError naming `where` for an empty token (',,') or a bracket not closed."""
+    node: _Node = []
+    k = start + 1
+    token_start = k
+    while k < len(code):
+        char = code[k]
+        if char == "[":
+            child, k = _tree(code, k, where)
+            node.append(child)
+            token_start = k
+            continue
+        if char in ",]":
+            token = code[token_start:k]
+            if token.strip():
+                lead = len(token) - len(token.lstrip())
+                first = token_start + lead
+                node.append(_Leaf(token.strip(), first, first + len(token.strip())))
+            elif char == "," and (not node or code[token_start - 1] == ","):
+                raise InputError(f"{where}: an empty value (',,')")
+            if char == "]":
+                return node, k + 1
+            token_start = k + 1
+        k += 1
+    raise InputError(f"{where}: '[' without its closing ']'")
+
+
+def _numbers(
+    node: object, count: int, what: str, file: str, where: str, largest: float = LARGEST
+) -> list[tuple[float, Span]]:
+    """The `count` numbers of a list of numbers `node`; InputError naming `what` else."""
+    if (
+        not isinstance(node, list)
+        or len(node) != count
+        or not all(isinstance(n, _Leaf) for n in node)
+    ):
+        raise InputError(f"{where}: {what}: expected [{count} numbers]")
+    return [
+        (number(n.text, where, largest), Span(file, n.start, n.end))
+        for n in node
+        if isinstance(n, _Leaf)
+    ]
+
+
+def _pose(node: object, what: str, file: str, where: str) -> list[tuple[float, Span]]:
+    """[[x, y, z], [q1, q2, q3, q4]]: 7 numbers, the quaternion of norm 1."""
+    if not isinstance(node, list) or len(node) != 2:
+        raise InputError(f"{where}: {what}: expected [[x,y,z],[q1,q2,q3,q4]]")
+    out = _numbers(node[0], 3, f"{what} position", file, where)
+    out += _numbers(node[1], 4, f"{what} orientation", file, where)
+    norm = float(np.linalg.norm([v for v, _ in out[3:]]))
+    if abs(norm - 1.0) > QUATERNION_TOLERANCE:
+        raise InputError(f"{where}: {what}: quaternion of norm {norm:.6g}, not 1")
+    return out
+
+
+def _target(name: str, kind: str, code: str, start: int, file: str) -> Target:
+    """A robtarget [[x,y,z],[q1..q4],[cf1,cf4,cf6,cfx],[eax_a..eax_f]] or jointtarget
+    [[j1..j6],[eax_a..eax_f]] from its aggregate at `start`."""
     line = line_of(code, start)
-    found = numbers_in(code, start, end, file)
-    count = 11 if kind == "pose" else 6
-    if len(found) < count:
-        raise InputError(
-            f"{file}:{line}: {name}: {'robtarget' if kind == 'pose' else 'jointtarget'} with "
-            f"{len(found)} numbers, expected at least {count}"
-        )
-    values = tuple(v for v, _ in found[: 7 if kind == "pose" else 6])
-    spans = tuple(s for _, s in found[: 7 if kind == "pose" else 6])
-    config = tuple(int(v) for v, _ in found[7:11]) if kind == "pose" else None
-    return Target(name, file, line, kind, values, spans, configuration=config)
+    where = f"{file}:{line}"
+    tree, _ = _tree(code, start, where)
+    what = f"{name}: {'robtarget' if kind == 'pose' else 'jointtarget'}"
+    if kind == "pose":
+        if len(tree) != 4:
+            raise InputError(
+                f"{where}: {what}: expected [[x,y,z],[q1..q4],[cf1,cf4,cf6,cfx],[eax]]"
+            )
+        found = _pose(tree[:2], what, file, where)
+        config = _numbers(tree[2], 4, f"{what} robconf", file, where)
+        _numbers(tree[3], 6, f"{what} extax", file, where, NOT_USED)
+        configuration: tuple[int, ...] | None = tuple(int(v) for v, _ in config)
+    else:
+        if len(tree) != 2:
+            raise InputError(f"{where}: {what}: expected [[j1..j6],[eax_a..eax_f]]")
+        found = _numbers(tree[0], 6, what, file, where)
+        _numbers(tree[1], 6, f"{what} extax", file, where, NOT_USED)
+        configuration = None
+    return Target(
+        name,
+        file,
+        line,
+        kind,
+        tuple(v for v, _ in found),
+        tuple(s for _, s in found),
+        configuration=configuration,
+    )
 
 
-def _frame(kind: str, name: str, code: str, start: int, end: int, file: str) -> Frame:
-    """A tooldata (tool in the flange) or wobjdata (uframe x oframe in the base)."""
+def _flag(node: object, what: str, where: str) -> bool:
+    if not isinstance(node, _Leaf) or node.text.upper() not in ("TRUE", "FALSE"):
+        raise InputError(f"{where}: {what}: expected TRUE or FALSE")
+    return node.text.upper() == "TRUE"
+
+
+def _frame(kind: str, name: str, code: str, start: int, file: str) -> Frame:
+    """A tooldata [robhold, [[x,y,z],[q]], load] (the tool in the flange) or wobjdata
+    [robhold, ufprog, ufmec, [[uframe]], [[oframe]]] (uframe x oframe in the base)."""
     where = f"{file}:{line_of(code, start)}"
-    head = code[start:end].lstrip("[ \t\r\n").upper()
-    numbers = [v for v, _ in numbers_in(code, start, end, file)]
+    tree, _ = _tree(code, start, where)
+    what = f"{kind} {name}"
     if kind == "tooldata":
-        if head.startswith("FALSE"):
-            raise InputError(f"{where}: tooldata {name}: a stationary tool (robhold FALSE)")
-        return Frame(name, pose_to_base(np.array([numbers[:7]]))[0], where)
-    if head.startswith("TRUE"):
-        raise InputError(f"{where}: wobjdata {name}: a work object held by the robot")
-    if head.split(",")[1].strip() == "FALSE":
-        raise InputError(f"{where}: wobjdata {name}: moved by a mechanical unit (ufmec)")
-    uframe, oframe = pose_to_base(np.array([numbers[:7], numbers[7:14]]))
-    return Frame(name, uframe @ oframe, where)
+        if len(tree) != 3:
+            raise InputError(f"{where}: {what}: expected [robhold,[[x,y,z],[q1..q4]],load]")
+        if not _flag(tree[0], what, where):
+            raise InputError(f"{where}: {what}: a stationary tool (robhold FALSE)")
+        values = [v for v, _ in _pose(tree[1], what, file, where)]
+        return Frame(name, pose_to_base(np.array([values]))[0], where)
+    if len(tree) != 5:
+        raise InputError(f"{where}: {what}: expected [robhold,ufprog,ufmec,[uframe],[oframe]]")
+    if _flag(tree[0], what, where):
+        raise InputError(f"{where}: {what}: a work object held by the robot (robhold TRUE)")
+    if not _flag(tree[1], what, where):
+        raise InputError(f"{where}: {what}: moved by a mechanical unit (ufprog FALSE)")
+    uframe = [v for v, _ in _pose(tree[3], f"{what} uframe", file, where)]
+    oframe = [v for v, _ in _pose(tree[4], f"{what} oframe", file, where)]
+    both = pose_to_base(np.array([uframe, oframe]))
+    return Frame(name, both[0] @ both[1], where)
 
 
 def read(path: Path) -> Program:
     """The module `path`."""
     name = Path(path).name
-    text = read_text(path)
+    text, encoding = read_text(path)
     code = blank_comments(text, "!")
     book = TargetBook()
     tools: dict[str, Frame] = {}
@@ -119,40 +214,53 @@ def read(path: Path) -> Program:
         kind, declared = m.group(2).lower(), m.group(3)
         if code[m.end() : m.end() + 1] != "[":
             continue  # := another name or a function: not a literal
-        end = _bracket_end(code, m.end(), f"{name}:{line_of(code, m.start())}")
         if kind in ("robtarget", "jointtarget"):
             form = "pose" if kind == "robtarget" else "joints"
-            book.declare(_target(declared, form, code, m.end(), end, name))
+            if book.known(declared):
+                raise InputError(f"{name}:{line_of(code, m.start())}: {declared} declared twice")
+            book.declare(_target(declared, form, code, m.end(), name))
         else:
-            (tools if kind == "tooldata" else bases)[declared] = _frame(
-                kind, declared, code, m.end(), end, name
+            (tools if kind == "tooldata" else bases)[declared.lower()] = _frame(
+                kind, declared, code, m.end(), name
             )
     for m in _MOTION.finditer(code):
         end = code.find(";", m.end())
         line = line_of(code, m.start())
+        instruction = m.group(1) + (m.group(2) or "")
         if end < 0:
-            raise InputError(f"{name}:{line}: {m.group(1)} without its closing ';'")
+            raise InputError(f"{name}:{line}: {instruction} without its closing ';'")
         arguments = _split_arguments(code, m.end(), end)
         positional = [(a, b) for a, b in arguments if not code[a:b].strip().startswith("\\")]
+        circular = m.group(1).lower() == "movec"
+        at_tool = 4 if circular else 3  # ToPoint (CirPoint), Speed, Zone, Tool
+        if len(positional) <= at_tool:
+            raise InputError(
+                f"{name}:{line}: {instruction} with {len(positional)} arguments: no tool "
+                f"(argument {at_tool + 1})"
+            )
+        tool = code[slice(*positional[at_tool])].split("\\")[0].strip()
+        if not re.fullmatch(r"\w+", tool):
+            raise InputError(
+                f"{name}:{line}: {instruction}: tool {tool[:30]!r} is no tooldata name"
+            )
         wobj = re.search(r"\\WObj\s*:=\s*(\w+)", code[m.end() : end], re.IGNORECASE)
-        tool = code[slice(*positional[-1])].split("\\")[0].strip() if positional else "tool0"
-        tool_key = None if tool.lower() == "tool0" else tool
-        base_key = None if wobj is None or wobj.group(1).lower() == "wobj0" else wobj.group(1)
-        count = 2 if m.group(1).lower() == "movec" else 1
-        for a, b in positional[:count]:
+        tool_key = None if tool.lower() == "tool0" else tool.lower()
+        base_key = (
+            None if wobj is None or wobj.group(1).lower() == "wobj0" else wobj.group(1).lower()
+        )
+        for a, b in positional[: 2 if circular else 1]:
             argument = code[a:b].split("\\")[0].strip()  # without \ID:= and the like
             if argument.startswith("["):
                 start = code.index("[", a)
                 kind = "joints" if m.group(1).lower() == "moveabsj" else "pose"
                 target = book.inline_name(line_of(code, start))
-                close = _bracket_end(code, start, name)
-                book.declare(_target(target, kind, code, start, close, name))
+                book.declare(_target(target, kind, code, start, name))
                 book.use(target, line, tool_key, base_key)
             elif re.fullmatch(r"\w+", argument):
                 if not book.known(argument):
                     raise InputError(
-                        f"{name}:{line}: {m.group(1)} to {argument}: no robtarget or jointtarget "
-                        f"of that name declared in {name}"
+                        f"{name}:{line}: {instruction} to {argument}: no robtarget or "
+                        f"jointtarget of that name declared in {name}"
                     )
                 book.use(argument, line, tool_key, base_key)
             elif _EXPRESSION.match(argument):
@@ -166,8 +274,14 @@ def read(path: Path) -> Program:
                 else:
                     remarks.append(f"{name}:{line}: {argument[:40]}: not compensated")
             else:
-                remarks.append(f"{name}:{line}: {m.group(1)} to {argument[:40]}: not compensated")
-    return Program("rapid", {name: text}, book.targets(), tools, bases, tuple(remarks))
+                remarks.append(f"{name}:{line}: {instruction} to {argument[:40]}: not compensated")
+    declared_at = {m.start(3) for m in _DECL.finditer(code)}
+    for m in _CHANGED.finditer(code):  # a target changed while the program runs
+        if m.start(1) not in declared_at and book.known(m.group(1)):
+            book.noted(m.group(1), f"changed at run time on line {line_of(code, m.start())}")
+    return Program(
+        "rapid", {name: text}, book.targets(), tools, bases, tuple(remarks), {name: encoding}
+    )
 
 
 def pose_to_base(values: Array) -> Array:

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from robot_calib.errors import InputError
 from robot_calib.kinematics.frames import Array
 
 #: a number as the vendors write it: sign, digits, optional decimals and exponent
@@ -100,13 +101,36 @@ class Program:
     tools: dict[str, Frame] = field(default_factory=dict)
     bases: dict[str, Frame] = field(default_factory=dict)
     remarks: tuple[str, ...] = ()
+    encodings: dict[str, str] = field(default_factory=dict)  # file -> its encoding
+
+    def encoding(self, file: str) -> str:
+        """The encoding `file` was read in (and is written back in)."""
+        return self.encodings.get(file, "utf-8")
 
 
-def read_text(path: str | Path) -> str:
-    """A program file's exact text: bytes as Latin-1 would decode them are not guessed;
-    UTF-8 (ASCII included) is read as is, newlines untranslated (CRLF kept)."""
-    with open(path, encoding="utf-8", newline="") as stream:
-        return stream.read()
+#: the encodings a program file is read in, in this order: UTF-8 (ASCII included), then
+#: Windows-1252 (KUKA and ABB controllers save comments with umlauts so), then Latin-1
+#: (every byte a character: a file read so is written back byte for byte)
+ENCODINGS = ("utf-8", "cp1252", "latin-1")
+
+
+def read_text(path: str | Path) -> tuple[str, str]:
+    """A program file's exact text and its encoding (the first of ENCODINGS that decodes
+    it), newlines untranslated (CRLF kept); InputError for a file with NUL bytes (not a
+    program) or one that cannot be read."""
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        raise InputError(f"{path}: not a text program (a NUL byte at offset {nul})")
+    for encoding in ENCODINGS:
+        try:
+            return data.decode(encoding), encoding
+        except UnicodeDecodeError:
+            continue
+    raise AssertionError("latin-1 decodes every byte")
 
 
 def line_of(text: str, index: int) -> int:
@@ -120,12 +144,32 @@ def _newlines(text: str) -> list[int]:
     return [m.start() for m in re.finditer("\n", text)]
 
 
+#: the largest magnitude a number of a program may have: 1e6 (a kilometre in mm, a
+#: million degrees); beyond it, a corrupt value
+LARGEST = 1e6
+
+
+def number(token: str, where: str, largest: float = LARGEST) -> float:
+    """A number written as `token` (the whole token: '463.1.63' is none); InputError
+    naming `where` otherwise, or when it is not finite or beyond `largest`."""
+    if not NUMBER_RE.fullmatch(token):
+        raise InputError(f"{where}: {token.strip()[:30]!r} is not a number")
+    value = float(token)
+    if not abs(value) <= largest:
+        raise InputError(f"{where}: {token.strip()[:30]} is beyond +-{LARGEST:g} (corrupt?)")
+    return value
+
+
 def numbers_in(text: str, start: int, end: int, file: str) -> list[tuple[float, Span]]:
-    """Every number in text[start:end] with its span in the file."""
-    return [
-        (float(m.group()), Span(file, m.start(), m.end()))
-        for m in NUMBER_RE.finditer(text, start, end)
-    ]
+    """Every number of a bracketed list text[start:end] (tokens between brackets and
+    commas) with its span in the file; InputError naming the line for a token that is not
+    a whole number."""
+    out = []
+    for m in re.finditer(r"[^\[\],\s]+", text[start:end]):
+        at = start + m.start()
+        value = number(m.group(), f"{file}:{line_of(text, at)}")
+        out.append((value, Span(file, at, at + len(m.group()))))
+    return out
 
 
 def decimals(text: str) -> int:
@@ -162,7 +206,7 @@ def rewrite(
     out = {}
     for name, text in program.texts.items():
         pieces, at = [], 0
-        for start, end, new_text in sorted(edits[name]):
+        for start, end, new_text in sorted(edits[name]):  # every other byte as it was
             pieces += [text[at:start], new_text]
             at = end
         out[name] = "".join(pieces) + text[at:]
@@ -170,8 +214,9 @@ def rewrite(
 
 
 def blank_comments(text: str, marker: str, quote: str = '"') -> str:
-    """`text` with every comment (from `marker` outside a `quote`d string to the end of its
-    line) replaced by spaces: the same length, so offsets in it are offsets in `text`."""
+    """The code of `text`: every comment (from `marker` outside a `quote`d string to the end
+    of its line) and the inside of every string replaced by spaces (a motion written in a
+    message is no motion): the same length, so offsets in it are offsets in `text`."""
     out = list(text)
     inside = False
     k = 0
@@ -181,6 +226,8 @@ def blank_comments(text: str, marker: str, quote: str = '"') -> str:
             inside = False
         elif char == quote:
             inside = not inside
+        elif inside and char != "\r":
+            out[k] = " "
         elif char == marker and not inside:
             end = text.find("\n", k)
             end = len(text) if end < 0 else end
@@ -268,11 +315,12 @@ def euler_to_base(values: Array, order: str, unit_m: float) -> Array:
 
 
 def base_to_euler(poses: Array, old: Array, order: str, unit_m: float) -> Array:
-    """The inverse of `euler_to_base`, each angle within 180 deg of the old one's (at the
-    gimbal lock the first angle takes the turn about the common axis)."""
+    """The inverse of `euler_to_base` in the vendors' ranges: the first and third angle in
+    (-180, 180], the middle one in [-90, 90] (at the gimbal lock the first angle takes the
+    turn about the common axis). `old` (the numbers replaced) is not needed: one form."""
+    del old
     with warnings.catch_warnings():  # the gimbal lock has a valid answer: no warning
         warnings.simplefilter("ignore", UserWarning)
         angles = Rotation.from_matrix(poses[:, :3, :3]).as_euler(order, degrees=True)
-    before = np.asarray(old, dtype=float)[:, 3:6]
-    angles = before + (angles - before + 180.0) % 360.0 - 180.0
+    angles = 180.0 - (180.0 - angles) % 360.0  # (-180, 180]
     return np.hstack([poses[:, :3, 3] / unit_m, angles])

@@ -33,9 +33,17 @@ from robot_calib.programs.source import (
 )
 
 _LITERAL = r"(p?)\[([^\[\]]*)\]"
-_ASSIGN = re.compile(r"^[ \t]*(?:global[ \t]+)?(\w+)[ \t]*=[ \t]*" + _LITERAL, re.MULTILINE)
+_ASSIGN = re.compile(
+    r"^[ \t]*(?:(?:global|local)[ \t]+)?(\w+)[ \t]*=[ \t]*" + _LITERAL + r"[ \t\r]*$", re.MULTILINE
+)
+#: a variable set to anything but a literal (a pose from pose_trans(...), a function's)
+_OTHER = re.compile(
+    r"^[ \t]*(?:(?:global|local)[ \t]+)?(\w+)[ \t]*=(?!=)[ \t]*(?=\S)(?!p?\[[^\[\]]*\][ \t\r]*$)",
+    re.MULTILINE,
+)
+_ELEMENT = re.compile(r"^[ \t]*(\w+)\s*\[[^\]]*\]\s*=(?!=)", re.MULTILINE)
 _MOTION = re.compile(r"\b(movej|movel|movep|movec)\s*\(")
-_TCP = re.compile(r"\bset_tcp\s*\(\s*p\[([^\[\]]*)\]")
+_TCP = re.compile(r"\bset_tcp\s*\(\s*(?:p\[([^\[\]]*)\]|(\w+)\s*\))")
 
 
 def _literal(name: str, pose: bool, code: str, start: int, end: int, file: str) -> Target:
@@ -57,20 +65,37 @@ def _literal(name: str, pose: bool, code: str, start: int, end: int, file: str) 
     )
 
 
+def _call(code: str, start: int) -> str:
+    """The expression starting at `start` up to its balanced end (a ',' or ')' at depth 0)."""
+    depth = 0
+    for k in range(start, len(code)):
+        if code[k] in "([":
+            depth += 1
+        elif code[k] in ")]":
+            if depth == 0:
+                return code[start:k].strip()
+            depth -= 1
+        elif code[k] in ",\n" and depth == 0:
+            return code[start:k].strip()
+    return code[start:].strip()
+
+
 def read(path: Path) -> Program:
     """The script `path`."""
     name = Path(path).name
-    text = read_text(path)
+    text, encoding = read_text(path)
     code = blank_comments(text, "#")
     book = TargetBook()
     tools: dict[str, Frame] = {}
     events = sorted(
         [(m.start(), "assign", m) for m in _ASSIGN.finditer(code)]
+        + [(m.start(), "other", m) for m in _OTHER.finditer(code)]
+        + [(m.start(), "element", m) for m in _ELEMENT.finditer(code)]
         + [(m.start(), "move", m) for m in _MOTION.finditer(code)]
         + [(m.start(), "tcp", m) for m in _TCP.finditer(code)],
         key=lambda e: e[0],
     )
-    current: dict[str, str] = {}  # variable -> the target of its last assignment
+    current: dict[str, str | None] = {}  # variable -> its last literal's target (None: other)
     remarks = []
     tool = None
     for _, kind, m in events:
@@ -79,14 +104,26 @@ def read(path: Path) -> Program:
             key = f"{m.group(1)} (line {line})"
             book.declare(_literal(key, bool(m.group(2)), code, m.start(3), m.end(3), name))
             current[m.group(1)] = key
+        elif kind == "other":
+            current[m.group(1)] = None  # set to an expression: no literal of the program
+        elif kind == "element":
+            known = current.get(m.group(1))
+            if known is not None:
+                book.noted(known, f"an element changed at run time on line {line}")
         elif kind == "tcp":
             tool = f"set_tcp (line {line})"
-            found = numbers_in(code, m.start(1), m.end(1), name)
+            if m.group(1) is not None:
+                found = [v for v, _ in numbers_in(code, m.start(1), m.end(1), name)]
+            else:
+                variable = current.get(m.group(2))
+                if variable is None or book.get(variable).kind != "pose":
+                    raise InputError(
+                        f"{name}:{line}: set_tcp({m.group(2)}): not a p[...] assigned above"
+                    )
+                found = list(book.get(variable).values)
             if len(found) != 6:
                 raise InputError(f"{name}:{line}: set_tcp(p[...]) with {len(found)} numbers")
-            tools[tool] = Frame(
-                tool, pose_to_base(np.array([[v for v, _ in found]]))[0], f"{name}:{line}"
-            )
+            tools[tool] = Frame(tool, pose_to_base(np.array([found]))[0], f"{name}:{line}")
         else:
             count = 2 if m.group(1) == "movec" else 1
             at = m.end()
@@ -106,14 +143,32 @@ def read(path: Path) -> Program:
                             f"{name}:{line}: {m.group(1)} to {variable}: not assigned a p[...] "
                             "or [...] above this line"
                         )
-                    book.use(current[variable], line, tool, None)
+                    target = current[variable]
+                    if target is None:
+                        remarks.append(
+                            f"{name}:{line}: {m.group(1)} to {variable}, set by an expression: "
+                            "not compensated"
+                        )
+                    else:
+                        book.use(target, line, tool, None)
                 else:
-                    shown = code[at : code.find("\n", at)].strip()[:40]
-                    remarks.append(f"{name}:{line}: {m.group(1)} to {shown}: not compensated")
+                    shown = _call(code, at)[:60]
+                    inner = re.match(r"\s*\w+\s*\(\s*(\w+)\s*,", shown)
+                    target = current.get(inner.group(1)) if inner else None
+                    if target is not None:
+                        book.use(target, line, tool, None)
+                        remarks.append(
+                            f"{name}:{line}: {m.group(1)} to {shown} moves relative to "
+                            f"{inner.group(1) if inner else ''}: it gets its correction"
+                        )
+                    else:
+                        remarks.append(f"{name}:{line}: {m.group(1)} to {shown}: not compensated")
                     break
                 comma = code.find(",", at + argument.end())
                 at = comma + 1 if comma >= 0 else len(code)
-    return Program("urscript", {name: text}, book.targets(), tools, remarks=tuple(remarks))
+    return Program(
+        "urscript", {name: text}, book.targets(), tools, {}, tuple(remarks), {name: encoding}
+    )
 
 
 def pose_to_base(values: Array) -> Array:

@@ -92,7 +92,7 @@ def test_bad_program_inputs_are_one_line_and_write_nothing(tmp_path: Path) -> No
     refused("--joints", str(program), "-o", output, *tool, needle="--tool goes with --program")
     broken = tmp_path / "broken.ls"
     broken.write_text(program.read_text().replace("R =", "Q ="))
-    refused("--program", str(broken), "-o", output, needle="broken.ls:32: P[1] lacks R")
+    refused("--program", str(broken), "-o", output, needle="broken.ls:32: 'Q =")
 
 
 def test_an_existing_output_is_kept_without_force(tmp_path: Path) -> None:

@@ -152,7 +152,7 @@ BAD = [
     (
         "rapid",
         {"m.mod": _mod(" CONST robtarget p1:=[[1,2,3],[1,0,0,0]];")},
-        "m.mod:2: p1: robtarget with 7 numbers, expected at least 11",
+        "m.mod:2: p1: robtarget: expected [[x,y,z],[q1..q4],[cf1,cf4,cf6,cfx],[eax]]",
     ),
     (
         "rapid",
