@@ -231,38 +231,46 @@ def _data_rows(*masks: np.ndarray) -> list[str]:
 SHOWN = 8  # targets named per warning at most
 
 
-class NothingCompensated(RobotCalibError):
-    """A program none of whose targets could be compensated: exit 3, the outputs written
-    for inspection (every target left as it was and marked in the table)."""
+class NotCompensated(RobotCalibError):
+    """A program some of whose targets could not be compensated: exit 3, the outputs
+    written for inspection (those targets left as they were and marked in the table)."""
 
     exit_status = 3
-    kind = "nothing compensated"
+    kind = "not compensated"
 
 
 def frame_options(
     values: list[str] | None, language: Language, kind: int, option: str
 ) -> dict[str, Frame]:
     """--tool / --base ([KEY=]VALUES, the language's pose notation) -> frames by the key
-    the program uses (`Language.frame_keys`; '*' without KEY)."""
+    the program uses (`Language.frame_keys`; '*' without KEY); InputError for a value that
+    is not the language's pose, an empty KEY, or one KEY given twice."""
     from robot_calib.compensation.program import EVERY
     from robot_calib.programs.source import Frame
 
     out: dict[str, Frame] = {}
     count = len(language.pose_places)
     for text in values or []:
-        key, _, numbers = text.rpartition("=")
+        key, equals, numbers = text.rpartition("=")
         try:
             pose = np.array([float(v) for v in numbers.split(",")])
         except ValueError:
             pose = np.zeros(0)
-        if pose.size != count or not np.isfinite(pose).all():
+        if pose.size != count or not np.all(np.abs(pose) < 1e6):
             raise InputError(
                 f"--{option} {text}: expected [KEY=]{count} numbers separated by commas "
                 f"({language.title}'s pose notation)"
             )
+        if equals and not key.strip():
+            raise InputError(f"--{option} {text}: KEY= without a KEY (or give no '=')")
         if language.name == "rapid" and abs(np.linalg.norm(pose[3:]) - 1.0) > 1e-3:
             raise InputError(f"--{option} {text}: the quaternion q1..q4 has not norm 1")
-        name = EVERY if not key else language.frame_keys[kind].format(key.strip())
+        key = key.strip().lower() if language.fold_keys else key.strip()
+        name = EVERY if not key else language.frame_keys[kind].format(key)
+        if name in out:
+            raise InputError(
+                f"--{option} {text}: {key or 'the frame of every target'} given twice"
+            )
         out[name] = Frame(name, language.pose_to_base(pose[None])[0], f"--{option} {text}")
     return out
 
@@ -273,7 +281,7 @@ def compensate_program_file(args: argparse.Namespace, cal: Calibration) -> int:
     from robot_calib.cli.common import robot_files
     from robot_calib.compensation.program import compensate_program
     from robot_calib.compensation.program_table import write_program_table
-    from robot_calib.programs.registry import language_for
+    from robot_calib.programs.registry import check_robot, language_for
 
     for option in ("seed_joints", "frame", "unit"):
         if getattr(args, option) is not None:
@@ -282,34 +290,40 @@ def compensate_program_file(args: argparse.Namespace, cal: Calibration) -> int:
     if not source.is_file():
         raise InputError(f"{source}: no such program file")
     language = language_for(source, args.language)
-    try:
-        program = language.read(source)
-    except UnicodeDecodeError as exc:
-        raise InputError(
-            f"{source}: not a text program (byte {exc.start}: {exc.reason})"
-        ) from None
-    if not any(t.used for t in program.targets):
-        raise InputError(f"{source}: no motion to a target of the program ({language.title})")
+    check_robot(language, cal.model.robot.name, args.params)
     output = Path(args.output)
+    if output.suffix.lower() not in language.suffixes:
+        raise InputError(
+            f"-o {output}: a {language.title} program is written as {language.suffixes[0]}"
+        )
+    program = language.read(source)
+    if not any(t.used for t in program.targets):
+        raise InputError(
+            f"{source}: no motion to a target of the program read as {language.title}"
+        )
+    language.check_output(program, output)
     paths = language.outputs(program, output)
     table = output.with_name(output.stem + ".targets.csv")
     inputs = [args.params, *(source.with_name(n) for n in program.texts), *robot_files(args)]
-    for path in (*paths.values(), table):
-        if path.parent != output.parent:
-            raise InputError(f"{path}: the outputs go to one folder")
-        refuse_input(path, inputs)
     if not output.parent.is_dir():
         raise InputError(f"{output.parent}: no such folder for the compensated program")
+    for path in (*paths.values(), table):
+        refuse_input(path, inputs)
     tools = frame_options(args.tool, language, 0, "tool")
     bases = frame_options(args.base, language, 1, "base")
     result = compensate_program(cal, program, language, tools, bases)
     with staged_outputs(output.parent, args.force) as stage:
         for name, path in paths.items():
-            with open(stage / path.name, "w", encoding="utf-8", newline="") as stream:
+            encoding = program.encoding(name)
+            with open(stage / path.name, "w", encoding=encoding, newline="") as stream:
                 stream.write(result.texts[name])
-        write_program_table(stage / table.name, result.rows)
-    _report(args, cal, language, program, result, paths, table)
+        write_program_table(stage / table.name, result.rows, tools, bases)
+    _report(args, cal, language, program, result, paths, table, {**tools, **bases})
     return 0
+
+
+#: statuses of targets left as they were because the compensation failed there
+FAILED = ("configuration", "not_reached", "beyond_limits", "large_change")
 
 
 def _report(
@@ -320,37 +334,46 @@ def _report(
     result: ProgramCompensation,
     paths: dict[str, Path],
     table: Path,
+    given: dict[str, Frame],
 ) -> None:
-    """The summary line on stdout; warnings naming the targets left as they were."""
+    """The summary on stdout (files, robot, counts, the largest changes and their targets,
+    the frames each side used); warnings naming the targets left as they were; exit 3
+    (written for inspection) when the compensation failed at a target."""
     from robot_calib.compensation.program import WRITTEN
     from robot_calib.ik import first_tool2flange
 
     rows = [r for r in result.rows if r.status != "unused"]
     written = [r for r in rows if r.status in WRITTEN]
-    moved = max((r.moved_mm for r in written), default=0.0)
-    turned = max((r.turned_deg for r in written), default=0.0)
-    smr = first_tool2flange(cal.model, cal.parameters)[:3, 3] * 1e3
-    tools = sorted({r.target.tool or "the flange" for r in rows})
     files = ", ".join(str(p) for p in paths.values())
     print(
-        f"{files}: {len(written)}/{len(rows)} targets of {args.program} compensated "
-        f"({language.title}); largest change {moved:.4f} mm / {turned:.5f} deg; "
-        f"per-target table {table}"
+        f"{files}: {len(written)}/{len(rows)} targets of {args.program} ({language.title}) "
+        f"compensated for robot {cal.model.robot.name} ({args.params}); per-target table "
+        f"{table}"
     )
+    if written:
+        moved = max(written, key=lambda r: r.moved_mm)
+        turned = max(written, key=lambda r: r.turned_deg)
+        print(
+            f"largest change: {moved.moved_mm:.4f} mm ({moved.target.name}), "
+            f"{turned.turned_deg:.5f} deg ({turned.target.name}; of the orientation, or of "
+            "an axis for an axis target)"
+        )
+    smr = np.round(first_tool2flange(cal.model, cal.parameters)[:3, 3] * 1e3, 1) + 0.0
     print(
-        f"frames: the program's tool {', '.join(tools)}; the calibration measured its target "
-        f"at ({smr[0]:.1f}, {smr[1]:.1f}, {smr[2]:.1f}) mm in the flange"
+        "frames: "
+        + "; ".join(
+            f"{what} {_frame_source(key, program, given, default)}"
+            for what, keys, default in (
+                ("tool", {r.target.tool for r in rows}, "the flange"),
+                ("base", {r.target.base for r in rows}, "the robot base"),
+            )
+            for key in sorted(keys, key=str)
+        )
+        + f"; the calibration measured its target (SMR) at ({smr[0]:.1f}, {smr[1]:.1f}, "
+        f"{smr[2]:.1f}) mm in the flange"
         + ("; the learned correction applied" if cal.correction is not None else "")
     )
-    for status in (
-        "configuration",
-        "not_reached",
-        "beyond_limits",
-        "large_change",
-        "left",
-        "position_only",
-        "near_singular",
-    ):
+    for status in (*FAILED, "left", "position_only", "near_singular"):
         hit = [r for r in rows if r.status == status]
         if hit:
             names = ", ".join(f"{r.target.name} ({r.target.where})" for r in hit[:SHOWN])
@@ -370,8 +393,22 @@ def _report(
             f"(first {unused[0].target.name}, {unused[0].target.where})",
             file=sys.stderr,
         )
-    if rows and not written:
-        raise NothingCompensated(
-            f"{args.program}: none of its {len(rows)} targets compensated ({table} names "
-            "why for each; the program was written unchanged)"
+    failed = [r for r in rows if r.status in FAILED]
+    if failed:
+        raise NotCompensated(
+            f"{args.program}: {len(failed)} of its {len(rows)} targets could not be "
+            f"compensated and were left as they were ({table} says why for each; the program "
+            "was written for inspection: do not run it as compensated)"
         )
+
+
+def _frame_source(key: str | None, program: Program, given: dict[str, Frame], default: str) -> str:
+    """'TOOL_DATA[1] (pick_place.src:13)', 'UT 1 (--tool 1=...)', or the default."""
+    from robot_calib.compensation.program import EVERY
+
+    if EVERY in given and key is not None:
+        return f"{key} as {given[EVERY].where}"
+    if key is None:
+        return f"{default} ({given[EVERY].where})" if EVERY in given else default
+    frame = given.get(key) or program.tools.get(key) or program.bases.get(key)
+    return f"{key} ({frame.where})" if frame is not None else key

@@ -108,23 +108,41 @@ class ProgramCompensation:
 
 
 def frames_of(
-    program: Program, given_tools: dict[str, Frame], given_bases: dict[str, Frame]
+    program: Program,
+    language: Language,
+    given_tools: dict[str, Frame],
+    given_bases: dict[str, Frame],
 ) -> tuple[dict[str, Frame], dict[str, Frame]]:
     """The program's frames with the given ones over them (a frame keyed EVERY serves
-    every target); InputError naming the first target moved to with a frame declared by
-    neither."""
+    every target); InputError naming the first motion to a target whose frame neither
+    declares, and a given frame no target is moved to with (a typing slip: its key)."""
     tools, bases = {**program.tools, **given_tools}, {**program.bases, **given_bases}
-    for target in program.targets:
-        if not target.used or target.note:
-            continue
-        for key, known, what in ((target.tool, tools, "tools"), (target.base, bases, "bases")):
-            if key is not None and key not in known and EVERY not in known:
+    moving = [t for t in program.targets if t.used and not t.note]
+    for kind, known, given in ((0, tools, given_tools), (1, bases, given_bases)):
+        what = ("tool", "base")[kind]
+        used = {(t.tool, t.base)[kind] for t in moving}
+        for key in given:
+            if key != EVERY and key not in used:
+                names = ", ".join(sorted(k for k in used if k)) or "none"
                 raise InputError(
-                    f"{target.where}: {target.name} is moved to with {key}, which "
-                    f"{' and '.join(program.texts)} does not declare: give it "
-                    f"({param(what, key + '=...')})"
+                    f"{param(what, language.option_key(kind, key) + '=...')}: no target of "
+                    f"{', '.join(program.texts)} is moved to with {what} {key} (it uses: "
+                    f"{names})"
+                )
+        for target in moving:
+            frame = (target.tool, target.base)[kind]
+            if frame is not None and frame not in known and EVERY not in known:
+                raise InputError(
+                    f"{program_file(program)}:{target.used[0]}: {target.name} is moved to with "
+                    f"{what} {frame}, which {' and '.join(program.texts)} declare(s) no value "
+                    f"of: give it ({param(what, language.option_key(kind, frame) + '=...')})"
                 )
     return tools, bases
+
+
+def program_file(program: Program) -> str:
+    """The file the program's motions are in (the first read: a KRL program's .src)."""
+    return next(iter(program.texts))
 
 
 def compensate_program(
@@ -136,7 +154,7 @@ def compensate_program(
 ) -> ProgramCompensation:
     """`program` compensated for `calibration` (module docstring); `tools` and `bases`:
     frames by key, over the program's own (`frames_of`)."""
-    all_tools, all_bases = frames_of(program, tools or {}, bases or {})
+    all_tools, all_bases = frames_of(program, language, tools or {}, bases or {})
     model, params = calibration.model, calibration.parameters
     nominal, nominal_params = nominal_counterpart(model, params)
     robot = model.robot
@@ -194,11 +212,9 @@ def compensate_program(
     for j, k in enumerate(rows):
         target = program.targets[k]
         old = np.asarray(target.values)
+        reason[j] = reason[j] or ("" if status[j] == "ok" else _why(status[j]))
         if not done[j]:
-            reason[j] = reason[j] or _why(status[j])
-            out_rows[k] = TargetRow(
-                target, status[j], target.values, 0.0, 0.0, float(error[j]), reason[j]
-            )
+            out_rows[k] = TargetRow(target, status[j], target.values, 0.0, 0.0, np.nan, reason[j])
             continue
         if joints[j]:
             values = q_cal[j] / language.joint_unit
@@ -295,6 +311,8 @@ def _why(status: str) -> str:
         "was (near a singularity?)",
         "not_reached": "the calibrated robot does not reach it (out of reach or singular)",
         "beyond_limits": "reached only beyond the axis limits",
+        "position_only": "near the wrist singularity: the tool point compensated, its "
+        "orientation left as the exact pose would swing an axis by degrees",
     }.get(status, status)
 
 
@@ -345,12 +363,11 @@ def _check_configuration(
     ]
     if not check:
         return
-    found = _configurations(language, robot, q_cal[check])
-    for j, configs in zip(check, found):
+    found = language.configuration(robot, q_cal[check])  # exactly: what the controller gets
+    for j, config in zip(check, found):
         wanted = program.targets[rows[j]].configuration
         assert wanted is not None
-        if not any(_matches(config, wanted) for config in configs):
-            config = configs[0]
+        if not _matches(config, wanted):
             status[j] = "configuration"
             reason[j] = (
                 f"the calibrated solution needs configuration {config}, the target gives "

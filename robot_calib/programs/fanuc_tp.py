@@ -217,6 +217,7 @@ def configuration(robot: RobotDescription, q: Array) -> list[tuple[int, ...]]:
 
 
 LANGUAGE = Language(
+    vendor="FANUC",
     name="fanuc_tp",
     title="FANUC TP",
     suffixes=(".ls",),

@@ -328,6 +328,19 @@ def turn_bits(readings_deg: Array) -> Array:
     return (below * (1 << np.arange(below.shape[1]))).sum(axis=1)
 
 
+def check_output(program: Program, output: Path) -> None:
+    """InputError when the output's name is not the module's: the controller loads a
+    .src/.dat pair only under the name after DEF and DEFDAT."""
+    src = next(iter(program.texts))
+    found = re.search(r"^\s*(?:GLOBAL\s+)?DEF\s+(\w+)\s*\(", program.texts[src], re.I | re.M)
+    if found and found.group(1).lower() != output.stem.lower():
+        raise InputError(
+            f"-o {output}: the module is {found.group(1)} (DEF {found.group(1)}() in {src}); "
+            f"the controller loads it only as {found.group(1)}.src: write it to "
+            f"{output.with_name(found.group(1) + output.suffix)} (another folder)"
+        )
+
+
 def outputs(program: Program, output: Path) -> dict[str, Path]:
     """The .src to the output path, its .dat beside it with the same name."""
     out = {}
@@ -338,6 +351,8 @@ def outputs(program: Program, output: Path) -> dict[str, Path]:
 
 
 LANGUAGE = Language(
+    vendor="KUKA",
+    check_output=check_output,
     name="krl",
     title="KUKA KRL",
     suffixes=(".src",),

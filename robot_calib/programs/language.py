@@ -37,6 +37,10 @@ class Language:
     outputs : (program, the output path given) -> {program file: path to write}
     frame_keys : how a tool's and a base's number or name (an option's KEY) is written as
         the key the program's targets use, e.g. ('TOOL_DATA[{}]', 'BASE_DATA[{}]')
+    fold_keys : frame names are not case-sensitive (RAPID): keys are kept in lower case
+    vendor : who makes the controllers that run the language
+    check_output : (program, output path) -> None, InputError when the controller would
+        not load the program under that name (a KRL module's DEF name)
     """
 
     name: str
@@ -51,6 +55,17 @@ class Language:
     configuration: Callable[[RobotDescription, Array], list[tuple[int, ...]]] | None
     outputs: Callable[[Program, Path], dict[str, Path]]
     frame_keys: tuple[str, str] = ("{}", "{}")
+    fold_keys: bool = False
+    vendor: str = ""
+    check_output: Callable[[Program, Path], None] = lambda program, output: None
+
+    def option_key(self, kind: int, key: str) -> str:
+        """The KEY an option gives for the frame key `key` of `frame_keys[kind]` (0: tool,
+        1: base): 'TOOL_DATA[3]' -> '3', 'UT 2' -> '2', a name as it is."""
+        head, _, tail = self.frame_keys[kind].partition("{}")
+        if key.startswith(head) and key.endswith(tail) and len(key) > len(head) + len(tail):
+            return key[len(head) : len(key) - len(tail)]
+        return key
 
     def places(self, kind: str, count: int) -> tuple[int, ...]:
         """The fewest decimals of each of a target's `count` numbers."""

@@ -314,6 +314,8 @@ def configuration(robot: RobotDescription, q: Array) -> list[tuple[int, ...]]:
 
 
 LANGUAGE = Language(
+    vendor="ABB",
+    fold_keys=True,
     name="rapid",
     title="ABB RAPID",
     suffixes=(".mod", ".modx"),

@@ -34,3 +34,26 @@ def language_for(path: str | Path, name: str | None = None) -> Language:
 
 def _registry() -> dict[str, Language]:
     return {m.LANGUAGE.name: m.LANGUAGE for m in (krl, rapid, fanuc_tp, urscript)}
+
+
+#: the makers of the built-in robots, by the start of the description's name
+VENDORS = (
+    ("kr", "KUKA"),
+    ("irb", "ABB"),
+    ("m20ia", "FANUC"),
+    ("r2000", "FANUC"),
+    ("ur", "Universal Robots"),
+    ("gp", "Yaskawa"),
+)
+
+
+def check_robot(language: Language, robot: str, source: str) -> None:
+    """InputError naming `source` (the calibration) when its robot is a built-in one of
+    another maker than the language's (a program for a KUKA compensated with an ABB's
+    calibration); robots of other names are not checked."""
+    vendor = next((v for prefix, v in VENDORS if robot.lower().startswith(prefix)), None)
+    if vendor is not None and vendor != language.vendor:
+        raise InputError(
+            f"{source}: a calibration of robot {robot} ({vendor}), not of the "
+            f"{language.vendor} robot that runs {language.title} programs"
+        )

@@ -193,6 +193,7 @@ def base_to_pose(poses: Array, old: Array) -> Array:
 
 
 LANGUAGE = Language(
+    vendor="Universal Robots",
     name="urscript",
     title="Universal Robots URScript",
     suffixes=(".script", ".urscript"),

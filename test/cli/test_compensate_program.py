@@ -104,3 +104,46 @@ def test_an_existing_output_is_kept_without_force(tmp_path: Path) -> None:
     assert proc.returncode == 2 and "exists" in proc.stderr
     assert (out / "cal.mod").read_text() == "mine\n"
     assert not (out / "cal.targets.csv").exists()
+
+
+def test_a_calibration_of_another_robot_or_a_misnamed_output_is_refused(tmp_path: Path) -> None:
+    params, program = _setup("krl", tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    abb = _params("rapid", str(tmp_path.parent))
+    mod = program.with_suffix(".mod")
+    proc = cli("compensate", str(abb), "--program", str(program), "-o", str(out / program.name))
+    assert proc.returncode == 2 and "irb2600_12_165 (ABB), not of the KUKA robot" in proc.stderr
+    proc = cli("compensate", str(params), "--program", str(program), "-o", str(out / "pp2.src"))
+    assert proc.returncode == 2 and "the module is pick_place" in proc.stderr
+    proc = cli("compensate", str(params), "--program", str(program), "-o", str(out / "x.mod"))
+    assert proc.returncode == 2 and "written as .src" in proc.stderr
+    tool = ("--tool", "7=0,0,100,0,0,0")
+    proc = cli(
+        "compensate", str(params), "--program", str(program), "-o", str(out / program.name), *tool
+    )
+    assert proc.returncode == 2 and "no target of pick_place.src" in proc.stderr
+    assert "TOOL_DATA[7]" in proc.stderr
+    assert not list(out.iterdir()) and mod.exists()
+
+
+def test_a_program_partly_compensated_exits_3_and_says_which(tmp_path: Path) -> None:
+    params, program = _setup("rapid", tmp_path)
+    text = program.read_text()
+    far = "CONST robtarget pFar:=[[3500,0,800],[0,0,1,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+    text = text.replace("    PROC main()", f"    {far}\r\n    PROC main()")
+    text = text.replace(
+        "        MoveC pVia", "        MoveJ pFar, v100, fine, gripper;\r\n        MoveC pVia"
+    )
+    program.write_text(text, newline="")
+    out = tmp_path / "out"
+    out.mkdir()
+    proc = cli("compensate", str(params), "--program", str(program), "-o", str(out / program.name))
+    assert proc.returncode == 3, proc.stderr
+    assert "1 of its 6 targets could not be compensated" in proc.stderr
+    assert "pFar (pick_place.mod:" in proc.stderr
+    with open(out / "pick_place.targets.csv", newline="") as stream:
+        rows = {r["target"]: r for r in csv.DictReader(stream)}
+    assert rows["pFar"]["status"] == "configuration" and rows["pFar"]["error_um"] == ""
+    assert rows["pPick"]["status"] == "ok" and rows["pPick"]["tool"] == "gripper"
+    assert rows["pPick"]["base"] == "fixture"

@@ -141,7 +141,34 @@ def _mod(body: str) -> str:
 
 XYZ = " X = 1 mm, Y = 2 mm, Z = 3 mm,\n W = 0 deg, P = 0 deg"
 MOVE_P1 = " PROC main()\n  MoveL p1, v100, fine, tool0;\n ENDPROC"
+KRL_DAT = "DEFDAT p\nDECL E6POS XP1={X 1,Y 2,Z 3,A 0,B 90,C 0,S 2,T 2}\nENDDAT\n"
 BAD = [
+    (
+        "krl",
+        {"p.src": "DEF p()\nPTP XP1\nEND\n", "p.dat": KRL_DAT.replace("X 1,", "X 463.1.63,")},
+        "p.dat:2: '463.1.63' is not a number",
+    ),
+    (
+        "krl",
+        {"p.src": "DEF p()\nPTP XP1\nEND\n", "p.dat": KRL_DAT.replace("Y 2,", "Y 2,Y 3,")},
+        "p.dat:2: component Y given twice",
+    ),
+    (
+        "krl",
+        {"p.src": "DEF p()\nPTP XP1\nEND\n", "p.dat": KRL_DAT.replace("C 0,", "C 0 ")},
+        "p.dat:2: 'C 0 S 2': expected NAME value",
+    ),
+    (
+        "krl",
+        {"p.src": "DEF p()\nPTP XP1\nEND\n", "p.dat": KRL_DAT.replace("Z 3", "Z 1e999")},
+        "p.dat:2: 1e999 is beyond",
+    ),
+    (
+        "krl",
+        {"p.src": "DEF p()\n$TOOL = MYTOOL\nPTP XP1\nEND\n", "p.dat": KRL_DAT},
+        "p.src:2: $TOOL = MYTOOL: a frame this reader cannot resolve",
+    ),
+    ("krl", {"p.src": "DEF p()\nPTP XP1\nEND\n"}, "no such position declared in p.src (no p.dat"),
     (
         "krl",
         {"p.src": "DEF p()\nPTP XP9\nEND\n", "p.dat": "DEFDAT p\nENDDAT\n"},
@@ -171,6 +198,53 @@ BAD = [
         "CONFIG 'Q U T, 0, 0, 0': expected",
     ),
     (
+        "fanuc_tp",
+        {"p.ls": _ls(" UF : 0, UT : 0, CONFIG : 'N U T, 0, 0',\n" + XYZ + ", R = 0 deg")},
+        "CONFIG 'N U T, 0, 0': expected",
+    ),
+    (
+        "fanuc_tp",
+        {"p.ls": _ls(" UF : 0, UT : 0,\n" + XYZ.replace("1 mm", "1 m") + ", R = 0 deg")},
+        "p.ls:5: 'X = 1 m': expected X in mm",
+    ),
+    (
+        "fanuc_tp",
+        {"p.ls": _ls(" UF : 0, UT : 0,\n" + XYZ.replace("2 mm", "583.5.30 mm") + ", R = 0 deg")},
+        "p.ls:5: '583.5.30' is not a number",
+    ),
+    (
+        "rapid",
+        {
+            "m.mod": _mod(
+                " CONST robtarget p1:=[[1,2,3],[1,0,0,0],[0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+            )
+        },
+        "p1: robtarget robconf: expected [4 numbers]",
+    ),
+    (
+        "rapid",
+        {
+            "m.mod": _mod(
+                " CONST robtarget p1:=[[1,2,3],[0,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+            )
+        },
+        "p1: robtarget: quaternion of norm 0, not 1",
+    ),
+    (
+        "rapid",
+        {
+            "m.mod": _mod(
+                " CONST robtarget p1:=[[1,2,1e309],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+            )
+        },
+        "m.mod:2: 1e309 is beyond",
+    ),
+    (
+        "rapid",
+        {"m.mod": _mod(' PERS wobjdata w:=[FALSE,TRUE,"",[[1,2,3]],[[0,0,0],[1,0,0,0]]];')},
+        "wobjdata w uframe: expected [[x,y,z],[q1,q2,q3,q4]]",
+    ),
+    (
         "urscript",
         {"s.script": "def s():\n  movel(target, a=1)\nend\n"},
         "s.script:2: movel to target: not assigned",
@@ -179,6 +253,16 @@ BAD = [
         "urscript",
         {"s.script": "def s():\n  movel(p[0.1, 0.2, 0.3], a=1)\nend\n"},
         "s.script:2: line 2: p[...] with 3 numbers, expected 6",
+    ),
+    (
+        "urscript",
+        {"s.script": "def s():\n  movel(p[0.1, 0.2, 1e400, 0, 0, 0], a=1)\nend\n"},
+        "s.script:2: 1e400 is beyond",
+    ),
+    (
+        "urscript",
+        {"s.script": "def s():\n  set_tcp(t)\n  movej([0,0,0,0,0,0])\nend\n"},
+        "s.script:2: set_tcp(t): not a p[...] assigned above",
     ),
 ]
 
@@ -204,3 +288,47 @@ def test_language_from_suffix_and_unknown_suffix() -> None:
         language_for("prog.txt")
     with pytest.raises(InputError, match="`language='cobol'`"):
         language_for("x.src", "cobol")
+
+
+def test_what_the_readers_leave_or_name(tmp_path: Path) -> None:
+    """Text in strings is no motion; a target changed at run time, moved to relatively or
+    through an expression is left or named; Windows-1252 files are read and kept."""
+    ur = language_for("x", "urscript")
+    (tmp_path / "s.script").write_text(
+        "def s():\n"
+        '  textmsg("movel(p[1, 2, 3, 4, 5, 6])")\n'
+        "  a = p[0.4, 0.1, 0.3, 0, 3.14, 0]\n"
+        "  movel(a)\n"
+        "  a[2] = 0.5\n"
+        "  b = pose_trans(a, p[0, 0, 0.1, 0, 0, 0])\n"
+        "  movel(b)\n"
+        "end\n"
+    )
+    program = ur.read(tmp_path / "s.script")
+    assert [t.name for t in program.targets] == ["a (line 3)"]  # not the string's p[...]
+    assert "changed at run time on line 5" in program.targets[0].note
+    assert any("b, set by an expression" in r for r in program.remarks)
+    krl = language_for("x", "krl")
+    (tmp_path / "w.src").write_bytes(
+        "DEF w()\n; Greifer schließen\nLIN_REL {X 10,Y 0,Z 0,A 0,B 0,C 0}\n"
+        "PTP XP1\nLIN XP1:{X 5}\nEND\n".encode("cp1252")
+    )
+    (tmp_path / "w.dat").write_text(KRL_DAT.replace("DEFDAT p", "DEFDAT w"))
+    program = krl.read(tmp_path / "w.src")
+    assert program.encoding("w.src") == "cp1252"
+    assert "schließen" in program.texts["w.src"]
+    notes = {t.name: t.note for t in program.targets}
+    assert "relative motion" in notes["line 3"]
+    assert "geometric operator" in notes["XP1"]
+    rapid = language_for("x", "rapid")
+    (tmp_path / "m.mod").write_text(
+        _mod(
+            " CONST robtarget p1:=[[1,2,3],[1,0,0,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n"
+            ' PROC main()\n  TPWrite "MoveL p9, v1, fine, tool0;";\n'
+            "  MoveLDO p1, v100, fine, tGrip, doGrip, 1;\n  p1.trans.z := 5;\n ENDPROC"
+        )
+    )
+    program = rapid.read(tmp_path / "m.mod")
+    (target,) = program.targets
+    assert target.tool == "tgrip"  # the tool argument, not the signal value
+    assert "changed at run time" in target.note
