@@ -421,7 +421,11 @@ def _nominal_solutions(
     wanted = [program.targets[k].configuration for k in rows]
     if language.configuration is None:
         return q, ok
-    need = [j for j in pose_rows.tolist() if wanted[j] is not None]
+    # beyond the arm's longest reach (|a| + |d| of every link from the base): no seed helps
+    reach = float(np.sum(np.abs(robot.a)) + np.sum(np.abs(robot.d)))
+    far = np.linalg.norm(flange_goal[:, :3, 3], axis=1) > reach
+    ok &= ~(far & ~joints)
+    need = [j for j in pose_rows.tolist() if wanted[j] is not None and not far[j]]
     if not need:
         return q, ok
     met = np.ones(n, dtype=bool)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robot_calib.errors import InputError
+from robot_calib.errors import InputError, param
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.programs.configuration import posture
@@ -335,7 +335,8 @@ def check_output(program: Program, output: Path) -> None:
     found = re.search(r"^\s*(?:GLOBAL\s+)?DEF\s+(\w+)\s*\(", program.texts[src], re.I | re.M)
     if found and found.group(1).lower() != output.stem.lower():
         raise InputError(
-            f"-o {output}: the module is {found.group(1)} (DEF {found.group(1)}() in {src}); "
+            f"{param('output', str(output))}: the module is {found.group(1)} (DEF "
+            f"{found.group(1)}() in {src}); "
             f"the controller loads it only as {found.group(1)}.src: write it to "
             f"{output.with_name(found.group(1) + output.suffix)} (another folder)"
         )

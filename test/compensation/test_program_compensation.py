@@ -39,8 +39,8 @@ def test_compensated_program_reaches_what_the_program_meant(name: str, tmp_path:
         (out / file).write_bytes(text.encode())
     compensated = language.read(out / path.name)  # our own reader reads what we wrote
     tool, base = taught_program.tool2flange, taught_program.base2robot
-    before = drive(language, program, taught_program.q, world, tool, base)
-    after = drive(language, compensated, taught_program.q, world, tool, base)
+    before = drive(language, program, taught_program.q, world.world, tool, base)
+    after = drive(language, compensated, taught_program.q, world.world, tool, base)
     meant = taught_program.meant[:, :3, 3]
     miss_before = np.linalg.norm(before[:, :3, 3] - meant, axis=1)
     miss_after = np.linalg.norm(after[:, :3, 3] - meant, axis=1)

@@ -41,7 +41,7 @@ def recorded(plan: Plan, seed: int, temperature: np.ndarray | None = None) -> Re
 
 
 def _written(tmp_path: Path, pdf: bool = False) -> tuple[Path, Diagnosis]:
-    plan = paper_test_plan(2)
+    plan = paper_test_plan(1)
     warm = np.linspace(20.5, 27.25, len(plan.q))  # the campaign warmed the robot by 6.75 K
     calibration = recorded(plan, 1, warm)
     held = recorded(random_plan(ROBOT, 40, np.random.default_rng(5)), 2, np.full(40, 24.0))

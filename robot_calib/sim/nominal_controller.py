@@ -1,0 +1,107 @@
+"""The nominal controller running a program on the true simulated robot: where the tool
+really goes for a program's targets (test/compensation and scripts/program_figures.py
+score compensated programs with it).
+
+A controller given a Cartesian target with configuration data moves to the inverse
+kinematics' solution on that configuration; without configuration data, to the solution
+nearest the arm's pose before the motion (the taught readings stand for it here). Axis
+targets are moved to as written. The true robot (the world's model and truth: every
+effect, with the approach directions of the sequence) puts the tool there.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from robot_calib.compensation.solve import BRANCH_SHARES
+from robot_calib.ik import solve_ik
+from robot_calib.kinematics.description import RobotDescription
+from robot_calib.kinematics.frames import Array
+from robot_calib.model import KinematicModel
+from robot_calib.poses import Poses, approach_directions
+from robot_calib.programs.language import Language
+from robot_calib.programs.source import Program
+from robot_calib.sim.world import World
+
+
+def controller_solutions(
+    language: Language, program: Program, robot: RobotDescription, goal: Array, start: Array
+) -> Array:
+    """(n, J) readings the nominal controller moves to for pose targets with flange goals
+    (n, 4, 4): every solution the nominal inverse kinematics finds from the start readings
+    and from seeds spread over the arm's branches (both facings of axis 1, elbow and wrist
+    both ways, axes 1, 4, 6 +-1 turn), kept where it is within the limits and, for a
+    language with configuration data, has the target's configuration; of those, the one
+    nearest the start (a controller's choice without configuration data)."""
+    nominal = KinematicModel(robot, ())
+    params = nominal.parameters()
+    limits = robot.limits
+    seeds = [start]
+    for turn in (0.0, np.pi):
+        for shares in BRANCH_SHARES:
+            seed = start.copy()
+            seed[:, 0] = np.angle(np.exp(1j * (seed[:, 0] + turn)))
+            seed[:, 3:] = 0.0
+            for joint, share in zip((1, 2, 4), shares):
+                seed[:, joint] = limits[joint, 0] + share * np.diff(limits[joint])[0]
+            seeds.append(seed)
+    found = []
+    for seed in seeds:
+        ik = solve_ik(
+            nominal,
+            params,
+            Poses.from_readings(seed),
+            goal,
+            np.eye(4),
+            tolerance_m=1e-12,
+            max_iterations=100,
+        )
+        for shift in itertools.product((-1, 0, 1), repeat=3):
+            q = ik.q.copy()
+            q[:, [0, 3, 5]] += 2 * np.pi * np.array(shift)
+            ok = ik.converged & np.all((q >= limits[:, 0]) & (q <= limits[:, 1]), axis=1)
+            found.append(np.where(ok[:, None], q, np.nan))
+    candidates = np.stack(found, axis=1)  # (n, m, J)
+    targets = [t for t in program.targets if t.kind == "pose"]
+    out = np.full_like(start, np.nan)
+    for k, target in enumerate(targets):
+        rows = candidates[k][np.isfinite(candidates[k]).all(axis=1)]
+        if language.configuration is not None and target.configuration is not None:
+            configs = language.configuration(robot, rows)
+            rows = rows[
+                [
+                    all(w < 0 or c == w for c, w in zip(config, target.configuration))
+                    for config in configs
+                ]
+            ]
+        assert len(rows), f"{target.name}: the controller finds no solution on its configuration"
+        out[k] = rows[np.argmin(np.abs(rows - start[k]).max(axis=1))]
+    return out
+
+
+def drive(
+    language: Language,
+    program: Program,
+    taught_q: Array,
+    world: World,
+    tool2flange: Array,
+    base2robot: Array,
+) -> Array:
+    """(n, 4, 4) where the true robot puts the tool at each target of `program` (program
+    order) driven by the nominal controller: axis targets as written; pose targets at the
+    controller's solution (`controller_solutions`: on the target's configuration, the one
+    nearest the taught readings), with the approach directions of the sequence."""
+    q = np.array(taught_q, dtype=float)
+    kinds = np.array([t.kind for t in program.targets])
+    poses = np.flatnonzero(kinds == "pose")
+    joints = np.flatnonzero(kinds == "joints")
+    if poses.size:
+        values = np.array([program.targets[k].values for k in poses])
+        goal = base2robot @ language.pose_to_base(values) @ np.linalg.inv(tool2flange)
+        q[poses] = controller_solutions(language, program, world.model.robot, goal, q[poses])
+    if joints.size:
+        q[joints] = np.array([program.targets[k].values for k in joints]) * language.joint_unit
+    at = Poses(q, approach_directions(q), np.zeros(len(q)))
+    return world.model.flange2base(world.truth, at) @ tool2flange
