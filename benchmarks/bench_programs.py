@@ -35,7 +35,9 @@ TARGET_PER_S = 1000.0
 ARMS = {"krl": "kr16_2", "rapid": "irb2600_12_165", "fanuc_tp": "m20ia", "urscript": "ur10"}
 
 
-def main() -> None:
+def main() -> int:
+    """Prints a line per language; 1 when a language is below TARGET_PER_S."""
+    below = 0
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--targets", type=int, default=10000)
     parser.add_argument("--language", action="append", choices=language_names())
@@ -69,6 +71,7 @@ def main() -> None:
         count = Counter(row.status for row in result.rows)
         written = sum(count[s] for s in WRITTEN)
         rate = len(result.rows) / seconds
+        below += rate < TARGET_PER_S
         print(
             f"{language.title}: {len(result.rows)} targets read, compensated and written in "
             f"{seconds:.2f} s (read {read_s:.2f} s): {rate:,.0f} targets/s "
@@ -76,6 +79,8 @@ def main() -> None:
             f"{TARGET_PER_S:,.0f}/s); {written} written, statuses {dict(count)}"
         )
 
+    return 1 if below else 0
+
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())
