@@ -57,7 +57,8 @@ def main() -> None:
             recordings.append(recording_from_arrays(poses.q, points, poses.time, robot=robot))
         cal = calibrate(recordings[0], robot, "geometric+backlash:2,3+compliance:2,3")
         held = cal.score(recordings[1]).accuracy.absolute_rms_mm
-        before, after = [], []
+        before: list[np.ndarray] = []
+        after: list[np.ndarray] = []
         for seed in range(args.programs):
             taught = taught_program(robot, language, args.targets, np.random.default_rng(seed))
             frames: tuple[dict[str, Frame], dict[str, Frame]] = ({}, {})
