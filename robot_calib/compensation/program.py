@@ -172,8 +172,9 @@ def compensate_program(
         values = np.array([program.targets[rows[j]].values for j in poses])
         goal[poses] = base[poses] @ language.pose_to_base(values)
     solved = np.ones(n, dtype=bool)
+    reachable = np.ones(n, dtype=bool)
     if poses.size:
-        q_nom, solved = _nominal_solutions(
+        q_nom, solved, reachable = _nominal_solutions(
             calibration, program, language, rows, joints, q_nom, goal, tool
         )
     if joints.any():  # what the program means at its axis values
@@ -182,7 +183,11 @@ def compensate_program(
     q_cal, error, status = _compensated(calibration, q_nom, solved, tool)
     reason = [""] * n
     for row in np.flatnonzero(~solved).tolist():
-        status[row], reason[row] = "configuration", _unreached(program.targets[rows[row]])
+        if reachable[row]:
+            status[row], reason[row] = "configuration", _unreached(program.targets[rows[row]])
+        else:
+            status[row] = "not_reached"
+            reason[row] = "out of the nominal arm's reach: no solution within the axis limits"
     _check_configuration(program, language, robot, rows, q_cal, status, reason)
     if n:
         margin = singular_margin(robot, np.nan_to_num(q_nom))
@@ -384,11 +389,13 @@ def _nominal_solutions(
     q_nom: Array,
     goal: Array,
     tool: Array,
-) -> tuple[Array, NDArray[np.bool_]]:
+) -> tuple[Array, NDArray[np.bool_], NDArray[np.bool_]]:
     """The nominal controller's readings (n, J) [rad] for the pose rows (the axis rows as
-    given) and which rows have one: rows followed from the axis targets before them
-    (`nominal_ik` as for a program), then, where a target's configuration is not met,
-    solved again from every branch seed with whole turns of axes 1, 4, 6 until one is."""
+    given), which rows have one, and which have any solution within the axis limits
+    (on another configuration, where the first ones have none): rows followed from the
+    axis targets before them (`nominal_ik` as for a program), then, where a target's
+    configuration is not met, solved again from every branch seed with whole turns of
+    axes 1, 4, 6 until one is."""
     model, params = calibration.model, calibration.parameters
     nominal, nominal_params = nominal_counterpart(model, params)
     robot = model.robot
@@ -420,14 +427,15 @@ def _nominal_solutions(
     ok |= joints
     wanted = [program.targets[k].configuration for k in rows]
     if language.configuration is None:
-        return q, ok
+        return q, ok, ok.copy()
     # beyond the arm's longest reach (|a| + |d| of every link from the base): no seed helps
     reach = float(np.sum(np.abs(robot.a)) + np.sum(np.abs(robot.d)))
     far = np.linalg.norm(flange_goal[:, :3, 3], axis=1) > reach
     ok &= ~(far & ~joints)
+    reachable = ok.copy()
     need = [j for j in pose_rows.tolist() if wanted[j] is not None and not far[j]]
     if not need:
-        return q, ok
+        return q, ok, reachable
     met = np.ones(n, dtype=bool)
     met[need] = False
     _meet(language, robot, q, ok, met, wanted, need)
@@ -453,13 +461,14 @@ def _nominal_solutions(
         trial[left] = again.q
         trial_ok = ok.copy()
         trial_ok[left] = again.converged
+        reachable[left] |= again.converged & within_limits(robot, again.q)
         before = met.copy()
         _meet(language, robot, trial, trial_ok, met, wanted, [int(j) for j in left])
         newly = left[met[left] & ~before[left]]
         q[newly], ok[newly] = trial[newly], True
     bad = np.array([j for j in need if not met[j]], dtype=int)
     ok[bad] = False
-    return q, ok
+    return q, ok, reachable
 
 
 def _meet(

@@ -144,6 +144,6 @@ def test_a_program_partly_compensated_exits_3_and_says_which(tmp_path: Path) -> 
     assert "pFar (pick_place.mod:" in proc.stderr
     with open(out / "pick_place.targets.csv", newline="") as stream:
         rows = {r["target"]: r for r in csv.DictReader(stream)}
-    assert rows["pFar"]["status"] == "configuration" and rows["pFar"]["error_um"] == ""
+    assert rows["pFar"]["status"] == "not_reached" and rows["pFar"]["error_um"] == ""
     assert rows["pPick"]["status"] == "ok" and rows["pPick"]["tool"] == "gripper"
     assert rows["pPick"]["base"] == "fixture"

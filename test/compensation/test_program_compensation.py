@@ -134,6 +134,6 @@ def test_a_target_out_of_reach_is_left_and_marked(tmp_path: Path) -> None:
     program = language.read(tmp_path / "far.mod")
     result = compensate_program(world.calibration, program, language)
     (row,) = result.rows
-    assert row.status == "configuration"  # no nominal solution at all
-    assert "no solution" in row.reason
+    assert row.status == "not_reached"  # no nominal solution at all
+    assert "out of the nominal arm's reach" in row.reason
     assert result.texts == program.texts
