@@ -32,7 +32,9 @@ ROBOT = CALIBRATION_ROBOT  # --robot's default, in words
 
 
 def add_arguments(comp: argparse.ArgumentParser) -> None:
-    comp.add_argument("params", metavar="PARAMS.json")
+    comp.add_argument(
+        "params", metavar="PARAMS.json", help="the calibration (calibrate's or diagnose's)"
+    )
     given = comp.add_mutually_exclusive_group(required=True)
     given.add_argument(
         "--joints",
@@ -97,10 +99,11 @@ def add_arguments(comp: argparse.ArgumentParser) -> None:
     )
     add_output(
         comp,
-        "JOINTS.csv to write: q1..qJ [rad] compensated, dir1..dirJ (the approach "
-        "directions assumed), error_mm and error_urad (the calibrated model's remaining "
-        "error), iterations; with --program: the compensated program (a KRL .dat is "
-        "written beside its .src), and a per-target table NAME.targets.csv beside it",
+        "the file to write: with --joints or --targets a JOINTS.csv (q1..qJ [rad] "
+        "compensated, dir1..dirJ the approach directions assumed, error_mm and error_urad "
+        "the calibrated model's remaining error, iterations, status); with --program the "
+        "compensated program in its language's suffix (a KRL .dat is written beside its "
+        ".src) and a per-target table NAME.targets.csv beside it",
     )
     add_force(comp, implausible=True)
 
@@ -266,6 +269,15 @@ def frame_options(
         if language.name == "rapid" and abs(np.linalg.norm(pose[3:]) - 1.0) > 1e-3:
             raise InputError(f"--{option} {text}: the quaternion q1..q4 has not norm 1")
         key = key.strip().lower() if language.fold_keys else key.strip()
+        reach = float(np.abs(pose[:3]).max())
+        metres = language.joint_unit == 1.0  # URScript: poses in m, axes in rad
+        if (metres and reach > 5.0) or (not metres and 0.0 < reach < 2.0):
+            unit, other = ("m", "mm") if metres else ("mm", "m")
+            print(
+                f"warning: --{option} {text}: its position is in {unit} in {language.title}; "
+                f"{reach:g} looks like {other}",
+                file=sys.stderr,
+            )
         name = EVERY if not key else language.frame_keys[kind].format(key)
         if name in out:
             raise InputError(

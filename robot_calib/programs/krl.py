@@ -58,6 +58,8 @@ _FRAME_VALUE = re.compile(
     r"|(?:STOOL2|SBASE)\s*\(\s*(\w+)(?:\.\w+)?\s*\))\s*$",
     re.IGNORECASE,
 )
+#: an assignment in the .src to a declared position or one of its components
+_CHANGED = re.compile(r"^[ \t]*(\w+)(?:\.\w+)?[ \t]*=(?!=)", re.MULTILINE)
 _SETTINGS = re.compile(
     r"\bBAS\s*\(\s*#(TOOL|BASE)\s*,\s*(\d+)\s*\)|\bFDAT_ACT\s*=\s*(\w+)", re.IGNORECASE
 )
@@ -295,6 +297,9 @@ def read(path: Path) -> Program:
             if comma < 0:
                 break
             at = comma + 1
+    for m in _CHANGED.finditer(code):  # a target changed while the program runs
+        if book.known(m.group(1)):
+            book.noted(m.group(1), f"changed at run time on line {line_of(code, m.start())}")
     return Program("krl", texts, book.targets(), tools, bases, tuple(remarks), encodings)
 
 

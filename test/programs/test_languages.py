@@ -116,6 +116,33 @@ def test_round_trip_is_byte_identical(name: str, tmp_path: Path) -> None:
         assert text.encode() == original
 
 
+@pytest.mark.parametrize("name", sorted(MAIN))
+def test_new_numbers_read_back_as_written(name: str, tmp_path: Path) -> None:
+    """Every target moved by a few hundredths: written at the language's decimals, read
+    back to within them, and nothing else changed (the text between numbers)."""
+    language = language_for("x", name)
+    for path in EXAMPLES.glob("pick_place.*"):
+        shutil.copy(path, tmp_path)
+    program = language.read(tmp_path / MAIN[name])
+    unit = name == "rapid"  # a quaternion stays a unit quaternion: positions moved only
+    moved = {
+        k: tuple(
+            v + (0.0 if unit and t.kind == "pose" and i >= 3 else 0.0123456 * (i + 1))
+            for i, v in enumerate(t.values)
+        )
+        for k, t in enumerate(program.targets)
+    }
+    places = {k: language.places(t.kind, len(t.values)) for k, t in enumerate(program.targets)}
+    out = tmp_path / "out"
+    out.mkdir()
+    for file, text in rewrite(program, moved, places).items():
+        (out / file).write_bytes(text.encode(program.encoding(file)))
+    again = language.read(out / MAIN[name])
+    for k, target in enumerate(again.targets):
+        step = 10.0 ** -np.array(places[k], dtype=float)
+        assert np.all(np.abs(np.subtract(target.values, moved[k])) <= step / 2 + 1e-12)
+
+
 def test_rewrite_keeps_crlf_and_comments(tmp_path: Path) -> None:
     language = language_for("x", "rapid")
     text = (
@@ -311,15 +338,19 @@ def test_what_the_readers_leave_or_name(tmp_path: Path) -> None:
     krl = language_for("x", "krl")
     (tmp_path / "w.src").write_bytes(
         "DEF w()\n; Greifer schließen\nLIN_REL {X 10,Y 0,Z 0,A 0,B 0,C 0}\n"
-        "PTP XP1\nLIN XP1:{X 5}\nEND\n".encode("cp1252")
+        "PTP XP1\nLIN XP1:{X 5}\nXP2.Z = 10\nPTP XP2\nEND\n".encode("cp1252")
     )
-    (tmp_path / "w.dat").write_text(KRL_DAT.replace("DEFDAT p", "DEFDAT w"))
+    dat = KRL_DAT.replace("DEFDAT p", "DEFDAT w")
+    (tmp_path / "w.dat").write_text(
+        dat.replace("ENDDAT", "DECL E6AXIS XP2={A1 0,A2 -90,A3 90,A4 0,A5 0,A6 0}\nENDDAT")
+    )
     program = krl.read(tmp_path / "w.src")
     assert program.encoding("w.src") == "cp1252"
     assert "schließen" in program.texts["w.src"]
     notes = {t.name: t.note for t in program.targets}
     assert "relative motion" in notes["line 3"]
     assert "geometric operator" in notes["XP1"]
+    assert "changed at run time on line 6" in notes["XP2"]
     rapid = language_for("x", "rapid")
     (tmp_path / "m.mod").write_text(
         _mod(
