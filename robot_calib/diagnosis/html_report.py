@@ -45,6 +45,7 @@ from robot_calib.diagnosis.report import (
     ModelErrors,
     blank,
     harmonic_cells,
+    iso_distance_table,
     iso_pose_table,
     parameter_rows,
     unobservable,
@@ -696,6 +697,14 @@ def _iso(diagnosis: Diagnosis) -> str:
         _table(header, rows),
     ]
     out.append(_table(*iso_pose_table(figures)))
+    if figures[0].distance is not None:
+        first = figures[0].distance
+        out.append(
+            "<p>Distance accuracy AD and repeatability RD (ISO 9283 7.3) between the "
+            f"repeated poses first measured at {first.first_index_a} and "
+            f"{first.first_index_b}, over {first.n} cycles.</p>"
+        )
+        out.append(_table(*iso_distance_table(figures)))
     return "".join(out)
 
 

@@ -11,6 +11,13 @@ calibrated one after):
 RP does not depend on the model: it is the robot's (and the tracker's) repeatability; AP
 is where calibration shows.
 
+Distance accuracy and repeatability (ISO 9283 7.3), between two repeated poses A and B
+visited in the same cycles (the cube's P2 and P4, else the first two): D_i the measured
+distance |x_B,i - x_A,i| in cycle i, D_c the model's,
+  AD = mean(D_i) - D_c,  RD = 3 S_D;
+of orientation, with d_i = e_B,i - e_A,i (the change of the orientation error from A to B,
+per component a, b, c), AD_a = |mean(d_a)| and RD_a = 3 S_(d_a) [deg].
+
 Orientation (ISO 9283 7.2.2 and 7.2.3, its a, b, c about the x, y, z axes): with e_i the
 rotation vector of the model's orientation against the measured one (small angles: its
 components are the deviations about x, y, z of the tracker frame),
@@ -47,6 +54,30 @@ class PoseFigures(Record):
 
 
 @dataclass(frozen=True)
+class DistanceFigures(Record):
+    """ISO 9283 distance accuracy AD and repeatability RD between two repeated poses (their
+    first measurements' indices), over the `n` cycles that visited both [mm], and of
+    orientation per component a, b, c [deg] (None without orientations)."""
+
+    first_index_a: int
+    first_index_b: int
+    n: int
+    ad_mm: float
+    rd_mm: float
+    ad_abc_deg: tuple[float, float, float] | None = None
+    rd_abc_deg: tuple[float, float, float] | None = None
+
+    def line(self) -> str:
+        orientation = (
+            ""
+            if self.ad_abc_deg is None or self.rd_abc_deg is None
+            else f"; orientation AD max {max(self.ad_abc_deg):.4f} deg, RD max "
+            f"{max(self.rd_abc_deg):.4f} deg"
+        )
+        return f"distance AD {self.ad_mm:+.4f} mm, RD {self.rd_mm:.4f} mm{orientation}"
+
+
+@dataclass(frozen=True)
 class Iso9283(Record):
     """ISO 9283 figures of one model on one recording (DIAGNOSIS.json `iso9283`)."""
 
@@ -58,6 +89,8 @@ class Iso9283(Record):
     # the largest AP_a/b/c and RP_a/b/c over the poses [deg]; None without orientations
     ap_orientation_max_deg: float | None = None
     rp_orientation_max_deg: float | None = None
+    # AD and RD between two repeated poses (None: fewer than two poses with common cycles)
+    distance: DistanceFigures | None = None
 
     def line(self) -> str:
         orientation = (
@@ -66,9 +99,11 @@ class Iso9283(Record):
             else f"; orientation AP max {self.ap_orientation_max_deg:.4f} deg, RP max "
             f"{self.rp_orientation_max_deg:.4f} deg"
         )
+        distance = "" if self.distance is None else f"; {self.distance.line()}"
         return (
             f"ISO 9283 ({self.model}, {len(self.poses)} repeated poses, {self.scored_on}): "
             f"AP max {self.ap_max_mm:.4f} mm, RP max {self.rp_max_mm:.4f} mm{orientation}"
+            f"{distance}"
         )
 
 
@@ -104,7 +139,8 @@ def iso9283(
     orientation against the measured one [rad] (NaN where none was measured; None:
     none); None when no pose is repeated MIN_REPEATS times."""
     figures = []
-    for group in repeat_groups(recording) if groups is None else groups:
+    groups = repeat_groups(recording) if groups is None else groups
+    for group in groups:
         measured = recording.points[group]
         centre = measured.mean(axis=0)
         command = predicted[group].mean(axis=0)
@@ -134,10 +170,49 @@ def iso9283(
         max(f.rp_mm for f in figures),
         max((max(f.ap_abc_deg) for f in oriented if f.ap_abc_deg), default=None),
         max((max(f.rp_abc_deg) for f in oriented if f.rp_abc_deg), default=None),
+        _distance(recording, predicted, groups, orientation_errors),
     )
 
 
 Triple = tuple[float, float, float]
+
+
+def _distance(
+    recording: Recording,
+    predicted: Array,
+    groups: list[IntArray],
+    orientation_errors: Array | None,
+) -> DistanceFigures | None:
+    """AD and RD between the cube's P2 and P4 (the second and fourth repeated pose, as
+    ISO 9283 takes them), else the first two; their measurements paired by cycle (the
+    k-th visit of each); None with fewer than two poses or MIN_REPEATS common cycles."""
+    if len(groups) < 2:
+        return None
+    a, b = (groups[1], groups[3]) if len(groups) >= 4 else (groups[0], groups[1])
+    n = min(len(a), len(b))
+    if n < MIN_REPEATS:
+        return None
+    a, b = a[:n], b[:n]
+    measured = np.linalg.norm(recording.points[b] - recording.points[a], axis=1)
+    command = np.linalg.norm(predicted[b].mean(axis=0) - predicted[a].mean(axis=0))
+    ad_abc = rd_abc = None
+    if orientation_errors is not None:
+        change = orientation_errors[b] - orientation_errors[a]
+        change = change[np.isfinite(change).all(axis=1)]
+        if len(change) >= MIN_REPEATS:
+            ad = np.degrees(np.abs(change.mean(axis=0)))
+            rd = np.degrees(3.0 * change.std(axis=0, ddof=1))
+            ad_abc = (float(ad[0]), float(ad[1]), float(ad[2]))
+            rd_abc = (float(rd[0]), float(rd[1]), float(rd[2]))
+    return DistanceFigures(
+        int(a[0]),
+        int(b[0]),
+        n,
+        float((measured.mean() - command) * 1e3),
+        float(3.0 * measured.std(ddof=1) * 1e3),
+        ad_abc,
+        rd_abc,
+    )
 
 
 def _orientation(errors: Array | None) -> tuple[Triple | None, Triple | None]:

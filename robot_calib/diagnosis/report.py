@@ -330,6 +330,28 @@ def iso_pose_table(figures: Sequence[Iso9283]) -> tuple[list[str], list[list[obj
     return header, rows
 
 
+def iso_distance_table(figures: Sequence[Iso9283]) -> tuple[list[str], list[list[object]]]:
+    """ISO 9283 distance accuracy and repeatability (both reports): a row per model with
+    AD and RD [mm] and, with orientations, the largest AD a/b/c and RD a/b/c [deg]."""
+    oriented = any(f.distance is not None and f.distance.rd_abc_deg for f in figures)
+    header = ["model", "AD [mm]", "RD [mm]"]
+    if oriented:
+        header += ["AD a/b/c max [deg]", "RD a/b/c max [deg]"]
+    rows: list[list[object]] = []
+    for f in figures:
+        if f.distance is None:
+            continue
+        d = f.distance
+        row: list[object] = [f.model, f"{d.ad_mm:+.4f}", f"{d.rd_mm:.4f}"]
+        if oriented:
+            row += [
+                max_deg(max(d.ad_abc_deg) if d.ad_abc_deg else None),
+                max_deg(max(d.rd_abc_deg) if d.rd_abc_deg else None),
+            ]
+        rows.append(row)
+    return header, rows
+
+
 def max_deg(value: float | None) -> str:
     """A largest orientation figure [deg], '-' without orientations."""
     return "-" if value is None else f"{value:.4f}"
@@ -502,6 +524,13 @@ def write_report(
             for f in diagnosis.iso9283
         ]
         lines += ["", *_markdown_table(*iso_pose_table(diagnosis.iso9283))]
+        if diagnosis.iso9283[0].distance is not None:
+            lines += [
+                "",
+                "Distance accuracy (AD) and repeatability (RD), ISO 9283 7.3:",
+                "",
+                *_markdown_table(*iso_distance_table(diagnosis.iso9283)),
+            ]
     if diagnosis.outliers:
         lines += [
             "",

@@ -91,6 +91,16 @@ def test_orientation_ap_falls_with_calibration_and_rp_is_three_sigma() -> None:
     assert before.ap_orientation_max_deg > 5 * after.ap_orientation_max_deg
     # what the reports print: the per-pose a/b/c columns and the line
     assert "orientation AP max" in after.line()
+    # distance accuracy between P2 and P4 over the 30 cycles (ISO 9283 7.3): RD is the
+    # noise of a difference of two measurements (3 sqrt(2) sigma per component), AD falls
+    assert before.distance is not None and after.distance is not None
+    assert after.distance.n == 30
+    assert after.distance.rd_mm == pytest.approx(before.distance.rd_mm)  # the robot's own
+    assert abs(after.distance.ad_mm) < 0.005 < abs(before.distance.ad_mm)
+    assert after.distance.rd_abc_deg is not None and after.distance.ad_abc_deg is not None
+    rd = np.radians(np.mean(after.distance.rd_abc_deg))
+    assert rd == pytest.approx(3 * np.sqrt(2) * sigma, rel=0.3)
+    assert "distance AD" in after.line()
     cube = iso9283_plan(WORLD.model, WORLD.truth, cycles=5)
     plain, _ = diagnose(recorded(WORLD, paper_test_plan(2), 1), ROBOT, recorded(WORLD, cube, 3))
     assert all(f.ap_orientation_max_deg is None for f in plain.iso9283)
