@@ -334,8 +334,9 @@ def compensate_program_file(args: argparse.Namespace, cal: Calibration) -> int:
     return 0
 
 
-#: statuses of targets left as they were because the compensation failed there
-FAILED = ("configuration", "not_reached", "beyond_limits", "large_change")
+#: statuses of targets the program moves to but that were left as they were: the
+#: compensation failed there, or the target cannot be compensated as it stands
+FAILED = ("configuration", "not_reached", "beyond_limits", "large_change", "left")
 
 
 def _report(
@@ -385,7 +386,7 @@ def _report(
         f"{smr[2]:.1f}) mm in the flange"
         + ("; the learned correction applied" if cal.correction is not None else "")
     )
-    for status in (*FAILED, "left", "position_only", "near_singular"):
+    for status in (*FAILED, "position_only", "near_singular"):
         hit = [r for r in rows if r.status == status]
         if hit:
             names = ", ".join(f"{r.target.name} ({r.target.where})" for r in hit[:SHOWN])

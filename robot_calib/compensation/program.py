@@ -50,7 +50,7 @@ from robot_calib.model import Calibrated
 from robot_calib.poses import Poses, approach_directions
 from robot_calib.programs.configuration import singular_margin
 from robot_calib.programs.language import Language
-from robot_calib.programs.source import Frame, Program, Target, rewrite
+from robot_calib.programs.source import OUTSIDE, Frame, Program, Target, rewrite
 
 #: statuses of targets written compensated; every other target is left as it was
 WRITTEN = ("ok", "position_only", "near_singular")
@@ -132,6 +132,12 @@ def frames_of(
         for target in moving:
             frame = (target.tool, target.base)[kind]
             if frame is not None and frame not in known and EVERY not in known:
+                if OUTSIDE in frame:
+                    raise InputError(
+                        f"{program_file(program)}:{target.used[0]}: {target.name} is moved to "
+                        f"with {what} {frame}: declare it in the program, or set the frame "
+                        "before the motion"
+                    )
                 raise InputError(
                     f"{program_file(program)}:{target.used[0]}: {target.name} is moved to with "
                     f"{what} {frame}, which {' and '.join(program.texts)} declare(s) no value "
@@ -160,8 +166,8 @@ def compensate_program(
     robot = model.robot
     rows = [k for k, t in enumerate(program.targets) if t.used and not t.note and t.values]
     n = len(rows)
-    tool = np.array([_pose(all_tools, t.tool) for t in _at(program, rows)])
-    base = np.array([_pose(all_bases, t.base) for t in _at(program, rows)])
+    tool = np.array([_pose(all_tools, t.tool) for t in _at(program, rows)]).reshape(n, 4, 4)
+    base = np.array([_pose(all_bases, t.base) for t in _at(program, rows)]).reshape(n, 4, 4)
     joints = np.array([program.targets[k].kind == "joints" for k in rows], dtype=bool)
     q_nom = np.zeros((n, robot.n_joints))
     for j in np.flatnonzero(joints).tolist():

@@ -94,7 +94,8 @@ def _body(text: str, start: int, end: int, file: str, where: str) -> dict[str, t
                 )
             if key in out:
                 raise InputError(f"{where}: {key} given twice")
-            value = number(part.group(value_group), where)
+            at_value = at + part.start(value_group)
+            value = number(part.group(value_group), f"{file}:{line_of(text, at_value)}")
             span = Span(file, at + part.start(value_group), at + part.end(value_group))
             out[key] = (value, span)
         at += len(piece) + 1
@@ -180,7 +181,7 @@ def read(path: Path) -> Program:
         rest = text[m.end() : text.find("\n", m.end())]
         if re.search(r"\bINC\b", rest):
             book.noted(label, f"an incremental motion (INC) on line {line}")
-        elif re.search(r"\b(Offset|Tool_Offset)\b", rest):
+        elif re.search(r"\b(Offset|Tool_Offset|VOFFSET)\b", rest, re.IGNORECASE):
             remarks.append(
                 f"{name}:{line}: a motion to {label} with an offset: it gets {label}'s correction"
             )

@@ -23,6 +23,7 @@ from robot_calib.kinematics.frames import Array
 from robot_calib.programs.configuration import posture
 from robot_calib.programs.language import Language
 from robot_calib.programs.source import (
+    OUTSIDE,
     Frame,
     Program,
     Span,
@@ -49,7 +50,7 @@ _DECL = re.compile(
 _DATA = re.compile(r"\b(TOOL_DATA|BASE_DATA)\s*\[\s*(\d+)\s*\]\s*=\s*\{", re.IGNORECASE)
 _FDAT = re.compile(r"\bDECL\s+(?:GLOBAL\s+)?FDAT\s+(\w+)\s*=\s*\{([^}]*)\}", re.IGNORECASE)
 _MOTION = re.compile(r"\b(S?PTP|S?LIN|S?CIRC)(_REL)?\b[ \t]*([^\r\n]*)", re.IGNORECASE)
-_ARGUMENT = re.compile(r"\s*(\{[^}\n]*\}?|\$?\w+(?:\s*\[[^\]]*\])?)(\s*:\s*\{)?")
+_ARGUMENT = re.compile(r"\s*(\{[^}\n]*\}?|\$?\w+(?:\s*\[[^\]]*\])?)(\s*:)?")
 #: $TOOL / $BASE set to a frame: TOOL_DATA[n], BASE_DATA[n], $NULLFRAME, STOOL2(FPn),
 #: SBASE(FPn.BASE_NO); anything else is refused (a frame the reader cannot resolve)
 _ASSIGN = re.compile(r"\$(TOOL|BASE)\s*=\s*([^,\r\n;]*)", re.IGNORECASE)
@@ -60,6 +61,7 @@ _FRAME_VALUE = re.compile(
 )
 #: an assignment in the .src to a declared position or one of its components
 _CHANGED = re.compile(r"^[ \t]*(\w+)(?:\.\w+)?[ \t]*=(?!=)", re.MULTILINE)
+_BAS_OTHER = re.compile(r"\bBAS\s*\(\s*#(?:TOOL|BASE)\s*,\s*(?!\d+\s*\))[^)]*\)", re.I)
 _SETTINGS = re.compile(
     r"\bBAS\s*\(\s*#(TOOL|BASE)\s*,\s*(\d+)\s*\)|\bFDAT_ACT\s*=\s*(\w+)", re.IGNORECASE
 )
@@ -153,7 +155,7 @@ class _Frames:
         gives keys no frame has: a target moved to with them is refused by name."""
         if name.upper() not in self.fdat:
             self.external = ""
-            return f"TOOL_NO of {name} (not in the program)", f"BASE_NO of {name}"
+            return f"of FDAT {name} ({OUTSIDE})", f"of FDAT {name} ({OUTSIDE})"
         tool_no, base_no, frame = self.fdat[name.upper()]
         self.external = "" if frame == "BASE" else f"IPO_FRAME #{frame} (a fixed tool)"
         return self.key("TOOL", tool_no), self.key("BASE", base_no)
@@ -213,7 +215,10 @@ def read(path: Path) -> Program:
             key = f"{m.group(1).upper()}[{m.group(2)}]"
             where = f"{name}:{line_of(code, m.start())}"
             parts, _ = _components(code, m.end(), name)
-            (tools if key.startswith("TOOL") else bases)[key] = _frame_of(parts, key, where)
+            frames_of = tools if key.startswith("TOOL") else bases
+            if key in frames_of:  # which value serves which motion: not followed here
+                raise InputError(f"{where}: {key} given a value twice in the program")
+            frames_of[key] = _frame_of(parts, key, where)
         for m in _FDAT.finditer(code):
             body = m.group(2).upper()
             tool_no = re.search(r"TOOL_NO\s+(\d+)", body)
@@ -291,6 +296,7 @@ def read(path: Path) -> Program:
                 book.noted(name, f"{motion}_REL: a relative motion")
             elif argument.group(2):
                 book.noted(name, f"moved to through the geometric operator ':' on line {line}")
+                break  # its operand is no target of this motion
             elif frames.external:
                 book.noted(name, frames.external)
             comma = code.find(",", argument.end(1), m.end(3))
@@ -300,6 +306,13 @@ def read(path: Path) -> Program:
     for m in _CHANGED.finditer(code):  # a target changed while the program runs
         if book.known(m.group(1)):
             book.noted(m.group(1), f"changed at run time on line {line_of(code, m.start())}")
+    for m in _BAS_OTHER.finditer(code):
+        raise InputError(
+            f"{src}:{line_of(code, m.start())}: {m.group().strip()}: a frame this reader cannot "
+            "resolve (BAS(#TOOL, n) with a number only)"
+        )
+    declared_at = {m.start(2) for m in _DECL.finditer(code)}
+    book.referenced(code, src, declared_at)  # SPL of a spline block, and the like
     return Program("krl", texts, book.targets(), tools, bases, tuple(remarks), encodings)
 
 

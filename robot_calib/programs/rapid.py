@@ -75,6 +75,7 @@ class _Leaf:
     text: str
     start: int
     end: int
+    line: int  # where it is written (an aggregate may span lines)
 
 
 _Node = list["_Node | _Leaf"]
@@ -98,7 +99,8 @@ def _tree(code: str, start: int, where: str) -> tuple[_Node, int]:
             if token.strip():
                 lead = len(token) - len(token.lstrip())
                 first = token_start + lead
-                node.append(_Leaf(token.strip(), first, first + len(token.strip())))
+                stripped = token.strip()
+                node.append(_Leaf(stripped, first, first + len(stripped), line_of(code, first)))
             elif char == "," and (not node or code[token_start - 1] == ","):
                 raise InputError(f"{where}: an empty value (',,')")
             if char == "]":
@@ -119,7 +121,7 @@ def _numbers(
     ):
         raise InputError(f"{where}: {what}: expected [{count} numbers]")
     return [
-        (number(n.text, where, largest), Span(file, n.start, n.end))
+        (number(n.text, f"{file}:{n.line}", largest), Span(file, n.start, n.end))
         for n in node
         if isinstance(n, _Leaf)
     ]
@@ -210,6 +212,7 @@ def read(path: Path) -> Program:
     tools: dict[str, Frame] = {}
     bases: dict[str, Frame] = {}
     remarks: list[str] = []
+    relative: list[tuple[int, str, str]] = []  # motions through Offs(p, ...) and the like
     for m in _DECL.finditer(code):
         kind, declared = m.group(2).lower(), m.group(3)
         if code[m.end() : m.end() + 1] != "[":
@@ -265,20 +268,29 @@ def read(path: Path) -> Program:
                 book.use(argument, line, tool_key, base_key)
             elif _EXPRESSION.match(argument):
                 used = re.search(r"\(\s*(\w+)", argument)
-                if used and book.known(used.group(1)):
-                    book.use(used.group(1), line, tool_key, base_key)
-                    remarks.append(
-                        f"{name}:{line}: {argument[:40]} moves relative to {used.group(1)}: it "
-                        f"gets {used.group(1)}'s correction"
-                    )
-                else:
-                    remarks.append(f"{name}:{line}: {argument[:40]}: not compensated")
+                relative.append((line, argument[:40], used.group(1) if used else ""))
             else:
                 remarks.append(f"{name}:{line}: {instruction} to {argument[:40]}: not compensated")
     declared_at = {m.start(3) for m in _DECL.finditer(code)}
     for m in _CHANGED.finditer(code):  # a target changed while the program runs
-        if m.start(1) not in declared_at and book.known(m.group(1)):
+        if m.start(1) in declared_at:
+            continue
+        where = f"{name}:{line_of(code, m.start())}"
+        if m.group(1).lower() in tools or m.group(1).lower() in bases:
+            raise InputError(
+                f"{where}: {m.group(1)} changed at run time: the frame a motion uses is not "
+                "known here"
+            )
+        if book.known(m.group(1)):
             book.noted(m.group(1), f"changed at run time on line {line_of(code, m.start())}")
+    for line, argument, inner in relative:  # Offs(p, ...): p's correction if p is compensated
+        moved = book.known(inner) and bool(book.get(inner).used) and not book.get(inner).note
+        remarks.append(
+            f"{name}:{line}: {argument} moves relative to {inner}: it gets {inner}'s correction"
+            if moved
+            else f"{name}:{line}: {argument}: not compensated"
+        )
+    book.referenced(code, name, declared_at)
     return Program(
         "rapid", {name: text}, book.targets(), tools, bases, tuple(remarks), {name: encoding}
     )

@@ -24,6 +24,9 @@ from robot_calib.kinematics.frames import Array
 #: a number as the vendors write it: sign, digits, optional decimals and exponent
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 NUMBER_RE = re.compile(NUMBER)
+#: in the key of a frame a program names but declares elsewhere (a KUKA FDAT of
+#: $config.dat): no option can give it
+OUTSIDE = "declared outside the program"
 
 
 @dataclass(frozen=True)
@@ -274,7 +277,9 @@ class TargetBook:
         key = name.upper()
         target = self._declared[key]
         note = target.note
-        if target.used and (target.tool, target.base) != (tool, base) and not note:
+        # an axis target means the tool where the axes put it: its base does not matter
+        same_base = target.kind == "joints" or target.base == base
+        if target.used and (target.tool != tool or not same_base) and not note:
             note = (
                 f"used on line {target.used[0]} with tool {target.tool or 'flange'} and base "
                 f"{target.base or 'robot base'}, on line {line} with tool {tool or 'flange'} "
@@ -296,6 +301,27 @@ class TargetBook:
         key = name.upper()
         if not self._declared[key].note:
             self._declared[key] = replace(self._declared[key], note=note)
+
+    def referenced(self, code: str, file: str, declared_at: set[int]) -> None:
+        """Mark `left` every target no known motion goes to that the code (comments and
+        strings blanked) names elsewhere than where it is declared (`declared_at`: the
+        offsets of its name in declarations): an instruction this reader does not know
+        (a spline block's SPL, RAPID's TriggL, an expression) moves to it uncompensated."""
+        for key, target in list(self._declared.items()):
+            if target.used or target.note:
+                continue
+            name = target.name.split(" (line")[0]
+            for m in re.finditer(rf"(?<![\w$.])({re.escape(name)})(?!\w)", code, re.IGNORECASE):
+                if m.start() not in declared_at:
+                    line = line_of(code, m.start())
+                    self._declared[key] = replace(
+                        target,
+                        used=(line,),
+                        note=f"named on line {line} by an instruction this reader does not "
+                        "compensate through",
+                    )
+                    self._used.append(key)
+                    break
 
     def targets(self) -> tuple[Target, ...]:
         """Used targets in the order first moved to, then those never moved to."""

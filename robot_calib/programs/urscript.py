@@ -97,9 +97,14 @@ def read(path: Path) -> Program:
     )
     current: dict[str, str | None] = {}  # variable -> its last literal's target (None: other)
     remarks = []
+    relative: list[tuple[int, str, str, str]] = []  # motions to pose_trans(p, ...) and alike
     tool = None
     for _, kind, m in events:
         line = line_of(code, m.start())
+        if kind in ("assign", "other"):
+            before = current.get(m.group(1))
+            if before is not None and book.get(before).used:  # moved to, then set again
+                book.noted(before, f"its variable set again on line {line} (in a loop?)")
         if kind == "assign":
             key = f"{m.group(1)} (line {line})"
             book.declare(_literal(key, bool(m.group(2)), code, m.start(3), m.end(3), name))
@@ -154,18 +159,30 @@ def read(path: Path) -> Program:
                 else:
                     shown = _call(code, at)[:60]
                     inner = re.match(r"\s*\w+\s*\(\s*(\w+)\s*,", shown)
-                    target = current.get(inner.group(1)) if inner else None
-                    if target is not None:
-                        book.use(target, line, tool, None)
-                        remarks.append(
-                            f"{name}:{line}: {m.group(1)} to {shown} moves relative to "
-                            f"{inner.group(1) if inner else ''}: it gets its correction"
-                        )
-                    else:
-                        remarks.append(f"{name}:{line}: {m.group(1)} to {shown}: not compensated")
+                    relative.append((line, m.group(1), shown, inner.group(1) if inner else ""))
                     break
                 comma = code.find(",", at + argument.end())
                 at = comma + 1 if comma >= 0 else len(code)
+    for line, motion, shown, base in relative:  # pose_trans(p, ...): p's correction
+        target = current.get(base)
+        moved = target is not None and bool(book.get(target).used) and not book.get(target).note
+        remarks.append(
+            f"{name}:{line}: {motion} to {shown} moves relative to {base}: it gets {base}'s "
+            "correction"
+            if moved
+            else f"{name}:{line}: {motion} to {shown}: not compensated"
+        )
+    for m in re.finditer(r"\bset_tcp\s*\(", code):
+        if not _TCP.match(code, m.start()):
+            raise InputError(
+                f"{name}:{line_of(code, m.start())}: set_tcp({_call(code, m.end())[:40]}): a "
+                "TCP this reader cannot resolve (p[...] or a variable assigned one)"
+            )
+    declared_at = {m.start(1) for m in _ASSIGN.finditer(code)} | {
+        m.start(1) for m in _OTHER.finditer(code)
+    }
+    declared_at |= {m.start(2) for m in _TCP.finditer(code) if m.group(2)}
+    book.referenced(code, name, declared_at)
     return Program(
         "urscript", {name: text}, book.targets(), tools, {}, tuple(remarks), {name: encoding}
     )

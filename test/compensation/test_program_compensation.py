@@ -137,3 +137,15 @@ def test_a_target_out_of_reach_is_left_and_marked(tmp_path: Path) -> None:
     assert row.status == "not_reached"  # no nominal solution at all
     assert "out of the nominal arm's reach" in row.reason
     assert result.texts == program.texts
+
+
+def test_a_program_whose_every_target_is_left_writes_it_unchanged(tmp_path: Path) -> None:
+    world = program_world("urscript")
+    language = language_for("x", "urscript")
+    (tmp_path / "s.script").write_text(
+        "def s():\n  a = p[0.4, 0.1, 0.3, 0, 3.14, 0]\n  a[2] = 0.6\n  movel(a)\nend\n"
+    )
+    program = language.read(tmp_path / "s.script")
+    result = compensate_program(world.calibration, program, language)
+    assert [r.status for r in result.rows] == ["left"]
+    assert result.texts == program.texts

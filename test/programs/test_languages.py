@@ -237,7 +237,7 @@ BAD = [
     (
         "fanuc_tp",
         {"p.ls": _ls(" UF : 0, UT : 0,\n" + XYZ.replace("2 mm", "583.5.30 mm") + ", R = 0 deg")},
-        "p.ls:5: '583.5.30' is not a number",
+        "p.ls:8: '583.5.30' is not a number",
     ),
     (
         "rapid",
@@ -363,3 +363,54 @@ def test_what_the_readers_leave_or_name(tmp_path: Path) -> None:
     (target,) = program.targets
     assert target.tool == "tgrip"  # the tool argument, not the signal value
     assert "changed at run time" in target.note
+
+
+def test_instructions_the_readers_do_not_follow_are_named_or_refused(tmp_path: Path) -> None:
+    krl = language_for("x", "krl")
+    dat = KRL_DAT.replace(
+        "ENDDAT",
+        "DECL E6POS XP2={X 4,Y 5,Z 6,A 0,B 90,C 0}\n"
+        "DECL E6POS XP3={X 7,Y 8,Z 9,A 0,B 90,C 0}\nENDDAT",
+    )
+    (tmp_path / "k.dat").write_text(dat.replace("DEFDAT p", "DEFDAT k"))
+    (tmp_path / "k.src").write_text(
+        "DEF k()\nPTP XP1\nLIN XP1:XP2\nSPLINE\n  SPL XP3\nENDSPLINE\nEND\n"
+    )
+    notes = {t.name: (t.used, t.note) for t in krl.read(tmp_path / "k.src").targets}
+    assert "geometric operator" in notes["XP1"][1]
+    assert "named on line 3" in notes["XP2"][1] and "named on line 5" in notes["XP3"][1]
+    (tmp_path / "b.src").write_text("DEF b()\nBAS(#TOOL, tn)\nPTP XP1\nEND\n")
+    (tmp_path / "b.dat").write_text(KRL_DAT.replace("DEFDAT p", "DEFDAT b"))
+    with pytest.raises(InputError, match=r"b\.src:2: BAS\(#TOOL, tn\): a frame this reader"):
+        krl.read(tmp_path / "b.src")
+    ur = language_for("x", "urscript")
+    (tmp_path / "u.script").write_text(
+        "def u():\n  set_tcp(pose_trans(t, p[0,0,0.1,0,0,0]))\n  movej([0,0,0,0,0,0])\nend\n"
+    )
+    with pytest.raises(InputError, match=r"u\.script:2: set_tcp\(pose_trans"):
+        ur.read(tmp_path / "u.script")
+    rapid = language_for("x", "rapid")
+    (tmp_path / "r.mod").write_text(
+        _mod(
+            " PERS tooldata g:=[TRUE,[[0,0,200],[1,0,0,0]],[1,[0,0,1],[1,0,0,0],0,0,0]];\n"
+            " CONST jointtarget j1:=[[0,0,0,0,30,0],[9E9,9E9,9E9,9E9,9E9,9E9]];\n"
+            " PROC main()\n  MoveAbsJ j1, v100, fine, g;\n  g.tframe.trans.z := 250;\n ENDPROC"
+        )
+    )
+    with pytest.raises(InputError, match=r"r\.mod:6: g changed at run time"):
+        rapid.read(tmp_path / "r.mod")
+
+
+def test_an_axis_target_serves_every_base(tmp_path: Path) -> None:
+    """Axis values put the tool where they put it whatever base is active: one target,
+    moved to under two bases, is compensated (a Cartesian one is not)."""
+    krl = language_for("x", "krl")
+    (tmp_path / "h.dat").write_text(
+        "DEFDAT h\nDECL E6AXIS XH={A1 0,A2 -90,A3 90,A4 0,A5 30,A6 0}\nENDDAT\n"
+    )
+    (tmp_path / "h.src").write_text(
+        "DEF h()\nBASE_DATA[1]={X 1,Y 0,Z 0,A 0,B 0,C 0}\nPTP XH\n"
+        "$BASE = BASE_DATA[1]\nPTP XH\nEND\n"
+    )
+    (target,) = krl.read(tmp_path / "h.src").targets
+    assert target.used == (3, 5) and target.note == ""
