@@ -30,14 +30,16 @@ def controller_solutions(
     language: Language, program: Program, robot: RobotDescription, goal: Array, start: Array
 ) -> Array:
     """(n, J) readings the nominal controller moves to for pose targets with flange goals
-    (n, 4, 4): every solution the nominal inverse kinematics finds from the start readings
-    and from seeds spread over the arm's branches (both facings of axis 1, elbow and wrist
-    both ways, axes 1, 4, 6 +-1 turn), kept where it is within the limits and, for a
-    language with configuration data, has the target's configuration; of those, the one
-    nearest the start (a controller's choice without configuration data)."""
+    (n, 4, 4): the solution the nominal inverse kinematics finds from the start readings,
+    where it is within the limits and (a language with configuration data) on the target's
+    configuration, axes 1, 4, 6 turned by whole turns where that gets it there; else the
+    first such solution from seeds spread over the arm's branches (both facings of axis 1,
+    elbow and wrist both ways). A configuration picks one solution of a 6-axis arm;
+    without one, a controller takes the one nearest the arm (the start)."""
     nominal = KinematicModel(robot, ())
     params = nominal.parameters()
-    limits = robot.limits
+    targets = [t for t in program.targets if t.kind == "pose"]
+    out = np.full_like(start, np.nan)
     seeds = [start]
     for turn in (0.0, np.pi):
         for shares in BRANCH_SHARES:
@@ -45,40 +47,59 @@ def controller_solutions(
             seed[:, 0] = np.angle(np.exp(1j * (seed[:, 0] + turn)))
             seed[:, 3:] = 0.0
             for joint, share in zip((1, 2, 4), shares):
-                seed[:, joint] = limits[joint, 0] + share * np.diff(limits[joint])[0]
+                low, high = robot.limits[joint]
+                seed[:, joint] = low + share * (high - low)
             seeds.append(seed)
-    found = []
-    for seed in seeds:
+    best = np.full(len(start), np.inf)
+    for k, seed in enumerate(seeds):  # the start first; the branches for rows left
+        rows = np.arange(len(start)) if k == 0 else np.flatnonzero(~np.isfinite(best))
+        if not rows.size:
+            break
         ik = solve_ik(
             nominal,
             params,
-            Poses.from_readings(seed),
-            goal,
+            Poses.from_readings(seed[rows]),
+            goal[rows],
             np.eye(4),
             tolerance_m=1e-12,
             max_iterations=100,
         )
-        for shift in itertools.product((-1, 0, 1), repeat=3):
-            q = ik.q.copy()
-            q[:, [0, 3, 5]] += 2 * np.pi * np.array(shift)
-            ok = ik.converged & np.all((q >= limits[:, 0]) & (q <= limits[:, 1]), axis=1)
-            found.append(np.where(ok[:, None], q, np.nan))
-    candidates = np.stack(found, axis=1)  # (n, m, J)
-    targets = [t for t in program.targets if t.kind == "pose"]
-    out = np.full_like(start, np.nan)
-    for k, target in enumerate(targets):
-        rows = candidates[k][np.isfinite(candidates[k]).all(axis=1)]
-        if language.configuration is not None and target.configuration is not None:
-            configs = language.configuration(robot, rows)
-            rows = rows[
-                [
-                    all(w < 0 or c == w for c, w in zip(config, target.configuration))
-                    for config in configs
-                ]
-            ]
-        assert len(rows), f"{target.name}: the controller finds no solution on its configuration"
-        out[k] = rows[np.argmin(np.abs(rows - start[k]).max(axis=1))]
+        for i, row in enumerate(rows.tolist()):
+            if not ik.converged[i]:
+                continue
+            found = _on_configuration(language, robot, targets[row].configuration, ik.q[i])
+            if found is not None:
+                distance = float(np.abs(found - start[row]).max())
+                if distance < best[row]:
+                    best[row], out[row] = distance, found
+    for row, target in enumerate(targets):
+        assert np.isfinite(out[row]).all(), (
+            f"{target.name}: the controller finds no solution on its configuration"
+        )
     return out
+
+
+def _on_configuration(
+    language: Language,
+    robot: RobotDescription,
+    wanted: tuple[int, ...] | None,
+    q: Array,
+) -> Array | None:
+    """Readings q (J,) [rad], axes 1, 4, 6 turned by -1, 0 or +1 turn, within the limits and
+    on the wanted configuration (any, without one): the fewest turns first; None if none."""
+    limits = robot.limits
+    shifts = sorted(itertools.product((-1, 0, 1), repeat=3), key=lambda t: sum(map(abs, t)))
+    for shift in shifts:
+        trial = q.copy()
+        trial[[0, 3, 5]] += 2 * np.pi * np.array(shift)
+        if not np.all((trial >= limits[:, 0]) & (trial <= limits[:, 1])):
+            continue
+        if wanted is None or language.configuration is None:
+            return trial
+        (config,) = language.configuration(robot, trial[None])
+        if all(w < 0 or c == w for c, w in zip(config, wanted)):
+            return trial
+    return None
 
 
 def drive(
