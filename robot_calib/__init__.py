@@ -20,6 +20,7 @@ _LAZY = {
         (
             "calibrate",
             "compensate",
+            "compensate_program",
             "diagnose",
             "load_robot",
             "read_recording",

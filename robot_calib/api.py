@@ -12,6 +12,7 @@
     diagnosis = rc.diagnose(recording, robot)
     print(diagnosis.summary())
     commands = rc.compensate(again, q)  # nominal joint commands (n, J) [rad] -> corrected
+    done = rc.compensate_program(again, "pick_place.src")  # a KUKA program, compensated
 
 The science runs on this process alone unless the caller installs a runner: `with
 robot_calib.parallel.using(robot_calib.forked.FORKED): rc.diagnose(...)` puts its
@@ -35,6 +36,7 @@ from robot_calib.log import Log
 
 if TYPE_CHECKING:
     from robot_calib.compensation import Compensation
+    from robot_calib.compensation.program import ProgramCompensation
     from robot_calib.flows.reportable import ReportableDiagnosis
     from robot_calib.flows.simulate import Simulation
     from robot_calib.identify.calibration import Calibration
@@ -222,3 +224,45 @@ def compensate(
         q, approach_directions(q) if directions is None else directions, time
     )
     return compensate_commands(calibration, commands)
+
+
+def compensate_program(
+    calibration: Calibration,
+    program: str | Path,
+    *,
+    language: str | None = None,
+    tools: dict[str, Sequence[float]] | None = None,
+    bases: dict[str, Sequence[float]] | None = None,
+) -> ProgramCompensation:
+    """A robot program (KUKA .src with its .dat, ABB .mod, FANUC .ls, URScript .script;
+    `language` 'krl', 'rapid', 'fanuc_tp' or 'urscript' where the suffix does not say)
+    compensated for `calibration` (msgs_doc/programs.md): `.texts` (file name -> the
+    compensated text; write it in the file's encoding, `.program.encoding(name)`) and
+    `.rows` (per target: status, values written, mm and deg moved, why). `tools`, `bases`:
+    frames the program names but does not declare (FANUC's UT/UF), by their number or name
+    ('*' for every target), in the language's own pose notation (KRL X,Y,Z,A,B,C [mm, deg],
+    RAPID x,y,z,q1..q4, FANUC X,Y,Z,W,P,R, URScript x,y,z,rx,ry,rz [m, rad])."""
+    import numpy as np
+
+    from robot_calib.compensation.program import EVERY
+    from robot_calib.compensation.program import compensate_program as compensate_it
+    from robot_calib.programs.registry import check_robot, language_for
+    from robot_calib.programs.source import Frame
+
+    lang = language_for(program, language)
+    check_robot(lang, calibration.model.robot.name, "calibration")
+    given: list[dict[str, Frame]] = []
+    for kind, (keyword, frames) in enumerate((("tools", tools), ("bases", bases))):
+        out: dict[str, Frame] = {}
+        for key, values in (frames or {}).items():
+            pose = np.asarray(values, dtype=float)
+            if pose.shape != (len(lang.pose_places),) or not np.isfinite(pose).all():
+                raise InputError(
+                    f"{param(keyword)}: {key}: {len(lang.pose_places)} numbers in "
+                    f"{lang.title}'s pose notation"
+                )
+            name = str(key).lower() if lang.fold_keys else str(key)
+            name = EVERY if name == EVERY else lang.frame_keys[kind].format(name)
+            out[name] = Frame(name, lang.pose_to_base(pose[None])[0], f"{keyword}[{key!r}]")
+        given.append(out)
+    return compensate_it(calibration, lang.read(Path(program)), lang, given[0], given[1])

@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import robot_calib as rc
@@ -165,3 +166,27 @@ def test_a_robot_by_name_and_bags_as_a_list_are_taken_and_wrong_types_said() -> 
     ]:
         with pytest.raises(rc.InputError, match=rf"^`{keyword}[`=]"):
             call()
+
+
+def test_a_robot_program_compensated_from_python(tmp_path: Path) -> None:
+    """`rc.compensate_program`: the example FANUC program with its UT/UF given as the
+    language's poses; every target compensated, the texts written back and read again."""
+    from program_world import program_world
+
+    examples = Path(__file__).resolve().parents[2] / "docs" / "examples" / "programs"
+    calibration = program_world("fanuc_tp").calibration
+    done = rc.compensate_program(
+        calibration,
+        examples / "pick_place.ls",
+        tools={"1": [0, 0, 200, 0, 0, 0]},
+        bases={"1": [800, -300, 200, 0, 0, 20]},
+    )
+    assert [r.status for r in done.rows] == ["ok"] * 5
+    (tmp_path / "pick_place.ls").write_text(done.texts["pick_place.ls"], newline="")
+    from robot_calib.programs.registry import language_for
+
+    read = language_for(tmp_path / "pick_place.ls").read(tmp_path / "pick_place.ls")
+    for target, row in zip(read.targets, done.rows):  # as written: 3 decimals, 4 for angles
+        assert np.allclose(target.values, row.values, atol=5e-4)
+    with pytest.raises(rc.InputError, match="`tools`: 1: 6 numbers"):
+        rc.compensate_program(calibration, examples / "pick_place.ls", tools={"1": [0, 0]})
