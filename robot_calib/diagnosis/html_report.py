@@ -144,7 +144,7 @@ pre{background:#1d2733;color:#e8eef5;padding:10px 14px;border-radius:4px;overflo
 code{font-family:"DejaVu Sans Mono",monospace;font-size:13px}
 ul.tight li{margin:2px 0}.muted{color:#7a8794}
 td>.note{display:block;text-align:left;color:#2e6b45;min-width:160px}
-table.header td{text-align:left;overflow-wrap:anywhere}table.header th{text-align:left}
+table.header td{text-align:left}table.header th{text-align:left}
 @media print{body{background:#fff}main{max-width:none;padding:0}section{break-inside:auto}
  figure,table{break-inside:avoid}}
 """
