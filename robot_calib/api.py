@@ -43,6 +43,7 @@ if TYPE_CHECKING:
     from robot_calib.kinematics.description import RobotDescription
     from robot_calib.kinematics.frames import Array
     from robot_calib.measurements import Recording
+    from robot_calib.programs.source import Frame
 
 
 def _robot(robot: object) -> RobotDescription:
@@ -242,27 +243,14 @@ def compensate_program(
     frames the program names but does not declare (FANUC's UT/UF), by their number or name
     ('*' for every target), in the language's own pose notation (KRL X,Y,Z,A,B,C [mm, deg],
     RAPID x,y,z,q1..q4, FANUC X,Y,Z,W,P,R, URScript x,y,z,rx,ry,rz [m, rad])."""
-    import numpy as np
-
-    from robot_calib.compensation.program import EVERY
     from robot_calib.compensation.program import compensate_program as compensate_it
     from robot_calib.programs.registry import check_robot, language_for
-    from robot_calib.programs.source import Frame
 
     lang = language_for(program, language)
     check_robot(lang, calibration.model.robot.name, "calibration")
-    given: list[dict[str, Frame]] = []
+    given: list[dict[str, Frame]] = [{}, {}]
     for kind, (keyword, frames) in enumerate((("tools", tools), ("bases", bases))):
-        out: dict[str, Frame] = {}
         for key, values in (frames or {}).items():
-            pose = np.asarray(values, dtype=float)
-            if pose.shape != (len(lang.pose_places),) or not np.isfinite(pose).all():
-                raise InputError(
-                    f"{param(keyword)}: {key}: {len(lang.pose_places)} numbers in "
-                    f"{lang.title}'s pose notation"
-                )
-            name = str(key).lower() if lang.fold_keys else str(key)
-            name = EVERY if name == EVERY else lang.frame_keys[kind].format(name)
-            out[name] = Frame(name, lang.pose_to_base(pose[None])[0], f"{keyword}[{key!r}]")
-        given.append(out)
+            frame = lang.frame(kind, str(key), values, f"{param(keyword)}: {key}")
+            given[kind][frame.key] = frame
     return compensate_it(calibration, lang.read(Path(program)), lang, given[0], given[1])

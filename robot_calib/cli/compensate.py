@@ -248,27 +248,18 @@ def frame_options(
     """--tool / --base ([KEY=]VALUES, the language's pose notation) -> frames by the key
     the program uses (`Language.frame_keys`; '*' without KEY); InputError for a value that
     is not the language's pose, an empty KEY, or one KEY given twice."""
-    from robot_calib.compensation.program import EVERY
-    from robot_calib.programs.source import Frame
+    from robot_calib.programs.source import EVERY
 
     out: dict[str, Frame] = {}
-    count = len(language.pose_places)
     for text in values or []:
         key, equals, numbers = text.rpartition("=")
         try:
             pose = np.array([float(v) for v in numbers.split(",")])
         except ValueError:
             pose = np.zeros(0)
-        if pose.size != count or not np.all(np.abs(pose) < 1e6):
-            raise InputError(
-                f"--{option} {text}: expected [KEY=]{count} numbers separated by commas "
-                f"({language.title}'s pose notation)"
-            )
         if equals and not key.strip():
             raise InputError(f"--{option} {text}: KEY= without a KEY (or give no '=')")
-        if language.name == "rapid" and abs(np.linalg.norm(pose[3:]) - 1.0) > 1e-3:
-            raise InputError(f"--{option} {text}: the quaternion q1..q4 has not norm 1")
-        key = key.strip().lower() if language.fold_keys else key.strip()
+        frame = language.frame(kind, key.strip() or EVERY, pose, f"--{option} {text}")
         reach = float(np.abs(pose[:3]).max())
         metres = language.joint_unit == 1.0  # URScript: poses in m, axes in rad
         if (metres and reach > 5.0) or (not metres and 0.0 < reach < 2.0):
@@ -278,12 +269,10 @@ def frame_options(
                 f"{reach:g} looks like {other}",
                 file=sys.stderr,
             )
-        name = EVERY if not key else language.frame_keys[kind].format(key)
-        if name in out:
-            raise InputError(
-                f"--{option} {text}: {key or 'the frame of every target'} given twice"
-            )
-        out[name] = Frame(name, language.pose_to_base(pose[None])[0], f"--{option} {text}")
+        if frame.key in out:
+            what = key.strip() or "the frame of every target"
+            raise InputError(f"--{option} {text}: {what} given twice")
+        out[frame.key] = frame
     return out
 
 
@@ -417,7 +406,7 @@ def _report(
 
 def _frame_source(key: str | None, program: Program, given: dict[str, Frame], default: str) -> str:
     """'TOOL_DATA[1] (pick_place.src:13)', 'UT 1 (--tool 1=...)', or the default."""
-    from robot_calib.compensation.program import EVERY
+    from robot_calib.programs.source import EVERY
 
     if EVERY in given and key is not None:
         return f"{key} as {given[EVERY].where}"

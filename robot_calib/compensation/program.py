@@ -50,14 +50,13 @@ from robot_calib.model import Calibrated
 from robot_calib.poses import Poses, approach_directions
 from robot_calib.programs.configuration import singular_margin
 from robot_calib.programs.language import Language
-from robot_calib.programs.source import OUTSIDE, Frame, Program, Target, rewrite
+from robot_calib.programs.source import EVERY, OUTSIDE, Frame, Program, Target, rewrite
 
 #: statuses of targets written compensated; every other target is left as it was
 WRITTEN = ("ok", "position_only", "near_singular")
 #: `singular_margin` below this [m] at the nominal solution: the controller may take
 #: another solution close by, the target is written but named
 NEAR_SINGULAR_M = 0.01
-EVERY = "*"  # the key of a frame given for every target
 TURNS = (-1, 0, 1)  # whole turns tried on axes 1, 4 and 6 to meet a configuration
 #: readings this close to a boundary of the configuration data (a sign, a quadrant) meet
 #: either side [deg]: the rounding of a taught target's numbers moves its solution by ~1e-3

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from robot_calib.atomic import write_text_atomic
-from robot_calib.compensation.program import EVERY, TargetRow
-from robot_calib.programs.source import Frame
+from robot_calib.compensation.program import TargetRow
+from robot_calib.programs.source import EVERY, Frame
 
 #: the columns of a compensated program's per-target table (msgs_doc/programs.md)
 TABLE_HEADER = (

@@ -8,13 +8,17 @@ Each language is one module (`krl`, `rapid`, `fanuc_tp`, `urscript`) holding one
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
-from robot_calib.programs.source import Program
+from robot_calib.messages import QUATERNION_TOLERANCE
+from robot_calib.programs.source import EVERY, LARGEST, Frame, Program
 
 
 @dataclass(frozen=True)
@@ -66,6 +70,21 @@ class Language:
         if key.startswith(head) and key.endswith(tail) and len(key) > len(head) + len(tail):
             return key[len(head) : len(key) - len(tail)]
         return key
+
+    def frame(self, kind: int, key: str, pose: Array | Sequence[float], where: str) -> Frame:
+        """A frame given for the program (kind 0: a tool, 1: a base) under `key` (a number
+        or a name as the program writes it; EVERY: for every target), its pose in the
+        language's notation; InputError naming `where` for a pose that is not the
+        notation's count of numbers within LARGEST, or whose quaternion has not norm 1."""
+        values = np.asarray(pose, dtype=float).reshape(-1)
+        count = len(self.pose_places)
+        if values.size != count or not np.all(np.abs(values) < LARGEST):
+            raise InputError(f"{where}: {count} numbers in {self.title}'s pose notation expected")
+        if count == 7 and abs(np.linalg.norm(values[3:]) - 1.0) > QUATERNION_TOLERANCE:
+            raise InputError(f"{where}: the quaternion q1..q4 has not norm 1")
+        name = key.lower() if self.fold_keys else key
+        name = EVERY if name == EVERY else self.frame_keys[kind].format(name)
+        return Frame(name, self.pose_to_base(values[None])[0], where)
 
     def places(self, kind: str, count: int) -> tuple[int, ...]:
         """The fewest decimals of each of a target's `count` numbers."""

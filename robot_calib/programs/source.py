@@ -24,6 +24,7 @@ from robot_calib.kinematics.frames import Array
 #: a number as the vendors write it: sign, digits, optional decimals and exponent
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 NUMBER_RE = re.compile(NUMBER)
+EVERY = "*"  # the key of a frame given for every target
 #: in the key of a frame a program names but declares elsewhere (a KUKA FDAT of
 #: $config.dat): no option can give it
 OUTSIDE = "declared outside the program"
