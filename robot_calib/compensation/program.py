@@ -48,7 +48,7 @@ from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.model import Calibrated
 from robot_calib.poses import Poses, approach_directions
-from robot_calib.programs.configuration import singular_margin
+from robot_calib.programs.configuration import matches, singular_margin
 from robot_calib.programs.language import Language
 from robot_calib.programs.source import EVERY, OUTSIDE, Frame, Program, Target, rewrite
 
@@ -335,11 +335,6 @@ def _unreached(target: Target) -> str:
     )
 
 
-def _matches(found: tuple[int, ...], wanted: tuple[int, ...]) -> bool:
-    """A configuration equals the wanted one where that gives a value (-1: not given)."""
-    return all(w < 0 or f == w for f, w in zip(found, wanted))
-
-
 def _configurations(
     language: Language, robot: RobotDescription, q: Array
 ) -> list[list[tuple[int, ...]]]:
@@ -377,7 +372,7 @@ def _check_configuration(
     for j, config in zip(check, found):
         wanted = program.targets[rows[j]].configuration
         assert wanted is not None
-        if not _matches(config, wanted):
+        if not matches(config, wanted):
             status[j] = "configuration"
             reason[j] = (
                 f"the calibrated solution needs configuration {config}, the target gives "
@@ -497,7 +492,7 @@ def _meet(
     plain = _configurations(language, robot, q[rows])  # most rows meet it as solved
     for i, j in enumerate(list(rows)):
         wanted_j = wanted[j]
-        if wanted_j is not None and any(_matches(c, wanted_j) for c in plain[i]):
+        if wanted_j is not None and any(matches(c, wanted_j) for c in plain[i]):
             met[j] = bool(np.all((q[j] >= limits[:, 0]) & (q[j] <= limits[:, 1])))
     rows = [j for j in rows if not met[j]]
     if not rows:
@@ -512,7 +507,7 @@ def _meet(
         assert wanted_j is not None
         for variant in range(len(shifts)):
             at = i * len(shifts) + variant
-            if inside[at] and any(_matches(c, wanted_j) for c in found[at]):
+            if inside[at] and any(matches(c, wanted_j) for c in found[at]):
                 q[j], met[j] = trial[i, variant], True
                 break
 

@@ -195,15 +195,10 @@ def _distance(
     a, b = a[:n], b[:n]
     measured = np.linalg.norm(recording.points[b] - recording.points[a], axis=1)
     command = np.linalg.norm(predicted[b].mean(axis=0) - predicted[a].mean(axis=0))
-    ad_abc = rd_abc = None
-    if orientation_errors is not None:
-        change = orientation_errors[b] - orientation_errors[a]
-        change = change[np.isfinite(change).all(axis=1)]
-        if len(change) >= MIN_REPEATS:
-            ad = np.degrees(np.abs(change.mean(axis=0)))
-            rd = np.degrees(3.0 * change.std(axis=0, ddof=1))
-            ad_abc = (float(ad[0]), float(ad[1]), float(ad[2]))
-            rd_abc = (float(rd[0]), float(rd[1]), float(rd[2]))
+    # |mean| and 3 S of the change of the orientation error: as a pose's AP and RP
+    ad_abc, rd_abc = _orientation(
+        None if orientation_errors is None else orientation_errors[b] - orientation_errors[a]
+    )
     return DistanceFigures(
         int(a[0]),
         int(b[0]),

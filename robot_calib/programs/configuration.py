@@ -79,3 +79,8 @@ def singular_margin(robot: RobotDescription, q: Array) -> Array:
         [np.cross(axes, flange[:, None] - origins), ROTATION_LEVER_M * axes], axis=2
     )
     return np.linalg.svd(jacobian, compute_uv=False)[:, -1]
+
+
+def matches(found: tuple[int, ...], wanted: tuple[int, ...]) -> bool:
+    """A configuration equals the wanted one where that gives a value (-1: not given)."""
+    return all(w < 0 or f == w for f, w in zip(found, wanted))

@@ -21,6 +21,7 @@ from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
 from robot_calib.model import KinematicModel
 from robot_calib.poses import Poses, approach_directions
+from robot_calib.programs.configuration import matches
 from robot_calib.programs.language import Language
 from robot_calib.programs.source import Program
 from robot_calib.sim.world import World
@@ -97,7 +98,7 @@ def _on_configuration(
         if wanted is None or language.configuration is None:
             return trial
         (config,) = language.configuration(robot, trial[None])
-        if all(w < 0 or c == w for c, w in zip(config, wanted)):
+        if matches(config, wanted):
             return trial
     return None
 
