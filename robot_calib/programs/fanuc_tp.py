@@ -28,6 +28,7 @@ from robot_calib.programs.source import (
     Target,
     TargetBook,
     base_to_euler,
+    blank_comments,
     euler_to_base,
     line_of,
     number,
@@ -185,6 +186,8 @@ def read(path: Path) -> Program:
             remarks.append(
                 f"{name}:{line}: a motion to {label} with an offset: it gets {label}'s correction"
             )
+    pos_start, _ = _section(text, "POS")  # the /MN and what precedes it
+    book.referenced(blank_comments(text[:pos_start], "!"), name, set())  # PR[2]=P[1] and alike
     return Program(
         "fanuc_tp",
         {name: text},

@@ -401,6 +401,16 @@ def test_instructions_the_readers_do_not_follow_are_named_or_refused(tmp_path: P
         rapid.read(tmp_path / "r.mod")
 
 
+def test_a_fanuc_position_used_by_an_assignment_is_named(tmp_path: Path) -> None:
+    fanuc = language_for("x", "fanuc_tp")
+    body = " UF : 0, UT : 0,\n" + XYZ + ", R = 0 deg"
+    text = _ls(body).replace(" 1:J P[1] 100% FINE ;", " 1:J P[1] 100% FINE ;\n 2:  PR[2]=P[2] ;")
+    text = text.replace("/END", "P[2]{\n GP1:\n" + body + "\n};\n/END")
+    (tmp_path / "p.ls").write_text(text)
+    notes = {t.name: t.note for t in fanuc.read(tmp_path / "p.ls").targets}
+    assert notes["P[1]"] == "" and "named on line 4" in notes["P[2]"]
+
+
 def test_an_axis_target_serves_every_base(tmp_path: Path) -> None:
     """Axis values put the tool where they put it whatever base is active: one target,
     moved to under two bases, is compensated (a Cartesian one is not)."""
