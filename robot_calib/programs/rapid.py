@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from robot_calib.errors import InputError
 from robot_calib.kinematics.description import RobotDescription
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, homogeneous
 from robot_calib.messages import QUATERNION_TOLERANCE
 from robot_calib.programs.configuration import posture
 from robot_calib.programs.language import Language, single_output
@@ -299,10 +299,9 @@ def read(path: Path) -> Program:
 def pose_to_base(values: Array) -> Array:
     """[x, y, z, q1, q2, q3, q4] (n, 7) [mm; q1 = w] -> (n, 4, 4) [m]."""
     values = np.atleast_2d(np.asarray(values, dtype=float))
-    out = np.tile(np.eye(4), (len(values), 1, 1))
-    out[:, :3, :3] = Rotation.from_quat(values[:, [4, 5, 6, 3]]).as_matrix()
-    out[:, :3, 3] = values[:, :3] * 1e-3
-    return out
+    return homogeneous(
+        Rotation.from_quat(values[:, [4, 5, 6, 3]]).as_matrix(), values[:, :3] * 1e-3
+    )
 
 
 def base_to_pose(poses: Array, old: Array) -> Array:

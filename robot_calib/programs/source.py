@@ -19,7 +19,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from robot_calib.errors import InputError
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, homogeneous
 
 #: a number as the vendors write it: sign, digits, optional decimals and exponent
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
@@ -335,10 +335,8 @@ def euler_to_base(values: Array, order: str, unit_m: float) -> Array:
     `order` (upper case: about the moving axes; lower case: about fixed axes) -> (n, 4, 4)
     [m]."""
     values = np.atleast_2d(np.asarray(values, dtype=float))
-    out = np.tile(np.eye(4), (len(values), 1, 1))
-    out[:, :3, :3] = Rotation.from_euler(order, values[:, 3:6], degrees=True).as_matrix()
-    out[:, :3, 3] = values[:, :3] * unit_m
-    return out
+    rotation = Rotation.from_euler(order, values[:, 3:6], degrees=True).as_matrix()
+    return homogeneous(rotation, values[:, :3] * unit_m)
 
 
 def base_to_euler(poses: Array, old: Array, order: str, unit_m: float) -> Array:

@@ -19,7 +19,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from robot_calib.errors import InputError
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, homogeneous
 from robot_calib.programs.language import Language, single_output
 from robot_calib.programs.source import (
     Frame,
@@ -191,10 +191,7 @@ def read(path: Path) -> Program:
 def pose_to_base(values: Array) -> Array:
     """p[x, y, z, rx, ry, rz] (n, 6) [m, rad; a rotation vector] -> (n, 4, 4) [m]."""
     values = np.atleast_2d(np.asarray(values, dtype=float))
-    out = np.tile(np.eye(4), (len(values), 1, 1))
-    out[:, :3, :3] = Rotation.from_rotvec(values[:, 3:6]).as_matrix()
-    out[:, :3, 3] = values[:, :3]
-    return out
+    return homogeneous(Rotation.from_rotvec(values[:, 3:6]).as_matrix(), values[:, :3])
 
 
 def base_to_pose(poses: Array, old: Array) -> Array:

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from robot_calib.kinematics.description import RobotDescription, random_readings
-from robot_calib.kinematics.frames import Array
+from robot_calib.kinematics.frames import Array, homogeneous, rpy_to_matrix
 from robot_calib.programs.configuration import singular_margin
 from robot_calib.programs.language import Language
 
@@ -100,12 +100,8 @@ def taught_path(robot: RobotDescription, n: int, rng: np.random.Generator) -> Ar
 
 def frame(xyz_m: tuple[float, float, float], rpy_deg: tuple[float, float, float]) -> Array:
     """A (4, 4) frame from a position [m] and roll, pitch, yaw [deg] (Rz Ry Rx)."""
-    from scipy.spatial.transform import Rotation
-
-    out = np.eye(4)
-    out[:3, :3] = Rotation.from_euler("xyz", rpy_deg, degrees=True).as_matrix()
-    out[:3, 3] = xyz_m
-    return out
+    roll, pitch, yaw = np.radians(rpy_deg)
+    return homogeneous(rpy_to_matrix(roll, pitch, yaw), np.asarray(xyz_m, dtype=float))
 
 
 def taught_program(
