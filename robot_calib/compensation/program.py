@@ -32,9 +32,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot_calib.compensation.solve import (
-    BRANCH_SHARES,
+    BRANCHES,
     DIRECTION_ROUNDS,
     NOMINAL_ITERATIONS,
+    branch_seed,
     compensate_commands,
     home_readings,
     nominal_counterpart,
@@ -439,16 +440,11 @@ def _nominal_solutions(
     met = np.ones(n, dtype=bool)
     met[need] = False
     _meet(language, robot, q, ok, met, wanted, need)
-    for choice in [(turn, shares) for turn in (0.0, np.pi) for shares in BRANCH_SHARES]:
+    for branch in BRANCHES:
         left = np.array([j for j in need if not met[j]], dtype=int)
         if not left.size:
             break
-        turn, shares = choice
-        start_q = seed[left].copy()
-        start_q[:, 0] = np.angle(np.exp(1j * (start_q[:, 0] + turn)))
-        start_q[:, 3:] = 0.0
-        for joint, share in zip((1, 2, 4), shares):
-            start_q[:, joint] = limits[joint, 0] + share * (limits[joint, 1] - limits[joint, 0])
+        start_q = branch_seed(seed[left], limits, *branch)
         again = solve_ik(
             nominal,
             nominal_params,

@@ -376,6 +376,24 @@ BRANCH_SHARES = (
 )
 
 
+#: the branch seeds' (turn of joint 1 [rad], shares of joints 2, 3 and 5): facing the
+#: target, then away from it, each with every BRANCH_SHARES
+BRANCHES = tuple((turn, shares) for turn in (0.0, np.pi) for shares in BRANCH_SHARES)
+
+
+def branch_seed(
+    facing: Array, limits: Array, turn: float, shares: tuple[float, float, float]
+) -> Array:
+    """Seed readings (n, J) [rad] on one branch: joint 1 as in `facing` (n, J) turned by
+    `turn`, joints 2, 3 and 5 at `shares` of their ranges (J, 2), joints 4 and 6 at 0."""
+    seed = np.array(facing, dtype=float)
+    seed[:, 0] = np.angle(np.exp(1j * (seed[:, 0] + turn)))  # facing it, or away
+    seed[:, 3:] = 0.0
+    for joint, share in zip((1, 2, 4), shares):
+        seed[:, joint] = limits[joint, 0] + share * (limits[joint, 1] - limits[joint, 0])
+    return seed
+
+
 def _other_branches(
     found: IKSolution,
     start: Poses,
@@ -391,15 +409,11 @@ def _other_branches(
     limits."""
     if found.q.shape[1] < 5:
         return found
-    for turn, shares in ((t, s) for t in (0.0, np.pi) for s in BRANCH_SHARES):
+    for branch in BRANCHES:
         left = np.flatnonzero(~(found.converged & _inside(found.q, limits)))
         if not left.size:
             break
-        seed = start.q[left].copy()
-        seed[:, 0] = np.angle(np.exp(1j * (seed[:, 0] + turn)))  # facing it, or away
-        seed[:, 3:] = 0.0
-        for joint, share in zip((1, 2, 4), shares):
-            seed[:, joint] = limits[joint, 0] + share * (limits[joint, 1] - limits[joint, 0])
+        seed = branch_seed(start.q[left], limits, *branch)
         again = solve(replace(start.subset(left), q=seed), goal2base[left], oriented[left])
         found = _merged(
             found, left, again, again.converged & _inside(again.q, limits), again.iterations

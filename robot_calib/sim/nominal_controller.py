@@ -15,7 +15,7 @@ import itertools
 
 import numpy as np
 
-from robot_calib.compensation.solve import BRANCH_SHARES
+from robot_calib.compensation.solve import BRANCHES, branch_seed
 from robot_calib.ik import solve_ik
 from robot_calib.kinematics.description import RobotDescription
 from robot_calib.kinematics.frames import Array
@@ -41,16 +41,7 @@ def controller_solutions(
     params = nominal.parameters()
     targets = [t for t in program.targets if t.kind == "pose"]
     out = np.full_like(start, np.nan)
-    seeds = [start]
-    for turn in (0.0, np.pi):
-        for shares in BRANCH_SHARES:
-            seed = start.copy()
-            seed[:, 0] = np.angle(np.exp(1j * (seed[:, 0] + turn)))
-            seed[:, 3:] = 0.0
-            for joint, share in zip((1, 2, 4), shares):
-                low, high = robot.limits[joint]
-                seed[:, joint] = low + share * (high - low)
-            seeds.append(seed)
+    seeds = [start] + [branch_seed(start, robot.limits, *branch) for branch in BRANCHES]
     best = np.full(len(start), np.inf)
     for k, seed in enumerate(seeds):  # the start first; the branches for rows left
         rows = np.arange(len(start)) if k == 0 else np.flatnonzero(~np.isfinite(best))
