@@ -136,8 +136,24 @@ def taught_program(
     write = _WRITERS[language.name]
     tool_values = language.base_to_pose(tool[None], reference[:1])[0]
     base_values = language.base_to_pose(base[None], reference[:1])[0]
-    texts = write(name, values, axes, pose, config, tool_values, base_values)
+    texts = write(_Listing(name, values, axes, pose, config, tool_values, base_values))
     return TaughtProgram(texts, q, pose, meant, tool, base)
+
+
+@dataclass(frozen=True)
+class _Listing:
+    """What a writer puts in a program: its name; the targets' numbers in the language's
+    units, pose values (n, k) and axis values (n, J); which are poses (n,); their
+    configuration data (None: the language has none); the tool and base in the
+    language's pose notation."""
+
+    name: str
+    values: Array
+    axes: Array
+    pose: Array
+    config: list[tuple[int, ...]] | None
+    tool: Array
+    base: Array
 
 
 def _reference(language: Language, n: int) -> Array:
@@ -153,53 +169,45 @@ def _numbers(values: Array, places: int) -> list[str]:
     return [f"{v:.{places}f}" for v in values]
 
 
-def _krl(
-    name: str,
-    values: Array,
-    axes: Array,
-    pose: Array,
-    config: list[tuple[int, ...]] | None,
-    tool: Array,
-    base: Array,
-) -> dict[str, str]:
+def _krl(p: _Listing) -> dict[str, str]:
     src = [
         "&ACCESS RVP",
         "&REL 1",
-        f"DEF {name}( )",
+        f"DEF {p.name}( )",
         ";FOLD INI",
         "  ;FOLD BASISTECH INI",
         "    BAS (#INITMOV,0 )",
         "  ;ENDFOLD (BASISTECH INI)",
         ";ENDFOLD (INI)",
         "",
-        _decl("TOOL_DATA[1]", tool) + " ; the gripper",
-        _decl("BASE_DATA[2]", base) + " ; the fixture",
+        _decl("TOOL_DATA[1]", p.tool) + " ; the gripper",
+        _decl("BASE_DATA[2]", p.base) + " ; the fixture",
         "$TOOL = TOOL_DATA[1]",
         "$BASE = BASE_DATA[2]",
     ]
     dat = [
-        f"DEFDAT {name}",
+        f"DEFDAT {p.name}",
         ";FOLD EXTERNAL DECLARATIONS;%{PE}%MKUKATPBASIS,%CEXT,%VCOMMON,%P",
         ";ENDFOLD (EXTERNAL DECLARATIONS)",
     ]
-    for k in range(len(values)):
-        if pose[k]:
-            s, t = config[k] if config else (2, 0)
+    for k in range(len(p.values)):
+        if p.pose[k]:
+            s, t = p.config[k] if p.config else (2, 0)
             dat.append(
-                f"DECL E6POS XP{k + 1}={{{','.join(_pairs('XYZABC', values[k], 4))},"
+                f"DECL E6POS XP{k + 1}={{{','.join(_pairs('XYZABC', p.values[k], 4))},"
                 f"S {s},T {t},E1 0.0,E2 0.0,E3 0.0,E4 0.0,E5 0.0,E6 0.0}}"
             )
             src.append(f"LIN XP{k + 1} C_DIS ; to point {k + 1}")
         else:
-            names = [f"A{j + 1}" for j in range(len(axes[k]))]
+            names = [f"A{j + 1}" for j in range(len(p.axes[k]))]
             dat.append(
-                f"DECL E6AXIS XP{k + 1}={{{','.join(_pairs(names, axes[k], 4))},"
+                f"DECL E6AXIS XP{k + 1}={{{','.join(_pairs(names, p.axes[k], 4))},"
                 "E1 0.0,E2 0.0,E3 0.0,E4 0.0,E5 0.0,E6 0.0}"
             )
             src.append(f"PTP XP{k + 1}")
     src += ["END", ""]
     dat += ["ENDDAT", ""]
-    return {f"{name}.src": "\r\n".join(src), f"{name}.dat": "\r\n".join(dat)}
+    return {f"{p.name}.src": "\r\n".join(src), f"{p.name}.dat": "\r\n".join(dat)}
 
 
 def _pairs(names: object, values: Array, places: int) -> list[str]:
@@ -210,54 +218,39 @@ def _decl(key: str, values: Array) -> str:
     return f"{key}={{{','.join(_pairs('XYZABC', values, 3))}}}"
 
 
-def _rapid(
-    name: str,
-    values: Array,
-    axes: Array,
-    pose: Array,
-    config: list[tuple[int, ...]] | None,
-    tool: Array,
-    base: Array,
-) -> dict[str, str]:
+def _rapid(p: _Listing) -> dict[str, str]:
     def pose_text(v: Array) -> str:
         return f"[[{','.join(_numbers(v[:3], 2))}],[{','.join(_numbers(v[3:], 6))}]]"
 
     lines = [
-        f"MODULE {name}",
+        f"MODULE {p.name}",
         "    ! taught on the nominal model",
-        f"    PERS tooldata tcp1:=[TRUE,{pose_text(tool)},[2,[0,0,100],[1,0,0,0],0,0,0]];",
-        f'    TASK PERS wobjdata fixture:=[FALSE,TRUE,"",{pose_text(base)},[[0,0,0],[1,0,0,0]]];',
+        f"    PERS tooldata tcp1:=[TRUE,{pose_text(p.tool)},[2,[0,0,100],[1,0,0,0],0,0,0]];",
+        f'    TASK PERS wobjdata fixture:=[FALSE,TRUE,"",{pose_text(p.base)},'
+        "[[0,0,0],[1,0,0,0]]];",
     ]
     body = []
-    for k in range(len(values)):
-        if pose[k]:
-            cf = config[k] if config else (0, 0, 0, 0)
+    for k in range(len(p.values)):
+        if p.pose[k]:
+            cf = p.config[k] if p.config else (0, 0, 0, 0)
             lines.append(
-                f"    CONST robtarget p{k + 1}:={pose_text(values[k])[:-1]},"
+                f"    CONST robtarget p{k + 1}:={pose_text(p.values[k])[:-1]},"
                 f"[{','.join(map(str, cf))}],[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];"
             )
             body.append(f"        MoveL p{k + 1}, v200, z1, tcp1\\WObj:=fixture;")
         else:
             lines.append(
-                f"    CONST jointtarget j{k + 1}:=[[{','.join(_numbers(axes[k], 4))}],"
+                f"    CONST jointtarget j{k + 1}:=[[{','.join(_numbers(p.axes[k], 4))}],"
                 "[9E+09,9E+09,9E+09,9E+09,9E+09,9E+09]];"
             )
             body.append(f"        MoveAbsJ j{k + 1}, v500, fine, tcp1\\WObj:=fixture;")
     lines += ["    PROC main()", *body, "    ENDPROC", "ENDMODULE", ""]
-    return {f"{name}.mod": "\r\n".join(lines)}
+    return {f"{p.name}.mod": "\r\n".join(lines)}
 
 
-def _fanuc(
-    name: str,
-    values: Array,
-    axes: Array,
-    pose: Array,
-    config: list[tuple[int, ...]] | None,
-    tool: Array,
-    base: Array,
-) -> dict[str, str]:
+def _fanuc(p: _Listing) -> dict[str, str]:
     head = [
-        f"/PROG  {name.upper()}",
+        f"/PROG  {p.name.upper()}",
         "/ATTR",
         "OWNER\t\t= MNEDITOR;",
         'COMMENT\t\t= "taught";',
@@ -267,55 +260,47 @@ def _fanuc(
         "   2:  UTOOL_NUM=1 ;",
     ]
     positions = ["/POS"]
-    for k in range(len(values)):
-        motion = "L" if pose[k] else "J"
-        speed = "500mm/sec CNT50" if pose[k] else "50% FINE"
+    for k in range(len(p.values)):
+        motion = "L" if p.pose[k] else "J"
+        speed = "500mm/sec CNT50" if p.pose[k] else "50% FINE"
         head.append(f"{k + 3:4d}:{motion} P[{k + 1}] {speed}    ;")
         positions += [f"P[{k + 1}]{{", "   GP1:"]
-        if pose[k]:
-            f, u, t, *turns = config[k] if config else (0, 1, 1, 0, 0, 0)
+        if p.pose[k]:
+            f, u, t, *turns = p.config[k] if p.config else (0, 1, 1, 0, 0, 0)
             letters = f"{'F' if f else 'N'} {'U' if u else 'D'} {'T' if t else 'B'}"
             turn_text = ", ".join(map(str, turns))
-            v = values[k]
+            v = p.values[k]
             positions += [
                 f"\tUF : 1, UT : 1,\t\tCONFIG : '{letters}, {turn_text}',",
                 f"\tX = {v[0]:9.3f}  mm,\tY = {v[1]:9.3f}  mm,\tZ = {v[2]:9.3f}  mm,",
                 f"\tW = {v[3]:9.3f} deg,\tP = {v[4]:9.3f} deg,\tR = {v[5]:9.3f} deg",
             ]
         else:
-            a = axes[k]
+            a = p.axes[k]
             positions += [
                 "\tUF : 1, UT : 1,\t",
                 f"\tJ1= {a[0]:9.3f} deg,\tJ2= {a[1]:9.3f} deg,\tJ3= {a[2]:9.3f} deg,",
                 f"\tJ4= {a[3]:9.3f} deg,\tJ5= {a[4]:9.3f} deg,\tJ6= {a[5]:9.3f} deg",
             ]
         positions.append("};")
-    return {f"{name}.ls": "\n".join([*head, *positions, "/END", ""])}
+    return {f"{p.name}.ls": "\n".join([*head, *positions, "/END", ""])}
 
 
-def _urscript(
-    name: str,
-    values: Array,
-    axes: Array,
-    pose: Array,
-    config: list[tuple[int, ...]] | None,
-    tool: Array,
-    base: Array,
-) -> dict[str, str]:
-    del config, base  # URScript targets carry no configuration; poses are in the base
+def _urscript(p: _Listing) -> dict[str, str]:
+    # URScript targets carry no configuration, and its poses are in the robot base
     lines = [
-        f"def {name}():",
+        f"def {p.name}():",
         "  # taught on the nominal model",
-        f"  set_tcp(p[{','.join(_numbers(tool, 6))}])",
+        f"  set_tcp(p[{','.join(_numbers(p.tool, 6))}])",
     ]
-    for k in range(len(values)):
-        if pose[k]:
-            lines.append(f"  p{k + 1} = p[{', '.join(_numbers(values[k], 6))}]")
+    for k in range(len(p.values)):
+        if p.pose[k]:
+            lines.append(f"  p{k + 1} = p[{', '.join(_numbers(p.values[k], 6))}]")
             lines.append(f"  movel(p{k + 1}, a=1.2, v=0.25)")
         else:
-            lines.append(f"  movej([{', '.join(_numbers(axes[k], 6))}], a=1.4, v=1.05)")
+            lines.append(f"  movej([{', '.join(_numbers(p.axes[k], 6))}], a=1.4, v=1.05)")
     lines += ["end", ""]
-    return {f"{name}.script": "\n".join(lines)}
+    return {f"{p.name}.script": "\n".join(lines)}
 
 
 #: decimals each writer uses: pose numbers (each), axis values
