@@ -8,6 +8,7 @@ import functools
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from cli_runner import cli
 from program_world import program_world
@@ -59,6 +60,13 @@ def test_compensate_a_program(language: str, tmp_path: Path) -> None:
         assert row["status"] == "ok", row
         assert 0.05 < float(row["moved_mm"]) < 2.0  # tenths of a millimetre of correction
         assert old.values != new.values
+        if old.kind == "pose":  # the table's change is the written target's, as read back
+            was, now = lang.pose_to_base(np.array([old.values, new.values]))
+            moved = np.linalg.norm(now[:3, 3] - was[:3, 3]) * 1e3
+            cos = (np.trace(was[:3, :3].T @ now[:3, :3]) - 1.0) / 2.0
+            turned = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+            assert float(row["moved_mm"]) == pytest.approx(moved, abs=2e-3)  # the decimals
+            assert float(row["turned_deg"]) == pytest.approx(turned, abs=2e-4)
     if language == "krl":  # the .dat beside the .src, its line ends kept
         assert (out / "pick_place.dat").read_bytes().count(b"\r\n") == (
             program.with_suffix(".dat").read_bytes().count(b"\r\n")
